@@ -1,0 +1,54 @@
+# Two commands do everything on a fresh machine (see README.md):
+#   make demo   venv from the pins, install, run the closed-loop CBHA scene in simulation
+#   make test   venv from the pins, install, run the whole test suite
+# The venv is rebuilt only when a pin file changes (stamp files), so warm runs start at once.
+
+# ROS 2 Jazzy wheels on PyPI are built for CPython 3.11.
+PYTHON ?= $(shell command -v python3.11 2>/dev/null)
+VENV ?= .venv
+VPY := $(VENV)/bin/python
+PINS_STAMP := $(VENV)/.pins-stamp
+INSTALL_STAMP := $(VENV)/.install-stamp
+DEMO_OUT ?= output/demo
+PYTEST_ARGS ?=
+
+.PHONY: demo test venv install lint bench report constraints clean
+
+demo: install
+	$(VPY) -m cbha_inverse.ros.demo --output $(DEMO_OUT)
+
+test: install
+	$(VPY) -m pytest test -q -rs $(PYTEST_ARGS)
+
+venv: $(PINS_STAMP)
+
+install: $(INSTALL_STAMP)
+
+$(PINS_STAMP): requirements.txt requirements-dev.txt constraints.txt
+	@if [ -z "$(PYTHON)" ]; then \
+	  echo 'error: python3.11 not found (ROS 2 Jazzy wheels need CPython 3.11); set PYTHON=/path/to/python3.11' >&2; \
+	  exit 1; fi
+	@test -x $(VPY) || $(PYTHON) -m venv $(VENV)
+	$(VPY) -m pip install --quiet --disable-pip-version-check -r requirements-dev.txt -c constraints.txt
+	@touch $@
+
+$(INSTALL_STAMP): $(PINS_STAMP) setup.py setup.cfg package.xml
+	$(VPY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $@
+
+lint: install
+	$(VPY) -m pytest test/test_flake8.py test/test_pep257.py -q
+
+bench: install
+	$(VPY) -m cbha_inverse.report.cli bench
+
+report: install
+	$(VPY) -m cbha_inverse.report.cli all
+
+# Re-pin the transitive dependencies after changing requirements*.txt.
+constraints: $(PINS_STAMP)
+	( echo '# Transitive pins: pip freeze of a venv made from requirements-dev.txt. Regenerate: make constraints'; \
+	  $(VPY) -m pip freeze --disable-pip-version-check | grep -vE '^(-e|cbha)' ) > constraints.txt
+
+clean:
+	rm -rf $(VENV) build install log output .pytest_cache *.egg-info

@@ -1,0 +1,1 @@
+"""Pure numerics without ROS: mechanics, block-tridiagonal solver, actuation and inverse model."""

@@ -1,0 +1,1 @@
+"""Offline condensation of volumetric FE segments onto rigid vertebra frames (no ROS)."""

@@ -1,0 +1,1 @@
+"""Benchmarks and reports: error against run time, numerical stability."""

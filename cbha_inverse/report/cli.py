@@ -1,0 +1,59 @@
+"""
+``cbha_report``: one entry point for the package's benchmarks and reports.
+
+Each sub-command runs the report of one part and prints its table; ``all`` runs them in turn.
+"""
+
+import argparse
+import importlib
+import sys
+
+#: sub-command -> (module with ``main(argv)``, what it reports)
+REPORTS = {
+    'core': ('cbha_inverse.report.bench_core',
+             'block-tridiagonal solver vs LAPACK banded/dense, static-solve times'),
+    'inverse': ('cbha_inverse.report.bench_inverse',
+                'inverse-model tick time per scene with its breakdown'),
+    'fem': ('cbha_inverse.report.fem_report',
+            'condensation error against run time, chain vs full FE'),
+}
+GROUPS = {'bench': ('core', 'inverse'), 'all': ('core', 'inverse', 'fem')}
+
+
+def main(argv=None):
+    """
+    Run one report, a group of reports, or all of them.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command-line arguments (default ``sys.argv[1:]``); arguments after the report name are
+        passed to that report.
+
+    Returns
+    -------
+    int
+        0 on success, the first non-zero exit code of a report otherwise.
+
+    """
+    parser = argparse.ArgumentParser(
+        prog='cbha_report', description=__doc__.strip().splitlines()[0],
+        epilog='\n'.join(f'{name}: {text}' for name, (_, text) in REPORTS.items()),
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('report', choices=sorted(REPORTS) + sorted(GROUPS))
+    parser.add_argument('report_args', nargs=argparse.REMAINDER,
+                        help='arguments passed to the report (single report only)')
+    args = parser.parse_args(argv)
+    names = GROUPS.get(args.report, (args.report,))
+    for name in names:
+        module_name, text = REPORTS[name]
+        print(f'== {name}: {text}', flush=True)
+        report_args = args.report_args if len(names) == 1 else []
+        code = importlib.import_module(module_name).main(report_args)
+        if code:
+            return code
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The only rclpy code: thin nodes, conversions, QoS and parameters."""

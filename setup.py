@@ -1,0 +1,54 @@
+"""ament_python build of cbha_inverse: `colcon build` gives the `ros2 run` layout."""
+
+from pathlib import Path
+
+from setuptools import find_packages
+from setuptools import setup
+
+PACKAGE_NAME = 'cbha_inverse'
+HERE = Path(__file__).resolve().parent
+
+
+def tree_data_files(top):
+    """List (install dir, [files]) pairs that mirror ``top`` under share/<package>/."""
+    pairs = []
+    for directory in sorted(p for p in (HERE / top).rglob('*') if p.is_dir()) + [HERE / top]:
+        files = sorted(str(f.relative_to(HERE)) for f in directory.iterdir() if f.is_file())
+        if files:
+            pairs.append((f'share/{PACKAGE_NAME}/{directory.relative_to(HERE)}', files))
+    return pairs
+
+
+CONSOLE_SCRIPTS = [
+    # nodes (node name = executable name = config/<name>.yaml)
+    'trajectory = cbha_inverse.ros.trajectory_node:main',
+    'inverse_solver = cbha_inverse.ros.inverse_solver_node:main',
+    'cbha_sim = cbha_inverse.ros.cbha_sim_node:main',
+    # commands
+    'cbha_demo = cbha_inverse.ros.demo:main',
+    'condense_segment = cbha_inverse.fem.cli:main',
+    'cbha_report = cbha_inverse.report.cli:main',
+    'cbha_bench_core = cbha_inverse.report.bench_core:main',
+    'cbha_bench_inverse = cbha_inverse.report.bench_inverse:main',
+    'cbha_fem_report = cbha_inverse.report.fem_report:main',
+]
+
+setup(
+    name=PACKAGE_NAME,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE_NAME}']),
+        (f'share/{PACKAGE_NAME}', ['package.xml']),
+        *tree_data_files('config'),
+        *tree_data_files('meshes'),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=False,
+    maintainer='cbha_inverse maintainers',
+    maintainer_email='maintainers@cbha-inverse.invalid',
+    description='Quasi-static FEM inverse control of continuum robots with rigid vertebrae (CBHA).',
+    license='Apache-2.0',
+    extras_require={'test': ['pytest']},
+    entry_points={'console_scripts': CONSOLE_SCRIPTS},
+)
