@@ -12,6 +12,8 @@ HERE = Path(__file__).resolve().parent
 def tree_data_files(top):
     """List (install dir, [files]) pairs that mirror ``top`` under share/<package>/."""
     pairs = []
+    if not (HERE / top).is_dir():
+        return pairs
     for directory in sorted(p for p in (HERE / top).rglob('*') if p.is_dir()) + [HERE / top]:
         files = sorted(str(f.relative_to(HERE)) for f in directory.iterdir() if f.is_file())
         if files:
