@@ -48,7 +48,7 @@ report: install
 # Re-pin the transitive dependencies after changing requirements*.txt.
 constraints: $(PINS_STAMP)
 	( echo '# Transitive pins: pip freeze of a venv made from requirements-dev.txt. Regenerate: make constraints'; \
-	  $(VPY) -m pip freeze --disable-pip-version-check | grep -vE '^(-e|cbha)' ) > constraints.txt
+	  $(VPY) -m pip freeze --disable-pip-version-check | grep -vE '^(-e|cbha|# Editable)' ) > constraints.txt
 
 clean:
 	rm -rf $(VENV) build install log output .pytest_cache *.egg-info
