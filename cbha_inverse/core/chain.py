@@ -1,0 +1,221 @@
+"""
+Chain of 6-DoF frames joined by compliance links: immutable model and separate state.
+
+Frames i = 0..n; frame 0 is the fixed base; link i (0-based, i = 0..n-1) joins frame i to frame
+i+1 (DESIGN §3, paper §III). The model never changes after it is built; what changes during a
+solve lives in a :class:`ChainState` (pinocchio's Model/Data split).
+"""
+
+from dataclasses import dataclass
+
+from cbha_inverse.core.se3 import quat_from_matrix, so3_exp
+import numpy as np
+
+
+def _frozen(array):
+    """Return a read-only float copy of ``array``."""
+    out = np.array(array, dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ChainModel:
+    """
+    Immutable chain of n compliance links (n + 1 frames, frame 0 = fixed base).
+
+    Attributes
+    ----------
+    compliances : (n, 6, 6) ndarray  [m/N, 1/N, rad/(N*m)]
+        Compliance of link i (frame i clamped, loads at frame i+1, frame-i axes; DESIGN §3).
+    stiffnesses : (n, 6, 6) ndarray
+        Their inverses (symmetrised).
+    rest_offsets : (n, 3) ndarray  [m]
+        Origin of frame i+1 in frame-i axes at rest.
+    rest_rotations : (n, 3, 3) ndarray
+        Rotation of frame i+1 relative to frame i at rest.
+    masses : (n,) ndarray  [kg]
+        Masses lumped at frames 1..n.
+    base_position : (3,) ndarray  [m]
+    base_rotation : (3, 3) ndarray
+
+    """
+
+    compliances: np.ndarray
+    stiffnesses: np.ndarray
+    rest_offsets: np.ndarray
+    rest_rotations: np.ndarray
+    masses: np.ndarray
+    base_position: np.ndarray
+    base_rotation: np.ndarray
+
+    @property
+    def n_links(self):
+        """Return the number of links n."""
+        return self.compliances.shape[0]
+
+    @property
+    def n_frames(self):
+        """Return the number of frames n + 1 (including the fixed base)."""
+        return self.compliances.shape[0] + 1
+
+    @property
+    def length(self):
+        """Return the sum of the rest link lengths [m] (a characteristic length of the chain)."""
+        return float(np.sum(np.linalg.norm(self.rest_offsets, axis=-1)))
+
+    @classmethod
+    def from_compliances(cls, compliances, rest_offsets, masses=None, rest_rotations=None,
+                         base_position=None, base_rotation=None):
+        """
+        Build a chain from link compliances and rest offsets.
+
+        Parameters
+        ----------
+        compliances : (n, 6, 6) array_like
+            Symmetric positive definite; link i joins frame i to frame i+1.
+        rest_offsets : (n, 3) array_like  [m]
+            Frame i+1 origin in frame-i axes at rest.
+        masses : (n,) array_like, optional  [kg]
+            Lumped at frames 1..n; zeros by default.
+        rest_rotations : (n, 3, 3) array_like, optional
+            Rest rotation of frame i+1 in frame i; identity by default.
+        base_position : (3,) array_like, optional  [m]
+            Zero by default.
+        base_rotation : (3, 3) array_like, optional
+            Identity by default.
+
+        Returns
+        -------
+        ChainModel
+
+        Raises
+        ------
+        ValueError
+            On inconsistent shapes, a non-symmetric or non-positive-definite compliance, or a
+            rotation that is not orthonormal.
+
+        """
+        comp = np.array(compliances, dtype=float)
+        if comp.ndim != 3 or comp.shape[1:] != (6, 6) or comp.shape[0] < 1:
+            raise ValueError(f'compliances must have shape (n, 6, 6), got {comp.shape}')
+        n = comp.shape[0]
+        scale = np.abs(comp).max(axis=(1, 2))
+        asym = np.abs(comp - np.swapaxes(comp, 1, 2)).max(axis=(1, 2))
+        bad = np.nonzero(asym > 1e-8 * scale)[0]
+        if bad.size:
+            raise ValueError(f'compliance of link {bad[0]} is not symmetric')
+        comp = 0.5 * (comp + np.swapaxes(comp, 1, 2))
+        try:
+            np.linalg.cholesky(comp)
+        except np.linalg.LinAlgError:
+            eig = np.linalg.eigvalsh(comp).min(axis=1)
+            raise ValueError(
+                f'compliance of link {int(np.argmin(eig))} is not positive definite') from None
+        stiff = np.linalg.inv(comp)
+        stiff = 0.5 * (stiff + np.swapaxes(stiff, 1, 2))
+        offsets = np.array(rest_offsets, dtype=float)
+        if offsets.shape != (n, 3):
+            raise ValueError(f'rest_offsets must have shape ({n}, 3), got {offsets.shape}')
+        if rest_rotations is None:
+            rots = np.broadcast_to(np.eye(3), (n, 3, 3))
+        else:
+            rots = np.array(rest_rotations, dtype=float)
+            if rots.shape != (n, 3, 3):
+                raise ValueError(f'rest_rotations must have shape ({n}, 3, 3)')
+            _check_rotations(rots, 'rest_rotations')
+        mass = np.zeros(n) if masses is None else np.array(masses, dtype=float)
+        if mass.shape != (n,) or np.any(mass < 0.0):
+            raise ValueError(f'masses must be {n} non-negative values')
+        base_x = np.zeros(3) if base_position is None else np.array(base_position, dtype=float)
+        base_r = np.eye(3) if base_rotation is None else np.array(base_rotation, dtype=float)
+        if base_x.shape != (3,) or base_r.shape != (3, 3):
+            raise ValueError('base_position must be (3,) and base_rotation (3, 3)')
+        _check_rotations(base_r[None], 'base_rotation')
+        return cls(_frozen(comp), _frozen(stiff), _frozen(offsets), _frozen(rots),
+                   _frozen(mass), _frozen(base_x), _frozen(base_r))
+
+
+def _check_rotations(rots, name):
+    """Raise ValueError unless every (3, 3) matrix is a proper rotation."""
+    err = np.abs(rots @ np.swapaxes(rots, -1, -2) - np.eye(3)).max()
+    if err > 1e-9 or np.any(np.linalg.det(rots) < 0.0):
+        raise ValueError(f'{name} must be proper rotation matrices')
+
+
+@dataclass(frozen=True, eq=False)
+class ChainState:
+    """
+    Poses of the n + 1 frames of a chain (world axes).
+
+    Attributes
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+    rotations : (n + 1, 3, 3) ndarray
+
+    """
+
+    positions: np.ndarray
+    rotations: np.ndarray
+
+    @property
+    def quaternions(self):
+        """(n + 1, 4) ndarray: frame orientations as (x, y, z, w) quaternions."""
+        return quat_from_matrix(self.rotations)
+
+
+def rest_state(model):
+    """
+    Rest shape of a chain, composed from the base along the rest transforms.
+
+    ``x_{i+1} = x_i + R_i d0_i``, ``R_{i+1} = R_i Q0_i``.
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+
+    Returns
+    -------
+    ChainState
+
+    """
+    n = model.n_links
+    pos = np.empty((n + 1, 3))
+    rot = np.empty((n + 1, 3, 3))
+    pos[0] = model.base_position
+    rot[0] = model.base_rotation
+    for i in range(n):
+        pos[i + 1] = pos[i] + rot[i] @ model.rest_offsets[i]
+        rot[i + 1] = rot[i] @ model.rest_rotations[i]
+    return ChainState(pos, rot)
+
+
+def retract(state, increments):
+    """
+    Apply world-axis increments to frames 1..n (frame 0 never moves).
+
+    ``x_i <- x_i + dx_i``, ``R_i <- exp(dtheta_i) R_i`` (left multiplication, world axes).
+
+    Parameters
+    ----------
+    state : ChainState
+        Current poses.
+    increments : (n, 6) array_like  [m, rad]
+        (dx, dy, dz, rx, ry, rz) per moving frame.
+
+    Returns
+    -------
+    ChainState
+        A new state; ``state`` is not modified.
+
+    """
+    inc = np.asarray(increments, dtype=float)
+    n = state.positions.shape[0] - 1
+    if inc.shape != (n, 6):
+        raise ValueError(f'increments must have shape ({n}, 6), got {inc.shape}')
+    pos = state.positions.copy()
+    rot = state.rotations.copy()
+    pos[1:] += inc[:, :3]
+    rot[1:] = so3_exp(inc[:, 3:]) @ rot[1:]
+    return ChainState(pos, rot)

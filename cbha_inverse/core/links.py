@@ -1,0 +1,366 @@
+"""
+Compliance links between two 6-DoF frames: Timoshenko compliance, corotational wrench, tangent.
+
+A link joins frame a (= frame i) to frame b (= frame i+1). Its data are a symmetric positive
+definite 6x6 stiffness ``K = C^-1`` (C as the paper defines it: frame a clamped, loads at the
+origin of frame b, all in frame-a axes; DESIGN §3, paper eq. 2-4) and the rest transform of frame
+b seen from frame a (offset ``d0``, rotation ``Q0``).
+
+Local deformation (DESIGN §3)::
+
+    delta = [ R_a^T (x_b - x_a) - d0 ;  log(R_a^T R_b Q0^T) ]          (frame-a axes)
+
+The link stores the energy ``U = delta^T K delta / 2``; its wrenches are the exact generalised
+forces ``-dU/dq`` for world-axis increments (dx, dtheta) with ``R <- exp(dtheta) R``:
+
+- on frame b, in frame-a axes at the origin of b: force ``-(K delta)_t`` (exactly DESIGN's
+  ``w = -K delta``) and moment ``-Jl^-1(phi)^T (K delta)_r``, where ``Jl^-1`` is the inverse left
+  Jacobian of SO(3) at ``phi = delta_r``. The factor ``Jl^-1^T = I + O(|phi|)`` makes the link
+  conservative (symmetric material tangent, rigid-body invariance, equilibrium) and does not change
+  the linear response at rest, which is the paper's eq. 4-8;
+- on frame a: the opposite force and the opposite moment transported from x_b to x_a
+  (the paper's H matrix, eq. 5-6).
+Both are rotated to world axes with R_a (paper eq. 7).
+
+The 12x12 tangent ``T = -d[w_a; w_b]/d[dq_a; dq_b]`` is the exact derivative: material part
+``B^T K B`` (paper eq. 8 with the rotation made explicit) plus the geometric (load-dependent) part.
+Its off-diagonal 6x6 blocks satisfy ``T_ba = T_ab^T``; the rotational 3x3 part of each diagonal
+block carries an antisymmetric part ``hat(m)/2`` (m: the link moment on that frame), the
+well-known non-symmetry of spatial rotation increments away from equilibrium.
+"""
+
+from typing import NamedTuple
+
+from cbha_inverse.core.se3 import (hat, so3_left_jacobian_inverse,
+                                   so3_left_jacobian_inverse_transpose_derivative, so3_log)
+import numpy as np
+
+
+def cowper_shear_coefficient(poisson_ratio, outer_radius, inner_radius=0.0):
+    """
+    Cowper's shear coefficient of a solid or hollow circular section.
+
+    ``kappa = 6 (1 + nu) (1 + m^2)^2 / ((7 + 6 nu) (1 + m^2)^2 + (20 + 12 nu) m^2)``, ``m =
+    r_i / r_o`` (Cowper 1966); ``m = 0`` gives the solid value ``6 (1 + nu) / (7 + 6 nu)``.
+
+    Parameters
+    ----------
+    poisson_ratio : float
+        Poisson's ratio nu.
+    outer_radius : float  [m]
+        Outer radius r_o.
+    inner_radius : float  [m]
+        Inner radius r_i (0 for a solid section).
+
+    Returns
+    -------
+    float
+
+    """
+    nu = float(poisson_ratio)
+    m2 = (float(inner_radius) / float(outer_radius)) ** 2
+    a = (1.0 + m2) ** 2
+    return 6.0 * (1.0 + nu) * a / ((7.0 + 6.0 * nu) * a + (20.0 + 12.0 * nu) * m2)
+
+
+def timoshenko_compliance(length, youngs_modulus, poisson_ratio, outer_radius, inner_radius=0.0):
+    """
+    Compliance of a straight Timoshenko beam along local +x (DESIGN §3).
+
+    Frame a is clamped at x = 0; loads (Fx, Fy, Fz, Mx, My, Mz) act at the origin of frame b
+    (x = L), displacements (dx, dy, dz, rx, ry, rz) are measured there, all in frame-a axes::
+
+        C[0,0] = L/(EA)   C[3,3] = L/(GJ)   C[1,1] = C[2,2] = L^3/(3EI) + L/(kappa G A)
+        C[4,4] = C[5,5] = L/(EI)   C[1,5] = C[5,1] = L^2/(2EI)   C[2,4] = C[4,2] = -L^2/(2EI)
+
+    with G = E / (2 (1 + nu)), J = 2 I the polar moment and kappa Cowper's coefficient.
+
+    Parameters
+    ----------
+    length : float  [m]
+        Beam length L.
+    youngs_modulus : float  [Pa]
+        Young's modulus E.
+    poisson_ratio : float
+        Poisson's ratio nu.
+    outer_radius : float  [m]
+        Outer radius r_o.
+    inner_radius : float  [m]
+        Inner radius r_i, 0 for a solid section.
+
+    Returns
+    -------
+    (6, 6) ndarray  [m/N, 1/N, rad/(N*m)]
+
+    """
+    length = float(length)
+    e_mod = float(youngs_modulus)
+    r_o = float(outer_radius)
+    r_i = float(inner_radius)
+    if length <= 0.0 or e_mod <= 0.0 or r_o <= 0.0 or not 0.0 <= r_i < r_o:
+        raise ValueError('need length > 0, youngs_modulus > 0 and 0 <= inner < outer radius')
+    if not -1.0 < poisson_ratio < 0.5:
+        raise ValueError('poisson_ratio must lie in (-1, 0.5)')
+    area = np.pi * (r_o ** 2 - r_i ** 2)
+    inertia = np.pi * (r_o ** 4 - r_i ** 4) / 4.0
+    shear_modulus = e_mod / (2.0 * (1.0 + poisson_ratio))
+    kappa = cowper_shear_coefficient(poisson_ratio, r_o, r_i)
+    ei = e_mod * inertia
+    c = np.zeros((6, 6))
+    c[0, 0] = length / (e_mod * area)
+    c[1, 1] = c[2, 2] = length ** 3 / (3.0 * ei) + length / (kappa * shear_modulus * area)
+    c[3, 3] = length / (shear_modulus * 2.0 * inertia)
+    c[4, 4] = c[5, 5] = length / ei
+    c[1, 5] = c[5, 1] = length ** 2 / (2.0 * ei)
+    c[2, 4] = c[4, 2] = -length ** 2 / (2.0 * ei)
+    return c
+
+
+class LinkTerms(NamedTuple):
+    """Local (frame-a axes) quantities of a batch of links shared by wrench and tangent."""
+
+    offset: np.ndarray          # (..., 3) R_a^T (x_b - x_a)
+    phi: np.ndarray             # (..., 3) log(R_a^T R_b Q0^T)
+    jinv: np.ndarray            # (..., 3, 3) Jl^-1(phi)
+    stress: np.ndarray          # (..., 6) K delta
+    wrench_b: np.ndarray        # (..., 6) wrench on frame b, frame-a axes, at x_b
+
+
+def link_deformation(rest_offset, rest_rotation, position_a, rotation_a, position_b, rotation_b):
+    """
+    Local deformation ``delta`` of links (DESIGN §3), frame-a axes.
+
+    Parameters
+    ----------
+    rest_offset : (..., 3) array_like  [m]
+        Origin of frame b in frame-a axes at rest (d0).
+    rest_rotation : (..., 3, 3) array_like
+        Rotation of frame b in frame a at rest (Q0).
+    position_a : (..., 3) array_like  [m]
+        World position of frame a.
+    rotation_a : (..., 3, 3) array_like
+        World rotation of frame a.
+    position_b : (..., 3) array_like  [m]
+        World position of frame b.
+    rotation_b : (..., 3, 3) array_like
+        World rotation of frame b.
+
+    Returns
+    -------
+    (..., 6) ndarray  [m, rad]
+
+    """
+    rot_a = np.asarray(rotation_a, dtype=float)
+    rot_at = np.swapaxes(rot_a, -1, -2)
+    diff = np.asarray(position_b, dtype=float) - np.asarray(position_a, dtype=float)
+    offset = (rot_at @ diff[..., None])[..., 0]
+    rel = rot_at @ np.asarray(rotation_b, dtype=float) @ np.swapaxes(
+        np.asarray(rest_rotation, dtype=float), -1, -2)
+    return np.concatenate([offset - rest_offset, so3_log(rel)], axis=-1)
+
+
+def link_terms(stiffness, rest_offset, rest_rotation, position_a, rotation_a, position_b,
+               rotation_b):
+    """
+    Evaluate the local quantities of a batch of links (see :class:`LinkTerms`).
+
+    Parameters
+    ----------
+    stiffness : (..., 6, 6) array_like  [N/m, N, N*m/rad]
+        Link stiffness K = C^-1 (frame-a axes).
+    rest_offset : (..., 3) array_like  [m]
+        Origin of frame b in frame-a axes at rest (d0).
+    rest_rotation : (..., 3, 3) array_like
+        Rotation of frame b in frame a at rest (Q0).
+    position_a : (..., 3) array_like  [m]
+        World position of frame a.
+    rotation_a : (..., 3, 3) array_like
+        World rotation of frame a.
+    position_b : (..., 3) array_like  [m]
+        World position of frame b.
+    rotation_b : (..., 3, 3) array_like
+        World rotation of frame b.
+
+    Returns
+    -------
+    LinkTerms
+
+    """
+    rot_at = np.swapaxes(rotation_a, -1, -2)
+    diff = position_b - position_a
+    offset = (rot_at @ diff[..., None])[..., 0]
+    rel = rot_at @ rotation_b @ np.swapaxes(rest_rotation, -1, -2)
+    phi = so3_log(rel)
+    delta = np.concatenate([offset - rest_offset, phi], axis=-1)
+    stress = (stiffness @ delta[..., None])[..., 0]
+    jinv = so3_left_jacobian_inverse(phi)
+    moment = (np.swapaxes(jinv, -1, -2) @ stress[..., 3:, None])[..., 0]
+    wrench_b = -np.concatenate([stress[..., :3], moment], axis=-1)
+    return LinkTerms(offset, phi, jinv, stress, wrench_b)
+
+
+def _rotate_wrench(rot, wrench):
+    """Rotate (..., 6) wrenches by (..., 3, 3) rotations."""
+    out = np.empty(np.broadcast_shapes(wrench.shape, rot.shape[:-2] + (6,)))
+    out[..., :3] = (rot @ wrench[..., :3, None])[..., 0]
+    out[..., 3:] = (rot @ wrench[..., 3:, None])[..., 0]
+    return out
+
+
+def wrench_pair_from_terms(terms, rotation_a):
+    """
+    World wrenches on frames a and b from local link terms (paper eq. 5-7).
+
+    Parameters
+    ----------
+    terms : LinkTerms
+        Local link quantities from :func:`link_terms`.
+    rotation_a : (..., 3, 3) ndarray
+        World rotation of frame a.
+
+    Returns
+    -------
+    wrench_a, wrench_b : (..., 6) ndarrays  [N, N*m]
+        Each at its own frame origin, world axes.
+
+    """
+    w_b = _rotate_wrench(rotation_a, terms.wrench_b)
+    arm = (rotation_a @ terms.offset[..., None])[..., 0]
+    w_a = np.empty_like(w_b)
+    w_a[..., :3] = -w_b[..., :3]
+    w_a[..., 3:] = -w_b[..., 3:] - np.cross(arm, w_b[..., :3])
+    return w_a, w_b
+
+
+def link_wrenches(stiffness, rest_offset, rest_rotation, position_a, rotation_a, position_b,
+                  rotation_b):
+    """
+    World wrenches that a batch of compliance links applies to its two frames.
+
+    Parameters
+    ----------
+    stiffness : (..., 6, 6) array_like  [N/m, N, N*m/rad]
+        Link stiffness K = C^-1 (frame-a axes).
+    rest_offset : (..., 3) array_like  [m]
+        Origin of frame b in frame-a axes at rest (d0).
+    rest_rotation : (..., 3, 3) array_like
+        Rotation of frame b in frame a at rest (Q0).
+    position_a : (..., 3) array_like  [m]
+        World position of frame a.
+    rotation_a : (..., 3, 3) array_like
+        World rotation of frame a.
+    position_b : (..., 3) array_like  [m]
+        World position of frame b.
+    rotation_b : (..., 3, 3) array_like
+        World rotation of frame b.
+
+    Returns
+    -------
+    wrench_a, wrench_b : (..., 6) ndarrays  [N, N*m]
+        On frame a at x_a and on frame b at x_b, world axes.
+
+    """
+    args = [np.asarray(v, dtype=float) for v in (stiffness, rest_offset, rest_rotation,
+                                                 position_a, rotation_a, position_b, rotation_b)]
+    terms = link_terms(*args)
+    return wrench_pair_from_terms(terms, args[4])
+
+
+def local_tangent_blocks(terms, stiffness):
+    """
+    Exact link tangent blocks in frame-a axes: ``T_aa``, ``T_ab``, ``T_bb`` (``T_ba = T_ab^T``).
+
+    Material part ``B^T K B`` with ``B_b = diag(I, Jl^-1)``, ``B_a = -B_b [[I, -hat(p)], [0, I]]``
+    (p: current offset of b from a, the paper's H matrix) plus the geometric part from the
+    rotation of the force with R_a, the moving lever arm p, and the variation of ``Jl^-1``.
+
+    Parameters
+    ----------
+    terms : LinkTerms
+        Local link quantities from :func:`link_terms`.
+    stiffness : (..., 6, 6) ndarray
+        Link stiffness K.
+
+    Returns
+    -------
+    t_aa, t_ab, t_bb : (..., 6, 6) ndarrays
+
+    """
+    batch = terms.phi.shape[:-1]
+    eye = np.broadcast_to(np.eye(3), batch + (3, 3))
+    jinv = terms.jinv
+    p_hat = hat(terms.offset)
+    a_b = np.zeros(batch + (6, 6))
+    a_b[..., :3, :3] = eye
+    a_b[..., 3:, 3:] = jinv
+    t_bb = np.swapaxes(a_b, -1, -2) @ stiffness @ a_b
+    tp = np.zeros(batch + (6, 6))
+    tp[..., :3, :3] = eye
+    tp[..., 3:, 3:] = eye
+    tp[..., :3, 3:] = -p_hat
+    tpt = np.swapaxes(tp, -1, -2)
+    t_ab = -(tpt @ t_bb)
+    t_aa = -(t_ab @ tp)
+    # geometric part: s_t local force (on a), moment m = Jl^-T s_r, DJ = d(Jl^-T s_r)/dphi Jl^-1
+    f_hat = hat(terms.stress[..., :3])
+    m_hat = hat(-terms.wrench_b[..., 3:])
+    dj = so3_left_jacobian_inverse_transpose_derivative(terms.phi, terms.stress[..., 3:]) @ jinv
+    t_aa[..., :3, 3:] += f_hat
+    t_aa[..., 3:, :3] -= f_hat
+    t_aa[..., 3:, 3:] += p_hat @ f_hat + m_hat + dj
+    t_ab[..., 3:, :3] += f_hat
+    t_ab[..., 3:, 3:] -= dj
+    t_bb[..., 3:, 3:] += dj
+    return t_aa, t_ab, t_bb
+
+
+def _rotate_block(rot, block):
+    """Return ``diag(R, R) @ block @ diag(R, R)^T`` for (..., 6, 6) blocks."""
+    rb = np.zeros(rot.shape[:-2] + (6, 6))
+    rb[..., :3, :3] = rot
+    rb[..., 3:, 3:] = rot
+    return rb @ block @ np.swapaxes(rb, -1, -2)
+
+
+def link_tangent(stiffness, rest_offset, rest_rotation, position_a, rotation_a, position_b,
+                 rotation_b):
+    """
+    Exact 12x12 tangent of a batch of links, ``T = -d[w_a; w_b] / d[dq_a; dq_b]`` (world axes).
+
+    The increments are world-axis ``dq = (dx, dy, dz, rx, ry, rz)`` applied as
+    ``x <- x + dx``, ``R <- exp(dtheta) R`` (see :func:`cbha_inverse.core.chain.retract`).
+
+    Parameters
+    ----------
+    stiffness : (..., 6, 6) array_like  [N/m, N, N*m/rad]
+        Link stiffness K = C^-1 (frame-a axes).
+    rest_offset : (..., 3) array_like  [m]
+        Origin of frame b in frame-a axes at rest (d0).
+    rest_rotation : (..., 3, 3) array_like
+        Rotation of frame b in frame a at rest (Q0).
+    position_a : (..., 3) array_like  [m]
+        World position of frame a.
+    rotation_a : (..., 3, 3) array_like
+        World rotation of frame a.
+    position_b : (..., 3) array_like  [m]
+        World position of frame b.
+    rotation_b : (..., 3, 3) array_like
+        World rotation of frame b.
+
+    Returns
+    -------
+    (..., 12, 12) ndarray
+        Rows and columns ordered (frame a, frame b).
+
+    """
+    args = [np.asarray(v, dtype=float) for v in (stiffness, rest_offset, rest_rotation,
+                                                 position_a, rotation_a, position_b, rotation_b)]
+    terms = link_terms(*args)
+    t_aa, t_ab, t_bb = local_tangent_blocks(terms, args[0])
+    rot = args[4]
+    out = np.empty(terms.phi.shape[:-1] + (12, 12))
+    out[..., :6, :6] = _rotate_block(rot, t_aa)
+    out[..., :6, 6:] = _rotate_block(rot, t_ab)
+    out[..., 6:, :6] = np.swapaxes(out[..., :6, 6:], -1, -2)
+    out[..., 6:, 6:] = _rotate_block(rot, t_bb)
+    return out
