@@ -1,0 +1,329 @@
+"""
+Actuators of a frame chain: cables (tendons) and pressure cavities (paper §IV, DESIGN §5).
+
+Every actuator contributes one column of the actuation Jacobian transpose ``J_aᵀ`` (paper eq. 9):
+the wrenches it applies to the frames per unit actuation (unit tension in N, unit pressure in Pa).
+Here a column is stored batch-first as ``(n + 1, 6)``: one wrench (Fx, Fy, Fz, Mx, My, Mz) per
+frame, world axes, at the frame origin; row 0 (the fixed base) is kept so that the indices match
+the frames and is dropped by the solver.
+
+Sign conventions (the actuator's virtual work is ``λ · dδ_a``):
+
+- cable: ``λ ≥ 0`` is the tension; ``δ_a`` is the cable *shortening* (pulled-in length), so the
+  column is ``-d(length)/dq`` and a positive tension shortens the cable;
+- cavity: ``λ`` is the gauge pressure; ``δ_a`` is the cavity volume, so the column is
+  ``+d(volume)/dq`` and a positive pressure inflates the cavity.
+
+With increments ``dq`` applied by :func:`cbha_inverse.core.chain.retract` (``dx`` and world-axis
+``dθ`` per frame), ``J_a dq = dδ_a`` to first order; the tests check this against finite
+differences.
+
+Each actuator group evaluates all its actuators at once (vectorised over routing points,
+vertices, triangles); :class:`ActuatorSet` stacks the groups in the scene's actuator order.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+
+def cross(a, b):
+    """
+    Return the row-wise cross product ``a × b`` (faster than ``numpy.cross`` for small batches).
+
+    Parameters
+    ----------
+    a, b : (..., 3) ndarray
+        Vectors.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        ``a × b``.
+
+    """
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+def point_wrenches(levers, forces):
+    """
+    Map forces applied at points to wrenches at frame origins (paper Fig. 4, rigid mapping).
+
+    A force ``F`` at ``p = x_f + r`` does the virtual work ``F · (dx_f + dθ_f × r)``, so the
+    wrench at the frame origin is ``[F; r × F]`` (world axes).
+
+    Parameters
+    ----------
+    levers : (P, 3) ndarray  [m]
+        ``r = p - x_f``, world axes.
+    forces : (P, 3) ndarray  [N]
+        Forces, world axes.
+
+    Returns
+    -------
+    (P, 6) ndarray  [N, N*m]
+        Wrenches at the frame origins.
+
+    """
+    return np.concatenate([forces, cross(levers, forces)], axis=1)
+
+
+@dataclass(frozen=True)
+class Cable:
+    """
+    One cable (tendon) routed through points fixed to frames.
+
+    Attributes
+    ----------
+    name : str
+        Actuator name.
+    frames : (P,) ndarray of int
+        Frame index of each routing point, in routing order from the actuator (base) end.
+    offsets : (P, 3) ndarray  [m]
+        Routing points in the axes of their frame, relative to its origin.
+    max_tension : float  [N]
+        Upper bound of the tension (``inf`` if unbounded).
+
+    """
+
+    name: str
+    frames: np.ndarray
+    offsets: np.ndarray
+    max_tension: float = np.inf
+
+    def __post_init__(self):
+        """Validate shapes."""
+        frames = np.asarray(self.frames, dtype=int).reshape(-1)
+        offsets = np.asarray(self.offsets, dtype=float).reshape(-1, 3)
+        if frames.size < 2 or offsets.shape[0] != frames.size:
+            raise ValueError(f'cable {self.name!r}: need >= 2 routing points with one offset each')
+        object.__setattr__(self, 'frames', frames)
+        object.__setattr__(self, 'offsets', offsets)
+
+
+class CableGroup:
+    """
+    All cables of a scene, evaluated together (DESIGN §5).
+
+    The force of a cable on a routing point is the sum of the unit vectors toward its neighbouring
+    routing points (the last point pulls toward the previous one); it is mapped rigidly to the
+    wrench of the point's frame. Without friction this is exactly ``-d(length)/dq``.
+
+    Parameters
+    ----------
+    cables : sequence of Cable
+        The cables, in column order.
+    n_frames : int
+        Number of frames of the chain (``n + 1``, base included).
+
+    """
+
+    def __init__(self, cables, n_frames):
+        """Precompute index arrays and the scatter matrices of the group."""
+        self.cables = tuple(cables)
+        self.names = tuple(c.name for c in self.cables)
+        self.n_frames = int(n_frames)
+        m = len(self.cables)
+        frames, offsets, owner, starts = [], [], [], []
+        count = 0
+        for j, cable in enumerate(self.cables):
+            if cable.frames.min() < 0 or cable.frames.max() >= n_frames:
+                raise ValueError(f'cable {cable.name!r} names a frame outside 0..{n_frames - 1}')
+            p = cable.frames.size
+            frames.append(cable.frames)
+            offsets.append(cable.offsets)
+            owner.append(np.full(p, j))
+            starts.append(count + np.arange(p - 1))
+            count += p
+        self.frames = np.concatenate(frames)
+        self.offsets = np.concatenate(offsets)
+        owner = np.concatenate(owner)
+        self.segment_start = np.concatenate(starts)
+        self.segment_end = self.segment_start + 1
+        n_points, n_segments = self.frames.size, self.segment_start.size
+        segment_owner = owner[self.segment_start]
+        rows = np.arange(n_segments)
+        incidence = (sp.csr_matrix((np.ones(n_segments), (self.segment_start, rows)),
+                                   shape=(n_points, n_segments))
+                     - sp.csr_matrix((np.ones(n_segments), (self.segment_end, rows)),
+                                     shape=(n_points, n_segments)))
+        self._point_force = incidence.toarray()
+        scatter = np.zeros((m * self.n_frames, n_points))
+        scatter[owner * self.n_frames + self.frames, np.arange(n_points)] = 1.0
+        self._scatter = scatter
+        self._length_sum = np.zeros((m, n_segments))
+        self._length_sum[segment_owner, rows] = 1.0
+        self.upper_bounds = np.array([c.max_tension for c in self.cables], dtype=float)
+        self.lower_bounds = np.zeros(m)
+
+    @property
+    def n_actuators(self):
+        """Return the number of cables."""
+        return len(self.cables)
+
+    def routing_points(self, positions, rotations):
+        """
+        Return the world positions of all routing points and their levers.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+
+        Returns
+        -------
+        points, levers : (P, 3) ndarray  [m]
+            Routing points and ``point - frame origin`` (world axes).
+
+        """
+        levers = np.einsum('pij,pj->pi', rotations[self.frames], self.offsets)
+        return positions[self.frames] + levers, levers
+
+    def lengths(self, positions, rotations):
+        """
+        Return the routed length of every cable.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+
+        Returns
+        -------
+        (m,) ndarray  [m]
+            Sum of the straight spans between consecutive routing points.
+
+        """
+        points, _ = self.routing_points(positions, rotations)
+        spans = points[self.segment_end] - points[self.segment_start]
+        return self._length_sum @ np.sqrt(np.einsum('si,si->s', spans, spans))
+
+    def evaluate(self, positions, rotations):
+        """
+        Return the Jacobian columns and the displacements of all cables.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+
+        Returns
+        -------
+        wrenches : (m, n + 1, 6) ndarray  [N, N*m per N]
+            Frame wrenches per unit tension (columns of ``J_aᵀ``).
+        displacements : (m,) ndarray  [m]
+            ``-length``: the cable shortening up to a constant (``δ_a``).
+
+        """
+        points, levers = self.routing_points(positions, rotations)
+        spans = points[self.segment_end] - points[self.segment_start]
+        span_lengths = np.sqrt(np.einsum('si,si->s', spans, spans))
+        units = spans / span_lengths[:, None]
+        forces = self._point_force @ units
+        wrenches = self._scatter @ point_wrenches(levers, forces)
+        return (wrenches.reshape(self.n_actuators, self.n_frames, 6),
+                -(self._length_sum @ span_lengths))
+
+
+class ActuatorSet:
+    """
+    The actuators of a scene: groups (cables, cavities) stacked in column order.
+
+    Parameters
+    ----------
+    groups : sequence
+        Objects with ``names``, ``n_actuators``, ``lower_bounds``, ``upper_bounds`` and
+        ``evaluate(positions, rotations) -> (wrenches (m_g, n + 1, 6), displacements (m_g,))``
+        (:class:`CableGroup`, :class:`cbha_inverse.core.cavity.CavityGroup`,
+        :class:`cbha_inverse.core.cavity.LinearCavityGroup`).
+    n_frames : int
+        Number of frames (base included).
+    order : sequence of str, optional
+        Actuator names in the wanted column order (default: group order).
+
+    """
+
+    def __init__(self, groups, n_frames, order=None):
+        """Index the groups' columns in the requested order."""
+        self.groups = tuple(g for g in groups if g.n_actuators)
+        self.n_frames = int(n_frames)
+        names = [name for g in self.groups for name in g.names]
+        if len(set(names)) != len(names):
+            raise ValueError(f'duplicate actuator names in {names}')
+        order = list(names if order is None else order)
+        if sorted(order) != sorted(names):
+            raise ValueError(f'actuator order {order} does not match the actuators {names}')
+        position = {name: k for k, name in enumerate(order)}
+        self.names = tuple(order)
+        self._columns = [np.array([position[name] for name in g.names], dtype=int)
+                         for g in self.groups]
+        self.lower_bounds = np.empty(len(order))
+        self.upper_bounds = np.empty(len(order))
+        for g, cols in zip(self.groups, self._columns):
+            self.lower_bounds[cols] = g.lower_bounds
+            self.upper_bounds[cols] = g.upper_bounds
+
+    @property
+    def n_actuators(self):
+        """Return the number of actuators ``m``."""
+        return len(self.names)
+
+    def evaluate(self, positions, rotations):
+        """
+        Return all Jacobian columns and actuator displacements.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+
+        Returns
+        -------
+        wrenches : (m, n + 1, 6) ndarray
+            Columns of ``J_aᵀ`` (frame wrenches per unit actuation, world axes).
+        displacements : (m,) ndarray
+            ``δ_a`` up to constants (cable shortening, cavity volume).
+
+        """
+        if len(self.groups) == 1:
+            return self.groups[0].evaluate(positions, rotations)
+        wrenches = np.empty((self.n_actuators, self.n_frames, 6))
+        displacements = np.empty(self.n_actuators)
+        for g, cols in zip(self.groups, self._columns):
+            wrenches[cols], displacements[cols] = g.evaluate(positions, rotations)
+        return wrenches, displacements
+
+    def loads(self, positions, rotations, actuation):
+        """
+        Return the frame wrenches ``J_aᵀ λ`` of an actuation.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        actuation : (m,) ndarray  [N or Pa]
+            Tensions / pressures.
+
+        Returns
+        -------
+        (n + 1, 6) ndarray  [N, N*m]
+            Wrenches per frame, world axes (row 0 acts on the fixed base).
+
+        """
+        wrenches, _ = self.evaluate(positions, rotations)
+        return np.einsum('m,mfa->fa', np.asarray(actuation, dtype=float), wrenches)

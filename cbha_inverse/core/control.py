@@ -1,0 +1,365 @@
+"""
+The per-tick inverse-simulation controller (DESIGN §6, paper §IV) and closed-loop correction.
+
+:class:`InverseSolver` holds the immutable model (chain, actuators, effectors, gravity) and a
+mutable tick state (frame poses, current actuation, QP warm start). One :meth:`InverseSolver.step`:
+
+1. linearise at the current state: tangent stiffness ``K`` and internal wrenches
+   (``assemble_tangent``), actuator columns ``J_aᵀ`` at the current poses, residual
+   ``r = f(q) + f_ext + J_aᵀ λ_prev``;
+2. factor ``K`` (block tridiagonal) and solve ``K⁻¹ [J_aᵀ, r]`` in one multi-RHS call, giving
+   ``W_ea``, ``W_aa`` and ``δ_e^free`` (:func:`cbha_inverse.core.inverse.project_constraints`);
+3. solve the regularised box QP (proxsuite, warm-started; projected Gauss-Seidel on request or as a
+   fallback if proxsuite reports a failure);
+4. apply ``λ`` and update the state by the Newton step of the same factorization,
+   ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (no second solve), followed by ``newton_steps - 1``
+   further full Newton steps at fixed ``λ`` if requested.
+
+Repeated ticks therefore run Newton's method on the coupled problem (equilibrium plus optimal
+actuation); at a fixed target the state converges to the static equilibrium of the returned
+actuation. Each step is limited to ``max_rotation_step`` radians per frame so a far target cannot
+throw the linearisation off.
+"""
+
+from dataclasses import dataclass, field
+import time
+
+from cbha_inverse.core.assembly import assemble_tangent, internal_wrenches
+from cbha_inverse.core.btd import factorize, NotPositiveDefiniteError
+from cbha_inverse.core.chain import rest_state, retract
+from cbha_inverse.core.inverse import (actuation_qp, ActuationQP, binding_bounds,
+                                       project_constraints, projected_gauss_seidel)
+import numpy as np
+
+
+@dataclass(frozen=True)
+class InverseOptions:
+    """
+    Options of the inverse solver.
+
+    Attributes
+    ----------
+    energy_weight : float
+        ``ε_E`` of the actuation-energy term (unit-free, see :mod:`cbha_inverse.core.inverse`).
+    proximal_weight : float
+        ``ε_P`` of the tick-to-tick smoothing term (unit-free).
+    rate_limit : tuple of float or None
+        Largest change per tick of each actuator (N or Pa), ``None`` for none.
+    qp_solver : str
+        ``'proxsuite'`` (default) or ``'gauss_seidel'``.
+    newton_steps : int
+        Newton steps per tick (1 = the update reuses the tick's factorization).
+    max_rotation_step : float  [rad]
+        Largest frame rotation increment per Newton step.
+    eps_abs : float
+        QP tolerance (normalised problem).
+
+    """
+
+    energy_weight: float = 1e-6
+    proximal_weight: float = 1e-6
+    rate_limit: tuple = None
+    qp_solver: str = 'proxsuite'
+    newton_steps: int = 1
+    max_rotation_step: float = 0.5
+    eps_abs: float = 1e-10
+
+    def __post_init__(self):
+        """Validate."""
+        if self.qp_solver not in ('proxsuite', 'gauss_seidel'):
+            raise ValueError(f"qp_solver must be 'proxsuite' or 'gauss_seidel', "
+                             f'not {self.qp_solver!r}')
+        if self.newton_steps < 1:
+            raise ValueError('newton_steps must be >= 1')
+
+
+@dataclass(frozen=True)
+class TickResult:
+    """
+    Result of one control tick.
+
+    Attributes
+    ----------
+    actuation : (m,) ndarray  [N or Pa]
+        Commanded actuation, always finite and within the bounds.
+    effector_positions : (k, 3) ndarray  [m]
+        Effector positions of the updated model state.
+    status : str
+        ``'solved'`` (QP solved, no bound limits the tracking), ``'saturated'`` (QP solved, some
+        actuator is held by a bound the target pushes against: closest reachable point),
+        ``'qp_fallback'`` (proxsuite failed, the Gauss-Seidel solution is used),
+        ``'not_positive_definite'`` (tangent not SPD: actuation held, state unchanged) or
+        ``'rejected'`` (non-finite target: actuation held, state unchanged).
+    qp_status : str
+        The QP solver's own status.
+    qp_iterations : int
+        QP iterations.
+    saturated : (m,) ndarray of bool
+        Actuators held by a bound.
+    predicted_error : float  [m]
+        ``‖W_ea λ + δ_e^free‖`` of the linearised model (largest effector gap).
+    residual_norm : float  [N, N*m]
+        Norm of the equilibrium residual before the update.
+    timings : dict
+        Seconds spent in ``assembly``, ``factor``, ``projection``, ``qp``, ``update``, ``total``.
+
+    """
+
+    actuation: np.ndarray
+    effector_positions: np.ndarray
+    status: str
+    qp_status: str
+    qp_iterations: int
+    saturated: np.ndarray
+    predicted_error: float
+    residual_norm: float
+    timings: dict = field(default_factory=dict)
+
+
+class InverseSolver:
+    """
+    The per-tick controller of DESIGN §6 (pure numerics, no ROS).
+
+    Parameters
+    ----------
+    model : cbha_inverse.core.chain.ChainModel
+        The frame chain.
+    actuators : cbha_inverse.core.actuation.ActuatorSet
+        Its actuators (``m``).
+    effectors : cbha_inverse.core.effectors.PointEffectors
+        Its effector points (``k``).
+    gravity : (3,) array_like or None  [m/s^2]
+        Gravity acting on the lumped masses.
+    options : InverseOptions, optional
+        Solver options.
+    scale : (m,) array_like, optional
+        Actuator scales ``σ`` (default: ``upper - lower``).
+
+    """
+
+    def __init__(self, model, actuators, effectors, gravity=None, options=None, scale=None):
+        """Precompute the constant parts and start from rest."""
+        self.model = model
+        self.actuators = actuators
+        self.effectors = effectors
+        self.options = options or InverseOptions()
+        self.lower_bounds = np.array(actuators.lower_bounds, dtype=float)
+        self.upper_bounds = np.array(actuators.upper_bounds, dtype=float)
+        if not np.all(np.isfinite(self.upper_bounds)):
+            raise ValueError('every actuator needs a finite upper bound')
+        self.actuator_names = tuple(actuators.names)
+        self.effector_names = tuple(effectors.names)
+        m = actuators.n_actuators
+        self._scale = (self.upper_bounds - self.lower_bounds if scale is None
+                       else np.asarray(scale, dtype=float))
+        self._rate = (None if self.options.rate_limit is None
+                      else np.broadcast_to(np.asarray(self.options.rate_limit, float), (m,)))
+        n = model.n_links
+        external = np.zeros((n, 6))
+        if gravity is not None:
+            external[:, :3] = np.asarray(model.masses, dtype=float)[:, None] * np.asarray(gravity)
+        self._external = external.reshape(-1)
+        self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
+        self.reset()
+
+    def reset(self, state=None, actuation=None):
+        """
+        Return to rest (or to a given state and actuation) and forget the warm start.
+
+        Parameters
+        ----------
+        state : cbha_inverse.core.chain.ChainState, optional
+            Start state (default: the rest shape; the first ticks then settle it under gravity).
+        actuation : (m,) array_like, optional
+            Start actuation (default: zero, clipped to the bounds).
+
+        """
+        self.state = rest_state(self.model) if state is None else state
+        a = np.zeros(len(self.actuator_names)) if actuation is None else actuation
+        self.actuation = np.clip(np.asarray(a, dtype=float), self.lower_bounds, self.upper_bounds)
+        self._qp.reset()
+
+    def effector_positions(self):
+        """Return the effector positions (k, 3) of the current model state."""
+        return self.effectors.positions(self.state.positions, self.state.rotations)
+
+    def _limited(self, increments):
+        """Scale a Newton step so that no frame rotates more than ``max_rotation_step``."""
+        largest = np.sqrt(np.max(np.einsum('ij,ij->i', increments[:, 3:], increments[:, 3:])))
+        if largest > self.options.max_rotation_step:
+            increments = increments * (self.options.max_rotation_step / largest)
+        return increments
+
+    def _residual(self, state, actuation):
+        """Return ``f(q) + f_ext + J_aᵀ λ`` (6n,) at a state."""
+        wrenches, _ = self.actuators.evaluate(state.positions, state.rotations)
+        return (internal_wrenches(self.model, state).reshape(-1) + self._external
+                + actuation @ wrenches[:, 1:, :].reshape(wrenches.shape[0], -1))
+
+    def _held(self, status, targets, qp_status='not_run'):
+        """Return a tick result that keeps the actuation and the state."""
+        m = self.actuation.size
+        return TickResult(self.actuation.copy(), self.effector_positions(), status, qp_status, 0,
+                          np.zeros(m, dtype=bool), float('nan'), float('nan'), {})
+
+    def step(self, targets):
+        """
+        Run one control tick toward the effector targets.
+
+        Parameters
+        ----------
+        targets : (k, 3) array_like  [m]
+            Desired effector positions (world axes, effector order).
+
+        Returns
+        -------
+        TickResult
+            The new actuation, the updated effector positions, status and timings.
+
+        Raises
+        ------
+        ValueError
+            If ``targets`` does not have the shape (k, 3).
+
+        """
+        t_start = time.perf_counter()
+        targets = np.asarray(targets, dtype=float)
+        k = self.effectors.n_effectors
+        if targets.shape != (k, 3):
+            if targets.size == 3 * k:
+                targets = targets.reshape(k, 3)
+            else:
+                raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
+        if not np.all(np.isfinite(targets)):
+            return self._held('rejected', targets)
+        state, model, previous = self.state, self.model, self.actuation
+        positions, rotations = state.positions, state.rotations
+        tangent = assemble_tangent(model, state)
+        wrenches, _ = self.actuators.evaluate(positions, rotations)
+        m = wrenches.shape[0]
+        jat = wrenches[:, 1:, :].reshape(m, -1)
+        residual = tangent.internal.reshape(-1) + self._external + previous @ jat
+        t_assembly = time.perf_counter()
+        try:
+            factorization = factorize(tangent.diagonal, tangent.upper)
+        except NotPositiveDefiniteError:
+            return self._held('not_positive_definite', targets)
+        t_factor = time.perf_counter()
+        levers = self.effectors.levers(rotations)
+        projection = project_constraints(factorization, jat, residual, self.effectors, levers,
+                                         positions[self.effectors.frames] + levers, targets,
+                                         previous)
+        t_projection = time.perf_counter()
+        problem = actuation_qp(projection, previous, self.lower_bounds, self.upper_bounds,
+                               self._scale, energy_weight=self.options.energy_weight,
+                               proximal_weight=self.options.proximal_weight,
+                               rate_limit=self._rate)
+        status = 'solved'
+        if self.options.qp_solver == 'proxsuite':
+            solution = self._qp.solve(problem)
+            if not solution.ok:
+                status = 'qp_fallback'
+                solution = projected_gauss_seidel(problem)
+                solution = type(solution)(solution.x, self._qp_status_text(solution), 0, True)
+        else:
+            solution = projected_gauss_seidel(problem)
+        actuation = np.clip(problem.scale * solution.x, self.lower_bounds, self.upper_bounds)
+        saturated = binding_bounds(problem, solution.x)
+        if status == 'solved' and saturated.any():
+            status = 'saturated'
+        gap = projection.w_ea @ actuation + projection.delta_free
+        t_qp = time.perf_counter()
+        solved = projection.solved
+        increments = (solved[:, m] + solved[:, :m] @ (actuation - previous)).reshape(-1, 6)
+        state = retract(state, self._limited(increments))
+        for _ in range(self.options.newton_steps - 1):
+            tangent = assemble_tangent(model, state)
+            try:
+                step = factorize(tangent.diagonal, tangent.upper).solve(
+                    self._residual(state, actuation))
+            except NotPositiveDefiniteError:
+                break
+            state = retract(state, self._limited(step.reshape(-1, 6)))
+        self.state = state
+        self.actuation = actuation
+        effector_positions = self.effectors.positions(state.positions, state.rotations)
+        t_end = time.perf_counter()
+        timings = {'assembly': t_assembly - t_start, 'factor': t_factor - t_assembly,
+                   'projection': t_projection - t_factor, 'qp': t_qp - t_projection,
+                   'update': t_end - t_qp, 'total': t_end - t_start}
+        return TickResult(actuation, effector_positions, status, solution.status,
+                          solution.iterations, saturated,
+                          float(np.max(np.linalg.norm(gap.reshape(-1, 3), axis=1))),
+                          float(np.linalg.norm(residual)), timings)
+
+    @staticmethod
+    def _qp_status_text(solution):
+        """Label the Gauss-Seidel fallback's status."""
+        return f'gauss_seidel_{solution.status}'
+
+
+class TargetCorrector:
+    """
+    Closed-loop target correction: integral action on the measured effector error (DESIGN §6).
+
+    The model is asked to reach ``target + c``; every update integrates
+    ``c ← c + gain · (target - measured)`` and clamps ``|c|`` per effector to ``max_correction``.
+    Anti-windup: while the solver reports saturation, an update that would increase ``|c|`` is
+    skipped (conditional integration). Effectors without a measurement (NaN rows) are not
+    integrated. Open loop is ``gain = 0`` (the paper's mode).
+
+    Parameters
+    ----------
+    n_effectors : int
+        ``k``.
+    gain : float
+        Integral gain per update (dimensionless, 0..1; e.g. 0.1 at 50 Hz).
+    max_correction : float  [m]
+        Largest correction per effector.
+
+    """
+
+    def __init__(self, n_effectors, gain=0.1, max_correction=0.03):
+        """Start with no correction."""
+        if not 0.0 <= gain <= 1.0:
+            raise ValueError('gain must lie in [0, 1]')
+        self.gain = float(gain)
+        self.max_correction = float(max_correction)
+        self.correction = np.zeros((int(n_effectors), 3))
+
+    def reset(self):
+        """Forget the integral."""
+        self.correction[:] = 0.0
+
+    def update(self, target, measured, saturated=False):
+        """
+        Integrate one measurement and return the corrected target.
+
+        Parameters
+        ----------
+        target : (k, 3) array_like  [m]
+            Desired effector positions.
+        measured : (k, 3) array_like or None  [m]
+            Measured positions (NaN rows: not measured; None: nothing measured).
+        saturated : bool
+            Whether the last tick saturated (anti-windup).
+
+        Returns
+        -------
+        (k, 3) ndarray  [m]
+            ``target + c``.
+
+        """
+        target = np.asarray(target, dtype=float).reshape(self.correction.shape)
+        if measured is not None and self.gain > 0.0:
+            error = target - np.asarray(measured, dtype=float).reshape(target.shape)
+            valid = np.all(np.isfinite(error), axis=1)
+            proposal = self.correction + self.gain * np.where(valid[:, None], error, 0.0)
+            norms = np.linalg.norm(proposal, axis=1)
+            too_long = norms > self.max_correction
+            proposal[too_long] *= (self.max_correction / norms[too_long])[:, None]
+            if saturated:
+                grows = np.linalg.norm(proposal, axis=1) > np.linalg.norm(self.correction, axis=1)
+                proposal[grows] = self.correction[grows]
+            self.correction = proposal
+        return target + self.correction

@@ -1,0 +1,347 @@
+"""
+Scenes: a YAML file that names the chain, actuators and effectors of a run (DESIGN §1, §11).
+
+``load_scene(path)`` builds only what the scene names: a beam-and-tendon scene imports neither
+gmsh nor meshio nor OpenCV; a segment scene (the CBHA) reads condensed segments through
+:func:`cbha_inverse.fem.segment_io.load_segment`, imported only then.
+
+Scene YAML schema (SI units)::
+
+    name: str
+    description: str
+    base_frame: str                      # TF name of frame 0 (default cbha_base)
+    gravity: [gx, gy, gz] or null        # m/s^2, world axes (+x along the backbone at rest)
+    chain:                               # one of two types
+      type: beam_vertebrae               # Timoshenko beams, vertebrae every `beams_per_interval`
+      n_vertebrae, beams_per_interval, interval_length, vertebra_mass, backbone: {youngs_modulus,
+      poisson_ratio, outer_radius, inner_radius, density}
+    chain:
+      type: segments                     # condensed segments in series
+      sections: [{name, segment: <path relative to the scene file>, count}]
+    cables: [{name, angle_deg, radius, end_vertebra, max_tension}]       # routed base → end
+    cavities: [{name, section, cavity: <segment cavity name>, max_pressure}]
+    cavity_model: linear | mesh          # see cbha_inverse.core.cavity (default linear)
+    actuator_order: [names]              # column order (default: cables, then cavities)
+    effectors: [{name, frame: <int or 'tip'> or vertebra: <int>, offset: [x, y, z]}]
+    workspace_center: [x, y, z] or {actuation_fraction: f}
+"""
+
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+from cbha_inverse.core.actuation import ActuatorSet, Cable, CableGroup
+from cbha_inverse.core.chain import ChainModel
+from cbha_inverse.core.control import InverseOptions, InverseSolver
+from cbha_inverse.core.effectors import PointEffectors
+from cbha_inverse.core.links import timoshenko_compliance
+from cbha_inverse.core.statics import solve_static
+from cbha_inverse.paths import config_path
+import numpy as np
+import yaml
+
+
+@dataclass(frozen=True)
+class ForwardResult:
+    """
+    Static equilibrium of a scene under a given actuation.
+
+    Attributes
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins (frame 0 = base).
+    quaternions : (n + 1, 4) ndarray
+        Frame orientations (x, y, z, w).
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    effector_positions : (k, 3) ndarray  [m]
+        Effector points.
+    actuation : (m,) ndarray  [N or Pa]
+        The applied actuation.
+    converged : bool
+        Whether the static solve converged (check it: never silently ignore).
+    iterations : int
+        Newton iterations.
+    residual_norm : float
+        Final equilibrium residual.
+    message : str
+        The static solver's message.
+    state : cbha_inverse.core.chain.ChainState
+        The equilibrium state (e.g. to reset an inverse solver there).
+
+    """
+
+    positions: np.ndarray
+    quaternions: np.ndarray
+    rotations: np.ndarray
+    effector_positions: np.ndarray
+    actuation: np.ndarray
+    converged: bool
+    iterations: int
+    residual_norm: float
+    message: str
+    state: object
+
+
+class Scene:
+    """
+    A loaded scene: chain model, actuators, effectors and gravity (immutable).
+
+    Build it with :func:`load_scene`.
+
+    Attributes
+    ----------
+    name : str
+    description : str
+    base_frame : str
+    model : cbha_inverse.core.chain.ChainModel
+    actuators : cbha_inverse.core.actuation.ActuatorSet
+    effectors : cbha_inverse.core.effectors.PointEffectors
+    gravity : (3,) ndarray or None  [m/s^2]
+    actuator_names, effector_names : tuple of str
+    lower_bounds, upper_bounds : (m,) ndarray  [N or Pa]
+
+    """
+
+    def __init__(self, name, model, actuators, effectors, gravity, *, description='',
+                 base_frame='cbha_base', workspace=None, solver_defaults=None):
+        """Store the parts (use :func:`load_scene`)."""
+        self.name = name
+        self.description = description
+        self.base_frame = base_frame
+        self.model = model
+        self.actuators = actuators
+        self.effectors = effectors
+        self.gravity = None if gravity is None else np.asarray(gravity, dtype=float)
+        self.actuator_names = tuple(actuators.names)
+        self.effector_names = tuple(effectors.names)
+        self.lower_bounds = np.array(actuators.lower_bounds, dtype=float)
+        self.upper_bounds = np.array(actuators.upper_bounds, dtype=float)
+        self._workspace = workspace
+        self._solver_defaults = dict(solver_defaults or {})
+
+    def __repr__(self):
+        """Summarise the scene."""
+        return (f'Scene({self.name!r}: {self.model.n_links} links, '
+                f'{len(self.actuator_names)} actuators, {len(self.effector_names)} effectors)')
+
+    def forward(self, actuation, *, initial_state=None, tolerance=1e-10, strict=False):
+        """
+        Solve the static equilibrium under an actuation (paper eq. 9).
+
+        Parameters
+        ----------
+        actuation : (m,) array_like  [N or Pa]
+            Tensions / gauge pressures in actuator order (must lie within the bounds).
+        initial_state : ChainState, optional
+            Warm start.
+        tolerance : float
+            Static solver tolerance.
+        strict : bool
+            Raise ``RuntimeError`` when the solve does not converge.
+
+        Returns
+        -------
+        ForwardResult
+            The equilibrium (``converged`` says whether it was reached).
+
+        """
+        a = np.asarray(actuation, dtype=float).reshape(-1)
+        if a.size != len(self.actuator_names) or not np.all(np.isfinite(a)):
+            raise ValueError(f'actuation must be {len(self.actuator_names)} finite values')
+        if np.any(a < self.lower_bounds - 1e-9 * np.abs(self.upper_bounds)) or np.any(
+                a > self.upper_bounds * (1.0 + 1e-9)):
+            raise ValueError('actuation outside the actuator bounds')
+        actuators = self.actuators
+
+        def load(state):
+            return actuators.loads(state.positions, state.rotations, a)[1:]
+
+        res = solve_static(self.model, gravity=self.gravity, load_function=load,
+                           initial_state=initial_state, tolerance=tolerance)
+        if strict and not res.converged:
+            raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
+        return ForwardResult(res.positions, res.quaternions, res.rotations,
+                             self.effectors.positions(res.positions, res.rotations), a,
+                             bool(res.converged), int(res.iterations), float(res.residual_norm),
+                             res.message, res.state)
+
+    @cached_property
+    def rest_effector_positions(self):
+        """(k, 3) effector positions at zero actuation (under the scene's gravity)."""
+        return self.forward(np.clip(np.zeros(len(self.actuator_names)), self.lower_bounds,
+                                    self.upper_bounds), strict=True).effector_positions
+
+    @cached_property
+    def workspace_center(self):
+        """
+        (k, 3) suggested centre of target trajectories [m].
+
+        From the scene's ``workspace_center``: explicit coordinates (tip effector; other
+        effectors at rest), or ``{actuation_fraction: f}`` = the effectors at the uniform
+        actuation ``lower + f (upper - lower)``. Without it: the rest effector positions. For the
+        CBHA this is the tip at mid pressure in every tube, around which the paper's 60 mm circle
+        in the y-z plane is reachable.
+        """
+        spec = self._workspace
+        if spec is None:
+            return self.rest_effector_positions.copy()
+        if isinstance(spec, dict):
+            f = float(spec.get('actuation_fraction', 0.0))
+            a = self.lower_bounds + f * (self.upper_bounds - self.lower_bounds)
+            return self.forward(a, strict=True).effector_positions
+        center = self.rest_effector_positions.copy()
+        center[-1] = np.asarray(spec, dtype=float)
+        return center
+
+    def make_inverse_solver(self, **options):
+        """
+        Build the per-tick inverse solver of this scene (DESIGN §6).
+
+        Parameters
+        ----------
+        **options
+            Fields of :class:`cbha_inverse.core.control.InverseOptions` (``energy_weight``,
+            ``proximal_weight``, ``rate_limit``, ``qp_solver``, ``newton_steps``, ...); the
+            scene's ``solver`` section gives the defaults.
+
+        Returns
+        -------
+        cbha_inverse.core.control.InverseSolver
+            Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult``.
+
+        """
+        merged = {**self._solver_defaults, **options}
+        if merged.get('rate_limit') is not None:
+            merged['rate_limit'] = tuple(np.broadcast_to(
+                np.asarray(merged['rate_limit'], dtype=float), (len(self.actuator_names),)))
+        return InverseSolver(self.model, self.actuators, self.effectors, gravity=self.gravity,
+                             options=InverseOptions(**merged))
+
+
+def resolve_scene_path(path):
+    """
+    Return the YAML path of a scene given a path or a bare name (``'cbha'``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A file path, or a scene name looked up in ``config/scenes/``.
+
+    Returns
+    -------
+    pathlib.Path
+
+    """
+    p = Path(path)
+    if p.is_file():
+        return p
+    named = config_path('scenes', p.name if p.suffix == '.yaml' else f'{p.name}.yaml')
+    if named.is_file():
+        return named
+    raise FileNotFoundError(f'no scene {path!s} (nor {named})')
+
+
+def load_scene(path, *, stiffness_scale=1.0, gravity=None):
+    """
+    Load a scene YAML and build only what it names.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Scene file, or a name in ``config/scenes`` (``'tendon_6f_8c'``, ``'cbha'``).
+    stiffness_scale : float
+        Multiplies every link stiffness (divides the compliances), e.g. to model a stiffer or
+        softer robot than the nominal one.
+    gravity : (3,) array_like, optional  [m/s^2]
+        Overrides the scene's gravity (``[0, 0, 0]`` disables it).
+
+    Returns
+    -------
+    Scene
+
+    """
+    if not stiffness_scale > 0.0:
+        raise ValueError('stiffness_scale must be positive')
+    path = resolve_scene_path(path)
+    with open(path, encoding='utf-8') as f:
+        spec = yaml.safe_load(f)
+    chain = spec['chain']
+    kind = chain.get('type')
+    if kind == 'beam_vertebrae':
+        model = _beam_chain(chain, stiffness_scale)
+        vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
+    elif kind == 'segments':
+        from cbha_inverse.scene.segments import segment_chain
+        model, sections, parts = segment_chain(chain, path.parent, stiffness_scale)
+        vertebra_frames = np.arange(model.n_frames)
+    else:
+        raise ValueError(f'{path}: unknown chain type {kind!r}')
+    groups = []
+    if spec.get('cables'):
+        groups.append(CableGroup(_cables(spec['cables'], model, vertebra_frames),
+                                 model.n_frames))
+    if spec.get('cavities'):
+        from cbha_inverse.scene.segments import cavity_group
+        groups.append(cavity_group(spec['cavities'], sections, parts, model.n_frames,
+                                   spec.get('cavity_model', 'linear')))
+    actuators = ActuatorSet(groups, model.n_frames, spec.get('actuator_order'))
+    effectors = _effectors(spec['effectors'], model, vertebra_frames)
+    g = spec.get('gravity', [0.0, 0.0, -9.81]) if gravity is None else gravity
+    return Scene(spec.get('name', path.stem), model, actuators, effectors, g,
+                 description=spec.get('description', ''),
+                 base_frame=spec.get('base_frame', 'cbha_base'),
+                 workspace=spec.get('workspace_center'), solver_defaults=spec.get('solver'))
+
+
+def _vertebra_frames(chain):
+    """Frame index of vertebra v (0 = base) for a beam_vertebrae chain."""
+    return np.arange(int(chain['n_vertebrae']) + 1) * int(chain['beams_per_interval'])
+
+
+def _beam_chain(chain, stiffness_scale):
+    """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene."""
+    n_v, per = int(chain['n_vertebrae']), int(chain['beams_per_interval'])
+    b = chain['backbone']
+    length = float(chain['interval_length']) / per
+    c = timoshenko_compliance(length, float(b['youngs_modulus']), float(b['poisson_ratio']),
+                              float(b['outer_radius']), float(b.get('inner_radius', 0.0)))
+    n = n_v * per
+    area = np.pi * (float(b['outer_radius']) ** 2 - float(b.get('inner_radius', 0.0)) ** 2)
+    masses = np.full(n, float(b.get('density', 0.0)) * area * length)
+    masses[per - 1::per] += float(chain.get('vertebra_mass', 0.0))
+    offsets = np.tile([length, 0.0, 0.0], (n, 1))
+    return ChainModel.from_compliances(np.broadcast_to(c / stiffness_scale, (n, 6, 6)), offsets,
+                                       masses=masses)
+
+
+def _cables(items, model, vertebra_frames):
+    """Route each cable from the base through every vertebra up to its end vertebra."""
+    cables = []
+    for item in items:
+        angle = np.deg2rad(float(item['angle_deg']))
+        radius = float(item['radius'])
+        end = int(item['end_vertebra'])
+        if not 1 <= end < len(vertebra_frames):
+            raise ValueError(f"cable {item['name']!r}: end_vertebra {end} outside "
+                             f'1..{len(vertebra_frames) - 1}')
+        frames = vertebra_frames[:end + 1]
+        offset = np.array([0.0, radius * np.cos(angle), radius * np.sin(angle)])
+        cables.append(Cable(str(item['name']), frames, np.tile(offset, (len(frames), 1)),
+                            float(item['max_tension'])))
+    return cables
+
+
+def _effectors(items, model, vertebra_frames):
+    """Build the effector points."""
+    names, frames, offsets = [], [], []
+    for item in items:
+        if 'vertebra' in item:
+            frame = int(vertebra_frames[int(item['vertebra'])])
+        else:
+            frame = item.get('frame', 'tip')
+            frame = model.n_links if frame == 'tip' else int(frame)
+        names.append(str(item['name']))
+        frames.append(frame)
+        offsets.append(item.get('offset', [0.0, 0.0, 0.0]))
+    return PointEffectors(names, frames, offsets, model.n_frames)
