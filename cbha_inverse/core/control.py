@@ -4,10 +4,11 @@ The per-tick inverse-simulation controller (DESIGN §6, paper §IV) and closed-l
 :class:`InverseSolver` holds the immutable model (chain, actuators, effectors, gravity) and a
 mutable tick state (frame poses, current actuation, QP warm start). One :meth:`InverseSolver.step`:
 
-1. linearise at the current state: tangent stiffness ``K`` and internal wrenches
-   (``assemble_tangent``), actuator columns ``J_aᵀ`` at the current poses, residual
-   ``r = f(q) + f_ext + J_aᵀ λ_prev``;
-2. factor ``K`` (block tridiagonal) and solve ``K⁻¹ [J_aᵀ, r]`` in one multi-RHS call, giving
+1. linearise at the current state: tangent stiffness ``K`` and internal wrenches (the fused
+   :class:`cbha_inverse.core.kernel.ChainKernel`, equal to ``assemble_tangent``), actuator
+   columns ``J_aᵀ`` at the current poses, residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
+2. factor ``K`` (LAPACK Cholesky of the dense block-tridiagonal matrix, the fastest exact method
+   at control-scene sizes) and solve ``K⁻¹ [J_aᵀ, r]`` in one multi-RHS call, giving
    ``W_ea``, ``W_aa`` and ``δ_e^free`` (:func:`cbha_inverse.core.inverse.project_constraints`);
 3. solve the regularised box QP (proxsuite, warm-started; projected Gauss-Seidel on request or as a
    fallback if proxsuite reports a failure);
@@ -24,11 +25,10 @@ throw the linearisation off.
 from dataclasses import dataclass, field
 import time
 
-from cbha_inverse.core.assembly import assemble_tangent, internal_wrenches
-from cbha_inverse.core.btd import factorize, NotPositiveDefiniteError
-from cbha_inverse.core.chain import rest_state, retract
+from cbha_inverse.core.chain import ChainState, rest_state
 from cbha_inverse.core.inverse import (actuation_qp, ActuationQP, binding_bounds,
                                        project_constraints, projected_gauss_seidel)
+from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, fast_retract
 import numpy as np
 
 
@@ -160,6 +160,7 @@ class InverseSolver:
             external[:, :3] = np.asarray(model.masses, dtype=float)[:, None] * np.asarray(gravity)
         self._external = external.reshape(-1)
         self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
+        self._kernel = ChainKernel(model)
         self.reset()
 
     def reset(self, state=None, actuation=None):
@@ -174,14 +175,21 @@ class InverseSolver:
             Start actuation (default: zero, clipped to the bounds).
 
         """
-        self.state = rest_state(self.model) if state is None else state
+        state = rest_state(self.model) if state is None else state
+        self._positions = np.array(state.positions, dtype=float)
+        self._rotations = np.array(state.rotations, dtype=float)
         a = np.zeros(len(self.actuator_names)) if actuation is None else actuation
         self.actuation = np.clip(np.asarray(a, dtype=float), self.lower_bounds, self.upper_bounds)
         self._qp.reset()
 
+    @property
+    def state(self):
+        """Return a copy of the current model state (:class:`~cbha_inverse.core.chain.ChainState`)."""
+        return ChainState(self._positions.copy(), self._rotations.copy())
+
     def effector_positions(self):
         """Return the effector positions (k, 3) of the current model state."""
-        return self.effectors.positions(self.state.positions, self.state.rotations)
+        return self.effectors.positions(self._positions, self._rotations)
 
     def _limited(self, increments):
         """Scale a Newton step so that no frame rotates more than ``max_rotation_step``."""
@@ -190,10 +198,10 @@ class InverseSolver:
             increments = increments * (self.options.max_rotation_step / largest)
         return increments
 
-    def _residual(self, state, actuation):
+    def _residual(self, positions, rotations, internal, actuation):
         """Return ``f(q) + f_ext + J_aᵀ λ`` (6n,) at a state."""
-        wrenches, _ = self.actuators.evaluate(state.positions, state.rotations)
-        return (internal_wrenches(self.model, state).reshape(-1) + self._external
+        wrenches, _ = self.actuators.evaluate(positions, rotations)
+        return (internal.reshape(-1) + self._external
                 + actuation @ wrenches[:, 1:, :].reshape(wrenches.shape[0], -1))
 
     def _held(self, status, targets, qp_status='not_run'):
@@ -232,17 +240,17 @@ class InverseSolver:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
         if not np.all(np.isfinite(targets)):
             return self._held('rejected', targets)
-        state, model, previous = self.state, self.model, self.actuation
-        positions, rotations = state.positions, state.rotations
-        tangent = assemble_tangent(model, state)
+        previous = self.actuation
+        positions, rotations = self._positions, self._rotations
+        internal, tangent = self._kernel.linearise(positions, rotations)
         wrenches, _ = self.actuators.evaluate(positions, rotations)
         m = wrenches.shape[0]
         jat = wrenches[:, 1:, :].reshape(m, -1)
-        residual = tangent.internal.reshape(-1) + self._external + previous @ jat
+        residual = internal.reshape(-1) + self._external + previous @ jat
         t_assembly = time.perf_counter()
         try:
-            factorization = factorize(tangent.diagonal, tangent.upper)
-        except NotPositiveDefiniteError:
+            factorization = DenseCholesky(tangent)
+        except np.linalg.LinAlgError:
             return self._held('not_positive_definite', targets)
         t_factor = time.perf_counter()
         levers = self.effectors.levers(rotations)
@@ -271,18 +279,19 @@ class InverseSolver:
         t_qp = time.perf_counter()
         solved = projection.solved
         increments = (solved[:, m] + solved[:, :m] @ (actuation - previous)).reshape(-1, 6)
-        state = retract(state, self._limited(increments))
+        positions, rotations = fast_retract(positions, rotations, self._limited(increments))
         for _ in range(self.options.newton_steps - 1):
-            tangent = assemble_tangent(model, state)
+            internal, tangent = self._kernel.linearise(positions, rotations)
             try:
-                step = factorize(tangent.diagonal, tangent.upper).solve(
-                    self._residual(state, actuation))
-            except NotPositiveDefiniteError:
+                step = DenseCholesky(tangent).solve(
+                    self._residual(positions, rotations, internal, actuation))
+            except np.linalg.LinAlgError:
                 break
-            state = retract(state, self._limited(step.reshape(-1, 6)))
-        self.state = state
+            positions, rotations = fast_retract(positions, rotations,
+                                                self._limited(step.reshape(-1, 6)))
+        self._positions, self._rotations = positions, rotations
         self.actuation = actuation
-        effector_positions = self.effectors.positions(state.positions, state.rotations)
+        effector_positions = self.effectors.positions(positions, rotations)
         t_end = time.perf_counter()
         timings = {'assembly': t_assembly - t_start, 'factor': t_factor - t_assembly,
                    'projection': t_projection - t_factor, 'qp': t_qp - t_projection,

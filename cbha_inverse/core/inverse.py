@@ -266,21 +266,83 @@ class ActuationQP:
         if not self._initialised:
             qp.init(problem.hessian, problem.gradient, None, None, None, None, None,
                     problem.lower, problem.upper)
+            qp.solve()
+            # warm start only once a previous result exists (proxsuite 0.8 crashes otherwise)
             qp.settings.initial_guess = (
                 proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT)
             self._initialised = True
         else:
             qp.update(H=problem.hessian, g=problem.gradient, l_box=problem.lower,
                       u_box=problem.upper, update_preconditioner=False)
-        qp.solve()
+            qp.solve()
         info = qp.results.info
         status = _STATUS.get(info.status.name, info.status.name)
         x = qp.results.x
         ok = status == 'solved' and bool(np.all(np.isfinite(x)))
         if not ok:
             self.reset()
-        x = np.clip(x, problem.lower, problem.upper) if ok else problem.previous.copy()
+        x = polish(problem, np.clip(x, problem.lower, problem.upper)) if ok else np.clip(
+            problem.previous, problem.lower, problem.upper)
         return QPSolution(x, status, int(info.iter), ok)
+
+
+def polish(problem, x, tolerance=1e-4):
+    """
+    Refine an approximate box-QP solution on its active set (exact KKT point if it is one).
+
+    proxsuite's augmented-Lagrangian iterate leaves the bound-active variables a little inside
+    the box (about ``sqrt(eps)``). Fixing the variables within ``tolerance`` of a bound whose
+    gradient pushes outward and solving the equality-constrained problem of the others gives the
+    exact solution; it is accepted only if it is feasible, its active multipliers have the right
+    sign and it does not increase the objective, otherwise ``x`` is returned unchanged.
+
+    Parameters
+    ----------
+    problem : QPProblem
+        The normalised QP.
+    x : (m,) ndarray
+        Approximate solution inside the box.
+    tolerance : float
+        Distance to a bound (dimensionless) below which a variable is tried as active.
+
+    Returns
+    -------
+    (m,) ndarray
+        The refined (or the given) solution.
+
+    """
+    h, g = problem.hessian, problem.gradient
+    grad = h @ x + g
+    at_lower = (x - problem.lower < tolerance) & (grad > 0.0)
+    at_upper = (problem.upper - x < tolerance) & (grad < 0.0)
+    active = at_lower | at_upper
+    if not active.any():
+        try:
+            y = np.linalg.solve(h, -g)
+        except np.linalg.LinAlgError:
+            return x
+        return y if _inside(problem, y) else x
+    y = x.copy()
+    y[at_lower] = problem.lower[at_lower]
+    y[at_upper] = problem.upper[at_upper]
+    free = ~active
+    if free.any():
+        try:
+            y[free] = np.linalg.solve(h[np.ix_(free, free)],
+                                      -g[free] - h[np.ix_(free, active)] @ y[active])
+        except np.linalg.LinAlgError:
+            return x
+    grad = h @ y + g
+    if not (_inside(problem, y) and np.all(grad[at_lower] >= 0.0)
+            and np.all(grad[at_upper] <= 0.0)):
+        return x
+    objective = 0.5 * y @ h @ y + g @ y
+    return y if objective <= 0.5 * x @ h @ x + g @ x else x
+
+
+def _inside(problem, x):
+    """Whether ``x`` lies in the box of ``problem``."""
+    return bool(np.all(x >= problem.lower) and np.all(x <= problem.upper))
 
 
 def projected_gauss_seidel(problem, x0=None, max_iterations=500, tolerance=1e-10):

@@ -1,0 +1,130 @@
+"""
+Segment scenes: chains of condensed FEM segments with pressure cavities (the CBHA).
+
+Imported by :func:`cbha_inverse.scene.load_scene` only for ``chain.type: segments``; reads the
+segment YAMLs through :func:`cbha_inverse.fem.segment_io.load_segment` (no gmsh).
+"""
+
+from pathlib import Path
+
+from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart, LinearCavityGroup
+from cbha_inverse.core.chain import ChainModel
+import numpy as np
+
+
+def segment_chain(chain, base_dir, stiffness_scale=1.0):
+    """
+    Build a chain of condensed segments in series.
+
+    Parameters
+    ----------
+    chain : dict
+        The scene's ``chain`` section: ``sections: [{name, segment, count}]`` (segment path
+        relative to the scene file).
+    base_dir : pathlib.Path
+        Directory of the scene file.
+    stiffness_scale : float
+        Divides every compliance.
+
+    Returns
+    -------
+    model : cbha_inverse.core.chain.ChainModel
+        The chain (frame 0 = base, one frame per vertebra after it).
+    sections : dict
+        ``name -> (first link index, count)``.
+    parts : dict
+        ``name -> segment`` (the loaded segment of each section, for its cavities).
+
+    """
+    from cbha_inverse.fem.segment_io import load_segment
+    compliances, offsets, rotations, masses = [], [], [], []
+    sections, parts = {}, {}
+    for item in chain['sections']:
+        segment = load_segment(Path(base_dir, item['segment']))
+        count = int(item['count'])
+        sections[item['name']] = (len(compliances), count)
+        parts[item['name']] = segment
+        for _ in range(count):
+            compliances.append(np.asarray(segment.compliance, dtype=float) / stiffness_scale)
+            offsets.append(np.asarray(segment.rest_offset, dtype=float))
+            rotations.append(np.asarray(segment.rest_rotation, dtype=float))
+            masses.append(float(segment.mass))
+    model = ChainModel.from_compliances(np.array(compliances), np.array(offsets),
+                                        masses=np.array(masses),
+                                        rest_rotations=np.array(rotations))
+    return model, sections, parts
+
+
+def cavity_surfaces(segment):
+    """
+    Return the cavity surfaces of a loaded segment as ``name -> (points, triangles)``.
+
+    Parameters
+    ----------
+    segment : object
+        A segment from :func:`cbha_inverse.fem.segment_io.load_segment`; its ``cavities`` is a
+        mapping ``name -> (points, triangles)`` or a sequence of objects with ``name``,
+        ``points``, ``triangles``.
+
+    Returns
+    -------
+    dict
+        ``name -> ((P, 3) ndarray [m], (T, 3) ndarray of int)`` in segment coordinates.
+
+    """
+    cavities = getattr(segment, 'cavities', None) or {}
+    out = {}
+    items = cavities.items() if hasattr(cavities, 'items') else (
+        (c.name, c) for c in cavities)
+    for name, value in items:
+        if hasattr(value, 'points'):
+            points, triangles = value.points, value.triangles
+        else:
+            points, triangles = value
+        out[str(name)] = (np.asarray(points, dtype=float), np.asarray(triangles, dtype=int))
+    return out
+
+
+def cavity_group(items, sections, segments, n_frames, model='linear'):
+    """
+    Build the pressure actuators: one per (section, cavity), summed over the section's segments.
+
+    Parameters
+    ----------
+    items : list of dict
+        The scene's ``cavities``: ``{name, section, cavity, max_pressure}``.
+    sections : dict
+        ``name -> (first link index, count)`` from :func:`segment_chain`.
+    segments : dict
+        ``name -> segment`` from :func:`segment_chain`.
+    n_frames : int
+        Number of frames (base included).
+    model : str
+        ``'linear'`` (:class:`~cbha_inverse.core.cavity.LinearCavityGroup`, default) or ``'mesh'``
+        (:class:`~cbha_inverse.core.cavity.CavityGroup`).
+
+    Returns
+    -------
+    LinearCavityGroup or CavityGroup
+
+    """
+    cavities = []
+    for item in items:
+        section = item['section']
+        first, count = sections[section]
+        segment = segments[section]
+        surfaces = cavity_surfaces(segment)
+        if item['cavity'] not in surfaces:
+            raise ValueError(f"segment of section {section!r} has no cavity {item['cavity']!r} "
+                             f'(has {sorted(surfaces)})')
+        points, triangles = surfaces[item['cavity']]
+        offset = np.asarray(segment.rest_offset, dtype=float)
+        rotation = np.asarray(segment.rest_rotation, dtype=float)
+        parts = tuple(CavityPart(points, triangles, first + s, offset, rotation)
+                      for s in range(count))
+        cavities.append(Cavity(str(item['name']), parts, float(item['max_pressure'])))
+    if model == 'linear':
+        return LinearCavityGroup(cavities, n_frames)
+    if model == 'mesh':
+        return CavityGroup(cavities, n_frames)
+    raise ValueError(f"cavity_model must be 'linear' or 'mesh', not {model!r}")
