@@ -184,7 +184,7 @@ class InverseSolver:
 
     @property
     def state(self):
-        """Return a copy of the current model state (:class:`~cbha_inverse.core.chain.ChainState`)."""
+        """Return a copy of the current model frames as a ``ChainState``."""
         return ChainState(self._positions.copy(), self._rotations.copy())
 
     def effector_positions(self):

@@ -169,8 +169,8 @@ class ChainKernel:
         cr[:, 0] = phi[:, 1] * s_r[:, 2] - phi[:, 2] * s_r[:, 1]
         cr[:, 1] = phi[:, 2] * s_r[:, 0] - phi[:, 0] * s_r[:, 2]
         cr[:, 2] = phi[:, 0] * s_r[:, 1] - phi[:, 1] * s_r[:, 0]
-        moment_local = -(s_r + 0.5 * cr
-                         + c[:, None] * (phi * phi_dot_s[:, None] - (theta * theta)[:, None] * s_r))
+        t2 = (theta * theta)[:, None]
+        moment_local = -(s_r + 0.5 * cr + c[:, None] * (phi * phi_dot_s[:, None] - t2 * s_r))
         local = self._local
         local[:, :, 0] = -stress[:, :3]
         local[:, :, 1] = moment_local
