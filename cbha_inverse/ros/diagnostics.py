@@ -1,0 +1,76 @@
+"""
+A small ``/diagnostics`` publisher (diagnostic_updater is not on PyPI).
+
+Each node registers one callback that returns its statuses; they are published about once per
+second as a ``diagnostic_msgs/DiagnosticArray`` with names ``"<node>: <task>"``.
+"""
+
+from cbha_inverse.ros.qos import DIAGNOSTICS_QOS
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+OK = DiagnosticStatus.OK
+WARN = DiagnosticStatus.WARN
+ERROR = DiagnosticStatus.ERROR
+STALE = DiagnosticStatus.STALE
+
+
+def make_status(node_name, task, level, message, values=None, hardware_id=''):
+    """
+    Build one ``DiagnosticStatus``.
+
+    Parameters
+    ----------
+    node_name : str
+        Node name (first part of the status name).
+    task : str
+        What is reported (second part of the status name).
+    level : bytes
+        ``OK``, ``WARN``, ``ERROR`` or ``STALE`` (1-byte values in rclpy).
+    message : str
+        Short human-readable summary.
+    values : mapping, optional
+        Key/value pairs; values are formatted with ``str`` (floats with 6 significant digits).
+    hardware_id : str
+        Hardware identifier.
+
+    Returns
+    -------
+    diagnostic_msgs.msg.DiagnosticStatus
+        The status.
+
+    """
+    status = DiagnosticStatus(level=level, name=f'{node_name}: {task}', message=message,
+                              hardware_id=hardware_id)
+    for key, value in (values or {}).items():
+        text = f'{value:.6g}' if isinstance(value, float) else str(value)
+        status.values.append(KeyValue(key=str(key), value=text))
+    return status
+
+
+class DiagnosticsPublisher:
+    """
+    Publish a node's statuses on ``/diagnostics`` at a fixed period.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node that owns the publisher and the timer.
+    collect : callable
+        ``collect() -> list of DiagnosticStatus``, called at each period.
+    period : float  [s]
+        Publication period (about 1 s by convention).
+
+    """
+
+    def __init__(self, node, collect, period=1.0):
+        self._node = node
+        self._collect = collect
+        self.publisher = node.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.timer = node.create_timer(period, self.publish)
+
+    def publish(self):
+        """Collect the statuses and publish them once."""
+        message = DiagnosticArray()
+        message.header.stamp = self._node.get_clock().now().to_msg()
+        message.status = list(self._collect())
+        self.publisher.publish(message)

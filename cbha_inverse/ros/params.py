@@ -1,0 +1,140 @@
+"""
+Declare a node's parameters from a frozen dataclass and read them back into it once.
+
+The idea of generate_parameter_library without the library: each field of a frozen dataclass
+carries its ROS description and range in its ``metadata`` (see :func:`param`);
+:func:`declare_parameters` declares every field on the node as a read-only, strictly typed
+parameter with a ``ParameterDescriptor`` (description, ``FloatingPointRange`` /
+``IntegerRange``, allowed choices) and returns the dataclass filled with the values that the
+params file and ``-p`` overrides gave. Callbacks read that dataclass, never the parameter server.
+"""
+
+from dataclasses import field, fields
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import (
+    InvalidParameterTypeException, InvalidParameterValueException,
+    ParameterAlreadyDeclaredException, ParameterUninitializedException)
+
+
+class ParameterError(ValueError):
+    """A parameter has the wrong type, is outside its range or not one of its choices."""
+
+
+def param(default, description, *, low=None, high=None, choices=None, ros_name=None):
+    """
+    Return a dataclass field that describes one ROS parameter.
+
+    Parameters
+    ----------
+    default : bool, int, float, str or tuple
+        Default value; its type is the parameter's type (a tuple of floats is a double array, of
+        str a string array). Write floats as floats (``1.0``), as ROS parameters are strictly
+        typed.
+    description : str
+        What the parameter means, with its unit.
+    low, high : float or int, optional
+        Inclusive range of a scalar int or float parameter (both or neither).
+    choices : tuple of str, optional
+        Allowed values of a string parameter.
+    ros_name : str, optional
+        Parameter name when it differs from the field name (e.g. dotted names).
+
+    Returns
+    -------
+    dataclasses.Field
+        The field, for use in a frozen dataclass.
+
+    """
+    if (low is None) != (high is None):
+        raise TypeError('give both low and high, or neither')
+    return field(default=default, metadata={
+        'description': description, 'low': low, 'high': high,
+        'choices': tuple(choices) if choices is not None else None, 'ros_name': ros_name})
+
+
+def describe(name, default, metadata):
+    """
+    Build the ``ParameterDescriptor`` of one parameter.
+
+    Parameters
+    ----------
+    name : str
+        Parameter name.
+    default : object
+        Default value (decides which range type applies).
+    metadata : mapping
+        The field metadata written by :func:`param`.
+
+    Returns
+    -------
+    rcl_interfaces.msg.ParameterDescriptor
+        Read-only descriptor with description, range and choices.
+
+    """
+    description = metadata.get('description', '')
+    choices = metadata.get('choices')
+    descriptor = ParameterDescriptor(name=name, description=description, read_only=True)
+    low, high = metadata.get('low'), metadata.get('high')
+    if low is not None and isinstance(default, bool):
+        raise TypeError(f'parameter {name}: a bool has no range')
+    if low is not None and isinstance(default, int):
+        descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
+    elif low is not None and isinstance(default, float):
+        descriptor.floating_point_range = [
+            FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
+    if choices:
+        descriptor.additional_constraints = 'one of: ' + ', '.join(choices)
+    return descriptor
+
+
+def declare_parameters(node, params_class):
+    """
+    Declare every field of ``params_class`` on ``node`` and return the filled dataclass.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node (its params file overrides are applied by rclpy at declaration).
+    params_class : type
+        A frozen dataclass whose fields were made with :func:`param`.
+
+    Returns
+    -------
+    params_class
+        The values, read once (tuples for array parameters).
+
+    Raises
+    ------
+    ParameterError
+        If a value has the wrong type, lies outside its range or is not one of its choices; the
+        message names the parameter, the value and what was expected. The dataclass's own
+        ``__post_init__`` checks (if any) may raise ``ValueError`` as well.
+
+    """
+    values = {}
+    for spec in fields(params_class):
+        name = spec.metadata.get('ros_name') or spec.name
+        default = spec.default
+        ros_default = list(default) if isinstance(default, tuple) else default
+        descriptor = describe(name, default, spec.metadata)
+        try:
+            value = node.declare_parameter(name, ros_default, descriptor).value
+        except InvalidParameterTypeException as exc:
+            raise ParameterError(
+                f'parameter {name!r} has the wrong type (expected {type(default).__name__}'
+                f'{" of floats written with .0" if isinstance(default, (float, tuple)) else ""}):'
+                f' {exc}') from None
+        except InvalidParameterValueException as exc:
+            raise ParameterError(f'parameter {name!r} is out of range: {exc}') from None
+        except (ParameterAlreadyDeclaredException, ParameterUninitializedException) as exc:
+            raise ParameterError(f'parameter {name!r}: {exc}') from None
+        choices = spec.metadata.get('choices')
+        if choices and value not in choices:
+            raise ParameterError(
+                f'parameter {name!r} must be one of {list(choices)}, got {value!r}')
+        values[spec.name] = tuple(value) if isinstance(default, tuple) else value
+    try:
+        return params_class(**values)
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from None

@@ -1,0 +1,47 @@
+"""
+QoS profiles of the package's topics (DESIGN section 7), chosen per topic on purpose.
+
+Commands and targets are RELIABLE (a dropped set-point is a missed step); measured streams use the
+sensor-data profile (BEST_EFFORT, depth 5: the newest sample matters, an old one is useless). A
+best-effort publisher never reaches a reliable subscriber, so subscribers of measured streams use
+the sensor-data profile as well.
+"""
+
+from rclpy.qos import (
+    DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy)
+
+
+def reliable(depth=10):
+    """
+    Return a RELIABLE, VOLATILE, KEEP_LAST profile.
+
+    Parameters
+    ----------
+    depth : int
+        History depth.
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+        The profile.
+
+    """
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+TARGET_QOS = reliable(10)
+"""``target`` (geometry_msgs/PointStamped): reliable, depth 10."""
+
+COMMAND_QOS = reliable(10)
+"""``pressure_command`` (std_msgs/Float64MultiArray): reliable, depth 10 (ros2_control style)."""
+
+MEASURED_QOS = qos_profile_sensor_data
+"""``tip/measured`` (geometry_msgs/PointStamped): sensor data (best effort, depth 5)."""
+
+DIAGNOSTICS_QOS = reliable(10)
+"""``/diagnostics`` (diagnostic_msgs/DiagnosticArray): reliable."""
+
+MARKER_QOS = reliable(1)
+"""``backbone`` (visualization_msgs/MarkerArray): reliable, newest only."""
