@@ -217,8 +217,8 @@ class Trajectory:
         Returns
         -------
         (N,) ndarray  [m]
-            Arc length in ``[0, length]``; after the last lap (or the end of an open path) it stays at
-            the end point.
+            Arc length in ``[0, length]``; after the last lap (or the end of an open path) it
+            stays at the end point.
 
         """
         moving = np.atleast_1d(np.asarray(time, dtype=float)) - self.start_hold
