@@ -5,8 +5,12 @@ Each node registers one callback that returns its statuses; they are published a
 second as a ``diagnostic_msgs/DiagnosticArray`` with names ``"<node>: <task>"``.
 """
 
+import collections
+import math
+
 from cbha_inverse.ros.qos import DIAGNOSTICS_QOS
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
 
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
@@ -74,3 +78,47 @@ class DiagnosticsPublisher:
         message.header.stamp = self._node.get_clock().now().to_msg()
         message.status = list(self._collect())
         self.publisher.publish(message)
+
+
+class TimingStats:
+    """
+    Bounded record of durations with median / p99 summaries (for diagnostics).
+
+    Parameters
+    ----------
+    capacity : int
+        Most recent samples kept.
+
+    """
+
+    def __init__(self, capacity=20000):
+        self._samples = collections.deque(maxlen=int(capacity))
+        self.count = 0
+
+    def add(self, seconds):
+        """Record one duration [s]."""
+        self._samples.append(float(seconds))
+        self.count += 1
+
+    def summary(self, prefix):
+        """
+        Return ``{prefix_median_ms, prefix_p99_ms, prefix_max_ms}`` over the kept samples.
+
+        Parameters
+        ----------
+        prefix : str
+            Key prefix.
+
+        Returns
+        -------
+        dict
+            Milliseconds (NaN when no sample was recorded).
+
+        """
+        if not self._samples:
+            values = (math.nan, math.nan, math.nan)
+        else:
+            samples = np.fromiter(self._samples, dtype=float) * 1e3
+            values = (float(np.median(samples)), float(np.percentile(samples, 99)),
+                      float(np.max(samples)))
+        return dict(zip((f'{prefix}_median_ms', f'{prefix}_p99_ms', f'{prefix}_max_ms'), values))

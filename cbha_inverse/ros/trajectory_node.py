@@ -15,9 +15,8 @@ from cbha_inverse.core.trajectory import make_trajectory, PLANES, SHAPES
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK
 from cbha_inverse.ros.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.qos import TARGET_QOS
+from cbha_inverse.ros.runner import run_node
 from geometry_msgs.msg import PointStamped
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 NODE_NAME = 'trajectory'
@@ -127,21 +126,7 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters.
 
     """
-    rclpy.init(args=argv)
-    node = None
-    try:
-        node = TrajectoryNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ParameterError as exc:
-        rclpy.logging.get_logger(NODE_NAME).fatal(str(exc))
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(TrajectoryNode, NODE_NAME, argv)
 
 
 if __name__ == '__main__':

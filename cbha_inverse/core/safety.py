@@ -1,0 +1,242 @@
+"""
+Input validation and fail-safe decisions of the nodes (pure, no ROS; DESIGN section 7).
+
+The nodes call these functions on every message and before every publication:
+
+- :func:`check_point` accepts a target or a measured point only if it is finite, in the expected
+  frame and inside the configured workspace box;
+- :func:`check_command` is what a real valve driver does with an incoming command (exact length,
+  finite, within ``[0, p_max]``);
+- :func:`bounded_command` is the last gate before a command is published: it never lets a NaN
+  or an out-of-range pressure through;
+- :class:`StalenessWatch` and :func:`stale_action` decide when to hold or vent, on a steady clock
+  (``time.monotonic``) passed in by the caller, so that a bag replay or ``use_sim_time`` cannot
+  fool the watchdog.
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+ACTIONS = ('hold', 'vent')
+
+
+@dataclass(frozen=True)
+class Check:
+    """
+    Outcome of an input check.
+
+    Attributes
+    ----------
+    ok : bool
+        Whether the input is accepted.
+    reason : str
+        ``'ok'`` or a short category (``'non_finite'``, ``'wrong_frame'``, ``'outside_workspace'``,
+        ``'wrong_length'``, ``'out_of_range'``) used as a diagnostics counter key.
+    detail : str
+        Human-readable explanation for the (throttled) log.
+
+    """
+
+    ok: bool
+    reason: str = 'ok'
+    detail: str = ''
+
+
+ACCEPTED = Check(True)
+
+
+@dataclass(frozen=True)
+class WorkspaceBox:
+    """
+    Axis-aligned box of plausible points [m] in the base frame.
+
+    Parameters
+    ----------
+    lower, upper : (3,) array_like  [m]
+        Corners, ``lower < upper`` component-wise, finite.
+
+    """
+
+    lower: tuple
+    upper: tuple
+
+    def __post_init__(self):
+        """Validate the corners."""
+        lower = np.asarray(self.lower, dtype=float)
+        upper = np.asarray(self.upper, dtype=float)
+        if lower.shape != (3,) or upper.shape != (3,):
+            raise ValueError('workspace box corners must have 3 components each')
+        if not (np.all(np.isfinite(lower)) and np.all(np.isfinite(upper))):
+            raise ValueError('workspace box corners must be finite')
+        if not np.all(lower < upper):
+            raise ValueError(f'workspace box lower {lower.tolist()} must be below upper '
+                             f'{upper.tolist()} in every axis')
+        object.__setattr__(self, 'lower', tuple(float(v) for v in lower))
+        object.__setattr__(self, 'upper', tuple(float(v) for v in upper))
+
+    def contains(self, point):
+        """Return whether a finite (3,) point lies inside the closed box."""
+        point = np.asarray(point, dtype=float)
+        return bool(np.all(point >= self.lower) and np.all(point <= self.upper))
+
+
+def check_point(point, frame_id, expected_frame, box):
+    """
+    Validate a target or a measured point.
+
+    Parameters
+    ----------
+    point : (3,) array_like  [m]
+        The point.
+    frame_id : str
+        Its header frame.
+    expected_frame : str
+        The only accepted frame (no TF here: points must already be in the base frame).
+    box : WorkspaceBox
+        Plausible region.
+
+    Returns
+    -------
+    Check
+        Accepted, or the first reason for rejection (non-finite, wrong frame, outside box).
+
+    """
+    point = np.asarray(point, dtype=float)
+    if point.shape != (3,) or not np.all(np.isfinite(point)):
+        return Check(False, 'non_finite', f'non-finite point {point.tolist()}')
+    if frame_id != expected_frame:
+        return Check(False, 'wrong_frame',
+                     f'frame {frame_id!r} is not the expected {expected_frame!r}')
+    if not box.contains(point):
+        return Check(False, 'outside_workspace',
+                     f'point {[float(f"{v:.6g}") for v in point]} outside the workspace box '
+                     f'{list(box.lower)}..{list(box.upper)}')
+    return ACCEPTED
+
+
+def check_command(values, n_valves, max_pressure):
+    """
+    Validate an incoming pressure command as a valve driver does.
+
+    Parameters
+    ----------
+    values : sequence of float  [Pa]
+        The command (``Float64MultiArray.data``).
+    n_valves : int
+        Required length.
+    max_pressure : float  [Pa]
+        Largest accepted gauge pressure (``p_max``).
+
+    Returns
+    -------
+    Check
+        Accepted, or why not (wrong length, non-finite, out of ``[0, p_max]``).
+
+    """
+    values = np.asarray(values, dtype=float).reshape(-1)
+    if values.size != n_valves:
+        return Check(False, 'wrong_length', f'{values.size} values, expected {n_valves}')
+    if not np.all(np.isfinite(values)):
+        return Check(False, 'non_finite', 'non-finite pressure')
+    if np.any(values < 0.0) or np.any(values > max_pressure):
+        return Check(False, 'out_of_range', f'pressure outside [0, {max_pressure:g}] Pa: '
+                     f'{[float(f"{v:.6g}") for v in values]}')
+    return ACCEPTED
+
+
+def bounded_command(values, lower, upper):
+    """
+    Clip a command to its bounds; the last gate before publication.
+
+    Parameters
+    ----------
+    values : (m,) array_like  [Pa]
+        Proposed command.
+    lower, upper : (m,) array_like  [Pa]
+        Bounds (finite, ``lower <= upper``).
+
+    Returns
+    -------
+    (m,) ndarray  [Pa]
+        ``clip(values, lower, upper)``, guaranteed finite and within the bounds.
+
+    Raises
+    ------
+    ValueError
+        If ``values`` is not finite or not of length m: the caller must keep its last valid
+        command (a NaN is never clipped into a plausible number).
+
+    """
+    values = np.asarray(values, dtype=float).reshape(-1)
+    lower = np.asarray(lower, dtype=float)
+    upper = np.asarray(upper, dtype=float)
+    if values.shape != lower.shape:
+        raise ValueError(f'command has {values.size} values, expected {lower.size}')
+    if not np.all(np.isfinite(values)):
+        raise ValueError('command is not finite')
+    clipped = np.clip(values, lower, upper)
+    assert np.all(np.isfinite(clipped)) and np.all(clipped >= lower) and np.all(clipped <= upper)
+    return clipped
+
+
+class StalenessWatch:
+    """
+    Age of the last valid input on a steady clock.
+
+    Parameters
+    ----------
+    timeout : float  [s]
+        Age beyond which the input is stale (> 0).
+
+    """
+
+    def __init__(self, timeout):
+        """Start with no input received (stale)."""
+        timeout = float(timeout)
+        if not math.isfinite(timeout) or timeout <= 0.0:
+            raise ValueError(f'timeout must be a finite number > 0, got {timeout}')
+        self.timeout = timeout
+        self.last = None
+
+    def mark(self, now):
+        """Record a valid input at steady time ``now`` [s]."""
+        self.last = float(now)
+
+    def age(self, now):
+        """Return the age [s] of the last valid input (``inf`` if none yet)."""
+        return math.inf if self.last is None else float(now) - self.last
+
+    def stale(self, now):
+        """Return whether no valid input arrived within ``timeout`` before ``now``."""
+        return self.age(now) > self.timeout
+
+
+def stale_action(target_stale, feedback_stale, closed_loop, action):
+    """
+    Decide what the controller does this tick.
+
+    Parameters
+    ----------
+    target_stale : bool
+        No valid target within its timeout.
+    feedback_stale : bool
+        No valid measurement within its timeout.
+    closed_loop : bool
+        Whether the controller needs feedback (closed-loop mode).
+    action : str
+        Configured reaction to stale inputs: ``'hold'`` (keep the last command) or ``'vent'``
+        (command the safe pressure).
+
+    Returns
+    -------
+    str
+        ``'run'`` (solve and publish), ``'hold'`` or ``'vent'``.
+
+    """
+    if action not in ACTIONS:
+        raise ValueError(f'action must be one of {ACTIONS}, got {action!r}')
+    if target_stale or (closed_loop and feedback_stale):
+        return action
+    return 'run'

@@ -1,0 +1,118 @@
+"""Conversions between ROS messages and numpy arrays (no maths here)."""
+
+from geometry_msgs.msg import Point, PointStamped
+import numpy as np
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from visualization_msgs.msg import Marker, MarkerArray
+
+
+def point_array(message):
+    """Return the (3,) point [m] of a ``PointStamped`` (NaN/inf pass through for validation)."""
+    point = message.point
+    return np.array([point.x, point.y, point.z], dtype=float)
+
+
+def point_stamped(point, stamp, frame_id):
+    """
+    Build a ``PointStamped``.
+
+    Parameters
+    ----------
+    point : (3,) array_like  [m]
+        Coordinates.
+    stamp : builtin_interfaces.msg.Time
+        Header stamp.
+    frame_id : str
+        Header frame.
+
+    Returns
+    -------
+    geometry_msgs.msg.PointStamped
+        The message.
+
+    """
+    message = PointStamped()
+    message.header.stamp = stamp
+    message.header.frame_id = frame_id
+    message.point.x, message.point.y, message.point.z = (float(v) for v in point)
+    return message
+
+
+def command_message(values, valve_names):
+    """
+    Build a pressure command (ros2_control forward-command style).
+
+    Parameters
+    ----------
+    values : (m,) array_like  [Pa]
+        Gauge pressures in valve order.
+    valve_names : sequence of str
+        Valve names; joined with commas as the label of the single layout dimension.
+
+    Returns
+    -------
+    std_msgs.msg.Float64MultiArray
+        ``data`` = the pressures.
+
+    """
+    message = Float64MultiArray()
+    size = len(valve_names)
+    message.layout.dim = [MultiArrayDimension(label=','.join(valve_names), size=size,
+                                              stride=size)]
+    message.data = [float(v) for v in values]
+    return message
+
+
+def command_array(message):
+    """Return ``Float64MultiArray.data`` as a float ndarray (any length, unchecked)."""
+    return np.asarray(message.data, dtype=float).reshape(-1)
+
+
+def backbone_markers(positions, target, stamp, frame_id, namespace='backbone'):
+    """
+    Build the RViz markers of the model backbone and the current target.
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) array_like  [m]
+        Frame origins of the model (frame 0 = base).
+    target : (3,) array_like or None  [m]
+        Current target (not drawn if None).
+    stamp : builtin_interfaces.msg.Time
+        Header stamp.
+    frame_id : str
+        Header frame.
+    namespace : str
+        Marker namespace.
+
+    Returns
+    -------
+    visualization_msgs.msg.MarkerArray
+        A LINE_STRIP through the frames, a SPHERE_LIST on the frames and a SPHERE at the target.
+
+    """
+    def marker(marker_id, kind, scale, rgb):
+        item = Marker()
+        item.header.stamp = stamp
+        item.header.frame_id = frame_id
+        item.ns = namespace
+        item.id = marker_id
+        item.type = kind
+        item.action = Marker.ADD
+        item.pose.orientation.w = 1.0
+        item.scale.x = item.scale.y = item.scale.z = scale
+        item.color.r, item.color.g, item.color.b = rgb
+        item.color.a = 1.0
+        return item
+
+    points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in positions]
+    line = marker(0, Marker.LINE_STRIP, 0.004, (0.2, 0.5, 1.0))
+    line.points = points
+    frames = marker(1, Marker.SPHERE_LIST, 0.008, (0.9, 0.9, 0.9))
+    frames.points = points
+    markers = [line, frames]
+    if target is not None:
+        goal = marker(2, Marker.SPHERE, 0.01, (1.0, 0.3, 0.1))
+        goal.pose.position = Point(x=float(target[0]), y=float(target[1]), z=float(target[2]))
+        markers.append(goal)
+    return MarkerArray(markers=markers)

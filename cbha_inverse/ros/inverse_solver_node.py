@@ -1,0 +1,290 @@
+"""
+``inverse_solver``: the controller node (DESIGN sections 6 and 7).
+
+Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/measured``
+(PointStamped, sensor data); publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order =
+``valve_names``, reliable), ``/diagnostics`` (~1 Hz) and ``backbone`` (MarkerArray).
+
+With ``trigger: target`` a valid target is solved and its command published inside the target
+callback (lowest target-to-command latency); the timer at ``rate_hz`` ticks the solver only when no
+target came during the last period (the model keeps converging at a fixed target) and runs the
+staleness watchdog. Every input passes :mod:`cbha_inverse.core.safety` first; a rejected message
+is counted and logged (throttled) and the last valid command stays. Every command passes
+:func:`cbha_inverse.core.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
+"""
+
+from dataclasses import dataclass
+import math
+import sys
+import time
+
+from cbha_inverse.core.control import TargetCorrector
+from cbha_inverse.core.robotino import ARM_VALVES
+from cbha_inverse.core.safety import (
+    bounded_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
+from cbha_inverse.ros.conversions import backbone_markers, command_message, point_array
+from cbha_inverse.ros.diagnostics import (
+    DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
+from cbha_inverse.ros.params import declare_parameters, param, ParameterError
+from cbha_inverse.ros.qos import COMMAND_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.runner import run_node
+from cbha_inverse.scene import load_scene
+from geometry_msgs.msg import PointStamped
+import numpy as np
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
+
+NODE_NAME = 'inverse_solver'
+
+
+@dataclass(frozen=True)
+class InverseSolverParams:
+    """Parameters of the ``inverse_solver`` node."""
+
+    scene: str = param('cbha.yaml', 'scene YAML: a file path, or a name in config/scenes')
+    rate_hz: float = param(100.0, 'control tick rate [Hz]', low=1.0, high=2000.0)
+    trigger: str = param('target', 'target: solve when a target arrives (and on the timer when '
+                         'none came for a period); timer: solve on the timer only',
+                         choices=('target', 'timer'))
+    mode: str = param('open', 'open: model only (the paper); closed: integral correction from '
+                      'tip/measured', choices=('open', 'closed'))
+    valve_names: tuple = param(ARM_VALVES, 'command order: a permutation of the scene actuators')
+    max_pressure: float = param(150000.0, 'p_max [Pa] ceiling of every command (1.5 bar)',
+                                low=0.0, high=1.0e7)
+    target_timeout: float = param(0.5, 'target older than this is stale [s] (steady clock)',
+                                  low=0.001, high=3600.0)
+    feedback_timeout: float = param(0.5, 'closed loop: measurement older than this is stale [s]',
+                                    low=0.001, high=3600.0)
+    stale_action: str = param('hold', 'on stale inputs: hold the last command or vent',
+                              choices=('hold', 'vent'))
+    vent_pressure: float = param(0.0, 'safe pressure commanded when venting [Pa]',
+                                 low=0.0, high=1.0e7)
+    frame_id: str = param('cbha_base', 'the only accepted frame_id of target and tip/measured')
+    workspace_min: tuple = param((-0.5, -0.5, -0.5), 'workspace box lower corner [m]: targets '
+                                 'and measurements outside are rejected')
+    workspace_max: tuple = param((0.8, 0.5, 0.5), 'workspace box upper corner [m]')
+    loop_gain: float = param(0.05, 'closed loop: integral gain per measurement [-]',
+                             low=0.0, high=1.0)
+    max_correction: float = param(0.03, 'closed loop: largest target correction [m]',
+                                  low=0.0, high=1.0)
+    newton_steps: int = param(1, 'Newton steps of the model per tick', low=1, high=20)
+    marker_period: float = param(0.1, 'period of the backbone markers [s]', low=0.01, high=60.0)
+    diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
+    log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
+                                low=0.0, high=3600.0)
+
+
+class InverseSolverNode(Node):
+    """
+    The controller: target (+ measurement) in, pressure command out.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node`` (``context``, ``namespace``, ``parameter_overrides``).
+
+    Raises
+    ------
+    ParameterError
+        On invalid parameters or a scene that does not fit them (the node is destroyed first).
+
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        try:
+            self.params = declare_parameters(self, InverseSolverParams)
+            self._setup_model()
+        except (ValueError, FileNotFoundError, KeyError) as exc:
+            self.destroy_node()
+            raise ParameterError(f'{NODE_NAME}: {exc}') from None
+        p = self.params
+        self.period = 1.0 / p.rate_hz
+        self.target = None
+        self.measured = None
+        self.target_watch = StalenessWatch(p.target_timeout)
+        self.feedback_watch = StalenessWatch(p.feedback_timeout)
+        self.command = self.vent_command.copy()
+        self.decision = 'waiting'
+        self.last_result = None
+        self._last_solve = -math.inf
+        self.rejected = {}
+        self.published = 0
+        self.ticks = 0
+        self.statuses = {}
+        self.tick_times = TimingStats()
+        self.latencies = TimingStats()
+        self.command_publisher = self.create_publisher(
+            Float64MultiArray, 'pressure_command', COMMAND_QOS)
+        self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
+        self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
+        self.create_subscription(PointStamped, 'tip/measured', self._on_measured, MEASURED_QOS)
+        self.timer = self.create_timer(self.period, self._on_timer)
+        self.marker_timer = self.create_timer(p.marker_period, self._publish_markers)
+        self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
+        self.get_logger().info(
+            f'scene {self.scene.name}: {len(p.valve_names)} valves {list(p.valve_names)}, '
+            f'p_max {self.upper.max():g}, {p.mode} loop, trigger {p.trigger} at {p.rate_hz:g} Hz,'
+            f' stale -> {p.stale_action}; {self.command_publisher.topic_name}')
+
+    def _setup_model(self):
+        """Load the scene, build the solver and the command order and bounds."""
+        p = self.params
+        self.scene = load_scene(p.scene)
+        if len(self.scene.effector_names) != 1:
+            raise ValueError(f'scene {self.scene.name} has effectors '
+                             f'{list(self.scene.effector_names)}; this node drives exactly one')
+        names = self.scene.actuator_names
+        if sorted(p.valve_names) != sorted(names):
+            raise ValueError(f'valve_names {list(p.valve_names)} must be a permutation of the '
+                             f'scene actuators {list(names)}')
+        self.order = np.array([names.index(name) for name in p.valve_names])
+        self.lower = np.maximum(self.scene.lower_bounds[self.order], 0.0)
+        self.upper = np.minimum(self.scene.upper_bounds[self.order], p.max_pressure)
+        if np.any(self.lower > self.upper):
+            raise ValueError('max_pressure is below a lower actuator bound of the scene')
+        self.vent_command = bounded_command(np.full(len(names), p.vent_pressure),
+                                            self.lower, self.upper)
+        self.box = WorkspaceBox(p.workspace_min, p.workspace_max)
+        self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps)
+        self.corrector = TargetCorrector(1, gain=p.loop_gain if p.mode == 'closed' else 0.0,
+                                         max_correction=p.max_correction)
+
+    # inputs ---------------------------------------------------------------------------------
+    def _reject(self, topic, check):
+        key = f'{topic}.{check.reason}'
+        self.rejected[key] = self.rejected.get(key, 0) + 1
+        self.get_logger().warn(f'rejected {topic}: {check.detail} (total {self.rejected[key]})',
+                               throttle_duration_sec=self.params.log_throttle)
+
+    def _on_target(self, message):
+        received = time.perf_counter()
+        point = point_array(message)
+        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
+        if not check.ok:
+            self._reject('target', check)
+            return
+        self.target = point
+        self.target_watch.mark(time.monotonic())
+        if self.params.trigger == 'target' and self._decide() == 'run':
+            self._solve_and_publish()
+            self.latencies.add(time.perf_counter() - received)
+
+    def _on_measured(self, message):
+        point = point_array(message)
+        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
+        if not check.ok:
+            self._reject('tip/measured', check)
+            return
+        self.measured = point
+        self.feedback_watch.mark(time.monotonic())
+        if self.params.mode == 'closed' and self.target is not None:
+            saturated = self.last_result is not None and self.last_result.status == 'saturated'
+            self.corrector.update(self.target[None], point[None], saturated=saturated)
+
+    # control --------------------------------------------------------------------------------
+    def _decide(self):
+        now = time.monotonic()
+        decision = stale_action(self.target_watch.stale(now), self.feedback_watch.stale(now),
+                                self.params.mode == 'closed', self.params.stale_action)
+        label = 'waiting' if self.target is None else decision
+        if label != self.decision:
+            self.get_logger().info(f'{self.decision} -> {label}')
+            self.decision = label
+        return decision
+
+    def _on_timer(self):
+        decision = self._decide()
+        if decision == 'run':
+            if (self.params.trigger == 'timer'
+                    or time.monotonic() - self._last_solve >= 0.9 * self.period):
+                self._solve_and_publish()
+        elif decision == 'hold':
+            self._publish(self.command)
+        else:
+            self._publish(self.vent_command)
+
+    def _solve_and_publish(self):
+        start = time.perf_counter()
+        goal = self.corrector.update(self.target[None], None)
+        result = self.solver.step(goal)
+        self.last_result = result
+        self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
+        self._last_solve = time.monotonic()
+        self.ticks += 1
+        try:
+            command = bounded_command(result.actuation[self.order], self.lower, self.upper)
+        except ValueError as exc:
+            self.rejected['solver.non_finite'] = self.rejected.get('solver.non_finite', 0) + 1
+            self.get_logger().error(f'solver output rejected, holding: {exc}',
+                                    throttle_duration_sec=self.params.log_throttle)
+            command = self.command
+        self._publish(command)
+        self.tick_times.add(time.perf_counter() - start)
+
+    def _publish(self, command):
+        command = bounded_command(command, self.lower, self.upper)
+        self.command = command
+        self.command_publisher.publish(command_message(command, self.params.valve_names))
+        self.published += 1
+
+    # outputs --------------------------------------------------------------------------------
+    def _publish_markers(self):
+        self.marker_publisher.publish(backbone_markers(
+            self.solver.state.positions, self.target, self.get_clock().now().to_msg(),
+            self.params.frame_id))
+
+    def _statuses(self):
+        now = time.monotonic()
+        result = self.last_result
+        values = {'mode': self.params.mode, 'decision': self.decision, 'ticks': self.ticks,
+                  'published': self.published, 'last_status': result.status if result else '',
+                  'qp_status': result.qp_status if result else '',
+                  'residual_norm': result.residual_norm if result else math.nan,
+                  'predicted_error_mm': 1e3 * result.predicted_error if result else math.nan,
+                  'saturated': ','.join(np.asarray(self.scene.actuator_names)[
+                      result.saturated].tolist()) if result else '',
+                  'target_age_s': self.target_watch.age(now),
+                  'feedback_age_s': self.feedback_watch.age(now),
+                  'correction_mm': 1e3 * float(np.linalg.norm(self.corrector.correction)),
+                  'command_pa': ' '.join(f'{v:.0f}' for v in self.command),
+                  **self.tick_times.summary('tick'), **self.latencies.summary('latency'),
+                  **{f'status.{k}': v for k, v in sorted(self.statuses.items())}}
+        if result is not None and result.status == 'not_positive_definite':
+            level, message = ERROR, 'model tangent not positive definite: holding'
+        elif self.decision in ('hold', 'vent'):
+            level, message = WARN, f'stale input: {self.decision}'
+        elif self.decision == 'waiting':
+            level, message = OK, 'waiting for a target'
+        else:
+            level, message = OK, f'running ({result.status if result else "no tick yet"})'
+        total = sum(self.rejected.values())
+        inputs = make_status(NODE_NAME, 'inputs', WARN if total else OK,
+                             f'{total} rejected messages' if total else 'all inputs valid',
+                             {'rejected_total': total, **{f'rejected.{k}': v for k, v
+                                                          in sorted(self.rejected.items())}})
+        return [make_status(NODE_NAME, 'control', level, message, values), inputs]
+
+
+def main(argv=None):
+    """
+    Run the ``inverse_solver`` node until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line (default ``sys.argv``), e.g. ``['inverse_solver', '--ros-args',
+        '--params-file', 'config/inverse_solver.yaml', '-r', '__ns:=/cbha']``.
+
+    Returns
+    -------
+    int
+        0 on a clean shutdown, 2 on invalid parameters.
+
+    """
+    return run_node(InverseSolverNode, NODE_NAME, argv)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

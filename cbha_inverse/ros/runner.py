@@ -1,0 +1,41 @@
+"""The Jazzy ``main()`` of every node: init, spin until SIGINT/SIGTERM, clean shutdown."""
+
+from cbha_inverse.ros.params import ParameterError
+import rclpy
+from rclpy.executors import ExternalShutdownException
+
+
+def run_node(node_class, node_name, argv=None):
+    """
+    Create one node, spin it until SIGINT/SIGTERM and shut down cleanly.
+
+    Parameters
+    ----------
+    node_class : callable
+        ``node_class() -> rclpy.node.Node``; raises ``ParameterError`` on invalid parameters.
+    node_name : str
+        Logger name for start-up errors.
+    argv : list of str, optional
+        Command line (default ``sys.argv``), with ``--ros-args ...``.
+
+    Returns
+    -------
+    int
+        0 after SIGINT/SIGTERM, 2 on invalid parameters or an unusable scene.
+
+    """
+    rclpy.init(args=argv)
+    node = None
+    try:
+        node = node_class()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ParameterError, FileNotFoundError) as exc:
+        rclpy.logging.get_logger(node_name).fatal(str(exc))
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
