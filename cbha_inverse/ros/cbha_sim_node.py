@@ -1,0 +1,194 @@
+"""
+``cbha_sim``: a simulated CBHA for hardware-free runs (the plant of closed-loop runs and tests).
+
+Subscribes ``pressure_command`` (Float64MultiArray, gauge Pa in ``valve_names`` order, reliable)
+and rejects malformed commands like a valve driver (wrong length, non-finite, outside
+``[0, max_pressure]``: logged with throttling, counted, the last valid set-point stays). A valid
+command takes effect after the transport ``latency``; the valve pressures follow it with a
+first-order lag ``valve_time_constant`` (exact exponential step). Every tick at ``rate_hz`` the
+plant (:class:`cbha_inverse.core.plant.StaticPlant`: the scene loaded with a deliberate
+``stiffness_scale`` error and its own ``gravity``) is moved to the equilibrium of the current
+valve pressures by warm-started Newton steps, and the tip is published on ``tip/measured``
+(PointStamped, sensor data QoS) with Gaussian noise (seeded) and, noise-free, on ``tip/true``.
+"""
+
+import collections
+from dataclasses import dataclass
+import math
+import sys
+import time
+
+from cbha_inverse.core.plant import StaticPlant
+from cbha_inverse.core.robotino import ARM_VALVES
+from cbha_inverse.core.safety import check_command
+from cbha_inverse.ros.conversions import command_array, point_stamped
+from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK, TimingStats, WARN
+from cbha_inverse.ros.params import declare_parameters, param, ParameterError
+from cbha_inverse.ros.qos import COMMAND_QOS, MEASURED_QOS
+from cbha_inverse.ros.runner import run_node
+from cbha_inverse.scene import load_scene
+from geometry_msgs.msg import PointStamped
+import numpy as np
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+
+NODE_NAME = 'cbha_sim'
+
+
+@dataclass(frozen=True)
+class CbhaSimParams:
+    """Parameters of the ``cbha_sim`` node."""
+
+    scene: str = param('cbha.yaml', 'plant scene YAML: a file path, or a name in config/scenes')
+    stiffness_scale: float = param(0.9, 'plant stiffness / nominal stiffness (model error) [-]',
+                                   low=0.01, high=100.0)
+    gravity: tuple = param((0.0, 0.0, -9.81), 'plant gravity in cbha_base [m/s^2]')
+    valve_names: tuple = param(ARM_VALVES, 'command order: a permutation of the scene actuators')
+    max_pressure: float = param(150000.0, 'driver limit [Pa]: commands above are rejected',
+                                low=0.0, high=1.0e7)
+    valve_time_constant: float = param(0.01, 'first-order valve response [s] (paper: 10 ms)',
+                                       low=0.0, high=10.0)
+    latency: float = param(0.003, 'transport latency command -> valves [s] (paper: 3 ms)',
+                           low=0.0, high=10.0)
+    rate_hz: float = param(100.0, 'plant update and tip publication rate [Hz]',
+                           low=1.0, high=2000.0)
+    noise_std: float = param(0.0002, 'standard deviation of the tip measurement noise per axis '
+                             '[m]', low=0.0, high=0.1)
+    seed: int = param(0, 'seed of the measurement noise', low=0, high=2 ** 31 - 1)
+    tolerance: float = param(1e-8, 'static equilibrium residual tolerance [N]',
+                             low=1e-14, high=1.0)
+    max_iterations: int = param(20, 'Newton iterations per plant update at most', low=1,
+                                high=1000)
+    frame_id: str = param('cbha_base', 'frame_id of the published tip')
+    diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
+    log_throttle: float = param(1.0, 'least time between two logs of rejected commands [s]',
+                                low=0.0, high=3600.0)
+
+
+class CbhaSimNode(Node):
+    """
+    The simulated robot: pressure command in, tip position out.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node``.
+
+    Raises
+    ------
+    ParameterError
+        On invalid parameters or a scene that does not fit them.
+
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        try:
+            self.params = declare_parameters(self, CbhaSimParams)
+            p = self.params
+            if len(p.gravity) != 3 or not all(math.isfinite(g) for g in p.gravity):
+                raise ValueError(f'gravity must be 3 finite numbers, got {list(p.gravity)}')
+            self.scene = load_scene(p.scene, stiffness_scale=p.stiffness_scale,
+                                    gravity=p.gravity)
+            names = self.scene.actuator_names
+            if sorted(p.valve_names) != sorted(names):
+                raise ValueError(f'valve_names {list(p.valve_names)} must be a permutation of '
+                                 f'the scene actuators {list(names)}')
+        except (ValueError, FileNotFoundError, KeyError) as exc:
+            self.destroy_node()
+            raise ParameterError(f'{NODE_NAME}: {exc}') from None
+        self.order = np.array([names.index(name) for name in p.valve_names])
+        self.plant = StaticPlant(self.scene, tolerance=p.tolerance,
+                                 max_iterations=p.max_iterations)
+        self.rng = np.random.default_rng(p.seed)
+        self.setpoint = np.zeros(len(names))
+        self.pressures = np.zeros(len(names))
+        self.pending = collections.deque()
+        self.rejected = {}
+        self.accepted = 0
+        self.last_result = None
+        self.not_converged = 0
+        self.tick_times = TimingStats()
+        self._last_tick = None
+        self.measured_publisher = self.create_publisher(PointStamped, 'tip/measured',
+                                                        MEASURED_QOS)
+        self.truth_publisher = self.create_publisher(PointStamped, 'tip/true', MEASURED_QOS)
+        self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
+                                 COMMAND_QOS)
+        self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
+        self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
+        self.get_logger().info(
+            f'plant {self.scene.name} x{p.stiffness_scale:g} stiffness, gravity '
+            f'{list(p.gravity)}, valves {p.valve_time_constant * 1e3:g} ms, latency '
+            f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm, {p.rate_hz:g} Hz')
+
+    def _on_command(self, message):
+        values = command_array(message)
+        check = check_command(values, len(self.order), self.params.max_pressure)
+        if not check.ok:
+            self.rejected[check.reason] = self.rejected.get(check.reason, 0) + 1
+            self.get_logger().warn(f'rejected pressure_command: {check.detail}',
+                                   throttle_duration_sec=self.params.log_throttle)
+            return
+        in_scene_order = np.empty(len(self.order))
+        in_scene_order[self.order] = values
+        self.pending.append((time.monotonic() + self.params.latency, in_scene_order))
+        self.accepted += 1
+
+    def _tick(self):
+        start = time.perf_counter()
+        now = time.monotonic()
+        while self.pending and self.pending[0][0] <= now:
+            self.setpoint = self.pending.popleft()[1]
+        dt = 0.0 if self._last_tick is None else now - self._last_tick
+        self._last_tick = now
+        tau = self.params.valve_time_constant
+        blend = 1.0 if tau == 0.0 else -math.expm1(-dt / tau)
+        self.pressures = self.pressures + blend * (self.setpoint - self.pressures)
+        result = self.plant.update(self.pressures)
+        self.last_result = result
+        self.not_converged += not result.converged
+        tip = result.effector_positions[-1]
+        stamp = self.get_clock().now().to_msg()
+        noisy = tip + self.rng.normal(0.0, self.params.noise_std, 3)
+        self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
+        self.truth_publisher.publish(point_stamped(tip, stamp, self.params.frame_id))
+        self.tick_times.add(time.perf_counter() - start)
+
+    def _statuses(self):
+        result = self.last_result
+        total = sum(self.rejected.values())
+        values = {'accepted_commands': self.accepted, 'rejected_total': total,
+                  **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
+                  'valve_pressures_pa': ' '.join(f'{v:.0f}' for v in self.pressures[self.order]),
+                  'newton_iterations': result.iterations if result else 0,
+                  'residual_norm': result.residual_norm if result else math.nan,
+                  'not_converged_updates': self.not_converged,
+                  **self.tick_times.summary('tick')}
+        level = WARN if total or (result is not None and not result.converged) else OK
+        message = (f'{total} rejected commands' if total else
+                   'plant not converged' if level == WARN else 'ok')
+        return [make_status(NODE_NAME, 'plant', level, message, values)]
+
+
+def main(argv=None):
+    """
+    Run the ``cbha_sim`` node until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line (default ``sys.argv``), e.g. ``['cbha_sim', '--ros-args',
+        '--params-file', 'config/cbha_sim.yaml', '-r', '__ns:=/cbha']``.
+
+    Returns
+    -------
+    int
+        0 on a clean shutdown, 2 on invalid parameters.
+
+    """
+    return run_node(CbhaSimNode, NODE_NAME, argv)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
