@@ -31,7 +31,7 @@ well-known non-symmetry of spatial rotation increments away from equilibrium.
 
 from typing import NamedTuple
 
-from cbha_inverse.core.se3 import (hat, so3_left_jacobian_inverse,
+from cbha_inverse.core.se3 import (_EYE3, _jl_inv_coefficient, hat,
                                    so3_left_jacobian_inverse_transpose_derivative, so3_log)
 import numpy as np
 
@@ -121,6 +121,8 @@ class LinkTerms(NamedTuple):
 
     offset: np.ndarray          # (..., 3) R_a^T (x_b - x_a)
     phi: np.ndarray             # (..., 3) log(R_a^T R_b Q0^T)
+    phi_hat: np.ndarray         # (..., 3, 3) hat(phi)
+    coefficients: tuple         # (c, c'/t) of Jl^-1 at |phi|
     jinv: np.ndarray            # (..., 3, 3) Jl^-1(phi)
     stress: np.ndarray          # (..., 6) K delta
     wrench_b: np.ndarray        # (..., 6) wrench on frame b, frame-a axes, at x_b
@@ -170,15 +172,15 @@ def link_terms(stiffness, rest_offset, rest_rotation, position_a, rotation_a, po
         Link stiffness K = C^-1 (frame-a axes).
     rest_offset : (..., 3) array_like  [m]
         Origin of frame b in frame-a axes at rest (d0).
-    rest_rotation : (..., 3, 3) array_like
-        Rotation of frame b in frame a at rest (Q0).
-    position_a : (..., 3) array_like  [m]
+    rest_rotation : (..., 3, 3) ndarray or None
+        Rotation of frame b in frame a at rest (Q0); None for identity.
+    position_a : (..., 3) ndarray  [m]
         World position of frame a.
-    rotation_a : (..., 3, 3) array_like
+    rotation_a : (..., 3, 3) ndarray
         World rotation of frame a.
-    position_b : (..., 3) array_like  [m]
+    position_b : (..., 3) ndarray  [m]
         World position of frame b.
-    rotation_b : (..., 3, 3) array_like
+    rotation_b : (..., 3, 3) ndarray
         World rotation of frame b.
 
     Returns
@@ -187,24 +189,21 @@ def link_terms(stiffness, rest_offset, rest_rotation, position_a, rotation_a, po
 
     """
     rot_at = np.swapaxes(rotation_a, -1, -2)
-    diff = position_b - position_a
-    offset = (rot_at @ diff[..., None])[..., 0]
-    rel = rot_at @ rotation_b @ np.swapaxes(rest_rotation, -1, -2)
+    offset = (rot_at @ (position_b - position_a)[..., None])[..., 0]
+    rel = rot_at @ rotation_b
+    if rest_rotation is not None:
+        rel = rel @ np.swapaxes(rest_rotation, -1, -2)
     phi = so3_log(rel)
     delta = np.concatenate([offset - rest_offset, phi], axis=-1)
     stress = (stiffness @ delta[..., None])[..., 0]
-    jinv = so3_left_jacobian_inverse(phi)
-    moment = (np.swapaxes(jinv, -1, -2) @ stress[..., 3:, None])[..., 0]
-    wrench_b = -np.concatenate([stress[..., :3], moment], axis=-1)
-    return LinkTerms(offset, phi, jinv, stress, wrench_b)
-
-
-def _rotate_wrench(rot, wrench):
-    """Rotate (..., 6) wrenches by (..., 3, 3) rotations."""
-    out = np.empty(np.broadcast_shapes(wrench.shape, rot.shape[:-2] + (6,)))
-    out[..., :3] = (rot @ wrench[..., :3, None])[..., 0]
-    out[..., 3:] = (rot @ wrench[..., 3:, None])[..., 0]
-    return out
+    coefficients = _jl_inv_coefficient(np.sqrt(np.sum(phi * phi, axis=-1)))
+    phi_hat = hat(phi)
+    jinv = coefficients[0][..., None, None] * (phi_hat @ phi_hat) - 0.5 * phi_hat
+    jinv += _EYE3
+    wrench_b = np.empty_like(stress)
+    wrench_b[..., :3] = -stress[..., :3]
+    wrench_b[..., 3:] = -(stress[..., None, 3:] @ jinv)[..., 0, :]
+    return LinkTerms(offset, phi, phi_hat, coefficients, jinv, stress, wrench_b)
 
 
 def wrench_pair_from_terms(terms, rotation_a):
@@ -224,12 +223,14 @@ def wrench_pair_from_terms(terms, rotation_a):
         Each at its own frame origin, world axes.
 
     """
-    w_b = _rotate_wrench(rotation_a, terms.wrench_b)
-    arm = (rotation_a @ terms.offset[..., None])[..., 0]
-    w_a = np.empty_like(w_b)
-    w_a[..., :3] = -w_b[..., :3]
-    w_a[..., 3:] = -w_b[..., 3:] - np.cross(arm, w_b[..., :3])
-    return w_a, w_b
+    w_b = terms.wrench_b
+    f_b = w_b[..., :3]
+    lever = (hat(terms.offset) @ f_b[..., None])[..., 0]
+    # columns: force on a, moment on a, force on b, moment on b (local), then one rotation
+    local = np.stack([-f_b, -w_b[..., 3:] - lever, f_b, w_b[..., 3:]], axis=-1)
+    world = np.swapaxes(rotation_a @ local, -1, -2)
+    shape = world.shape[:-2] + (6,)
+    return world[..., :2, :].reshape(shape), world[..., 2:, :].reshape(shape)
 
 
 def link_wrenches(stiffness, rest_offset, rest_rotation, position_a, rotation_a, position_b,
@@ -287,27 +288,27 @@ def local_tangent_blocks(terms, stiffness):
 
     """
     batch = terms.phi.shape[:-1]
-    eye = np.broadcast_to(np.eye(3), batch + (3, 3))
     jinv = terms.jinv
-    p_hat = hat(terms.offset)
     a_b = np.zeros(batch + (6, 6))
-    a_b[..., :3, :3] = eye
+    a_b[..., :3, :3] = _EYE3
     a_b[..., 3:, 3:] = jinv
     t_bb = np.swapaxes(a_b, -1, -2) @ stiffness @ a_b
+    p_hat = hat(terms.offset)
     tp = np.zeros(batch + (6, 6))
-    tp[..., :3, :3] = eye
-    tp[..., 3:, 3:] = eye
+    tp[..., :3, :3] = _EYE3
+    tp[..., 3:, 3:] = _EYE3
     tp[..., :3, 3:] = -p_hat
-    tpt = np.swapaxes(tp, -1, -2)
-    t_ab = -(tpt @ t_bb)
-    t_aa = -(t_ab @ tp)
+    t_ab = np.swapaxes(tp, -1, -2) @ t_bb
+    t_aa = t_ab @ tp
+    t_ab *= -1.0
     # geometric part: s_t local force (on a), moment m = Jl^-T s_r, DJ = d(Jl^-T s_r)/dphi Jl^-1
     f_hat = hat(terms.stress[..., :3])
-    m_hat = hat(-terms.wrench_b[..., 3:])
-    dj = so3_left_jacobian_inverse_transpose_derivative(terms.phi, terms.stress[..., 3:]) @ jinv
+    m_hat = hat(terms.wrench_b[..., 3:])
+    dj = so3_left_jacobian_inverse_transpose_derivative(
+        terms.phi, terms.stress[..., 3:], terms.coefficients) @ jinv
     t_aa[..., :3, 3:] += f_hat
     t_aa[..., 3:, :3] -= f_hat
-    t_aa[..., 3:, 3:] += p_hat @ f_hat + m_hat + dj
+    t_aa[..., 3:, 3:] += p_hat @ f_hat - m_hat + dj
     t_ab[..., 3:, :3] += f_hat
     t_ab[..., 3:, 3:] -= dj
     t_bb[..., 3:, 3:] += dj

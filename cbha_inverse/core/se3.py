@@ -6,14 +6,24 @@ every function is batched over leading axes (``(..., 3)`` vectors, ``(..., 3, 3)
 Rotation increments are applied on the left in world axes, ``R <- so3_exp(dtheta) @ R``, so the
 Jacobians used by the mechanics are the *left* Jacobians of SO(3).
 
-The small-angle branches use Taylor series below ``_SMALL_ANGLE`` rad, where the closed forms
-lose digits to cancellation; :func:`so3_log` goes through a (Shepperd) quaternion, which is
-accurate at every angle including near pi.
+Where closed forms lose digits to cancellation, ``sinc`` forms or Taylor series are used;
+:func:`so3_log` reads the angle with ``atan2`` and, beyond 2.4 rad, goes through a (Shepperd)
+quaternion, which stays accurate up to pi.
 """
 
 import numpy as np
 
-_SMALL_ANGLE = 0.1
+_SERIES_ANGLE = 1.0
+# |B_(2k+2)| / (2k+2)!, k = 0..9: Taylor coefficients of c(t) in t**2 (see _jl_inv_coefficient)
+_JL_SERIES = (1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 47900160.0,
+              691.0 / (2730.0 * 479001600.0), 7.0 / (6.0 * 87178291200.0),
+              3617.0 / (510.0 * 20922789888000.0), 43867.0 / (798.0 * 6402373705728000.0),
+              174611.0 / (330.0 * 2432902008176640000.0))
+_EYE3 = np.eye(3)
+# hat(v) = v @ _HAT_BASIS reshaped to 3x3 (one matmul instead of six scattered writes)
+_HAT_BASIS = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0],
+                       [0, 0, 1, 0, 0, 0, -1, 0, 0],
+                       [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float)
 
 
 def hat(v):
@@ -31,14 +41,7 @@ def hat(v):
 
     """
     v = np.asarray(v, dtype=float)
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1] = -v[..., 2]
-    out[..., 0, 2] = v[..., 1]
-    out[..., 1, 0] = v[..., 2]
-    out[..., 1, 2] = -v[..., 0]
-    out[..., 2, 0] = -v[..., 1]
-    out[..., 2, 1] = v[..., 0]
-    return out
+    return (v @ _HAT_BASIS).reshape(v.shape[:-1] + (3, 3))
 
 
 def vee(m):
@@ -62,15 +65,10 @@ def vee(m):
 
 
 def _angle_coefficients(theta):
-    """Return ``sin(t)/t`` and ``(1 - cos(t))/t**2`` with Taylor series near zero."""
-    t2 = theta * theta
-    small = theta < _SMALL_ANGLE
-    safe = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0)),
-                 np.sin(safe) / safe)
-    b = np.where(small, 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0)),
-                 (1.0 - np.cos(safe)) / (safe * safe))
-    return a, b
+    """Return ``sin(t)/t`` and ``(1 - cos(t))/t**2 = sinc(t/2)**2 / 2`` without cancellation."""
+    a = np.sinc(theta * (1.0 / np.pi))
+    b = np.sinc(theta * (0.5 / np.pi))
+    return a, 0.5 * b * b
 
 
 def so3_exp(rotvec):
@@ -166,10 +164,11 @@ def matrix_from_quat(quat):
 
 def so3_log(rot):
     """
-    Rotation vector of a rotation matrix, angle in [0, pi].
+    Return the rotation vector of a rotation matrix, angle in [0, pi].
 
-    Computed from the quaternion, ``theta = 2 atan2(|v|, w)``, which keeps full accuracy for
-    small angles and near pi (where the axis is recovered from the symmetric part).
+    ``theta = atan2(|vee(R)|, (tr R - 1) / 2)`` and ``phi = vee(R) theta / sin(theta)`` while
+    ``tr R > -0.5`` (theta < 2.4 rad) for every input; otherwise through the quaternion,
+    ``theta = 2 atan2(|v|, w)``, which keeps full accuracy near pi.
 
     Parameters
     ----------
@@ -181,6 +180,14 @@ def so3_log(rot):
     (..., 3) ndarray  [rad]
 
     """
+    rot = np.asarray(rot, dtype=float)
+    trace = rot[..., 0, 0] + rot[..., 1, 1] + rot[..., 2, 2]
+    if trace.size and trace.min() > -0.5:
+        d = vee(rot)
+        sin_t = np.sqrt(np.sum(d * d, axis=-1))
+        theta = np.arctan2(sin_t, 0.5 * (trace - 1.0))
+        ratio = np.divide(theta, sin_t, out=np.ones_like(theta), where=sin_t > 0.0)
+        return d * ratio[..., None]
     q = quat_from_matrix(rot)
     v = q[..., :3]
     w = q[..., 3]
@@ -197,23 +204,34 @@ def _jl_inv_coefficient(theta):
     """
     Return ``c(t) = 1/t**2 - (1 + cos t) / (2 t sin t)`` and ``c'(t) / t``.
 
-    ``c`` is the coefficient of ``hat(phi)**2`` in the inverse left Jacobian of SO(3).
+    ``c`` is the coefficient of ``hat(phi)**2`` in the inverse left Jacobian of SO(3). Below
+    ``_SERIES_ANGLE`` both come from ``c = sum_k |B_(2k+2)| / (2k+2)! t**(2k)`` (Bernoulli numbers;
+    truncation < 1e-13 relative), where the closed forms cancel (``c'`` like ``1/t**4``).
     """
+    theta = np.asarray(theta, dtype=float)
     t2 = theta * theta
-    small = theta < _SMALL_ANGLE
-    # c' has a 1/t**4 cancellation: its series is used up to a larger angle (error < 1e-11).
-    small_d = theta < 0.5
-    t = np.where(small_d, 1.0, theta)
+    t_max = float(theta.max()) if theta.size else 0.0
+    # number of series terms: the first neglected term of c'/t is below 1e-17 of its value
+    terms = len(_JL_SERIES)
+    while terms > 2 and 2.0 * (terms - 1) * _JL_SERIES[terms - 1] * min(
+            t_max, _SERIES_ANGLE) ** (2 * terms - 4) < 1e-17 / 360.0:
+        terms -= 1
+    c = np.full_like(t2, _JL_SERIES[terms - 1])
+    dc = np.full_like(t2, 2.0 * (terms - 1) * _JL_SERIES[terms - 1])
+    for k in range(terms - 2, -1, -1):
+        c = c * t2 + _JL_SERIES[k]
+        if k > 0:
+            dc = dc * t2 + 2.0 * k * _JL_SERIES[k]
+    if theta.size == 0 or theta.max() < _SERIES_ANGLE:
+        return c, dc
+    big = theta >= _SERIES_ANGLE
+    t = np.where(big, theta, 1.0)
     half = 0.5 * t
     cot = np.cos(half) / np.sin(half)
     csc2 = 1.0 / np.sin(half) ** 2
+    c_closed = 1.0 / (t * t) - cot / (2.0 * t)
     dc_closed = (-2.0 / t ** 3 + csc2 / (4.0 * t) + cot / (2.0 * t * t)) / t
-    t_c = np.where(small, 1.0, theta)
-    c_closed = 1.0 / (t_c * t_c) - np.cos(0.5 * t_c) / np.sin(0.5 * t_c) / (2.0 * t_c)
-    c_series = 1.0 / 12.0 + t2 / 720.0 + t2 * t2 / 30240.0 + t2 ** 3 / 1209600.0
-    dc_series = (1.0 / 360.0 + t2 / 7560.0 + t2 * t2 / 201600.0 + t2 ** 3 / 5987520.0
-                 + t2 ** 4 * (1382.0 / 261534873600.0))
-    return np.where(small, c_series, c_closed), np.where(small_d, dc_series, dc_closed)
+    return np.where(big, c_closed, c), np.where(big, dc_closed, dc)
 
 
 def so3_left_jacobian_inverse(rotvec):
@@ -233,16 +251,14 @@ def so3_left_jacobian_inverse(rotvec):
 
     """
     rotvec = np.asarray(rotvec, dtype=float)
-    c, _ = _jl_inv_coefficient(np.linalg.norm(rotvec, axis=-1))
+    c, _ = _jl_inv_coefficient(np.sqrt(np.sum(rotvec * rotvec, axis=-1)))
     k = hat(rotvec)
-    out = -0.5 * k + c[..., None, None] * (k @ k)
-    out[..., 0, 0] += 1.0
-    out[..., 1, 1] += 1.0
-    out[..., 2, 2] += 1.0
+    out = c[..., None, None] * (k @ k) - 0.5 * k
+    out += _EYE3
     return out
 
 
-def so3_left_jacobian_inverse_transpose_derivative(rotvec, vec):
+def so3_left_jacobian_inverse_transpose_derivative(rotvec, vec, coefficients=None):
     """
     Differentiate ``Jl^-1(phi)^T s`` with respect to ``phi`` for fixed ``s``.
 
@@ -256,6 +272,8 @@ def so3_left_jacobian_inverse_transpose_derivative(rotvec, vec):
         Rotation vectors phi.
     vec : (..., 3) array_like
         Vectors s.
+    coefficients : tuple of two (...,) ndarrays, optional
+        ``(c(t), c'(t)/t)`` if already computed.
 
     Returns
     -------
@@ -265,15 +283,11 @@ def so3_left_jacobian_inverse_transpose_derivative(rotvec, vec):
     phi = np.asarray(rotvec, dtype=float)
     s = np.asarray(vec, dtype=float)
     t2 = np.sum(phi * phi, axis=-1)
-    c, dc = _jl_inv_coefficient(np.sqrt(t2))
+    c, dc = _jl_inv_coefficient(np.sqrt(t2)) if coefficients is None else coefficients
     ps = np.sum(phi * s, axis=-1)
-    a = phi * ps[..., None] - t2[..., None] * s
-    out = -0.5 * hat(s)
-    out += dc[..., None, None] * (a[..., :, None] * phi[..., None, :])
-    out += c[..., None, None] * (phi[..., :, None] * s[..., None, :]
-                                 - 2.0 * s[..., :, None] * phi[..., None, :])
-    diag = (c * ps)[..., None]
-    out[..., 0, 0] += diag[..., 0]
-    out[..., 1, 1] += diag[..., 0]
-    out[..., 2, 2] += diag[..., 0]
+    a = dc[..., None] * (phi * ps[..., None] - t2[..., None] * s) - 2.0 * c[..., None] * s
+    out = a[..., :, None] * phi[..., None, :]
+    out += (c[..., None] * phi)[..., :, None] * s[..., None, :]
+    out -= 0.5 * hat(s)
+    out += (c * ps)[..., None, None] * _EYE3
     return out

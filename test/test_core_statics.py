@@ -1,0 +1,162 @@
+"""Tests of assembly and static equilibrium against closed forms and the exact elastica."""
+
+from cbha_inverse.core import assembly, chain, links, se3, statics
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq
+
+E_MOD, NU, R_OUT, R_IN = 2.0e9, 0.35, 0.01, 0.004
+
+
+def _beam_chain(lengths, base_rotation=None):
+    """Return a straight chain of Timoshenko links along +x of the base."""
+    comps = [links.timoshenko_compliance(h, E_MOD, NU, R_OUT, R_IN) for h in lengths]
+    offsets = [[h, 0.0, 0.0] for h in lengths]
+    return chain.ChainModel.from_compliances(comps, offsets, base_rotation=base_rotation)
+
+
+def test_chaining_reproduces_whole_beam_compliance():
+    """The tip compliance of a chain of Timoshenko links equals the whole beam's (1e-9)."""
+    lengths = np.array([0.05, 0.03, 0.07, 0.04, 0.06, 0.05])
+    base_rot = se3.so3_exp([0.3, -0.7, 1.1])
+    model = _beam_chain(lengths, base_rotation=base_rot)
+    tangent = assembly.assemble_tangent(model, chain.rest_state(model))
+    # rest shape: only round-off forces of the stiff axial links (EA/h * eps * length)
+    assert np.abs(tangent.internal).max() < 1e-12 * np.abs(tangent.diagonal).max()
+    flex = np.linalg.inv(tangent.to_dense())[-6:, -6:]
+    rb = np.kron(np.eye(2), base_rot)
+    flex_base = rb.T @ flex @ rb          # world axes -> base axes
+    ref = links.timoshenko_compliance(lengths.sum(), E_MOD, NU, R_OUT, R_IN)
+    np.testing.assert_allclose(flex_base, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+
+
+def test_small_tip_load_is_linear_and_at_rest_nothing_moves():
+    """Zero load: rest shape in 0 iterations; tiny tip wrench: displacement = C w (1e-6)."""
+    lengths = np.full(8, 0.05)
+    model = _beam_chain(lengths)
+    res = statics.solve_static(model)
+    assert res.converged and res.iterations == 0
+    np.testing.assert_allclose(res.positions, chain.rest_state(model).positions, atol=0)
+    comp = links.timoshenko_compliance(lengths.sum(), E_MOD, NU, R_OUT, R_IN)
+    wrench = 1e-6 / np.sqrt(np.diag(comp)) * np.array([1.0, -0.5, 0.3, 0.2, 0.7, -0.4])
+    res = statics.solve_static(model, tip_wrench=wrench)
+    assert res.converged and res.iterations <= 3
+    disp = np.concatenate([res.positions[-1] - [lengths.sum(), 0, 0],
+                           se3.so3_log(res.rotations[-1])])
+    np.testing.assert_allclose(disp, comp @ wrench, rtol=1e-5, atol=1e-6 * np.abs(
+        comp @ wrench).max())
+
+
+def _elastica_tip(alpha):
+    """Tip (x, y) / L of the inextensible elastica: theta'' + alpha cos(theta) = 0."""
+    def shoot(kappa0, dense=False):
+        sol = solve_ivp(lambda s, y: [y[1], -alpha * np.cos(y[0]), np.cos(y[0]), np.sin(y[0])],
+                        (0.0, 1.0), [0.0, kappa0, 0.0, 0.0], rtol=1e-12, atol=1e-12)
+        return sol.y[:, -1]
+    kappa0 = brentq(lambda k: shoot(k)[1], 1e-9, alpha, xtol=1e-14)
+    return shoot(kappa0)[2:]
+
+
+def _elastica_chain(n, length=1.0, ei=1.0):
+    """Return an effectively inextensible, unshearable Euler-Bernoulli chain."""
+    h = length / n
+    comp = np.zeros((6, 6))
+    comp[0, 0] = h / (1e7 * ei / length ** 2)         # axial: EA = 1e7 EI / L^2
+    comp[1, 1] = comp[2, 2] = h ** 3 / (3 * ei)
+    comp[3, 3] = h / ei
+    comp[4, 4] = comp[5, 5] = h / ei
+    comp[1, 5] = comp[5, 1] = h ** 2 / (2 * ei)
+    comp[2, 4] = comp[4, 2] = -h ** 2 / (2 * ei)
+    return chain.ChainModel.from_compliances(np.repeat(comp[None], n, 0),
+                                             np.tile([h, 0.0, 0.0], (n, 1)))
+
+
+@pytest.mark.parametrize('alpha', [1.0, 2.5, 5.0, 10.0])
+def test_large_deflection_matches_elastica(alpha):
+    """Dead perpendicular tip load PL^2/EI = alpha: tip deflection within 0.5 % (20 links)."""
+    model = _elastica_chain(20)
+    res = statics.solve_static(model, tip_wrench=[0.0, alpha, 0.0, 0.0, 0.0, 0.0])
+    assert res.converged, res.message
+    assert res.iterations <= 8 * res.load_steps
+    x_ref, y_ref = _elastica_tip(alpha)
+    tip = res.positions[-1]
+    assert abs(tip[1] - y_ref) <= 5e-3 * y_ref
+    assert abs(tip[0] - x_ref) <= 5e-3 * 1.0
+    assert abs(tip[2]) < 1e-12
+
+
+def test_tip_moment_rolls_chain_into_circle():
+    """
+    Check that M = 2 pi EI / L closes the chain into a circle, tip rotated by 2 pi.
+
+    The links are identical, so the frames form a regular polygon of 20 sides whose turning angle
+    sums to 2 pi: it closes exactly (the link's chord offset under a pure moment rotates every
+    side equally). What remains is the Newton stopping error: the residual test bottoms out at
+    the round-off floor of the stiff axial links (EA = 1e7 EI / L^2, ~1e-13 EA/h L), which times
+    the chain's compliance is ~1e-9 L; hence the tolerance 1e-8 L.
+    """
+    model = _elastica_chain(20)
+    res = statics.solve_static(model, tip_wrench=[0.0, 0.0, 0.0, 0.0, 0.0, 2 * np.pi])
+    assert res.converged and res.iterations <= 8
+    np.testing.assert_allclose(res.positions[-1], 0.0, atol=1e-8)
+    angles = se3.so3_log(np.swapaxes(res.rotations[:-1], 1, 2) @ res.rotations[1:])[:, 2]
+    assert angles.sum() == pytest.approx(2 * np.pi, abs=1e-8)
+    np.testing.assert_allclose(abs(res.quaternions[-1][3]), 1.0, atol=1e-12)
+    centre = res.positions[:-1].mean(axis=0)
+    radii = np.linalg.norm(res.positions[:-1] - centre, axis=1)
+    # vertices of a regular 20-gon whose side is the link chord under M (linear link law):
+    # sqrt(h^2 + (C[1,5] M)^2); its circumradius exceeds L / (2 pi) by ~(2 pi / n)^2 / 8
+    chord = np.hypot(0.05, model.compliances[0, 1, 5] * 2 * np.pi)
+    np.testing.assert_allclose(radii, chord / (2 * np.sin(np.pi / 20)), rtol=1e-7)
+    assert radii[0] == pytest.approx(1.0 / (2 * np.pi), rel=(2 * np.pi / 20) ** 2 / 6)
+
+
+def test_impossible_budget_reports_non_convergence():
+    """max_iterations=1 cannot reach PL^2/EI = 10: converged False, a message, strict raises."""
+    model = _elastica_chain(20)
+    load = [0.0, 10.0, 0.0, 0.0, 0.0, 0.0]
+    res = statics.solve_static(model, tip_wrench=load, max_iterations=1, max_load_steps=16)
+    assert not res.converged
+    assert 'not converged' in res.message
+    assert res.load_factor < 1.0 and res.load_steps == 16
+    with pytest.raises(statics.StaticConvergenceError) as info:
+        statics.solve_static(model, tip_wrench=load, max_iterations=1, max_load_steps=4,
+                             strict=True)
+    assert not info.value.result.converged
+
+
+def test_gravity_frame_wrenches_and_load_function_agree():
+    """Gravity on lumped masses = the same dead frame forces = a constant load_function."""
+    n = 10
+    base = _elastica_chain(n, length=0.5, ei=0.2)
+    masses = np.linspace(0.01, 0.05, n)
+    model = chain.ChainModel.from_compliances(base.compliances, base.rest_offsets, masses=masses)
+    g = np.array([0.0, -9.81, -3.0])
+    res_g = statics.solve_static(model, gravity=g)
+    forces = np.zeros((n, 6))
+    forces[:, :3] = masses[:, None] * g
+    res_f = statics.solve_static(model, frame_wrenches=forces)
+    res_l = statics.solve_static(model, load_function=lambda state: forces)
+    for res in (res_g, res_f, res_l):
+        assert res.converged, res.message
+    np.testing.assert_allclose(res_f.positions, res_g.positions, atol=1e-12)
+    np.testing.assert_allclose(res_l.positions, res_g.positions, atol=1e-12)
+    # equilibrium of the whole chain: base reaction balances the total weight
+    internal = assembly.internal_wrenches(model, res_g.state)
+    np.testing.assert_allclose(internal[:, :3].sum(axis=0), -masses.sum() * g, atol=1e-10)
+
+
+def test_follower_moment_matches_dead_moment_in_plane():
+    """A follower tip moment about the tip's own z axis equals the dead one in planar bending."""
+    model = _elastica_chain(12)
+
+    def follower(state):
+        out = np.zeros((12, 6))
+        out[-1, 3:] = state.rotations[-1] @ [0.0, 0.0, np.pi]
+        return out
+
+    res_f = statics.solve_static(model, load_function=follower)
+    res_d = statics.solve_static(model, tip_wrench=[0, 0, 0, 0, 0, np.pi])
+    assert res_f.converged and res_d.converged
+    np.testing.assert_allclose(res_f.positions, res_d.positions, atol=1e-9)
