@@ -1,0 +1,246 @@
+"""
+The controller and the simulated robot over real DDS (in one process, one executor).
+
+Scene: the paper's tendon trunk (``tendon_6f_8c``, 8 cables, ~1 ms per tick) so that the loop runs
+fast on a shared machine; the plant is the same scene 10 % softer (``stiffness_scale`` 0.9), with
+valve lag (10 ms), transport latency (3 ms) and 0.2 mm measurement noise.
+"""
+
+import time
+
+from cbha_inverse.ros.cbha_sim_node import CbhaSimNode
+from cbha_inverse.ros.inverse_solver_node import InverseSolverNode
+from cbha_inverse.ros.qos import COMMAND_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.trajectory_node import TrajectoryNode
+from cbha_inverse.scene import load_scene
+from geometry_msgs.msg import PointStamped
+import numpy as np
+import pytest
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from ros_helpers import spin_for, spin_until
+from std_msgs.msg import Float64MultiArray
+
+SCENE = 'tendon_6f_8c'
+MAX_TENSION = 10.0
+CENTER = (0.117, 0.0, -0.005)
+RADIUS = 0.01
+SPEED = 0.01
+RATE = 50.0
+
+
+def _names():
+    return list(load_scene(SCENE).actuator_names)
+
+
+def _solver(context, namespace='/cbha', **overrides):
+    params = {'scene': SCENE, 'valve_names': _names(), 'rate_hz': RATE, **overrides}
+    return InverseSolverNode(context=context, namespace=namespace, parameter_overrides=[
+        Parameter(k, value=v) for k, v in params.items()])
+
+
+def _sim(context, namespace='/cbha', **overrides):
+    params = {'scene': SCENE, 'valve_names': _names(), 'rate_hz': RATE,
+              'max_pressure': MAX_TENSION, **overrides}
+    return CbhaSimNode(context=context, namespace=namespace, parameter_overrides=[
+        Parameter(k, value=v) for k, v in params.items()])
+
+
+def _tracking_rms(context, mode, duration):
+    """Run trajectory + solver + sim; return the RMS and max tip error [m] after 2 s."""
+    trajectory = TrajectoryNode(context=context, namespace='/cbha', parameter_overrides=[
+        Parameter('center', value=list(CENTER)), Parameter('radius', value=RADIUS),
+        Parameter('speed', value=SPEED), Parameter('rate_hz', value=RATE),
+        Parameter('start_hold', value=1.0)])
+    solver = _solver(context, mode=mode)
+    sim = _sim(context)
+    recorder = Node('recorder', context=context, namespace='/cbha')
+    targets, tips = [], []
+
+    def stamp(msg):
+        return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+
+    recorder.create_subscription(PointStamped, 'target', lambda m: targets.append(
+        (stamp(m), m.point.x, m.point.y, m.point.z)), TARGET_QOS)
+    recorder.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(
+        (stamp(m), m.point.x, m.point.y, m.point.z)), MEASURED_QOS)
+    nodes = (trajectory, solver, sim, recorder)
+    executor = SingleThreadedExecutor(context=context)
+    for node in nodes:
+        executor.add_node(node)
+    try:
+        spin_for(executor, duration)
+    finally:
+        executor.shutdown()
+        for node in nodes:
+            node.destroy_node()
+    targets, tips = np.array(targets), np.array(tips)
+    moving = tips[:, 0] > targets[0, 0] + 2.0
+    goal = np.stack([np.interp(tips[moving, 0], targets[:, 0], targets[:, i])
+                     for i in (1, 2, 3)], axis=1)
+    error = np.linalg.norm(tips[moving, 1:] - goal, axis=1)
+    assert moving.sum() > 0.5 * RATE * (duration - 2.5), 'too few tip samples'
+    return float(np.sqrt(np.mean(error ** 2))), float(error.max())
+
+
+def test_closed_loop_tracks_circle_segment_below_bound(rclpy_context):
+    """
+    Closed loop on 4 s of a 10 mm circle at 1 cm/s beats 0.6 mm RMS; open loop does not.
+
+    Bound: the integral correction removes the model error (10 % stiffness); what remains is
+    the loop lag, about valve 10 ms + latency 3 ms + one plant tick 20 ms + one control tick
+    20 ms ~ 55 ms, times 1 cm/s ~ 0.55 mm, partly compensated by the integral; 0.6 mm. The open
+    loop with the same plant is > 1 mm off (the mismatch), so the bound discriminates.
+    """
+    closed_rms, closed_max = _tracking_rms(rclpy_context, 'closed', 6.0)
+    open_rms, _ = _tracking_rms(rclpy_context, 'open', 6.0)
+    print(f'closed loop RMS {closed_rms * 1e3:.3f} mm (max {closed_max * 1e3:.3f}), '
+          f'open loop RMS {open_rms * 1e3:.3f} mm')
+    assert closed_rms < 0.6e-3
+    assert open_rms > 2.0 * closed_rms
+
+
+def _point(x, y, z, frame='cbha_base'):
+    message = PointStamped()
+    message.header.frame_id = frame
+    message.point.x, message.point.y, message.point.z = float(x), float(y), float(z)
+    return message
+
+
+def _bad_points(rng, count):
+    """Yield NaN/inf/huge/wrong-frame points."""
+    bad = [np.nan, np.inf, -np.inf, 1e300, -1e6, 5.0]
+    for i in range(count):
+        point = list(CENTER)
+        kind = i % 4
+        if kind == 3:
+            yield _point(*point, frame=['', 'world', 'cbha_base ', 'map'][rng.integers(4)])
+            continue
+        point[rng.integers(3)] = bad[rng.integers(len(bad))]
+        if kind == 2:
+            point = [bad[rng.integers(len(bad))] for _ in range(3)]
+        yield _point(*point, frame='cbha_base')
+
+
+def _bad_commands(rng, count, n_valves):
+    """Yield wrong-length, non-finite, negative and too-high commands."""
+    for i in range(count):
+        kind = i % 4
+        if kind == 0:
+            length = int(rng.choice([0, 1, n_valves - 1, n_valves + 1, 8 * n_valves]))
+            data = rng.uniform(0.0, 1.0, length)
+        else:
+            data = rng.uniform(0.0, MAX_TENSION, n_valves)
+            data[rng.integers(n_valves)] = [np.nan, np.inf, -np.inf, -1.0, 1e308,
+                                            MAX_TENSION * 1.01][rng.integers(6)]
+        yield Float64MultiArray(data=[float(v) for v in data])
+
+
+def _count(node, prefix):
+    return sum(v for k, v in node.rejected.items() if k.startswith(prefix))
+
+
+def test_fuzzed_inputs_never_produce_bad_commands(rclpy_context):
+    """
+    2,200 bad messages on each subscribed topic of both nodes; commands stay finite and bounded.
+
+    The solver runs in /cbha (target, tip/measured), the fuzzed simulator in /fuzz
+    (pressure_command) so that the monitor of /cbha/pressure_command sees only the solver.
+    """
+    count = 2200
+    rng = np.random.default_rng(7)
+    solver = _solver(rclpy_context, max_pressure=MAX_TENSION)
+    sim = _sim(rclpy_context, namespace='/fuzz')
+    fuzzer = Node('fuzzer', context=rclpy_context)
+    target_pub = fuzzer.create_publisher(PointStamped, '/cbha/target', TARGET_QOS)
+    measured_pub = fuzzer.create_publisher(PointStamped, '/cbha/tip/measured', MEASURED_QOS)
+    command_pub = fuzzer.create_publisher(Float64MultiArray, '/fuzz/pressure_command',
+                                          COMMAND_QOS)
+    commands, tips = [], []
+    fuzzer.create_subscription(Float64MultiArray, '/cbha/pressure_command',
+                               lambda m: commands.append(np.array(m.data)), COMMAND_QOS)
+    fuzzer.create_subscription(PointStamped, '/fuzz/tip/measured', lambda m: tips.append(
+        (m.point.x, m.point.y, m.point.z)), MEASURED_QOS)
+    executor = SingleThreadedExecutor(context=rclpy_context)
+    for node in (solver, sim, fuzzer):
+        executor.add_node(node)
+    try:
+        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
+                          and command_pub.get_subscription_count() > 0
+                          and measured_pub.get_subscription_count() > 0, 10.0)
+        streams = zip(_bad_points(rng, count), _bad_points(rng, count),
+                      _bad_commands(rng, count, len(_names())))
+        for i, (target, measured, command) in enumerate(streams):
+            target_pub.publish(target)
+            measured_pub.publish(measured)
+            command_pub.publish(command)
+            if i % 20 == 0:
+                target_pub.publish(_point(CENTER[0], 0.005 * np.cos(i), 0.005 * np.sin(i)))
+            if i % 5 == 4:  # pace: reliable KEEP_LAST(10) would drop a burst
+                spin_until(executor, lambda: _count(solver, 'target.') > i
+                           and sum(sim.rejected.values()) > i, 2.0)
+        spin_until(executor, lambda: sum(sim.rejected.values()) >= count, 20.0)
+        spin_for(executor, 0.3)
+        published_during_fuzz = len(commands)
+        target_pub.publish(_point(*CENTER))
+        assert spin_until(executor, lambda: len(commands) > published_during_fuzz + 2, 5.0)
+    finally:
+        executor.shutdown()
+        for node in (solver, sim, fuzzer):
+            node.destroy_node()
+    rejected_targets = _count(solver, 'target.')
+    rejected_measured = _count(solver, 'tip/measured.')
+    print(f'rejected: solver {solver.rejected}, sim {sim.rejected}; {len(commands)} commands')
+    assert rejected_targets == count
+    assert rejected_measured >= 0.95 * count  # best effort: a few may be dropped, none crashed
+    assert sum(sim.rejected.values()) == count
+    assert len(commands) > count // 20
+    data = np.array(commands)
+    assert np.all(np.isfinite(data)) and np.all(data >= 0.0) and np.all(data <= MAX_TENSION)
+    assert np.all(np.isfinite(tips)) and len(tips) > 0
+    assert np.all(sim.pressures <= MAX_TENSION) and np.all(sim.pressures >= 0.0)
+
+
+@pytest.mark.parametrize('action', ['vent', 'hold'])
+def test_stale_target_holds_or_vents_within_timeout(rclpy_context, action):
+    timeout = 0.2
+    vent = 1.0
+    solver = _solver(rclpy_context, max_pressure=MAX_TENSION, target_timeout=timeout,
+                     stale_action=action, vent_pressure=vent, rate_hz=100.0)
+    client = Node('client', context=rclpy_context, namespace='/cbha')
+    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    commands = []
+    client.create_subscription(Float64MultiArray, 'pressure_command', lambda m: commands.append(
+        (time.monotonic(), np.array(m.data))), COMMAND_QOS)
+    executor = SingleThreadedExecutor(context=rclpy_context)
+    executor.add_node(solver)
+    executor.add_node(client)
+    try:
+        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
+        end = time.monotonic() + 0.5
+        i = 0
+        while time.monotonic() < end:
+            target_pub.publish(_point(CENTER[0], 0.01 * np.cos(0.1 * i), 0.01 * np.sin(0.1 * i)))
+            i += 1
+            spin_for(executor, 0.01)
+        last_target = time.monotonic()
+        solved = solver.command.copy()
+        spin_for(executor, timeout + 0.3)
+    finally:
+        executor.shutdown()
+        solver.destroy_node()
+        client.destroy_node()
+    assert solver.decision == action
+    after = [(t, c) for t, c in commands if t > last_target + timeout + 0.05]
+    assert after, 'no command published after the timeout'
+    if action == 'vent':
+        assert not np.allclose(solved, vent)
+        first_vent = next(t for t, c in commands if t > last_target and np.allclose(c, vent))
+        assert first_vent - last_target < timeout + 0.1
+        expected = np.full_like(solved, vent)
+    else:
+        expected = after[0][1]  # the last command solved before the target went stale
+        assert np.all(np.isfinite(expected)) and not np.allclose(expected, 0.0)
+    for _, command in after:
+        np.testing.assert_allclose(command, expected, rtol=0, atol=0)
