@@ -160,6 +160,10 @@ class CableGroup:
         self._length_sum[segment_owner, rows] = 1.0
         self.upper_bounds = np.array([c.max_tension for c in self.cables], dtype=float)
         self.lower_bounds = np.zeros(m)
+        self._segment_owner = segment_owner
+        self._point_owner = owner
+        self._tangent_index = _span_tangent_index(self.frames, self.segment_start,
+                                                  self.segment_end, self.n_frames)
 
     @property
     def n_actuators(self):
@@ -235,6 +239,87 @@ class CableGroup:
         return (wrenches.reshape(self.n_actuators, self.n_frames, 6),
                 -(self._length_sum @ span_lengths))
 
+    def load_tangent(self, positions, rotations, tensions, symmetric=True):
+        """
+        Return the (symmetrised) load stiffness of the cables, ``-d(J_aᵀ λ)/dq``.
+
+        Cable forces follow the structure, so they add a stiffness to the tangent of the
+        equilibrium (paper eq. 9-10): per span ``s`` with unit direction ``u``, length ``ℓ`` and
+        tension ``λ``, ``λ D_sᵀ (I - u uᵀ)/ℓ D_s`` (``D_s`` maps increments to the change of the
+        span vector; positive semi-definite: it stabilises the compressed backbone), and per
+        routing point with lever ``r`` and force ``F`` the moment term
+        ``-sym(F^ r^) = (F·r) I - (r Fᵀ + F rᵀ)/2`` on its frame's rotations. Without it a
+        tendon-compressed chain can look unstable to Newton's method.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        tensions : (m,) ndarray  [N]
+            Cable tensions.
+        symmetric : bool
+            Ignored: the symmetric part is returned (the skew part of a cable's load stiffness
+            is small and Newton converges without it).
+
+        Returns
+        -------
+        (6n, 6n) ndarray  [N/m, N, N*m]
+            Over frames 1..n (world-axis increments), to add to the structural tangent.
+
+        """
+        points, levers = self.routing_points(positions, rotations)
+        start, end = self.segment_start, self.segment_end
+        spans = points[end] - points[start]
+        lengths = np.sqrt(np.einsum('si,si->s', spans, spans))
+        units = spans / lengths[:, None]
+        scale = tensions[self._segment_owner] / lengths
+        proj = -scale[:, None, None] * units[:, :, None] * units[:, None, :]
+        proj[:, 0, 0] += scale
+        proj[:, 1, 1] += scale
+        proj[:, 2, 2] += scale
+        lever = np.stack([levers[start], levers[end]], axis=1)
+        # B = [I; r^] (6 x 3) for the start and end points of every span
+        b = np.zeros((len(start), 2, 6, 3))
+        b[:, :, 0, 0] = b[:, :, 1, 1] = b[:, :, 2, 2] = 1.0
+        b[:, :, 3, 1] = -lever[..., 2]
+        b[:, :, 3, 2] = lever[..., 1]
+        b[:, :, 4, 0] = lever[..., 2]
+        b[:, :, 4, 2] = -lever[..., 0]
+        b[:, :, 5, 0] = -lever[..., 1]
+        b[:, :, 5, 1] = lever[..., 0]
+        bp = np.matmul(b, proj[:, None])
+        blocks = np.matmul(bp[:, :, None], np.swapaxes(b, 2, 3)[:, None, :])
+        blocks[:, 0, 1] *= -1.0
+        blocks[:, 1, 0] *= -1.0
+        forces = (self._point_force @ units) * tensions[self._point_owner][:, None]
+        fr = np.einsum('pi,pi->p', forces, levers)
+        moment = -0.5 * (levers[:, :, None] * forces[:, None, :]
+                         + forces[:, :, None] * levers[:, None, :])
+        moment[:, 0, 0] += fr
+        moment[:, 1, 1] += fr
+        moment[:, 2, 2] += fr
+        size = 6 * self.n_frames
+        dense = np.bincount(self._tangent_index,
+                            np.concatenate([blocks.reshape(-1), moment.reshape(-1)]),
+                            minlength=size * size).reshape(size, size)
+        return dense[6:, 6:]
+
+
+def _span_tangent_index(frames, start, end, n_frames):
+    """Flat dense indices of the span blocks and point moment blocks of a cable group."""
+    size = 6 * n_frames
+    f = np.stack([frames[start], frames[end]], axis=1)
+    i6 = np.arange(6)
+    rows = 6 * f[:, :, None, None, None] + i6[None, None, None, :, None]
+    cols = 6 * f[:, None, :, None, None] + i6[None, None, None, None, :]
+    span_index = (rows * size + cols).reshape(-1)
+    i3 = np.arange(3)
+    prow = 6 * frames[:, None, None] + 3 + i3[None, :, None]
+    pcol = 6 * frames[:, None, None] + 3 + i3[None, None, :]
+    return np.concatenate([span_index, (prow * size + pcol).reshape(-1)])
+
 
 class ActuatorSet:
     """
@@ -305,6 +390,34 @@ class ActuatorSet:
         for g, cols in zip(self.groups, self._columns):
             wrenches[cols], displacements[cols] = g.evaluate(positions, rotations)
         return wrenches, displacements
+
+    def load_tangent(self, positions, rotations, actuation, symmetric=True):
+        """
+        Return the load stiffness ``-d(J_aᵀ λ)/dq`` of the groups that provide one.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        actuation : (m,) ndarray
+            Actuation in column order.
+        symmetric : bool
+            Symmetric part only (for a Cholesky factorization).
+
+        Returns
+        -------
+        (6n, 6n) ndarray or None
+            ``None`` when no group has a load stiffness.
+
+        """
+        total = None
+        for g, cols in zip(self.groups, self._columns):
+            if hasattr(g, 'load_tangent'):
+                part = g.load_tangent(positions, rotations, actuation[cols], symmetric)
+                total = part if total is None else total + part
+        return total
 
     def loads(self, positions, rotations, actuation):
         """

@@ -21,7 +21,8 @@ Two evaluators share this geometry:
 from dataclasses import dataclass
 
 from cbha_inverse.core.actuation import cross, point_wrenches
-from cbha_inverse.core.se3 import so3_exp, so3_log
+from cbha_inverse.core.kernel import jl_inverse_coefficients
+from cbha_inverse.core.se3 import hat, so3_exp, so3_log
 import numpy as np
 import scipy.sparse as sp
 
@@ -331,6 +332,13 @@ class LinearCavityGroup:
                                                             cols)), shape=shape).toarray()
         self._sum = np.zeros((m, n_e))
         self._sum[owner, cols] = 1.0
+        self._owner = owner
+        size = 6 * self.n_frames
+        f = np.stack([self.lower, self.upper], axis=1)
+        i6 = np.arange(6)
+        rows = 6 * f[:, :, None, None, None] + i6[None, None, None, :, None]
+        cols6 = 6 * f[:, None, :, None, None] + i6[None, None, None, None, :]
+        self._tangent_index = (rows * size + cols6).reshape(-1)
         self.upper_bounds = np.array([c.max_pressure for c in self.cavities], dtype=float)
         self.lower_bounds = np.zeros(m)
 
@@ -338,6 +346,33 @@ class LinearCavityGroup:
     def n_actuators(self):
         """Return the number of cavities."""
         return len(self.cavities)
+
+    def load_tangent(self, positions, rotations, pressures, symmetric=True):
+        """
+        Return the load stiffness ``-d(J_aᵀ p)/dq`` of the condensed cavities.
+
+        Pressure forces follow the structure (the caps turn with the vertebrae); like the cable
+        load stiffness this term is needed for Newton's method to converge at high pressure.
+        Exact derivative of the affine model (symmetrised on request).
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        pressures : (m,) ndarray  [Pa]
+            Gauge pressures.
+        symmetric : bool
+            Return the symmetric part (for Cholesky) instead of the exact derivative.
+
+        Returns
+        -------
+        (6n, 6n) ndarray
+            Over frames 1..n.
+
+        """
+        return _linear_cavity_load_tangent(self, positions, rotations, pressures, symmetric)
 
     def evaluate(self, positions, rotations):
         """
@@ -370,6 +405,55 @@ class LinearCavityGroup:
         vol = (self.v0 + np.einsum('ea,ea->e', self.g0, delta)
                + 0.5 * np.einsum('ea,eab,eb->e', delta, self._volume_hessian, delta))
         return wrenches.reshape(self.n_actuators, self.n_frames, 6), self._sum @ vol
+
+
+def _linear_cavity_load_tangent(group, positions, rotations, pressures, symmetric):
+    """Return ``-d(J_aᵀ p)/dq`` (frames 1..n) of a :class:`LinearCavityGroup`."""
+    lo, up = group.lower, group.upper
+    r_a, x_a, x_b = rotations[lo], positions[lo], positions[up]
+    v = x_b - x_a
+    delta = segment_deformation(x_a, r_a, x_b, rotations[up], group.rest_offset,
+                                group.rest_rotation)
+    local = group.g0 + np.einsum('eab,eb->ea', group.hessian, delta)
+    p = pressures[group._owner]
+    f = np.einsum('eij,ej->ei', r_a, local[:, :3])
+    m = np.einsum('eij,ej->ei', r_a, local[:, 3:])
+    phi = delta[:, 3:]
+    c, _ = jl_inverse_coefficients(np.sqrt(np.einsum('ei,ei->e', phi, phi)))
+    phi_hat = hat(phi)
+    jinv = c[:, None, None] * (phi_hat @ phi_hat) - 0.5 * phi_hat + np.eye(3)
+    r_at = np.swapaxes(r_a, 1, 2)
+    n_e = len(lo)
+    # dδ = D_a dq_a + D_b dq_b (frame-i axes)
+    d_a = np.zeros((n_e, 6, 6))
+    d_a[:, :3, :3] = -r_at
+    d_a[:, :3, 3:] = r_at @ hat(v)
+    d_a[:, 3:, 3:] = -jinv @ r_at
+    d_b = np.zeros((n_e, 6, 6))
+    d_b[:, :3, :3] = r_at
+    d_b[:, 3:, 3:] = jinv @ r_at
+    rr = np.zeros((n_e, 6, 6))
+    rr[:, :3, :3] = r_a
+    rr[:, 3:, 3:] = r_a
+    rh = rr @ group.hessian
+    jb_a = rh @ d_a
+    jb_a[:, :3, 3:] -= hat(f)
+    jb_a[:, 3:, 3:] -= hat(m)
+    jb_b = rh @ d_b
+    t = np.zeros((n_e, 6, 6))
+    t[:, :3, :3] = -np.eye(3)
+    t[:, 3:, 3:] = -np.eye(3)
+    t[:, 3:, :3] = -hat(v)
+    ja_a = t @ jb_a
+    ja_a[:, 3:, :3] -= hat(f)
+    ja_b = t @ jb_b
+    ja_b[:, 3:, :3] += hat(f)
+    blocks = np.stack([np.stack([ja_a, ja_b], 1), np.stack([jb_a, jb_b], 1)], 1)
+    blocks *= -p[:, None, None, None, None]
+    size = 6 * group.n_frames
+    dense = np.bincount(group._tangent_index, blocks.reshape(-1),
+                        minlength=size * size).reshape(size, size)[6:, 6:]
+    return 0.5 * (dense + dense.T) if symmetric else dense
 
 
 def fit_linear_cavity(part, step=1e-5):

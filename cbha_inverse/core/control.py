@@ -28,7 +28,7 @@ import time
 from cbha_inverse.core.chain import ChainState, rest_state
 from cbha_inverse.core.inverse import (actuation_qp, ActuationQP, binding_bounds,
                                        project_constraints, projected_gauss_seidel)
-from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, fast_retract
+from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, DenseLU, fast_retract
 import numpy as np
 
 
@@ -57,7 +57,7 @@ class InverseOptions:
     """
 
     energy_weight: float = 1e-6
-    proximal_weight: float = 1e-6
+    proximal_weight: float = 1e-4
     rate_limit: tuple = None
     qp_solver: str = 'proxsuite'
     newton_steps: int = 1
@@ -198,6 +198,32 @@ class InverseSolver:
             increments = increments * (self.options.max_rotation_step / largest)
         return increments
 
+    def _factor(self, tangent, positions, rotations, actuation):
+        """
+        Factor the tick's tangent, falling back when it is not positive definite.
+
+        1. Cholesky of structure + symmetric load stiffness (the normal case);
+        2. LU of structure + exact (non-symmetric) load stiffness (high pressures);
+        3. Cholesky of the material tangent alone (paper eq. 8; far from equilibrium).
+        The residual is exact in every case, so only the convergence rate changes.
+        """
+        try:
+            return DenseCholesky(tangent)
+        except np.linalg.LinAlgError:
+            pass
+        _, full = self._kernel.linearise(positions, rotations)
+        load = self.actuators.load_tangent(positions, rotations, actuation, symmetric=False)
+        if load is not None:
+            try:
+                return DenseLU(full + load)
+            except np.linalg.LinAlgError:
+                pass
+        _, material = self._kernel.linearise(positions, rotations, geometric=False)
+        try:
+            return DenseCholesky(material)
+        except np.linalg.LinAlgError:
+            return None
+
     def _residual(self, positions, rotations, internal, actuation):
         """Return ``f(q) + f_ext + J_aᵀ λ`` (6n,) at a state."""
         wrenches, _ = self.actuators.evaluate(positions, rotations)
@@ -247,10 +273,12 @@ class InverseSolver:
         m = wrenches.shape[0]
         jat = wrenches[:, 1:, :].reshape(m, -1)
         residual = internal.reshape(-1) + self._external + previous @ jat
+        load_tangent = self.actuators.load_tangent(positions, rotations, previous)
+        if load_tangent is not None:
+            tangent = tangent + load_tangent
         t_assembly = time.perf_counter()
-        try:
-            factorization = DenseCholesky(tangent)
-        except np.linalg.LinAlgError:
+        factorization = self._factor(tangent, positions, rotations, previous)
+        if factorization is None:
             return self._held('not_positive_definite', targets)
         t_factor = time.perf_counter()
         levers = self.effectors.levers(rotations)
@@ -282,6 +310,9 @@ class InverseSolver:
         positions, rotations = fast_retract(positions, rotations, self._limited(increments))
         for _ in range(self.options.newton_steps - 1):
             internal, tangent = self._kernel.linearise(positions, rotations)
+            load_tangent = self.actuators.load_tangent(positions, rotations, actuation)
+            if load_tangent is not None:
+                tangent = tangent + load_tangent
             try:
                 step = DenseCholesky(tangent).solve(
                     self._residual(positions, rotations, internal, actuation))

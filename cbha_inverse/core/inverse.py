@@ -22,8 +22,10 @@ and ``s_P`` scale factors that give both terms the magnitude of the tracking ter
 ``ε_P`` are unit-free. ``λᵀ W_aa λ`` is the elastic energy the actuation stores in the structure:
 it picks the least-effort solution among redundant ones (no co-contraction) and makes the QP
 strictly convex; the proximal term smooths the actuation from tick to tick and vanishes at a fixed
-point, so it adds no steady-state error. With the defaults (1e-6) the energy term's bias on a
-reachable target is far below a micrometre.
+point, so it adds no steady-state error. Defaults (see
+:class:`cbha_inverse.core.control.InverseOptions`): ``ε_E = 1e-6`` (its bias on a reachable target
+is a few micrometres at most), ``ε_P = 1e-4`` (enough to stop redundant tendons from alternating
+between equivalent solutions on a saturated target).
 """
 
 from dataclasses import dataclass
@@ -130,7 +132,7 @@ class QPProblem:
 
 
 def actuation_qp(projection, previous, lower_bounds, upper_bounds, scale, *,
-                 energy_weight=1e-6, proximal_weight=1e-6, rate_limit=None):
+                 energy_weight=1e-6, proximal_weight=1e-4, rate_limit=None):
     """
     Build the regularised, normalised QP of paper eq. 13 (module docstring).
 

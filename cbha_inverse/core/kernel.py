@@ -213,7 +213,7 @@ class ChainKernel:
         terms = self._terms(positions, rotations)
         return self._gather(terms[1], terms[8])
 
-    def linearise(self, positions, rotations):
+    def linearise(self, positions, rotations, geometric=True):
         """
         Return the internal wrenches and the dense tangent ``K`` (as :func:`assemble_tangent`).
 
@@ -223,6 +223,10 @@ class ChainKernel:
             Frame origins.
         rotations : (n + 1, 3, 3) ndarray
             Frame rotations.
+        geometric : bool
+            Include the geometric (stress-dependent) part. Without it the tangent is the
+            material part of paper eq. 8 (rotated ``Bᵀ K B`` with the lever transport), positive
+            definite whatever the stresses: the fallback when the full tangent is not.
 
         Returns
         -------
@@ -246,16 +250,17 @@ class ChainKernel:
         t_ab = np.matmul(np.swapaxes(tp, 1, 2), t_bb)
         t_aa = np.matmul(t_ab, tp)
         t_ab *= -1.0
-        f_hat = _hat_into(self._f_hat, stress[:, :3])
-        m_hat = _hat_into(self._m_hat, moment_local)
-        dj = np.matmul(so3_left_jacobian_inverse_transpose_derivative(
-            phi, stress[:, 3:], (c, dc)), jinv)
-        t_aa[:, :3, 3:] += f_hat
-        t_aa[:, 3:, :3] -= f_hat
-        t_aa[:, 3:, 3:] += np.matmul(p_hat, f_hat) - m_hat + dj
-        t_ab[:, 3:, :3] += f_hat
-        t_ab[:, 3:, 3:] -= dj
-        t_bb[:, 3:, 3:] += dj
+        if geometric:
+            f_hat = _hat_into(self._f_hat, stress[:, :3])
+            m_hat = _hat_into(self._m_hat, moment_local)
+            dj = np.matmul(so3_left_jacobian_inverse_transpose_derivative(
+                phi, stress[:, 3:], (c, dc)), jinv)
+            t_aa[:, :3, 3:] += f_hat
+            t_aa[:, 3:, :3] -= f_hat
+            t_aa[:, 3:, 3:] += np.matmul(p_hat, f_hat) - m_hat + dj
+            t_ab[:, 3:, :3] += f_hat
+            t_ab[:, 3:, 3:] -= dj
+            t_bb[:, 3:, 3:] += dj
         rb = self._rb
         rot_a = rotations[:-1]
         rb[:, :, :3, :3] = rot_a
@@ -318,6 +323,55 @@ class DenseCholesky:
         x, info = lapack.dpotrs(self._factor, rhs, lower=1)
         if info != 0:
             raise np.linalg.LinAlgError(f'dpotrs failed (info {info})')
+        return x
+
+
+class DenseLU:
+    """
+    LAPACK LU factorization (``dgetrf``) of a square matrix.
+
+    The fallback for tangents that are not symmetric positive definite (exact non-symmetric load
+    stiffness at high pressure).
+
+    Parameters
+    ----------
+    matrix : (N, N) ndarray
+        Square matrix (copied).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If the matrix is singular.
+
+    """
+
+    method = 'dense_lu'
+
+    def __init__(self, matrix):
+        """Factor a copy."""
+        lu, piv, info = lapack.dgetrf(np.array(matrix, dtype=float, order='F'))
+        if info != 0:
+            raise np.linalg.LinAlgError(f'tangent stiffness singular (LU pivot {info})')
+        self._lu, self._piv = lu, piv
+
+    def solve(self, rhs):
+        """
+        Solve ``K X = rhs``.
+
+        Parameters
+        ----------
+        rhs : (N,) or (N, k) ndarray
+            Right-hand sides.
+
+        Returns
+        -------
+        ndarray
+            Same shape as ``rhs``.
+
+        """
+        x, info = lapack.dgetrs(self._lu, self._piv, rhs)
+        if info != 0:
+            raise np.linalg.LinAlgError(f'dgetrs failed (info {info})')
         return x
 
 

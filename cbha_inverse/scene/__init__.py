@@ -31,11 +31,12 @@ from functools import cached_property
 from pathlib import Path
 
 from cbha_inverse.core.actuation import ActuatorSet, Cable, CableGroup
-from cbha_inverse.core.chain import ChainModel
+from cbha_inverse.core.chain import ChainModel, rest_state
 from cbha_inverse.core.control import InverseOptions, InverseSolver
 from cbha_inverse.core.effectors import PointEffectors
+from cbha_inverse.core.equilibrium import solve_equilibrium
+from cbha_inverse.core.kernel import ChainKernel
 from cbha_inverse.core.links import timoshenko_compliance
-from cbha_inverse.core.statics import solve_static
 from cbha_inverse.paths import config_path
 import numpy as np
 import yaml
@@ -129,6 +130,10 @@ class Scene:
         """
         Solve the static equilibrium under an actuation (paper eq. 9).
 
+        Uses :func:`cbha_inverse.core.equilibrium.solve_equilibrium` (Newton with the actuators'
+        load stiffness, line search, load continuation), the same linearisation as the inverse
+        solver.
+
         Parameters
         ----------
         actuation : (m,) array_like  [N or Pa]
@@ -152,19 +157,28 @@ class Scene:
         if np.any(a < self.lower_bounds - 1e-9 * np.abs(self.upper_bounds)) or np.any(
                 a > self.upper_bounds * (1.0 + 1e-9)):
             raise ValueError('actuation outside the actuator bounds')
-        actuators = self.actuators
-
-        def load(state):
-            return actuators.loads(state.positions, state.rotations, a)[1:]
-
-        res = solve_static(self.model, gravity=self.gravity, load_function=load,
-                           initial_state=initial_state, tolerance=tolerance)
+        start = rest_state(self.model) if initial_state is None else initial_state
+        res = solve_equilibrium(self._kernel, self.actuators, a, self._external, start,
+                                tolerance=tolerance)
         if strict and not res.converged:
             raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
-        return ForwardResult(res.positions, res.quaternions, res.rotations,
-                             self.effectors.positions(res.positions, res.rotations), a,
-                             bool(res.converged), int(res.iterations), float(res.residual_norm),
-                             res.message, res.state)
+        st = res.state
+        return ForwardResult(st.positions, st.quaternions, st.rotations,
+                             self.effectors.positions(st.positions, st.rotations), a,
+                             res.converged, res.iterations, res.residual_norm, res.message, st)
+
+    @cached_property
+    def _kernel(self):
+        """Return the fused mechanics kernel of the chain."""
+        return ChainKernel(self.model)
+
+    @cached_property
+    def _external(self):
+        """Gravity wrenches (6n,) on frames 1..n."""
+        external = np.zeros((self.model.n_links, 6))
+        if self.gravity is not None:
+            external[:, :3] = np.asarray(self.model.masses)[:, None] * self.gravity
+        return external.reshape(-1)
 
     @cached_property
     def rest_effector_positions(self):

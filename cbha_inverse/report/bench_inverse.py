@@ -1,0 +1,182 @@
+"""
+Benchmark of the inverse-simulation control tick per scene (``cbha_bench_inverse``).
+
+For every scene the solver tracks a circle in the y-z plane around the scene's workspace centre
+(the paper's 60 mm circle for the CBHA, a 10 mm circle for the tendon trunks) and the table shows
+the tick time (median and 99th percentile over the measured ticks) and its median breakdown
+(assembly = internal wrenches, tangent and actuator columns; factor = Cholesky; W = the multi-RHS
+solve and the projection to W_ea, W_aa, δ_free; QP; update = Newton step and effector positions)
+beside the figures reported in the paper (SOFA, 2.66 GHz Core i7, 2015).
+"""
+
+import argparse
+import json
+import sys
+import time
+
+from cbha_inverse.scene import load_scene
+import numpy as np
+
+PAPER = {
+    'tendon_6f_8c': 'paper: 6 frames / 4-8 tendons: 5 ms (W 2 ms, QP < 1 ms)',
+    'tendon_10f_16c': 'paper: 10 frames / 16 tendons: 13 ms (W 9 ms)',
+    'cbha': 'paper: not reported (open-loop CBHA runs)',
+}
+RADIUS = {'cbha': 0.06}
+PHASES = ('assembly', 'factor', 'projection', 'qp', 'update', 'total')
+
+
+def circle_targets(center, radius, n_ticks, period_ticks):
+    """
+    Return targets on a circle in the y-z plane around the last effector's centre.
+
+    Parameters
+    ----------
+    center : (k, 3) ndarray  [m]
+        Centre; effectors other than the last stay there.
+    radius : float  [m]
+        Circle radius.
+    n_ticks : int
+        Number of targets.
+    period_ticks : int
+        Ticks per revolution.
+
+    Returns
+    -------
+    (n_ticks, k, 3) ndarray  [m]
+
+    """
+    phase = 2.0 * np.pi * np.arange(n_ticks) / period_ticks
+    targets = np.repeat(np.asarray(center, dtype=float)[None], n_ticks, axis=0)
+    targets[:, -1, 1] += radius * np.cos(phase)
+    targets[:, -1, 2] += radius * np.sin(phase)
+    return targets
+
+
+def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_steps=1):
+    """
+    Run the tick on one scene and collect timings and tracking errors.
+
+    Parameters
+    ----------
+    name : str
+        Scene name (``config/scenes/<name>.yaml``).
+    n_ticks : int
+        Measured ticks.
+    warmup : int
+        Ticks run first (converge onto the circle, warm the caches), not measured.
+    qp_solver : str
+        ``'proxsuite'`` or ``'gauss_seidel'``.
+    newton_steps : int
+        Newton steps per tick.
+
+    Returns
+    -------
+    dict
+        Scene sizes, median / p99 of the total, median of each phase [s], tracking error [m],
+        status counts.
+
+    """
+    scene = load_scene(name)
+    solver = scene.make_inverse_solver(qp_solver=qp_solver, newton_steps=newton_steps)
+    radius = RADIUS.get(name, 0.01)
+    center = scene.workspace_center
+    targets = circle_targets(center, radius, n_ticks + warmup, 500)
+    first = targets[0]
+    for _ in range(warmup):
+        solver.step(first)
+    times = {p: np.empty(n_ticks) for p in PHASES}
+    errors = np.empty(n_ticks)
+    statuses = {}
+    for i in range(n_ticks):
+        out = solver.step(targets[warmup + i])
+        for p in PHASES:
+            times[p][i] = out.timings.get(p, np.nan)
+        errors[i] = np.linalg.norm(out.effector_positions[-1] - targets[warmup + i][-1])
+        statuses[out.status] = statuses.get(out.status, 0) + 1
+    return {
+        'scene': name,
+        'frames': scene.model.n_links,
+        'actuators': len(scene.actuator_names),
+        'effectors': len(scene.effector_names),
+        'qp_solver': qp_solver,
+        'median': {p: float(np.median(times[p])) for p in PHASES},
+        'p99': float(np.percentile(times['total'], 99)),
+        'tracking_error_median': float(np.median(errors)),
+        'tracking_error_max': float(errors.max()),
+        'radius': radius,
+        'status': statuses,
+    }
+
+
+def format_table(rows):
+    """
+    Format benchmark rows as a plain-text table.
+
+    Parameters
+    ----------
+    rows : list of dict
+        From :func:`bench_scene`.
+
+    Returns
+    -------
+    str
+
+    """
+    head = (f"{'scene':16s} {'n':>3s} {'m':>3s} {'k':>2s} {'QP':>12s} {'median':>8s} "
+            f"{'p99':>8s} | {'assem':>7s} {'factor':>7s} {'W':>7s} {'QP':>7s} {'update':>7s}"
+            f" | {'err med':>8s}  paper")
+    lines = [head, '-' * len(head)]
+    for r in rows:
+        med = r['median']
+        us = {p: 1e6 * med[p] for p in PHASES}
+        lines.append(
+            f"{r['scene']:16s} {r['frames']:3d} {r['actuators']:3d} {r['effectors']:2d} "
+            f"{r['qp_solver']:>12s} {us['total']:6.0f}us {1e6 * r['p99']:6.0f}us | "
+            f"{us['assembly']:5.0f}us {us['factor']:5.0f}us {us['projection']:5.0f}us "
+            f"{us['qp']:5.0f}us {us['update']:5.0f}us | {1e3 * r['tracking_error_median']:6.3f}mm"
+            f"  {PAPER.get(r['scene'], '')}")
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    """
+    Print the per-scene tick-time table (``cbha_bench_inverse``).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command-line arguments (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit status.
+
+    """
+    parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--scenes', nargs='+', default=['tendon_6f_8c', 'tendon_10f_16c',
+                                                        'cbha'])
+    parser.add_argument('--ticks', type=int, default=2000)
+    parser.add_argument('--warmup', type=int, default=100)
+    parser.add_argument('--gauss-seidel', action='store_true',
+                        help='also run the projected Gauss-Seidel QP for comparison')
+    parser.add_argument('--json', help='write the rows to this JSON file')
+    args = parser.parse_args(argv)
+    rows = []
+    started = time.perf_counter()
+    for name in args.scenes:
+        solvers = ['proxsuite'] + (['gauss_seidel'] if args.gauss_seidel else [])
+        for qp_solver in solvers:
+            rows.append(bench_scene(name, args.ticks, args.warmup, qp_solver))
+    print(format_table(rows))
+    print(f'goals on the shared 2-core machine: 6f/8c <= 100 us, 10f/16c <= 150 us, '
+          f'CBHA <= 150 us median, p99 <= 500 us; ({time.perf_counter() - started:.1f} s)')
+    if args.json:
+        with open(args.json, 'w', encoding='utf-8') as f:
+            json.dump(rows, f, indent=2)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

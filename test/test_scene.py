@@ -1,0 +1,134 @@
+"""Scenes: loading, forward/inverse consistency, bounds, redundancy, saturation, imports."""
+
+import json
+import subprocess
+import sys
+
+from cbha_inverse.paths import config_path
+from cbha_inverse.scene import load_scene
+import numpy as np
+import pytest
+
+TENDON_SCENES = ['tendon_6f_8c', 'tendon_10f_16c']
+ALL_SCENES = TENDON_SCENES + ['cbha']
+
+
+def _load(name):
+    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
+        pytest.skip('the condensed CBHA segment is not generated yet')
+    return load_scene(config_path('scenes', f'{name}.yaml'))
+
+
+@pytest.fixture(scope='module', params=ALL_SCENES)
+def scene(request):
+    return _load(request.param)
+
+
+def test_scene_api(scene):
+    m = len(scene.actuator_names)
+    k = len(scene.effector_names)
+    assert scene.lower_bounds.shape == scene.upper_bounds.shape == (m,)
+    assert np.all(scene.upper_bounds > scene.lower_bounds)
+    assert scene.rest_effector_positions.shape == (k, 3)
+    solver = scene.make_inverse_solver()
+    assert solver.actuator_names == scene.actuator_names
+    assert solver.effector_names == scene.effector_names
+    np.testing.assert_array_equal(solver.upper_bounds, scene.upper_bounds)
+    assert scene.workspace_center.shape == (k, 3)
+
+
+def test_forward_inverse_consistency(scene):
+    """Random in-bounds actuation → forward p*; the inverse solver from rest reaches p*."""
+    rng = np.random.default_rng(42)
+    m = len(scene.actuator_names)
+    span = scene.upper_bounds - scene.lower_bounds
+    actuation = scene.lower_bounds + span * rng.uniform(0.0, 0.6, m)
+    target = scene.forward(actuation, strict=True).effector_positions
+    solver = scene.make_inverse_solver()
+    errors = []
+    for tick in range(30):
+        out = solver.step(target)
+        assert np.all(out.actuation >= solver.lower_bounds)
+        assert np.all(out.actuation <= solver.upper_bounds)
+        assert out.status in ('solved', 'saturated')
+        errors.append(np.abs(out.effector_positions - target).max())
+        if errors[-1] < 1e-5 and tick > 3:
+            break
+    reached = scene.forward(out.actuation, initial_state=solver.state, strict=True)
+    assert np.linalg.norm(reached.effector_positions - target, axis=1).max() < 1e-4, errors
+    assert set(out.timings) >= {'assembly', 'factor', 'projection', 'qp', 'total'}
+
+
+def test_unreachable_target_saturates_finitely(scene):
+    solver = scene.make_inverse_solver()
+    far = scene.rest_effector_positions + [0.0, 5.0, -5.0]
+    for _ in range(10):
+        out = solver.step(far)
+        assert np.all(np.isfinite(out.actuation))
+        assert np.all(np.isfinite(out.effector_positions))
+        assert np.all(out.actuation >= solver.lower_bounds)
+        assert np.all(out.actuation <= solver.upper_bounds)
+    assert out.status == 'saturated'
+    assert out.saturated.any()
+
+
+def test_bad_targets_are_rejected_or_refused():
+    scene = _load('tendon_6f_8c')
+    solver = scene.make_inverse_solver()
+    out = solver.step([[np.nan, 0.0, 0.0]])
+    assert out.status == 'rejected'
+    np.testing.assert_array_equal(out.actuation, np.zeros(len(scene.actuator_names)))
+    with pytest.raises(ValueError):
+        solver.step(np.zeros((2, 3)))
+
+
+def test_redundant_tendons_give_the_same_solution_run_to_run():
+    scene = _load('tendon_10f_16c')
+    targets = scene.rest_effector_positions + [[0.0, 0.004, 0.0], [0.0, 0.01, 0.008]]
+    runs = []
+    for _ in range(2):
+        solver = scene.make_inverse_solver()
+        runs.append(np.array([solver.step(targets).actuation for _ in range(8)]))
+    # equal up to floating-point summation order (numpy/BLAS kernels depend on alignment): the
+    # regularised QP has a unique solution, the 16 tendons do not drift between runs
+    np.testing.assert_allclose(runs[0], runs[1], rtol=1e-6, atol=1e-9)
+
+
+def test_gauss_seidel_option_reaches_the_same_point():
+    scene = _load('tendon_6f_8c')
+    target = scene.forward(np.array([3.0, 0, 0, 1.0, 0, 2.0, 0, 0])).effector_positions
+    for qp_solver in ('proxsuite', 'gauss_seidel'):
+        solver = scene.make_inverse_solver(qp_solver=qp_solver)
+        for _ in range(30):
+            out = solver.step(target)
+        assert np.abs(out.effector_positions - target).max() < 1e-5
+
+
+def test_inflating_one_cbha_tube_bends_away_from_it():
+    scene = _load('cbha')
+    from cbha_inverse.fem.segment_io import load_segment
+    from cbha_inverse.scene.segments import cavity_surfaces
+    surfaces = cavity_surfaces(load_segment(config_path('segments', 'cbha_segment.yaml')))
+    rest = scene.forward(np.zeros(6), strict=True)
+    axis = rest.positions[-1] - rest.positions[0]
+    for k, name in enumerate(scene.actuator_names[:3]):
+        pressure = np.zeros(6)
+        pressure[k] = 0.5 * scene.upper_bounds[k]
+        tip = scene.forward(pressure, strict=True).positions[-1]
+        move = tip - rest.positions[-1]
+        move -= axis * (move @ axis) / (axis @ axis)
+        centroid = surfaces[name.split('_')[-1]][0].mean(axis=0)
+        side = np.array([0.0, centroid[1], centroid[2]])
+        side /= np.linalg.norm(side)
+        assert move @ side < -0.5 * np.linalg.norm(move), name
+
+
+def test_tendon_scene_imports_no_gmsh_meshio_or_cv2():
+    code = ('import sys, json; from cbha_inverse.scene import load_scene; '
+            "s = load_scene('tendon_6f_8c'); "
+            's.make_inverse_solver().step(s.rest_effector_positions); '
+            "names = ('gmsh', 'meshio', 'cv2', 'rclpy'); "
+            'print(json.dumps([m for m in names if m in sys.modules]))')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         cwd=str(config_path().parents[0]), check=True, timeout=60)
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == []
