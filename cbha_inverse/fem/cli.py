@@ -70,7 +70,7 @@ def pressure_notes(spec, segment, cavities, pressure=150e3, n_segments=8):
     return notes
 
 
-def run(geometry, output_dir, order=None, mesh_size=None, force=False, out=sys.stdout):
+def run(geometry, output_dir, order=None, mesh_size=None, force=False, out=None):
     """
     Condense one geometry YAML and write (or reuse) its segment YAML.
 
@@ -86,8 +86,8 @@ def run(geometry, output_dir, order=None, mesh_size=None, force=False, out=sys.s
         Element size override.
     force : bool
         Recompute even when the cached file matches.
-    out : file-like
-        Where progress is printed.
+    out : file-like, optional
+        Where progress is printed (default ``sys.stdout``).
 
     Returns
     -------
@@ -96,6 +96,7 @@ def run(geometry, output_dir, order=None, mesh_size=None, force=False, out=sys.s
 
     """
     from cbha_inverse.fem.segment_io import cached_segment, inputs_sha256, write_segment
+    out = sys.stdout if out is None else out
     geometry = Path(geometry)
     spec = yaml.safe_load(geometry.read_text())
     order = int(order or spec['mesh'].get('order', 2))

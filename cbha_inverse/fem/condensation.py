@@ -82,7 +82,8 @@ def relative_asymmetry(matrix):
         Relative asymmetry.
 
     """
-    scale = np.sqrt(np.outer(np.abs(np.diag(matrix)), np.abs(np.diag(matrix))))
+    diag = np.abs(np.diag(matrix))
+    scale = np.sqrt(np.outer(diag, diag))
     return float(np.max(np.abs(matrix - matrix.T) / scale))
 
 
@@ -116,6 +117,9 @@ def checked_symmetric(compliance):
             f'condensed compliance asymmetric beyond round-off: {asym:.3e} > '
             f'{SYMMETRY_TOLERANCE:.0e} (check the coupling and the mesh)')
     sym = 0.5 * (compliance + compliance.T)
+    if np.any(np.diag(sym) <= 0.0):
+        raise np.linalg.LinAlgError('condensed compliance not positive definite '
+                                    '(non-positive diagonal term)')
     d = 1.0 / np.sqrt(np.diag(sym))
     eig = np.linalg.eigvalsh(sym * np.outer(d, d))
     if eig[0] <= 0.0:

@@ -158,7 +158,8 @@ def bellows_tube_mesh(geometry, *, mesh_size, order=2, circumferential_elements=
     through_thickness : int, optional
         Element layers through the wall (default: wall / mesh_size, at least 2).
     curved : bool
-        Isoparametric P2 (mid-edge nodes on the revolved geometry).
+        Isoparametric P2 (mid-edge nodes on the revolved geometry); if that inverts an
+        element, the tube is remeshed with straight edges.
     samples_per_pitch : int
         Spline control points per corrugation pitch.
 
@@ -201,8 +202,22 @@ def bellows_tube_mesh(geometry, *, mesh_size, order=2, circumferential_elements=
             out = geo.revolve(ents, 0, 0, 0, 1, 0, 0, 2.0 * np.pi / 3.0, numElements=[n_layers])
             ents = [out[0]]
         geo.synchronize()
-        mesh = mesh_current_model(gmsh, order)
-    return merge_coincident_nodes(mesh)
+        mesh = merge_coincident_nodes(mesh_current_model(gmsh, order))
+    if order == 2 and curved and not _jacobians_positive(mesh):
+        return bellows_tube_mesh(geometry, mesh_size=mesh_size, order=order,
+                                 circumferential_elements=n_circ, through_thickness=n_thick,
+                                 curved=False, samples_per_pitch=samples_per_pitch)
+    return mesh
+
+
+def _jacobians_positive(mesh):
+    """Return True if every quadrature point of every element has det J > 0."""
+    from cbha_inverse.fem.elasticity import shape_gradients
+    try:
+        shape_gradients(mesh)
+    except ValueError:
+        return False
+    return True
 
 
 def bellows_mesh_counts(geometry, mesh_size):
@@ -219,12 +234,13 @@ def bellows_mesh_counts(geometry, mesh_size):
     Returns
     -------
     (int, int)
-        Circumferential elements (multiple of 3, element length about 4 x mesh_size) and wall
+        Circumferential elements (multiple of 3, element length about 4 x mesh_size, at least
+        24) and wall
         layers (wall / mesh_size rounded, at least 2).
 
     """
     circ = 2.0 * np.pi * geometry['tube_mean_radius'] / (4.0 * mesh_size)
-    n_circ = 3 * max(4, int(np.ceil(circ / 3.0)))
+    n_circ = 3 * max(8, int(np.ceil(circ / 3.0)))
     n_thick = max(2, int(round(geometry['wall_thickness'] / mesh_size)))
     return n_circ, n_thick
 

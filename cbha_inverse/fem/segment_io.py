@@ -278,3 +278,30 @@ def load_segment(path):
     metadata = {k: v for k, v in data.items() if k not in known}
     return Segment(str(data.get('name', path.stem)), compliance, offset, rotation, mass,
                    cavities, metadata)
+
+
+def chain_from_segments(segments, base_position=None, base_rotation=None):
+    """
+    Build a ``ChainModel`` from condensed segments (a chain of compliance links, DESIGN §3).
+
+    Parameters
+    ----------
+    segments : sequence of Segment or CondensedSegment
+        Link i joins frame i to frame i + 1; its mass is lumped at frame i + 1.
+    base_position : (3,) array_like, optional  [m]
+        Base frame origin.
+    base_rotation : (3, 3) array_like, optional
+        Base frame axes.
+
+    Returns
+    -------
+    cbha_inverse.core.chain.ChainModel
+        The chain.
+
+    """
+    from cbha_inverse.core.chain import ChainModel
+    return ChainModel.from_compliances(
+        np.array([s.compliance for s in segments]), np.array([s.rest_offset for s in segments]),
+        masses=np.array([s.mass for s in segments]),
+        rest_rotations=np.array([s.rest_rotation for s in segments]),
+        base_position=base_position, base_rotation=base_rotation)

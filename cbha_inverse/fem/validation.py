@@ -1,0 +1,146 @@
+"""Chain-versus-full-FE comparisons shared by the tests and the FEM report (DESIGN §4 step 7)."""
+
+import time
+
+from cbha_inverse.fem.condensation import condense_cylinder
+from cbha_inverse.fem.full_fe import linear_tip_compliance, solve_nonlinear
+from cbha_inverse.fem.geometry import cylinder_mesh
+from cbha_inverse.fem.segment_io import chain_from_segments
+import numpy as np
+
+
+def chain_tip_compliance(model):
+    """
+    Return the linear 6x6 compliance of the last frame of a chain at rest.
+
+    The rest tangent of the chain (block tridiagonal, frames 1..n) is inverted; its last
+    diagonal block is the tip compliance in world axes.
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+
+    Returns
+    -------
+    (6, 6) ndarray
+        Tip compliance.
+
+    """
+    from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense
+    from cbha_inverse.core.chain import rest_state
+    tangent = assemble_tangent(model, rest_state(model))
+    dense = blocks_to_dense(tangent.diagonal, tangent.upper)
+    return np.linalg.inv(dense)[-6:, -6:]
+
+
+def relative_diagonal_error(test, reference):
+    """
+    Return |diag(test) / diag(reference) - 1| for the six diagonal terms.
+
+    Parameters
+    ----------
+    test, reference : (6, 6) ndarray
+        Compliances.
+
+    Returns
+    -------
+    (6,) ndarray
+        Relative errors.
+
+    """
+    return np.abs(np.diag(test) / np.diag(reference) - 1.0)
+
+
+def linear_chain_vs_full(n_segments, length, radius, *, youngs_modulus, poisson_ratio,
+                         mesh_size, order=2):
+    """
+    Compare the tip compliance of a chain of condensed cylinders with the full linear FE body.
+
+    Parameters
+    ----------
+    n_segments : int
+        Segments stacked.
+    length, radius : float  [m]
+        Segment length and cylinder radius.
+    youngs_modulus : float  [Pa]
+        Young's modulus.
+    poisson_ratio : float
+        Poisson's ratio.
+    mesh_size : float  [m]
+        Element size of both models.
+    order : {1, 2}
+        Element order.
+
+    Returns
+    -------
+    dict
+        'chain', 'full' (6, 6) compliances, 'error' (6,) relative diagonal errors, 'full_seconds'
+        (assembly + factor + solve of the body), 'chain_seconds' (tangent + solve of the chain),
+        'body_nodes'.
+
+    """
+    seg = condense_cylinder(length, radius, youngs_modulus=youngs_modulus,
+                            poisson_ratio=poisson_ratio, mesh_size=mesh_size, order=order)
+    model = chain_from_segments([seg] * n_segments)
+    t0 = time.perf_counter()
+    chain = chain_tip_compliance(model)
+    chain_seconds = time.perf_counter() - t0
+    body = cylinder_mesh(length, radius, mesh_size=mesh_size, order=order, n_segments=n_segments)
+    full, timings = linear_tip_compliance(body, youngs_modulus, poisson_ratio, n_segments, length)
+    return {'chain': chain, 'full': full, 'error': relative_diagonal_error(chain, full),
+            'full_seconds': sum(timings.values()), 'chain_seconds': chain_seconds,
+            'body_nodes': body.n_nodes, 'segment': seg}
+
+
+def large_bending(n_segments=8, length=0.01, radius=0.0025, *, youngs_modulus=1e6,
+                  poisson_ratio=0.3, mesh_size=0.0025, load_parameter=3.8):
+    """
+    Compare a chain of condensed segments with the nonlinear SVK body under a tip load.
+
+    The dead tip force is -z with magnitude load_parameter * EI / (n L)^2 (EI of the circular
+    section), which bends a cantilever beyond 60 deg for load_parameter >= 3.5.
+
+    Parameters
+    ----------
+    n_segments : int
+        Segments.
+    length, radius : float  [m]
+        Segment length and radius.
+    youngs_modulus : float  [Pa]
+        Young's modulus.
+    poisson_ratio : float
+        Poisson's ratio.
+    mesh_size : float  [m]
+        Element size (P2) of segment and body.
+    load_parameter : float
+        F (n L)^2 / EI.
+
+    Returns
+    -------
+    dict
+        'chain_tip', 'full_tip' (3,) positions, 'tip_rotation_deg' (full FE),
+        'error_over_displacement', 'error_over_length', 'chain_seconds', 'full_seconds',
+        'full' (NonlinearResult), 'chain' (StaticResult).
+
+    """
+    from cbha_inverse.core.se3 import so3_log
+    from cbha_inverse.core.statics import solve_static
+    seg = condense_cylinder(length, radius, youngs_modulus=youngs_modulus,
+                            poisson_ratio=poisson_ratio, mesh_size=mesh_size)
+    model = chain_from_segments([seg] * n_segments)
+    total = n_segments * length
+    force = load_parameter * youngs_modulus * np.pi * radius ** 4 / 4.0 / total ** 2
+    wrench = np.array([0.0, 0.0, -force, 0.0, 0.0, 0.0])
+    t0 = time.perf_counter()
+    chain = solve_static(model, tip_wrench=wrench)
+    chain_seconds = time.perf_counter() - t0
+    body = cylinder_mesh(length, radius, mesh_size=mesh_size, n_segments=n_segments)
+    full = solve_nonlinear(body, youngs_modulus, poisson_ratio, n_segments, length, wrench)
+    err = np.linalg.norm(chain.positions[-1] - full.positions[-1])
+    disp = np.linalg.norm(full.positions[-1] - np.array([total, 0.0, 0.0]))
+    return {'chain_tip': chain.positions[-1], 'full_tip': full.positions[-1],
+            'tip_rotation_deg': float(np.degrees(np.linalg.norm(so3_log(full.rotations[-1])))),
+            'error_over_displacement': float(err / disp), 'error_over_length': float(err / total),
+            'chain_seconds': chain_seconds, 'full_seconds': full.seconds, 'full': full,
+            'chain': chain, 'force': force}
