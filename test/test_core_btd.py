@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.linalg import solveh_banded
 
-METHODS = ('dense', 'banded', 'cyclic', 'auto')
+METHODS = ('hybrid', 'dense', 'banded', 'cyclic', 'auto')
 
 
 def _random_btd(rng, n, b=6, shift=None):
@@ -69,10 +69,11 @@ def test_band_storage_matches_definition():
 
 def test_auto_method_choice():
     """'auto' follows the documented size thresholds."""
-    assert btd.choose_method(1) == 'dense'
-    assert btd.choose_method(btd.AUTO_DENSE_MAX) == 'dense'
-    assert btd.choose_method(btd.AUTO_DENSE_MAX + 1) == 'banded'
-    assert btd.choose_method(btd.AUTO_CYCLIC_MIN) == 'cyclic'
+    assert btd.choose_method(1) == 'hybrid'
+    assert btd.choose_method(btd.AUTO_HYBRID_MAX) == 'hybrid'
+    assert btd.choose_method(btd.AUTO_HYBRID_MAX + 1) == 'banded'
+    big = btd.AUTO_CYCLIC_MIN or 10 ** 6
+    assert btd.choose_method(big) == ('cyclic' if btd.AUTO_CYCLIC_MIN else 'banded')
 
 
 @pytest.mark.parametrize('method', METHODS)
@@ -86,7 +87,7 @@ def test_refuses_indefinite_matrix(method):
     assert issubclass(btd.NotPositiveDefiniteError, np.linalg.LinAlgError)
 
 
-@pytest.mark.parametrize('method', ('dense', 'banded', 'cyclic'))
+@pytest.mark.parametrize('method', ('hybrid', 'dense', 'banded', 'cyclic'))
 def test_condition_estimate(method):
     """The 1-norm condition estimate is a sharp lower bound and flags ill-conditioning."""
     rng = np.random.default_rng(3)
@@ -111,7 +112,7 @@ def test_bad_input():
         btd.factorize(diag, upper, method='magic')
     bad = diag.copy()
     bad[2, 1, 1] = np.nan
-    for method in ('dense', 'banded', 'cyclic'):
+    for method in ('hybrid', 'dense', 'banded', 'cyclic'):
         with pytest.raises((ValueError, np.linalg.LinAlgError)):
             btd.factorize(bad, upper, method=method)
     with pytest.raises(ValueError):

@@ -10,18 +10,22 @@ the frame chain is block tridiagonal). Storage::
     [       U_1^T D_2   ...     ]
     [             ...   D_{n-1} ]
 
-Backends (all exact direct methods; ``method='auto'`` picks the fastest for the size, using the
-thresholds measured by ``cbha_bench_core`` on the reference machine, see :data:`AUTO_DENSE_MAX`
-and :data:`AUTO_CYCLIC_MIN`):
+Backends (all exact direct methods; ``method='auto'`` picks by size with the thresholds
+:data:`AUTO_HYBRID_MAX` and :data:`AUTO_CYCLIC_MIN`, measured with ``cbha_bench_core``):
 
-- ``'dense'``: LAPACK ``dpotrf``/``dpotrs`` on the assembled (bn x bn) matrix (tiny n);
 - ``'banded'``: LAPACK banded Cholesky ``dpbtrf``/``dpbtrs`` on the (2b, bn) lower band storage
-  (half-bandwidth 2b - 1 = 11), built from the blocks with one strided copy;
+  (half-bandwidth 2b - 1 = 11), built from the blocks by two strided copies. The band of a
+  block-tridiagonal matrix holds exactly its blocks, so this *is* a block-tridiagonal
+  Cholesky, run by compiled code; 'auto' uses it above :data:`AUTO_HYBRID_MAX` blocks;
+- ``'hybrid'``: the same ``dpbtrf`` factor scattered into a dense triangle and solved with
+  ``dpotrs`` (level-3 ``dtrsm`` on all right-hand sides at once instead of ``dpbtrs``'s
+  column-by-column ``dtbsv``): the fastest for the control tick's small chains with many
+  right-hand sides;
+- ``'dense'``: LAPACK ``dpotrf``/``dpotrs`` on the assembled (bn x bn) matrix;
 - ``'cyclic'``: block cyclic reduction, i.e. the block LDL^T (Cholesky) factorisation of the
-  odd-even permuted matrix, each level vectorised over all its blocks with batched numpy
-  (``cholesky``, ``inv``, ``matmul``). O(n) work in log2(n) vectorised levels; its solve streams
-  every right-hand side through each level at once, which is why it wins at large n with many
-  right-hand sides, where ``dpbtrs`` solves column by column.
+  odd-even permuted matrix, each of its log2(n) levels vectorised over all its blocks with
+  batched numpy (``cholesky``, ``inv``, ``matmul``). Exact and O(n), but measured slower than
+  ``dpbtrf`` on the reference machine, so 'auto' does not choose it.
 
 Every backend detects a matrix that is not positive definite and raises
 :class:`NotPositiveDefiniteError` naming the block; :attr:`BTDFactorization.condition_estimate`
@@ -32,12 +36,14 @@ Hager-Higham estimator with the factor's own solves otherwise).
 import numpy as np
 from scipy.linalg import lapack
 
-#: largest number of blocks for which 'auto' uses the dense backend
-AUTO_DENSE_MAX = 8
-#: smallest number of blocks for which 'auto' uses block cyclic reduction
-AUTO_CYCLIC_MIN = 1500
+#: largest number of blocks for which 'auto' uses the hybrid backend (banded otherwise)
+AUTO_HYBRID_MAX = 24
+#: smallest number of blocks for which 'auto' would use cyclic reduction: never on the reference
+#: machine (its factorisation measured 2-4x slower than dpbtrf at n = 1000 and 10000)
+AUTO_CYCLIC_MIN = None
 
-METHODS = ('auto', 'dense', 'banded', 'cyclic')
+METHODS = ('auto', 'hybrid', 'dense', 'banded', 'cyclic')
+_MASKS = {}
 
 
 class NotPositiveDefiniteError(np.linalg.LinAlgError):
@@ -84,9 +90,14 @@ def to_lower_banded(diagonal, upper):
     """
     Convert symmetric BTD blocks to LAPACK lower band storage (``ab[r, j] = A[j + r, j]``).
 
-    With half-bandwidth ``kd = 2b - 1`` the band holds the whole block tridiagonal. Column ``j =
-    b k + c`` of the band is row c of ``[D_k | U_k | 0]`` from element c onwards, so the band is
-    one strided view of that padded (n, b, 3b) array, copied once.
+    With half-bandwidth ``kd = 2b - 1`` the band holds the whole block tridiagonal. In the
+    C-ordered (n, b, 2b) array whose transpose-reshape is the Fortran band, row c of block k
+    holds ``D_k[c, c:]``, then ``U_k[c, :]``, then c zeros. Both blocks are therefore written
+    with one strided view each (row stride ``2b - 1``): the upper triangle of ``D`` (its strict
+    lower triangle is written as zeros and lands exactly in the zero tail of the previous row),
+    then ``U`` (which overwrites the one slot the diagonal view shares with it); two small
+    writes clear the tail of the last row of every block and the ``U`` slots of the last block.
+    No intermediate copy is made.
 
     Parameters
     ----------
@@ -102,24 +113,41 @@ def to_lower_banded(diagonal, upper):
     """
     diagonal, upper = _check_blocks(diagonal, upper)
     n, b = diagonal.shape[:2]
-    padded = np.zeros((n, b, 3 * b))
-    padded[:, :, :b] = diagonal
-    padded[:-1, :, b:2 * b] = upper
-    item = padded.itemsize
-    view = np.ndarray((n, b, 2 * b), dtype=float, buffer=padded,
-                      strides=(3 * b * b * item, (3 * b + 1) * item, item))
-    return np.ascontiguousarray(view).reshape(n * b, 2 * b).T
+    w = 2 * b
+    band = np.empty((n, b * w))
+    # element (k, c, m) of these views is band[k, (w - 1) c + m + offset]: row stride w - 1
+    span = b * (w - 1)
+    band[:, :span].reshape(n, b, w - 1)[:, :, :b] = diagonal * _upper_mask(b)
+    band[:-1, b:b + span].reshape(n - 1, b, w - 1)[:, :, :b] = upper
+    band[-1, b:b + span].reshape(b, w - 1)[:, :b] = 0.0
+    band[:, (b - 1) * w + b + 1:] = 0.0
+    return band.reshape(n * b, w).T
 
 
-def _dense(diagonal, upper):
-    """Assemble the dense symmetric matrix (lower and upper triangles)."""
+def _upper_mask(b):
+    """Return the (b, b) upper-triangular 0/1 mask (cached)."""
+    if b not in _MASKS:
+        _MASKS[b] = np.triu(np.ones((b, b)))
+    return _MASKS[b]
+
+
+def _dense_lower(diagonal, upper):
+    """
+    Assemble the dense matrix for LAPACK ``uplo='L'`` without a copy (Fortran order).
+
+    The diagonal and upper blocks are written into a C-ordered array with strided block views;
+    its transpose is Fortran-contiguous and holds them as the lower triangle.
+    """
     n, b = diagonal.shape[:2]
-    out = np.zeros((n, b, n, b))
-    idx = np.arange(n)
-    out[idx, :, idx, :] = diagonal
-    out[idx[:-1], :, idx[1:], :] = upper
-    out[idx[1:], :, idx[:-1], :] = np.swapaxes(upper, 1, 2)
-    return out.reshape(n * b, n * b)
+    size = n * b
+    out = np.zeros((size, size))
+    item = out.itemsize
+    strides = ((b * size + b) * item, size * item, item)
+    np.ndarray((n, b, b), dtype=float, buffer=out, strides=strides)[...] = diagonal
+    if n > 1:
+        np.ndarray((n - 1, b, b), dtype=float, buffer=out, offset=b * item,
+                   strides=strides)[...] = upper
+    return out.T
 
 
 def _not_pd(row, block_size, pivot, how):
@@ -183,7 +211,7 @@ class BTDFactorization:
     def condition_estimate(self):
         """Return the estimated 1-norm condition number ``||A||_1 ||A^-1||_1`` (computed once)."""
         if self._condition is None:
-            if self.method == 'dense':
+            if self._dense_factor is not None:
                 anorm = block_one_norm(*self._blocks)
                 rcond, _ = lapack.dpocon(self._dense_factor, anorm, uplo='L')
                 self._condition = np.inf if rcond <= 0.0 else 1.0 / rcond
@@ -220,7 +248,7 @@ class BTDFactorization:
 def _factor_dense(diagonal, upper):
     """Dense LAPACK Cholesky backend."""
     n, b = diagonal.shape[:2]
-    factor, info = lapack.dpotrf(_dense(diagonal, upper), lower=1, clean=0, overwrite_a=1)
+    factor, info = lapack.dpotrf(_dense_lower(diagonal, upper), lower=1, clean=0, overwrite_a=1)
     if info > 0:
         raise _not_pd(info - 1, b, factor[info - 1, info - 1], 'dense Cholesky')
     if info < 0 or not np.isfinite(factor.diagonal()).all():
@@ -247,6 +275,34 @@ def _factor_banded(diagonal, upper):
         return x
 
     return BTDFactorization('banded', (diagonal, upper), solver)
+
+
+def _factor_hybrid(diagonal, upper):
+    """
+    Banded Cholesky factor, solved with dense triangular solves (small n, many RHS).
+
+    ``dpbtrf`` factorises in O(n); the band factor is then scattered into a dense lower
+    triangle (one strided copy: column j of the Fortran array holds ``L[j + r, j]`` at offset
+    ``j (N + 1) + r``) so that ``dpotrs`` solves all right-hand sides with level-3 ``dtrsm``
+    instead of ``dpbtrs``'s column-by-column ``dtbsv``.
+    """
+    n, b = diagonal.shape[:2]
+    band, info = lapack.dpbtrf(to_lower_banded(diagonal, upper), lower=1, overwrite_ab=1)
+    if info > 0:
+        raise _not_pd(info - 1, b, band[0, info - 1], 'banded Cholesky')
+    if info < 0 or not np.isfinite(band[0]).all():
+        raise ValueError('banded Cholesky failed: non-finite entries or illegal argument')
+    size = n * b
+    flat = np.zeros(size * (size + 1) + 2 * b)
+    width = min(2 * b, size + 1)
+    flat[:size * (size + 1)].reshape(size, size + 1)[:, :width] = band.T[:, :width]
+    factor = flat[:size * size].reshape(size, size).T
+
+    def solver(rhs):
+        x, _ = lapack.dpotrs(factor, rhs, lower=1)
+        return x
+
+    return BTDFactorization('hybrid', (diagonal, upper), solver, dense_factor=factor)
 
 
 def _first_bad_block(blocks):
@@ -349,9 +405,9 @@ def choose_method(n_blocks):
     str
 
     """
-    if n_blocks <= AUTO_DENSE_MAX:
-        return 'dense'
-    if n_blocks >= AUTO_CYCLIC_MIN:
+    if n_blocks <= AUTO_HYBRID_MAX:
+        return 'hybrid'
+    if AUTO_CYCLIC_MIN is not None and n_blocks >= AUTO_CYCLIC_MIN:
         return 'cyclic'
     return 'banded'
 
@@ -366,7 +422,7 @@ def factorize(diagonal, upper, method='auto'):
         Diagonal blocks (symmetric).
     upper : (n - 1, b, b) array_like
         ``upper[i]`` = block (i, i+1); block (i+1, i) is its transpose.
-    method : {'auto', 'dense', 'banded', 'cyclic'}
+    method : {'auto', 'hybrid', 'dense', 'banded', 'cyclic'}
         Backend; 'auto' chooses by size (see :func:`choose_method`).
 
     Returns
@@ -389,6 +445,8 @@ def factorize(diagonal, upper, method='auto'):
         method = choose_method(diagonal.shape[0])
     if method == 'dense':
         return _factor_dense(diagonal, upper)
+    if method == 'hybrid':
+        return _factor_hybrid(diagonal, upper)
     if method == 'banded':
         return _factor_banded(diagonal, upper)
     return _factor_cyclic(diagonal, upper)
