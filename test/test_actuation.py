@@ -1,8 +1,8 @@
 """Actuator columns (cables, cavities) against finite differences and rigid-body invariants."""
 
 from cbha_inverse.core.actuation import ActuatorSet, Cable, CableGroup
-from cbha_inverse.core.cavity import (Cavity, CavityGroup, CavityPart, LinearCavityGroup,
-                                      tube_surface)
+from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart, tube_surface
+from cbha_inverse.core.cavity_linear import LinearCavityGroup
 from cbha_inverse.core.chain import ChainModel, rest_state, retract
 from cbha_inverse.core.effectors import PointEffectors
 from cbha_inverse.core.links import timoshenko_compliance

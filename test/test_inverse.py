@@ -1,8 +1,8 @@
 """The actuation QP (proxsuite and projected Gauss-Seidel) and the closed-loop target corrector."""
 
 from cbha_inverse.core.control import TargetCorrector
-from cbha_inverse.core.inverse import (actuation_qp, ActuationQP, binding_bounds,
-                                       projected_gauss_seidel, Projection)
+from cbha_inverse.core.inverse import actuation_qp, Projection
+from cbha_inverse.core.qp import ActuationQP, binding_bounds, projected_gauss_seidel
 import numpy as np
 import pytest
 

@@ -211,7 +211,7 @@ class CableGroup:
         spans = points[self.segment_end] - points[self.segment_start]
         return self._length_sum @ np.sqrt(np.einsum('si,si->s', spans, spans))
 
-    def evaluate(self, positions, rotations):
+    def evaluate(self, positions, rotations, displacements=True):
         """
         Return the Jacobian columns and the displacements of all cables.
 
@@ -221,6 +221,9 @@ class CableGroup:
             Frame origins.
         rotations : (n + 1, 3, 3) ndarray
             Frame rotations (frame axes → world).
+
+        displacements : bool
+            Unused (the lengths come with the columns at no cost).
 
         Returns
         -------
@@ -364,7 +367,7 @@ class ActuatorSet:
         """Return the number of actuators ``m``."""
         return len(self.names)
 
-    def evaluate(self, positions, rotations):
+    def evaluate(self, positions, rotations, displacements=True):
         """
         Return all Jacobian columns and actuator displacements.
 
@@ -374,6 +377,8 @@ class ActuatorSet:
             Frame origins.
         rotations : (n + 1, 3, 3) ndarray
             Frame rotations (frame axes → world).
+        displacements : bool
+            Also evaluate ``δ_a`` (a group may return ``None`` otherwise).
 
         Returns
         -------
@@ -384,12 +389,12 @@ class ActuatorSet:
 
         """
         if len(self.groups) == 1:
-            return self.groups[0].evaluate(positions, rotations)
+            return self.groups[0].evaluate(positions, rotations, displacements)
         wrenches = np.empty((self.n_actuators, self.n_frames, 6))
-        displacements = np.empty(self.n_actuators)
+        out = np.empty(self.n_actuators)
         for g, cols in zip(self.groups, self._columns):
-            wrenches[cols], displacements[cols] = g.evaluate(positions, rotations)
-        return wrenches, displacements
+            wrenches[cols], out[cols] = g.evaluate(positions, rotations, True)
+        return wrenches, out
 
     def load_tangent(self, positions, rotations, actuation, symmetric=True):
         """

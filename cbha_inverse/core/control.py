@@ -26,9 +26,9 @@ from dataclasses import dataclass, field
 import time
 
 from cbha_inverse.core.chain import ChainState, rest_state
-from cbha_inverse.core.inverse import (actuation_qp, ActuationQP, binding_bounds,
-                                       project_constraints, projected_gauss_seidel)
+from cbha_inverse.core.inverse import project_constraints, qp_matrices, qp_problem
 from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, DenseLU, fast_retract
+from cbha_inverse.core.qp import ActuationQP, binding_bounds, projected_gauss_seidel
 import numpy as np
 
 
@@ -53,6 +53,13 @@ class InverseOptions:
         Largest frame rotation increment per Newton step.
     eps_abs : float
         QP tolerance (normalised problem).
+    relinearize_every : int
+        Ticks between linearisations. 1 (default) is DESIGN §6 / the paper: tangent, factor and
+        ``W`` at every tick. ``N > 1`` keeps the factorization and ``W_ea``, ``W_aa`` for ``N``
+        ticks (a modified Newton method): in between, a tick only evaluates the residual at the
+        current state, solves one right-hand side and re-solves the QP with the same Hessian.
+        The fixed point is the same (the residual is exact); convergence per tick is linear
+        instead of quadratic.
 
     """
 
@@ -63,6 +70,7 @@ class InverseOptions:
     newton_steps: int = 1
     max_rotation_step: float = 0.5
     eps_abs: float = 1e-10
+    relinearize_every: int = 1
 
     def __post_init__(self):
         """Validate."""
@@ -71,6 +79,8 @@ class InverseOptions:
                              f'not {self.qp_solver!r}')
         if self.newton_steps < 1:
             raise ValueError('newton_steps must be >= 1')
+        if self.relinearize_every < 1:
+            raise ValueError('relinearize_every must be >= 1')
 
 
 @dataclass(frozen=True)
@@ -181,6 +191,8 @@ class InverseSolver:
         a = np.zeros(len(self.actuator_names)) if actuation is None else actuation
         self.actuation = np.clip(np.asarray(a, dtype=float), self.lower_bounds, self.upper_bounds)
         self._qp.reset()
+        self._linearization = None
+        self._age = 0
 
     @property
     def state(self):
@@ -226,7 +238,7 @@ class InverseSolver:
 
     def _residual(self, positions, rotations, internal, actuation):
         """Return ``f(q) + f_ext + J_aᵀ λ`` (6n,) at a state."""
-        wrenches, _ = self.actuators.evaluate(positions, rotations)
+        wrenches, _ = self.actuators.evaluate(positions, rotations, False)
         return (internal.reshape(-1) + self._external
                 + actuation @ wrenches[:, 1:, :].reshape(wrenches.shape[0], -1))
 
@@ -268,31 +280,55 @@ class InverseSolver:
             return self._held('rejected', targets)
         previous = self.actuation
         positions, rotations = self._positions, self._rotations
-        internal, tangent = self._kernel.linearise(positions, rotations)
-        wrenches, _ = self.actuators.evaluate(positions, rotations)
-        m = wrenches.shape[0]
-        jat = wrenches[:, 1:, :].reshape(m, -1)
-        residual = internal.reshape(-1) + self._external + previous @ jat
-        load_tangent = self.actuators.load_tangent(positions, rotations, previous)
-        if load_tangent is not None:
-            tangent = tangent + load_tangent
-        t_assembly = time.perf_counter()
-        factorization = self._factor(tangent, positions, rotations, previous)
-        if factorization is None:
-            return self._held('not_positive_definite', targets)
-        t_factor = time.perf_counter()
-        levers = self.effectors.levers(rotations)
-        projection = project_constraints(factorization, jat, residual, self.effectors, levers,
-                                         positions[self.effectors.frames] + levers, targets,
-                                         previous)
+        lin = self._linearization
+        if lin is None or self._age >= self.options.relinearize_every:
+            internal, tangent = self._kernel.linearise(positions, rotations)
+            wrenches, _ = self.actuators.evaluate(positions, rotations, False)
+            m = wrenches.shape[0]
+            jat = wrenches[:, 1:, :].reshape(m, -1)
+            residual = internal.reshape(-1) + self._external + previous @ jat
+            load_tangent = self.actuators.load_tangent(positions, rotations, previous)
+            if load_tangent is not None:
+                tangent = tangent + load_tangent
+            t_assembly = time.perf_counter()
+            factorization = self._factor(tangent, positions, rotations, previous)
+            if factorization is None:
+                self._linearization = None
+                return self._held('not_positive_definite', targets)
+            t_factor = time.perf_counter()
+            levers = self.effectors.levers(rotations)
+            projection = project_constraints(factorization, jat, residual, self.effectors,
+                                             levers, positions[self.effectors.frames] + levers,
+                                             targets, previous)
+            matrices = qp_matrices(projection.w_ea, projection.w_aa, self._scale,
+                                   energy_weight=self.options.energy_weight,
+                                   proximal_weight=self.options.proximal_weight)
+            lin = (factorization, projection.solved[:, :m], projection.w_ea, matrices)
+            self._linearization, self._age = lin, 1
+            free_step, delta_free = projection.solved[:, m], projection.delta_free
+            same_hessian = False
+        else:
+            factorization, solved_a, w_ea, matrices = lin
+            m = w_ea.shape[1]
+            internal = self._kernel.internal(positions, rotations)
+            wrenches, _ = self.actuators.evaluate(positions, rotations, False)
+            residual = (internal.reshape(-1) + self._external
+                        + previous @ wrenches[:, 1:, :].reshape(m, -1))
+            t_assembly = t_factor = time.perf_counter()
+            free_step = factorization.solve(residual)
+            levers = self.effectors.levers(rotations)
+            moved = self.effectors.apply_jacobian(free_step.reshape(-1, 6), levers)
+            delta_free = ((positions[self.effectors.frames] + levers - targets + moved).reshape(-1)
+                          - w_ea @ previous)
+            self._age += 1
+            same_hessian = True
         t_projection = time.perf_counter()
-        problem = actuation_qp(projection, previous, self.lower_bounds, self.upper_bounds,
-                               self._scale, energy_weight=self.options.energy_weight,
-                               proximal_weight=self.options.proximal_weight,
-                               rate_limit=self._rate)
+        w_ea, matrices = lin[2], lin[3]
+        problem = qp_problem(matrices, delta_free, previous, self.lower_bounds, self.upper_bounds,
+                             rate_limit=self._rate)
         status = 'solved'
         if self.options.qp_solver == 'proxsuite':
-            solution = self._qp.solve(problem)
+            solution = self._qp.solve(problem, same_hessian=same_hessian)
             if not solution.ok:
                 status = 'qp_fallback'
                 solution = projected_gauss_seidel(problem)
@@ -303,10 +339,9 @@ class InverseSolver:
         saturated = binding_bounds(problem, solution.x)
         if status == 'solved' and saturated.any():
             status = 'saturated'
-        gap = projection.w_ea @ actuation + projection.delta_free
+        gap = w_ea @ actuation + delta_free
         t_qp = time.perf_counter()
-        solved = projection.solved
-        increments = (solved[:, m] + solved[:, :m] @ (actuation - previous)).reshape(-1, 6)
+        increments = (free_step + lin[1] @ (actuation - previous)).reshape(-1, 6)
         positions, rotations = fast_retract(positions, rotations, self._limited(increments))
         for _ in range(self.options.newton_steps - 1):
             internal, tangent = self._kernel.linearise(positions, rotations)

@@ -52,7 +52,7 @@ class EquilibriumResult:
 def _residual(kernel, actuators, external, actuation, positions, rotations, factor):
     """Return the residual (6n,) at a state and load factor."""
     internal = kernel.internal(positions, rotations)
-    wrenches, _ = actuators.evaluate(positions, rotations)
+    wrenches, _ = actuators.evaluate(positions, rotations, False)
     m = wrenches.shape[0]
     return internal.reshape(-1) + factor * (
         external + actuation @ wrenches[:, 1:, :].reshape(m, -1))
@@ -131,7 +131,7 @@ def solve_equilibrium(kernel, actuators, actuation, external, initial_state, *,
     """
     positions = np.array(initial_state.positions, dtype=float)
     rotations = np.array(initial_state.rotations, dtype=float)
-    wrenches, _ = actuators.evaluate(positions, rotations)
+    wrenches, _ = actuators.evaluate(positions, rotations, False)
     columns = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
     # scale of the applied loads: a pressure column holds large wrenches that cancel between
     # neighbouring frames, so its own norm (not that of the sum) sets the round-off floor

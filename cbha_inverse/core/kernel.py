@@ -22,7 +22,7 @@ _JL_SERIES = np.array([1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0,
 _SERIES_LIMIT = 0.5
 
 
-def jl_inverse_coefficients(theta):
+def jl_inverse_coefficients(theta, derivative=True):
     """
     Return ``c(t)`` and ``c'(t)/t`` of ``Jl⁻¹(φ) = I - φ^/2 + c(|φ|) φ^²``.
 
@@ -30,19 +30,29 @@ def jl_inverse_coefficients(theta):
     ----------
     theta : (n,) ndarray  [rad]
         Rotation angles (< 2π).
+    derivative : bool
+        Also return ``c'(t)/t`` (else ``None``).
 
     Returns
     -------
     c, dc_over_t : (n,) ndarray
-        Series below 0.5 rad (truncation < 1e-14 relative), closed form above.
+        Series below 0.5 rad (only the terms that matter at the largest angle: truncation below
+        1e-16 relative), closed form above.
 
     """
     t2 = theta * theta
-    c = np.zeros_like(theta)
-    dc = np.zeros_like(theta)
-    for k in range(len(_JL_SERIES) - 1, -1, -1):
+    t_max = min(float(theta.max()), _SERIES_LIMIT) if theta.size else 0.0
+    terms = 1
+    while terms < len(_JL_SERIES) and _JL_SERIES[terms] * t_max ** (2 * terms) > 1e-17 / 12.0:
+        terms += 1
+    terms = min(terms + 1, len(_JL_SERIES))
+    c = np.full_like(theta, _JL_SERIES[terms - 1])
+    for k in range(terms - 2, -1, -1):
         c = c * t2 + _JL_SERIES[k]
-        if k > 0:
+    dc = None
+    if derivative:
+        dc = np.full_like(theta, 2.0 * (terms - 1) * _JL_SERIES[terms - 1])
+        for k in range(terms - 2, 0, -1):
             dc = dc * t2 + 2.0 * k * _JL_SERIES[k]
     big = theta >= _SERIES_LIMIT
     if big.any():
@@ -50,7 +60,9 @@ def jl_inverse_coefficients(theta):
         half = 0.5 * t
         cot = np.cos(half) / np.sin(half)
         c[big] = 1.0 / (t * t) - cot / (2.0 * t)
-        dc[big] = (-2.0 / t ** 3 + 1.0 / (4.0 * t * np.sin(half) ** 2) + cot / (2.0 * t * t)) / t
+        if derivative:
+            dc[big] = (-2.0 / t ** 3 + 1.0 / (4.0 * t * np.sin(half) ** 2)
+                       + cot / (2.0 * t * t)) / t
     return c, dc
 
 
@@ -137,21 +149,23 @@ class ChainKernel:
         self._idx = idx
         self._eye3 = np.eye(3)
 
-    def _terms(self, positions, rotations):
+    def _terms(self, positions, rotations, derivative=True):
         """Return the local link terms shared by the wrenches and the tangent."""
         rot_a = rotations[:-1]
+        rot_at = np.swapaxes(rot_a, 1, 2)
         diff = positions[1:] - positions[:-1]
-        offset = np.einsum('nji,nj->ni', rot_a, diff)
-        rel = np.matmul(np.swapaxes(rot_a, 1, 2), rotations[1:])
+        offset = np.matmul(rot_at, diff[:, :, None])[:, :, 0]
+        rel = np.matmul(rot_at, rotations[1:])
         if self._q0t is not None:
             rel = np.matmul(rel, self._q0t)
         flat = rel.reshape(-1, 9)
         d = 0.5 * (flat[:, [7, 2, 3]] - flat[:, [5, 6, 1]])
-        sin_t = np.sqrt(np.einsum('ni,ni->n', d, d))
+        sin_t = np.sqrt((d * d).sum(axis=1))
         cos_t = 0.5 * (flat[:, 0] + flat[:, 4] + flat[:, 8] - 1.0)
         if cos_t.min() <= -0.5:
             from cbha_inverse.core.se3 import so3_log
             phi = so3_log(rel)
+            theta = np.sqrt((phi * phi).sum(axis=1))
         else:
             theta = np.arctan2(sin_t, cos_t)
             ratio = np.divide(theta, sin_t, out=np.ones_like(theta), where=sin_t > 0.0)
@@ -159,11 +173,10 @@ class ChainKernel:
         delta = self._delta
         delta[:, :3] = offset - self.rest_offsets
         delta[:, 3:] = phi
-        stress = np.einsum('nij,nj->ni', self.stiffness, delta)
-        theta = np.sqrt(np.einsum('ni,ni->n', phi, phi))
-        c, dc = jl_inverse_coefficients(theta)
+        stress = np.matmul(self.stiffness, delta[:, :, None])[:, :, 0]
+        c, dc = jl_inverse_coefficients(theta, derivative)
         s_r = stress[:, 3:]
-        phi_dot_s = np.einsum('ni,ni->n', phi, s_r)
+        phi_dot_s = (phi * s_r).sum(axis=1)
         # Jl^-T s = s + phi x s / 2 + c (phi (phi . s) - t^2 s)
         cr = np.empty_like(s_r)
         cr[:, 0] = phi[:, 1] * s_r[:, 2] - phi[:, 2] * s_r[:, 1]
@@ -210,7 +223,7 @@ class ChainKernel:
         (n, 6) ndarray  [N, N*m]
 
         """
-        terms = self._terms(positions, rotations)
+        terms = self._terms(positions, rotations, derivative=False)
         return self._gather(terms[1], terms[8])
 
     def linearise(self, positions, rotations, geometric=True):

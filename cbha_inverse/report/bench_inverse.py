@@ -53,7 +53,8 @@ def circle_targets(center, radius, n_ticks, period_ticks):
     return targets
 
 
-def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_steps=1):
+def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_steps=1,
+                relinearize_every=1):
     """
     Run the tick on one scene and collect timings and tracking errors.
 
@@ -69,6 +70,8 @@ def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_st
         ``'proxsuite'`` or ``'gauss_seidel'``.
     newton_steps : int
         Newton steps per tick.
+    relinearize_every : int
+        Ticks between linearisations (1 = every tick, DESIGN §6).
 
     Returns
     -------
@@ -78,7 +81,8 @@ def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_st
 
     """
     scene = load_scene(name)
-    solver = scene.make_inverse_solver(qp_solver=qp_solver, newton_steps=newton_steps)
+    solver = scene.make_inverse_solver(qp_solver=qp_solver, newton_steps=newton_steps,
+                                       relinearize_every=relinearize_every)
     radius = RADIUS.get(name, 0.01)
     center = scene.workspace_center
     targets = circle_targets(center, radius, n_ticks + warmup, 500)
@@ -100,6 +104,7 @@ def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_st
         'actuators': len(scene.actuator_names),
         'effectors': len(scene.effector_names),
         'qp_solver': qp_solver,
+        'relinearize_every': relinearize_every,
         'median': {p: float(np.median(times[p])) for p in PHASES},
         'p99': float(np.percentile(times['total'], 99)),
         'tracking_error_median': float(np.median(errors)),
@@ -123,7 +128,7 @@ def format_table(rows):
     str
 
     """
-    head = (f"{'scene':16s} {'n':>3s} {'m':>3s} {'k':>2s} {'QP':>12s} {'median':>8s} "
+    head = (f"{'scene':16s} {'n':>3s} {'m':>3s} {'k':>2s} {'QP':>12s} {'lin':>3s} {'median':>8s} "
             f"{'p99':>8s} | {'assem':>7s} {'factor':>7s} {'W':>7s} {'QP':>7s} {'update':>7s}"
             f" | {'err med':>8s}  paper")
     lines = [head, '-' * len(head)]
@@ -132,7 +137,8 @@ def format_table(rows):
         us = {p: 1e6 * med[p] for p in PHASES}
         lines.append(
             f"{r['scene']:16s} {r['frames']:3d} {r['actuators']:3d} {r['effectors']:2d} "
-            f"{r['qp_solver']:>12s} {us['total']:6.0f}us {1e6 * r['p99']:6.0f}us | "
+            f"{r['qp_solver']:>12s} {r['relinearize_every']:3d} "
+            f"{us['total']:6.0f}us {1e6 * r['p99']:6.0f}us | "
             f"{us['assembly']:5.0f}us {us['factor']:5.0f}us {us['projection']:5.0f}us "
             f"{us['qp']:5.0f}us {us['update']:5.0f}us | {1e3 * r['tracking_error_median']:6.3f}mm"
             f"  {PAPER.get(r['scene'], '')}")
@@ -161,6 +167,8 @@ def main(argv=None):
     parser.add_argument('--warmup', type=int, default=100)
     parser.add_argument('--gauss-seidel', action='store_true',
                         help='also run the projected Gauss-Seidel QP for comparison')
+    parser.add_argument('--relinearize-every', type=int, nargs='+', default=[1, 5],
+                        help='ticks between linearisations to compare (1 = every tick)')
     parser.add_argument('--json', help='write the rows to this JSON file')
     args = parser.parse_args(argv)
     rows = []
@@ -168,7 +176,9 @@ def main(argv=None):
     for name in args.scenes:
         solvers = ['proxsuite'] + (['gauss_seidel'] if args.gauss_seidel else [])
         for qp_solver in solvers:
-            rows.append(bench_scene(name, args.ticks, args.warmup, qp_solver))
+            for every in args.relinearize_every:
+                rows.append(bench_scene(name, args.ticks, args.warmup, qp_solver,
+                                        relinearize_every=every))
     print(format_table(rows))
     print(f'goals on the shared 2-core machine: 6f/8c <= 100 us, 10f/16c <= 150 us, '
           f'CBHA <= 150 us median, p99 <= 500 us; ({time.perf_counter() - started:.1f} s)')

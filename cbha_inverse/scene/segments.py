@@ -7,7 +7,8 @@ segment YAMLs through :func:`cbha_inverse.fem.segment_io.load_segment` (no gmsh)
 
 from pathlib import Path
 
-from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart, LinearCavityGroup
+from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart
+from cbha_inverse.core.cavity_linear import LinearCavityGroup
 from cbha_inverse.core.chain import ChainModel
 import numpy as np
 

@@ -1,0 +1,247 @@
+"""
+Solvers of the box-constrained actuation QP (paper eq. 13): proxsuite and projected Gauss-Seidel.
+
+The problem itself (:class:`cbha_inverse.core.inverse.QPProblem`) is built in
+:mod:`cbha_inverse.core.inverse`; here it is solved, polished onto its active set and checked for
+saturation. proxsuite's status is always returned to the caller.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import proxsuite
+
+
+_STATUS = {
+    'PROXQP_SOLVED': 'solved',
+    'PROXQP_MAX_ITER_REACHED': 'max_iterations',
+    'PROXQP_PRIMAL_INFEASIBLE': 'primal_infeasible',
+    'PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE': 'closest_primal_feasible',
+    'PROXQP_DUAL_INFEASIBLE': 'dual_infeasible',
+    'PROXQP_NOT_RUN': 'not_run',
+}
+
+
+@dataclass(frozen=True)
+class QPSolution:
+    """
+    A QP solution in dimensionless variables.
+
+    Attributes
+    ----------
+    x : (m,) ndarray
+        Solution, clipped into the box (removes the solver's round-off violations).
+    status : str
+        ``'solved'``, ``'max_iterations'``, ``'primal_infeasible'``, ... (proxsuite's status) or
+        ``'converged'`` / ``'max_iterations'`` for Gauss-Seidel.
+    iterations : int
+        Solver iterations.
+    ok : bool
+        Whether ``x`` is a solution (solved / converged).
+
+    """
+
+    x: np.ndarray
+    status: str
+    iterations: int
+    ok: bool
+
+
+class ActuationQP:
+    """
+    Reusable proxsuite dense box-QP, warm-started from the previous result.
+
+    Parameters
+    ----------
+    n_actuators : int
+        ``m``.
+    eps_abs : float
+        Absolute tolerance of the normalised problem.
+    max_iterations : int
+        proxsuite iteration limit.
+
+    """
+
+    def __init__(self, n_actuators, eps_abs=1e-10, max_iterations=1000):
+        """Create the proxsuite object (initialised on the first solve)."""
+        self.n_actuators = int(n_actuators)
+        self.eps_abs = float(eps_abs)
+        self.max_iterations = int(max_iterations)
+        self.reset()
+
+    def reset(self):
+        """Forget the warm start."""
+        qp = proxsuite.proxqp.dense.QP(self.n_actuators, 0, 0, True)
+        qp.settings.eps_abs = self.eps_abs
+        qp.settings.eps_rel = 0.0
+        qp.settings.max_iter = self.max_iterations
+        qp.settings.verbose = False
+        self._qp = qp
+        self._initialised = False
+
+    def solve(self, problem, same_hessian=False):
+        """
+        Solve a :class:`QPProblem`.
+
+        Parameters
+        ----------
+        problem : QPProblem
+            The normalised QP.
+        same_hessian : bool
+            The Hessian is the one of the previous solve (only ``g`` and the box are sent).
+
+        Returns
+        -------
+        QPSolution
+            The solution and proxsuite's status (always checked by the caller).
+
+        """
+        qp = self._qp
+        if not self._initialised:
+            qp.init(problem.hessian, problem.gradient, None, None, None, None, None,
+                    problem.lower, problem.upper)
+            qp.solve()
+            # warm start only once a previous result exists (proxsuite 0.8 crashes otherwise)
+            qp.settings.initial_guess = (
+                proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT)
+            self._initialised = True
+        elif same_hessian:
+            qp.update(g=problem.gradient, l_box=problem.lower, u_box=problem.upper,
+                      update_preconditioner=False)
+            qp.solve()
+        else:
+            qp.update(H=problem.hessian, g=problem.gradient, l_box=problem.lower,
+                      u_box=problem.upper, update_preconditioner=False)
+            qp.solve()
+        info = qp.results.info
+        status = _STATUS.get(info.status.name, info.status.name)
+        x = qp.results.x
+        ok = status == 'solved' and bool(np.all(np.isfinite(x)))
+        if not ok:
+            self.reset()
+        x = polish(problem, np.clip(x, problem.lower, problem.upper)) if ok else np.clip(
+            problem.previous, problem.lower, problem.upper)
+        return QPSolution(x, status, int(info.iter), ok)
+
+
+def polish(problem, x, tolerance=1e-4):
+    """
+    Refine an approximate box-QP solution on its active set (exact KKT point if it is one).
+
+    proxsuite's augmented-Lagrangian iterate leaves the bound-active variables a little inside
+    the box (about ``sqrt(eps)``). Fixing the variables within ``tolerance`` of a bound whose
+    gradient pushes outward and solving the equality-constrained problem of the others gives the
+    exact solution (the KKT point of that active set); it is accepted only if it is feasible and
+    its active multipliers have the right sign, otherwise ``x`` is returned unchanged. Without
+    active bounds proxsuite's iterate is returned as is.
+
+    Parameters
+    ----------
+    problem : QPProblem
+        The normalised QP.
+    x : (m,) ndarray
+        Approximate solution inside the box.
+    tolerance : float
+        Distance to a bound (dimensionless) below which a variable is tried as active.
+
+    Returns
+    -------
+    (m,) ndarray
+        The refined (or the given) solution.
+
+    """
+    h, g = problem.hessian, problem.gradient
+    grad = h @ x + g
+    at_lower = (x - problem.lower < tolerance) & (grad > 0.0)
+    at_upper = (problem.upper - x < tolerance) & (grad < 0.0)
+    active = at_lower | at_upper
+    if not active.any():
+        return x
+    y = np.where(at_lower, problem.lower, np.where(at_upper, problem.upper, x))
+    free = ~active
+    if free.any():
+        h_free = h[free]
+        try:
+            y[free] = np.linalg.solve(h_free[:, free], -g[free] - h_free[:, active] @ y[active])
+        except np.linalg.LinAlgError:
+            return x
+    grad = h @ y + g
+    if not (_inside(problem, y) and np.all(grad[at_lower] >= 0.0)
+            and np.all(grad[at_upper] <= 0.0)):
+        return x
+    return y
+
+
+def _inside(problem, x):
+    """Whether ``x`` lies in the box of ``problem``."""
+    return bool(np.all(x >= problem.lower) and np.all(x <= problem.upper))
+
+
+def projected_gauss_seidel(problem, x0=None, max_iterations=500, tolerance=1e-10):
+    """
+    Solve the box QP by projected Gauss-Seidel, as the paper's solver does (§IV).
+
+    Each sweep sets ``x_i = clip(x_i - (H x + g)_i / H_ii, lower_i, upper_i)``.
+
+    Parameters
+    ----------
+    problem : QPProblem
+        The normalised QP.
+    x0 : (m,) ndarray, optional
+        Start (default: ``problem.previous`` clipped into the box).
+    max_iterations : int
+        Maximum number of sweeps.
+    tolerance : float
+        Stop when the largest change of a sweep is below this (dimensionless).
+
+    Returns
+    -------
+    QPSolution
+        ``status`` ``'converged'`` or ``'max_iterations'``.
+
+    """
+    h, g = problem.hessian, problem.gradient
+    lo, up = problem.lower, problem.upper
+    x = np.clip(problem.previous if x0 is None else np.asarray(x0, dtype=float), lo, up).copy()
+    diag = np.diag(h).copy()
+    grad = h @ x + g
+    for sweep in range(1, max_iterations + 1):
+        change = 0.0
+        for i in range(x.size):
+            new = min(max(x[i] - grad[i] / diag[i], lo[i]), up[i])
+            step = new - x[i]
+            if step != 0.0:
+                grad += step * h[:, i]
+                x[i] = new
+                change = max(change, abs(step))
+        if change < tolerance:
+            return QPSolution(x, 'converged', sweep, True)
+    return QPSolution(x, 'max_iterations', max_iterations, False)
+
+
+def binding_bounds(problem, x, tolerance=1e-6):
+    """
+    Return which actuators are held by a bound that the tracking term pushes against (saturation).
+
+    Only the tracking part of the objective counts: a slack cable held at zero tension by the
+    energy term is not saturated, a cable that would need to push is.
+
+    Parameters
+    ----------
+    problem : QPProblem
+        The normalised QP.
+    x : (m,) ndarray
+        Its solution.
+    tolerance : float
+        Dimensionless tolerance on the distance to the bound and on the gradient.
+
+    Returns
+    -------
+    (m,) ndarray of bool
+        ``True`` where ``x`` sits on a bound and the tracking gradient points out of the box.
+
+    """
+    grad = problem.tracking_hessian @ x + problem.tracking_gradient
+    at_lower = (x <= problem.lower + tolerance) & (grad > tolerance)
+    at_upper = (x >= problem.upper - tolerance) & (grad < -tolerance)
+    return at_lower | at_upper
