@@ -55,7 +55,7 @@ class CbhaSimParams:
     noise_std: float = param(0.0002, 'standard deviation of the tip measurement noise per axis '
                              '[m]', low=0.0, high=0.1)
     seed: int = param(0, 'seed of the measurement noise', low=0, high=2 ** 31 - 1)
-    tolerance: float = param(1e-8, 'static equilibrium residual tolerance [N]',
+    tolerance: float = param(1e-6, 'static equilibrium residual tolerance [N, N*m]',
                              low=1e-14, high=1.0)
     max_iterations: int = param(20, 'Newton iterations per plant update at most', low=1,
                                 high=1000)

@@ -43,6 +43,8 @@ class TrajectoryParams:
                               low=0.0, high=3600.0)
     rate_hz: float = param(100.0, 'publication rate [Hz]', low=0.1, high=2000.0)
     frame_id: str = param('cbha_base', 'frame_id of the published targets')
+    wait_for_subscribers: int = param(0, 'publish nothing (and keep the clock at 0) until this '
+                                      'many subscriptions match target', low=0, high=1000)
 
 
 class TrajectoryNode(Node):
@@ -92,6 +94,9 @@ class TrajectoryNode(Node):
         return (now - self._start).nanoseconds * 1e-9
 
     def _tick(self):
+        if self._start is None and (self.publisher.get_subscription_count()
+                                    < self.params.wait_for_subscribers):
+            return
         elapsed = self.elapsed()
         point = self.trajectory.sample(elapsed)[0]
         message = PointStamped()

@@ -1,0 +1,116 @@
+"""
+Tracking metrics and plots of closed/open-loop runs (used by ``cbha_demo``; no ROS).
+
+The tip error at a tip sample is the distance to the target interpolated (linearly, per axis)
+at the tip's time stamp; RMS and max are taken over the samples whose stamps lie in the moving
+part of the trajectory.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TrackingErrors:
+    """
+    Tip-to-target errors of one run.
+
+    Attributes
+    ----------
+    times : (N,) ndarray  [s]
+        Tip sample stamps used.
+    errors : (N,) ndarray  [m]
+        Distances tip - target.
+    rms : float  [m]
+        Root mean square of ``errors``.
+    maximum : float  [m]
+        Largest error.
+
+    """
+
+    times: np.ndarray
+    errors: np.ndarray
+    rms: float
+    maximum: float
+
+
+def tracking_errors(target_times, targets, tip_times, tips, start, end):
+    """
+    Compare tip samples with the target path.
+
+    Parameters
+    ----------
+    target_times : (T,) array_like  [s]
+        Target stamps (increasing).
+    targets : (T, 3) array_like  [m]
+        Targets.
+    tip_times : (N,) array_like  [s]
+        Tip stamps.
+    tips : (N, 3) array_like  [m]
+        Tip positions.
+    start, end : float  [s]
+        Window of the comparison (e.g. the moving part of the lap).
+
+    Returns
+    -------
+    TrackingErrors
+        Errors in the window.
+
+    Raises
+    ------
+    ValueError
+        If fewer than 2 targets or no tip sample lie in the window.
+
+    """
+    target_times = np.asarray(target_times, dtype=float)
+    targets = np.asarray(targets, dtype=float).reshape(-1, 3)
+    tip_times = np.asarray(tip_times, dtype=float)
+    tips = np.asarray(tips, dtype=float).reshape(-1, 3)
+    inside = ((tip_times >= max(start, target_times[0] if target_times.size else np.inf))
+              & (tip_times <= min(end, target_times[-1] if target_times.size else -np.inf)))
+    if target_times.size < 2 or not np.any(inside):
+        raise ValueError('no tip sample inside the target window')
+    goal = np.stack([np.interp(tip_times[inside], target_times, targets[:, axis])
+                     for axis in range(3)], axis=1)
+    errors = np.linalg.norm(tips[inside] - goal, axis=1)
+    return TrackingErrors(tip_times[inside], errors, float(np.sqrt(np.mean(errors ** 2))),
+                          float(np.max(errors)))
+
+
+def plot_runs(runs, path):
+    """
+    Plot target vs tip in the y-z plane, one panel per run, into a PNG.
+
+    Parameters
+    ----------
+    runs : list of dict
+        Each with ``title`` (str), ``targets`` (T, 3), ``tips`` (N, 3) [m], ``rms`` [m].
+    path : str or os.PathLike
+        Output PNG.
+
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    columns = min(2, len(runs))
+    rows = int(np.ceil(len(runs) / columns))
+    figure, axes = plt.subplots(rows, columns, figsize=(5.0 * columns, 4.6 * rows),
+                                squeeze=False)
+    for axis, run in zip(axes.flat, runs):
+        targets = np.asarray(run['targets']) * 1e3
+        tips = np.asarray(run['tips']) * 1e3
+        axis.plot(targets[:, 1], targets[:, 2], 'k--', lw=1.0, label='target')
+        axis.plot(tips[:, 1], tips[:, 2], '-', color='tab:red', lw=1.2, label='tip (plant)')
+        axis.set_title(f"{run['title']}: RMS {run['rms'] * 1e3:.2f} mm")
+        axis.set_xlabel('y [mm]')
+        axis.set_ylabel('z [mm]')
+        axis.set_aspect('equal', adjustable='datalim')
+        axis.grid(True, lw=0.3)
+        axis.legend(loc='upper right', fontsize=8)
+    for axis in list(axes.flat)[len(runs):]:
+        axis.set_visible(False)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)

@@ -1,0 +1,302 @@
+"""
+``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
+
+For each run the demo starts ``cbha_sim``, ``inverse_solver`` and ``trajectory`` as three separate
+processes (as ``ros2 run`` would, with the installed params files plus a per-run override file
+written into the output folder), records ``target``, ``tip/true`` and ``/diagnostics`` in this
+process for one lap, stops the nodes with SIGINT and prints one summary line: tracking RMS and max
+error (tip of the plant vs target, moving part of the lap), the solver's tick time median / p99
+and its target-to-command latency p99 (target callback entry to command published, measured in
+the node). It writes ``demo.png`` (target vs tip in the y-z plane) and ``summary.json``, and per
+run the params files used, the node logs and ``recording.npz`` (stamped targets and tips).
+
+Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
+centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
+"""
+
+import argparse
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+
+from cbha_inverse.core.trajectory import make_trajectory
+from cbha_inverse.paths import config_path
+from cbha_inverse.report.tracking import plot_runs, tracking_errors
+from cbha_inverse.scene import load_scene
+import numpy as np
+import yaml
+
+NODES = ('cbha_sim', 'inverse_solver', 'trajectory')
+MODULES = {'cbha_sim': 'cbha_inverse.ros.cbha_sim_node',
+           'inverse_solver': 'cbha_inverse.ros.inverse_solver_node',
+           'trajectory': 'cbha_inverse.ros.trajectory_node'}
+NAMESPACE = '/cbha'
+
+
+def parse_args(argv):
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(prog='cbha_demo', description=__doc__.split('\n\n')[0])
+    parser.add_argument('--output', default='output/demo', help='output folder')
+    parser.add_argument('--scene', default='cbha.yaml', help='scene of model and plant')
+    parser.add_argument('--shapes', default='circle,square', help='comma-separated shapes')
+    parser.add_argument('--modes', default='open,closed', help='comma-separated modes')
+    parser.add_argument('--radius', type=float, default=0.06, help='circle radius [m]')
+    parser.add_argument('--side', type=float, default=0.08, help='square side [m]')
+    parser.add_argument('--circle-speed', type=float, default=0.025, help='[m/s]')
+    parser.add_argument('--square-speed', type=float, default=0.031, help='[m/s]')
+    parser.add_argument('--start-hold', type=float, default=1.5,
+                        help='time at the start point before moving [s] (not scored)')
+    parser.add_argument('--stiffness-scale', type=float, default=0.9,
+                        help='plant stiffness / model stiffness')
+    parser.add_argument('--domain', type=int, default=None,
+                        help='ROS_DOMAIN_ID for the run (default: the environment, else a free '
+                        'one from domain_coordinator)')
+    return parser.parse_args(argv)
+
+
+def _environment(domain):
+    """Return the children's environment: isolated DDS, no wheel bootstrap flag."""
+    env = dict(os.environ)
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    if domain is not None:
+        env['ROS_DOMAIN_ID'] = str(domain)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+def _write_params(path, values):
+    """Write a ``--params-file`` YAML for all nodes."""
+    path.write_text(yaml.safe_dump({'/**': {'ros__parameters': values}}, sort_keys=False))
+    return path
+
+
+def _start(node, run_dir, overrides, env):
+    """Start one node process with its installed params file and the run's overrides."""
+    params = _write_params(run_dir / f'{node}.yaml', overrides)
+    log = open(run_dir / f'{node}.log', 'w')
+    process = subprocess.Popen(
+        [sys.executable, '-m', MODULES[node], '--ros-args', '-r', f'__ns:={NAMESPACE}',
+         '--params-file', str(config_path(f'{node}.yaml')), '--params-file', str(params)],
+        env=env, stdout=log, stderr=subprocess.STDOUT)
+    process.log = log
+    return process
+
+
+def _stop(processes):
+    """SIGINT every process, then wait; return the exit codes."""
+    for process in processes.values():
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+    codes = {}
+    for name, process in processes.items():
+        try:
+            codes[name] = process.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            codes[name] = process.wait()
+        process.log.close()
+    return codes
+
+
+class Recorder:
+    """Subscribe to target, tip/true and /diagnostics (one rclpy node in this process)."""
+
+    def __init__(self, context):
+        from cbha_inverse.ros.qos import DIAGNOSTICS_QOS, MEASURED_QOS, TARGET_QOS
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PointStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        self.node = Node('cbha_demo_recorder', context=context, namespace=NAMESPACE)
+        self.targets, self.tips, self.diagnostics = [], [], {}
+        self.node.create_subscription(PointStamped, 'target', self._point(self.targets),
+                                      TARGET_QOS)
+        self.node.create_subscription(PointStamped, 'tip/true', self._point(self.tips),
+                                      MEASURED_QOS)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
+                                      DIAGNOSTICS_QOS)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+
+    @staticmethod
+    def _point(store):
+        def callback(message):
+            stamp = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+            store.append((stamp, message.point.x, message.point.y, message.point.z))
+        return callback
+
+    def _on_diagnostics(self, message):
+        for status in message.status:
+            self.diagnostics[status.name] = ({v.key: v.value for v in status.values},
+                                             time.monotonic())
+
+    def spin_until(self, predicate, timeout):
+        """Spin until ``predicate()`` or ``timeout`` seconds; return the predicate."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and not predicate():
+            self.executor.spin_once(timeout_sec=0.05)
+        return predicate()
+
+    def clear(self):
+        """Forget what was recorded."""
+        self.targets.clear()
+        self.tips.clear()
+        self.diagnostics.clear()
+
+    def close(self):
+        """Destroy the node."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env):
+    """Run one shape in one mode for one lap and return its summary dict."""
+    speed = args.circle_speed if shape == 'circle' else args.square_speed
+    trajectory = make_trajectory(shape, center=center, radius=args.radius, side=args.side,
+                                 plane='yz', speed=speed, laps=1, start_hold=args.start_hold)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    recorder.clear()
+    common = {'scene': args.scene, 'valve_names': list(valve_names)}
+    processes = {'cbha_sim': _start('cbha_sim', run_dir, {
+        **common, 'stiffness_scale': args.stiffness_scale}, env)}
+    processes['inverse_solver'] = _start('inverse_solver', run_dir, {**common, 'mode': mode},
+                                         env)
+    try:
+        ready = recorder.spin_until(lambda: all(
+            any(name.startswith(f'{node}:') for name in recorder.diagnostics)
+            for node in ('cbha_sim', 'inverse_solver')), 120.0)
+        if not ready:
+            raise RuntimeError(f'nodes did not start, see the logs in {run_dir}')
+        launched = time.time()  # targets stamped earlier are late messages of a previous run
+        processes['trajectory'] = _start('trajectory', run_dir, {
+            'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
+            'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
+            'start_hold': args.start_hold, 'wait_for_subscribers': 2}, env)
+        recorder.spin_until(lambda: len(recorder.targets) > 0, 60.0)
+        started = time.monotonic()
+        recorder.spin_until(lambda: time.monotonic() - started > trajectory.duration + 0.3,
+                            trajectory.duration + 10.0)
+        fresh = time.monotonic()
+        recorder.spin_until(lambda: recorder.diagnostics.get(
+            'inverse_solver: control', ({}, 0.0))[1] > fresh, 3.0)
+    finally:
+        codes = _stop(processes)
+    targets = [t for t in recorder.targets if t[0] >= launched]
+    tips = recorder.tips
+    first = targets[0][0]
+    start, end = first + args.start_hold, first + trajectory.duration
+    errors = tracking_errors([t[0] for t in targets], [t[1:] for t in targets],
+                             [t[0] for t in tips], [t[1:] for t in tips], start, end)
+    control = recorder.diagnostics.get('inverse_solver: control', ({}, 0.0))[0]
+    plant = recorder.diagnostics.get('cbha_sim: plant', ({}, 0.0))[0]
+
+    def number(values, key):
+        try:
+            return float(values[key])
+        except (KeyError, ValueError):
+            return float('nan')
+
+    moving = [t[1:] for t in targets if start <= t[0] <= end]
+    tip_path = [t[1:] for t in tips if start <= t[0] <= end]
+    np.savez_compressed(run_dir / 'recording.npz', targets=np.array(targets), tips=np.array(tips),
+                        window=np.array([start, end]))
+    return {'shape': shape, 'mode': mode, 'speed_m_s': speed, 'lap_s': trajectory.lap_time,
+            'rms_mm': errors.rms * 1e3, 'max_mm': errors.maximum * 1e3,
+            'samples': int(errors.errors.size),
+            'tick_median_ms': number(control, 'tick_median_ms'),
+            'tick_p99_ms': number(control, 'tick_p99_ms'),
+            'latency_median_ms': number(control, 'latency_median_ms'),
+            'latency_p99_ms': number(control, 'latency_p99_ms'),
+            'solver_ticks': number(control, 'ticks'),
+            'solver_status': {k[len('status.'):]: v for k, v in control.items()
+                              if k.startswith('status.')},
+            'plant_tick_median_ms': number(plant, 'tick_median_ms'),
+            'exit_codes': codes,
+            '_targets': moving, '_tips': tip_path}
+
+
+def main(argv=None):
+    """
+    Run the demo; return 0 when every run completed and every node exited cleanly.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line without the program name (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit code.
+
+    """
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    wall = time.monotonic()
+    output = Path(args.output)
+    output.mkdir(parents=True, exist_ok=True)
+    scene = load_scene(args.scene)
+    center = scene.workspace_center[-1]
+    configured = yaml.safe_load(config_path('inverse_solver.yaml').read_text())
+    valve_names = configured['/**']['ros__parameters']['valve_names']
+    if sorted(valve_names) != sorted(scene.actuator_names):
+        valve_names = list(scene.actuator_names)
+    domain = args.domain
+    reservation = None
+    if domain is None and 'ROS_DOMAIN_ID' not in os.environ:
+        try:
+            from domain_coordinator import domain_id
+            reservation = domain_id()
+            domain = reservation.__enter__()
+        except ImportError:
+            domain = None
+    env = _environment(domain)
+    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                           'FASTDDS_BUILTIN_TRANSPORTS')})
+    if domain is not None:
+        os.environ['ROS_DOMAIN_ID'] = str(domain)
+    print(f'cbha_demo: scene {scene.name}, centre {[round(float(v), 4) for v in center]} m, '
+          f'plant stiffness x{args.stiffness_scale:g}, ROS_DOMAIN_ID {domain}, '
+          f'output {output}', flush=True)
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    recorder = Recorder(context)
+    results = []
+    try:
+        for shape in args.shapes.split(','):
+            for mode in args.modes.split(','):
+                result = run_once(recorder, output / f'{shape}_{mode}', shape, mode, args,
+                                  center, valve_names, env)
+                results.append(result)
+                print(f"{shape:6s} {mode:6s}: RMS {result['rms_mm']:6.3f} mm, max "
+                      f"{result['max_mm']:6.3f} mm | tick median {result['tick_median_ms']:.3f}"
+                      f" ms, p99 {result['tick_p99_ms']:.3f} ms | target->command latency "
+                      f"p99 {result['latency_p99_ms']:.3f} ms", flush=True)
+    finally:
+        recorder.close()
+        rclpy.try_shutdown(context=context)
+        if reservation is not None:
+            reservation.__exit__(None, None, None)
+    plot_runs([{'title': f"{r['shape']} {r['mode']} loop", 'targets': r['_targets'],
+                'tips': r['_tips'], 'rms': r['rms_mm'] * 1e-3} for r in results],
+              output / 'demo.png')
+    summary = {'scene': scene.name, 'center_m': [float(v) for v in center],
+               'stiffness_scale': args.stiffness_scale, 'wall_time_s': time.monotonic() - wall,
+               'runs': [{k: v for k, v in r.items() if not k.startswith('_')} for r in results]}
+    (output / 'summary.json').write_text(json.dumps(summary, indent=2))
+    print(f"wrote {output / 'demo.png'} and {output / 'summary.json'} "
+          f"({summary['wall_time_s']:.0f} s)")
+    clean = all(code == 0 for r in results for code in r['exit_codes'].values())
+    return 0 if clean else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
