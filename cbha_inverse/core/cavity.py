@@ -11,11 +11,11 @@ Two evaluators share this geometry:
 
 - :class:`CavityGroup` evaluates the skinned mesh (exact, cost proportional to the vertices);
 - :class:`cbha_inverse.core.cavity_linear.LinearCavityGroup` condenses each skinned segment
-  cavity, like the compliance of a segment, onto its two frames: the wrench on the upper frame is affine in the corotational
-  deformation of the segment (``G0 + H δ``, frame-i axes, fitted by central differences of the
-  exact mesh at rest) and the lower frame gets the equilibrating wrench. It costs one small
-  operation per segment and is the default of the online solver; its error against the exact
-  mesh is second order in the segment deformation and is checked in the tests.
+  cavity, like the compliance of a segment, onto its two frames: the wrench on the upper frame
+  is affine in the corotational deformation of the segment (``G0 + H δ``, frame-i axes, fitted
+  by central differences of the exact mesh at rest) and the lower frame gets the equilibrating
+  wrench. It costs one small operation per segment and is the default of the online solver; its
+  error against the exact mesh is second order in the segment deformation (tested).
 """
 
 from dataclasses import dataclass
