@@ -144,3 +144,94 @@ def large_bending(n_segments=8, length=0.01, radius=0.0025, *, youngs_modulus=1e
             'error_over_displacement': float(err / disp), 'error_over_length': float(err / total),
             'chain_seconds': chain_seconds, 'full_seconds': full.seconds, 'full': full,
             'chain': chain, 'force': force}
+
+
+def bellows_body(spec, n_segments, *, mesh_size=None, order=None):
+    """
+    Return the full-FE mesh and coupling of n stacked bellows segments with rigid vertebrae.
+
+    Every segment is three copies of the same tube mesh; vertebra frame i (at x = i L) holds
+    the upper wall ends of segment i and the lower wall ends of segment i + 1, the wall ends at
+    x = t_v / 2 are clamped.
+
+    Parameters
+    ----------
+    spec : dict
+        Bellows segment geometry YAML.
+    n_segments : int
+        Segments stacked.
+    mesh_size : float, optional  [m]
+        Element size (default the YAML's).
+    order : {1, 2}, optional
+        Element order (default the YAML's).
+
+    Returns
+    -------
+    mesh : TetMesh
+        Body mesh.
+    coupling : RigidCoupling
+        Frames 1..n.
+
+    """
+    from cbha_inverse.fem.bellows import geometry_tube_centres
+    from cbha_inverse.fem.coupling import build_coupling
+    from cbha_inverse.fem.geometry import bellows_tube_mesh
+    from cbha_inverse.fem.mesh import nodes_on_plane, TetMesh
+    g = spec['geometry']
+    tube = bellows_tube_mesh(g, mesh_size=mesh_size or spec['mesh']['mesh_size'],
+                             order=order or spec['mesh'].get('order', 2))
+    length, half = g['segment_length'], 0.5 * g['vertebra_thickness']
+    shifts = [(i * length, y_c, z_c) for i in range(n_segments)
+              for y_c, z_c in geometry_tube_centres(g)]
+    points = np.vstack([tube.points + s for s in shifts])
+    tets = np.vstack([tube.tets + k * tube.n_nodes for k in range(len(shifts))])
+    mesh = TetMesh(points, tets)
+    sets = [np.concatenate([nodes_on_plane(mesh, i * length - half),
+                            nodes_on_plane(mesh, i * length + half)])
+            for i in range(1, n_segments + 1)]
+    origins = [[i * length, 0.0, 0.0] for i in range(1, n_segments + 1)]
+    return mesh, build_coupling(mesh.points, sets, origins, nodes_on_plane(mesh, half))
+
+
+def bellows_chain_vs_full(spec, n_segments, *, mesh_size=None, order=None):
+    """
+    Compare the chain of condensed bellows segments with the full linear FE of the stack.
+
+    Parameters
+    ----------
+    spec : dict
+        Bellows segment geometry YAML.
+    n_segments : int
+        Segments stacked.
+    mesh_size : float, optional  [m]
+        Element size.
+    order : {1, 2}, optional
+        Element order.
+
+    Returns
+    -------
+    dict
+        'error' (6,) relative diagonal error of the tip compliance, 'full_seconds' (assembly,
+        factorisation and 6 solves of the body), 'chain_seconds' (one linear solve of the chain
+        by core.solve_static), 'body_dofs'.
+
+    """
+    from cbha_inverse.core.statics import solve_static
+    from cbha_inverse.fem.condensation import condense_bellows, frame_compliance
+    from cbha_inverse.fem.elasticity import assemble_stiffness
+    mat = spec['material']
+    seg = condense_bellows(spec, mesh_size=mesh_size, order=order)
+    model = chain_from_segments([seg] * n_segments)
+    chain = chain_tip_compliance(model)
+    small = 1e-9 * np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    t0 = time.perf_counter()
+    solve_static(model, tip_wrench=small)
+    chain_seconds = time.perf_counter() - t0
+    mesh, coupling = bellows_body(spec, n_segments, mesh_size=mesh_size, order=order)
+    t1 = time.perf_counter()
+    stiffness = assemble_stiffness(mesh, mat['youngs_modulus'], mat['poisson_ratio'])
+    full, _ = frame_compliance(stiffness, coupling, frame=-1)
+    full_seconds = time.perf_counter() - t1
+    return {'chain': chain, 'full': full, 'error': relative_diagonal_error(chain, full),
+            'full_seconds': full_seconds, 'chain_seconds': chain_seconds,
+            'body_dofs': coupling.n_reduced}
