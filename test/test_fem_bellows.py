@@ -110,6 +110,20 @@ def test_cli_writes_then_reuses_the_cached_segment(tmp_path, capsys):
     assert main([str(tmp_path / 'missing.yaml')]) == 1
 
 
+def test_cli_condenses_a_geo_file(tmp_path, capsys):
+    geo = tmp_path / 'bar.geo'
+    geo.write_text('SetFactory("OpenCASCADE");\nBox(1) = {0, -0.005, -0.005, 0.03, 0.01, 0.01};\n')
+    args = [str(geo), '--output-dir', str(tmp_path), '--mesh-size', '0.004',
+            '--youngs-modulus', '1e6', '--poisson-ratio', '0.3']
+    assert main(args) == 0
+    seg = load_segment(tmp_path / 'bar.yaml')
+    assert np.allclose(seg.rest_offset, [0.03, 0.0, 0.0])
+    # rigid ends stop the Poisson contraction: slightly stiffer than L / (E A)
+    assert 0.95 < seg.compliance[0, 0] / (0.03 / (1e6 * 1e-4)) < 1.0
+    assert main(args) == 0 and 'cached' in capsys.readouterr().out
+    assert main([str(geo), '--output-dir', str(tmp_path)]) == 1
+
+
 def test_segment_yaml_round_trip(tmp_path, segment):
     class _Fake:
         compliance = segment.compliance

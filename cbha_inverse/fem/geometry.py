@@ -133,6 +133,31 @@ def cylinder_mesh(length, outer_radius, inner_radius=0.0, *, mesh_size, order=2,
         return mesh_current_model(gmsh, order)
 
 
+def geo_file_mesh(path, *, mesh_size, order=2):
+    """
+    Mesh a gmsh ``.geo`` (or any gmsh-readable CAD) file in 3D.
+
+    Parameters
+    ----------
+    path : path-like
+        Geometry file in segment coordinates (axis +x, lower face on the plane of smallest x).
+    mesh_size : float  [m]
+        Target element size.
+    order : {1, 2}
+        Element order.
+
+    Returns
+    -------
+    TetMesh
+        The mesh.
+
+    """
+    with gmsh_session(mesh_size, order, 'geo') as gmsh:
+        gmsh.open(str(path))
+        gmsh.option.setNumber('Mesh.MeshSizeMax', float(mesh_size))
+        return mesh_current_model(gmsh, order)
+
+
 def bellows_tube_mesh(geometry, *, mesh_size, order=2, circumferential_elements=None,
                       through_thickness=None, curved=True, samples_per_pitch=16):
     """
