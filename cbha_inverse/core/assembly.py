@@ -9,7 +9,8 @@ the links (no Python loop per link).
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.links import link_terms, local_tangent_blocks, wrench_pair_from_terms
+from cbha_inverse.core.links import (link_terms, local_tangent, rotate_tangent,
+                                     wrench_pair_from_terms)
 from cbha_inverse.core.se3 import hat
 import numpy as np
 
@@ -157,16 +158,9 @@ def assemble_tangent(model, state):
     rot_a = state.rotations[:-1]
     terms = _chain_terms(model, state)
     w_a, w_b = wrench_pair_from_terms(terms, rot_a)
-    t_aa, t_ab, t_bb = local_tangent_blocks(terms, model.stiffnesses)
-    n = model.n_links
-    # rotate all three block kinds at once: diag(R, R) X diag(R, R)^T
-    rb = np.zeros((n, 6, 6))
-    rb[:, :3, :3] = rot_a
-    rb[:, 3:, 3:] = rot_a
-    stacked = np.stack([t_aa, t_ab, t_bb])
-    world = rb @ stacked @ np.swapaxes(rb, -1, -2)
-    diagonal = world[2].copy()
-    diagonal[:-1] += world[0, 1:]
-    diagonal = 0.5 * (diagonal + np.swapaxes(diagonal, 1, 2))
-    upper = world[1, 1:]
-    return TangentSystem(_gather_wrenches(w_a, w_b), diagonal, np.ascontiguousarray(upper))
+    world = rotate_tangent(rot_a, local_tangent(terms, model.stiffnesses))
+    diagonal = world[:, 6:, 6:].copy()
+    diagonal[:-1] += world[1:, :6, :6]
+    diagonal += np.swapaxes(diagonal, 1, 2)
+    diagonal *= 0.5
+    return TangentSystem(_gather_wrenches(w_a, w_b), diagonal, world[1:, :6, 6:].copy())

@@ -32,7 +32,8 @@ well-known non-symmetry of spatial rotation increments away from equilibrium.
 from typing import NamedTuple
 
 from cbha_inverse.core.se3 import (_EYE3, _jl_inv_coefficient, hat,
-                                   so3_left_jacobian_inverse_transpose_derivative, so3_log)
+                                   so3_left_jacobian_inverse_transpose_derivative, so3_log,
+                                   so3_log_angle)
 import numpy as np
 
 
@@ -116,6 +117,13 @@ def timoshenko_compliance(length, youngs_modulus, poisson_ratio, outer_radius, i
     return c
 
 
+_EYE4 = np.eye(4)
+# constant entries of the local deformation Jacobian B (see local_tangent)
+_B_TEMPLATE = np.zeros((6, 12))
+_B_TEMPLATE[:3, :3] = -np.eye(3)
+_B_TEMPLATE[:3, 6:9] = np.eye(3)
+
+
 class LinkTerms(NamedTuple):
     """Local (frame-a axes) quantities of a batch of links shared by wrench and tangent."""
 
@@ -193,10 +201,10 @@ def link_terms(stiffness, rest_offset, rest_rotation, position_a, rotation_a, po
     rel = rot_at @ rotation_b
     if rest_rotation is not None:
         rel = rel @ np.swapaxes(rest_rotation, -1, -2)
-    phi = so3_log(rel)
+    phi, theta = so3_log_angle(rel)
     delta = np.concatenate([offset - rest_offset, phi], axis=-1)
     stress = (stiffness @ delta[..., None])[..., 0]
-    coefficients = _jl_inv_coefficient(np.sqrt(np.sum(phi * phi, axis=-1)))
+    coefficients = _jl_inv_coefficient(theta)
     phi_hat = hat(phi)
     jinv = coefficients[0][..., None, None] * (phi_hat @ phi_hat) - 0.5 * phi_hat
     jinv += _EYE3
@@ -267,13 +275,57 @@ def link_wrenches(stiffness, rest_offset, rest_rotation, position_a, rotation_a,
     return wrench_pair_from_terms(terms, args[4])
 
 
+def local_tangent(terms, stiffness):
+    """
+    Exact 12x12 link tangent in frame-a axes, rows and columns ordered (frame a, frame b).
+
+    Material part ``B^T K B`` with the local deformation Jacobian (world increments rotated to
+    frame-a axes)::
+
+        B = [ -I   hat(p)   I   0  ]      p: current offset of b from a (the paper's H matrix)
+            [  0   -Jl^-1   0  Jl^-1 ]
+
+    plus the geometric part from the rotation of the force with R_a (``hat(s_t)``), the moving
+    lever arm and the variation of ``Jl^-1`` (``DJ = d(Jl^-T s_r)/dphi Jl^-1``).
+
+    Parameters
+    ----------
+    terms : LinkTerms
+        Local link quantities from :func:`link_terms`.
+    stiffness : (..., 6, 6) ndarray
+        Link stiffness K.
+
+    Returns
+    -------
+    (..., 12, 12) ndarray
+
+    """
+    batch = terms.phi.shape[:-1]
+    jinv = terms.jinv
+    p_hat = hat(terms.offset)
+    bmat = np.broadcast_to(_B_TEMPLATE, batch + (6, 12)).copy()
+    bmat[..., :3, 3:6] = p_hat
+    bmat[..., 3:, 9:] = jinv
+    bmat[..., 3:, 3:6] = -jinv
+    out = np.swapaxes(bmat, -1, -2) @ (stiffness @ bmat)
+    f_hat = hat(terms.stress[..., :3])
+    m_hat = hat(terms.wrench_b[..., 3:])
+    dj = so3_left_jacobian_inverse_transpose_derivative(
+        terms.phi, terms.stress[..., 3:], terms.coefficients) @ jinv
+    out[..., 0:3, 3:6] += f_hat
+    out[..., 3:6, 0:3] -= f_hat
+    out[..., 3:6, 3:6] += p_hat @ f_hat - m_hat + dj
+    out[..., 3:6, 6:9] += f_hat
+    out[..., 6:9, 3:6] -= f_hat
+    out[..., 3:6, 9:12] -= dj
+    out[..., 9:12, 3:6] += m_hat - dj
+    out[..., 9:12, 9:12] += dj
+    return out
+
+
 def local_tangent_blocks(terms, stiffness):
     """
     Exact link tangent blocks in frame-a axes: ``T_aa``, ``T_ab``, ``T_bb`` (``T_ba = T_ab^T``).
-
-    Material part ``B^T K B`` with ``B_b = diag(I, Jl^-1)``, ``B_a = -B_b [[I, -hat(p)], [0, I]]``
-    (p: current offset of b from a, the paper's H matrix) plus the geometric part from the
-    rotation of the force with R_a, the moving lever arm p, and the variation of ``Jl^-1``.
 
     Parameters
     ----------
@@ -287,40 +339,29 @@ def local_tangent_blocks(terms, stiffness):
     t_aa, t_ab, t_bb : (..., 6, 6) ndarrays
 
     """
-    batch = terms.phi.shape[:-1]
-    jinv = terms.jinv
-    a_b = np.zeros(batch + (6, 6))
-    a_b[..., :3, :3] = _EYE3
-    a_b[..., 3:, 3:] = jinv
-    t_bb = np.swapaxes(a_b, -1, -2) @ stiffness @ a_b
-    p_hat = hat(terms.offset)
-    tp = np.zeros(batch + (6, 6))
-    tp[..., :3, :3] = _EYE3
-    tp[..., 3:, 3:] = _EYE3
-    tp[..., :3, 3:] = -p_hat
-    t_ab = np.swapaxes(tp, -1, -2) @ t_bb
-    t_aa = t_ab @ tp
-    t_ab *= -1.0
-    # geometric part: s_t local force (on a), moment m = Jl^-T s_r, DJ = d(Jl^-T s_r)/dphi Jl^-1
-    f_hat = hat(terms.stress[..., :3])
-    m_hat = hat(terms.wrench_b[..., 3:])
-    dj = so3_left_jacobian_inverse_transpose_derivative(
-        terms.phi, terms.stress[..., 3:], terms.coefficients) @ jinv
-    t_aa[..., :3, 3:] += f_hat
-    t_aa[..., 3:, :3] -= f_hat
-    t_aa[..., 3:, 3:] += p_hat @ f_hat - m_hat + dj
-    t_ab[..., 3:, :3] += f_hat
-    t_ab[..., 3:, 3:] -= dj
-    t_bb[..., 3:, 3:] += dj
-    return t_aa, t_ab, t_bb
+    full = local_tangent(terms, stiffness)
+    return full[..., :6, :6], full[..., :6, 6:], full[..., 6:, 6:]
 
 
-def _rotate_block(rot, block):
-    """Return ``diag(R, R) @ block @ diag(R, R)^T`` for (..., 6, 6) blocks."""
-    rb = np.zeros(rot.shape[:-2] + (6, 6))
-    rb[..., :3, :3] = rot
-    rb[..., 3:, 3:] = rot
-    return rb @ block @ np.swapaxes(rb, -1, -2)
+def rotate_tangent(rotation_a, tangent):
+    """
+    Rotate 12x12 link tangents from frame-a axes to world axes: ``R4 T R4^T``.
+
+    Parameters
+    ----------
+    rotation_a : (..., 3, 3) ndarray
+        World rotation of frame a.
+    tangent : (..., 12, 12) ndarray
+        Tangents in frame-a axes.
+
+    Returns
+    -------
+    (..., 12, 12) ndarray
+
+    """
+    batch = rotation_a.shape[:-2]
+    r4 = (_EYE4[:, None, :, None] * rotation_a[..., None, :, None, :]).reshape(batch + (12, 12))
+    return r4 @ tangent @ np.swapaxes(r4, -1, -2)
 
 
 def link_tangent(stiffness, rest_offset, rest_rotation, position_a, rotation_a, position_b,
@@ -357,11 +398,4 @@ def link_tangent(stiffness, rest_offset, rest_rotation, position_a, rotation_a, 
     args = [np.asarray(v, dtype=float) for v in (stiffness, rest_offset, rest_rotation,
                                                  position_a, rotation_a, position_b, rotation_b)]
     terms = link_terms(*args)
-    t_aa, t_ab, t_bb = local_tangent_blocks(terms, args[0])
-    rot = args[4]
-    out = np.empty(terms.phi.shape[:-1] + (12, 12))
-    out[..., :6, :6] = _rotate_block(rot, t_aa)
-    out[..., :6, 6:] = _rotate_block(rot, t_ab)
-    out[..., 6:, :6] = np.swapaxes(out[..., :6, 6:], -1, -2)
-    out[..., 6:, 6:] = _rotate_block(rot, t_bb)
-    return out
+    return rotate_tangent(args[4], local_tangent(terms, args[0]))

@@ -20,6 +20,11 @@ _JL_SERIES = (1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 479
               3617.0 / (510.0 * 20922789888000.0), 43867.0 / (798.0 * 6402373705728000.0),
               174611.0 / (330.0 * 2432902008176640000.0))
 _EYE3 = np.eye(3)
+# flattened R @ _LOG_BASIS = (vee(R), tr(R) / 2)
+_LOG_BASIS = np.zeros((9, 4))
+_LOG_BASIS[[7, 2, 3], [0, 1, 2]] = 0.5
+_LOG_BASIS[[5, 6, 1], [0, 1, 2]] = -0.5
+_LOG_BASIS[[0, 4, 8], 3] = 0.5
 # hat(v) = v @ _HAT_BASIS reshaped to 3x3 (one matmul instead of six scattered writes)
 _HAT_BASIS = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0],
                        [0, 0, 1, 0, 0, 0, -1, 0, 0],
@@ -180,14 +185,36 @@ def so3_log(rot):
     (..., 3) ndarray  [rad]
 
     """
+    return so3_log_angle(rot)[0]
+
+
+def so3_log_angle(rot):
+    """
+    Return the rotation vectors and angles of rotation matrices (see :func:`so3_log`).
+
+    Parameters
+    ----------
+    rot : (..., 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    rotvec : (..., 3) ndarray  [rad]
+        Rotation vectors.
+    angle : (...,) ndarray  [rad]
+        Their norms, in [0, pi].
+
+    """
     rot = np.asarray(rot, dtype=float)
-    trace = rot[..., 0, 0] + rot[..., 1, 1] + rot[..., 2, 2]
-    if trace.size and trace.min() > -0.5:
-        d = vee(rot)
-        sin_t = np.sqrt(np.sum(d * d, axis=-1))
-        theta = np.arctan2(sin_t, 0.5 * (trace - 1.0))
-        ratio = np.divide(theta, sin_t, out=np.ones_like(theta), where=sin_t > 0.0)
-        return d * ratio[..., None]
+    # one product gives vee(R) = sin(t) axis and (tr R) / 2 = cos(t) + 1/2
+    mixed = rot.reshape(rot.shape[:-2] + (9,)) @ _LOG_BASIS
+    cos_t = mixed[..., 3] - 0.5
+    if cos_t.size and cos_t.min() > -0.75:
+        d = mixed[..., :3]
+        sin_t = np.sqrt((d * d).sum(axis=-1))
+        theta = np.arctan2(sin_t, cos_t)
+        # sin_t = 0 only for d = 0, where any finite ratio gives the zero vector
+        return d * (theta / np.maximum(sin_t, 1e-300))[..., None], theta
     q = quat_from_matrix(rot)
     v = q[..., :3]
     w = q[..., 3]
@@ -197,7 +224,7 @@ def so3_log(rot):
     safe_w = np.where(small, w, 1.0)
     scale = np.where(small, 2.0 / safe_w * (1.0 - s * s / (3.0 * safe_w * safe_w)),
                      2.0 * np.arctan2(s, w) / safe_s)
-    return v * scale[..., None]
+    return v * scale[..., None], 2.0 * np.arctan2(s, w)
 
 
 def _jl_inv_coefficient(theta):
