@@ -59,7 +59,8 @@ class InverseOptions:
         ticks (a modified Newton method): in between, a tick only evaluates the residual at the
         current state, solves one right-hand side and re-solves the QP with the same Hessian.
         The fixed point is the same (the residual is exact); convergence per tick is linear
-        instead of quadratic.
+        instead of quadratic. A kept linearisation is dropped early when the residual grows or
+        an actuator moves by more than 2 % of its range in one tick.
 
     """
 
@@ -193,6 +194,7 @@ class InverseSolver:
         self._qp.reset()
         self._linearization = None
         self._age = 0
+        self._residual_norm = np.inf
 
     @property
     def state(self):
@@ -242,11 +244,14 @@ class InverseSolver:
         return (internal.reshape(-1) + self._external
                 + actuation @ wrenches[:, 1:, :].reshape(wrenches.shape[0], -1))
 
-    def _held(self, status, targets, qp_status='not_run'):
+    def _held(self, status, started, qp_status='not_run'):
         """Return a tick result that keeps the actuation and the state."""
         m = self.actuation.size
+        elapsed = time.perf_counter() - started
+        timings = {'assembly': 0.0, 'factor': 0.0, 'projection': 0.0, 'qp': 0.0, 'update': 0.0,
+                   'total': elapsed}
         return TickResult(self.actuation.copy(), self.effector_positions(), status, qp_status, 0,
-                          np.zeros(m, dtype=bool), float('nan'), float('nan'), {})
+                          np.zeros(m, dtype=bool), float('nan'), float('nan'), timings)
 
     def step(self, targets):
         """
@@ -277,7 +282,7 @@ class InverseSolver:
             else:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
         if not np.all(np.isfinite(targets)):
-            return self._held('rejected', targets)
+            return self._held('rejected', t_start)
         previous = self.actuation
         positions, rotations = self._positions, self._rotations
         lin = self._linearization
@@ -294,7 +299,7 @@ class InverseSolver:
             factorization = self._factor(tangent, positions, rotations, previous)
             if factorization is None:
                 self._linearization = None
-                return self._held('not_positive_definite', targets)
+                return self._held('not_positive_definite', t_start)
             t_factor = time.perf_counter()
             levers = self.effectors.levers(rotations)
             projection = project_constraints(factorization, jat, residual, self.effectors,
@@ -342,6 +347,13 @@ class InverseSolver:
         gap = w_ea @ actuation + delta_free
         t_qp = time.perf_counter()
         increments = (free_step + lin[1] @ (actuation - previous)).reshape(-1, 6)
+        residual_norm = float(np.linalg.norm(residual))
+        if self._age > 1 and (residual_norm > 2.0 * self._residual_norm + 1e-9
+                              or np.max(np.abs(solution.x - problem.previous)) > 0.02):
+            # the kept linearisation no longer contracts (or the actuation moves fast):
+            # relinearise at the next tick
+            self._age = self.options.relinearize_every
+        self._residual_norm = residual_norm
         positions, rotations = fast_retract(positions, rotations, self._limited(increments))
         for _ in range(self.options.newton_steps - 1):
             internal, tangent = self._kernel.linearise(positions, rotations)
