@@ -111,8 +111,7 @@ def rigid_coupling(n_nodes, frame_nodes, frame_origins, clamped_nodes=()):
     """
     frame_nodes = tuple(np.asarray(f, dtype=np.int64) for f in frame_nodes)
     origins = np.asarray(frame_origins, dtype=float).reshape(-1, 3)
-    points_needed = len(frame_nodes) == len(origins)
-    if not points_needed:
+    if len(frame_nodes) != len(origins):
         raise ValueError('one origin per frame node set is needed')
     clamped = np.asarray(clamped_nodes, dtype=np.int64)
     owner = np.full(n_nodes, -2, dtype=np.int64)

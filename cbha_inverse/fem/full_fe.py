@@ -18,6 +18,7 @@ from cbha_inverse.fem.elasticity import (assemble_blocks, assemble_stiffness, el
                                          lame_parameters, shape_gradients)
 from cbha_inverse.fem.mesh import nodes_on_plane
 import numpy as np
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 
@@ -265,11 +266,12 @@ def solve_nonlinear(mesh, youngs_modulus, poisson_ratio, n_segments, length, tip
         r = t_mat.T @ f_int - lam * f_ext
         if not tangent:
             return r, None
-        k_red = (t_mat.T @ k_t @ t_mat).tolil()
-        for j, block in enumerate(_frame_geometric_blocks(base, f_int, arms)):
-            idx = base.frame_dofs(j)[3:]
-            k_red[np.ix_(idx, idx)] = k_red[np.ix_(idx, idx)].toarray() + block
-        return r, k_red.tocsc()
+        blocks = np.array(_frame_geometric_blocks(base, f_int, arms))
+        idx = np.array([base.frame_dofs(j)[3:] for j in range(n_segments)])
+        geometric = sp.coo_matrix(
+            (blocks.ravel(), (np.repeat(idx, 3, axis=1).ravel(), np.tile(idx, 3).ravel())),
+            shape=(base.n_reduced, base.n_reduced))
+        return r, (t_mat.T @ k_t @ t_mat + geometric).tocsc()
 
     def update(state, dz):
         u_free, disp, rots = state
