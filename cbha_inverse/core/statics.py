@@ -21,7 +21,7 @@ Convergence test (``residual_norm`` reports the left-hand side)::
 ``r_scaled`` is the residual with moments divided by the chain length L_c (so both are in N);
 ``load_scale`` is the largest scaled component of the applied loads and of the internal wrenches
 at the current state; ``floor`` is the round-off level of the internal forces,
-``1e3 eps max_links(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` with ``x_ref = L_c +
+``64 eps max_links(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` with ``x_ref = L_c +
 |base position|`` (max-abs entries of the stiffness blocks), below which no residual is
 meaningful.
 """
@@ -139,7 +139,7 @@ def _residual_floor(model, length):
     k_tr = max(k[:, :3, 3:].max(), k[:, 3:, :3].max())
     k_rr = k[:, 3:, 3:].max()
     x_ref = length + float(np.linalg.norm(model.base_position))
-    return 1e3 * np.finfo(float).eps * max(k_tt * x_ref + k_tr, (k_tr * x_ref + k_rr) / length)
+    return 64.0 * np.finfo(float).eps * max(k_tt * x_ref + k_tr, (k_tr * x_ref + k_rr) / length)
 
 
 def _scaled(wrenches, length):
@@ -302,7 +302,8 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         ``load_function(state) -> (n, 6)`` extra configuration-dependent wrenches (world axes,
         at frames 1..n), e.g. cables or pressure; scaled by the load factor like the dead loads.
     initial_state : ChainState, optional
-        Start of the iteration (e.g. the previous solution); the rest shape by default.
+        Warm start (e.g. the previous solution): Newton on the full load from it; if that
+        fails, load stepping from the rest shape (the default start).
     tolerance : float
         Relative residual tolerance (see the module docstring).
     max_iterations : int
@@ -321,14 +322,22 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
     """
     external = external_wrenches(model, tip_wrench, frame_wrenches, gravity)
     problem = _Problem(model, external, load_function, float(tolerance))
-    state = rest_state(model) if initial_state is None else initial_state
-    if state.positions.shape != (model.n_frames, 3):
-        raise ValueError('initial_state does not match the model')
     lam = 0.0
     increment = 1.0
     steps = 0
     total = 0
     message = ''
+    state = rest_state(model)
+    if initial_state is not None:
+        if initial_state.positions.shape != (model.n_frames, 3):
+            raise ValueError('initial_state does not match the model')
+        # warm start: the full load from the given state; if that fails, step up from rest
+        steps = 1
+        ok, new_state, total, _, why = _newton(problem, initial_state, 1.0, max_iterations)
+        if ok:
+            state, lam = new_state, 1.0
+        else:
+            message = f'warm start failed: {why}'
     while lam < 1.0:
         if steps >= max_load_steps:
             message = (f'not converged: load step budget ({max_load_steps}) exhausted at load '
