@@ -37,14 +37,15 @@ def test_scene_api(scene):
     assert scene.workspace_center.shape == (k, 3)
 
 
-def test_forward_inverse_consistency(scene):
+@pytest.mark.parametrize('relinearize_every', [1, 5])
+def test_forward_inverse_consistency(scene, relinearize_every):
     """Random in-bounds actuation → forward p*; the inverse solver from rest reaches p*."""
     rng = np.random.default_rng(42)
     m = len(scene.actuator_names)
     span = scene.upper_bounds - scene.lower_bounds
     actuation = scene.lower_bounds + span * rng.uniform(0.0, 0.6, m)
     target = scene.forward(actuation, strict=True).effector_positions
-    solver = scene.make_inverse_solver()
+    solver = scene.make_inverse_solver(relinearize_every=relinearize_every)
     errors = []
     for tick in range(30):
         out = solver.step(target)

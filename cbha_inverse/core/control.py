@@ -348,8 +348,8 @@ class InverseSolver:
         t_qp = time.perf_counter()
         increments = (free_step + lin[1] @ (actuation - previous)).reshape(-1, 6)
         residual_norm = float(np.linalg.norm(residual))
-        if self._age > 1 and (residual_norm > 2.0 * self._residual_norm + 1e-9
-                              or np.max(np.abs(solution.x - problem.previous)) > 0.02):
+        if (self._age > 1 and residual_norm > 2.0 * self._residual_norm + 1e-9) or np.max(
+                np.abs(solution.x - problem.previous)) > 0.02:
             # the kept linearisation no longer contracts (or the actuation moves fast):
             # relinearise at the next tick
             self._age = self.options.relinearize_every
