@@ -21,7 +21,7 @@ def _box(order, size=0.5):
 @pytest.fixture(scope='module')
 def boxes():
     """Coarse P1 and P2 meshes of a 1 x 0.8 x 0.6 box (and very coarse ones for eigenvalues)."""
-    return {1: _box(1), 2: _box(2), 'eig1': _box(1, 0.3), 'eig2': _box(2, 1.0)}
+    return {1: _box(1), 2: _box(2), 'eig1': _box(1, 1.0), 'eig2': _box(2, 2.0)}
 
 
 @pytest.mark.parametrize('order', [1, 2])
