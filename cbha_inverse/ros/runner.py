@@ -3,6 +3,7 @@
 from cbha_inverse.ros.params import ParameterError
 import rclpy
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation
 
 
 def run_node(node_class, node_name, argv=None):
@@ -31,6 +32,11 @@ def run_node(node_class, node_name, argv=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except rclpy_implementation.RCLError:
+        # A signal that shuts the context down while a callback runs makes the next wait-set
+        # construction fail instead of raising ExternalShutdownException: still a clean stop.
+        if rclpy.ok():
+            raise
     except (ParameterError, FileNotFoundError) as exc:
         rclpy.logging.get_logger(node_name).fatal(str(exc))
         return 2
