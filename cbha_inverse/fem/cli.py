@@ -72,7 +72,7 @@ def pressure_notes(spec, segment, cavities, pressure=150e3, n_segments=8):
         notes.append(
             f'cavity {name}: {upper[0]:.4e} N/Pa axial force and moment '
             f'{np.round(upper[3:], 10).tolist()} N*m/Pa at the upper frame; {pressure:.0f} Pa in '
-            f'this tube bends a {n_segments}-segment section by about '
+            f'this tube bends a section of {n_segments} segments by about '
             f'{np.degrees(np.linalg.norm(rotation) * pressure):.1f} deg (linear estimate)')
     return notes
 
