@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+from cbha_inverse.core.control import TargetCorrector
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -133,3 +134,21 @@ def test_tendon_scene_imports_no_gmsh_meshio_or_cv2():
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                          cwd=str(config_path().parents[0]), check=True, timeout=60)
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+
+
+def test_closed_loop_correction_removes_model_error():
+    """The plant is 20 % stiffer than the model: integral action brings the tip to the target."""
+    model = _load('tendon_6f_8c')
+    plant = load_scene(config_path('scenes', 'tendon_6f_8c.yaml'), stiffness_scale=1.2)
+    target = model.workspace_center + [[0.0, 0.008, -0.004]]
+    solver = model.make_inverse_solver()
+    corrector = TargetCorrector(1, gain=0.5, max_correction=0.02)
+    measured, state, errors, saturated = None, None, [], False
+    for _ in range(40):
+        out = solver.step(corrector.update(target, measured, saturated))
+        saturated = out.status == 'saturated'
+        real = plant.forward(out.actuation, initial_state=state, strict=True)
+        measured, state = real.effector_positions, real.state
+        errors.append(np.linalg.norm(measured - target))
+    assert errors[0] > 5e-4
+    assert errors[-1] < 1e-5, errors
