@@ -69,7 +69,9 @@ def test_band_storage_matches_definition():
 
 def test_auto_method_choice():
     """'auto' follows the documented size thresholds."""
-    assert btd.choose_method(1) == 'hybrid'
+    assert btd.choose_method(1) == 'dense'
+    assert btd.choose_method(btd.AUTO_DENSE_MAX) == 'dense'
+    assert btd.choose_method(btd.AUTO_DENSE_MAX + 1) == 'hybrid'
     assert btd.choose_method(btd.AUTO_HYBRID_MAX) == 'hybrid'
     assert btd.choose_method(btd.AUTO_HYBRID_MAX + 1) == 'banded'
     big = btd.AUTO_CYCLIC_MIN or 10 ** 6
@@ -100,6 +102,8 @@ def test_condition_estimate(method):
     diag = diag + (1e-11 - low) * np.eye(6)
     est = btd.factorize(diag, upper, method=method).condition_estimate
     assert est > 1e10
+    with pytest.raises(btd.IllConditionedError, match='ill-conditioned'):
+        btd.factorize(diag, upper, method=method, max_condition=1e8)
 
 
 def test_bad_input():

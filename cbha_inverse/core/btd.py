@@ -11,7 +11,8 @@ the frame chain is block tridiagonal). Storage::
     [             ...   D_{n-1} ]
 
 Backends (all exact direct methods; ``method='auto'`` picks by size with the thresholds
-:data:`AUTO_HYBRID_MAX` and :data:`AUTO_CYCLIC_MIN`, measured with ``cbha_bench_core``):
+:data:`AUTO_DENSE_MAX`, :data:`AUTO_HYBRID_MAX` and :data:`AUTO_CYCLIC_MIN`, measured with
+``cbha_bench_core``):
 
 - ``'banded'``: LAPACK banded Cholesky ``dpbtrf``/``dpbtrs`` on the (2b, bn) lower band storage
   (half-bandwidth 2b - 1 = 11), built from the blocks by two strided copies. The band of a
@@ -19,9 +20,11 @@ Backends (all exact direct methods; ``method='auto'`` picks by size with the thr
   Cholesky, run by compiled code; 'auto' uses it above :data:`AUTO_HYBRID_MAX` blocks;
 - ``'hybrid'``: the same ``dpbtrf`` factor scattered into a dense triangle and solved with
   ``dpotrs`` (level-3 ``dtrsm`` on all right-hand sides at once instead of ``dpbtrs``'s
-  column-by-column ``dtbsv``): the fastest for the control tick's small chains with many
-  right-hand sides;
-- ``'dense'``: LAPACK ``dpotrf``/``dpotrs`` on the assembled (bn x bn) matrix;
+  column-by-column ``dtbsv``): the fastest for the control tick's chains (up to
+  :data:`AUTO_HYBRID_MAX` blocks) with many right-hand sides;
+- ``'dense'``: LAPACK ``dpotrf``/``dpotrs`` on the assembled (bn x bn) matrix, written through
+  strided block views: the least Python overhead, 'auto' uses it up to :data:`AUTO_DENSE_MAX`
+  blocks;
 - ``'cyclic'``: block cyclic reduction, i.e. the block LDL^T (Cholesky) factorisation of the
   odd-even permuted matrix, each of its log2(n) levels vectorised over all its blocks with
   batched numpy (``cholesky``, ``inv``, ``matmul``). Exact and O(n), but measured slower than
@@ -36,7 +39,9 @@ Hager-Higham estimator with the factor's own solves otherwise).
 import numpy as np
 from scipy.linalg import lapack
 
-#: largest number of blocks for which 'auto' uses the hybrid backend (banded otherwise)
+#: largest number of blocks for which 'auto' uses the dense backend
+AUTO_DENSE_MAX = 8
+#: largest number of blocks for which 'auto' uses the hybrid backend (banded above)
 AUTO_HYBRID_MAX = 24
 #: smallest number of blocks for which 'auto' would use cyclic reduction: never on the reference
 #: machine (its factorisation measured 2-4x slower than dpbtrf at n = 1000 and 10000)
@@ -48,6 +53,10 @@ _MASKS = {}
 
 class NotPositiveDefiniteError(np.linalg.LinAlgError):
     """The block-tridiagonal matrix is not (numerically) positive definite."""
+
+
+class IllConditionedError(np.linalg.LinAlgError):
+    """The condition estimate exceeds the limit given to :func:`factorize`."""
 
 
 def _check_blocks(diagonal, upper):
@@ -112,6 +121,11 @@ def to_lower_banded(diagonal, upper):
 
     """
     diagonal, upper = _check_blocks(diagonal, upper)
+    return _band(diagonal, upper)
+
+
+def _band(diagonal, upper):
+    """Lower band storage of checked blocks (see :func:`to_lower_banded`)."""
     n, b = diagonal.shape[:2]
     w = 2 * b
     band = np.empty((n, b * w))
@@ -135,19 +149,17 @@ def _dense_lower(diagonal, upper):
     """
     Assemble the dense matrix for LAPACK ``uplo='L'`` without a copy (Fortran order).
 
-    The diagonal and upper blocks are written into a C-ordered array with strided block views;
-    its transpose is Fortran-contiguous and holds them as the lower triangle.
+    The diagonal and upper blocks are written into a C-ordered array through block views with
+    row stride ``b (bn + 1)`` (slices of a reshaped flat buffer); its transpose is
+    Fortran-contiguous and holds them as the lower triangle.
     """
     n, b = diagonal.shape[:2]
     size = n * b
-    out = np.zeros((size, size))
-    item = out.itemsize
-    strides = ((b * size + b) * item, size * item, item)
-    np.ndarray((n, b, b), dtype=float, buffer=out, strides=strides)[...] = diagonal
-    if n > 1:
-        np.ndarray((n - 1, b, b), dtype=float, buffer=out, offset=b * item,
-                   strides=strides)[...] = upper
-    return out.T
+    step = b * (size + 1)
+    flat = np.zeros(n * step)
+    flat.reshape(n, step)[:, :b * size].reshape(n, b, size)[:, :, :b] = diagonal
+    flat.reshape(n, step)[:-1, b:b + b * size].reshape(n - 1, b, size)[:, :, :b] = upper
+    return flat[:size * size].reshape(size, size).T
 
 
 def _not_pd(row, block_size, pivot, how):
@@ -264,7 +276,7 @@ def _factor_dense(diagonal, upper):
 def _factor_banded(diagonal, upper):
     """LAPACK banded Cholesky backend (dpbtrf / dpbtrs)."""
     n, b = diagonal.shape[:2]
-    factor, info = lapack.dpbtrf(to_lower_banded(diagonal, upper), lower=1, overwrite_ab=1)
+    factor, info = lapack.dpbtrf(_band(diagonal, upper), lower=1, overwrite_ab=1)
     if info > 0:
         raise _not_pd(info - 1, b, factor[0, info - 1], 'banded Cholesky')
     if info < 0 or not np.isfinite(factor[0]).all():
@@ -287,7 +299,7 @@ def _factor_hybrid(diagonal, upper):
     instead of ``dpbtrs``'s column-by-column ``dtbsv``.
     """
     n, b = diagonal.shape[:2]
-    band, info = lapack.dpbtrf(to_lower_banded(diagonal, upper), lower=1, overwrite_ab=1)
+    band, info = lapack.dpbtrf(_band(diagonal, upper), lower=1, overwrite_ab=1)
     if info > 0:
         raise _not_pd(info - 1, b, band[0, info - 1], 'banded Cholesky')
     if info < 0 or not np.isfinite(band[0]).all():
@@ -405,6 +417,8 @@ def choose_method(n_blocks):
     str
 
     """
+    if n_blocks <= AUTO_DENSE_MAX:
+        return 'dense'
     if n_blocks <= AUTO_HYBRID_MAX:
         return 'hybrid'
     if AUTO_CYCLIC_MIN is not None and n_blocks >= AUTO_CYCLIC_MIN:
@@ -412,7 +426,7 @@ def choose_method(n_blocks):
     return 'banded'
 
 
-def factorize(diagonal, upper, method='auto'):
+def factorize(diagonal, upper, method='auto', max_condition=None):
     """
     Factorise a symmetric positive definite block-tridiagonal matrix.
 
@@ -424,6 +438,9 @@ def factorize(diagonal, upper, method='auto'):
         ``upper[i]`` = block (i, i+1); block (i+1, i) is its transpose.
     method : {'auto', 'hybrid', 'dense', 'banded', 'cyclic'}
         Backend; 'auto' chooses by size (see :func:`choose_method`).
+    max_condition : float, optional
+        If given, the condition estimate is computed at once and a larger one raises
+        :class:`IllConditionedError` (otherwise it is computed on first access).
 
     Returns
     -------
@@ -434,6 +451,8 @@ def factorize(diagonal, upper, method='auto'):
     ------
     NotPositiveDefiniteError
         If the matrix is not numerically positive definite (message names the block).
+    IllConditionedError
+        If ``max_condition`` is given and exceeded.
     ValueError
         On bad shapes, an unknown method, or non-finite entries (detected in the factor).
 
@@ -443,13 +462,14 @@ def factorize(diagonal, upper, method='auto'):
         raise ValueError(f'method must be one of {METHODS}, got {method!r}')
     if method == 'auto':
         method = choose_method(diagonal.shape[0])
-    if method == 'dense':
-        return _factor_dense(diagonal, upper)
-    if method == 'hybrid':
-        return _factor_hybrid(diagonal, upper)
-    if method == 'banded':
-        return _factor_banded(diagonal, upper)
-    return _factor_cyclic(diagonal, upper)
+    backend = {'dense': _factor_dense, 'hybrid': _factor_hybrid, 'banded': _factor_banded,
+               'cyclic': _factor_cyclic}[method]
+    factorization = backend(diagonal, upper)
+    if max_condition is not None and not factorization.condition_estimate <= max_condition:
+        raise IllConditionedError(
+            f'block-tridiagonal matrix is ill-conditioned: 1-norm condition estimate '
+            f'{factorization.condition_estimate:.3g} > {max_condition:.3g}')
+    return factorization
 
 
 def solve(diagonal, upper, rhs, method='auto'):
