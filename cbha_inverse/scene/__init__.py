@@ -20,10 +20,14 @@ Scene YAML schema (SI units)::
       sections: [{name, segment: <path relative to the scene file>, count}]
     cables: [{name, angle_deg, radius, end_vertebra, max_tension}]       # routed base → end
     cavities: [{name, section, cavity: <segment cavity name>, max_pressure}]
-    cavity_model: linear | mesh          # see cbha_inverse.core.cavity (default linear)
+    cavity_model: linear | mesh          # core.cavity_linear / core.cavity (default linear)
     actuator_order: [names]              # column order (default: cables, then cavities)
     effectors: [{name, frame: <int or 'tip'> or vertebra: <int>, offset: [x, y, z]}]
     workspace_center: [x, y, z] or {actuation_fraction: f}
+    solver: {energy_weight, proximal_weight, rate_limit, relinearize_every, ...}  # defaults
+
+Scenes shipped in ``config/scenes``: ``tendon_6f_8c`` and ``tendon_10f_16c`` (the paper's Fig. 6
+trunks, Timoshenko beams and cables) and ``cbha`` (16 condensed bellows segments, 6 cavities).
 """
 
 from dataclasses import dataclass
