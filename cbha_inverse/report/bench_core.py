@@ -212,7 +212,8 @@ def btd_table(sizes, rhs_counts, budget, out):
     print(f'dense LAPACK skipped above n = {DENSE_MAX_FRAMES} frames (6n x 6n dense matrix; '
           f'at n = 1000 it is 288 MB and seconds per factorisation).', file=out)
     print(f"'auto' uses dense for n <= {btd.AUTO_DENSE_MAX}, hybrid for n <= "
-          f'{btd.AUTO_HYBRID_MAX}, banded above'
+          f'{btd.AUTO_HYBRID_MAX} if BLAS is single-threaded '
+          f'(now: {btd.blas_single_threaded()}), banded otherwise'
           + (f', cyclic from n = {btd.AUTO_CYCLIC_MIN}' if btd.AUTO_CYCLIC_MIN else '')
           + '.', file=out)
     return rows
