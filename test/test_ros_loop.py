@@ -254,3 +254,41 @@ def test_stale_target_holds_or_vents_within_timeout(rclpy_context, action):
         assert np.all(np.isfinite(expected)) and not np.allclose(expected, 0.0)
     for _, command in after:
         np.testing.assert_allclose(command, expected, rtol=0, atol=0)
+
+
+def test_stale_feedback_in_closed_loop_vents_within_timeout(rclpy_context):
+    timeout = 0.2
+    vent = 1.0
+    solver = _solver(rclpy_context, max_pressure=MAX_TENSION, mode='closed',
+                     feedback_timeout=timeout, stale_action='vent', vent_pressure=vent,
+                     rate_hz=100.0)
+    client = Node('client', context=rclpy_context, namespace='/cbha')
+    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    measured_pub = client.create_publisher(PointStamped, 'tip/measured', MEASURED_QOS)
+    commands = []
+    client.create_subscription(Float64MultiArray, 'pressure_command', lambda m: commands.append(
+        (time.monotonic(), np.array(m.data))), COMMAND_QOS)
+    executor = SingleThreadedExecutor(context=rclpy_context)
+    executor.add_node(solver)
+    executor.add_node(client)
+    try:
+        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
+                          and measured_pub.get_subscription_count() > 0, 10.0)
+        last_measured = None
+        start = time.monotonic()
+        while time.monotonic() < start + 1.0:
+            target_pub.publish(_point(CENTER[0], 0.005, 0.0))
+            if time.monotonic() < start + 0.5:
+                measured_pub.publish(_point(*CENTER))
+                last_measured = time.monotonic()
+            spin_for(executor, 0.01)
+    finally:
+        executor.shutdown()
+        solver.destroy_node()
+        client.destroy_node()
+    assert solver.decision == 'vent'
+    running = [c for t, c in commands if t < last_measured]
+    assert running and not np.allclose(running[-1], vent)
+    first_vent = next(t for t, c in commands if t > last_measured and np.allclose(c, vent))
+    assert first_vent - last_measured < timeout + 0.1
+    assert all(np.allclose(c, vent) for t, c in commands if t > first_vent)
