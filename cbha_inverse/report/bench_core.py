@@ -40,9 +40,47 @@ DENSE_MAX_FRAMES = 200
 OUR_METHODS = ('hybrid', 'dense', 'banded', 'cyclic')
 
 
+def time_calls(funcs, budget):
+    """
+    Return the best mean time [s] of each function, measured in interleaved rounds.
+
+    Each round times every function once over a batch of calls (batch sized to ~1/8 of the
+    per-function budget); the minimum over rounds is kept. Interleaving makes the comparison
+    fair when the machine's load changes during the run (a shared 2-core machine here).
+
+    Parameters
+    ----------
+    funcs : dict of str -> callable
+        Called without arguments.
+    budget : float  [s]
+        Approximate time to spend per function.
+
+    Returns
+    -------
+    dict of str -> float
+
+    """
+    numbers = {}
+    for name, func in funcs.items():
+        start = time.perf_counter()
+        func()
+        first = max(time.perf_counter() - start, 1e-7)
+        numbers[name] = max(1, int(budget / (8 * first)))
+    rounds = 7 if max(numbers.values()) > 1 else 3
+    best = dict.fromkeys(funcs, np.inf)
+    for _ in range(rounds):
+        for name, func in funcs.items():
+            number = numbers[name]
+            start = time.perf_counter()
+            for _ in range(number):
+                func()
+            best[name] = min(best[name], (time.perf_counter() - start) / number)
+    return best
+
+
 def time_call(func, budget):
     """
-    Return the best mean time [s] of ``func()`` over repeats lasting about ``budget`` seconds.
+    Return the best mean time [s] of ``func()`` (see :func:`time_calls`).
 
     Parameters
     ----------
@@ -56,18 +94,7 @@ def time_call(func, budget):
     float
 
     """
-    start = time.perf_counter()
-    func()
-    first = max(time.perf_counter() - start, 1e-7)
-    repeats = 5 if first < budget / 10 else 3
-    number = max(1, int(budget / (repeats * first)))
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        for _ in range(number):
-            func()
-        best = min(best, (time.perf_counter() - start) / number)
-    return best
+    return time_calls({'f': func}, budget)['f']
 
 
 def beam_chain(n_links, length=0.5, youngs_modulus=2.0e9, outer_radius=0.01,
@@ -185,19 +212,18 @@ def btd_table(sizes, rhs_counts, budget, out):
                 return lapack.dpotrs(factor, rhs, lower=1)[0]
 
             ref = lapack_banded()
-            row = {'n': n, 'k': k, 'pb': time_call(lapack_banded, budget)}
-            row['po'] = time_call(lapack_dense, budget) if dense is not None else None
+            funcs = {'pb': lapack_banded}
+            if dense is not None:
+                funcs['po'] = lapack_dense
             for method in OUR_METHODS:
-                if method in ('dense', 'hybrid') and dense is None:
-                    row[method] = None
-                    continue
-                row[method] = time_call(
-                    lambda m=method: btd.factorize(diag, upper, m).solve(rhs), budget)
+                if method not in ('dense', 'hybrid') or dense is not None:
+                    funcs[method] = (lambda m=method: btd.factorize(diag, upper, m).solve(rhs))
+            funcs['auto'] = lambda: btd.factorize(diag, upper).solve(rhs)
+            row = {'n': n, 'k': k, 'po': None, 'dense': None, 'hybrid': None}
+            row.update(time_calls(funcs, budget))
             auto = btd.factorize(diag, upper)
-            err = np.abs(auto.solve(rhs) - ref).max() / np.abs(ref).max()
-            row['auto'] = time_call(lambda: btd.factorize(diag, upper).solve(rhs), budget)
             row['method'] = auto.method
-            row['err'] = err
+            row['err'] = err = np.abs(auto.solve(rhs) - ref).max() / np.abs(ref).max()
             best = min(row[m] for m in OUR_METHODS if row[m] is not None)
             rows.append(row)
 
@@ -248,11 +274,11 @@ def static_report(budget, out):
     fac = btd.factorize(tangent.diagonal, tangent.upper)
     rhs6 = rng.normal(size=(96, 6))
     rhs20 = rng.normal(size=(96, 20))
-    times['assemble_tangent'] = time_call(lambda: assemble_tangent(model, state), budget)
-    times[f'factorize ({fac.method})'] = time_call(
-        lambda: btd.factorize(tangent.diagonal, tangent.upper), budget)
-    times['solve 6 RHS'] = time_call(lambda: fac.solve(rhs6), budget)
-    times['solve 20 RHS'] = time_call(lambda: fac.solve(rhs20), budget)
+    times.update(time_calls({
+        'assemble_tangent': lambda: assemble_tangent(model, state),
+        f'factorize ({fac.method})': lambda: btd.factorize(tangent.diagonal, tangent.upper),
+        'solve 6 RHS': lambda: fac.solve(rhs6),
+        'solve 20 RHS': lambda: fac.solve(rhs20)}, budget))
     print('\nControl-tick pieces, 17-frame chain (16 links), microseconds:', file=out)
     for name, value in times.items():
         print(f'  {name:28s} {value * 1e6:9.1f}', file=out)
