@@ -96,8 +96,23 @@ def blocks_to_dense(diagonal, upper, lower=None):
     return out.reshape(n * b, n * b)
 
 
-def _chain_terms(model, state):
-    """Link terms of all links of a chain at ``state``."""
+def chain_terms(model, state):
+    """
+    Evaluate the local terms of all links of a chain (shared by wrenches and tangent).
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+    state : ChainState
+        Frame poses.
+
+    Returns
+    -------
+    LinkTerms
+        Batched over the n links.
+
+    """
     pos = state.positions
     rot = state.rotations
     terms = link_terms(model.stiffnesses, model.rest_offsets, model.rest_rotations,
@@ -112,7 +127,7 @@ def _gather_wrenches(w_a, w_b):
     return internal
 
 
-def internal_wrenches(model, state):
+def internal_wrenches(model, state, terms=None):
     """
     Total link wrench on frames 1..n (the elastic force f(q) of paper eq. 9).
 
@@ -122,6 +137,8 @@ def internal_wrenches(model, state):
         The chain.
     state : ChainState
         Frame poses.
+    terms : LinkTerms, optional
+        ``chain_terms(model, state)`` if already computed.
 
     Returns
     -------
@@ -129,12 +146,13 @@ def internal_wrenches(model, state):
         World axes, at each frame origin.
 
     """
-    terms = _chain_terms(model, state)
+    if terms is None:
+        terms = chain_terms(model, state)
     w_a, w_b = wrench_pair_from_terms(terms, state.rotations[:-1])
     return _gather_wrenches(w_a, w_b)
 
 
-def assemble_tangent(model, state):
+def assemble_tangent(model, state, terms=None):
     """
     Assemble internal wrenches and the BTD tangent ``K = -d internal / d increments``.
 
@@ -149,6 +167,8 @@ def assemble_tangent(model, state):
         The chain.
     state : ChainState
         Frame poses.
+    terms : LinkTerms, optional
+        ``chain_terms(model, state)`` if already computed.
 
     Returns
     -------
@@ -156,7 +176,8 @@ def assemble_tangent(model, state):
 
     """
     rot_a = state.rotations[:-1]
-    terms = _chain_terms(model, state)
+    if terms is None:
+        terms = chain_terms(model, state)
     w_a, w_b = wrench_pair_from_terms(terms, rot_a)
     world = rotate_tangent(rot_a, local_tangent(terms, model.stiffnesses))
     diagonal = world[:, 6:, 6:].copy()

@@ -28,9 +28,8 @@ meaningful.
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.assembly import assemble_tangent, internal_wrenches
+from cbha_inverse.core.assembly import assemble_tangent, chain_terms, internal_wrenches
 from cbha_inverse.core.chain import ChainState, rest_state
-from cbha_inverse.core.links import link_terms
 from cbha_inverse.core.se3 import so3_exp
 import numpy as np
 from scipy.linalg import solve_banded
@@ -203,7 +202,7 @@ class _Problem:
         return res, r_max, float(np.linalg.norm(scaled)), ok
 
 
-def _relative_update(model, state, step):
+def _relative_update(model, state, step, terms):
     """
     Map world increments of frames 1..n to link-deformation increments and a pose generator.
 
@@ -216,8 +215,6 @@ def _relative_update(model, state, step):
     steps acceptable at large rotations.
     """
     pos, rot = state.positions, state.rotations
-    terms = link_terms(model.stiffnesses, model.rest_offsets, model.rest_rotations,
-                       pos[:-1], rot[:-1], pos[1:], rot[1:])
     inc = np.concatenate([np.zeros((1, 6)), step], axis=0)
     rot_at = np.swapaxes(rot[:-1], 1, 2)
     dx = inc[1:, :3] - inc[:-1, :3] - np.cross(inc[:-1, 3:], pos[1:] - pos[:-1])
@@ -239,21 +236,24 @@ def _relative_update(model, state, step):
     return poses
 
 
-def _line_search(problem, state, lam, step, r_two):
+def _line_search(problem, state, terms, lam, step, r_two):
     """
     Backtrack along the Newton step (in deformation coordinates) on the residual norm.
 
     Armijo test on the Euclidean norm of the scaled residual, ``|r(a)| <= (1 - 1e-4 a) |r(0)|``,
-    halving ``a`` at most ``_MAX_HALVINGS`` times; returns the accepted state or None (the load
-    step is then cut, which is cheaper than creeping along a poor direction).
+    halving ``a`` at most ``_MAX_HALVINGS`` times; returns the accepted state and its link terms,
+    or None (the load step is then cut, which is cheaper than creeping along a poor direction).
     """
-    poses = _relative_update(problem.model, state, step)
+    model = problem.model
+    poses = _relative_update(model, state, step, terms)
     alpha = 1.0
     for _ in range(_MAX_HALVINGS):
         trial = poses(alpha)
-        _, _, t_two, ok = problem.evaluate(trial, lam)
+        trial_terms = chain_terms(model, trial)
+        internal = internal_wrenches(model, trial, trial_terms)
+        _, _, t_two, ok = problem.evaluate(trial, lam, internal)
         if ok or t_two <= (1.0 - _ARMIJO * alpha) * r_two:
-            return trial
+            return trial, trial_terms
         alpha *= 0.5
     return None
 
@@ -262,9 +262,10 @@ def _newton(problem, state, lam, max_iterations):
     """Newton iterations at a fixed load factor; returns (ok, state, iterations, r_max, why)."""
     model = problem.model
     iterations = 0
+    terms = chain_terms(model, state)
     while True:
-        tangent = assemble_tangent(model, state)
-        res, r_max, r_two, ok = problem.evaluate(state, lam, tangent.internal)
+        internal = internal_wrenches(model, state, terms)
+        res, r_max, r_two, ok = problem.evaluate(state, lam, internal)
         if ok:
             return True, state, iterations, r_max, 'converged'
         if not np.isfinite(r_max):
@@ -272,14 +273,14 @@ def _newton(problem, state, lam, max_iterations):
         if iterations >= max_iterations:
             return False, state, iterations, r_max, 'iteration budget exhausted'
         try:
-            step = _newton_direction(tangent, res)
+            step = _newton_direction(assemble_tangent(model, state, terms), res)
         except np.linalg.LinAlgError:
             return False, state, iterations, r_max, 'singular tangent'
         iterations += 1
-        trial = _line_search(problem, state, lam, step, r_two)
-        if trial is None:
+        accepted = _line_search(problem, state, terms, lam, step, r_two)
+        if accepted is None:
             return False, state, iterations, r_max, 'line search failed'
-        state = trial
+        state, terms = accepted
 
 
 def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
