@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.linalg import solveh_banded
 
-METHODS = ('hybrid', 'dense', 'banded', 'cyclic', 'auto')
+METHODS = ('hybrid', 'dense', 'banded', 'cyclic', 'block', 'auto')
 
 
 def _random_btd(rng, n, b=6, shift=None):
@@ -90,7 +90,7 @@ def test_refuses_indefinite_matrix(method):
     assert issubclass(btd.NotPositiveDefiniteError, np.linalg.LinAlgError)
 
 
-@pytest.mark.parametrize('method', ('hybrid', 'dense', 'banded', 'cyclic'))
+@pytest.mark.parametrize('method', ('hybrid', 'dense', 'banded', 'cyclic', 'block'))
 def test_condition_estimate(method):
     """The 1-norm condition estimate is a sharp lower bound and flags ill-conditioning."""
     rng = np.random.default_rng(3)
@@ -117,7 +117,7 @@ def test_bad_input():
         btd.factorize(diag, upper, method='magic')
     bad = diag.copy()
     bad[2, 1, 1] = np.nan
-    for method in ('hybrid', 'dense', 'banded', 'cyclic'):
+    for method in ('hybrid', 'dense', 'banded', 'cyclic', 'block'):
         with pytest.raises((ValueError, np.linalg.LinAlgError)):
             btd.factorize(bad, upper, method=method)
     with pytest.raises(ValueError):

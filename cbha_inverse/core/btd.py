@@ -29,7 +29,10 @@ Backends (all exact direct methods; ``method='auto'`` picks by size with the thr
 - ``'cyclic'``: block cyclic reduction, i.e. the block LDL^T (Cholesky) factorisation of the
   odd-even permuted matrix, each of its log2(n) levels vectorised over all its blocks with
   batched numpy (``cholesky``, ``inv``, ``matmul``). Exact and O(n), but measured slower than
-  ``dpbtrf`` on the reference machine, so 'auto' does not choose it.
+  ``dpbtrf`` on the reference machine, so 'auto' does not choose it;
+- ``'block'``: the textbook sequential block Cholesky, one Python iteration per block (LAPACK
+  on the 6x6 blocks): the readable reference; its per-block interpreter cost (~10 us) is what
+  the compiled band kernels remove.
 
 Every backend detects a matrix that is not positive definite and raises
 :class:`NotPositiveDefiniteError` naming the block; :attr:`BTDFactorization.condition_estimate`
@@ -50,7 +53,7 @@ AUTO_HYBRID_MAX = 24
 #: machine (its factorisation measured 2-4x slower than dpbtrf at n = 1000 and 10000)
 AUTO_CYCLIC_MIN = None
 
-METHODS = ('auto', 'hybrid', 'dense', 'banded', 'cyclic')
+METHODS = ('auto', 'hybrid', 'dense', 'banded', 'cyclic', 'block')
 _MASKS = {}
 
 
@@ -165,7 +168,7 @@ def _dense_lower(diagonal, upper):
     return flat[:size * size].reshape(size, size).T
 
 
-def _not_pd(row, block_size, pivot, how):
+def not_pd_error(row, block_size, pivot, how):
     """Build the error for a failed pivot at global row ``row`` (0-based)."""
     block, comp = divmod(int(row), block_size)
     return NotPositiveDefiniteError(
@@ -265,7 +268,7 @@ def _factor_dense(diagonal, upper):
     n, b = diagonal.shape[:2]
     factor, info = lapack.dpotrf(_dense_lower(diagonal, upper), lower=1, clean=0, overwrite_a=1)
     if info > 0:
-        raise _not_pd(info - 1, b, factor[info - 1, info - 1], 'dense Cholesky')
+        raise not_pd_error(info - 1, b, factor[info - 1, info - 1], 'dense Cholesky')
     if info < 0 or not np.isfinite(factor.diagonal()).all():
         raise ValueError('dense Cholesky failed: non-finite entries or illegal argument')
 
@@ -281,7 +284,7 @@ def _factor_banded(diagonal, upper):
     n, b = diagonal.shape[:2]
     factor, info = lapack.dpbtrf(_band(diagonal, upper), lower=1, overwrite_ab=1)
     if info > 0:
-        raise _not_pd(info - 1, b, factor[0, info - 1], 'banded Cholesky')
+        raise not_pd_error(info - 1, b, factor[0, info - 1], 'banded Cholesky')
     if info < 0 or not np.isfinite(factor[0]).all():
         raise ValueError('banded Cholesky failed: non-finite entries or illegal argument')
 
@@ -304,7 +307,7 @@ def _factor_hybrid(diagonal, upper):
     n, b = diagonal.shape[:2]
     band, info = lapack.dpbtrf(_band(diagonal, upper), lower=1, overwrite_ab=1)
     if info > 0:
-        raise _not_pd(info - 1, b, band[0, info - 1], 'banded Cholesky')
+        raise not_pd_error(info - 1, b, band[0, info - 1], 'banded Cholesky')
     if info < 0 or not np.isfinite(band[0]).all():
         raise ValueError('banded Cholesky failed: non-finite entries or illegal argument')
     size = n * b
@@ -318,92 +321,6 @@ def _factor_hybrid(diagonal, upper):
         return x
 
     return BTDFactorization('hybrid', (diagonal, upper), solver, dense_factor=factor)
-
-
-def _first_bad_block(blocks):
-    """Index of the first block whose Cholesky fails, and its smallest eigenvalue."""
-    for k, blk in enumerate(blocks):
-        try:
-            np.linalg.cholesky(blk)
-        except np.linalg.LinAlgError:
-            return k, float(np.linalg.eigvalsh(0.5 * (blk + blk.T))[0])
-    return 0, float('nan')
-
-
-def _factor_cyclic(diagonal, upper):
-    """
-    Block cyclic reduction backend (block LDL^T of the odd-even permuted matrix).
-
-    At each level the odd blocks j are eliminated: with ``X_l = D_j^-1 U_{j-1}^T`` and ``X_r =
-    D_j^-1 U_j``, the even blocks become ``D_i -= U_{i-1}^T X_r(i-1) + U_i X_l(i+1)`` and
-    couple to the next even block by ``-U_i X_r(i+1)``. The Schur complements of an SPD matrix
-    are SPD, so a failed Cholesky of a pivot block proves the matrix is not positive definite.
-    """
-    n, b = diagonal.shape[:2]
-    if not (np.isfinite(diagonal).all() and np.isfinite(upper).all()):
-        raise ValueError('block-tridiagonal matrix has non-finite entries')
-    d = diagonal
-    u = upper
-    index = np.arange(n)
-    levels = []
-    while d.shape[0] > 1:
-        m = d.shape[0]
-        d_odd = d[1::2]
-        try:
-            np.linalg.cholesky(d_odd)
-        except np.linalg.LinAlgError:
-            k, eig = _first_bad_block(d_odd)
-            raise NotPositiveDefiniteError(
-                'block-tridiagonal matrix is not positive definite: cyclic-reduction pivot '
-                f'block of original block {index[1::2][k]} has eigenvalue {eig:.6g}') from None
-        d_inv = np.linalg.inv(d_odd)
-        u_left = u[0::2]
-        u_right = u[1::2]
-        n_right = u_right.shape[0]
-        x_left = d_inv @ np.swapaxes(u_left, 1, 2)
-        x_right = d_inv[:n_right] @ u_right
-        d_even = d[0::2].copy()
-        d_even[1:1 + n_right] -= np.swapaxes(u_right, 1, 2) @ x_right
-        d_even[:m // 2] -= u_left @ x_left
-        u = -(u_left[:n_right] @ x_right)
-        levels.append((d_inv, x_left, x_right, np.swapaxes(x_left, 1, 2).copy(),
-                       np.swapaxes(x_right, 1, 2).copy()))
-        d = d_even
-        index = index[0::2]
-    try:
-        np.linalg.cholesky(d)
-    except np.linalg.LinAlgError:
-        raise NotPositiveDefiniteError(
-            'block-tridiagonal matrix is not positive definite: last cyclic-reduction pivot '
-            f'block (original block {index[0]}) has eigenvalue '
-            f'{np.linalg.eigvalsh(d[0])[0]:.6g}') from None
-    last_inv = np.linalg.inv(d)
-
-    def solver(rhs):
-        k = rhs.shape[1]
-        r = rhs.reshape(n, b, k)
-        odds = []
-        for d_inv, x_left, x_right, x_left_t, x_right_t in levels:
-            r_odd = r[1::2]
-            n_right = x_right.shape[0]
-            r = r[0::2].copy()
-            r[1:1 + n_right] -= x_right_t @ r_odd[:n_right]
-            r[:x_left.shape[0]] -= x_left_t @ r_odd
-            odds.append(r_odd)
-        x = last_inv @ r
-        for (d_inv, x_left, x_right, _, _), r_odd in zip(reversed(levels), reversed(odds)):
-            m_even = x.shape[0]
-            m = m_even + r_odd.shape[0]
-            full = np.empty((m, b, k))
-            full[0::2] = x
-            x_odd = d_inv @ r_odd
-            x_odd -= x_left @ x[:r_odd.shape[0]]
-            x_odd[:x_right.shape[0]] -= x_right @ x[1:1 + x_right.shape[0]]
-            full[1::2] = x_odd
-            x = full
-        return x.reshape(n * b, k)
-
-    return BTDFactorization('cyclic', (diagonal, upper), solver)
 
 
 def blas_single_threaded():
@@ -457,7 +374,7 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
         Diagonal blocks (symmetric).
     upper : (n - 1, b, b) array_like
         ``upper[i]`` = block (i, i+1); block (i+1, i) is its transpose.
-    method : {'auto', 'hybrid', 'dense', 'banded', 'cyclic'}
+    method : {'auto', 'hybrid', 'dense', 'banded', 'cyclic', 'block'}
         Backend; 'auto' chooses by size (see :func:`choose_method`).
     max_condition : float, optional
         If given, the condition estimate is computed at once and a larger one raises
@@ -483,8 +400,13 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
         raise ValueError(f'method must be one of {METHODS}, got {method!r}')
     if method == 'auto':
         method = choose_method(diagonal.shape[0])
-    backend = {'dense': _factor_dense, 'hybrid': _factor_hybrid, 'banded': _factor_banded,
-               'cyclic': _factor_cyclic}[method]
+    if method in ('cyclic', 'block'):
+        from cbha_inverse.core import btd_reference   # imports this module: load lazily
+        backend = {'cyclic': btd_reference.factor_cyclic,
+                   'block': btd_reference.factor_block}[method]
+    else:
+        backend = {'dense': _factor_dense, 'hybrid': _factor_hybrid,
+                   'banded': _factor_banded}[method]
     factorization = backend(diagonal, upper)
     if max_condition is not None and not factorization.condition_estimate <= max_condition:
         raise IllConditionedError(

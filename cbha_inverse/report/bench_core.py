@@ -37,7 +37,7 @@ RHS_COUNTS = (6, 20)
 #: dense LAPACK is skipped above this many frames (a 6n x 6n matrix: 6000^2 doubles = 288 MB
 #: at n = 1000 and seconds per factorisation)
 DENSE_MAX_FRAMES = 200
-OUR_METHODS = ('hybrid', 'dense', 'banded', 'cyclic')
+OUR_METHODS = ('hybrid', 'dense', 'banded', 'cyclic', 'block')
 
 
 def time_calls(funcs, budget):
@@ -189,8 +189,8 @@ def btd_table(sizes, rhs_counts, budget, out):
     """
     rows = []
     head = (f"{'n':>6} {'k':>3} | {'LAPACK pb':>9} {'LAPACK po':>9} | {'hybrid':>9} "
-            f"{'dense':>9} {'banded':>9} {'cyclic':>9} | {'auto':>9} {'method':>7} "
-            f"{'ratio':>5} {'best':>5} | {'rel.err':>7}")
+            f"{'dense':>9} {'banded':>9} {'cyclic':>9} {'block':>9} | {'auto':>9} "
+            f"{'method':>7} {'ratio':>5} {'best':>5} | {'rel.err':>7}")
     print('BTD solve: factorisation + solve, times in microseconds; ratio = auto / LAPACK '
           'banded (pb); best = fastest of ours / pb', file=out)
     print(head, file=out)
@@ -231,8 +231,9 @@ def btd_table(sizes, rhs_counts, budget, out):
                 return f'{value * 1e6:9.1f}' if value is not None else f"{'skipped':>9}"
 
             print(f"{n:6d} {k:3d} | {fmt(row['pb'])} {fmt(row['po'])} | {fmt(row['hybrid'])} "
-                  f"{fmt(row['dense'])} {fmt(row['banded'])} {fmt(row['cyclic'])} | "
-                  f"{fmt(row['auto'])} {row['method']:>7} {row['auto'] / row['pb']:5.2f} "
+                  f"{fmt(row['dense'])} {fmt(row['banded'])} {fmt(row['cyclic'])} "
+                  f"{fmt(row['block'])} | {fmt(row['auto'])} {row['method']:>7} "
+                  f"{row['auto'] / row['pb']:5.2f} "
                   f"{best / row['pb']:5.2f} | {err:7.1e}", file=out)
             out.flush()
     print(f'dense LAPACK skipped above n = {DENSE_MAX_FRAMES} frames (6n x 6n dense matrix; '

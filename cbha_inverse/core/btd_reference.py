@@ -1,0 +1,142 @@
+"""
+Reference backends of the block-tridiagonal solver (see :mod:`cbha_inverse.core.btd`).
+
+- :func:`factor_block`: the textbook sequential block Cholesky, one Python iteration per block;
+- :func:`factor_cyclic`: block cyclic reduction (block LDL^T of the odd-even permuted matrix),
+  each of its log2(n) levels vectorised over all its blocks.
+
+Both are exact and O(n); ``cbha_bench_core`` measures them against the LAPACK band kernels that
+``factorize(method='auto')`` uses. Call them through ``factorize(..., method='block')`` or
+``method='cyclic'``.
+"""
+
+from cbha_inverse.core.btd import BTDFactorization, not_pd_error, NotPositiveDefiniteError
+import numpy as np
+from scipy.linalg import blas, lapack
+
+
+def factor_block(diagonal, upper):
+    """
+    Sequential block Cholesky ``A = L L^T`` with L block lower bidiagonal (textbook BTD).
+
+    ``S_i = D_i - M_(i-1) M_(i-1)^T``, ``L_i = chol(S_i)``, ``M_i = U_i^T L_i^-T``; solves by
+    block forward and back substitution, every right-hand side at once. One Python iteration
+    per block (LAPACK ``dpotrf`` and BLAS ``dtrsm`` on 6x6 blocks): the reference
+    implementation, kept to show in the benchmark what the compiled band backends save.
+    """
+    n, b = diagonal.shape[:2]
+    chol = np.empty((n, b, b))
+    coupling = np.empty((max(n - 1, 0), b, b))      # M_i^T = L_i^-1 U_i
+    schur = diagonal[0]
+    for i in range(n):
+        factor, info = lapack.dpotrf(schur, lower=1, clean=1)
+        if info > 0:
+            raise not_pd_error(b * i + info - 1, b, factor[info - 1, info - 1], 'block Cholesky')
+        if info < 0 or not np.isfinite(factor).all():
+            raise ValueError('block Cholesky failed: non-finite entries or illegal argument')
+        chol[i] = factor
+        if i + 1 < n:
+            m_t = blas.dtrsm(1.0, factor, upper[i], lower=1)
+            coupling[i] = m_t
+            schur = diagonal[i + 1] - m_t.T @ m_t
+
+    def solver(rhs):
+        k = rhs.shape[1]
+        y = rhs.reshape(n, b, k).copy()
+        for i in range(n):
+            if i > 0:
+                y[i] -= coupling[i - 1].T @ y[i - 1]
+            y[i] = blas.dtrsm(1.0, chol[i], y[i], lower=1)
+        for i in range(n - 1, -1, -1):
+            if i + 1 < n:
+                y[i] -= coupling[i] @ y[i + 1]
+            y[i] = blas.dtrsm(1.0, chol[i], y[i], lower=1, trans_a=1)
+        return y.reshape(n * b, k)
+
+    return BTDFactorization('block', (diagonal, upper), solver)
+
+
+def _first_bad_block(blocks):
+    """Index of the first block whose Cholesky fails, and its smallest eigenvalue."""
+    for k, blk in enumerate(blocks):
+        try:
+            np.linalg.cholesky(blk)
+        except np.linalg.LinAlgError:
+            return k, float(np.linalg.eigvalsh(0.5 * (blk + blk.T))[0])
+    return 0, float('nan')
+
+
+def factor_cyclic(diagonal, upper):
+    """
+    Block cyclic reduction backend (block LDL^T of the odd-even permuted matrix).
+
+    At each level the odd blocks j are eliminated: with ``X_l = D_j^-1 U_{j-1}^T`` and ``X_r =
+    D_j^-1 U_j``, the even blocks become ``D_i -= U_{i-1}^T X_r(i-1) + U_i X_l(i+1)`` and
+    couple to the next even block by ``-U_i X_r(i+1)``. The Schur complements of an SPD matrix
+    are SPD, so a failed Cholesky of a pivot block proves the matrix is not positive definite.
+    """
+    n, b = diagonal.shape[:2]
+    if not (np.isfinite(diagonal).all() and np.isfinite(upper).all()):
+        raise ValueError('block-tridiagonal matrix has non-finite entries')
+    d = diagonal
+    u = upper
+    index = np.arange(n)
+    levels = []
+    while d.shape[0] > 1:
+        m = d.shape[0]
+        d_odd = d[1::2]
+        try:
+            np.linalg.cholesky(d_odd)
+        except np.linalg.LinAlgError:
+            k, eig = _first_bad_block(d_odd)
+            raise NotPositiveDefiniteError(
+                'block-tridiagonal matrix is not positive definite: cyclic-reduction pivot '
+                f'block of original block {index[1::2][k]} has eigenvalue {eig:.6g}') from None
+        d_inv = np.linalg.inv(d_odd)
+        u_left = u[0::2]
+        u_right = u[1::2]
+        n_right = u_right.shape[0]
+        x_left = d_inv @ np.swapaxes(u_left, 1, 2)
+        x_right = d_inv[:n_right] @ u_right
+        d_even = d[0::2].copy()
+        d_even[1:1 + n_right] -= np.swapaxes(u_right, 1, 2) @ x_right
+        d_even[:m // 2] -= u_left @ x_left
+        u = -(u_left[:n_right] @ x_right)
+        levels.append((d_inv, x_left, x_right, np.swapaxes(x_left, 1, 2).copy(),
+                       np.swapaxes(x_right, 1, 2).copy()))
+        d = d_even
+        index = index[0::2]
+    try:
+        np.linalg.cholesky(d)
+    except np.linalg.LinAlgError:
+        raise NotPositiveDefiniteError(
+            'block-tridiagonal matrix is not positive definite: last cyclic-reduction pivot '
+            f'block (original block {index[0]}) has eigenvalue '
+            f'{np.linalg.eigvalsh(d[0])[0]:.6g}') from None
+    last_inv = np.linalg.inv(d)
+
+    def solver(rhs):
+        k = rhs.shape[1]
+        r = rhs.reshape(n, b, k)
+        odds = []
+        for d_inv, x_left, x_right, x_left_t, x_right_t in levels:
+            r_odd = r[1::2]
+            n_right = x_right.shape[0]
+            r = r[0::2].copy()
+            r[1:1 + n_right] -= x_right_t @ r_odd[:n_right]
+            r[:x_left.shape[0]] -= x_left_t @ r_odd
+            odds.append(r_odd)
+        x = last_inv @ r
+        for (d_inv, x_left, x_right, _, _), r_odd in zip(reversed(levels), reversed(odds)):
+            m_even = x.shape[0]
+            m = m_even + r_odd.shape[0]
+            full = np.empty((m, b, k))
+            full[0::2] = x
+            x_odd = d_inv @ r_odd
+            x_odd -= x_left @ x[:r_odd.shape[0]]
+            x_odd[:x_right.shape[0]] -= x_right @ x[1:1 + x_right.shape[0]]
+            full[1::2] = x_odd
+            x = full
+        return x.reshape(n * b, k)
+
+    return BTDFactorization('cyclic', (diagonal, upper), solver)
