@@ -178,3 +178,27 @@ def test_warm_start_converges_fast_and_falls_back():
     # both pass the residual test, whose floor (round-off of the EA-stiff links, ~3e-6 N) times
     # the bending compliance L^3 / 3EI bounds their difference
     np.testing.assert_allclose(back.positions, cold.positions, atol=1e-6)
+
+
+def test_assembled_tangent_matches_central_differences():
+    """The assembled exact BTD tangent equals central differences of internal_wrenches."""
+    lengths = np.array([0.05, 0.03, 0.07, 0.04, 0.06])
+    model = _beam_chain(lengths, base_rotation=se3.so3_exp([0.2, 0.1, -0.3]))
+    rng = np.random.default_rng(21)
+    state = chain.retract(chain.rest_state(model), rng.normal(scale=[2e-3] * 3 + [0.2] * 3,
+                                                              size=(5, 6)))
+    tangent = assembly.assemble_tangent(model, state)
+    np.testing.assert_allclose(tangent.internal, assembly.internal_wrenches(model, state))
+    h = 1e-7
+    cols = []
+    for e in np.eye(30):
+        inc = h * e.reshape(5, 6)
+        plus = assembly.internal_wrenches(model, chain.retract(state, inc))
+        minus = assembly.internal_wrenches(model, chain.retract(state, -inc))
+        cols.append(-(plus - minus).ravel() / (2 * h))
+    fd = np.stack(cols, axis=1)
+    exact = tangent.to_dense(exact=True)
+    assert np.abs(exact - fd).max() <= 1e-6 * np.abs(fd).max()
+    sym = tangent.to_dense()
+    np.testing.assert_allclose(sym, sym.T, atol=0)
+    np.testing.assert_allclose(sym, 0.5 * (exact + exact.T), atol=1e-12 * np.abs(sym).max())
