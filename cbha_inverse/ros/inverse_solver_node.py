@@ -13,6 +13,8 @@ is counted and logged (throttled) and the last valid command stays. Every comman
 :func:`cbha_inverse.core.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
 """
 
+import bisect
+import collections
 from dataclasses import dataclass
 import math
 import sys
@@ -75,6 +77,11 @@ class InverseSolverParams:
                                 low=0.0, high=3600.0)
 
 
+def _stamp_ns(message):
+    """Return a header stamp in integer nanoseconds."""
+    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+
+
 class InverseSolverNode(Node):
     """
     The controller: target (+ measurement) in, pressure command out.
@@ -102,6 +109,8 @@ class InverseSolverNode(Node):
         p = self.params
         self.period = 1.0 / p.rate_hz
         self.target = None
+        self.target_history = collections.deque(maxlen=256)
+        self.target_error = math.nan
         self.measured = None
         self.target_watch = StalenessWatch(p.target_timeout)
         self.feedback_watch = StalenessWatch(p.feedback_timeout)
@@ -166,6 +175,7 @@ class InverseSolverNode(Node):
             self._reject('target', check)
             return
         self.target = point
+        self.target_history.append((_stamp_ns(message), point))
         self.target_watch.mark(time.monotonic())
         if self.params.trigger == 'target' and self._decide() == 'run':
             self._solve_and_publish()
@@ -181,7 +191,26 @@ class InverseSolverNode(Node):
         self.feedback_watch.mark(time.monotonic())
         if self.params.mode == 'closed' and self.target is not None:
             saturated = self.last_result is not None and self.last_result.status == 'saturated'
-            self.corrector.update(self.target[None], point[None], saturated=saturated)
+            reference = self._target_at(_stamp_ns(message))
+            self.corrector.update(reference[None], point[None], saturated=saturated)
+            self.target_error = float(np.linalg.norm(reference - point))
+
+    def _target_at(self, stamp_ns):
+        """
+        Return the target that was current at a measurement's stamp.
+
+        Comparing a measurement with the target of its own time keeps delivery delays and bursts
+        of measurements out of the integral; without a target history covering the stamp (e.g.
+        unstamped or differently clocked measurements) the current target is used.
+        """
+        history = self.target_history
+        if not history or stamp_ns < history[0][0] or stamp_ns > history[-1][0]:
+            return self.target
+        index = bisect.bisect_right(self._history_stamps(), stamp_ns) - 1
+        return history[max(index, 0)][1]
+
+    def _history_stamps(self):
+        return [stamp for stamp, _ in self.target_history]
 
     # control --------------------------------------------------------------------------------
     def _decide(self):
@@ -248,6 +277,7 @@ class InverseSolverNode(Node):
                   'target_age_s': self.target_watch.age(now),
                   'feedback_age_s': self.feedback_watch.age(now),
                   'correction_mm': 1e3 * float(np.linalg.norm(self.corrector.correction)),
+                  'measured_error_mm': 1e3 * self.target_error,
                   'command_pa': ' '.join(f'{v:.0f}' for v in self.command),
                   **self.tick_times.summary('tick'), **self.latencies.summary('latency'),
                   **{f'status.{k}': v for k, v in sorted(self.statuses.items())}}
