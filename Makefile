@@ -11,6 +11,9 @@ PINS_STAMP := $(VENV)/.pins-stamp
 INSTALL_STAMP := $(VENV)/.install-stamp
 DEMO_OUT ?= output/demo
 PYTEST_ARGS ?=
+# small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
+export OPENBLAS_NUM_THREADS ?= 1
+export OMP_NUM_THREADS ?= 1
 
 .PHONY: demo test venv install lint bench report constraints clean
 

@@ -13,6 +13,11 @@ import tempfile
 
 import pytest
 
+# One BLAS thread before numpy loads (see cbha_inverse/__init__.py): small dense solves are ~50x
+# slower with OpenBLAS worker threads on a loaded 2-core machine.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+os.environ.setdefault('OMP_NUM_THREADS', '1')
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 if str(REPO_ROOT) not in sys.path:
     sys.path.insert(0, str(REPO_ROOT))
