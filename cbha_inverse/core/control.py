@@ -14,7 +14,8 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    fallback if proxsuite reports a failure);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (no second solve), followed by ``newton_steps - 1``
-   further full Newton steps at fixed ``λ`` if requested.
+   further full Newton steps at fixed ``λ`` if requested (or, with ``relinearize_every > 1``,
+   keep the linear model for a few ticks; see :class:`InverseOptions`).
 
 Repeated ticks therefore run Newton's method on the coupled problem (equilibrium plus optimal
 actuation); at a fixed target the state converges to the static equilibrium of the returned
@@ -54,13 +55,14 @@ class InverseOptions:
     eps_abs : float
         QP tolerance (normalised problem).
     relinearize_every : int
-        Ticks between linearisations. 1 (default) is DESIGN §6 / the paper: tangent, factor and
-        ``W`` at every tick. ``N > 1`` keeps the factorization and ``W_ea``, ``W_aa`` for ``N``
-        ticks (a modified Newton method): in between, a tick only evaluates the residual at the
-        current state, solves one right-hand side and re-solves the QP with the same Hessian.
-        The fixed point is the same (the residual is exact); convergence per tick is linear
-        instead of quadratic. A kept linearisation is dropped early when the residual grows or
-        an actuator moves by more than 2 % of its range in one tick.
+        Ticks between linearisations. 1 (default) is DESIGN §6 / the paper: tangent, factor,
+        ``W`` and a Newton update at every tick. ``N > 1``: a linearisation is kept for up to
+        ``N`` ticks and the ticks in between solve the QP of the same linear model (paper
+        eq. 11, only ``δ_free`` changes with the target; proxsuite re-solves with the same
+        Hessian) and report its predicted effector positions; the next linearisation applies
+        the latest actuation to the linearisation state (one Newton step), so the fixed point
+        is the same static equilibrium. A linearisation is dropped early when an actuator moves
+        by more than 2 % of its range in one tick (large motions relinearise every tick).
 
     """
 
@@ -82,6 +84,19 @@ class InverseOptions:
             raise ValueError('newton_steps must be >= 1')
         if self.relinearize_every < 1:
             raise ValueError('relinearize_every must be >= 1')
+
+
+@dataclass(frozen=True)
+class _Linearization:
+    """What a linearisation tick keeps for the linear ticks that follow it (paper eq. 11)."""
+
+    w_ea: np.ndarray
+    matrices: object
+    offset: np.ndarray            # p_e + J_e K⁻¹ r - W_ea λ_prev (so δ_free = offset - target)
+    free_step: np.ndarray         # K⁻¹ r
+    solved_actuators: np.ndarray  # K⁻¹ J_aᵀ
+    previous: np.ndarray          # λ_prev at the linearisation
+    residual_norm: float
 
 
 @dataclass(frozen=True)
@@ -193,17 +208,32 @@ class InverseSolver:
         self.actuation = np.clip(np.asarray(a, dtype=float), self.lower_bounds, self.upper_bounds)
         self._qp.reset()
         self._linearization = None
+        self._pending = None
         self._age = 0
-        self._residual_norm = np.inf
+
+    def _current(self):
+        """Return the frames with the pending linear step applied (without storing them)."""
+        if self._pending is None:
+            return self._positions, self._rotations
+        free_step, solved_a, previous = self._pending
+        increments = (free_step + solved_a @ (self.actuation - previous)).reshape(-1, 6)
+        return fast_retract(self._positions, self._rotations, self._limited(increments))
+
+    def _materialise(self):
+        """Apply the pending linear step to the stored frames."""
+        if self._pending is not None:
+            self._positions, self._rotations = self._current()
+            self._pending = None
 
     @property
     def state(self):
         """Return a copy of the current model frames as a ``ChainState``."""
-        return ChainState(self._positions.copy(), self._rotations.copy())
+        positions, rotations = self._current()
+        return ChainState(positions.copy(), rotations.copy())
 
     def effector_positions(self):
         """Return the effector positions (k, 3) of the current model state."""
-        return self.effectors.positions(self._positions, self._rotations)
+        return self.effectors.positions(*self._current())
 
     def _limited(self, increments):
         """Scale a Newton step so that no frame rotates more than ``max_rotation_step``."""
@@ -281,12 +311,14 @@ class InverseSolver:
                 targets = targets.reshape(k, 3)
             else:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
-        if not np.all(np.isfinite(targets)):
+        if not np.isfinite(targets).all():
             return self._held('rejected', t_start)
-        previous = self.actuation
-        positions, rotations = self._positions, self._rotations
         lin = self._linearization
-        if lin is None or self._age >= self.options.relinearize_every:
+        fresh = lin is None or self._age >= self.options.relinearize_every
+        if fresh:
+            self._materialise()
+            previous = self.actuation
+            positions, rotations = self._positions, self._rotations
             internal, tangent = self._kernel.linearise(positions, rotations)
             wrenches, _ = self.actuators.evaluate(positions, rotations, False)
             m = wrenches.shape[0]
@@ -308,76 +340,68 @@ class InverseSolver:
             matrices = qp_matrices(projection.w_ea, projection.w_aa, self._scale,
                                    energy_weight=self.options.energy_weight,
                                    proximal_weight=self.options.proximal_weight)
-            lin = (factorization, projection.solved[:, :m], projection.w_ea, matrices)
+            delta_free = projection.delta_free
+            lin = _Linearization(projection.w_ea, matrices, delta_free + targets.reshape(-1),
+                                 projection.solved[:, m], projection.solved[:, :m], previous,
+                                 float(np.linalg.norm(residual)))
             self._linearization, self._age = lin, 1
-            free_step, delta_free = projection.solved[:, m], projection.delta_free
-            same_hessian = False
         else:
-            factorization, solved_a, w_ea, matrices = lin
-            m = w_ea.shape[1]
-            internal = self._kernel.internal(positions, rotations)
-            wrenches, _ = self.actuators.evaluate(positions, rotations, False)
-            residual = (internal.reshape(-1) + self._external
-                        + previous @ wrenches[:, 1:, :].reshape(m, -1))
-            t_assembly = t_factor = time.perf_counter()
-            free_step = factorization.solve(residual)
-            levers = self.effectors.levers(rotations)
-            moved = self.effectors.apply_jacobian(free_step.reshape(-1, 6), levers)
-            delta_free = ((positions[self.effectors.frames] + levers - targets + moved).reshape(-1)
-                          - w_ea @ previous)
+            previous = self.actuation
+            t_assembly = t_factor = t_start
+            delta_free = lin.offset - targets.reshape(-1)
             self._age += 1
-            same_hessian = True
         t_projection = time.perf_counter()
-        w_ea, matrices = lin[2], lin[3]
-        problem = qp_problem(matrices, delta_free, previous, self.lower_bounds, self.upper_bounds,
-                             rate_limit=self._rate)
+        problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
+                             self.upper_bounds, rate_limit=self._rate)
         status = 'solved'
         if self.options.qp_solver == 'proxsuite':
-            solution = self._qp.solve(problem, same_hessian=same_hessian)
+            solution = self._qp.solve(problem, same_hessian=not fresh)
             if not solution.ok:
                 status = 'qp_fallback'
                 solution = projected_gauss_seidel(problem)
                 solution = type(solution)(solution.x, self._qp_status_text(solution), 0, True)
         else:
             solution = projected_gauss_seidel(problem)
-        actuation = np.clip(problem.scale * solution.x, self.lower_bounds, self.upper_bounds)
+        actuation = np.minimum(np.maximum(problem.scale * solution.x, self.lower_bounds),
+                               self.upper_bounds)
         saturated = binding_bounds(problem, solution.x)
         if status == 'solved' and saturated.any():
             status = 'saturated'
-        gap = w_ea @ actuation + delta_free
-        t_qp = time.perf_counter()
-        increments = (free_step + lin[1] @ (actuation - previous)).reshape(-1, 6)
-        residual_norm = float(np.linalg.norm(residual))
-        if (self._age > 1 and residual_norm > 2.0 * self._residual_norm + 1e-9) or np.max(
-                np.abs(solution.x - problem.previous)) > 0.02:
-            # the kept linearisation no longer contracts (or the actuation moves fast):
-            # relinearise at the next tick
+        gap = lin.w_ea @ actuation + delta_free
+        if np.abs(solution.x - problem.previous).max() > 0.02:
+            # the actuation moves fast: the next tick relinearises
             self._age = self.options.relinearize_every
-        self._residual_norm = residual_norm
-        positions, rotations = fast_retract(positions, rotations, self._limited(increments))
-        for _ in range(self.options.newton_steps - 1):
-            internal, tangent = self._kernel.linearise(positions, rotations)
-            load_tangent = self.actuators.load_tangent(positions, rotations, actuation)
-            if load_tangent is not None:
-                tangent = tangent + load_tangent
-            try:
-                step = DenseCholesky(tangent).solve(
-                    self._residual(positions, rotations, internal, actuation))
-            except np.linalg.LinAlgError:
-                break
-            positions, rotations = fast_retract(positions, rotations,
-                                                self._limited(step.reshape(-1, 6)))
-        self._positions, self._rotations = positions, rotations
+        t_qp = time.perf_counter()
         self.actuation = actuation
-        effector_positions = self.effectors.positions(positions, rotations)
+        self._pending = (lin.free_step, lin.solved_actuators, lin.previous)
+        if self.options.relinearize_every == 1:
+            self._materialise()
+            positions, rotations = self._positions, self._rotations
+            for _ in range(self.options.newton_steps - 1):
+                internal, tangent = self._kernel.linearise(positions, rotations)
+                load_tangent = self.actuators.load_tangent(positions, rotations, actuation)
+                if load_tangent is not None:
+                    tangent = tangent + load_tangent
+                try:
+                    step = DenseCholesky(tangent).solve(
+                        self._residual(positions, rotations, internal, actuation))
+                except np.linalg.LinAlgError:
+                    break
+                positions, rotations = fast_retract(positions, rotations,
+                                                    self._limited(step.reshape(-1, 6)))
+            self._positions, self._rotations = positions, rotations
+            effector_positions = self.effectors.positions(positions, rotations)
+        else:
+            # between linearisations the tick is the linear model of paper eq. 11
+            effector_positions = targets + gap.reshape(-1, 3)
         t_end = time.perf_counter()
         timings = {'assembly': t_assembly - t_start, 'factor': t_factor - t_assembly,
                    'projection': t_projection - t_factor, 'qp': t_qp - t_projection,
                    'update': t_end - t_qp, 'total': t_end - t_start}
         return TickResult(actuation, effector_positions, status, solution.status,
                           solution.iterations, saturated,
-                          float(np.max(np.linalg.norm(gap.reshape(-1, 3), axis=1))),
-                          float(np.linalg.norm(residual)), timings)
+                          float(np.sqrt((gap.reshape(-1, 3) ** 2).sum(axis=1).max())),
+                          lin.residual_norm, timings)
 
     @staticmethod
     def _qp_status_text(solution):

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import proxsuite
+from scipy.linalg import lapack
 
 
 _STATUS = {
@@ -116,11 +117,13 @@ class ActuationQP:
         info = qp.results.info
         status = _STATUS.get(info.status.name, info.status.name)
         x = qp.results.x
-        ok = status == 'solved' and bool(np.all(np.isfinite(x)))
+        ok = status == 'solved' and bool(np.isfinite(x).all())
         if not ok:
             self.reset()
-        x = polish(problem, np.clip(x, problem.lower, problem.upper)) if ok else np.clip(
-            problem.previous, problem.lower, problem.upper)
+            x = problem.previous
+        x = np.minimum(np.maximum(x, problem.lower), problem.upper)
+        if ok:
+            x = polish(problem, x)
         return QPSolution(x, status, int(info.iter), ok)
 
 
@@ -161,20 +164,20 @@ def polish(problem, x, tolerance=1e-4):
     free = ~active
     if free.any():
         h_free = h[free]
-        try:
-            y[free] = np.linalg.solve(h_free[:, free], -g[free] - h_free[:, active] @ y[active])
-        except np.linalg.LinAlgError:
+        _, solution, info = lapack.dposv(h_free[:, free], -g[free] - h_free[:, active] @ y[active])
+        if info != 0:
             return x
+        y[free] = solution
     grad = h @ y + g
-    if not (_inside(problem, y) and np.all(grad[at_lower] >= 0.0)
-            and np.all(grad[at_upper] <= 0.0)):
+    if not (_inside(problem, y) and (grad[at_lower] >= 0.0).all()
+            and (grad[at_upper] <= 0.0).all()):
         return x
     return y
 
 
 def _inside(problem, x):
     """Whether ``x`` lies in the box of ``problem``."""
-    return bool(np.all(x >= problem.lower) and np.all(x <= problem.upper))
+    return bool((x >= problem.lower).all() and (x <= problem.upper).all())
 
 
 def projected_gauss_seidel(problem, x0=None, max_iterations=500, tolerance=1e-10):
