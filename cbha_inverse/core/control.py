@@ -109,7 +109,8 @@ class TickResult:
     actuation : (m,) ndarray  [N or Pa]
         Commanded actuation, always finite and within the bounds.
     effector_positions : (k, 3) ndarray  [m]
-        Effector positions of the updated model state.
+        Effector positions of the updated model state (between linearisations, with
+        ``relinearize_every > 1``: the linear model's prediction).
     status : str
         ``'solved'`` (QP solved, no bound limits the tracking), ``'saturated'`` (QP solved, some
         actuator is held by a bound the target pushes against: closest reachable point),
@@ -125,7 +126,7 @@ class TickResult:
     predicted_error : float  [m]
         ``‖W_ea λ + δ_e^free‖`` of the linearised model (largest effector gap).
     residual_norm : float  [N, N*m]
-        Norm of the equilibrium residual before the update.
+        Norm of the equilibrium residual at the last linearisation (before its update).
     timings : dict
         Seconds spent in ``assembly``, ``factor``, ``projection``, ``qp``, ``update``, ``total``.
 
