@@ -156,3 +156,26 @@ def test_effector_jacobian_matches_finite_differences():
     np.testing.assert_allclose(many[..., 1], 2 * many[..., 0])
     with pytest.raises(ValueError):
         PointEffectors(['base'], [0], [[0, 0, 0]], N_LINKS + 1)
+
+
+@pytest.mark.parametrize('kind', ['cables', 'cavities'])
+def test_load_stiffness_is_the_symmetric_part_of_the_load_derivative(kind):
+    rng = np.random.default_rng(8)
+    if kind == 'cables':
+        group, amount = CableGroup(_cables(), N_LINKS + 1), np.array([2.0, 3.0, 1.5])
+    else:
+        group, amount = LinearCavityGroup(_cavities(), N_LINKS + 1), np.array([1e5, 7e4])
+    state = _deformed(rng)
+    h, n = 1e-6, N_LINKS
+    fd = np.zeros((6 * n, 6 * n))
+    for j in range(6 * n):
+        e = np.zeros((n, 6))
+        e.reshape(-1)[j] = h
+        plus = np.einsum('m,mfa->fa', amount, group.evaluate(*_pose(retract(state, e)))[0])
+        minus = np.einsum('m,mfa->fa', amount, group.evaluate(*_pose(retract(state, -e)))[0])
+        fd[:, j] = -(plus - minus)[1:].reshape(-1) / (2 * h)
+    analytic = group.load_tangent(state.positions, state.rotations, amount)
+    np.testing.assert_allclose(analytic, 0.5 * (fd + fd.T), atol=1e-7 * np.abs(fd).max())
+    if kind == 'cavities':
+        exact = group.load_tangent(state.positions, state.rotations, amount, symmetric=False)
+        np.testing.assert_allclose(exact, fd, atol=1e-7 * np.abs(fd).max())

@@ -152,3 +152,18 @@ def test_closed_loop_correction_removes_model_error():
         errors.append(np.linalg.norm(measured - target))
     assert errors[0] > 5e-4
     assert errors[-1] < 1e-5, errors
+
+
+def test_forward_model_agrees_with_the_core_static_solver():
+    """Small tensions (where the structural-tangent Newton of statics also converges)."""
+    from cbha_inverse.core.statics import solve_static
+    scene = _load('tendon_6f_8c')
+    actuation = np.array([0.3, 0.0, 0.1, 0.0, 0.2, 0.0, 0.0, 0.1])
+    ours = scene.forward(actuation, strict=True)
+
+    def load(state):
+        return scene.actuators.loads(state.positions, state.rotations, actuation)[1:]
+
+    core = solve_static(scene.model, gravity=scene.gravity, load_function=load)
+    assert core.converged, core.message
+    np.testing.assert_allclose(ours.positions, core.positions, atol=1e-9)
