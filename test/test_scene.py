@@ -167,3 +167,15 @@ def test_forward_model_agrees_with_the_core_static_solver():
     core = solve_static(scene.model, gravity=scene.gravity, load_function=load)
     assert core.converged, core.message
     np.testing.assert_allclose(ours.positions, core.positions, atol=1e-9)
+
+
+def test_rate_limit_bounds_every_tick():
+    scene = _load('tendon_6f_8c')
+    solver = scene.make_inverse_solver(rate_limit=0.25)
+    target = scene.forward(np.array([6.0, 0, 0, 0, 4.0, 0, 0, 0])).effector_positions
+    previous = solver.actuation.copy()
+    for _ in range(40):
+        out = solver.step(target)
+        assert np.abs(out.actuation - previous).max() <= 0.25 + 1e-9
+        previous = out.actuation
+    assert np.abs(solver.effector_positions() - target).max() < 1e-4
