@@ -1,10 +1,10 @@
 """
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
-For each run the demo starts ``cbha_sim``, ``inverse_solver`` and ``trajectory`` as three separate
-processes (as ``ros2 run`` would, with the installed params files plus a per-run override file
-written into the output folder), records ``target``, ``tip/true`` and ``/diagnostics`` in this
-process for one lap, stops the nodes with SIGINT and prints one summary line: tracking RMS and max
+For each run the demo starts ``cbha_sim``, ``inverse_solver`` and then ``trajectory`` as three
+separate processes (as ``ros2 run`` would, with the installed params files plus a per-run
+override file written into the output folder), records ``target``, ``tip/true`` and
+``/diagnostics`` in this process for one lap, stops the nodes with SIGINT and prints one summary line: tracking RMS and max
 error (tip of the plant vs target, moving part of the lap), the solver's tick time median / p99
 and its target-to-command latency p99 (target callback entry to command published, measured in
 the node). It writes ``demo.png`` (target vs tip in the y-z plane) and ``summary.json``, and per
@@ -166,26 +166,29 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env):
     common = {'scene': args.scene, 'valve_names': list(valve_names)}
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
         **common, 'stiffness_scale': args.stiffness_scale}, env)}
-    processes['inverse_solver'] = _start('inverse_solver', run_dir, {**common, 'mode': mode},
-                                         env)
+    processes['inverse_solver'] = _start('inverse_solver', run_dir, {
+        **common, 'mode': mode, 'diagnostics_period': 0.5}, env)
     try:
-        ready = recorder.spin_until(lambda: all(
-            any(name.startswith(f'{node}:') for name in recorder.diagnostics)
-            for node in ('cbha_sim', 'inverse_solver')), 120.0)
-        if not ready:
+        # the trajectory starts once both nodes publish diagnostics (they spin), and keeps its
+        # clock at 0 until the solver and this recorder subscribe to its targets
+        if not recorder.spin_until(lambda: all(
+                any(name.startswith(f'{node}:') for name in recorder.diagnostics)
+                for node in ('cbha_sim', 'inverse_solver')), 120.0):
             raise RuntimeError(f'nodes did not start, see the logs in {run_dir}')
         launched = time.time()  # targets stamped earlier are late messages of a previous run
         processes['trajectory'] = _start('trajectory', run_dir, {
             'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
             'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
             'start_hold': args.start_hold, 'wait_for_subscribers': 2}, env)
-        recorder.spin_until(lambda: len(recorder.targets) > 0, 60.0)
+        if not recorder.spin_until(lambda: any(t[0] >= launched for t in recorder.targets),
+                                   60.0):
+            raise RuntimeError(f'no target received, see the logs in {run_dir}')
         started = time.monotonic()
         recorder.spin_until(lambda: time.monotonic() - started > trajectory.duration + 0.3,
                             trajectory.duration + 10.0)
         fresh = time.monotonic()
         recorder.spin_until(lambda: recorder.diagnostics.get(
-            'inverse_solver: control', ({}, 0.0))[1] > fresh, 3.0)
+            'inverse_solver: control', ({}, 0.0))[1] > fresh, 2.0)
     finally:
         codes = _stop(processes)
     targets = [t for t in recorder.targets if t[0] >= launched]
