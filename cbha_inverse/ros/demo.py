@@ -5,10 +5,11 @@ For each run the demo starts ``cbha_sim``, ``inverse_solver`` and then ``traject
 separate processes (as ``ros2 run`` would, with the installed params files plus a per-run
 override file written into the output folder), records ``target``, ``tip/true`` and
 ``/diagnostics`` in this process for one lap, stops the nodes with SIGINT and prints one
-summary line: tracking RMS and max error (tip of the plant vs target, moving part of the lap), the solver's tick time median / p99
-and its target-to-command latency p99 (target callback entry to command published, measured in
-the node). It writes ``demo.png`` (target vs tip in the y-z plane) and ``summary.json``, and per
-run the params files used, the node logs and ``recording.npz`` (stamped targets and tips).
+summary line: tracking RMS and max error (tip of the plant vs target, moving part of the lap),
+the solver's tick time median / p99 and its target-to-command latency p99 (target callback
+entry to command published, measured in the node). It writes ``demo.png`` (target vs tip in the
+y-z plane) and ``summary.json``, and per run the params files used, the node logs and
+``recording.npz`` (stamped targets and tips).
 
 Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
 centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
