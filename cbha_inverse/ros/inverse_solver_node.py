@@ -66,7 +66,7 @@ class InverseSolverParams:
     workspace_min: tuple = param((-0.5, -0.5, -0.5), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected')
     workspace_max: tuple = param((0.8, 0.5, 0.5), 'workspace box upper corner [m]')
-    loop_gain: float = param(0.05, 'closed loop: integral gain per measurement [-]',
+    loop_gain: float = param(0.1, 'closed loop: integral gain per measurement [-]',
                              low=0.0, high=1.0)
     max_correction: float = param(0.03, 'closed loop: largest target correction [m]',
                                   low=0.0, high=1.0)
