@@ -71,6 +71,9 @@ class InverseSolverParams:
     max_correction: float = param(0.03, 'closed loop: largest target correction [m]',
                                   low=0.0, high=1.0)
     newton_steps: int = param(1, 'Newton steps of the model per tick', low=1, high=20)
+    relinearize_every: int = param(1, 'ticks between linearisations (1 = every tick, the paper; '
+                                   'N > 1 re-solves the QP of the last linear model in between)',
+                                   low=1, high=1000)
     marker_period: float = param(0.1, 'period of the backbone markers [s]', low=0.01, high=60.0)
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
@@ -156,7 +159,8 @@ class InverseSolverNode(Node):
         self.vent_command = bounded_command(np.full(len(names), p.vent_pressure),
                                             self.lower, self.upper)
         self.box = WorkspaceBox(p.workspace_min, p.workspace_max)
-        self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps)
+        self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
+                                                     relinearize_every=p.relinearize_every)
         self.corrector = TargetCorrector(1, gain=p.loop_gain if p.mode == 'closed' else 0.0,
                                          max_correction=p.max_correction)
 
