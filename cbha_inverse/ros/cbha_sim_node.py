@@ -108,6 +108,7 @@ class CbhaSimNode(Node):
         self.accepted = 0
         self.last_result = None
         self.not_converged = 0
+        self.failures = 0
         self.tick_times = TimingStats()
         self._last_tick = None
         self.measured_publisher = self.create_publisher(PointStamped, 'tip/measured',
@@ -145,7 +146,13 @@ class CbhaSimNode(Node):
         tau = self.params.valve_time_constant
         blend = 1.0 if tau == 0.0 else -math.expm1(-dt / tau)
         self.pressures = self.pressures + blend * (self.setpoint - self.pressures)
-        result = self.plant.update(self.pressures)
+        try:
+            result = self.plant.update(self.pressures)
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            self.failures += 1
+            self.get_logger().error(f'plant update failed, state kept: {exc!r}',
+                                    throttle_duration_sec=self.params.log_throttle)
+            return
         self.last_result = result
         self.not_converged += not result.converged
         tip = result.effector_positions[-1]
@@ -163,7 +170,7 @@ class CbhaSimNode(Node):
                   'valve_pressures_pa': ' '.join(f'{v:.0f}' for v in self.pressures[self.order]),
                   'newton_iterations': result.iterations if result else 0,
                   'residual_norm': result.residual_norm if result else math.nan,
-                  'not_converged_updates': self.not_converged,
+                  'not_converged_updates': self.not_converged, 'failed_updates': self.failures,
                   **self.tick_times.summary('tick')}
         level = WARN if total or (result is not None and not result.converged) else OK
         message = (f'{total} rejected commands' if total else

@@ -241,7 +241,15 @@ class InverseSolverNode(Node):
     def _solve_and_publish(self):
         start = time.perf_counter()
         goal = self.corrector.update(self.target[None], None)
-        result = self.solver.step(goal)
+        try:
+            result = self.solver.step(goal)
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            # a numerical failure must not kill the controller: hold, count, report ERROR
+            self.statuses['exception'] = self.statuses.get('exception', 0) + 1
+            self.get_logger().error(f'solver failed, holding the last command: {exc!r}',
+                                    throttle_duration_sec=self.params.log_throttle)
+            self._publish(self.command)
+            return
         self.last_result = result
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         self._last_solve = time.monotonic()
