@@ -1,4 +1,4 @@
-"""The simulator's plant and the demo's tracking metrics (pure parts behind cbha_sim / cbha_demo)."""
+"""The pure parts behind cbha_sim and cbha_demo: the plant and the tracking metrics."""
 
 from cbha_inverse.core.plant import StaticPlant
 from cbha_inverse.report.tracking import plot_runs, tracking_errors
