@@ -292,3 +292,38 @@ def test_stale_feedback_in_closed_loop_vents_within_timeout(rclpy_context):
     first_vent = next(t for t, c in commands if t > last_measured and np.allclose(c, vent))
     assert first_vent - last_measured < timeout + 0.1
     assert all(np.allclose(c, vent) for t, c in commands if t > first_vent)
+
+
+def test_solver_publishes_backbone_markers_and_diagnostics(rclpy_context):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from visualization_msgs.msg import Marker, MarkerArray
+
+    solver = _solver(rclpy_context, max_pressure=MAX_TENSION, diagnostics_period=0.2)
+    client = Node('client', context=rclpy_context, namespace='/cbha')
+    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    markers, diagnostics = [], []
+    client.create_subscription(MarkerArray, 'backbone', markers.append, 1)
+    client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 10)
+    executor = SingleThreadedExecutor(context=rclpy_context)
+    executor.add_node(solver)
+    executor.add_node(client)
+    try:
+        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
+        target_pub.publish(_point(*CENTER))
+        target_pub.publish(_point(float('nan'), 0.0, 0.0))
+        assert spin_until(executor, lambda: solver.ticks > 0 and markers and any(
+            s.name == 'inverse_solver: inputs' and any(
+                v.key == 'rejected.target.non_finite' for v in s.values)
+            for d in diagnostics for s in d.status), 10.0)
+    finally:
+        executor.shutdown()
+        solver.destroy_node()
+        client.destroy_node()
+    line = markers[-1].markers[0]
+    assert line.type == Marker.LINE_STRIP and line.header.frame_id == 'cbha_base'
+    assert len(line.points) == solver.scene.model.n_frames and line.color.a == 1.0
+    control = next(s for d in diagnostics for s in d.status
+                   if s.name == 'inverse_solver: control')
+    keys = {v.key for v in control.values}
+    assert {'tick_median_ms', 'tick_p99_ms', 'latency_p99_ms', 'residual_norm', 'qp_status',
+            'saturated', 'last_status'} <= keys
