@@ -49,7 +49,7 @@ setup(
     zip_safe=False,
     maintainer='cbha_inverse maintainers',
     maintainer_email='maintainers@cbha-inverse.invalid',
-    description='Quasi-static FEM inverse control of continuum robots with rigid vertebrae (CBHA).',
+    description='Quasi-static FEM inverse control of continuum robots with rigid vertebrae.',
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={'console_scripts': CONSOLE_SCRIPTS},

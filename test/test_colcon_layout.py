@@ -23,7 +23,7 @@ COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo')
 
 
 def _child_env(prefix):
-    """Return the environment ``install/setup.sh`` would give, without the wheels' bootstrap flag."""
+    """Return the environment install/setup.sh would give, minus the wheels' bootstrap flag."""
     env = dict(os.environ)
     # The rclpy wheels re-exec Python with their LD_LIBRARY_PATH once; a child that inherits the
     # flag without the matching library path cannot import rclpy (notes/ros2-on-pypi.md).
@@ -51,7 +51,7 @@ def colcon_install(tmp_path_factory):
 
 
 def test_install_has_ros2_run_layout(colcon_install, monkeypatch):
-    """The ament index finds the package; every executable and params file is where ros2 expects."""
+    """The ament index finds the package; each executable and params file is where ros2 expects."""
     from ament_index_python.packages import get_package_prefix
     from ament_index_python.packages import get_package_share_directory
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(colcon_install / PACKAGE))
