@@ -87,6 +87,7 @@ class LinearCavityGroup:
         self.v0 = np.array(v0)
         m, n_e = len(self.cavities), len(lower)
         owner = np.array(owner, dtype=int)
+        self.owner = owner
         cols = np.arange(n_e)
         shape = (m * self.n_frames, n_e)
         self._scatter_lower = sp.csr_matrix((np.ones(n_e), (owner * self.n_frames + self.lower,

@@ -27,10 +27,13 @@ from dataclasses import dataclass, field
 import time
 
 from cbha_inverse.core.chain import ChainState, rest_state
-from cbha_inverse.core.inverse import project_constraints, qp_matrices, qp_problem
-from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, DenseLU, fast_retract
+from cbha_inverse.core.correction import TargetCorrector  # noqa: F401 (public re-export)
+from cbha_inverse.core.inverse import qp_matrices, qp_problem
+from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, DenseLU
 from cbha_inverse.core.qp import ActuationQP, binding_bounds, projected_gauss_seidel
+from cbha_inverse.core.tick import exp_rotations, TickModel
 import numpy as np
+from scipy.linalg import lapack
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,10 @@ class InverseSolver:
         self._external = external.reshape(-1)
         self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
         self._kernel = ChainKernel(model)
+        self._tick = TickModel(model, actuators, self._external)
+        self._m, self._k = m, effectors.n_effectors
+        self._effector_rows = (6 * (effectors.frames - 1)[:, None] + np.arange(3)).reshape(-1)
+        self._zero_levers = not np.any(effectors.offsets)
         self.reset()
 
     def reset(self, state=None, actuation=None):
@@ -218,7 +225,7 @@ class InverseSolver:
             return self._positions, self._rotations
         free_step, solved_a, previous = self._pending
         increments = (free_step + solved_a @ (self.actuation - previous)).reshape(-1, 6)
-        return fast_retract(self._positions, self._rotations, self._limited(increments))
+        return _retract(self._positions, self._rotations, self._limited(increments))
 
     def _materialise(self):
         """Apply the pending linear step to the stored frames."""
@@ -238,24 +245,22 @@ class InverseSolver:
 
     def _limited(self, increments):
         """Scale a Newton step so that no frame rotates more than ``max_rotation_step``."""
-        largest = np.sqrt(np.max(np.einsum('ij,ij->i', increments[:, 3:], increments[:, 3:])))
+        rot = increments[:, 3:]
+        largest = float(np.einsum('ij,ij->i', rot, rot).max()) ** 0.5
         if largest > self.options.max_rotation_step:
             increments = increments * (self.options.max_rotation_step / largest)
         return increments
 
-    def _factor(self, tangent, positions, rotations, actuation):
+    def _factor(self, positions, rotations, actuation):
         """
-        Factor the tick's tangent, falling back when it is not positive definite.
+        Factor a fallback tangent when the tick's symmetric one is not positive definite.
 
-        1. Cholesky of structure + symmetric load stiffness (the normal case);
-        2. LU of structure + exact (non-symmetric) load stiffness (high pressures);
-        3. Cholesky of the material tangent alone (paper eq. 8; far from equilibrium).
+        The normal case (:meth:`_linearise`) is the Cholesky factorization of structure +
+        symmetric load stiffness; when it fails:
+        1. LU of structure + exact (non-symmetric) load stiffness (high pressures);
+        2. Cholesky of the material tangent alone (paper eq. 8; far from equilibrium).
         The residual is exact in every case, so only the convergence rate changes.
         """
-        try:
-            return DenseCholesky(tangent)
-        except np.linalg.LinAlgError:
-            pass
         _, full = self._kernel.linearise(positions, rotations)
         load = self.actuators.load_tangent(positions, rotations, actuation, symmetric=False)
         if load is not None:
@@ -268,12 +273,6 @@ class InverseSolver:
             return DenseCholesky(material)
         except np.linalg.LinAlgError:
             return None
-
-    def _residual(self, positions, rotations, internal, actuation):
-        """Return ``f(q) + f_ext + J_aᵀ λ`` (6n,) at a state."""
-        wrenches, _ = self.actuators.evaluate(positions, rotations, False)
-        return (internal.reshape(-1) + self._external
-                + actuation @ wrenches[:, 1:, :].reshape(wrenches.shape[0], -1))
 
     def _held(self, status, started, qp_status='not_run'):
         """Return a tick result that keeps the actuation and the state."""
@@ -306,7 +305,7 @@ class InverseSolver:
         """
         t_start = time.perf_counter()
         targets = np.asarray(targets, dtype=float)
-        k = self.effectors.n_effectors
+        k = self._k
         if targets.shape != (k, 3):
             if targets.size == 3 * k:
                 targets = targets.reshape(k, 3)
@@ -319,38 +318,16 @@ class InverseSolver:
         if fresh:
             self._materialise()
             previous = self.actuation
-            positions, rotations = self._positions, self._rotations
-            internal, tangent = self._kernel.linearise(positions, rotations)
-            wrenches, _ = self.actuators.evaluate(positions, rotations, False)
-            m = wrenches.shape[0]
-            jat = wrenches[:, 1:, :].reshape(m, -1)
-            residual = internal.reshape(-1) + self._external + previous @ jat
-            load_tangent = self.actuators.load_tangent(positions, rotations, previous)
-            if load_tangent is not None:
-                tangent = tangent + load_tangent
-            t_assembly = time.perf_counter()
-            factorization = self._factor(tangent, positions, rotations, previous)
-            if factorization is None:
+            t_assembly, t_factor, lin = self._linearise(targets, previous)
+            if lin is None:
                 self._linearization = None
                 return self._held('not_positive_definite', t_start)
-            t_factor = time.perf_counter()
-            levers = self.effectors.levers(rotations)
-            projection = project_constraints(factorization, jat, residual, self.effectors,
-                                             levers, positions[self.effectors.frames] + levers,
-                                             targets, previous)
-            matrices = qp_matrices(projection.w_ea, projection.w_aa, self._scale,
-                                   energy_weight=self.options.energy_weight,
-                                   proximal_weight=self.options.proximal_weight)
-            delta_free = projection.delta_free
-            lin = _Linearization(projection.w_ea, matrices, delta_free + targets.reshape(-1),
-                                 projection.solved[:, m], projection.solved[:, :m], previous,
-                                 float(np.linalg.norm(residual)))
             self._linearization, self._age = lin, 1
         else:
             previous = self.actuation
             t_assembly = t_factor = t_start
-            delta_free = lin.offset - targets.reshape(-1)
             self._age += 1
+        delta_free = lin.offset - targets.reshape(-1)
         t_projection = time.perf_counter()
         problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._rate)
@@ -377,21 +354,10 @@ class InverseSolver:
         self._pending = (lin.free_step, lin.solved_actuators, lin.previous)
         if self.options.relinearize_every == 1:
             self._materialise()
-            positions, rotations = self._positions, self._rotations
             for _ in range(self.options.newton_steps - 1):
-                internal, tangent = self._kernel.linearise(positions, rotations)
-                load_tangent = self.actuators.load_tangent(positions, rotations, actuation)
-                if load_tangent is not None:
-                    tangent = tangent + load_tangent
-                try:
-                    step = DenseCholesky(tangent).solve(
-                        self._residual(positions, rotations, internal, actuation))
-                except np.linalg.LinAlgError:
+                if not self._newton_step(actuation):
                     break
-                positions, rotations = fast_retract(positions, rotations,
-                                                    self._limited(step.reshape(-1, 6)))
-            self._positions, self._rotations = positions, rotations
-            effector_positions = self.effectors.positions(positions, rotations)
+            effector_positions = self.effectors.positions(self._positions, self._rotations)
         else:
             # between linearisations the tick is the linear model of paper eq. 11
             effector_positions = targets + gap.reshape(-1, 3)
@@ -404,74 +370,72 @@ class InverseSolver:
                           float(np.sqrt((gap.reshape(-1, 3) ** 2).sum(axis=1).max())),
                           lin.residual_norm, timings)
 
+    def _linearise(self, targets, previous):
+        """
+        Linearise, factor and project at the stored state (DESIGN §6 steps 1-2).
+
+        Returns ``(t_assembly, t_factor, linearization)``; the linearisation is ``None`` when no
+        factorization of the tangent succeeds.
+        """
+        positions, rotations = self._positions, self._rotations
+        tangent, rhs = self._tick.linearise(positions, rotations, previous)
+        t_assembly = time.perf_counter()
+        # LAPACK Cholesky in place: the C-order lower triangle is the Fortran upper one
+        factor, info = lapack.dpotrf(tangent.T, lower=0, clean=0, overwrite_a=1)
+        if info == 0:
+            t_factor = time.perf_counter()
+            solved, info = lapack.dpotrs(factor, rhs, lower=0)
+            if info != 0:
+                raise np.linalg.LinAlgError(f'dpotrs failed (info {info})')
+        else:
+            factorization = self._factor(positions, rotations, previous)
+            t_factor = time.perf_counter()
+            if factorization is None:
+                return t_assembly, t_factor, None
+            solved = factorization.solve(rhs)
+        m = self._m
+        if self._zero_levers:
+            moved = solved[self._effector_rows]
+            effector_positions = positions[self.effectors.frames]
+        else:
+            n = self.model.n_links
+            levers = self.effectors.levers(rotations)
+            moved = self.effectors.apply_jacobian(solved.reshape(n, 6, m + 1), levers)
+            moved = moved.reshape(-1, m + 1)
+            effector_positions = positions[self.effectors.frames] + levers
+        w_ea = moved[:, 1:]
+        jat = rhs[:, 1:]
+        w_aa = jat.T @ solved[:, 1:]
+        matrices = qp_matrices(w_ea, w_aa, self._scale,
+                               energy_weight=self.options.energy_weight,
+                               proximal_weight=self.options.proximal_weight)
+        offset = effector_positions.reshape(-1) + moved[:, 0] - w_ea @ previous
+        residual = rhs[:, 0]
+        lin = _Linearization(w_ea, matrices, offset, solved[:, 0], solved[:, 1:], previous,
+                             float(np.sqrt(residual @ residual)))
+        return t_assembly, t_factor, lin
+
+    def _newton_step(self, actuation):
+        """Apply one full Newton step at fixed actuation; return whether it succeeded."""
+        tangent, rhs = self._tick.linearise(self._positions, self._rotations, actuation)
+        factor, info = lapack.dpotrf(tangent.T, lower=0, clean=0, overwrite_a=1)
+        if info != 0:
+            return False
+        step, info = lapack.dpotrs(factor, rhs[:, 0], lower=0)
+        self._positions, self._rotations = _retract(self._positions, self._rotations,
+                                                    self._limited(step.reshape(-1, 6)))
+        return True
+
     @staticmethod
     def _qp_status_text(solution):
         """Label the Gauss-Seidel fallback's status."""
         return f'gauss_seidel_{solution.status}'
 
 
-class TargetCorrector:
-    """
-    Closed-loop target correction: integral action on the measured effector error (DESIGN §6).
-
-    The model is asked to reach ``target + c``; every update integrates
-    ``c ← c + gain · (target - measured)`` and clamps ``|c|`` per effector to ``max_correction``.
-    Anti-windup: while the solver reports saturation, an update that would increase ``|c|`` is
-    skipped (conditional integration). Effectors without a measurement (NaN rows) are not
-    integrated. Open loop is ``gain = 0`` (the paper's mode).
-
-    Parameters
-    ----------
-    n_effectors : int
-        ``k``.
-    gain : float
-        Integral gain per update (dimensionless, 0..1; e.g. 0.1 at 50 Hz).
-    max_correction : float  [m]
-        Largest correction per effector.
-
-    """
-
-    def __init__(self, n_effectors, gain=0.1, max_correction=0.03):
-        """Start with no correction."""
-        if not 0.0 <= gain <= 1.0:
-            raise ValueError('gain must lie in [0, 1]')
-        self.gain = float(gain)
-        self.max_correction = float(max_correction)
-        self.correction = np.zeros((int(n_effectors), 3))
-
-    def reset(self):
-        """Forget the integral."""
-        self.correction[:] = 0.0
-
-    def update(self, target, measured, saturated=False):
-        """
-        Integrate one measurement and return the corrected target.
-
-        Parameters
-        ----------
-        target : (k, 3) array_like  [m]
-            Desired effector positions.
-        measured : (k, 3) array_like or None  [m]
-            Measured positions (NaN rows: not measured; None: nothing measured).
-        saturated : bool
-            Whether the last tick saturated (anti-windup).
-
-        Returns
-        -------
-        (k, 3) ndarray  [m]
-            ``target + c``.
-
-        """
-        target = np.asarray(target, dtype=float).reshape(self.correction.shape)
-        if measured is not None and self.gain > 0.0:
-            error = target - np.asarray(measured, dtype=float).reshape(target.shape)
-            valid = np.all(np.isfinite(error), axis=1)
-            proposal = self.correction + self.gain * np.where(valid[:, None], error, 0.0)
-            norms = np.linalg.norm(proposal, axis=1)
-            too_long = norms > self.max_correction
-            proposal[too_long] *= (self.max_correction / norms[too_long])[:, None]
-            if saturated:
-                grows = np.linalg.norm(proposal, axis=1) > np.linalg.norm(self.correction, axis=1)
-                proposal[grows] = self.correction[grows]
-            self.correction = proposal
-        return target + self.correction
+def _retract(positions, rotations, increments):
+    """Return new frames ``x += dx``, ``R ← exp(dθ) R`` (frames 1..n, as ``chain.retract``)."""
+    new_positions = positions.copy()
+    new_positions[1:] += increments[:, :3]
+    new_rotations = rotations.copy()
+    np.matmul(exp_rotations(increments[:, 3:]), rotations[1:], out=new_rotations[1:])
+    return new_positions, new_rotations

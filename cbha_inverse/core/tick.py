@@ -1,0 +1,455 @@
+"""
+Fused linearisation of one inverse-solver tick: chain, cables and condensed cavities at once.
+
+The reference path of a tick (:class:`cbha_inverse.core.kernel.ChainKernel` for the chain,
+``ActuatorSet.evaluate`` / ``load_tangent`` for the actuators, DESIGN §6 step 1) builds several
+dense ``6n x 6n`` matrices and calls numpy a few hundred times. :class:`TickModel` computes the
+same quantities (equal to round-off, tested) in a few dozen batched calls:
+
+- per link ``l`` (frames ``a = l``, ``b = l + 1``) the local b-side wrench
+  ``L = [-s_f; -Jl⁻ᵀ(φ) s_r] + Σ_c p_c (G0_c + H_c δ)`` (the elastic wrench of paper eq. 9 plus
+  the condensed cavities of :mod:`cbha_inverse.core.cavity_linear`, which live on the same
+  segments), rotated to world axes once and gathered onto the frames (the a side receives the
+  equilibrating wrench);
+- the link tangent in world axes ``Dᵀ M D + geometric terms`` with ``M = (Bᵀ K + Z(dJ) - H_p) B``,
+  ``D = dδ/dq`` (6 x 12) and ``H_p = Σ_c p_c H_c``: the structural tangent of paper eq. 8 plus
+  the exact cavity load stiffness, in one 12 x 12 block per link;
+- cable columns and load stiffness per span, summed per frame pair by a constant matrix;
+- every block is added into the lower triangle of the dense tangent by one ``bincount`` with a
+  constant index that also symmetrises (weights ½ on the mirrored entries), which is the
+  symmetric tangent the reference solver factors.
+
+Actuator groups other than :class:`~cbha_inverse.core.actuation.CableGroup` and
+:class:`~cbha_inverse.core.cavity_linear.LinearCavityGroup` (e.g. the skinned mesh cavities) are
+evaluated through their own ``evaluate`` / ``load_tangent`` (slower, same result).
+"""
+
+from cbha_inverse.core.actuation import CableGroup
+from cbha_inverse.core.cavity_linear import LinearCavityGroup
+from cbha_inverse.core.se3 import so3_log
+import numpy as np
+
+# flattened hat(v): entries (0,1) (0,2) (1,0) (1,2) (2,0) (2,1) = -v2 v1 v2 -v0 -v1 v0
+_HAT_DST = np.array([1, 2, 3, 5, 6, 7])
+_HAT_SRC = np.array([2, 1, 2, 0, 1, 0])
+_HAT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+# flattened R @ _LOG_BASIS = (vee(R), tr(R) / 2)
+_LOG_BASIS = np.zeros((9, 4))
+_LOG_BASIS[[7, 2, 3], [0, 1, 2]] = 0.5
+_LOG_BASIS[[5, 6, 1], [0, 1, 2]] = -0.5
+_LOG_BASIS[[0, 4, 8], 3] = 0.5
+# c(t) = sum_k a_k t^(2k) (|B_(2k+2)| / (2k+2)!), the hat(phi)^2 coefficient of Jl^-1
+_JL_SERIES = np.array([1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0,
+                       1.0 / 47900160.0, 691.0 / 2730.0 / 479001600.0,
+                       7.0 / 6.0 / 87178291200.0])
+_JL_DSERIES = 2.0 * np.arange(1, 7) * _JL_SERIES[1:]
+_JL_POWERS = np.arange(7)
+_SERIES_LIMIT = 0.5
+# hat(v).reshape(9) = v @ _HAT_BASIS
+_HAT_BASIS = np.zeros((3, 9))
+_HAT_BASIS[_HAT_SRC, _HAT_DST] = _HAT_SIGN
+# sin(t)/t and (1 - cos t)/t^2 as series in t^2
+_EXP_POWERS = np.arange(8)
+_EXP_SERIES = np.array([[(-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 2)),
+                         (-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 3))] for k in range(8)])
+
+
+def hats_into(out, v):
+    """
+    Write ``hat(v)`` into a buffer (one small matrix product).
+
+    Parameters
+    ----------
+    out : (..., 3, 3) ndarray
+        C-contiguous buffer.
+    v : (..., 3) ndarray
+        Vectors.
+
+    Returns
+    -------
+    (..., 3, 3) ndarray
+        ``out``.
+
+    """
+    np.matmul(v.reshape(-1, 3), _HAT_BASIS, out=out.reshape(-1, 9))
+    return out
+
+
+def jl_coefficients(theta, t2):
+    """
+    Return ``c(t)`` and ``c'(t)/t`` of ``Jl⁻¹(φ) = I - φ^/2 + c φ^²`` (as the kernel's).
+
+    Parameters
+    ----------
+    theta, t2 : (n,) ndarray
+        Angles [rad] and their squares.
+
+    Returns
+    -------
+    c, dc_over_t : (n,) ndarray
+
+    """
+    powers = np.power(t2[:, None], _JL_POWERS)
+    c = powers @ _JL_SERIES
+    dc = powers[:, :6] @ _JL_DSERIES
+    if theta.max() >= _SERIES_LIMIT:
+        big = theta >= _SERIES_LIMIT
+        t = theta[big]
+        half = 0.5 * t
+        cot = np.cos(half) / np.sin(half)
+        c[big] = 1.0 / (t * t) - cot / (2.0 * t)
+        dc[big] = (-2.0 / t ** 3 + 1.0 / (4.0 * t * np.sin(half) ** 2)
+                   + cot / (2.0 * t * t)) / t
+    return c, dc
+
+
+def exp_rotations(rotvec):
+    """
+    Return ``exp(hat(v))`` for (n, 3) rotation vectors (Rodrigues, few numpy calls).
+
+    ``R = I + a v^ + b v^²`` with ``a = sin t / t`` and ``b = (1 - cos t) / t²``: both from their
+    Taylor series (8 terms, truncation below 1e-19 up to 0.5 rad, which is the default
+    ``max_rotation_step``), the closed form above.
+
+    Parameters
+    ----------
+    rotvec : (n, 3) ndarray  [rad]
+        Axis times angle.
+
+    Returns
+    -------
+    (n, 3, 3) ndarray
+
+    """
+    t2 = np.einsum('ni,ni->n', rotvec, rotvec)
+    if t2.max() <= 0.25:
+        ab = np.power(t2[:, None], _EXP_POWERS) @ _EXP_SERIES
+        a, b = ab[:, 0], ab[:, 1]
+    else:
+        theta = np.sqrt(t2)
+        small = theta < 1e-4
+        safe = np.where(small, 1.0, theta)
+        a = np.where(small, 1.0 - t2 / 6.0, np.sin(safe) / safe)
+        b = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
+    out = (rotvec[:, :, None] * rotvec[:, None, :]).reshape(-1, 9)
+    out *= b[:, None]
+    out += (a[:, None] * rotvec) @ _HAT_BASIS
+    out[:, ::4] += (1.0 - b * t2)[:, None]
+    return out.reshape(-1, 3, 3)
+
+
+class _Cables:
+    """Constant data of the cable fast path (one :class:`CableGroup`)."""
+
+    def __init__(self, group, columns, n_frames):
+        self.columns = np.asarray(columns, dtype=int)
+        self.contiguous = bool(np.all(np.diff(self.columns) == 1))
+        self.frames = group.frames
+        self.offsets = group.offsets[:, :, None]
+        n_points = self.frames.size
+        start, end = group.segment_start, group.segment_end
+        n_spans = start.size
+        self.start, self.end = start, end
+        self.span_matrix = np.zeros((n_spans, n_points))
+        self.span_matrix[np.arange(n_spans), end] = 1.0
+        self.span_matrix[np.arange(n_spans), start] -= 1.0
+        self.point_force = group._point_force
+        self.segment_owner = group._segment_owner
+        self.point_owner = group._point_owner
+        m_c = len(group.cables)
+        self.m = m_c
+        # scatter of point wrenches into (frame, cable)
+        self.scatter = np.zeros((n_frames * m_c, n_points))
+        self.scatter[self.frames * m_c + self.point_owner, np.arange(n_points)] = 1.0
+        # span blocks summed per frame pair
+        pairs = {}
+        pair_of_span = np.empty(n_spans, dtype=int)
+        for s in range(n_spans):
+            key = (int(self.frames[start[s]]), int(self.frames[end[s]]))
+            pair_of_span[s] = pairs.setdefault(key, len(pairs))
+        self.pairs = list(pairs)
+        self.pair_sum = np.zeros((len(pairs), n_spans))
+        self.pair_sum[pair_of_span, np.arange(n_spans)] = 1.0
+        frames_used = sorted({int(f) for f in self.frames})
+        self.moment_frames = frames_used
+        where = {f: i for i, f in enumerate(frames_used)}
+        self.frame_sum = np.zeros((len(frames_used), n_points))
+        self.frame_sum[[where[int(f)] for f in self.frames], np.arange(n_points)] = 1.0
+        self.c = np.zeros((n_spans, 12, 3))
+        self.c[:, 0:3] = np.eye(3)
+        self.c[:, 6:9] = -np.eye(3)
+        self.hats = np.zeros((n_points, 3, 3))
+        self.wrench = np.empty((n_points, 6))
+
+
+class TickModel:
+    """
+    Preallocated fused evaluator of everything a linearisation tick needs.
+
+    Parameters
+    ----------
+    model : cbha_inverse.core.chain.ChainModel
+        The chain.
+    actuators : cbha_inverse.core.actuation.ActuatorSet
+        The actuators (``m``).
+    external : (6n,) ndarray  [N, N*m]
+        Constant external wrenches on frames 1..n (gravity).
+
+    """
+
+    def __init__(self, model, actuators, external):
+        """Precompute constants, buffers and the assembly index."""
+        n = model.n_links
+        m = actuators.n_actuators
+        self.n, self.m, self.size = n, m, 6 * n
+        self.stiffness = np.ascontiguousarray(model.stiffnesses)
+        self.rest_offsets = np.ascontiguousarray(model.rest_offsets)
+        q0 = np.asarray(model.rest_rotations)
+        self._q0t = (None if np.array_equal(q0, np.broadcast_to(np.eye(3), q0.shape))
+                     else np.ascontiguousarray(np.swapaxes(q0, 1, 2)))
+        self.external = np.asarray(external, dtype=float).reshape(-1)
+        position = {name: k for k, name in enumerate(actuators.names)}
+        self._cables, self._generic = [], []
+        g0 = np.zeros((n, m, 6))
+        hess = np.zeros((n, m, 6, 6))
+        has_cavities = False
+        for group in actuators.groups:
+            cols = [position[name] for name in group.names]
+            if isinstance(group, CableGroup):
+                self._cables.append(_Cables(group, cols, model.n_frames))
+            elif isinstance(group, LinearCavityGroup) and _matches_links(group, model):
+                for e in range(group.lower.size):
+                    col = cols[group.owner[e]]
+                    g0[group.lower[e], col] += group.g0[e]
+                    hess[group.lower[e], col] += group.hessian[e]
+                has_cavities = True
+            else:
+                self._generic.append((group, np.asarray(cols, dtype=int)))
+        self.has_cavities = has_cavities
+        if has_cavities:
+            self._g0 = g0
+            self._hess = hess
+            self._hess_t = np.ascontiguousarray(hess.reshape(n, m, 36).transpose(0, 2, 1))
+        kc = m + 1 if has_cavities else 1
+        self._kc = kc
+        self._local = np.zeros((n, 3, 2, kc))
+        self._gather = np.zeros((n + 1, 2, 3, m + 1))
+        self._delta = np.empty((n, 6))
+        self._phi_hat = np.zeros((n, 3, 3))
+        self._diff_hat = np.zeros((n, 3, 3))
+        self._fm_hat = np.zeros((n, 2, 3, 3))
+        self._b = np.zeros((n, 6, 6))
+        self._b[:, :3, :3] = np.eye(3)
+        self._bt = self._b.copy()
+        self._d = np.zeros((n, 6, 12))
+        self._eye_minus = -np.eye(3)
+        # values of the assembly: link blocks, cable pair blocks, cable point moments
+        rows, cols = [], []
+        f = np.arange(n)
+        i12 = np.arange(12)
+        link_dof = 6 * f[:, None] + i12[None, :] - 6          # frame a = l -> dof 6(l - 1)
+        rows.append(np.broadcast_to(link_dof[:, :, None], (n, 12, 12)).reshape(-1))
+        cols.append(np.broadcast_to(link_dof[:, None, :], (n, 12, 12)).reshape(-1))
+        self._cable_slices = []
+        count = n * 144
+        for cab in self._cables:
+            i6 = np.arange(6)
+            for a, b in cab.pairs:
+                dof = np.concatenate([6 * (a - 1) + i6, 6 * (b - 1) + i6])
+                rows.append(np.repeat(dof, 12))
+                cols.append(np.tile(dof, 12))
+            i3 = np.arange(3)
+            for fr in cab.moment_frames:
+                dof = 6 * (fr - 1) + 3 + i3
+                rows.append(np.repeat(dof, 3))
+                cols.append(np.tile(dof, 3))
+            n_pair, n_mom = len(cab.pairs) * 144, len(cab.moment_frames) * 9
+            self._cable_slices.append((slice(count, count + n_pair),
+                                       slice(count + n_pair, count + n_pair + n_mom)))
+            count += n_pair + n_mom
+        rows, cols = np.concatenate(rows), np.concatenate(cols)
+        size = self.size
+        valid = (rows >= 0) & (cols >= 0)
+        lo, hi = np.minimum(rows, cols), np.maximum(rows, cols)
+        # dense C-order slot of the lower triangle (row >= col); base-frame entries -> trash
+        self._index = np.where(valid, hi * size + lo, size * size)
+        self._weights = np.where(rows == cols, 1.0, 0.5)
+        self._values = np.zeros(count)
+        self._link_values = self._values[:n * 144].reshape(n, 12, 12)
+
+    def linearise(self, positions, rotations, actuation):
+        """
+        Return the symmetric tangent (lower triangle) and the right-hand sides of a tick.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        actuation : (m,) ndarray
+            ``λ_prev`` (enters the residual and the load stiffness).
+
+        Returns
+        -------
+        tangent : (6n, 6n) ndarray
+            C-order; its lower triangle holds ``K`` (structure + symmetric load stiffness), the
+            strict upper triangle is zero. ``tangent.T`` is the Fortran-order upper triangle.
+        rhs : (6n, m + 1) ndarray
+            Column 0: the residual ``f(q) + f_ext + J_aᵀ λ``; columns 1..m: ``J_aᵀ``.
+
+        """
+        n = self.n
+        rot_a = rotations[:-1]
+        rot_at = rot_a.transpose(0, 2, 1)
+        diff = positions[1:] - positions[:-1]
+        rel = np.matmul(rot_at, rotations[1:])
+        if self._q0t is not None:
+            rel = np.matmul(rel, self._q0t)
+        mixed = rel.reshape(n, 9) @ _LOG_BASIS
+        cos_t = mixed[:, 3] - 0.5
+        delta = self._delta
+        np.subtract(np.matmul(rot_at, diff[:, :, None])[:, :, 0], self.rest_offsets,
+                    out=delta[:, :3])
+        if cos_t.min() > -0.5:
+            d = mixed[:, :3]
+            sin_t = np.sqrt(np.einsum('ni,ni->n', d, d))
+            theta = np.arctan2(sin_t, cos_t)
+            np.multiply(d, (theta / np.maximum(sin_t, 1e-300))[:, None], out=delta[:, 3:])
+        else:
+            delta[:, 3:] = so3_log(rel)
+            theta = np.sqrt(np.einsum('ni,ni->n', delta[:, 3:], delta[:, 3:]))
+        phi = delta[:, 3:]
+        t2 = theta * theta
+        stress = np.matmul(self.stiffness, delta[:, :, None])[:, :, 0]
+        c, dc = jl_coefficients(theta, t2)
+        phi_hat = hats_into(self._phi_hat, phi)
+        outer = phi[:, :, None] * phi[:, None, :]
+        jinv = c[:, None, None] * outer - 0.5 * phi_hat
+        jinv.reshape(n, 9)[:, ::4] += (1.0 - c * t2)[:, None]
+        jinv_t = jinv.transpose(0, 2, 1)
+        s_r = stress[:, 3:]
+        # local b-side wrench of every link (and of every cavity per unit pressure)
+        local = self._local
+        np.negative(stress[:, :3], out=local[:, :, 0, 0])
+        np.negative(np.matmul(jinv_t, s_r[:, :, None])[:, :, 0], out=local[:, :, 1, 0])
+        if self.has_cavities:
+            cav = self._g0 + np.matmul(self._hess, delta[:, None, :, None])[..., 0]
+            local[..., 1:] = cav.reshape(n, -1, 2, 3).transpose(0, 3, 2, 1)
+            local[..., 0] += local[..., 1:] @ actuation
+        world = np.matmul(rot_a, local.reshape(n, 3, -1)).reshape(n, 3, 2, -1)
+        diff_hat = hats_into(self._diff_hat, diff)
+        force = world[:, :, 0, :]
+        arm = np.matmul(diff_hat, force)
+        kc = self._kc
+        gather = self._gather
+        wt = world.transpose(0, 2, 1, 3)
+        gather[1:, :, :, :kc] = wt
+        gather[1:-1, :, :, :kc] -= wt[1:]
+        gather[1:-1, 1, :, :kc] -= arm[1:]
+        rhs = gather[1:].reshape(6 * n, -1)
+        # tangent blocks per link, world axes: D^T M D + geometric terms
+        b = self._b
+        b[:, 3:, 3:] = jinv
+        bt = self._bt
+        bt[:, 3:, 3:] = jinv_t
+        a = np.matmul(bt, self.stiffness)
+        # dj = d(Jl^-T s)/dphi (see se3.so3_left_jacobian_inverse_transpose_derivative)
+        ps = np.einsum('ni,ni->n', phi, s_r)
+        left = np.empty((n, 3, 2))
+        np.subtract(dc[:, None] * (phi * ps[:, None] - t2[:, None] * s_r),
+                    2.0 * c[:, None] * s_r, out=left[:, :, 0])
+        np.multiply(c[:, None], phi, out=left[:, :, 1])
+        right = np.empty((n, 2, 3))
+        right[:, 0] = phi
+        right[:, 1] = s_r
+        dj = np.matmul(left, right)
+        dj.reshape(n, 9)[:, _HAT_DST] -= 0.5 * s_r[:, _HAT_SRC] * _HAT_SIGN
+        dj.reshape(n, 9)[:, ::4] += (c * ps)[:, None]
+        a[:, 3:, 3:] += dj
+        if self.has_cavities:
+            a -= (self._hess_t @ actuation).reshape(n, 6, 6)
+        mat = np.matmul(a, b)
+        dmat = self._d
+        dv = dmat.reshape(n, 2, 3, 4, 3)
+        dv[:, [0, 1], :, [2, 3]] = rot_at
+        dv[:, [0, 1], :, [0, 1]] = -rot_at
+        np.matmul(rot_at, diff_hat, out=dv[:, 0, :, 1])
+        blocks = self._link_values
+        np.matmul(dmat.transpose(0, 2, 1), np.matmul(mat, dmat), out=blocks)
+        fm_hat = hats_into(self._fm_hat, world[:, :, :, 0].transpose(0, 2, 1))
+        f_hat2 = 2.0 * fm_hat[:, 0]
+        blocks[:, 6:9, 3:6] += f_hat2
+        blocks[:, 3:6, 0:3] += f_hat2
+        blocks[:, 9:12, 3:6] += fm_hat[:, 1]
+        blocks[:, 3:6, 3:6] -= np.matmul(fm_hat[:, 0], diff_hat)
+        for cab, (pair_slice, moment_slice) in zip(self._cables, self._cable_slices):
+            self._cable_terms(cab, positions, rotations, actuation, rhs, pair_slice,
+                              moment_slice)
+        rhs[:, 0] += self.external
+        tangent = np.bincount(self._index, self._values * self._weights,
+                              minlength=self.size * self.size + 1)[:-1]
+        tangent = tangent.reshape(self.size, self.size)
+        for group, cols in self._generic:
+            wrenches, _ = group.evaluate(positions, rotations, False)
+            jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
+            rhs[:, 1 + cols] = jat.T
+            rhs[:, 0] += actuation[cols] @ jat
+            load = group.load_tangent(positions, rotations, actuation[cols], True) if hasattr(
+                group, 'load_tangent') else None
+            if load is not None:
+                tangent += np.tril(0.5 * (load + load.T))
+        return tangent, rhs
+
+    def _cable_terms(self, cab, positions, rotations, actuation, rhs, pair_slice,
+                     moment_slice):
+        """Cable columns, their loads in the residual and their load stiffness blocks."""
+        n = self.n
+        levers = np.matmul(rotations[cab.frames], cab.offsets)[:, :, 0]
+        points = positions[cab.frames] + levers
+        spans = cab.span_matrix @ points
+        lengths = np.sqrt(np.einsum('si,si->s', spans, spans))
+        units = spans / lengths[:, None]
+        forces = cab.point_force @ units
+        hats = hats_into(cab.hats, levers)
+        wrench = cab.wrench
+        wrench[:, :3] = forces
+        np.matmul(hats, forces[:, :, None], out=wrench[:, 3:, None])
+        cols = (cab.scatter @ wrench).reshape(n + 1, cab.m, 6)[1:].transpose(0, 2, 1)
+        cols = cols.reshape(6 * n, cab.m)
+        tension = actuation[cab.columns]
+        if cab.contiguous:
+            target = rhs[:, 1 + cab.columns[0]:1 + cab.columns[-1] + 1]
+            if self.has_cavities:
+                target += cols
+            else:
+                target[...] = cols
+        else:
+            rhs[:, 1 + cab.columns] += cols
+        rhs[:, 0] += cols @ tension
+        # load stiffness: per span t/l (I - u u^T) through C = [I; r_s^; -I; -r_e^]
+        scale = tension[cab.segment_owner] / lengths
+        proj = -(scale[:, None, None] * units[:, :, None]) * units[:, None, :]
+        proj.reshape(-1, 9)[:, ::4] += scale[:, None]
+        c = cab.c
+        c[:, 3:6] = hats[cab.start]
+        np.negative(hats[cab.end], out=c[:, 9:12])
+        span_blocks = np.matmul(np.matmul(c, proj), c.transpose(0, 2, 1))
+        np.matmul(cab.pair_sum, span_blocks.reshape(-1, 144),
+                  out=self._values[pair_slice].reshape(-1, 144))
+        point_forces = forces * tension[cab.point_owner][:, None]
+        moment = -levers[:, :, None] * point_forces[:, None, :]
+        moment.reshape(-1, 9)[:, ::4] += np.einsum('pi,pi->p', point_forces, levers)[:, None]
+        np.matmul(cab.frame_sum, moment.reshape(-1, 9),
+                  out=self._values[moment_slice].reshape(-1, 9))
+
+
+def _matches_links(group, model):
+    """Whether every condensed cavity part has the rest geometry of its link."""
+    lower = group.lower
+    if lower.size == 0 or lower.min() < 0 or lower.max() >= model.n_links:
+        return False
+    return bool(np.allclose(group.rest_offset, np.asarray(model.rest_offsets)[lower],
+                            rtol=0.0, atol=1e-12)
+                and np.allclose(group.rest_rotation, np.asarray(model.rest_rotations)[lower],
+                                rtol=0.0, atol=1e-12))

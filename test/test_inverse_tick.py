@@ -1,0 +1,78 @@
+"""The fused tick model against the reference kernel, actuator columns and load stiffness."""
+
+from cbha_inverse.core.actuation import ActuatorSet
+from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart, tube_surface
+from cbha_inverse.core.cavity_linear import LinearCavityGroup
+from cbha_inverse.core.chain import ChainModel, rest_state, retract
+from cbha_inverse.core.kernel import ChainKernel
+from cbha_inverse.core.links import timoshenko_compliance
+from cbha_inverse.core.se3 import so3_exp
+from cbha_inverse.core.tick import exp_rotations, TickModel
+from cbha_inverse.paths import config_path
+from cbha_inverse.scene import load_scene
+import numpy as np
+import pytest
+
+
+def _reference(model, actuators, external, positions, rotations, actuation):
+    internal, tangent = ChainKernel(model).linearise(positions, rotations)
+    tangent = tangent.copy()
+    load = actuators.load_tangent(positions, rotations, actuation)
+    if load is not None:
+        tangent += load
+    wrenches, _ = actuators.evaluate(positions, rotations, False)
+    jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
+    return internal.reshape(-1) + external + actuation @ jat, jat, tangent
+
+
+def _check(model, actuators, external, state, actuation):
+    tick = TickModel(model, actuators, external)
+    tangent, rhs = tick.linearise(state.positions, state.rotations, actuation)
+    residual, jat, reference = _reference(model, actuators, external, state.positions,
+                                          state.rotations, actuation)
+    scale = np.abs(reference).max()
+    np.testing.assert_allclose(rhs[:, 0], residual, atol=1e-12 * np.abs(residual).max())
+    np.testing.assert_allclose(rhs[:, 1:], jat.T, atol=1e-12 * np.abs(jat).max())
+    np.testing.assert_allclose(tangent, np.tril(reference), atol=1e-12 * scale)
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'tendon_10f_16c', 'cbha'])
+def test_tick_model_equals_reference_on_the_scenes(name):
+    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
+        pytest.skip('the condensed CBHA segment is not generated yet')
+    scene = load_scene(name)
+    rng = np.random.default_rng(7)
+    n = scene.model.n_links
+    state = retract(rest_state(scene.model), np.concatenate(
+        [0.002 * rng.standard_normal((n, 3)), 0.2 * rng.standard_normal((n, 3))], axis=1))
+    actuation = scene.lower_bounds + (scene.upper_bounds - scene.lower_bounds) * rng.uniform(
+        0.0, 0.7, len(scene.actuator_names))
+    external = np.zeros(6 * n)
+    external[2::6] = -0.01
+    _check(scene.model, scene.actuators, external, state, actuation)
+
+
+def test_tick_model_large_angles_rest_rotations_and_mixed_groups():
+    rng = np.random.default_rng(3)
+    n, length = 5, 0.03
+    c = timoshenko_compliance(length, 2e7, 0.45, 0.006)
+    model = ChainModel.from_compliances(np.broadcast_to(c, (n, 6, 6)),
+                                        np.tile([length, 0.0, 0.0], (n, 1)),
+                                        rest_rotations=so3_exp(0.05 * rng.standard_normal((n, 3))))
+    points, tris = tube_surface(length, 0.004, (0.008, 0.003), n_around=10, n_along=3)
+    parts = tuple(CavityPart(points, tris, i, model.rest_offsets[i], model.rest_rotations[i])
+                  for i in (1, 2))
+    linear = LinearCavityGroup([Cavity('p', parts, 1e5)], model.n_frames)
+    mesh = CavityGroup([Cavity('q', parts[:1], 1e5)], model.n_frames)
+    actuators = ActuatorSet([linear, mesh], model.n_frames)
+    state = retract(rest_state(model), np.concatenate(
+        [0.003 * rng.standard_normal((n, 3)), 0.7 * rng.standard_normal((n, 3))], axis=1))
+    _check(model, actuators, np.zeros(6 * n), state, np.array([4e4, 2e4]))
+
+
+def test_exp_rotations_matches_so3_exp():
+    rng = np.random.default_rng(5)
+    small = rng.standard_normal((40, 3)) * np.logspace(-12, -0.4, 40)[:, None]
+    large = rng.standard_normal((10, 3))
+    for v in (small, large, np.zeros((2, 3))):
+        np.testing.assert_allclose(exp_rotations(v), so3_exp(v), atol=2e-15)
