@@ -41,6 +41,7 @@ class PointEffectors:
             raise ValueError(f'effector frames must lie in 1..{n_frames - 1} (the base is fixed)')
         self.n_frames = int(n_frames)
         self._dof = self.frames - 1
+        self._centred = not np.any(self.offsets)
 
     @property
     def n_effectors(self):
@@ -79,6 +80,8 @@ class PointEffectors:
         (k, 3) ndarray  [m]
 
         """
+        if self._centred:
+            return positions[self.frames]
         return positions[self.frames] + self.levers(rotations)
 
     def apply_jacobian(self, increments, levers):

@@ -214,16 +214,20 @@ def qp_matrices(w_ea, w_aa, scale, *, energy_weight=1e-6, proximal_weight=1e-4):
     w = w_ea * scale
     tracking = w.T @ w
     m = scale.size
-    norm = np.trace(tracking) / m
+    norm = tracking.trace() / m
     if not norm > 0.0:
         norm = 1.0
+    w /= norm
     tracking /= norm
-    hessian = tracking + proximal_weight * np.eye(m)
-    energy = w_aa * np.outer(scale, scale)
-    energy_norm = np.trace(energy) / m
+    hessian = tracking.copy()
+    hessian.flat[::m + 1] += proximal_weight
+    energy = w_aa * (scale[:, None] * scale)
+    energy_norm = energy.trace() / m
     if energy_norm > 0.0 and energy_weight > 0.0:
-        hessian += (energy_weight / energy_norm) * 0.5 * (energy + energy.T)
-    return QPMatrices(hessian, tracking, w / norm, scale, proximal_weight)
+        energy += energy.T
+        energy *= (energy_weight / energy_norm) * 0.5
+        hessian += energy
+    return QPMatrices(hessian, tracking, w, scale, proximal_weight)
 
 
 def qp_problem(matrices, delta_free, previous, lower_bounds, upper_bounds, rate_limit=None):

@@ -114,10 +114,11 @@ class ActuationQP:
             qp.update(H=problem.hessian, g=problem.gradient, l_box=problem.lower,
                       u_box=problem.upper, update_preconditioner=False)
             qp.solve()
-        info = qp.results.info
+        results = qp.results
+        info = results.info
         status = _STATUS.get(info.status.name, info.status.name)
-        x = qp.results.x
-        ok = status == 'solved' and bool(np.isfinite(x).all())
+        x = results.x
+        ok = status == 'solved' and bool(np.isfinite(x.sum()))
         if not ok:
             self.reset()
             x = problem.previous
