@@ -2,7 +2,8 @@
 
 from cbha_inverse.core.control import TargetCorrector
 from cbha_inverse.core.inverse import actuation_qp, Projection
-from cbha_inverse.core.qp import ActuationQP, binding_bounds, projected_gauss_seidel
+from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
+                                  projected_gauss_seidel)
 import numpy as np
 import pytest
 
@@ -91,3 +92,22 @@ def test_target_corrector_integrates_clamps_and_stops_winding_up():
     corr.update(target, [[np.nan] * 3])
     assert np.all(np.isfinite(corr.correction))
     np.testing.assert_array_equal(TargetCorrector(1, gain=0.0).update(target, target + 1), target)
+
+
+def test_active_set_qp_is_exact_and_agrees_with_proxsuite():
+    rng = np.random.default_rng(6)
+    for k, m, gap in ((1, 6, 0.01), (2, 16, 0.01), (1, 8, 100.0), (3, 8, 0.001)):
+        solver = ActiveSetQP(m)
+        for _ in range(4):
+            problem, _ = _problem(rng, k=k, m=m, gap=gap)
+            exact = solver.solve(problem)
+            reference = ActuationQP(m).solve(problem)
+            assert exact.ok and exact.status == 'solved' and reference.ok
+            x = exact.x
+            assert np.all(x >= problem.lower) and np.all(x <= problem.upper)
+            grad = problem.hessian @ x + problem.gradient
+            inside = (x > problem.lower + 1e-12) & (x < problem.upper - 1e-12)
+            assert np.abs(grad[inside]).max(initial=0.0) < 1e-10
+            obj = [0.5 * y @ problem.hessian @ y + problem.gradient @ y for y in (x, reference.x)]
+            assert obj[0] <= obj[1] + 1e-12 * max(1.0, abs(obj[1]))
+            np.testing.assert_allclose(x, reference.x, atol=1e-6)

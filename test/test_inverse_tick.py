@@ -76,3 +76,19 @@ def test_exp_rotations_matches_so3_exp():
     large = rng.standard_normal((10, 3))
     for v in (small, large, np.zeros((2, 3))):
         np.testing.assert_allclose(exp_rotations(v), so3_exp(v), atol=2e-15)
+
+
+@pytest.mark.parametrize('name', ['tendon_10f_16c', 'cbha'])
+def test_active_set_option_gives_the_proxsuite_actuation(name):
+    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
+        pytest.skip('the condensed CBHA segment is not generated yet')
+    scene = load_scene(name)
+    far = scene.workspace_center + 0.02
+    runs = []
+    for qp_solver in ('proxsuite', 'active_set'):
+        solver = scene.make_inverse_solver(qp_solver=qp_solver)
+        runs.append([solver.step(target) for target in [scene.workspace_center] * 5 + [far] * 5])
+    for a, b in zip(*runs):
+        assert b.status == a.status and b.qp_status == 'solved'
+        np.testing.assert_allclose(b.actuation, a.actuation, rtol=1e-5,
+                                   atol=1e-7 * scene.upper_bounds.max())

@@ -30,7 +30,8 @@ from cbha_inverse.core.chain import ChainState, rest_state
 from cbha_inverse.core.correction import TargetCorrector  # noqa: F401 (public re-export)
 from cbha_inverse.core.inverse import qp_matrices, qp_problem
 from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, DenseLU
-from cbha_inverse.core.qp import ActuationQP, binding_bounds, projected_gauss_seidel
+from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
+                                  projected_gauss_seidel)
 from cbha_inverse.core.tick import exp_rotations, TickModel
 import numpy as np
 from scipy.linalg import lapack
@@ -50,7 +51,9 @@ class InverseOptions:
     rate_limit : tuple of float or None
         Largest change per tick of each actuator (N or Pa), ``None`` for none.
     qp_solver : str
-        ``'proxsuite'`` (default) or ``'gauss_seidel'``.
+        ``'proxsuite'`` (default), ``'active_set'`` (exact principal pivoting on the active set,
+        :class:`cbha_inverse.core.qp.ActiveSetQP`, faster for the small ``m`` of the scenes;
+        proxsuite takes over when it does not converge) or ``'gauss_seidel'`` (the paper's).
     newton_steps : int
         Newton steps per tick (1 = the update reuses the tick's factorization).
     max_rotation_step : float  [rad]
@@ -80,8 +83,8 @@ class InverseOptions:
 
     def __post_init__(self):
         """Validate."""
-        if self.qp_solver not in ('proxsuite', 'gauss_seidel'):
-            raise ValueError(f"qp_solver must be 'proxsuite' or 'gauss_seidel', "
+        if self.qp_solver not in ('proxsuite', 'active_set', 'gauss_seidel'):
+            raise ValueError(f"qp_solver must be 'proxsuite', 'active_set' or 'gauss_seidel', "
                              f'not {self.qp_solver!r}')
         if self.newton_steps < 1:
             raise ValueError('newton_steps must be >= 1')
@@ -190,6 +193,7 @@ class InverseSolver:
             external[:, :3] = np.asarray(model.masses, dtype=float)[:, None] * np.asarray(gravity)
         self._external = external.reshape(-1)
         self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
+        self._active_set = ActiveSetQP(m)
         self._kernel = ChainKernel(model)
         self._tick = TickModel(model, actuators, self._external)
         self._m, self._k = m, effectors.n_effectors
@@ -215,6 +219,7 @@ class InverseSolver:
         a = np.zeros(len(self.actuator_names)) if actuation is None else actuation
         self.actuation = np.clip(np.asarray(a, dtype=float), self.lower_bounds, self.upper_bounds)
         self._qp.reset()
+        self._active_set.reset()
         self._linearization = None
         self._pending = None
         self._age = 0
@@ -332,13 +337,19 @@ class InverseSolver:
         problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._rate)
         status = 'solved'
-        if self.options.qp_solver == 'proxsuite':
-            solution = self._qp.solve(problem, same_hessian=not fresh)
+        qp_solver, same_hessian = self.options.qp_solver, not fresh
+        if qp_solver == 'active_set':
+            solution = self._active_set.solve(problem)
+            if not solution.ok:
+                # proxsuite (status checked) takes over; it has not seen this Hessian
+                qp_solver, same_hessian = 'proxsuite', False
+        if qp_solver == 'proxsuite':
+            solution = self._qp.solve(problem, same_hessian=same_hessian)
             if not solution.ok:
                 status = 'qp_fallback'
                 solution = projected_gauss_seidel(problem)
                 solution = type(solution)(solution.x, self._qp_status_text(solution), 0, True)
-        else:
+        elif qp_solver == 'gauss_seidel':
             solution = projected_gauss_seidel(problem)
         actuation = np.minimum(np.maximum(problem.scale * solution.x, self.lower_bounds),
                                self.upper_bounds)

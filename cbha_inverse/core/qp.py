@@ -128,6 +128,97 @@ class ActuationQP:
         return QPSolution(x, status, int(info.iter), ok)
 
 
+class ActiveSetQP:
+    """
+    Exact box-QP solver for small problems (m ≲ 30): principal pivoting on the active set.
+
+    Each iteration fixes the variables of the current active set at their bounds and solves the
+    others from the KKT equations (LAPACK ``dposv`` on the free block of the SPD Hessian); the
+    variables that leave the box become active and the active ones whose multiplier has the wrong
+    sign become free (block pivoting for the first iterations, then one variable at a time,
+    Murty's rule, which terminates for positive definite Hessians). The active set of the previous
+    tick is the warm start, so a tracking tick usually takes one iteration. The result satisfies
+    the KKT conditions to round-off (checked); if not within ``max_iterations``, ``ok`` is False
+    and the caller falls back to proxsuite.
+
+    Parameters
+    ----------
+    n_actuators : int
+        ``m``.
+    max_iterations : int
+        Iteration limit (default ``4 m + 10``).
+
+    """
+
+    def __init__(self, n_actuators, max_iterations=None):
+        """Start with every variable free."""
+        self.n_actuators = int(n_actuators)
+        self.max_iterations = (4 * self.n_actuators + 10 if max_iterations is None
+                               else int(max_iterations))
+        self.reset()
+
+    def reset(self):
+        """Forget the warm start (active set)."""
+        self._state = np.zeros(self.n_actuators, dtype=np.int8)
+
+    def solve(self, problem):
+        """
+        Solve a :class:`QPProblem` exactly.
+
+        Parameters
+        ----------
+        problem : QPProblem
+            The normalised QP (SPD Hessian).
+
+        Returns
+        -------
+        QPSolution
+            ``status`` ``'solved'`` (KKT conditions hold) or ``'max_iterations'`` /
+            ``'singular'`` (``ok`` False, ``x`` the previous actuation clipped into the box).
+
+        """
+        h, g = problem.hessian, problem.gradient
+        lower, upper = problem.lower, problem.upper
+        state = self._state.copy()
+        scale = 1e-12 * (1.0 + float(np.abs(g).max()) + float(np.abs(h).max()))
+        for iteration in range(1, self.max_iterations + 1):
+            x = np.where(state < 0, lower, upper)
+            free = state == 0
+            if free.all():
+                _, x, info = lapack.dposv(h, -g)
+            elif free.any():
+                h_free = h[free]
+                bound = ~free
+                _, xf, info = lapack.dposv(h_free[:, free], -g[free] - h_free[:, bound] @ x[bound])
+                x[free] = xf
+            else:
+                info = 0
+            if info != 0:
+                break
+            grad = h @ x + g
+            below = free & (x < lower - 1e-13)
+            above = free & (x > upper + 1e-13)
+            wrong = ((state < 0) & (grad < -scale)) | ((state > 0) & (grad > scale))
+            bad = below | above | wrong
+            if not bad.any():
+                self._state = state
+                return QPSolution(np.minimum(np.maximum(x, lower), upper), 'solved', iteration,
+                                  True)
+            if iteration > 3:
+                # Murty's rule: pivot only the first violating variable (finite termination)
+                first = int(np.argmax(bad))
+                bad = np.zeros_like(bad)
+                bad[first] = True
+                below, above, wrong = below & bad, above & bad, wrong & bad
+            state[below] = -1
+            state[above] = 1
+            state[wrong] = 0
+        self.reset()
+        x = np.minimum(np.maximum(problem.previous, lower), upper)
+        return QPSolution(x, 'max_iterations' if iteration == self.max_iterations else 'singular',
+                          iteration, False)
+
+
 def polish(problem, x, tolerance=1e-4):
     """
     Refine an approximate box-QP solution on its active set (exact KKT point if it is one).
