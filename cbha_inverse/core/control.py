@@ -32,7 +32,7 @@ from cbha_inverse.core.inverse import qp_matrices, qp_problem
 from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, DenseLU
 from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
                                   projected_gauss_seidel)
-from cbha_inverse.core.tick import exp_rotations, TickModel
+from cbha_inverse.core.tick import retract_frames as _retract, TickModel
 import numpy as np
 from scipy.linalg import lapack
 
@@ -441,12 +441,3 @@ class InverseSolver:
     def _qp_status_text(solution):
         """Label the Gauss-Seidel fallback's status."""
         return f'gauss_seidel_{solution.status}'
-
-
-def _retract(positions, rotations, increments):
-    """Return new frames ``x += dx``, ``R ← exp(dθ) R`` (frames 1..n, as ``chain.retract``)."""
-    new_positions = positions.copy()
-    new_positions[1:] += increments[:, :3]
-    new_rotations = rotations.copy()
-    np.matmul(exp_rotations(increments[:, 3:]), rotations[1:], out=new_rotations[1:])
-    return new_positions, new_rotations

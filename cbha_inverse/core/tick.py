@@ -27,6 +27,7 @@ evaluated through their own ``evaluate`` / ``load_tangent`` (slower, same result
 from cbha_inverse.core.actuation import CableGroup
 from cbha_inverse.core.cavity_linear import LinearCavityGroup
 from cbha_inverse.core.se3 import so3_log
+from cbha_inverse.core.tick_cables import CableTerms
 import numpy as np
 
 # flattened hat(v): entries (0,1) (0,2) (1,0) (1,2) (2,0) (2,1) = -v2 v1 v2 -v0 -v1 v0
@@ -48,6 +49,7 @@ _SERIES_LIMIT = 0.5
 # hat(v).reshape(9) = v @ _HAT_BASIS
 _HAT_BASIS = np.zeros((3, 9))
 _HAT_BASIS[_HAT_SRC, _HAT_DST] = _HAT_SIGN
+_HALF_HAT_BASIS = -0.5 * _HAT_BASIS
 # sin(t)/t and (1 - cos t)/t^2 as series in t^2
 _EXP_POWERS = np.arange(8)
 _EXP_SERIES = np.array([[(-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 2)),
@@ -138,48 +140,30 @@ def exp_rotations(rotvec):
     return out.reshape(-1, 3, 3)
 
 
-class _Cables:
-    """Constant data of the cable fast path (one :class:`CableGroup`)."""
+def retract_frames(positions, rotations, increments):
+    """
+    Apply world-axis increments to frames 1..n (as :func:`cbha_inverse.core.chain.retract`).
 
-    def __init__(self, group, columns, n_frames):
-        self.columns = np.asarray(columns, dtype=int)
-        self.contiguous = bool(np.all(np.diff(self.columns) == 1))
-        self.frames = group.frames
-        self.offsets = group.offsets[:, :, None]
-        n_points = self.frames.size
-        start, end = group.segment_start, group.segment_end
-        n_spans = start.size
-        self.start, self.end = start, end
-        self.span_matrix = np.zeros((n_spans, n_points))
-        self.span_matrix[np.arange(n_spans), end] = 1.0
-        self.span_matrix[np.arange(n_spans), start] -= 1.0
-        self.point_force = group._point_force
-        self.segment_owner = group._segment_owner
-        self.point_owner = group._point_owner
-        m_c = len(group.cables)
-        self.m = m_c
-        # scatter of point wrenches into (frame, cable)
-        self.scatter = np.zeros((n_frames * m_c, n_points))
-        self.scatter[self.frames * m_c + self.point_owner, np.arange(n_points)] = 1.0
-        # span blocks summed per frame pair
-        pairs = {}
-        pair_of_span = np.empty(n_spans, dtype=int)
-        for s in range(n_spans):
-            key = (int(self.frames[start[s]]), int(self.frames[end[s]]))
-            pair_of_span[s] = pairs.setdefault(key, len(pairs))
-        self.pairs = list(pairs)
-        self.pair_sum = np.zeros((len(pairs), n_spans))
-        self.pair_sum[pair_of_span, np.arange(n_spans)] = 1.0
-        frames_used = sorted({int(f) for f in self.frames})
-        self.moment_frames = frames_used
-        where = {f: i for i, f in enumerate(frames_used)}
-        self.frame_sum = np.zeros((len(frames_used), n_points))
-        self.frame_sum[[where[int(f)] for f in self.frames], np.arange(n_points)] = 1.0
-        self.c = np.zeros((n_spans, 12, 3))
-        self.c[:, 0:3] = np.eye(3)
-        self.c[:, 6:9] = -np.eye(3)
-        self.hats = np.zeros((n_points, 3, 3))
-        self.wrench = np.empty((n_points, 6))
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    increments : (n, 6) ndarray  [m, rad]
+        ``(dx, dθ)`` per mobile frame.
+
+    Returns
+    -------
+    positions, rotations : new arrays
+        ``x += dx``, ``R ← exp(dθ) R``.
+
+    """
+    new_positions = positions.copy()
+    new_positions[1:] += increments[:, :3]
+    new_rotations = rotations.copy()
+    np.matmul(exp_rotations(increments[:, 3:]), rotations[1:], out=new_rotations[1:])
+    return new_positions, new_rotations
 
 
 class TickModel:
@@ -216,7 +200,7 @@ class TickModel:
         for group in actuators.groups:
             cols = [position[name] for name in group.names]
             if isinstance(group, CableGroup):
-                self._cables.append(_Cables(group, cols, model.n_frames))
+                self._cables.append(CableTerms(group, cols, model.n_frames))
             elif isinstance(group, LinearCavityGroup) and _matches_links(group, model):
                 for e in range(group.lower.size):
                     col = cols[group.owner[e]]
@@ -364,17 +348,19 @@ class TickModel:
         right[:, 0] = phi
         right[:, 1] = s_r
         dj = np.matmul(left, right)
-        dj.reshape(n, 9)[:, _HAT_DST] -= 0.5 * s_r[:, _HAT_SRC] * _HAT_SIGN
-        dj.reshape(n, 9)[:, ::4] += (c * ps)[:, None]
+        dj_flat = dj.reshape(n, 9)
+        dj_flat += s_r @ _HALF_HAT_BASIS
+        dj_flat[:, ::4] += (c * ps)[:, None]
         a[:, 3:, 3:] += dj
         if self.has_cavities:
             a -= (self._hess_t @ actuation).reshape(n, 6, 6)
         mat = np.matmul(a, b)
         dmat = self._d
-        dv = dmat.reshape(n, 2, 3, 4, 3)
-        dv[:, [0, 1], :, [2, 3]] = rot_at
-        dv[:, [0, 1], :, [0, 1]] = -rot_at
-        np.matmul(rot_at, diff_hat, out=dv[:, 0, :, 1])
+        dmat[:, :3, 6:9] = rot_at
+        dmat[:, 3:, 9:12] = rot_at
+        np.negative(rot_at, out=dmat[:, :3, 0:3])
+        dmat[:, 3:, 3:6] = dmat[:, :3, 0:3]
+        np.matmul(rot_at, diff_hat, out=dmat[:, :3, 3:6])
         blocks = self._link_values
         np.matmul(dmat.transpose(0, 2, 1), np.matmul(mat, dmat), out=blocks)
         fm_hat = hats_into(self._fm_hat, world[:, :, :, 0].transpose(0, 2, 1))
@@ -384,8 +370,8 @@ class TickModel:
         blocks[:, 9:12, 3:6] += fm_hat[:, 1]
         blocks[:, 3:6, 3:6] -= np.matmul(fm_hat[:, 0], diff_hat)
         for cab, (pair_slice, moment_slice) in zip(self._cables, self._cable_slices):
-            self._cable_terms(cab, positions, rotations, actuation, rhs, pair_slice,
-                              moment_slice)
+            cab.evaluate(positions, rotations, actuation, rhs, self._values[pair_slice],
+                         self._values[moment_slice], self.has_cavities)
         rhs[:, 0] += self.external
         tangent = np.bincount(self._index, self._values * self._weights,
                               minlength=self.size * self.size + 1)[:-1]
@@ -400,48 +386,6 @@ class TickModel:
             if load is not None:
                 tangent += np.tril(0.5 * (load + load.T))
         return tangent, rhs
-
-    def _cable_terms(self, cab, positions, rotations, actuation, rhs, pair_slice,
-                     moment_slice):
-        """Cable columns, their loads in the residual and their load stiffness blocks."""
-        n = self.n
-        levers = np.matmul(rotations[cab.frames], cab.offsets)[:, :, 0]
-        points = positions[cab.frames] + levers
-        spans = cab.span_matrix @ points
-        lengths = np.sqrt(np.einsum('si,si->s', spans, spans))
-        units = spans / lengths[:, None]
-        forces = cab.point_force @ units
-        hats = hats_into(cab.hats, levers)
-        wrench = cab.wrench
-        wrench[:, :3] = forces
-        np.matmul(hats, forces[:, :, None], out=wrench[:, 3:, None])
-        cols = (cab.scatter @ wrench).reshape(n + 1, cab.m, 6)[1:].transpose(0, 2, 1)
-        cols = cols.reshape(6 * n, cab.m)
-        tension = actuation[cab.columns]
-        if cab.contiguous:
-            target = rhs[:, 1 + cab.columns[0]:1 + cab.columns[-1] + 1]
-            if self.has_cavities:
-                target += cols
-            else:
-                target[...] = cols
-        else:
-            rhs[:, 1 + cab.columns] += cols
-        rhs[:, 0] += cols @ tension
-        # load stiffness: per span t/l (I - u u^T) through C = [I; r_s^; -I; -r_e^]
-        scale = tension[cab.segment_owner] / lengths
-        proj = -(scale[:, None, None] * units[:, :, None]) * units[:, None, :]
-        proj.reshape(-1, 9)[:, ::4] += scale[:, None]
-        c = cab.c
-        c[:, 3:6] = hats[cab.start]
-        np.negative(hats[cab.end], out=c[:, 9:12])
-        span_blocks = np.matmul(np.matmul(c, proj), c.transpose(0, 2, 1))
-        np.matmul(cab.pair_sum, span_blocks.reshape(-1, 144),
-                  out=self._values[pair_slice].reshape(-1, 144))
-        point_forces = forces * tension[cab.point_owner][:, None]
-        moment = -levers[:, :, None] * point_forces[:, None, :]
-        moment.reshape(-1, 9)[:, ::4] += np.einsum('pi,pi->p', point_forces, levers)[:, None]
-        np.matmul(cab.frame_sum, moment.reshape(-1, 9),
-                  out=self._values[moment_slice].reshape(-1, 9))
 
 
 def _matches_links(group, model):

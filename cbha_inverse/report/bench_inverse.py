@@ -14,6 +14,7 @@ before the QP are ~0 and the median is theirs; the p99 is the linearisation tick
 
 import argparse
 import json
+import os
 import sys
 import time
 
@@ -25,6 +26,10 @@ PAPER = {
     'tendon_10f_16c': 'paper: 10 frames / 16 tendons: 13 ms (W 9 ms)',
     'cbha': 'paper: not reported (open-loop CBHA runs)',
 }
+# the paper's tick times [s] (SOFA, 2.66 GHz Core i7) and this project's goals [s] (median, p99)
+PAPER_TICK = {'tendon_6f_8c': 5e-3, 'tendon_10f_16c': 13e-3}
+GOALS = {'tendon_6f_8c': (100e-6, None), 'tendon_10f_16c': (150e-6, None),
+         'cbha': (150e-6, 500e-6)}
 RADIUS = {'cbha': 0.06}
 PHASES = ('assembly', 'factor', 'projection', 'qp', 'update', 'total')
 
@@ -70,7 +75,7 @@ def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_st
     warmup : int
         Ticks run first (converge onto the circle, warm the caches), not measured.
     qp_solver : str
-        ``'proxsuite'`` or ``'gauss_seidel'``.
+        ``'proxsuite'``, ``'active_set'`` or ``'gauss_seidel'``.
     newton_steps : int
         Newton steps per tick.
     relinearize_every : int
@@ -124,6 +129,9 @@ def format_table(rows):
     """
     Format benchmark rows as a plain-text table.
 
+    Per row: tick median and p99, the median of each phase, the goal of this machine (median /
+    p99, ``ok`` when met), the paper's tick time and the ratio paper / ours (median).
+
     Parameters
     ----------
     rows : list of dict
@@ -134,20 +142,31 @@ def format_table(rows):
     str
 
     """
-    head = (f"{'scene':16s} {'n':>3s} {'m':>3s} {'k':>2s} {'QP':>12s} {'lin':>3s} {'median':>8s} "
+    head = (f"{'scene':16s} {'n':>3s} {'m':>3s} {'k':>2s} {'QP':>10s} {'lin':>3s} {'median':>8s} "
             f"{'p99':>8s} | {'assem':>7s} {'factor':>7s} {'W':>7s} {'QP':>7s} {'update':>7s}"
-            f" | {'err med':>8s}  paper")
+            f" | {'err med':>8s} | {'goal med/p99':>16s} | {'paper':>6s} {'paper/us':>8s}")
     lines = [head, '-' * len(head)]
     for r in rows:
         med = r['median']
         us = {p: 1e6 * med[p] for p in PHASES}
+        goal_med, goal_p99 = GOALS.get(r['scene'], (None, None))
+        goal = '-'
+        if goal_med is not None:
+            met = med['total'] <= goal_med and (goal_p99 is None or r['p99'] <= goal_p99)
+            goal = (f"{1e6 * goal_med:.0f}/{'-' if goal_p99 is None else f'{1e6 * goal_p99:.0f}'}"
+                    f"us {'ok' if met else 'NO'}")
+        paper = PAPER_TICK.get(r['scene'])
+        ratio = (f"{paper / med['total']:7.1f}x" if paper else '       -')
+        paper_text = f'{1e3 * paper:4.0f}ms' if paper else '     -'
         lines.append(
             f"{r['scene']:16s} {r['frames']:3d} {r['actuators']:3d} {r['effectors']:2d} "
-            f"{r['qp_solver']:>12s} {r['relinearize_every']:3d} "
+            f"{r['qp_solver']:>10s} {r['relinearize_every']:3d} "
             f"{us['total']:6.0f}us {1e6 * r['p99']:6.0f}us | "
             f"{us['assembly']:5.0f}us {us['factor']:5.0f}us {us['projection']:5.0f}us "
             f"{us['qp']:5.0f}us {us['update']:5.0f}us | {1e3 * r['tracking_error_median']:6.3f}mm"
-            f"  {PAPER.get(r['scene'], '')}")
+            f' | {goal:>16s} | {paper_text} {ratio}')
+    lines.append('')
+    lines += [f'{name}: {text}' for name, text in PAPER.items()]
     return '\n'.join(lines)
 
 
@@ -171,6 +190,9 @@ def main(argv=None):
                                                         'cbha'])
     parser.add_argument('--ticks', type=int, default=2000)
     parser.add_argument('--warmup', type=int, default=100)
+    parser.add_argument('--qp-solvers', nargs='+', default=['proxsuite', 'active_set'],
+                        choices=['proxsuite', 'active_set', 'gauss_seidel'],
+                        help='QP solvers to compare (default: proxsuite and the exact active set)')
     parser.add_argument('--gauss-seidel', action='store_true',
                         help='also run the projected Gauss-Seidel QP for comparison')
     parser.add_argument('--relinearize-every', type=int, nargs='+', default=[1, 5],
@@ -180,14 +202,17 @@ def main(argv=None):
     rows = []
     started = time.perf_counter()
     for name in args.scenes:
-        solvers = ['proxsuite'] + (['gauss_seidel'] if args.gauss_seidel else [])
+        solvers = list(args.qp_solvers) + (['gauss_seidel'] if args.gauss_seidel
+                                           and 'gauss_seidel' not in args.qp_solvers else [])
         for qp_solver in solvers:
             for every in args.relinearize_every:
                 rows.append(bench_scene(name, args.ticks, args.warmup, qp_solver,
                                         relinearize_every=every))
     print(format_table(rows))
     print(f'goals on the shared 2-core machine: 6f/8c <= 100 us, 10f/16c <= 150 us, '
-          f'CBHA <= 150 us median, p99 <= 500 us; ({time.perf_counter() - started:.1f} s)')
+          f'CBHA <= 150 us median, p99 <= 500 us; one BLAS thread '
+          f"(OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}); "
+          f'({time.perf_counter() - started:.1f} s)')
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
             json.dump(rows, f, indent=2)
