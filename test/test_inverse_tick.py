@@ -7,7 +7,8 @@ from cbha_inverse.core.chain import ChainModel, rest_state, retract
 from cbha_inverse.core.kernel import ChainKernel
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import so3_exp
-from cbha_inverse.core.tick import exp_rotations, TickModel
+from cbha_inverse.core.tick import TickModel
+from cbha_inverse.core.tick_math import exp_rotations
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -33,7 +34,12 @@ def _check(model, actuators, external, state, actuation):
     scale = np.abs(reference).max()
     np.testing.assert_allclose(rhs[:, 0], residual, atol=1e-12 * np.abs(residual).max())
     np.testing.assert_allclose(rhs[:, 1:], jat.T, atol=1e-12 * np.abs(jat).max())
-    np.testing.assert_allclose(tangent, np.tril(reference), atol=1e-12 * scale)
+    np.testing.assert_allclose(tick.dense(tangent), np.tril(reference), atol=1e-12 * scale)
+    solved = tick.factor_solve(tangent, rhs.copy())
+    if solved is None:
+        assert np.linalg.eigvalsh(reference).min() < 0.0
+    else:
+        np.testing.assert_allclose(reference @ solved, rhs, atol=1e-9 * np.abs(rhs).max())
 
 
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'tendon_10f_16c', 'cbha'])

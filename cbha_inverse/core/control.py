@@ -28,13 +28,13 @@ import time
 
 from cbha_inverse.core.chain import ChainState, rest_state
 from cbha_inverse.core.correction import TargetCorrector  # noqa: F401 (public re-export)
-from cbha_inverse.core.inverse import qp_matrices, qp_problem
+from cbha_inverse.core.inverse import qp_matrices, qp_problem, QPProblem
 from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, DenseLU
 from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
                                   projected_gauss_seidel)
-from cbha_inverse.core.tick import retract_frames as _retract, TickModel
+from cbha_inverse.core.tick import TickModel
+from cbha_inverse.core.tick_math import retract_frames as _retract
 import numpy as np
-from scipy.linalg import lapack
 
 
 @dataclass(frozen=True)
@@ -185,6 +185,8 @@ class InverseSolver:
         m = actuators.n_actuators
         self._scale = (self.upper_bounds - self.lower_bounds if scale is None
                        else np.asarray(scale, dtype=float))
+        self._x_lower = self.lower_bounds / self._scale
+        self._x_upper = self.upper_bounds / self._scale
         self._rate = (None if self.options.rate_limit is None
                       else np.broadcast_to(np.asarray(self.options.rate_limit, float), (m,)))
         n = model.n_links
@@ -230,7 +232,8 @@ class InverseSolver:
             return self._positions, self._rotations
         free_step, solved_a, previous = self._pending
         increments = (free_step + solved_a @ (self.actuation - previous)).reshape(-1, 6)
-        return _retract(self._positions, self._rotations, self._limited(increments))
+        return _retract(self._positions, self._rotations, increments,
+                        self.options.max_rotation_step)
 
     def _materialise(self):
         """Apply the pending linear step to the stored frames."""
@@ -247,14 +250,6 @@ class InverseSolver:
     def effector_positions(self):
         """Return the effector positions (k, 3) of the current model state."""
         return self.effectors.positions(*self._current())
-
-    def _limited(self, increments):
-        """Scale a Newton step so that no frame rotates more than ``max_rotation_step``."""
-        rot = increments[:, 3:]
-        largest = float(np.einsum('ij,ij->i', rot, rot).max()) ** 0.5
-        if largest > self.options.max_rotation_step:
-            increments = increments * (self.options.max_rotation_step / largest)
-        return increments
 
     def _factor(self, positions, rotations, actuation):
         """
@@ -334,8 +329,17 @@ class InverseSolver:
             self._age += 1
         delta_free = lin.offset - targets.reshape(-1)
         t_projection = time.perf_counter()
-        problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
-                             self.upper_bounds, rate_limit=self._rate)
+        if self._rate is None:
+            # qp_problem with the constant normalised box
+            x_prev = previous / self._scale
+            tracking_gradient = lin.matrices.weighted_w.T @ delta_free
+            problem = QPProblem(lin.matrices.hessian,
+                                tracking_gradient - lin.matrices.proximal_weight * x_prev,
+                                self._x_lower, self._x_upper, self._scale, x_prev,
+                                lin.matrices.tracking_hessian, tracking_gradient)
+        else:
+            problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
+                                 self.upper_bounds, rate_limit=self._rate)
         status = 'solved'
         qp_solver, same_hessian = self.options.qp_solver, not fresh
         if qp_solver == 'active_set':
@@ -391,13 +395,10 @@ class InverseSolver:
         positions, rotations = self._positions, self._rotations
         tangent, rhs = self._tick.linearise(positions, rotations, previous)
         t_assembly = time.perf_counter()
-        # LAPACK Cholesky in place: the C-order lower triangle is the Fortran upper one
-        factor, info = lapack.dpotrf(tangent.T, lower=0, clean=0, overwrite_a=1)
-        if info == 0:
-            t_factor = time.perf_counter()
-            solved, info = lapack.dpotrs(factor, rhs, lower=0)
-            if info != 0:
-                raise np.linalg.LinAlgError(f'dpotrs failed (info {info})')
+        factor = self._tick.factor(tangent)
+        t_factor = time.perf_counter()
+        if factor is not None:
+            solved = self._tick.solve(factor, rhs)
         else:
             factorization = self._factor(positions, rotations, previous)
             t_factor = time.perf_counter()
@@ -429,12 +430,12 @@ class InverseSolver:
     def _newton_step(self, actuation):
         """Apply one full Newton step at fixed actuation; return whether it succeeded."""
         tangent, rhs = self._tick.linearise(self._positions, self._rotations, actuation)
-        factor, info = lapack.dpotrf(tangent.T, lower=0, clean=0, overwrite_a=1)
-        if info != 0:
+        step = self._tick.factor_solve(tangent, rhs[:, :1])
+        if step is None:
             return False
-        step, info = lapack.dpotrs(factor, rhs[:, 0], lower=0)
         self._positions, self._rotations = _retract(self._positions, self._rotations,
-                                                    self._limited(step.reshape(-1, 6)))
+                                                    step.reshape(-1, 6),
+                                                    self.options.max_rotation_step)
         return True
 
     @staticmethod

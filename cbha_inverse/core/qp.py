@@ -246,9 +246,13 @@ def polish(problem, x, tolerance=1e-4):
 
     """
     h, g = problem.hessian, problem.gradient
+    near_lower = x - problem.lower < tolerance
+    near_upper = problem.upper - x < tolerance
+    if not (near_lower.any() or near_upper.any()):
+        return x
     grad = h @ x + g
-    at_lower = (x - problem.lower < tolerance) & (grad > 0.0)
-    at_upper = (problem.upper - x < tolerance) & (grad < 0.0)
+    at_lower = near_lower & (grad > 0.0)
+    at_upper = near_upper & (grad < 0.0)
     active = at_lower | at_upper
     if not active.any():
         return x
@@ -336,7 +340,9 @@ def binding_bounds(problem, x, tolerance=1e-6):
         ``True`` where ``x`` sits on a bound and the tracking gradient points out of the box.
 
     """
+    near_lower = x <= problem.lower + tolerance
+    near_upper = x >= problem.upper - tolerance
+    if not (near_lower.any() or near_upper.any()):
+        return near_lower
     grad = problem.tracking_hessian @ x + problem.tracking_gradient
-    at_lower = (x <= problem.lower + tolerance) & (grad > tolerance)
-    at_upper = (x >= problem.upper - tolerance) & (grad < -tolerance)
-    return at_lower | at_upper
+    return (near_lower & (grad > tolerance)) | (near_upper & (grad < -tolerance))

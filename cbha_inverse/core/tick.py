@@ -28,142 +28,9 @@ from cbha_inverse.core.actuation import CableGroup
 from cbha_inverse.core.cavity_linear import LinearCavityGroup
 from cbha_inverse.core.se3 import so3_log
 from cbha_inverse.core.tick_cables import CableTerms
+from cbha_inverse.core.tick_math import HALF_HAT_BASIS, hats_into, jl_coefficients, LOG_BASIS
 import numpy as np
-
-# flattened hat(v): entries (0,1) (0,2) (1,0) (1,2) (2,0) (2,1) = -v2 v1 v2 -v0 -v1 v0
-_HAT_DST = np.array([1, 2, 3, 5, 6, 7])
-_HAT_SRC = np.array([2, 1, 2, 0, 1, 0])
-_HAT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
-# flattened R @ _LOG_BASIS = (vee(R), tr(R) / 2)
-_LOG_BASIS = np.zeros((9, 4))
-_LOG_BASIS[[7, 2, 3], [0, 1, 2]] = 0.5
-_LOG_BASIS[[5, 6, 1], [0, 1, 2]] = -0.5
-_LOG_BASIS[[0, 4, 8], 3] = 0.5
-# c(t) = sum_k a_k t^(2k) (|B_(2k+2)| / (2k+2)!), the hat(phi)^2 coefficient of Jl^-1
-_JL_SERIES = np.array([1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0,
-                       1.0 / 47900160.0, 691.0 / 2730.0 / 479001600.0,
-                       7.0 / 6.0 / 87178291200.0])
-_JL_DSERIES = 2.0 * np.arange(1, 7) * _JL_SERIES[1:]
-_JL_POWERS = np.arange(7)
-_SERIES_LIMIT = 0.5
-# hat(v).reshape(9) = v @ _HAT_BASIS
-_HAT_BASIS = np.zeros((3, 9))
-_HAT_BASIS[_HAT_SRC, _HAT_DST] = _HAT_SIGN
-_HALF_HAT_BASIS = -0.5 * _HAT_BASIS
-# sin(t)/t and (1 - cos t)/t^2 as series in t^2
-_EXP_POWERS = np.arange(8)
-_EXP_SERIES = np.array([[(-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 2)),
-                         (-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 3))] for k in range(8)])
-
-
-def hats_into(out, v):
-    """
-    Write ``hat(v)`` into a buffer (one small matrix product).
-
-    Parameters
-    ----------
-    out : (..., 3, 3) ndarray
-        C-contiguous buffer.
-    v : (..., 3) ndarray
-        Vectors.
-
-    Returns
-    -------
-    (..., 3, 3) ndarray
-        ``out``.
-
-    """
-    np.matmul(v.reshape(-1, 3), _HAT_BASIS, out=out.reshape(-1, 9))
-    return out
-
-
-def jl_coefficients(theta, t2):
-    """
-    Return ``c(t)`` and ``c'(t)/t`` of ``Jl⁻¹(φ) = I - φ^/2 + c φ^²`` (as the kernel's).
-
-    Parameters
-    ----------
-    theta, t2 : (n,) ndarray
-        Angles [rad] and their squares.
-
-    Returns
-    -------
-    c, dc_over_t : (n,) ndarray
-
-    """
-    powers = np.power(t2[:, None], _JL_POWERS)
-    c = powers @ _JL_SERIES
-    dc = powers[:, :6] @ _JL_DSERIES
-    if theta.max() >= _SERIES_LIMIT:
-        big = theta >= _SERIES_LIMIT
-        t = theta[big]
-        half = 0.5 * t
-        cot = np.cos(half) / np.sin(half)
-        c[big] = 1.0 / (t * t) - cot / (2.0 * t)
-        dc[big] = (-2.0 / t ** 3 + 1.0 / (4.0 * t * np.sin(half) ** 2)
-                   + cot / (2.0 * t * t)) / t
-    return c, dc
-
-
-def exp_rotations(rotvec):
-    """
-    Return ``exp(hat(v))`` for (n, 3) rotation vectors (Rodrigues, few numpy calls).
-
-    ``R = I + a v^ + b v^²`` with ``a = sin t / t`` and ``b = (1 - cos t) / t²``: both from their
-    Taylor series (8 terms, truncation below 1e-19 up to 0.5 rad, which is the default
-    ``max_rotation_step``), the closed form above.
-
-    Parameters
-    ----------
-    rotvec : (n, 3) ndarray  [rad]
-        Axis times angle.
-
-    Returns
-    -------
-    (n, 3, 3) ndarray
-
-    """
-    t2 = np.einsum('ni,ni->n', rotvec, rotvec)
-    if t2.max() <= 0.25:
-        ab = np.power(t2[:, None], _EXP_POWERS) @ _EXP_SERIES
-        a, b = ab[:, 0], ab[:, 1]
-    else:
-        theta = np.sqrt(t2)
-        small = theta < 1e-4
-        safe = np.where(small, 1.0, theta)
-        a = np.where(small, 1.0 - t2 / 6.0, np.sin(safe) / safe)
-        b = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
-    out = (rotvec[:, :, None] * rotvec[:, None, :]).reshape(-1, 9)
-    out *= b[:, None]
-    out += (a[:, None] * rotvec) @ _HAT_BASIS
-    out[:, ::4] += (1.0 - b * t2)[:, None]
-    return out.reshape(-1, 3, 3)
-
-
-def retract_frames(positions, rotations, increments):
-    """
-    Apply world-axis increments to frames 1..n (as :func:`cbha_inverse.core.chain.retract`).
-
-    Parameters
-    ----------
-    positions : (n + 1, 3) ndarray  [m]
-        Frame origins.
-    rotations : (n + 1, 3, 3) ndarray
-        Frame rotations.
-    increments : (n, 6) ndarray  [m, rad]
-        ``(dx, dθ)`` per mobile frame.
-
-    Returns
-    -------
-    positions, rotations : new arrays
-        ``x += dx``, ``R ← exp(dθ) R``.
-
-    """
-    new_positions = positions.copy()
-    new_positions[1:] += increments[:, :3]
-    new_rotations = rotations.copy()
-    np.matmul(exp_rotations(increments[:, 3:]), rotations[1:], out=new_rotations[1:])
-    return new_positions, new_rotations
+from scipy.linalg import lapack
 
 
 class TickModel:
@@ -256,8 +123,22 @@ class TickModel:
         valid = (rows >= 0) & (cols >= 0)
         lo, hi = np.minimum(rows, cols), np.maximum(rows, cols)
         # dense C-order slot of the lower triangle (row >= col); base-frame entries -> trash
-        self._index = np.where(valid, hi * size + lo, size * size)
         self._weights = np.where(rows == cols, 1.0, 0.5)
+        # long chains without generic groups: LAPACK band Cholesky (band storage, lower: entry
+        # (r, c) at [c, r - c] of a C-order (N, kd + 1) array = the Fortran (kd + 1, N) layout)
+        kd = int((hi - lo)[valid].max())
+        self.banded = size >= 72 and not self._generic and kd < size // 4
+        if self.banded:
+            self.kd = kd
+            self._index = np.where(valid, lo * (kd + 1) + hi - lo, size * (kd + 1))
+            c, d = np.meshgrid(np.arange(size), np.arange(kd + 1), indexing='ij')
+            inside = (c + d < size).reshape(-1)
+            self._band_src = np.flatnonzero(inside)
+            # the factor L as the C-order transpose (L[r, c] at [c, r])
+            self._dense_dst = (c * size + c + d).reshape(-1)[inside]
+            self._factor = np.zeros((size, size))
+        else:
+            self._index = np.where(valid, hi * size + lo, size * size)
         self._values = np.zeros(count)
         self._link_values = self._values[:n * 144].reshape(n, 12, 12)
 
@@ -276,9 +157,11 @@ class TickModel:
 
         Returns
         -------
-        tangent : (6n, 6n) ndarray
-            C-order; its lower triangle holds ``K`` (structure + symmetric load stiffness), the
-            strict upper triangle is zero. ``tangent.T`` is the Fortran-order upper triangle.
+        tangent : ndarray
+            ``K`` (structure + symmetric load stiffness) for :meth:`factor_solve`: for short
+            chains a C-order (6n, 6n) array whose lower triangle holds ``K`` (strict upper
+            triangle zero), for long ones (:attr:`banded`) the LAPACK lower band storage
+            (kd + 1, 6n); :meth:`dense` converts either.
         rhs : (6n, m + 1) ndarray
             Column 0: the residual ``f(q) + f_ext + J_aᵀ λ``; columns 1..m: ``J_aᵀ``.
 
@@ -290,7 +173,7 @@ class TickModel:
         rel = np.matmul(rot_at, rotations[1:])
         if self._q0t is not None:
             rel = np.matmul(rel, self._q0t)
-        mixed = rel.reshape(n, 9) @ _LOG_BASIS
+        mixed = rel.reshape(n, 9) @ LOG_BASIS
         cos_t = mixed[:, 3] - 0.5
         delta = self._delta
         np.subtract(np.matmul(rot_at, diff[:, :, None])[:, :, 0], self.rest_offsets,
@@ -349,7 +232,7 @@ class TickModel:
         right[:, 1] = s_r
         dj = np.matmul(left, right)
         dj_flat = dj.reshape(n, 9)
-        dj_flat += s_r @ _HALF_HAT_BASIS
+        dj_flat += s_r @ HALF_HAT_BASIS
         dj_flat[:, ::4] += (c * ps)[:, None]
         a[:, 3:, 3:] += dj
         if self.has_cavities:
@@ -373,6 +256,10 @@ class TickModel:
             cab.evaluate(positions, rotations, actuation, rhs, self._values[pair_slice],
                          self._values[moment_slice], self.has_cavities)
         rhs[:, 0] += self.external
+        if self.banded:
+            band = np.bincount(self._index, self._values * self._weights,
+                               minlength=self.size * (self.kd + 1) + 1)[:-1]
+            return band.reshape(self.size, self.kd + 1).T, rhs
         tangent = np.bincount(self._index, self._values * self._weights,
                               minlength=self.size * self.size + 1)[:-1]
         tangent = tangent.reshape(self.size, self.size)
@@ -386,6 +273,95 @@ class TickModel:
             if load is not None:
                 tangent += np.tril(0.5 * (load + load.T))
         return tangent, rhs
+
+    def factor(self, tangent):
+        """
+        Factor the tangent of :meth:`linearise` in place (LAPACK Cholesky).
+
+        Parameters
+        ----------
+        tangent : ndarray
+            From :meth:`linearise` (overwritten).
+
+        Returns
+        -------
+        tuple or None
+            ``(factor, lower)`` for :meth:`solve` (Fortran-order triangle, LAPACK ``lower``
+            flag); ``None`` if the tangent is not positive definite.
+
+        """
+        if self.banded:
+            band, info = lapack.dpbtrf(tangent, lower=1, overwrite_ab=1)
+            if info != 0:
+                return None
+            # dpbtrs is slow for several right-hand sides: solve with the dense triangle
+            factor = self._factor
+            factor.reshape(-1)[self._dense_dst] = band.T.reshape(-1)[self._band_src]
+            return factor.T, 1
+        # the C-order lower triangle is the Fortran upper one
+        factor, info = lapack.dpotrf(tangent.T, lower=0, clean=0, overwrite_a=1)
+        return (factor, 0) if info == 0 else None
+
+    @staticmethod
+    def solve(factor, rhs):
+        """
+        Solve ``K X = rhs`` with a factor of :meth:`factor` (one multi-RHS LAPACK call).
+
+        Parameters
+        ----------
+        factor : tuple
+            From :meth:`factor`.
+        rhs : (6n, c) ndarray
+            Right-hand sides.
+
+        Returns
+        -------
+        (6n, c) ndarray
+
+        """
+        solved, info = lapack.dpotrs(factor[0], rhs, lower=factor[1])
+        if info != 0:
+            raise np.linalg.LinAlgError(f'dpotrs failed (info {info})')
+        return solved
+
+    def factor_solve(self, tangent, rhs):
+        """
+        Return ``K⁻¹ rhs`` (:meth:`factor` then :meth:`solve`), ``None`` if not positive definite.
+
+        Parameters
+        ----------
+        tangent : ndarray
+            From :meth:`linearise` (overwritten).
+        rhs : (6n, c) ndarray
+            Right-hand sides.
+
+        Returns
+        -------
+        (6n, c) ndarray or None
+
+        """
+        factor = self.factor(tangent)
+        return None if factor is None else self.solve(factor, rhs)
+
+    def dense(self, tangent):
+        """
+        Return the lower triangle of the tangent of :meth:`linearise` as a full square matrix.
+
+        Parameters
+        ----------
+        tangent : ndarray
+            From :meth:`linearise` (band or dense storage).
+
+        Returns
+        -------
+        (6n, 6n) ndarray
+
+        """
+        if not self.banded:
+            return np.array(tangent)
+        out = np.zeros((self.size, self.size))
+        out.reshape(-1)[self._dense_dst] = tangent.T.reshape(-1)[self._band_src]
+        return out.T.copy()
 
 
 def _matches_links(group, model):
