@@ -1,127 +1,147 @@
 """
 Static equilibrium under actuator loads, with their load stiffness (paper eq. 9, DESIGN §3).
 
-Cable forces follow the structure; a Newton iteration that ignores their stiffness (the
-structural tangent alone) sees a tendon-compressed backbone as unstable and fails to converge
-beyond small tensions. :func:`solve_equilibrium` uses the full tangent (structure from
-:class:`cbha_inverse.core.kernel.ChainKernel` plus
-:meth:`cbha_inverse.core.actuation.ActuatorSet.load_tangent`), a backtracking line search on the
-residual norm and, only if the full load fails, load continuation. The Newton step solves with
-the exact (non-symmetric) load stiffness by LU; the inverse solver's tick uses its symmetric part
-with a Cholesky factorization. This is the forward model of
-the scenes, and the same linearisation the inverse solver uses per tick, so the two agree.
+``f(q) + f_ext + J_a(q)ᵀ λ = 0``: the actuation enters the package's one Newton engine
+(:func:`cbha_inverse.core.newton.solve_chain`) as a follower load ``J_a(q)ᵀ λ`` with its exact
+load stiffness ``-d(J_aᵀ λ)/dq`` (:meth:`cbha_inverse.core.actuation.ActuatorSet.load_tangent`).
+Cable and pressure forces follow the structure; a Newton iteration that ignores their stiffness
+(the structural tangent alone) sees a tendon-compressed backbone as unstable and fails to converge
+beyond small tensions. This is the forward model of the scenes
+(:meth:`cbha_inverse.scene.Scene.forward`) and of the simulated plant
+(:class:`cbha_inverse.core.plant.StaticPlant`), the same linearisation the inverse solver uses
+per tick, so the three agree.
 """
 
-from dataclasses import dataclass
-
-from cbha_inverse.core.chain import ChainState
-from cbha_inverse.core.kernel import DenseCholesky, fast_retract
+from cbha_inverse.core.newton import NewtonResult, solve_chain
 import numpy as np
 
+#: Result of :func:`solve_equilibrium` (``state``, ``converged``, ``iterations``,
+#: ``residual_norm``, ``residual``, ``load_steps``, ``load_factor``, ``message``).
+EquilibriumResult = NewtonResult
 
-@dataclass(frozen=True)
-class EquilibriumResult:
+
+def rotation_skew(moments):
     """
-    Result of :func:`solve_equilibrium`.
+    Return the skew load stiffness of moments carried by the frames, ``½ hat(M_j)`` blocks.
 
-    Attributes
+    A point force ``F`` attached to frame j at lever ``r`` applies ``M = r × F`` at its origin;
+    turning the frame by ``dθ`` turns the lever, ``-dM/dθ = hat(F) hat(r)``, whose skew part is
+    ``½ hat(M)`` (the symmetric part is in the groups' load stiffness, paper eq. 9-10 with the
+    moment term symmetrised). Checked against central differences of the cable loads in the tests.
+
+    Parameters
     ----------
-    state : cbha_inverse.core.chain.ChainState
-        Final frames.
-    converged : bool
-        Whether the residual met the tolerance at the full load.
-    iterations : int
-        Total Newton iterations.
-    residual_norm : float  [N, N*m]
-        Final residual norm.
-    load_steps : int
-        Load increments used (1 without continuation).
-    message : str
-        What happened.
+    moments : (n, 3) ndarray  [N*m]
+        Load moments on frames 1..n (world axes, at the frame origins).
+
+    Returns
+    -------
+    (6n, 6n) ndarray
+        Non-zero only in the rotational 3x3 part of the diagonal blocks.
 
     """
-
-    state: ChainState
-    converged: bool
-    iterations: int
-    residual_norm: float
-    load_steps: int
-    message: str
-
-
-def _residual(kernel, actuators, external, actuation, positions, rotations, factor):
-    """Return the residual (6n,) at a state and load factor."""
-    internal = kernel.internal(positions, rotations)
-    wrenches, _ = actuators.evaluate(positions, rotations, False)
-    m = wrenches.shape[0]
-    return internal.reshape(-1) + factor * (
-        external + actuation @ wrenches[:, 1:, :].reshape(m, -1))
+    n = moments.shape[0]
+    out = np.zeros((n, 6, n, 6))
+    idx = np.arange(n)
+    half = 0.5 * moments
+    out[idx, 3, idx, 4] = -half[:, 2]
+    out[idx, 3, idx, 5] = half[:, 1]
+    out[idx, 4, idx, 3] = half[:, 2]
+    out[idx, 4, idx, 5] = -half[:, 0]
+    out[idx, 5, idx, 3] = -half[:, 1]
+    out[idx, 5, idx, 4] = half[:, 0]
+    return out.reshape(6 * n, 6 * n)
 
 
-def _newton(kernel, actuators, external, actuation, positions, rotations, factor, tolerance,
-            max_iterations):
-    """Newton with line search at one load factor; return (positions, rotations, ok, its, r)."""
-    r = _residual(kernel, actuators, external, actuation, positions, rotations, factor)
-    norm = np.linalg.norm(r)
-    for it in range(1, max_iterations + 1):
-        if norm <= tolerance:
-            return positions, rotations, True, it - 1, norm
-        _, tangent = kernel.linearise(positions, rotations)
-        load = actuators.load_tangent(positions, rotations, factor * actuation, symmetric=False)
-        if load is not None:
-            tangent = tangent + load
-        try:
-            step = np.linalg.solve(tangent, r)
-            if not np.all(np.isfinite(step)):
-                raise np.linalg.LinAlgError('non-finite Newton step')
-        except np.linalg.LinAlgError:
-            _, tangent = kernel.linearise(positions, rotations, geometric=False)
-            if load is not None:
-                tangent = tangent + 0.5 * (load + load.T)
-            try:
-                step = DenseCholesky(tangent).solve(r)
-            except np.linalg.LinAlgError:
-                return positions, rotations, False, it, norm
-        step = step.reshape(-1, 6)
-        alpha = 1.0
-        for _ in range(12):
-            trial = fast_retract(positions, rotations, alpha * step)
-            r_new = _residual(kernel, actuators, external, actuation, *trial, factor)
-            norm_new = np.linalg.norm(r_new)
-            if np.isfinite(norm_new) and norm_new < (1.0 - 1e-4 * alpha) * norm:
-                break
-            alpha *= 0.5
-        else:
-            return positions, rotations, False, it, norm
-        positions, rotations = trial
-        r, norm = r_new, norm_new
-    return positions, rotations, norm <= tolerance, max_iterations, norm
+def _is_symmetric(matrix):
+    """Return True if a matrix is symmetric to round-off."""
+    return bool(np.abs(matrix - matrix.T).max() <= 1e-12 * np.abs(matrix).max())
 
 
-def solve_equilibrium(kernel, actuators, actuation, external, initial_state, *,
-                      tolerance=1e-10, max_iterations=50, max_load_steps=64):
+def actuator_loads(actuators, actuation):
+    """
+    Return the follower load and the exact load tangent of an actuation, for the Newton engine.
+
+    The load stiffness comes from each actuator group's ``load_tangent(..., symmetric=False)``;
+    a group that returns only the symmetric part (the cables) is completed with the skew part of
+    its moments, :func:`rotation_skew`. Newton's convergence is then quadratic (with the
+    symmetric part alone it is linear, ~10x per iteration on the tendon trunks).
+
+    Parameters
+    ----------
+    actuators : cbha_inverse.core.actuation.ActuatorSet
+        The actuators (columns of ``J_aᵀ`` and their load stiffness).
+    actuation : (m,) array_like  [N or Pa]
+        Applied actuation in column order.
+
+    Returns
+    -------
+    load_function : callable or None
+        ``state -> (n, 6)`` wrenches ``J_a(q)ᵀ λ`` on frames 1..n (world axes); None when the
+        actuation is zero.
+    load_tangent : callable or None
+        ``state -> (6n, 6n)`` load stiffness ``-d(J_aᵀ λ)/dq`` (None when the actuation is
+        zero; the callable returns None when no group has a load stiffness).
+
+    """
+    a = np.asarray(actuation, dtype=float).reshape(-1)
+    if not np.any(a):
+        return None, None
+    names = list(actuators.names)
+    groups = [(g, np.array([names.index(name) for name in g.names], dtype=int))
+              for g in actuators.groups if hasattr(g, 'load_tangent')]
+    last = {}
+
+    def columns(state):
+        if last.get('state') is not state:
+            last['state'] = state
+            last['wrenches'] = actuators.evaluate(state.positions, state.rotations, False)[0]
+        return last['wrenches']
+
+    def load_function(state):
+        return np.tensordot(a, columns(state)[:, 1:, :], axes=1)
+
+    def load_tangent(state):
+        total = None
+        for group, cols in groups:
+            part = group.load_tangent(state.positions, state.rotations, a[cols], False)
+            if _is_symmetric(part):
+                moments = np.tensordot(a[cols], columns(state)[cols, 1:, 3:], axes=1)
+                part = part + rotation_skew(moments)
+            total = part if total is None else total + part
+        return total
+
+    return load_function, load_tangent
+
+
+def solve_equilibrium(model, actuators, actuation, external=None, initial_state=None, *,
+                      tolerance=1e-10, absolute_tolerance=None, max_iterations=50,
+                      max_load_steps=64, max_rotation_step=None):
     """
     Solve ``f(q) + f_ext + J_a(q)ᵀ λ = 0`` for the frames (paper eq. 9).
 
     Parameters
     ----------
-    kernel : cbha_inverse.core.kernel.ChainKernel
-        The chain's mechanics.
+    model : cbha_inverse.core.chain.ChainModel
+        The chain.
     actuators : cbha_inverse.core.actuation.ActuatorSet
         The actuators.
-    actuation : (m,) ndarray  [N or Pa]
+    actuation : (m,) array_like  [N or Pa]
         Applied actuation.
-    external : (6n,) ndarray  [N, N*m]
+    external : (n, 6) or (6n,) array_like, optional  [N, N*m]
         Constant external wrenches (gravity) on frames 1..n.
-    initial_state : ChainState
-        Start (the rest shape or a warm start).
+    initial_state : ChainState, optional
+        Warm start (else the rest shape, with load stepping if needed).
     tolerance : float
-        Residual tolerance relative to the applied loads (``‖f_ext‖ + Σ |λ_j| ‖J_aᵀ_j‖``, plus
-        an absolute floor of ``tolerance``).
+        Relative tolerance of the engine's convergence test (:mod:`cbha_inverse.core.newton`).
+    absolute_tolerance : float, optional  [N, N*m]
+        Converge on ``|r|_2 <= absolute_tolerance`` instead.
     max_iterations : int
         Newton iterations per load step.
     max_load_steps : int
-        Largest number of load increments of the continuation.
+        Load steps allowed (a warm start counts as one).
+    max_rotation_step : float, optional  [rad]
+        Largest link rotation of a line search's first trial step.
 
     Returns
     -------
@@ -129,33 +149,10 @@ def solve_equilibrium(kernel, actuators, actuation, external, initial_state, *,
         Never silently unconverged: check ``converged``.
 
     """
-    positions = np.array(initial_state.positions, dtype=float)
-    rotations = np.array(initial_state.rotations, dtype=float)
-    wrenches, _ = actuators.evaluate(positions, rotations, False)
-    columns = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
-    # scale of the applied loads: a pressure column holds large wrenches that cancel between
-    # neighbouring frames, so its own norm (not that of the sum) sets the round-off floor
-    scale = np.linalg.norm(external) + np.abs(actuation) @ np.linalg.norm(columns, axis=1)
-    tol = tolerance * (1.0 + scale)
-    pos, rot, ok, its, norm = _newton(kernel, actuators, external, actuation, positions,
-                                      rotations, 1.0, tol, max_iterations)
-    if ok:
-        return EquilibriumResult(ChainState(pos, rot), True, its, float(norm), 1, 'converged')
-    total, steps, factor, increment = its, 0, 0.0, 0.25
-    while factor < 1.0 and steps < max_load_steps:
-        target = min(1.0, factor + increment)
-        pos, rot, ok, its, norm = _newton(kernel, actuators, external, actuation, positions,
-                                          rotations, target, tol, max_iterations)
-        total += its
-        steps += 1
-        if ok:
-            positions, rotations, factor = pos, rot, target
-            increment *= 1.5
-        else:
-            increment *= 0.5
-    converged = factor >= 1.0
-    message = 'converged with load continuation' if converged else (
-        f'not converged: load factor {factor:.4g} after {steps} load steps '
-        f'(residual {norm:.3g})')
-    return EquilibriumResult(ChainState(positions, rotations), converged, total, float(norm),
-                             steps, message)
+    n = model.n_links
+    external = None if external is None else np.asarray(external, dtype=float).reshape(n, 6)
+    load_function, load_tangent = actuator_loads(actuators, actuation)
+    return solve_chain(model, external, load_function=load_function, load_tangent=load_tangent,
+                       initial_state=initial_state, tolerance=tolerance,
+                       absolute_tolerance=absolute_tolerance, max_iterations=max_iterations,
+                       max_load_steps=max_load_steps, max_rotation_step=max_rotation_step)

@@ -35,11 +35,10 @@ from functools import cached_property
 from pathlib import Path
 
 from cbha_inverse.core.actuation import ActuatorSet, Cable, CableGroup
-from cbha_inverse.core.chain import ChainModel, rest_state
+from cbha_inverse.core.chain import ChainModel
 from cbha_inverse.core.control import InverseOptions, InverseSolver
 from cbha_inverse.core.effectors import PointEffectors
 from cbha_inverse.core.equilibrium import solve_equilibrium
-from cbha_inverse.core.kernel import ChainKernel
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.paths import config_path
 import numpy as np
@@ -134,9 +133,9 @@ class Scene:
         """
         Solve the static equilibrium under an actuation (paper eq. 9).
 
-        Uses :func:`cbha_inverse.core.equilibrium.solve_equilibrium` (Newton with the actuators'
-        load stiffness, line search, load continuation), the same linearisation as the inverse
-        solver.
+        Uses :func:`cbha_inverse.core.equilibrium.solve_equilibrium` (the package's Newton engine
+        with the actuators' load stiffness, line search, load stepping), the same linearisation
+        as the inverse solver.
 
         Parameters
         ----------
@@ -145,7 +144,7 @@ class Scene:
         initial_state : ChainState, optional
             Warm start.
         tolerance : float
-            Static solver tolerance.
+            Relative tolerance of the static solver (:mod:`cbha_inverse.core.newton`).
         strict : bool
             Raise ``RuntimeError`` when the solve does not converge.
 
@@ -161,8 +160,7 @@ class Scene:
         if np.any(a < self.lower_bounds - 1e-9 * np.abs(self.upper_bounds)) or np.any(
                 a > self.upper_bounds * (1.0 + 1e-9)):
             raise ValueError('actuation outside the actuator bounds')
-        start = rest_state(self.model) if initial_state is None else initial_state
-        res = solve_equilibrium(self._kernel, self.actuators, a, self._external, start,
+        res = solve_equilibrium(self.model, self.actuators, a, self._external, initial_state,
                                 tolerance=tolerance)
         if strict and not res.converged:
             raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
@@ -170,11 +168,6 @@ class Scene:
         return ForwardResult(st.positions, st.quaternions, st.rotations,
                              self.effectors.positions(st.positions, st.rotations), a,
                              res.converged, res.iterations, res.residual_norm, res.message, st)
-
-    @cached_property
-    def _kernel(self):
-        """Return the fused mechanics kernel of the chain."""
-        return ChainKernel(self.model)
 
     @cached_property
     def _external(self):

@@ -1,0 +1,403 @@
+"""
+The one Newton engine for the quasi-static equilibrium of a frame chain (paper eq. 9, DESIGN §3).
+
+Behind :func:`cbha_inverse.core.statics.solve_static`, the scenes' forward model
+(:func:`cbha_inverse.core.equilibrium.solve_equilibrium`) and the simulated plant
+(:class:`cbha_inverse.core.plant.StaticPlant`). It solves, for the poses of frames 1..n,
+
+    r(q) = f(q) + lam (f_dead + f_load(q)) = 0
+
+with ``f`` the internal wrenches (:func:`cbha_inverse.core.assembly.internal_wrenches`),
+``f_dead`` constant world wrenches (tip, frame wrenches, gravity), ``f_load(q)`` configuration-
+dependent (follower) wrenches such as cables and pressure (``J_a(q)ᵀ λ``) and ``lam`` the load
+factor:
+
+- Newton increments ``dq = T⁻¹ r`` (world axes, as for :func:`cbha_inverse.core.chain.retract`)
+  with ``T = K + lam L``: ``K = -d f / dq`` the exact, non-symmetric structural tangent (material
+  + geometric part, :mod:`cbha_inverse.core.links`) and ``L = -d f_load / dq`` the load
+  stiffness, given by an optional ``load_tangent(state) -> (6n, 6n)`` (frames 1..n, world-axis
+  increments, at the full load; ``actuators.load_tangent`` for cables and cavities). Without it
+  the follower loads are not differentiated: Newton then converges linearly at best, and
+  stalls when a tendon-compressed chain looks unstable to the structural tangent alone;
+- linear solves by LU: dense for up to ``_DENSE_MAX_LINKS`` links or whenever ``L`` is given,
+  LAPACK banded LU (11 sub- and super-diagonals, O(n)) for longer chains without ``L``. If the
+  tangent is singular, the step is not finite or the line search rejects it, the iteration falls
+  back to the material tangent (paper eq. 8, symmetric positive definite whatever the stresses,
+  Cholesky): a modified-Newton step, robust where ``T`` is indefinite or singular (a chain near a
+  limit point, high pressure);
+- the increment is applied in the chain's deformation coordinates: each link's offset and
+  rotation vector move by the linearised change ``B dq``, and the poses follow from the base by
+  forward kinematics with multiplicative rotations ``R_{i+1} = R_i exp(phi_i) Q0_i``. To first
+  order this is ``retract``; at large rotations it lets a bending increment carry the rest of
+  the chain rigidly instead of stretching the links along their tangents, which is what makes
+  full Newton steps work for slender (axially stiff) chains: the PL^2/EI = 10 elastica converges
+  from rest in one load step of 7 iterations instead of creeping with tiny steps;
+- backtracking line search on the Euclidean norm of the scaled residual (Armijo, factor 1/2),
+  optionally starting from a step shortened so that no link turns by more than
+  ``max_rotation_step``;
+- load stepping (:func:`solve_chain`): a warm start (``initial_state``) is tried at the full
+  load first; otherwise or if it fails, the full load from the rest shape; a load step that fails
+  (no convergence within ``max_iterations`` or a failed line search) is halved, successful steps
+  double the increment.
+
+Convergence test (``residual_norm`` reports the left-hand side), by default relative::
+
+    max |r_scaled| <= tolerance * load_scale + floor
+
+``r_scaled`` is the residual with moments divided by the chain length L_c (so both are in N);
+``load_scale`` is the largest scaled component of the applied loads and of the internal wrenches
+at the current state; ``floor`` is the round-off level of the internal forces,
+``64 eps max_links(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` with ``x_ref = L_c +
+|base position|`` (max-abs entries of the stiffness blocks), below which no residual is
+meaningful. With ``absolute_tolerance`` the test is instead ``|r|_2 <= absolute_tolerance``
+(unscaled Euclidean norm in N and N*m, the plant's contract).
+"""
+
+from dataclasses import dataclass
+
+from cbha_inverse.core.assembly import (assemble_tangent, blocks_to_dense, chain_terms,
+                                        internal_wrenches)
+from cbha_inverse.core.chain import ChainState, rest_state
+from cbha_inverse.core.kernel import ChainKernel, DenseCholesky
+from cbha_inverse.core.se3 import so3_exp
+import numpy as np
+from scipy.linalg import solve_banded
+
+_ARMIJO = 1e-4
+_MAX_HALVINGS = 6
+_MIN_LOAD_INCREMENT = 1.0 / 2 ** 20
+# dense LU of (6n)^2 beats the banded one (which builds its band storage in Python) up to here
+_DENSE_MAX_LINKS = 40
+_BLOCK_ROWS, _BLOCK_COLS = (idx.ravel() for idx in np.indices((6, 6)))
+
+
+@dataclass(frozen=True, eq=False)
+class NewtonResult:
+    """
+    Result of :func:`solve_chain`.
+
+    Attributes
+    ----------
+    state : ChainState
+        Equilibrium; if not converged, the last equilibrium at ``load_factor`` < 1, or (when no
+        load step succeeded after a warm start) the warm start's last iterate.
+    converged : bool
+        True only if the full load was reached and the convergence test passed.
+    iterations : int
+        Total Newton iterations over all load steps.
+    residual_norm : float  [N]
+        Convergence measure (see the module docstring) of ``state`` under the full load.
+    residual : (n, 6) ndarray  [N, N*m]
+        The residual ``r`` of ``state`` under the full load.
+    load_steps : int
+        Load steps attempted (successful and failed; a warm start counts as one).
+    load_factor : float
+        Fraction of the load in equilibrium at ``state`` (1.0 when converged).
+    message : str
+        What happened, in words.
+
+    """
+
+    state: ChainState
+    converged: bool
+    iterations: int
+    residual_norm: float
+    residual: np.ndarray
+    load_steps: int
+    load_factor: float
+    message: str
+
+
+def _residual_floor(model, length):
+    """Round-off level of the scaled internal wrenches (see the module docstring)."""
+    k = np.abs(model.stiffnesses)
+    k_tt = k[:, :3, :3].max()
+    k_tr = max(k[:, :3, 3:].max(), k[:, 3:, :3].max())
+    k_rr = k[:, 3:, 3:].max()
+    x_ref = length + float(np.linalg.norm(model.base_position))
+    return 64.0 * np.finfo(float).eps * max(k_tt * x_ref + k_tr, (k_tr * x_ref + k_rr) / length)
+
+
+def _scaled(wrenches, length):
+    """Return wrenches with moments divided by the characteristic length."""
+    out = wrenches.copy()
+    out[:, 3:] /= length
+    return out
+
+
+def _banded_solve(diagonal, upper, residual):
+    """
+    Solve the block-tridiagonal system ``T dq = r`` (lower blocks = ``upper`` transposed).
+
+    LAPACK banded LU (``dgbsv``, 11 sub- and super-diagonals); O(n) and level-2 BLAS only.
+    """
+    n = diagonal.shape[0]
+    ab = np.zeros((23, 6 * n))
+    # general band storage ab[11 + i - j, j] = A[i, j], filled from the three block diagonals
+    for blocks, shift in ((diagonal, 0), (upper, 1), (np.swapaxes(upper, 1, 2), -1)):
+        k = np.arange(blocks.shape[0])[:, None]
+        i = 6 * (k + max(-shift, 0)) + _BLOCK_ROWS
+        j = 6 * (k + max(shift, 0)) + _BLOCK_COLS
+        ab[11 + i - j, j] = blocks.reshape(-1, 36)
+    return solve_banded((11, 11), ab, residual.ravel(), check_finite=False)
+
+
+class _Problem:
+    """One static problem: model, loads, convergence test and the tangent solves."""
+
+    def __init__(self, model, external, load_function, load_tangent, tolerance,
+                 absolute_tolerance, max_rotation_step):
+        self.model = model
+        self.external = external
+        self.load_function = load_function
+        self.load_tangent = load_tangent
+        self.tolerance = float(tolerance)
+        self.absolute = None if absolute_tolerance is None else float(absolute_tolerance)
+        self.max_rotation_step = max_rotation_step
+        self.length = model.length if model.length > 0.0 else 1.0
+        self.floor = _residual_floor(model, self.length)
+        self._kernel = None
+
+    def loads(self, state, lam):
+        """Return the applied wrenches (n, 6) at load factor ``lam``."""
+        loads = self.external
+        if self.load_function is not None:
+            extra = np.asarray(self.load_function(state), dtype=float)
+            if extra.shape != self.external.shape:
+                raise ValueError(f'load_function must return shape {self.external.shape}')
+            loads = loads + extra
+        return lam * loads
+
+    def evaluate(self, state, lam, internal=None):
+        """Return (residual, convergence measure, scaled 2-norm, converged flag)."""
+        if internal is None:
+            internal = internal_wrenches(self.model, state)
+        loads = self.loads(state, lam)
+        res = internal + loads
+        scaled = _scaled(res, self.length)
+        r_two = float(np.linalg.norm(scaled))
+        if self.absolute is not None:
+            measure = float(np.linalg.norm(res))
+            return res, measure, r_two, measure <= self.absolute
+        scale = max(np.abs(_scaled(loads, self.length)).max(),
+                    np.abs(_scaled(internal, self.length)).max())
+        measure = float(np.abs(scaled).max())
+        return res, measure, r_two, measure <= self.tolerance * scale + self.floor
+
+    def exact_step(self, state, terms, lam, res):
+        """Newton step with the exact tangent ``K + lam L`` (LU)."""
+        tangent = assemble_tangent(self.model, state, terms)
+        load = None if self.load_tangent is None or lam == 0.0 else self.load_tangent(state)
+        if load is None and self.model.n_links > _DENSE_MAX_LINKS:
+            step = _banded_solve(tangent.exact_diagonal, tangent.upper, res)
+        else:
+            matrix = blocks_to_dense(tangent.exact_diagonal, tangent.upper)
+            if load is not None:
+                matrix += lam * np.asarray(load, dtype=float)
+            step = np.linalg.solve(matrix, res.ravel())
+        if not np.all(np.isfinite(step)):
+            raise np.linalg.LinAlgError('singular tangent (non-finite Newton step)')
+        return step.reshape(-1, 6)
+
+    def material_step(self, state, terms, lam, res):
+        """Modified-Newton step with the material tangent (SPD, Cholesky): the fallback."""
+        if self._kernel is None:
+            self._kernel = ChainKernel(self.model)
+        _, material = self._kernel.linearise(state.positions, state.rotations, geometric=False)
+        step = DenseCholesky(material.copy()).solve(res.ravel())
+        if not np.all(np.isfinite(step)):
+            raise np.linalg.LinAlgError('non-finite material step')
+        return step.reshape(-1, 6)
+
+    def first_alpha(self, link_rotation):
+        """Return the first line-search step: no link turns by more than the limit."""
+        limit = self.max_rotation_step
+        if limit is None or link_rotation <= limit:
+            return 1.0
+        return limit / link_rotation
+
+
+def _relative_update(model, state, step, terms):
+    """
+    Map world increments of frames 1..n to link-deformation increments and a pose generator.
+
+    Returns ``poses(alpha) -> ChainState`` and the largest link rotation increment [rad].
+
+    Newton's increment is applied in the chain's deformation coordinates (offset and rotation
+    vector of each link in its frame-a axes): ``u += R_a^T (dx_b - dx_a - dtheta_a x p)``,
+    ``phi += Jl^-1(phi) R_a^T (dtheta_b - dtheta_a)`` (the linearisation of the link deformation,
+    DESIGN §3), then the poses follow by forward kinematics from the fixed base. To first order
+    this is the same Newton step as :func:`retract`, but a bending increment carries the rest of
+    the chain along rigidly instead of stretching every link along its tangent, which keeps full
+    steps acceptable at large rotations.
+    """
+    pos, rot = state.positions, state.rotations
+    inc = np.concatenate([np.zeros((1, 6)), step], axis=0)
+    rot_at = np.swapaxes(rot[:-1], 1, 2)
+    dx = inc[1:, :3] - inc[:-1, :3] - np.cross(inc[:-1, 3:], pos[1:] - pos[:-1])
+    du = (rot_at @ dx[..., None])[..., 0]
+    dphi = (terms.jinv @ rot_at @ (inc[1:, 3:] - inc[:-1, 3:])[..., None])[..., 0]
+
+    rel_count = step.shape[0]
+
+    def poses(alpha):
+        rots = np.empty_like(rot)
+        rots[0] = rot[0]
+        rots[1:] = so3_exp(terms.phi + alpha * dphi) @ model.rest_rotations
+        rots[1] = rot[0] @ rots[1]
+        # R_{i+1} = R_i rel_i for all i: ordered prefix products in log2(n) batched steps
+        shift = 1
+        while shift < rel_count:
+            rots[shift + 1:] = rots[1:-shift] @ rots[shift + 1:]
+            shift *= 2
+        arms = (rots[:-1] @ (terms.offset + alpha * du)[..., None])[..., 0]
+        new_pos = np.empty_like(pos)
+        new_pos[0] = pos[0]
+        new_pos[1:] = pos[0] + np.cumsum(arms, axis=0)
+        return ChainState(new_pos, rots)
+
+    return poses, float(np.sqrt(np.max(np.einsum('ij,ij->i', dphi, dphi))))
+
+
+def _point(problem, state, lam, terms=None):
+    """Evaluate a state: (state, link terms, residual, measure, scaled 2-norm, converged)."""
+    if terms is None:
+        terms = chain_terms(problem.model, state)
+    internal = internal_wrenches(problem.model, state, terms)
+    return (state, terms) + problem.evaluate(state, lam, internal)
+
+
+def _line_search(problem, point, lam, step):
+    """
+    Backtrack along the Newton step (in deformation coordinates) on the residual norm.
+
+    Armijo test on the Euclidean norm of the scaled residual, ``|r(a)| <= (1 - 1e-4 a) |r(0)|``,
+    halving ``a`` at most ``_MAX_HALVINGS`` times; returns the accepted point (see
+    :func:`_point`), or None (the caller then tries the fallback direction or cuts the load step,
+    which is cheaper than creeping along a poor direction).
+    """
+    state, terms, _, _, r_two, _ = point
+    poses, link_rotation = _relative_update(problem.model, state, step, terms)
+    alpha = problem.first_alpha(link_rotation)
+    for _ in range(_MAX_HALVINGS):
+        trial = _point(problem, poses(alpha), lam)
+        if trial[5] or trial[4] <= (1.0 - _ARMIJO * alpha) * r_two:
+            return trial
+        alpha *= 0.5
+    return None
+
+
+def _newton(problem, state, lam, max_iterations):
+    """Newton iterations at a fixed load factor; returns (ok, last point, iterations, why)."""
+    point = _point(problem, state, lam)
+    iterations = 0
+    while True:
+        state, terms, res, measure, _, ok = point
+        if ok:
+            return True, point, iterations, 'converged'
+        if not np.isfinite(measure):
+            return False, point, iterations, 'non-finite residual'
+        if iterations >= max_iterations:
+            return False, point, iterations, 'iteration budget exhausted'
+        iterations += 1
+        accepted, why = None, ''
+        for direction in (problem.exact_step, problem.material_step):
+            try:
+                step = direction(state, terms, lam, res)
+            except np.linalg.LinAlgError as exc:
+                why = str(exc) or 'singular tangent'
+                continue
+            accepted = _line_search(problem, point, lam, step)
+            if accepted is not None:
+                break
+            why = 'line search failed'
+        if accepted is None:
+            return False, point, iterations, why
+        point = accepted
+
+
+def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
+                initial_state=None, tolerance=1e-10, absolute_tolerance=None, max_iterations=50,
+                max_load_steps=64, max_rotation_step=None):
+    """
+    Solve ``f(q) + f_dead + f_load(q) = 0`` for the frames of a chain (paper eq. 9).
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain; frame 0 is fixed.
+    external : (n, 6) array_like, optional  [N, N*m]
+        Dead wrenches on frames 1..n (world axes, at the frame origins).
+    load_function : callable, optional
+        ``load_function(state) -> (n, 6)`` follower wrenches (world axes, frames 1..n) at the
+        full load, e.g. ``J_a(q)ᵀ λ``.
+    load_tangent : callable, optional
+        ``load_tangent(state) -> (6n, 6n)`` ndarray (or None): the load stiffness
+        ``-d load_function / dq`` (world-axis increments of frames 1..n, as ``retract``) at the
+        full load; the engine scales it by the load factor. The exact (non-symmetric) derivative
+        gives quadratic convergence; its symmetric part still converges.
+    initial_state : ChainState, optional
+        Warm start: Newton on the full load from it first; if that fails, load stepping from
+        the rest shape (the default start).
+    tolerance : float
+        Relative tolerance of the default convergence test (module docstring).
+    absolute_tolerance : float, optional  [N, N*m]
+        Use ``|r|_2 <= absolute_tolerance`` instead.
+    max_iterations : int
+        Newton iterations allowed per load step (and for the warm start).
+    max_load_steps : int
+        Load steps allowed (attempts, successful or not; the warm start counts as one).
+    max_rotation_step : float, optional  [rad]
+        Largest link rotation of a line search's first trial step.
+
+    Returns
+    -------
+    NewtonResult
+        ``converged`` False with a message when the full load was not reached.
+
+    """
+    n = model.n_links
+    external = np.zeros((n, 6)) if external is None else np.asarray(external, dtype=float)
+    if external.shape != (n, 6):
+        raise ValueError(f'external wrenches must have shape ({n}, 6), got {external.shape}')
+    problem = _Problem(model, external, load_function, load_tangent, tolerance,
+                       absolute_tolerance, max_rotation_step)
+    lam, increment, steps, total, message = 0.0, 1.0, 0, 0, ''
+    state, warm, final = rest_state(model), None, None
+    if initial_state is not None:
+        if initial_state.positions.shape != (model.n_frames, 3):
+            raise ValueError('initial_state does not match the model')
+        steps = 1
+        ok, point, total, why = _newton(problem, initial_state, 1.0, max_iterations)
+        if ok:
+            state, lam, final = point[0], 1.0, point
+        else:
+            message, warm = f'warm start failed: {why}', point[0]
+    while lam < 1.0:
+        if steps >= max_load_steps:
+            message = (f'not converged: load step budget ({max_load_steps}) exhausted at load '
+                       f'factor {lam:.6g} ({message})')
+            break
+        if increment < _MIN_LOAD_INCREMENT:
+            message = (f'not converged: load increment below {_MIN_LOAD_INCREMENT:.3g} at load '
+                       f'factor {lam:.6g} ({message})')
+            break
+        target = min(1.0, lam + increment)
+        steps += 1
+        ok, point, its, why = _newton(problem, state, target, max_iterations)
+        total += its
+        if ok:
+            state, lam, final = point[0], target, point
+            increment = min(2.0 * increment, 1.0)
+        else:
+            increment *= 0.5
+            message = f'last failure at load factor {target:.6g}: {why}'
+    converged = lam >= 1.0
+    if converged:
+        message = f'converged in {total} Newton iterations, {steps} load step(s)'
+    else:
+        if lam == 0.0 and warm is not None:
+            state = warm  # no equilibrium reached: the warm iterate is the better place to resume
+        final = _point(problem, state, 1.0)
+    return NewtonResult(state, bool(converged), int(total), float(final[3]), final[2],
+                        int(steps), float(lam), message)
