@@ -180,25 +180,37 @@ class ActiveSetQP:
         h, g = problem.hessian, problem.gradient
         lower, upper = problem.lower, problem.upper
         state = self._state.copy()
-        scale = 1e-12 * (1.0 + float(np.abs(g).max()) + float(np.abs(h).max()))
+        # the problem is normalised (|H| ~ 1): absolute tolerance on the multipliers
+        scale = 1e-12 * (2.0 + float(np.abs(g).max()))
         for iteration in range(1, self.max_iterations + 1):
-            x = np.where(state < 0, lower, upper)
             free = state == 0
             if free.all():
+                # interior guess: the Newton point; only the box can be violated
                 _, x, info = lapack.dposv(h, -g)
-            elif free.any():
-                h_free = h[free]
-                bound = ~free
-                _, xf, info = lapack.dposv(h_free[:, free], -g[free] - h_free[:, bound] @ x[bound])
-                x[free] = xf
+                if info != 0:
+                    break
+                below = x < lower - 1e-13
+                above = x > upper + 1e-13
+                if not (below.any() or above.any()):
+                    self._state = state
+                    return QPSolution(np.minimum(np.maximum(x, lower), upper), 'solved',
+                                      iteration, True)
+                wrong = np.zeros_like(below)
             else:
+                x = np.where(state < 0, lower, upper)
                 info = 0
-            if info != 0:
-                break
-            grad = h @ x + g
-            below = free & (x < lower - 1e-13)
-            above = free & (x > upper + 1e-13)
-            wrong = ((state < 0) & (grad < -scale)) | ((state > 0) & (grad > scale))
+                if free.any():
+                    h_free = h[free]
+                    bound = ~free
+                    _, xf, info = lapack.dposv(h_free[:, free],
+                                               -g[free] - h_free[:, bound] @ x[bound])
+                    x[free] = xf
+                if info != 0:
+                    break
+                grad = h @ x + g
+                below = free & (x < lower - 1e-13)
+                above = free & (x > upper + 1e-13)
+                wrong = ((state < 0) & (grad < -scale)) | ((state > 0) & (grad > scale))
             bad = below | above | wrong
             if not bad.any():
                 self._state = state
