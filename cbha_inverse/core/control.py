@@ -1,21 +1,25 @@
 """
-The per-tick inverse-simulation controller (DESIGN §6, paper §IV) and closed-loop correction.
+The per-tick inverse-simulation controller (DESIGN §6, paper §IV).
 
 :class:`InverseSolver` holds the immutable model (chain, actuators, effectors, gravity) and a
 mutable tick state (frame poses, current actuation, QP warm start). One :meth:`InverseSolver.step`:
 
-1. linearise at the current state: tangent stiffness ``K`` and internal wrenches (the fused
-   :class:`cbha_inverse.core.kernel.ChainKernel`, equal to ``assemble_tangent``), actuator
-   columns ``J_aᵀ`` at the current poses, residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
-2. factor ``K`` (LAPACK Cholesky of the dense block-tridiagonal matrix, the fastest exact method
-   at control-scene sizes) and solve ``K⁻¹ [J_aᵀ, r]`` in one multi-RHS call, giving
-   ``W_ea``, ``W_aa`` and ``δ_e^free`` (:func:`cbha_inverse.core.inverse.project_constraints`);
-3. solve the regularised box QP (proxsuite, warm-started; projected Gauss-Seidel on request or as a
-   fallback if proxsuite reports a failure);
+1. linearise at the current state in one fused pass (:class:`cbha_inverse.core.tick.TickModel`,
+   equal to ``assemble_tangent`` + the actuators' ``evaluate`` / ``load_tangent``): tangent
+   stiffness ``K`` (structure + symmetric load stiffness), actuator columns ``J_aᵀ`` and the
+   residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
+2. factor ``K`` (LAPACK Cholesky: dense for short chains, band for long ones) and solve
+   ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS call, giving ``W_ea``, ``W_aa`` and ``δ_e^free`` (as
+   :func:`cbha_inverse.core.inverse.project_constraints`);
+3. solve the regularised box QP (proxsuite, warm-started, or the exact active-set solver; projected
+   Gauss-Seidel on request or as a fallback if proxsuite reports a failure);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (no second solve), followed by ``newton_steps - 1``
    further full Newton steps at fixed ``λ`` if requested (or, with ``relinearize_every > 1``,
    keep the linear model for a few ticks; see :class:`InverseOptions`).
+
+The closed-loop :class:`~cbha_inverse.core.correction.TargetCorrector` lives in
+:mod:`cbha_inverse.core.correction` (re-exported here).
 
 Repeated ticks therefore run Newton's method on the coupled problem (equilibrium plus optimal
 actuation); at a fixed target the state converges to the static equilibrium of the returned
