@@ -49,9 +49,11 @@ class CableTerms:
         self.point_owner = group._point_owner
         m_c = len(group.cables)
         self.m = m_c
-        # scatter of point wrenches into (frame, cable)
-        self.scatter = np.zeros((n_frames * m_c, n_points))
-        self.scatter[self.frames * m_c + self.point_owner, np.arange(n_points)] = 1.0
+        # scatter of point wrenches into (mobile frame, cable)
+        self.scatter = np.zeros(((n_frames - 1) * m_c, n_points))
+        mobile = self.frames > 0
+        self.scatter[((self.frames - 1) * m_c + self.point_owner)[mobile],
+                     np.arange(n_points)[mobile]] = 1.0
         # span blocks summed per frame pair
         pairs = {}
         pair_of_span = np.empty(n_spans, dtype=int)
@@ -86,7 +88,8 @@ class CableTerms:
         actuation : (m,) ndarray
             All actuators (the cable tensions are taken at :attr:`columns`).
         rhs : (6n, m + 1) ndarray
-            Residual (column 0, the cable loads are added) and ``J_aᵀ`` (columns ``1 + j``).
+            C-contiguous; residual (column 0, the cable loads are added) and ``J_aᵀ`` (columns
+            ``1 + j``).
         pair_values : (P * 144,) ndarray
             Receives the span stiffness blocks summed per frame pair (12 x 12 each).
         moment_values : (F * 9,) ndarray
@@ -108,18 +111,18 @@ class CableTerms:
         wrench = cab.wrench
         wrench[:, :3] = forces
         np.matmul(hats, forces[:, :, None], out=wrench[:, 3:, None])
-        cols = (cab.scatter @ wrench).reshape(n + 1, cab.m, 6)[1:].transpose(0, 2, 1)
-        cols = cols.reshape(6 * n, cab.m)
+        cols = (cab.scatter @ wrench).reshape(n, cab.m, 6)
         tension = actuation[cab.columns]
+        by_frame = rhs.reshape(n, 6, -1)
         if cab.contiguous:
-            target = rhs[:, 1 + cab.columns[0]:1 + cab.columns[-1] + 1]
+            target = by_frame[:, :, 1 + cab.columns[0]:1 + cab.columns[-1] + 1]
             if accumulate:
-                target += cols
+                target += cols.transpose(0, 2, 1)
             else:
-                target[...] = cols
+                target[...] = cols.transpose(0, 2, 1)
         else:
-            rhs[:, 1 + cab.columns] += cols
-        rhs[:, 0] += cols @ tension
+            rhs[:, 1 + cab.columns] += cols.transpose(0, 2, 1).reshape(6 * n, cab.m)
+        rhs[:, 0] += np.matmul(tension, cols).reshape(-1)
         # load stiffness: per span t/l (I - u u^T) through C = [I; r_s^; -I; -r_e^]
         scale = tension[cab.segment_owner] / lengths
         proj = -(scale[:, None, None] * units[:, :, None]) * units[:, None, :]
@@ -130,8 +133,12 @@ class CableTerms:
         span_blocks = np.matmul(np.matmul(c, proj), c.transpose(0, 2, 1))
         np.matmul(cab.pair_sum, span_blocks.reshape(-1, 144),
                   out=pair_values.reshape(-1, 144))
+        # point moments (F·r) I - sym(r Fᵀ), summed per frame: with A = Σ r Fᵀ it is tr(A) I - A
+        # (the assembly symmetrises)
         point_forces = forces * tension[cab.point_owner][:, None]
-        moment = -levers[:, :, None] * point_forces[:, None, :]
-        moment.reshape(-1, 9)[:, ::4] += np.einsum('pi,pi->p', point_forces, levers)[:, None]
-        np.matmul(cab.frame_sum, moment.reshape(-1, 9),
-                  out=moment_values.reshape(-1, 9))
+        moment = moment_values.reshape(-1, 9)
+        np.matmul(cab.frame_sum, (levers[:, :, None] * point_forces[:, None, :]).reshape(-1, 9),
+                  out=moment)
+        trace = moment[:, ::4].sum(axis=1)
+        np.negative(moment, out=moment)
+        moment[:, ::4] += trace[:, None]

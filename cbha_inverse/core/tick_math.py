@@ -28,10 +28,11 @@ _SERIES_LIMIT = 0.5
 _HAT_BASIS = np.zeros((3, 9))
 _HAT_BASIS[_HAT_SRC, _HAT_DST] = _HAT_SIGN
 HALF_HAT_BASIS = -0.5 * _HAT_BASIS
-# sin(t)/t and (1 - cos t)/t^2 as series in t^2
+# sin(t)/t, (1 - cos t)/t^2 and cos t as series in t^2
 _EXP_POWERS = np.arange(8)
 _EXP_SERIES = np.array([[(-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 2)),
-                         (-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 3))] for k in range(8)])
+                         (-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 3)),
+                         (-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 1))] for k in range(8)])
 
 
 def hats_into(out, v):
@@ -109,17 +110,18 @@ def exp_rotations(rotvec, t2=None):
     if t2.max() <= 0.25:
         # (clamped: powers of tiny angles would be denormal numbers, ~100x slower)
         ab = np.power(np.maximum(t2, 1e-30)[:, None], _EXP_POWERS) @ _EXP_SERIES
-        a, b = ab[:, 0], ab[:, 1]
+        a, b, cos = ab[:, 0], ab[:, 1], ab[:, 2:]
     else:
         theta = np.sqrt(t2)
         small = theta < 1e-4
         safe = np.where(small, 1.0, theta)
         a = np.where(small, 1.0 - t2 / 6.0, np.sin(safe) / safe)
         b = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
+        cos = (1.0 - b * t2)[:, None]
     out = (rotvec[:, :, None] * rotvec[:, None, :]).reshape(-1, 9)
     out *= b[:, None]
     out += (a[:, None] * rotvec) @ _HAT_BASIS
-    out[:, ::4] += (1.0 - b * t2)[:, None]
+    out[:, ::4] += cos
     return out.reshape(-1, 3, 3)
 
 
