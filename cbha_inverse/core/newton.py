@@ -16,15 +16,17 @@ factor:
   with ``T = K + lam L``: ``K = -d f / dq`` the exact, non-symmetric structural tangent (material
   + geometric part, :mod:`cbha_inverse.core.links`) and ``L = -d f_load / dq`` the load
   stiffness, given by an optional ``load_tangent(state) -> (6n, 6n)`` (frames 1..n, world-axis
-  increments, at the full load; ``actuators.load_tangent`` for cables and cavities). Without it
-  the follower loads are not differentiated: Newton then converges linearly at best, and
-  stalls when a tendon-compressed chain looks unstable to the structural tangent alone;
-- linear solves by LU: dense for up to ``_DENSE_MAX_LINKS`` links or whenever ``L`` is given,
-  LAPACK banded LU (11 sub- and super-diagonals, O(n)) for longer chains without ``L``. If the
-  tangent is singular, the step is not finite or the line search rejects it, the iteration falls
-  back to the material tangent (paper eq. 8, symmetric positive definite whatever the stresses,
-  Cholesky): a modified-Newton step, robust where ``T`` is indefinite or singular (a chain near a
-  limit point, high pressure);
+  increments, at the full load; :func:`cbha_inverse.core.equilibrium.actuator_loads` builds it
+  from a scene's actuators). Without it the follower loads are not differentiated: Newton then
+  converges linearly at best, and stalls when a tendon-compressed chain looks unstable to the
+  structural tangent alone;
+- linear solves by LU: dense up to ``_DENSE_MAX_LINKS`` links (faster there), LAPACK banded LU
+  for longer chains (11 sub- and super-diagonals without ``L``; with ``L`` the bandwidth of the
+  nonzeros, e.g. cables routed over neighbouring vertebrae), O(n). If the tangent is singular,
+  the step is not finite or the line search rejects it, the iteration falls back to the
+  material tangent (:func:`material_tangent`, SPD whatever the stresses, BTD Cholesky):
+  a modified-Newton step, robust where ``T`` is indefinite or singular (a chain near a limit
+  point, high pressure);
 - the increment is applied in the chain's deformation coordinates: each link's offset and
   rotation vector move by the linearised change ``B dq``, and the poses follow from the base by
   forward kinematics with multiplicative rotations ``R_{i+1} = R_i exp(phi_i) Q0_i``. To first
@@ -55,19 +57,21 @@ meaningful. With ``absolute_tolerance`` the test is instead ``|r|_2 <= absolute_
 
 from dataclasses import dataclass
 
+from cbha_inverse.core import btd
 from cbha_inverse.core.assembly import (assemble_tangent, blocks_to_dense, chain_terms,
                                         internal_wrenches)
 from cbha_inverse.core.chain import ChainState, rest_state
-from cbha_inverse.core.kernel import ChainKernel, DenseCholesky
-from cbha_inverse.core.se3 import so3_exp
+from cbha_inverse.core.links import rotate_tangent
+from cbha_inverse.core.se3 import hat, so3_exp
 import numpy as np
 from scipy.linalg import solve_banded
 
 _ARMIJO = 1e-4
 _MAX_HALVINGS = 6
 _MIN_LOAD_INCREMENT = 1.0 / 2 ** 20
-# dense LU of (6n)^2 beats the banded one (which builds its band storage in Python) up to here
-_DENSE_MAX_LINKS = 40
+# dense LU of (6n)^2 beats the banded one (which builds its band storage in Python) up to ~20
+# links (single-threaded BLAS: 96 vs 132 us at 16 links, 183 vs 154 us at 24)
+_DENSE_MAX_LINKS = 20
 _BLOCK_ROWS, _BLOCK_COLS = (idx.ravel() for idx in np.indices((6, 6)))
 
 
@@ -142,6 +146,58 @@ def _banded_solve(diagonal, upper, residual):
     return solve_banded((11, 11), ab, residual.ravel(), check_finite=False)
 
 
+def _dense_banded_solve(matrix, residual):
+    """Solve ``T dq = r`` by banded LU with the bandwidth of ``T``'s nonzeros (long chains)."""
+    rows, cols = np.nonzero(matrix)
+    lower, upper = int(max(0, (rows - cols).max())), int(max(0, (cols - rows).max()))
+    if 4 * (lower + upper) > matrix.shape[0]:
+        return np.linalg.solve(matrix, residual.ravel())
+    ab = np.zeros((lower + upper + 1, matrix.shape[0]))
+    ab[upper + rows - cols, cols] = matrix[rows, cols]
+    return solve_banded((lower, upper), ab, residual.ravel(), check_finite=False)
+
+
+def material_tangent(model, state, terms=None):
+    """
+    Material part of the chain tangent (paper eq. 8): symmetric positive definite BTD blocks.
+
+    Per link ``Bᵀ K B`` with ``B = [[-I, hat(p), I, 0], [0, -Jl⁻¹, 0, Jl⁻¹]]`` (frame-a axes,
+    ``p`` the current offset, see :func:`cbha_inverse.core.links.local_tangent`), rotated to
+    world axes and assembled over frames 1..n; no geometric (stress) part, so it stays positive
+    definite whatever the loads.
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+    state : ChainState
+        Frame poses.
+    terms : LinkTerms, optional
+        ``chain_terms(model, state)`` if already computed.
+
+    Returns
+    -------
+    diagonal : (n, 6, 6) ndarray
+    upper : (n - 1, 6, 6) ndarray
+
+    """
+    if terms is None:
+        terms = chain_terms(model, state)
+    n = model.n_links
+    bmat = np.zeros((n, 6, 12))
+    bmat[:, :3, :3] = -np.eye(3)
+    bmat[:, :3, 6:9] = np.eye(3)
+    bmat[:, :3, 3:6] = hat(terms.offset)
+    bmat[:, 3:, 3:6] = -terms.jinv
+    bmat[:, 3:, 9:] = terms.jinv
+    local = np.swapaxes(bmat, 1, 2) @ model.stiffnesses @ bmat
+    world = rotate_tangent(state.rotations[:-1], local)
+    diagonal = world[:, 6:, 6:].copy()
+    diagonal[:-1] += world[1:, :6, :6]
+    diagonal = 0.5 * (diagonal + np.swapaxes(diagonal, 1, 2))
+    return diagonal, world[1:, :6, 6:].copy()
+
+
 class _Problem:
     """One static problem: model, loads, convergence test and the tangent solves."""
 
@@ -156,7 +212,6 @@ class _Problem:
         self.max_rotation_step = max_rotation_step
         self.length = model.length if model.length > 0.0 else 1.0
         self.floor = _residual_floor(model, self.length)
-        self._kernel = None
 
     def loads(self, state, lam):
         """Return the applied wrenches (n, 6) at load factor ``lam``."""
@@ -194,17 +249,18 @@ class _Problem:
             matrix = blocks_to_dense(tangent.exact_diagonal, tangent.upper)
             if load is not None:
                 matrix += lam * np.asarray(load, dtype=float)
-            step = np.linalg.solve(matrix, res.ravel())
+            if self.model.n_links > _DENSE_MAX_LINKS:
+                step = _dense_banded_solve(matrix, res)
+            else:
+                step = np.linalg.solve(matrix, res.ravel())
         if not np.all(np.isfinite(step)):
             raise np.linalg.LinAlgError('singular tangent (non-finite Newton step)')
         return step.reshape(-1, 6)
 
     def material_step(self, state, terms, lam, res):
-        """Modified-Newton step with the material tangent (SPD, Cholesky): the fallback."""
-        if self._kernel is None:
-            self._kernel = ChainKernel(self.model)
-        _, material = self._kernel.linearise(state.positions, state.rotations, geometric=False)
-        step = DenseCholesky(material.copy()).solve(res.ravel())
+        """Modified-Newton step with the material tangent (SPD, BTD Cholesky): the fallback."""
+        diagonal, upper = material_tangent(self.model, state, terms)
+        step = btd.factorize(diagonal, upper).solve(res.ravel())
         if not np.all(np.isfinite(step)):
             raise np.linalg.LinAlgError('non-finite material step')
         return step.reshape(-1, 6)
@@ -363,7 +419,7 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
     problem = _Problem(model, external, load_function, load_tangent, tolerance,
                        absolute_tolerance, max_rotation_step)
     lam, increment, steps, total, message = 0.0, 1.0, 0, 0, ''
-    state, warm, final = rest_state(model), None, None
+    state, warm, final = None, None, None
     if initial_state is not None:
         if initial_state.positions.shape != (model.n_frames, 3):
             raise ValueError('initial_state does not match the model')
@@ -373,6 +429,8 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
             state, lam, final = point[0], 1.0, point
         else:
             message, warm = f'warm start failed: {why}', point[0]
+    if state is None:
+        state = rest_state(model)
     while lam < 1.0:
         if steps >= max_load_steps:
             message = (f'not converged: load step budget ({max_load_steps}) exhausted at load '
