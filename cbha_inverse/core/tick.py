@@ -81,6 +81,7 @@ class TickModel:
             self._g0 = g0
             self._hess = hess
             self._hess_t = np.ascontiguousarray(hess.reshape(n, m, 36).transpose(0, 2, 1))
+            self._g0_t = np.ascontiguousarray(g0.transpose(0, 2, 1))
         kc = m + 1 if has_cavities else 1
         self._kc = kc
         self._local = np.zeros((n, 3, 2, kc))
@@ -196,14 +197,23 @@ class TickModel:
         jinv.reshape(n, 9)[:, ::4] += (1.0 - c * t2)[:, None]
         jinv_t = jinv.transpose(0, 2, 1)
         s_r = stress[:, 3:]
-        # local b-side wrench of every link (and of every cavity per unit pressure)
+        b = self._b
+        b[:, 3:, 3:] = jinv
+        bt = self._bt
+        bt[:, 3:, 3:] = jinv_t
+        # a = Bᵀ K - H_p (B = diag(I, Jl⁻¹), H_p = Σ p_c H_c): the local b-side wrench of every
+        # link with its cavities is L = G0_p - a δ (elastic part -[s_f; Jl⁻ᵀ s_r])
+        a = np.matmul(bt, self.stiffness)
         local = self._local
-        np.negative(stress[:, :3], out=local[:, :, 0, 0])
-        np.negative(np.matmul(jinv_t, s_r[:, :, None])[:, :, 0], out=local[:, :, 1, 0])
         if self.has_cavities:
+            a -= (self._hess_t @ actuation).reshape(n, 6, 6)
+            wrench = np.matmul(a, delta[:, :, None])[:, :, 0]
+            wrench -= self._g0_t @ actuation
             cav = self._g0 + np.matmul(self._hess, delta[:, None, :, None])[..., 0]
             local[..., 1:] = cav.reshape(n, -1, 2, 3).transpose(0, 3, 2, 1)
-            local[..., 0] += local[..., 1:] @ actuation
+        else:
+            wrench = np.matmul(a, delta[:, :, None])[:, :, 0]
+        np.negative(wrench.reshape(n, 2, 3).transpose(0, 2, 1), out=local[..., 0])
         world = np.matmul(rot_a, local.reshape(n, 3, -1)).reshape(n, 3, 2, -1)
         diff_hat = hats_into(self._diff_hat, diff)
         force = world[:, :, 0, :]
@@ -216,11 +226,6 @@ class TickModel:
         gather[1:-1, 1, :, :kc] -= arm[1:]
         rhs = gather[1:].reshape(6 * n, -1)
         # tangent blocks per link, world axes: D^T M D + geometric terms
-        b = self._b
-        b[:, 3:, 3:] = jinv
-        bt = self._bt
-        bt[:, 3:, 3:] = jinv_t
-        a = np.matmul(bt, self.stiffness)
         # dj = d(Jl^-T s)/dphi (see se3.so3_left_jacobian_inverse_transpose_derivative)
         ps = np.einsum('ni,ni->n', phi, s_r)
         left = np.empty((n, 3, 2))
@@ -235,8 +240,6 @@ class TickModel:
         dj_flat += s_r @ HALF_HAT_BASIS
         dj_flat[:, ::4] += (c * ps)[:, None]
         a[:, 3:, 3:] += dj
-        if self.has_cavities:
-            a -= (self._hess_t @ actuation).reshape(n, 6, 6)
         mat = np.matmul(a, b)
         dmat = self._d
         dmat[:, :3, 6:9] = rot_at
