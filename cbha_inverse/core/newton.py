@@ -27,13 +27,9 @@ factor:
   material tangent (:func:`material_tangent`, SPD whatever the stresses, BTD Cholesky):
   a modified-Newton step, robust where ``T`` is indefinite or singular (a chain near a limit
   point, high pressure);
-- the increment is applied in the chain's deformation coordinates: each link's offset and
-  rotation vector move by the linearised change ``B dq``, and the poses follow from the base by
-  forward kinematics with multiplicative rotations ``R_{i+1} = R_i exp(phi_i) Q0_i``. To first
-  order this is ``retract``; at large rotations it lets a bending increment carry the rest of
-  the chain rigidly instead of stretching the links along their tangents, which is what makes
-  full Newton steps work for slender (axially stiff) chains: the PL^2/EI = 10 elastica converges
-  from rest in one load step of 7 iterations instead of creeping with tiny steps;
+- the increment is applied in the chain's deformation coordinates (:func:`_relative_update`):
+  full Newton steps stay acceptable at large rotations of slender chains (the PL^2/EI = 10
+  elastica converges from rest in one load step of 7 iterations);
 - backtracking line search on the Euclidean norm of the scaled residual (Armijo, factor 1/2),
   optionally starting from a step shortened so that no link turns by more than
   ``max_rotation_step``;
