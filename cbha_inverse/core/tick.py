@@ -78,8 +78,9 @@ class TickModel:
                 self._generic.append((group, np.asarray(cols, dtype=int)))
         self.has_cavities = has_cavities
         if has_cavities:
-            self._g0 = g0
-            self._hess = hess
+            # per link: every cavity's local wrench G0 + H δ as one (6m x 6) product
+            self._g0_rows = g0.reshape(n, 6 * m)
+            self._hess_rows = hess.reshape(n, 6 * m, 6)
             self._hess_t = np.ascontiguousarray(hess.reshape(n, m, 36).transpose(0, 2, 1))
             self._g0_t = np.ascontiguousarray(g0.transpose(0, 2, 1))
         kc = m + 1 if has_cavities else 1
@@ -209,7 +210,8 @@ class TickModel:
             a -= (self._hess_t @ actuation).reshape(n, 6, 6)
             wrench = np.matmul(a, delta[:, :, None])[:, :, 0]
             wrench -= self._g0_t @ actuation
-            cav = self._g0 + np.matmul(self._hess, delta[:, None, :, None])[..., 0]
+            cav = np.matmul(self._hess_rows, delta[:, :, None])[:, :, 0]
+            cav += self._g0_rows
             local[..., 1:] = cav.reshape(n, -1, 2, 3).transpose(0, 3, 2, 1)
         else:
             wrench = np.matmul(a, delta[:, :, None])[:, :, 0]
