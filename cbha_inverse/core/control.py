@@ -230,19 +230,19 @@ class InverseSolver:
         self._pending = None
         self._age = 0
 
-    def _current(self):
-        """Return the frames with the pending linear step applied (without storing them)."""
+    def _current(self, in_place=False):
+        """Return the frames with the pending linear step applied (stored if ``in_place``)."""
         if self._pending is None:
             return self._positions, self._rotations
         free_step, solved_a, previous = self._pending
         increments = (free_step + solved_a @ (self.actuation - previous)).reshape(-1, 6)
         return _retract(self._positions, self._rotations, increments,
-                        self.options.max_rotation_step)
+                        self.options.max_rotation_step, in_place)
 
     def _materialise(self):
         """Apply the pending linear step to the stored frames."""
         if self._pending is not None:
-            self._positions, self._rotations = self._current()
+            self._current(in_place=True)
             self._pending = None
 
     @property
@@ -365,7 +365,8 @@ class InverseSolver:
         if status == 'solved' and saturated.any():
             status = 'saturated'
         gap = lin.w_ea @ actuation + delta_free
-        if np.abs(solution.x - problem.previous).max() > 0.02:
+        if self._age < self.options.relinearize_every and np.abs(
+                solution.x - problem.previous).max() > 0.02:
             # the actuation moves fast: the next tick relinearises
             self._age = self.options.relinearize_every
         t_qp = time.perf_counter()

@@ -28,9 +28,18 @@ from cbha_inverse.core.actuation import CableGroup
 from cbha_inverse.core.cavity_linear import LinearCavityGroup
 from cbha_inverse.core.se3 import so3_log
 from cbha_inverse.core.tick_cables import CableTerms
-from cbha_inverse.core.tick_math import HALF_HAT_BASIS, hats_into, jl_coefficients, LOG_BASIS
+from cbha_inverse.core.tick_math import (HALF_HAT_BASIS, HAT_BASIS, hats_into, jl_coefficients,
+                                         LOG_BASIS)
 import numpy as np
 from scipy.linalg import lapack
+
+
+# (F0, M0, F1, M1, F2, M2) -> flattened [-2 hat(F); -hat(F); 2 hat(F); hat(M)] (12 x 3)
+_GEOMETRIC_BASIS = np.zeros((6, 36))
+_GEOMETRIC_BASIS[0::2, 0:9] = -2.0 * HAT_BASIS
+_GEOMETRIC_BASIS[0::2, 9:18] = -HAT_BASIS
+_GEOMETRIC_BASIS[0::2, 18:27] = 2.0 * HAT_BASIS
+_GEOMETRIC_BASIS[1::2, 27:36] = HAT_BASIS
 
 
 class TickModel:
@@ -90,7 +99,7 @@ class TickModel:
         self._delta = np.empty((n, 6))
         self._phi_hat = np.zeros((n, 3, 3))
         self._diff_hat = np.zeros((n, 3, 3))
-        self._fm_hat = np.zeros((n, 2, 3, 3))
+        self._panel = np.empty((n, 12, 3))
         self._b = np.zeros((n, 6, 6))
         self._b[:, :3, :3] = np.eye(3)
         self._bt = self._b.copy()
@@ -251,12 +260,12 @@ class TickModel:
         np.matmul(rot_at, diff_hat, out=dmat[:, :3, 3:6])
         blocks = self._link_values
         np.matmul(dmat.transpose(0, 2, 1), np.matmul(mat, dmat), out=blocks)
-        fm_hat = hats_into(self._fm_hat, world[:, :, :, 0].transpose(0, 2, 1))
-        f_hat2 = 2.0 * fm_hat[:, 0]
-        blocks[:, 6:9, 3:6] += f_hat2
-        blocks[:, 3:6, 0:3] += f_hat2
-        blocks[:, 9:12, 3:6] += fm_hat[:, 1]
-        blocks[:, 3:6, 3:6] -= np.matmul(fm_hat[:, 0], diff_hat)
+        # geometric terms (b-side force F, moment M): only their symmetric part matters, so they
+        # all fit in the a-rotation columns: [-2F^; -F^ d^; 2F^; M^] (d = x_b - x_a)
+        panel = self._panel
+        np.matmul(world[:, :, :, 0].reshape(n, 6), _GEOMETRIC_BASIS, out=panel.reshape(n, 36))
+        np.matmul(panel[:, 3:6], diff_hat, out=panel[:, 3:6])
+        blocks[:, :, 3:6] += panel
         for cab, (pair_slice, moment_slice) in zip(self._cables, self._cable_slices):
             cab.evaluate(positions, rotations, actuation, rhs, self._values[pair_slice],
                          self._values[moment_slice], self.has_cavities)

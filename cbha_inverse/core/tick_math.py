@@ -24,10 +24,10 @@ _JL_SERIES = np.array([1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0,
 _JL_DSERIES = 2.0 * np.arange(1, 7) * _JL_SERIES[1:]
 _JL_POWERS = np.arange(7)
 _SERIES_LIMIT = 0.5
-# hat(v).reshape(9) = v @ _HAT_BASIS
-_HAT_BASIS = np.zeros((3, 9))
-_HAT_BASIS[_HAT_SRC, _HAT_DST] = _HAT_SIGN
-HALF_HAT_BASIS = -0.5 * _HAT_BASIS
+# hat(v).reshape(9) = v @ HAT_BASIS
+HAT_BASIS = np.zeros((3, 9))
+HAT_BASIS[_HAT_SRC, _HAT_DST] = _HAT_SIGN
+HALF_HAT_BASIS = -0.5 * HAT_BASIS
 # sin(t)/t, (1 - cos t)/t^2 and cos t as series in t^2
 _EXP_POWERS = np.arange(8)
 _EXP_SERIES = np.array([[(-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 2)),
@@ -52,7 +52,7 @@ def hats_into(out, v):
         ``out``.
 
     """
-    np.matmul(v.reshape(-1, 3), _HAT_BASIS, out=out.reshape(-1, 9))
+    np.matmul(v.reshape(-1, 3), HAT_BASIS, out=out.reshape(-1, 9))
     return out
 
 
@@ -120,12 +120,12 @@ def exp_rotations(rotvec, t2=None):
         cos = (1.0 - b * t2)[:, None]
     out = (rotvec[:, :, None] * rotvec[:, None, :]).reshape(-1, 9)
     out *= b[:, None]
-    out += (a[:, None] * rotvec) @ _HAT_BASIS
+    out += (a[:, None] * rotvec) @ HAT_BASIS
     out[:, ::4] += cos
     return out.reshape(-1, 3, 3)
 
 
-def retract_frames(positions, rotations, increments, max_rotation=None):
+def retract_frames(positions, rotations, increments, max_rotation=None, in_place=False):
     """
     Apply world-axis increments to frames 1..n (as :func:`cbha_inverse.core.chain.retract`).
 
@@ -139,10 +139,12 @@ def retract_frames(positions, rotations, increments, max_rotation=None):
         ``(dx, dθ)`` per mobile frame.
     max_rotation : float, optional  [rad]
         Scale the whole step down so that no frame rotates more than this.
+    in_place : bool
+        Update ``positions`` and ``rotations`` instead of new arrays.
 
     Returns
     -------
-    positions, rotations : new arrays
+    positions, rotations : ndarray
         ``x += dx``, ``R ← exp(dθ) R``.
 
     """
@@ -155,9 +157,12 @@ def retract_frames(positions, rotations, increments, max_rotation=None):
             increments = increments * factor
             rot = increments[:, 3:]
             t2 = t2 * (factor * factor)
-    new_positions = positions.copy()
+    if in_place:
+        new_positions, new_rotations = positions, rotations
+    else:
+        new_positions = positions.copy()
+        new_rotations = np.empty_like(rotations)
+        new_rotations[0] = rotations[0]
     new_positions[1:] += increments[:, :3]
-    new_rotations = np.empty_like(rotations)
-    new_rotations[0] = rotations[0]
     np.matmul(exp_rotations(rot, t2), rotations[1:], out=new_rotations[1:])
     return new_positions, new_rotations
