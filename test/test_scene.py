@@ -48,14 +48,14 @@ def test_forward_inverse_consistency(scene, relinearize_every):
     target = scene.forward(actuation, strict=True).effector_positions
     solver = scene.make_inverse_solver(relinearize_every=relinearize_every)
     errors = []
-    for tick in range(30):
+    for _ in range(30):
         out = solver.step(target)
         assert np.all(out.actuation >= solver.lower_bounds)
         assert np.all(out.actuation <= solver.upper_bounds)
         assert out.status in ('solved', 'saturated')
         errors.append(np.abs(out.effector_positions - target).max())
-        if errors[-1] < 1e-5 and tick > 3:
-            break
+    # All 30 ticks: stopping at the first small *predicted* error can leave the solver's state
+    # off equilibrium (residual ~1 N), so the forward check below would pass or fail by luck.
     reached = scene.forward(out.actuation, initial_state=solver.state, strict=True)
     assert np.linalg.norm(reached.effector_positions - target, axis=1).max() < 1e-4, errors
     assert set(out.timings) >= {'assembly', 'factor', 'projection', 'qp', 'total'}
