@@ -9,8 +9,8 @@ the links (no Python loop per link).
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.links import (link_terms, local_tangent, rotate_tangent,
-                                     wrench_pair_from_terms)
+from cbha_inverse.core.links import (link_terms, local_material_tangent, local_tangent,
+                                     rotate_tangent, wrench_pair_from_terms)
 from cbha_inverse.core.se3 import hat
 import numpy as np
 
@@ -127,6 +127,32 @@ def _gather_wrenches(w_a, w_b):
     return internal
 
 
+def _gather_blocks(rotation_a, local):
+    """
+    Rotate link tangents to world axes and add them into the BTD blocks of frames 1..n.
+
+    Parameters
+    ----------
+    rotation_a : (n, 3, 3) ndarray
+        World rotations of the a-frames (frames 0..n-1).
+    local : (n, 12, 12) ndarray
+        Link tangents in frame-a axes.
+
+    Returns
+    -------
+    diagonal : (n, 6, 6) ndarray
+        Symmetrised diagonal blocks (the fixed base block dropped).
+    upper : (n - 1, 6, 6) ndarray
+
+    """
+    world = rotate_tangent(rotation_a, local)
+    diagonal = world[:, 6:, 6:].copy()
+    diagonal[:-1] += world[1:, :6, :6]
+    diagonal += np.swapaxes(diagonal, 1, 2)
+    diagonal *= 0.5
+    return diagonal, world[1:, :6, 6:].copy()
+
+
 def internal_wrenches(model, state, terms=None):
     """
     Total link wrench on frames 1..n (the elastic force f(q) of paper eq. 9).
@@ -179,9 +205,34 @@ def assemble_tangent(model, state, terms=None):
     if terms is None:
         terms = chain_terms(model, state)
     w_a, w_b = wrench_pair_from_terms(terms, rot_a)
-    world = rotate_tangent(rot_a, local_tangent(terms, model.stiffnesses))
-    diagonal = world[:, 6:, 6:].copy()
-    diagonal[:-1] += world[1:, :6, :6]
-    diagonal += np.swapaxes(diagonal, 1, 2)
-    diagonal *= 0.5
-    return TangentSystem(_gather_wrenches(w_a, w_b), diagonal, world[1:, :6, 6:].copy())
+    diagonal, upper = _gather_blocks(rot_a, local_tangent(terms, model.stiffnesses))
+    return TangentSystem(_gather_wrenches(w_a, w_b), diagonal, upper)
+
+
+def material_tangent(model, state, terms=None):
+    """
+    Material part of the chain tangent (paper eq. 8): symmetric positive definite BTD blocks.
+
+    Per link ``B^T K B`` (:func:`cbha_inverse.core.links.local_material_tangent`), rotated to
+    world axes and assembled over frames 1..n; no geometric (stress) part, so it stays positive
+    definite whatever the loads.
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+    state : ChainState
+        Frame poses.
+    terms : LinkTerms, optional
+        ``chain_terms(model, state)`` if already computed.
+
+    Returns
+    -------
+    diagonal : (n, 6, 6) ndarray
+    upper : (n - 1, 6, 6) ndarray
+
+    """
+    if terms is None:
+        terms = chain_terms(model, state)
+    return _gather_blocks(state.rotations[:-1],
+                          local_material_tangent(terms, model.stiffnesses))

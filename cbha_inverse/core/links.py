@@ -275,6 +275,33 @@ def link_wrenches(stiffness, rest_offset, rest_rotation, position_a, rotation_a,
     return wrench_pair_from_terms(terms, args[4])
 
 
+def local_material_tangent(terms, stiffness):
+    """
+    Material part ``B^T K B`` of the 12x12 link tangent in frame-a axes (paper eq. 8).
+
+    ``B`` is the local deformation Jacobian of :func:`local_tangent`; without the geometric
+    (stress) part the result is symmetric positive semi-definite whatever the loads.
+
+    Parameters
+    ----------
+    terms : LinkTerms
+        Local link quantities from :func:`link_terms`.
+    stiffness : (..., 6, 6) ndarray
+        Link stiffness K.
+
+    Returns
+    -------
+    (..., 12, 12) ndarray
+        Rows and columns ordered (frame a, frame b).
+
+    """
+    bmat = np.broadcast_to(_B_TEMPLATE, terms.phi.shape[:-1] + (6, 12)).copy()
+    bmat[..., :3, 3:6] = hat(terms.offset)
+    bmat[..., 3:, 9:] = terms.jinv
+    bmat[..., 3:, 3:6] = -terms.jinv
+    return np.swapaxes(bmat, -1, -2) @ (stiffness @ bmat)
+
+
 def local_tangent(terms, stiffness):
     """
     Exact 12x12 link tangent in frame-a axes, rows and columns ordered (frame a, frame b).
@@ -300,14 +327,9 @@ def local_tangent(terms, stiffness):
     (..., 12, 12) ndarray
 
     """
-    batch = terms.phi.shape[:-1]
     jinv = terms.jinv
     p_hat = hat(terms.offset)
-    bmat = np.broadcast_to(_B_TEMPLATE, batch + (6, 12)).copy()
-    bmat[..., :3, 3:6] = p_hat
-    bmat[..., 3:, 9:] = jinv
-    bmat[..., 3:, 3:6] = -jinv
-    out = np.swapaxes(bmat, -1, -2) @ (stiffness @ bmat)
+    out = local_material_tangent(terms, stiffness)
     f_hat = hat(terms.stress[..., :3])
     m_hat = hat(terms.wrench_b[..., 3:])
     dj = so3_left_jacobian_inverse_transpose_derivative(

@@ -55,10 +55,9 @@ from dataclasses import dataclass
 
 from cbha_inverse.core import btd
 from cbha_inverse.core.assembly import (assemble_tangent, blocks_to_dense, chain_terms,
-                                        internal_wrenches)
+                                        internal_wrenches, material_tangent)
 from cbha_inverse.core.chain import ChainState, rest_state
-from cbha_inverse.core.links import rotate_tangent
-from cbha_inverse.core.se3 import hat, so3_exp
+from cbha_inverse.core.se3 import so3_exp
 import numpy as np
 from scipy.linalg import solve_banded
 
@@ -151,47 +150,6 @@ def _dense_banded_solve(matrix, residual):
     ab = np.zeros((lower + upper + 1, matrix.shape[0]))
     ab[upper + rows - cols, cols] = matrix[rows, cols]
     return solve_banded((lower, upper), ab, residual.ravel(), check_finite=False)
-
-
-def material_tangent(model, state, terms=None):
-    """
-    Material part of the chain tangent (paper eq. 8): symmetric positive definite BTD blocks.
-
-    Per link ``Bᵀ K B`` with ``B = [[-I, hat(p), I, 0], [0, -Jl⁻¹, 0, Jl⁻¹]]`` (frame-a axes,
-    ``p`` the current offset, see :func:`cbha_inverse.core.links.local_tangent`), rotated to
-    world axes and assembled over frames 1..n; no geometric (stress) part, so it stays positive
-    definite whatever the loads.
-
-    Parameters
-    ----------
-    model : ChainModel
-        The chain.
-    state : ChainState
-        Frame poses.
-    terms : LinkTerms, optional
-        ``chain_terms(model, state)`` if already computed.
-
-    Returns
-    -------
-    diagonal : (n, 6, 6) ndarray
-    upper : (n - 1, 6, 6) ndarray
-
-    """
-    if terms is None:
-        terms = chain_terms(model, state)
-    n = model.n_links
-    bmat = np.zeros((n, 6, 12))
-    bmat[:, :3, :3] = -np.eye(3)
-    bmat[:, :3, 6:9] = np.eye(3)
-    bmat[:, :3, 3:6] = hat(terms.offset)
-    bmat[:, 3:, 3:6] = -terms.jinv
-    bmat[:, 3:, 9:] = terms.jinv
-    local = np.swapaxes(bmat, 1, 2) @ model.stiffnesses @ bmat
-    world = rotate_tangent(state.rotations[:-1], local)
-    diagonal = world[:, 6:, 6:].copy()
-    diagonal[:-1] += world[1:, :6, :6]
-    diagonal = 0.5 * (diagonal + np.swapaxes(diagonal, 1, 2))
-    return diagonal, world[1:, :6, 6:].copy()
 
 
 class _Problem:
