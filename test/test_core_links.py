@@ -129,3 +129,13 @@ def test_batched_matches_single():
     for k, item in enumerate(items):
         np.testing.assert_allclose(t_batch[k], links.link_tangent(*item), rtol=1e-13,
                                    atol=1e-13 * np.abs(t_batch[k]).max())
+
+
+def test_deformation_is_the_wrenches_delta():
+    """``link_deformation`` gives the delta whose ``K delta`` the link terms carry."""
+    stiff, d0, q0, x_a, r_a, x_b, r_b = _random_link(np.random.default_rng(11))
+    delta = links.link_deformation(d0, q0, x_a, r_a, x_b, r_b)
+    np.testing.assert_allclose(delta[:3], r_a.T @ (x_b - x_a) - d0, rtol=1e-13, atol=1e-16)
+    np.testing.assert_allclose(se3.so3_exp(delta[3:]), r_a.T @ r_b @ q0.T, atol=1e-13)
+    terms = links.link_terms(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    np.testing.assert_allclose(terms.stress, stiff @ delta, rtol=1e-12)

@@ -31,7 +31,7 @@ well-known non-symmetry of spatial rotation increments away from equilibrium.
 
 from typing import NamedTuple
 
-from cbha_inverse.core.se3 import (_EYE3, _jl_inv_coefficient, hat,
+from cbha_inverse.core.se3 import (_jl_inv_coefficient, _jl_inv_from_hat, hat,
                                    so3_left_jacobian_inverse_transpose_derivative, so3_log,
                                    so3_log_angle)
 import numpy as np
@@ -136,36 +136,38 @@ class LinkTerms(NamedTuple):
     wrench_b: np.ndarray        # (..., 6) wrench on frame b, frame-a axes, at x_b
 
 
+def _float_arrays(*values):
+    """Return the values as float ndarrays (public entry points take array_like)."""
+    return [np.asarray(v, dtype=float) for v in values]
+
+
+def _relative_pose(rest_rotation, position_a, rotation_a, position_b, rotation_b):
+    """Offset ``R_a^T (x_b - x_a)`` and rotation ``R_a^T R_b Q0^T`` (``Q0`` None: identity)."""
+    rot_at = np.swapaxes(rotation_a, -1, -2)
+    offset = (rot_at @ (position_b - position_a)[..., None])[..., 0]
+    rel = rot_at @ rotation_b
+    if rest_rotation is not None:
+        rel = rel @ np.swapaxes(rest_rotation, -1, -2)
+    return offset, rel
+
+
 def link_deformation(rest_offset, rest_rotation, position_a, rotation_a, position_b, rotation_b):
     """
     Local deformation ``delta`` of links (DESIGN §3), frame-a axes.
 
     Parameters
     ----------
-    rest_offset : (..., 3) array_like  [m]
-        Origin of frame b in frame-a axes at rest (d0).
-    rest_rotation : (..., 3, 3) array_like
-        Rotation of frame b in frame a at rest (Q0).
-    position_a : (..., 3) array_like  [m]
-        World position of frame a.
-    rotation_a : (..., 3, 3) array_like
-        World rotation of frame a.
-    position_b : (..., 3) array_like  [m]
-        World position of frame b.
-    rotation_b : (..., 3, 3) array_like
-        World rotation of frame b.
+    rest_offset, rest_rotation, position_a, rotation_a, position_b, rotation_b : array_like
+        Rest transform and frame poses, as in :func:`link_wrenches`.
 
     Returns
     -------
     (..., 6) ndarray  [m, rad]
+        ``[R_a^T (x_b - x_a) - d0; log(R_a^T R_b Q0^T)]``.
 
     """
-    rot_a = np.asarray(rotation_a, dtype=float)
-    rot_at = np.swapaxes(rot_a, -1, -2)
-    diff = np.asarray(position_b, dtype=float) - np.asarray(position_a, dtype=float)
-    offset = (rot_at @ diff[..., None])[..., 0]
-    rel = rot_at @ np.asarray(rotation_b, dtype=float) @ np.swapaxes(
-        np.asarray(rest_rotation, dtype=float), -1, -2)
+    offset, rel = _relative_pose(*_float_arrays(rest_rotation, position_a, rotation_a,
+                                                position_b, rotation_b))
     return np.concatenate([offset - rest_offset, so3_log(rel)], axis=-1)
 
 
@@ -196,18 +198,13 @@ def link_terms(stiffness, rest_offset, rest_rotation, position_a, rotation_a, po
     LinkTerms
 
     """
-    rot_at = np.swapaxes(rotation_a, -1, -2)
-    offset = (rot_at @ (position_b - position_a)[..., None])[..., 0]
-    rel = rot_at @ rotation_b
-    if rest_rotation is not None:
-        rel = rel @ np.swapaxes(rest_rotation, -1, -2)
+    offset, rel = _relative_pose(rest_rotation, position_a, rotation_a, position_b, rotation_b)
     phi, theta = so3_log_angle(rel)
     delta = np.concatenate([offset - rest_offset, phi], axis=-1)
     stress = (stiffness @ delta[..., None])[..., 0]
     coefficients = _jl_inv_coefficient(theta)
     phi_hat = hat(phi)
-    jinv = coefficients[0][..., None, None] * (phi_hat @ phi_hat) - 0.5 * phi_hat
-    jinv += _EYE3
+    jinv = _jl_inv_from_hat(phi_hat, coefficients[0])
     wrench_b = np.empty_like(stress)
     wrench_b[..., :3] = -stress[..., :3]
     wrench_b[..., 3:] = -(stress[..., None, 3:] @ jinv)[..., 0, :]
@@ -269,8 +266,8 @@ def link_wrenches(stiffness, rest_offset, rest_rotation, position_a, rotation_a,
         On frame a at x_a and on frame b at x_b, world axes.
 
     """
-    args = [np.asarray(v, dtype=float) for v in (stiffness, rest_offset, rest_rotation,
-                                                 position_a, rotation_a, position_b, rotation_b)]
+    args = _float_arrays(stiffness, rest_offset, rest_rotation, position_a, rotation_a,
+                         position_b, rotation_b)
     terms = link_terms(*args)
     return wrench_pair_from_terms(terms, args[4])
 
@@ -396,20 +393,8 @@ def link_tangent(stiffness, rest_offset, rest_rotation, position_a, rotation_a, 
 
     Parameters
     ----------
-    stiffness : (..., 6, 6) array_like  [N/m, N, N*m/rad]
-        Link stiffness K = C^-1 (frame-a axes).
-    rest_offset : (..., 3) array_like  [m]
-        Origin of frame b in frame-a axes at rest (d0).
-    rest_rotation : (..., 3, 3) array_like
-        Rotation of frame b in frame a at rest (Q0).
-    position_a : (..., 3) array_like  [m]
-        World position of frame a.
-    rotation_a : (..., 3, 3) array_like
-        World rotation of frame a.
-    position_b : (..., 3) array_like  [m]
-        World position of frame b.
-    rotation_b : (..., 3, 3) array_like
-        World rotation of frame b.
+    stiffness, rest_offset, rest_rotation, position_a, rotation_a, position_b, rotation_b
+        Link data and frame poses, as in :func:`link_wrenches`.
 
     Returns
     -------
@@ -417,7 +402,7 @@ def link_tangent(stiffness, rest_offset, rest_rotation, position_a, rotation_a, 
         Rows and columns ordered (frame a, frame b).
 
     """
-    args = [np.asarray(v, dtype=float) for v in (stiffness, rest_offset, rest_rotation,
-                                                 position_a, rotation_a, position_b, rotation_b)]
+    args = _float_arrays(stiffness, rest_offset, rest_rotation, position_a, rotation_a,
+                         position_b, rotation_b)
     terms = link_terms(*args)
     return rotate_tangent(args[4], local_tangent(terms, args[0]))

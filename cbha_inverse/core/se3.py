@@ -279,8 +279,12 @@ def so3_left_jacobian_inverse(rotvec):
     """
     rotvec = np.asarray(rotvec, dtype=float)
     c, _ = _jl_inv_coefficient(np.sqrt(np.sum(rotvec * rotvec, axis=-1)))
-    k = hat(rotvec)
-    out = c[..., None, None] * (k @ k) - 0.5 * k
+    return _jl_inv_from_hat(hat(rotvec), c)
+
+
+def _jl_inv_from_hat(phi_hat, c):
+    """``Jl^-1 = I - hat(phi)/2 + c hat(phi)^2`` from ``hat(phi)`` and ``c(|phi|)``."""
+    out = c[..., None, None] * (phi_hat @ phi_hat) - 0.5 * phi_hat
     out += _EYE3
     return out
 
