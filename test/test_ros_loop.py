@@ -7,6 +7,7 @@ The plant is the scene 10 % softer (``stiffness_scale`` 0.9), with valve lag (10
 latency (3 ms) and 0.2 mm measurement noise.
 """
 
+import contextlib
 import time
 
 from cbha_inverse.report.tracking import tracking_errors
@@ -47,6 +48,30 @@ def _sim(context, namespace='/cbha', **overrides):
         Parameter(k, value=v) for k, v in params.items()])
 
 
+@contextlib.contextmanager
+def _spinning(context, *nodes):
+    """Yield one executor over ``nodes``; shut it down and destroy the nodes afterwards."""
+    executor = SingleThreadedExecutor(context=context)
+    for node in nodes:
+        executor.add_node(node)
+    try:
+        yield executor
+    finally:
+        executor.shutdown()
+        for node in nodes:
+            node.destroy_node()
+
+
+def _command_client(context):
+    """Return a client node, its target publisher and the (time, command) list it records."""
+    client = Node('client', context=context, namespace='/cbha')
+    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    commands = []
+    client.create_subscription(Float64MultiArray, 'pressure_command', lambda m: commands.append(
+        (time.monotonic(), np.array(m.data))), COMMAND_QOS)
+    return client, target_pub, commands
+
+
 def _tracking_rms(context, mode, duration, hold=1.5, settle=1.0):
     """
     Run trajectory + solver + sim on the CBHA scene (paper circle, 50 Hz).
@@ -71,17 +96,9 @@ def _tracking_rms(context, mode, duration, hold=1.5, settle=1.0):
         (stamp(m), m.point.x, m.point.y, m.point.z)), TARGET_QOS)
     recorder.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(
         (stamp(m), m.point.x, m.point.y, m.point.z)), MEASURED_QOS)
-    nodes = (trajectory, solver, sim, recorder)
-    executor = SingleThreadedExecutor(context=context)
-    for node in nodes:
-        executor.add_node(node)
-    try:
+    with _spinning(context, trajectory, solver, sim, recorder) as executor:
         assert spin_until(executor, lambda: len(targets) > 0, 10.0)
         spin_for(executor, duration)
-    finally:
-        executor.shutdown()
-        for node in nodes:
-            node.destroy_node()
     errors = tracking_errors([t[0] for t in targets], [t[1:] for t in targets],
                              [t[0] for t in tips], [t[1:] for t in tips],
                              targets[0][0] + hold + settle, targets[-1][0])
@@ -172,10 +189,7 @@ def test_fuzzed_inputs_never_produce_bad_commands(rclpy_context):
                                lambda m: commands.append(np.array(m.data)), COMMAND_QOS)
     fuzzer.create_subscription(PointStamped, '/fuzz/tip/measured', lambda m: tips.append(
         (m.point.x, m.point.y, m.point.z)), MEASURED_QOS)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    for node in (solver, sim, fuzzer):
-        executor.add_node(node)
-    try:
+    with _spinning(rclpy_context, solver, sim, fuzzer) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
                           and command_pub.get_subscription_count() > 0
                           and measured_pub.get_subscription_count() > 0, 10.0)
@@ -195,10 +209,6 @@ def test_fuzzed_inputs_never_produce_bad_commands(rclpy_context):
         published_during_fuzz = len(commands)
         target_pub.publish(_point(*CENTER))
         assert spin_until(executor, lambda: len(commands) > published_during_fuzz + 2, 5.0)
-    finally:
-        executor.shutdown()
-        for node in (solver, sim, fuzzer):
-            node.destroy_node()
     rejected_targets = _count(solver, 'target.')
     rejected_measured = _count(solver, 'tip/measured.')
     print(f'rejected: solver {solver.rejected}, sim {sim.rejected}; {len(commands)} commands')
@@ -218,15 +228,8 @@ def test_stale_target_holds_or_vents_within_timeout(rclpy_context, action):
     vent = 1.0
     solver = _solver(rclpy_context, max_pressure=MAX_TENSION, target_timeout=timeout,
                      stale_action=action, vent_pressure=vent, rate_hz=100.0)
-    client = Node('client', context=rclpy_context, namespace='/cbha')
-    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
-    commands = []
-    client.create_subscription(Float64MultiArray, 'pressure_command', lambda m: commands.append(
-        (time.monotonic(), np.array(m.data))), COMMAND_QOS)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    executor.add_node(solver)
-    executor.add_node(client)
-    try:
+    client, target_pub, commands = _command_client(rclpy_context)
+    with _spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
         end = time.monotonic() + 0.5
         i = 0
@@ -237,10 +240,6 @@ def test_stale_target_holds_or_vents_within_timeout(rclpy_context, action):
         last_target = time.monotonic()
         solved = solver.command.copy()
         spin_for(executor, timeout + 0.3)
-    finally:
-        executor.shutdown()
-        solver.destroy_node()
-        client.destroy_node()
     assert solver.decision == action
     after = [(t, c) for t, c in commands if t > last_target + timeout + 0.05]
     assert after, 'no command published after the timeout'
@@ -262,16 +261,9 @@ def test_stale_feedback_in_closed_loop_vents_within_timeout(rclpy_context):
     solver = _solver(rclpy_context, max_pressure=MAX_TENSION, mode='closed',
                      feedback_timeout=timeout, stale_action='vent', vent_pressure=vent,
                      rate_hz=100.0)
-    client = Node('client', context=rclpy_context, namespace='/cbha')
-    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    client, target_pub, commands = _command_client(rclpy_context)
     measured_pub = client.create_publisher(PointStamped, 'tip/measured', MEASURED_QOS)
-    commands = []
-    client.create_subscription(Float64MultiArray, 'pressure_command', lambda m: commands.append(
-        (time.monotonic(), np.array(m.data))), COMMAND_QOS)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    executor.add_node(solver)
-    executor.add_node(client)
-    try:
+    with _spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
                           and measured_pub.get_subscription_count() > 0, 10.0)
         last_measured = None
@@ -282,10 +274,6 @@ def test_stale_feedback_in_closed_loop_vents_within_timeout(rclpy_context):
                 measured_pub.publish(_point(*CENTER))
                 last_measured = time.monotonic()
             spin_for(executor, 0.01)
-    finally:
-        executor.shutdown()
-        solver.destroy_node()
-        client.destroy_node()
     assert solver.decision == 'vent'
     running = [c for t, c in commands if t < last_measured]
     assert running and not np.allclose(running[-1], vent)
@@ -299,15 +287,11 @@ def test_solver_publishes_backbone_markers_and_diagnostics(rclpy_context):
     from visualization_msgs.msg import Marker, MarkerArray
 
     solver = _solver(rclpy_context, max_pressure=MAX_TENSION, diagnostics_period=0.2)
-    client = Node('client', context=rclpy_context, namespace='/cbha')
-    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    client, target_pub, _ = _command_client(rclpy_context)
     markers, diagnostics = [], []
     client.create_subscription(MarkerArray, 'backbone', markers.append, 1)
     client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 10)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    executor.add_node(solver)
-    executor.add_node(client)
-    try:
+    with _spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
         target_pub.publish(_point(*CENTER))
         target_pub.publish(_point(float('nan'), 0.0, 0.0))
@@ -315,10 +299,6 @@ def test_solver_publishes_backbone_markers_and_diagnostics(rclpy_context):
             s.name == 'inverse_solver: inputs' and any(
                 v.key == 'rejected.target.non_finite' for v in s.values)
             for d in diagnostics for s in d.status), 10.0)
-    finally:
-        executor.shutdown()
-        solver.destroy_node()
-        client.destroy_node()
     line = markers[-1].markers[0]
     assert line.type == Marker.LINE_STRIP and line.header.frame_id == 'cbha_base'
     assert len(line.points) == solver.scene.model.n_frames and line.color.a == 1.0
