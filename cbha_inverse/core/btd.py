@@ -271,22 +271,33 @@ def _factor_dense(diagonal, upper):
         raise not_pd_error(info - 1, b, factor[info - 1, info - 1], 'dense Cholesky')
     if info < 0 or not np.isfinite(factor.diagonal()).all():
         raise ValueError('dense Cholesky failed: non-finite entries or illegal argument')
+    return BTDFactorization('dense', (diagonal, upper), _dense_solver(factor),
+                            dense_factor=factor)
 
+
+def _dense_solver(factor):
+    """Return ``rhs -> A^-1 rhs`` for a dense lower Cholesky factor (``dpotrs``, level 3)."""
     def solver(rhs):
         x, _ = lapack.dpotrs(factor, rhs, lower=1)
         return x
 
-    return BTDFactorization('dense', (diagonal, upper), solver, dense_factor=factor)
+    return solver
 
 
-def _factor_banded(diagonal, upper):
-    """LAPACK banded Cholesky backend (dpbtrf / dpbtrs)."""
-    n, b = diagonal.shape[:2]
+def _band_cholesky(diagonal, upper):
+    """Banded Cholesky factor (``dpbtrf``) of checked blocks; raises on failure."""
+    b = diagonal.shape[1]
     factor, info = lapack.dpbtrf(_band(diagonal, upper), lower=1, overwrite_ab=1)
     if info > 0:
         raise not_pd_error(info - 1, b, factor[0, info - 1], 'banded Cholesky')
     if info < 0 or not np.isfinite(factor[0]).all():
         raise ValueError('banded Cholesky failed: non-finite entries or illegal argument')
+    return factor
+
+
+def _factor_banded(diagonal, upper):
+    """LAPACK banded Cholesky backend (dpbtrf / dpbtrs)."""
+    factor = _band_cholesky(diagonal, upper)
 
     def solver(rhs):
         x, _ = lapack.dpbtrs(factor, rhs, lower=1)
@@ -305,22 +316,14 @@ def _factor_hybrid(diagonal, upper):
     instead of ``dpbtrs``'s column-by-column ``dtbsv``.
     """
     n, b = diagonal.shape[:2]
-    band, info = lapack.dpbtrf(_band(diagonal, upper), lower=1, overwrite_ab=1)
-    if info > 0:
-        raise not_pd_error(info - 1, b, band[0, info - 1], 'banded Cholesky')
-    if info < 0 or not np.isfinite(band[0]).all():
-        raise ValueError('banded Cholesky failed: non-finite entries or illegal argument')
+    band = _band_cholesky(diagonal, upper)
     size = n * b
     flat = np.zeros(size * (size + 1) + 2 * b)
     width = min(2 * b, size + 1)
     flat[:size * (size + 1)].reshape(size, size + 1)[:, :width] = band.T[:, :width]
     factor = flat[:size * size].reshape(size, size).T
-
-    def solver(rhs):
-        x, _ = lapack.dpotrs(factor, rhs, lower=1)
-        return x
-
-    return BTDFactorization('hybrid', (diagonal, upper), solver, dense_factor=factor)
+    return BTDFactorization('hybrid', (diagonal, upper), _dense_solver(factor),
+                            dense_factor=factor)
 
 
 def blas_single_threaded():
