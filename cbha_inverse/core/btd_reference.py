@@ -66,6 +66,17 @@ def _first_bad_block(blocks):
     return 0, float('nan')
 
 
+def _check_pivots(blocks, index):
+    """Raise if a pivot block (original block indices ``index``) is not positive definite."""
+    try:
+        np.linalg.cholesky(blocks)
+    except np.linalg.LinAlgError:
+        k, eig = _first_bad_block(blocks)
+        raise NotPositiveDefiniteError(
+            'block-tridiagonal matrix is not positive definite: cyclic-reduction pivot '
+            f'block of original block {index[k]} has eigenvalue {eig:.6g}') from None
+
+
 def factor_cyclic(diagonal, upper):
     """
     Block cyclic reduction backend (block LDL^T of the odd-even permuted matrix).
@@ -85,13 +96,7 @@ def factor_cyclic(diagonal, upper):
     while d.shape[0] > 1:
         m = d.shape[0]
         d_odd = d[1::2]
-        try:
-            np.linalg.cholesky(d_odd)
-        except np.linalg.LinAlgError:
-            k, eig = _first_bad_block(d_odd)
-            raise NotPositiveDefiniteError(
-                'block-tridiagonal matrix is not positive definite: cyclic-reduction pivot '
-                f'block of original block {index[1::2][k]} has eigenvalue {eig:.6g}') from None
+        _check_pivots(d_odd, index[1::2])
         d_inv = np.linalg.inv(d_odd)
         u_left = u[0::2]
         u_right = u[1::2]
@@ -106,13 +111,7 @@ def factor_cyclic(diagonal, upper):
                        np.swapaxes(x_right, 1, 2).copy()))
         d = d_even
         index = index[0::2]
-    try:
-        np.linalg.cholesky(d)
-    except np.linalg.LinAlgError:
-        raise NotPositiveDefiniteError(
-            'block-tridiagonal matrix is not positive definite: last cyclic-reduction pivot '
-            f'block (original block {index[0]}) has eigenvalue '
-            f'{np.linalg.eigvalsh(d[0])[0]:.6g}') from None
+    _check_pivots(d, index)
     last_inv = np.linalg.inv(d)
 
     def solver(rhs):
