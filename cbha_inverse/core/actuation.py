@@ -24,6 +24,7 @@ vertices, triangles); :class:`ActuatorSet` stacks the groups in the scene's actu
 
 from dataclasses import dataclass
 
+from cbha_inverse.core.se3 import hat
 import numpy as np
 import scipy.sparse as sp
 
@@ -286,12 +287,7 @@ class CableGroup:
         # B = [I; r^] (6 x 3) for the start and end points of every span
         b = np.zeros((len(start), 2, 6, 3))
         b[:, :, 0, 0] = b[:, :, 1, 1] = b[:, :, 2, 2] = 1.0
-        b[:, :, 3, 1] = -lever[..., 2]
-        b[:, :, 3, 2] = lever[..., 1]
-        b[:, :, 4, 0] = lever[..., 2]
-        b[:, :, 4, 2] = -lever[..., 0]
-        b[:, :, 5, 0] = -lever[..., 1]
-        b[:, :, 5, 1] = lever[..., 0]
+        b[:, :, 3:, :] = hat(lever)
         bp = np.matmul(b, proj[:, None])
         blocks = np.matmul(bp[:, :, None], np.swapaxes(b, 2, 3)[:, None, :])
         blocks[:, 0, 1] *= -1.0
