@@ -179,3 +179,22 @@ def test_rate_limit_bounds_every_tick():
         assert np.abs(out.actuation - previous).max() <= 0.25 + 1e-9
         previous = out.actuation
     assert np.abs(solver.effector_positions() - target).max() < 1e-4
+
+
+@pytest.mark.parametrize('relinearize_every', [1, 3])
+def test_prepare_moves_the_linearisation_off_the_step_without_changing_it(relinearize_every):
+    """prepare() after each step gives the same ticks as linearising inside step()."""
+    scene = _load('cbha')
+    center = np.asarray(scene.workspace_center)
+    angles = np.linspace(0.0, 1.5, 12)
+    targets = center + 0.06 * np.stack([0 * angles, np.cos(angles), np.sin(angles)], axis=1)
+    plain = scene.make_inverse_solver(relinearize_every=relinearize_every)
+    early = scene.make_inverse_solver(relinearize_every=relinearize_every)
+    for target in targets:
+        expected = plain.step(target[None])
+        got = early.step(target[None])
+        assert early.prepare()
+        np.testing.assert_allclose(got.actuation, expected.actuation, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(got.effector_positions, expected.effector_positions,
+                                   rtol=0, atol=1e-12)
+    assert got.timings['assembly'] == 0.0 and got.timings['factor'] == 0.0

@@ -229,6 +229,7 @@ class InverseSolver:
         self._linearization = None
         self._pending = None
         self._age = 0
+        self._prepared = False
 
     def _current(self, in_place=False):
         """Return the frames with the pending linear step applied (stored if ``in_place``)."""
@@ -318,11 +319,12 @@ class InverseSolver:
         if not np.isfinite(targets).all():
             return self._held('rejected', t_start)
         lin = self._linearization
+        prepared, self._prepared = self._prepared, False
         fresh = lin is None or self._age >= self.options.relinearize_every
         if fresh:
             self._materialise()
             previous = self.actuation
-            t_assembly, t_factor, lin = self._linearise(targets, previous)
+            t_assembly, t_factor, lin = self._linearise(previous)
             if lin is None:
                 self._linearization = None
                 return self._held('not_positive_definite', t_start)
@@ -330,7 +332,7 @@ class InverseSolver:
         else:
             previous = self.actuation
             t_assembly = t_factor = t_start
-            self._age += 1
+            self._age = 1 if prepared else self._age + 1
         delta_free = lin.offset - targets.reshape(-1)
         t_projection = time.perf_counter()
         if self._rate is None:
@@ -345,7 +347,7 @@ class InverseSolver:
             problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
                                  self.upper_bounds, rate_limit=self._rate)
         status = 'solved'
-        qp_solver, same_hessian = self.options.qp_solver, not fresh
+        qp_solver, same_hessian = self.options.qp_solver, not (fresh or prepared)
         if qp_solver == 'active_set':
             solution = self._active_set.solve(problem)
             if not solution.ok:
@@ -390,7 +392,30 @@ class InverseSolver:
                           float(np.sqrt((gap.reshape(-1, 3) ** 2).sum(axis=1).max())),
                           lin.residual_norm, timings)
 
-    def _linearise(self, targets, previous):
+    def prepare(self):
+        """
+        Linearise now for the next :meth:`step`, off the target-to-command path.
+
+        A node calls it right after publishing a command: the next ``step`` then only solves the
+        QP and applies it (DESIGN §6 steps 3-4), so the target-to-command latency excludes the
+        linearisation (steps 1-2). The state and actuation do not change in between, so the
+        result is exactly that of linearising inside the next step. Does nothing while the
+        current linearisation is still valid (``relinearize_every`` > 1).
+
+        Returns
+        -------
+        bool
+            False when no factorization of the tangent succeeds (the next step then holds).
+
+        """
+        if self._linearization is not None and self._age < self.options.relinearize_every:
+            return True
+        self._materialise()
+        _, _, lin = self._linearise(self.actuation)
+        self._linearization, self._age, self._prepared = lin, 0, lin is not None
+        return lin is not None
+
+    def _linearise(self, previous):
         """
         Linearise, factor and project at the stored state (DESIGN §6 steps 1-2).
 

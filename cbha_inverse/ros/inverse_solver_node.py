@@ -186,8 +186,7 @@ class InverseSolverNode(Node):
         self.target_history.append((_stamp_ns(message), point))
         self.target_watch.mark(time.monotonic())
         if self.params.trigger == 'target' and self._decide() == 'run':
-            self._solve_and_publish()
-            self.latencies.add(time.perf_counter() - received)
+            self.latencies.add(self._solve_and_publish() - received)
 
     def _on_measured(self, message):
         point = point_array(message)
@@ -243,17 +242,16 @@ class InverseSolverNode(Node):
             self._publish(self.vent_command)
 
     def _solve_and_publish(self):
+        """Tick the solver, publish the command, prepare the next tick; return the publish time."""
         start = time.perf_counter()
         goal = self.corrector.update(self.target[None], None)
         try:
             result = self.solver.step(goal)
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             # a numerical failure must not kill the controller: hold, count, report ERROR
-            self.statuses['exception'] = self.statuses.get('exception', 0) + 1
-            self.get_logger().error(f'solver failed, holding the last command: {exc!r}',
-                                    throttle_duration_sec=self.params.log_throttle)
+            self._count_failure('solver failed, holding the last command', exc)
             self._publish(self.command)
-            return
+            return time.perf_counter()
         self.last_result = result
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         self._last_solve = time.monotonic()
@@ -266,7 +264,18 @@ class InverseSolverNode(Node):
                                     throttle_duration_sec=self.params.log_throttle)
             command = self.command
         self._publish(command)
+        published = time.perf_counter()
+        # linearise for the next tick now, off the target -> command path (DESIGN §6 steps 1-2)
+        try:
+            self.solver.prepare()
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            self._count_failure('linearisation failed (the next tick retries)', exc)
         self.tick_times.add(time.perf_counter() - start)
+        return published
+
+    def _count_failure(self, what, exc):
+        self.statuses['exception'] = self.statuses.get('exception', 0) + 1
+        self.get_logger().error(f'{what}: {exc!r}', throttle_duration_sec=self.params.log_throttle)
 
     def _publish(self, command):
         command = bounded_command(command, self.lower, self.upper)
