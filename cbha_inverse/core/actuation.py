@@ -208,9 +208,14 @@ class CableGroup:
             Sum of the straight spans between consecutive routing points.
 
         """
-        points, _ = self.routing_points(positions, rotations)
+        return self._length_sum @ self._spans(positions, rotations)[2]
+
+    def _spans(self, positions, rotations):
+        """Return the routing-point levers, the span unit vectors and the span lengths."""
+        points, levers = self.routing_points(positions, rotations)
         spans = points[self.segment_end] - points[self.segment_start]
-        return self._length_sum @ np.sqrt(np.einsum('si,si->s', spans, spans))
+        span_lengths = np.sqrt(np.einsum('si,si->s', spans, spans))
+        return levers, spans / span_lengths[:, None], span_lengths
 
     def evaluate(self, positions, rotations, displacements=True):
         """
@@ -234,10 +239,7 @@ class CableGroup:
             ``-length``: the cable shortening up to a constant (``δ_a``).
 
         """
-        points, levers = self.routing_points(positions, rotations)
-        spans = points[self.segment_end] - points[self.segment_start]
-        span_lengths = np.sqrt(np.einsum('si,si->s', spans, spans))
-        units = spans / span_lengths[:, None]
+        levers, units, span_lengths = self._spans(positions, rotations)
         forces = self._point_force @ units
         wrenches = self._scatter @ point_wrenches(levers, forces)
         return (wrenches.reshape(self.n_actuators, self.n_frames, 6),
@@ -273,11 +275,8 @@ class CableGroup:
             Over frames 1..n (world-axis increments), to add to the structural tangent.
 
         """
-        points, levers = self.routing_points(positions, rotations)
+        levers, units, lengths = self._spans(positions, rotations)
         start, end = self.segment_start, self.segment_end
-        spans = points[end] - points[start]
-        lengths = np.sqrt(np.einsum('si,si->s', spans, spans))
-        units = spans / lengths[:, None]
         scale = tensions[self._segment_owner] / lengths
         proj = -scale[:, None, None] * units[:, :, None] * units[:, None, :]
         proj[:, 0, 0] += scale
