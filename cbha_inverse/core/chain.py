@@ -19,6 +19,30 @@ def _frozen(array):
     return out
 
 
+def checked_array(value, shape, name):
+    """
+    Return ``value`` as a float ndarray, raising ValueError (naming it) unless of ``shape``.
+
+    Parameters
+    ----------
+    value : array_like
+        The argument.
+    shape : tuple of int
+        Required shape.
+    name : str
+        Argument name for the message.
+
+    Returns
+    -------
+    ndarray
+
+    """
+    out = np.asarray(value, dtype=float)
+    if out.shape != tuple(shape):
+        raise ValueError(f'{name} must have shape {tuple(shape)}, got {out.shape}')
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class ChainModel:
     """
@@ -114,15 +138,11 @@ class ChainModel:
                 f'compliance of link {int(np.argmin(eig))} is not positive definite') from None
         stiff = np.linalg.inv(comp)
         stiff = 0.5 * (stiff + np.swapaxes(stiff, 1, 2))
-        offsets = np.array(rest_offsets, dtype=float)
-        if offsets.shape != (n, 3):
-            raise ValueError(f'rest_offsets must have shape ({n}, 3), got {offsets.shape}')
+        offsets = checked_array(rest_offsets, (n, 3), 'rest_offsets')
         if rest_rotations is None:
             rots = np.broadcast_to(np.eye(3), (n, 3, 3))
         else:
-            rots = np.array(rest_rotations, dtype=float)
-            if rots.shape != (n, 3, 3):
-                raise ValueError(f'rest_rotations must have shape ({n}, 3, 3)')
+            rots = checked_array(rest_rotations, (n, 3, 3), 'rest_rotations')
             _check_rotations(rots, 'rest_rotations')
         mass = np.zeros(n) if masses is None else np.array(masses, dtype=float)
         if mass.shape != (n,) or np.any(mass < 0.0):
@@ -210,10 +230,7 @@ def retract(state, increments):
         A new state; ``state`` is not modified.
 
     """
-    inc = np.asarray(increments, dtype=float)
-    n = state.positions.shape[0] - 1
-    if inc.shape != (n, 6):
-        raise ValueError(f'increments must have shape ({n}, 6), got {inc.shape}')
+    inc = checked_array(increments, (state.positions.shape[0] - 1, 6), 'increments')
     pos = state.positions.copy()
     rot = state.rotations.copy()
     pos[1:] += inc[:, :3]

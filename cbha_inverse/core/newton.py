@@ -56,7 +56,7 @@ from dataclasses import dataclass
 from cbha_inverse.core import btd
 from cbha_inverse.core.assembly import (assemble_tangent, blocks_to_dense, chain_terms,
                                         internal_wrenches, material_tangent)
-from cbha_inverse.core.chain import ChainState, rest_state
+from cbha_inverse.core.chain import ChainState, checked_array, rest_state
 from cbha_inverse.core.se3 import so3_exp
 import numpy as np
 from scipy.linalg import solve_banded
@@ -367,9 +367,8 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
 
     """
     n = model.n_links
-    external = np.zeros((n, 6)) if external is None else np.asarray(external, dtype=float)
-    if external.shape != (n, 6):
-        raise ValueError(f'external wrenches must have shape ({n}, 6), got {external.shape}')
+    external = (np.zeros((n, 6)) if external is None
+                else checked_array(external, (n, 6), 'external wrenches'))
     problem = _Problem(model, external, load_function, load_tangent, tolerance,
                        absolute_tolerance, max_rotation_step)
     lam, increment, steps, total, message = 0.0, 1.0, 0, 0, ''

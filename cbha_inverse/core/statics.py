@@ -11,7 +11,7 @@ frame wrenches, gravity on the lumped masses) and the public result type.
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.chain import ChainState
+from cbha_inverse.core.chain import ChainState, checked_array
 from cbha_inverse.core.newton import solve_chain
 import numpy as np
 
@@ -90,20 +90,11 @@ def external_wrenches(model, tip_wrench=None, frame_wrenches=None, gravity=None)
     n = model.n_links
     ext = np.zeros((n, 6))
     if frame_wrenches is not None:
-        fw = np.asarray(frame_wrenches, dtype=float)
-        if fw.shape != (n, 6):
-            raise ValueError(f'frame_wrenches must have shape ({n}, 6), got {fw.shape}')
-        ext += fw
+        ext += checked_array(frame_wrenches, (n, 6), 'frame_wrenches')
     if tip_wrench is not None:
-        tw = np.asarray(tip_wrench, dtype=float)
-        if tw.shape != (6,):
-            raise ValueError(f'tip_wrench must have shape (6,), got {tw.shape}')
-        ext[-1] += tw
+        ext[-1] += checked_array(tip_wrench, (6,), 'tip_wrench')
     if gravity is not None:
-        g = np.asarray(gravity, dtype=float)
-        if g.shape != (3,):
-            raise ValueError(f'gravity must have shape (3,), got {g.shape}')
-        ext[:, :3] += model.masses[:, None] * g
+        ext[:, :3] += model.masses[:, None] * checked_array(gravity, (3,), 'gravity')
     return ext
 
 
