@@ -14,21 +14,23 @@ quaternion, which stays accurate up to pi.
 import numpy as np
 
 _SERIES_ANGLE = 1.0
-# |B_(2k+2)| / (2k+2)!, k = 0..9: Taylor coefficients of c(t) in t**2 (see _jl_inv_coefficient)
-_JL_SERIES = (1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 47900160.0,
-              691.0 / (2730.0 * 479001600.0), 7.0 / (6.0 * 87178291200.0),
-              3617.0 / (510.0 * 20922789888000.0), 43867.0 / (798.0 * 6402373705728000.0),
-              174611.0 / (330.0 * 2432902008176640000.0))
+#: ``|B_(2k+2)| / (2k+2)!``, k = 0..9: Taylor coefficients of ``c(t)`` in ``t**2``, the
+#: ``hat(phi)**2`` coefficient of the inverse left Jacobian (see :func:`_jl_inv_coefficient`;
+#: also used by :mod:`cbha_inverse.core.tick_math`)
+JL_SERIES = (1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 47900160.0,
+             691.0 / (2730.0 * 479001600.0), 7.0 / (6.0 * 87178291200.0),
+             3617.0 / (510.0 * 20922789888000.0), 43867.0 / (798.0 * 6402373705728000.0),
+             174611.0 / (330.0 * 2432902008176640000.0))
 _EYE3 = np.eye(3)
-# flattened R @ _LOG_BASIS = (vee(R), tr(R) / 2)
-_LOG_BASIS = np.zeros((9, 4))
-_LOG_BASIS[[7, 2, 3], [0, 1, 2]] = 0.5
-_LOG_BASIS[[5, 6, 1], [0, 1, 2]] = -0.5
-_LOG_BASIS[[0, 4, 8], 3] = 0.5
-# hat(v) = v @ _HAT_BASIS reshaped to 3x3 (one matmul instead of six scattered writes)
-_HAT_BASIS = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0],
-                       [0, 0, 1, 0, 0, 0, -1, 0, 0],
-                       [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float)
+#: flattened ``R @ LOG_BASIS = (vee(R), tr(R) / 2)`` (9 x 4)
+LOG_BASIS = np.zeros((9, 4))
+LOG_BASIS[[7, 2, 3], [0, 1, 2]] = 0.5
+LOG_BASIS[[5, 6, 1], [0, 1, 2]] = -0.5
+LOG_BASIS[[0, 4, 8], 3] = 0.5
+#: ``hat(v) = v @ HAT_BASIS`` reshaped to 3x3 (one matmul instead of six scattered writes)
+HAT_BASIS = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0],
+                      [0, 0, 1, 0, 0, 0, -1, 0, 0],
+                      [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float)
 
 
 def hat(v):
@@ -46,7 +48,7 @@ def hat(v):
 
     """
     v = np.asarray(v, dtype=float)
-    return (v @ _HAT_BASIS).reshape(v.shape[:-1] + (3, 3))
+    return (v @ HAT_BASIS).reshape(v.shape[:-1] + (3, 3))
 
 
 def vee(m):
@@ -207,7 +209,7 @@ def so3_log_angle(rot):
     """
     rot = np.asarray(rot, dtype=float)
     # one product gives vee(R) = sin(t) axis and (tr R) / 2 = cos(t) + 1/2
-    mixed = rot.reshape(rot.shape[:-2] + (9,)) @ _LOG_BASIS
+    mixed = rot.reshape(rot.shape[:-2] + (9,)) @ LOG_BASIS
     cos_t = mixed[..., 3] - 0.5
     if cos_t.size and cos_t.min() > -0.75:
         d = mixed[..., :3]
@@ -239,16 +241,16 @@ def _jl_inv_coefficient(theta):
     t2 = theta * theta
     t_max = float(theta.max()) if theta.size else 0.0
     # number of series terms: the first neglected term of c'/t is below 1e-17 of its value
-    terms = len(_JL_SERIES)
-    while terms > 2 and 2.0 * (terms - 1) * _JL_SERIES[terms - 1] * min(
+    terms = len(JL_SERIES)
+    while terms > 2 and 2.0 * (terms - 1) * JL_SERIES[terms - 1] * min(
             t_max, _SERIES_ANGLE) ** (2 * terms - 4) < 1e-17 / 360.0:
         terms -= 1
-    c = np.full_like(t2, _JL_SERIES[terms - 1])
-    dc = np.full_like(t2, 2.0 * (terms - 1) * _JL_SERIES[terms - 1])
+    c = np.full_like(t2, JL_SERIES[terms - 1])
+    dc = np.full_like(t2, 2.0 * (terms - 1) * JL_SERIES[terms - 1])
     for k in range(terms - 2, -1, -1):
-        c = c * t2 + _JL_SERIES[k]
+        c = c * t2 + JL_SERIES[k]
         if k > 0:
-            dc = dc * t2 + 2.0 * k * _JL_SERIES[k]
+            dc = dc * t2 + 2.0 * k * JL_SERIES[k]
     if theta.size == 0 or theta.max() < _SERIES_ANGLE:
         return c, dc
     big = theta >= _SERIES_ANGLE

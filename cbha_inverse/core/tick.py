@@ -26,10 +26,9 @@ evaluated through their own ``evaluate`` / ``load_tangent`` (slower, same result
 
 from cbha_inverse.core.actuation import CableGroup
 from cbha_inverse.core.cavity_linear import LinearCavityGroup
-from cbha_inverse.core.se3 import so3_log
+from cbha_inverse.core.se3 import HAT_BASIS, LOG_BASIS, so3_log
 from cbha_inverse.core.tick_cables import CableTerms
-from cbha_inverse.core.tick_math import (HALF_HAT_BASIS, HAT_BASIS, hats_into, jl_coefficients,
-                                         LOG_BASIS)
+from cbha_inverse.core.tick_math import HALF_HAT_BASIS, hats_into, jl_coefficients
 import numpy as np
 from scipy.linalg import lapack
 

@@ -8,11 +8,8 @@ matrix product, and the span stiffness blocks ``C P Cᵀ`` (``P = λ/ℓ (I - u 
 ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair by another.
 """
 
+from cbha_inverse.core.se3 import HAT_BASIS
 import numpy as np
-
-# hat(v).reshape(9) = v @ _HAT_BASIS
-_HAT_BASIS = np.zeros((3, 9))
-_HAT_BASIS[[2, 1, 2, 0, 1, 0], [1, 2, 3, 5, 6, 7]] = [-1.0, 1.0, 1.0, -1.0, -1.0, 1.0]
 
 
 class CableTerms:
@@ -107,7 +104,7 @@ class CableTerms:
         units = spans / lengths[:, None]
         forces = cab.point_force @ units
         hats = cab.hats
-        np.matmul(levers, _HAT_BASIS, out=hats.reshape(-1, 9))
+        np.matmul(levers, HAT_BASIS, out=hats.reshape(-1, 9))
         wrench = cab.wrench
         wrench[:, :3] = forces
         np.matmul(hats, forces[:, :, None], out=wrench[:, 3:, None])

@@ -6,27 +6,15 @@ matrix product (their terms chosen so that the truncation is below round-off), a
 of the frames (:func:`cbha_inverse.core.chain.retract`).
 """
 
+from cbha_inverse.core.se3 import HAT_BASIS, JL_SERIES
 import numpy as np
 
-# flattened hat(v): entries (0,1) (0,2) (1,0) (1,2) (2,0) (2,1) = -v2 v1 v2 -v0 -v1 v0
-_HAT_DST = np.array([1, 2, 3, 5, 6, 7])
-_HAT_SRC = np.array([2, 1, 2, 0, 1, 0])
-_HAT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
-# flattened R @ LOG_BASIS = (vee(R), tr(R) / 2)
-LOG_BASIS = np.zeros((9, 4))
-LOG_BASIS[[7, 2, 3], [0, 1, 2]] = 0.5
-LOG_BASIS[[5, 6, 1], [0, 1, 2]] = -0.5
-LOG_BASIS[[0, 4, 8], 3] = 0.5
-# c(t) = sum_k a_k t^(2k) (|B_(2k+2)| / (2k+2)!), the hat(phi)^2 coefficient of Jl^-1
-_JL_SERIES = np.array([1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0,
-                       1.0 / 47900160.0, 691.0 / 2730.0 / 479001600.0,
-                       7.0 / 6.0 / 87178291200.0])
+# c(t) = sum_k a_k t^(2k), the hat(phi)^2 coefficient of Jl^-1: the first 7 terms of the se3
+# series (truncation below round-off up to _SERIES_LIMIT), as one matrix product
+_JL_SERIES = np.array(JL_SERIES[:7])
 _JL_DSERIES = 2.0 * np.arange(1, 7) * _JL_SERIES[1:]
 _JL_POWERS = np.arange(7)
 _SERIES_LIMIT = 0.5
-# hat(v).reshape(9) = v @ HAT_BASIS
-HAT_BASIS = np.zeros((3, 9))
-HAT_BASIS[_HAT_SRC, _HAT_DST] = _HAT_SIGN
 HALF_HAT_BASIS = -0.5 * HAT_BASIS
 # sin(t)/t, (1 - cos t)/t^2 and cos t as series in t^2
 _EXP_POWERS = np.arange(8)
@@ -58,7 +46,7 @@ def hats_into(out, v):
 
 def jl_coefficients(theta, t2):
     """
-    Return ``c(t)`` and ``c'(t)/t`` of ``Jl⁻¹(φ) = I - φ^/2 + c φ^²`` (as the kernel's).
+    Return ``c(t)`` and ``c'(t)/t`` of ``Jl⁻¹(φ) = I - φ^/2 + c φ^²`` (as in ``se3``).
 
     Parameters
     ----------
