@@ -1,10 +1,10 @@
-"""The fused tick model against the reference kernel, actuator columns and load stiffness."""
+"""The fused tick model against the reference assembly, actuator columns and load stiffness."""
 
 from cbha_inverse.core.actuation import ActuatorSet
+from cbha_inverse.core.assembly import assemble_tangent
 from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart, tube_surface
 from cbha_inverse.core.cavity_linear import LinearCavityGroup
-from cbha_inverse.core.chain import ChainModel, rest_state, retract
-from cbha_inverse.core.kernel import ChainKernel
+from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import so3_exp
 from cbha_inverse.core.tick import TickModel
@@ -16,8 +16,8 @@ import pytest
 
 
 def _reference(model, actuators, external, positions, rotations, actuation):
-    internal, tangent = ChainKernel(model).linearise(positions, rotations)
-    tangent = tangent.copy()
+    system = assemble_tangent(model, ChainState(positions, rotations))
+    internal, tangent = system.internal, system.to_dense()
     load = actuators.load_tangent(positions, rotations, actuation)
     if load is not None:
         tangent += load

@@ -13,36 +13,10 @@ pressure.
 
 from cbha_inverse.core.actuation import cross
 from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart
-from cbha_inverse.core.kernel import jl_inverse_coefficients
-from cbha_inverse.core.se3 import hat, so3_exp, so3_log
+from cbha_inverse.core.links import link_deformation
+from cbha_inverse.core.se3 import hat, so3_exp, so3_left_jacobian_inverse
 import numpy as np
 import scipy.sparse as sp
-
-
-def segment_deformation(x_i, r_i, x_j, r_j, rest_offset, rest_rotation):
-    """
-    Return the corotational deformation of segments (DESIGN §3).
-
-    Parameters
-    ----------
-    x_i, x_j : (E, 3) ndarray  [m]
-        Lower and upper frame origins.
-    r_i, r_j : (E, 3, 3) ndarray
-        Lower and upper frame rotations.
-    rest_offset : (E, 3) ndarray  [m]
-        Rest offsets ``d0``.
-    rest_rotation : (E, 3, 3) ndarray
-        Rest relative rotations ``Q0``.
-
-    Returns
-    -------
-    (E, 6) ndarray  [m, rad]
-        ``[R_iᵀ(x_j - x_i) - d0; log(R_iᵀ R_j Q0ᵀ)]`` in frame-i axes.
-
-    """
-    lin = np.einsum('eji,ej->ei', r_i, x_j - x_i) - rest_offset
-    rel = np.einsum('eki,ekl,eml->eim', r_i, r_j, rest_rotation)
-    return np.concatenate([lin, so3_log(rel)], axis=1)
 
 
 class LinearCavityGroup:
@@ -105,8 +79,7 @@ class LinearCavityGroup:
         self._segment_of_entry = self._segment_of_entry.reshape(-1)
         self._segment_lower = unique[:, 0].astype(int)
         self._segment_offset = unique[:, 1:4]
-        self._segment_rotation_t = np.ascontiguousarray(
-            np.swapaxes(unique[:, 4:].reshape(-1, 3, 3), 1, 2))
+        self._segment_rotation = unique[:, 4:].reshape(-1, 3, 3)
         self._hessian_t = np.ascontiguousarray(np.swapaxes(self.hessian, 1, 2))
         size = 6 * self.n_frames
         f = np.stack([self.lower, self.upper], axis=1)
@@ -152,15 +125,11 @@ class LinearCavityGroup:
     def _deformation(self, positions, rotations):
         """Return per entry the segment deformation δ (E, 6) and R_i, x_j - x_i of its segment."""
         lo = self._segment_lower
-        r_i = rotations[lo]
-        r_it = np.swapaxes(r_i, 1, 2)
-        diff = positions[lo + 1] - positions[lo]
-        delta = np.empty((lo.size, 6))
-        delta[:, :3] = np.matmul(r_it, diff[:, :, None])[:, :, 0] - self._segment_offset
-        delta[:, 3:] = so3_log(np.matmul(np.matmul(r_it, rotations[lo + 1]),
-                                         self._segment_rotation_t))
+        x_i, r_i, x_j = positions[lo], rotations[lo], positions[lo + 1]
+        delta = link_deformation(self._segment_offset, self._segment_rotation, x_i, r_i, x_j,
+                                 rotations[lo + 1])
         seg = self._segment_of_entry
-        return delta[seg], r_i[seg], diff[seg]
+        return delta[seg], r_i[seg], (x_j - x_i)[seg]
 
     def evaluate(self, positions, rotations, displacements=True):
         """
@@ -206,16 +175,12 @@ def _linear_cavity_load_tangent(group, positions, rotations, pressures, symmetri
     lo, up = group.lower, group.upper
     r_a, x_a, x_b = rotations[lo], positions[lo], positions[up]
     v = x_b - x_a
-    delta = segment_deformation(x_a, r_a, x_b, rotations[up], group.rest_offset,
-                                group.rest_rotation)
+    delta = link_deformation(group.rest_offset, group.rest_rotation, x_a, r_a, x_b, rotations[up])
     local = group.g0 + np.einsum('eab,eb->ea', group.hessian, delta)
     p = pressures[group._owner]
     f = np.einsum('eij,ej->ei', r_a, local[:, :3])
     m = np.einsum('eij,ej->ei', r_a, local[:, 3:])
-    phi = delta[:, 3:]
-    c, _ = jl_inverse_coefficients(np.sqrt(np.einsum('ei,ei->e', phi, phi)))
-    phi_hat = hat(phi)
-    jinv = c[:, None, None] * (phi_hat @ phi_hat) - 0.5 * phi_hat + np.eye(3)
+    jinv = so3_left_jacobian_inverse(delta[:, 3:])
     r_at = np.swapaxes(r_a, 1, 2)
     n_e = len(lo)
     # dδ = D_a dq_a + D_b dq_b (frame-i axes)

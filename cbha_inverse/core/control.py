@@ -30,14 +30,15 @@ throw the linearisation off.
 from dataclasses import dataclass, field
 import time
 
+from cbha_inverse.core.assembly import assemble_tangent, material_tangent
+from cbha_inverse.core.btd import factorize
 from cbha_inverse.core.chain import ChainState, rest_state
 from cbha_inverse.core.correction import TargetCorrector  # noqa: F401 (public re-export)
 from cbha_inverse.core.inverse import qp_matrices, qp_problem, QPProblem
-from cbha_inverse.core.kernel import ChainKernel, DenseCholesky, DenseLU
 from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
                                   projected_gauss_seidel)
 from cbha_inverse.core.tick import TickModel
-from cbha_inverse.core.tick_math import retract_frames as _retract
+from cbha_inverse.core.tick_math import DenseLU, retract_frames as _retract
 import numpy as np
 
 
@@ -200,7 +201,6 @@ class InverseSolver:
         self._external = external.reshape(-1)
         self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
         self._active_set = ActiveSetQP(m)
-        self._kernel = ChainKernel(model)
         self._tick = TickModel(model, actuators, self._external)
         self._m, self._k = m, effectors.n_effectors
         self._effector_rows = (6 * (effectors.frames - 1)[:, None] + np.arange(3)).reshape(-1)
@@ -262,20 +262,23 @@ class InverseSolver:
 
         The normal case (:meth:`_linearise`) is the Cholesky factorization of structure +
         symmetric load stiffness; when it fails:
-        1. LU of structure + exact (non-symmetric) load stiffness (high pressures);
-        2. Cholesky of the material tangent alone (paper eq. 8; far from equilibrium).
+        1. LU of structure + load stiffness, both exact (non-symmetric; high pressures):
+           :func:`~cbha_inverse.core.assembly.assemble_tangent` and the actuators' exact
+           ``load_tangent``;
+        2. BTD Cholesky of the material tangent alone
+           (:func:`~cbha_inverse.core.assembly.material_tangent`, paper eq. 8; far from
+           equilibrium).
         The residual is exact in every case, so only the convergence rate changes.
         """
-        _, full = self._kernel.linearise(positions, rotations)
+        state = ChainState(positions, rotations)
         load = self.actuators.load_tangent(positions, rotations, actuation, symmetric=False)
         if load is not None:
             try:
-                return DenseLU(full + load)
+                return DenseLU(assemble_tangent(self.model, state).to_dense(exact=True) + load)
             except np.linalg.LinAlgError:
                 pass
-        _, material = self._kernel.linearise(positions, rotations, geometric=False)
         try:
-            return DenseCholesky(material)
+            return factorize(*material_tangent(self.model, state))
         except np.linalg.LinAlgError:
             return None
 

@@ -1,7 +1,7 @@
 """
 Fused linearisation of one inverse-solver tick: chain, cables and condensed cavities at once.
 
-The reference path of a tick (:class:`cbha_inverse.core.kernel.ChainKernel` for the chain,
+The reference path of a tick (:func:`cbha_inverse.core.assembly.assemble_tangent` for the chain,
 ``ActuatorSet.evaluate`` / ``load_tangent`` for the actuators, DESIGN §6 step 1) builds several
 dense ``6n x 6n`` matrices and calls numpy a few hundred times. :class:`TickModel` computes the
 same quantities (equal to round-off, tested) in a few dozen batched calls:

@@ -2,12 +2,13 @@
 Small SO(3) helpers of the fused tick (:mod:`cbha_inverse.core.tick`), in few numpy calls.
 
 Hats by one matrix product, the ``Jl⁻¹`` coefficients and ``exp`` by power series evaluated as one
-matrix product (their terms chosen so that the truncation is below round-off), and the retraction
-of the frames (:func:`cbha_inverse.core.chain.retract`).
+matrix product (their terms chosen so that the truncation is below round-off), the retraction
+of the frames (:func:`cbha_inverse.core.chain.retract`) and the dense LU of the fallback tangent.
 """
 
 from cbha_inverse.core.se3 import HAT_BASIS, JL_SERIES
 import numpy as np
+from scipy.linalg import lapack
 
 # c(t) = sum_k a_k t^(2k), the hat(phi)^2 coefficient of Jl^-1: the first 7 terms of the se3
 # series (truncation below round-off up to _SERIES_LIMIT), as one matrix product
@@ -154,3 +155,53 @@ def retract_frames(positions, rotations, increments, max_rotation=None, in_place
     new_positions[1:] += increments[:, :3]
     np.matmul(exp_rotations(rot, t2), rotations[1:], out=new_rotations[1:])
     return new_positions, new_rotations
+
+
+class DenseLU:
+    """
+    LAPACK LU factorization (``dgetrf``) of a square matrix with multi-RHS solves.
+
+    The fallback factorization of a tick whose tangent is not symmetric positive definite
+    (structure plus exact non-symmetric load stiffness at high pressure, see
+    :meth:`cbha_inverse.core.control.InverseSolver._factor`).
+
+    Parameters
+    ----------
+    matrix : (N, N) ndarray
+        Square matrix (copied).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If the matrix is singular.
+
+    """
+
+    method = 'dense_lu'
+
+    def __init__(self, matrix):
+        """Factor a copy."""
+        lu, piv, info = lapack.dgetrf(np.array(matrix, dtype=float, order='F'))
+        if info != 0:
+            raise np.linalg.LinAlgError(f'tangent stiffness singular (LU pivot {info})')
+        self._lu, self._piv = lu, piv
+
+    def solve(self, rhs):
+        """
+        Solve ``K X = rhs``.
+
+        Parameters
+        ----------
+        rhs : (N,) or (N, k) ndarray
+            Right-hand sides.
+
+        Returns
+        -------
+        ndarray
+            Same shape as ``rhs``.
+
+        """
+        x, info = lapack.dgetrs(self._lu, self._piv, rhs)
+        if info != 0:
+            raise np.linalg.LinAlgError(f'dgetrs failed (info {info})')
+        return x
