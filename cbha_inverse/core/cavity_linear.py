@@ -14,7 +14,7 @@ pressure.
 from cbha_inverse.core.actuation import cross
 from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart
 from cbha_inverse.core.links import link_deformation
-from cbha_inverse.core.se3 import hat, so3_exp, so3_left_jacobian_inverse
+from cbha_inverse.core.se3 import hat, so3_exp, so3_left_jacobian_inverse, so3_log
 import numpy as np
 import scipy.sparse as sp
 
@@ -79,7 +79,8 @@ class LinearCavityGroup:
         self._segment_of_entry = self._segment_of_entry.reshape(-1)
         self._segment_lower = unique[:, 0].astype(int)
         self._segment_offset = unique[:, 1:4]
-        self._segment_rotation = unique[:, 4:].reshape(-1, 3, 3)
+        self._segment_rotation_t = np.ascontiguousarray(
+            np.swapaxes(unique[:, 4:].reshape(-1, 3, 3), 1, 2))
         self._hessian_t = np.ascontiguousarray(np.swapaxes(self.hessian, 1, 2))
         size = 6 * self.n_frames
         f = np.stack([self.lower, self.upper], axis=1)
@@ -124,12 +125,18 @@ class LinearCavityGroup:
 
     def _deformation(self, positions, rotations):
         """Return per entry the segment deformation δ (E, 6) and R_i, x_j - x_i of its segment."""
+        # links.link_deformation inlined (pre-transposed rest rotations, R_i and x_j - x_i kept for
+        # the caller): ~4 us less per evaluate, on the forward solve's Newton path
         lo = self._segment_lower
-        x_i, r_i, x_j = positions[lo], rotations[lo], positions[lo + 1]
-        delta = link_deformation(self._segment_offset, self._segment_rotation, x_i, r_i, x_j,
-                                 rotations[lo + 1])
+        r_i = rotations[lo]
+        r_it = np.swapaxes(r_i, 1, 2)
+        diff = positions[lo + 1] - positions[lo]
+        delta = np.empty((lo.size, 6))
+        delta[:, :3] = np.matmul(r_it, diff[:, :, None])[:, :, 0] - self._segment_offset
+        delta[:, 3:] = so3_log(np.matmul(np.matmul(r_it, rotations[lo + 1]),
+                                         self._segment_rotation_t))
         seg = self._segment_of_entry
-        return delta[seg], r_i[seg], (x_j - x_i)[seg]
+        return delta[seg], r_i[seg], diff[seg]
 
     def evaluate(self, positions, rotations, displacements=True):
         """
