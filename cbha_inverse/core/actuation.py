@@ -247,14 +247,15 @@ class CableGroup:
 
     def load_tangent(self, positions, rotations, tensions, symmetric=True):
         """
-        Return the (symmetrised) load stiffness of the cables, ``-d(J_aᵀ λ)/dq``.
+        Return the load stiffness of the cables, ``-d(J_aᵀ λ)/dq`` (exact or its symmetric part).
 
         Cable forces follow the structure, so they add a stiffness to the tangent of the
         equilibrium (paper eq. 9-10): per span ``s`` with unit direction ``u``, length ``ℓ`` and
         tension ``λ``, ``λ D_sᵀ (I - u uᵀ)/ℓ D_s`` (``D_s`` maps increments to the change of the
         span vector; positive semi-definite: it stabilises the compressed backbone), and per
-        routing point with lever ``r`` and force ``F`` the moment term
-        ``-sym(F^ r^) = (F·r) I - (r Fᵀ + F rᵀ)/2`` on its frame's rotations. Without it a
+        routing point with lever ``r`` and force ``F`` the moment term ``-F^ r^ = (F·r) I - r Fᵀ``
+        on its frame's rotations (turning the frame turns the lever), whose symmetric part is
+        ``(F·r) I - (r Fᵀ + F rᵀ)/2`` and skew part ``½ hat(r × F)``. Without it a
         tendon-compressed chain can look unstable to Newton's method.
 
         Parameters
@@ -266,8 +267,8 @@ class CableGroup:
         tensions : (m,) ndarray  [N]
             Cable tensions.
         symmetric : bool
-            Ignored: the symmetric part is returned (the skew part of a cable's load stiffness
-            is small and Newton converges without it).
+            True: the symmetric part (for the Cholesky of the control tick); False: the exact
+            tangent (Newton converges quadratically with it, linearly without the skew part).
 
         Returns
         -------
@@ -293,8 +294,9 @@ class CableGroup:
         blocks[:, 1, 0] *= -1.0
         forces = (self._point_force @ units) * tensions[self._point_owner][:, None]
         fr = np.einsum('pi,pi->p', forces, levers)
-        moment = -0.5 * (levers[:, :, None] * forces[:, None, :]
-                         + forces[:, :, None] * levers[:, None, :])
+        moment = -levers[:, :, None] * forces[:, None, :]
+        if symmetric:
+            moment = 0.5 * (moment + np.swapaxes(moment, 1, 2))
         moment[:, 0, 0] += fr
         moment[:, 1, 1] += fr
         moment[:, 2, 2] += fr

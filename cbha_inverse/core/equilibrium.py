@@ -20,52 +20,13 @@ import numpy as np
 EquilibriumResult = NewtonResult
 
 
-def rotation_skew(moments):
-    """
-    Return the skew load stiffness of moments carried by the frames, ``½ hat(M_j)`` blocks.
-
-    A point force ``F`` attached to frame j at lever ``r`` applies ``M = r × F`` at its origin;
-    turning the frame by ``dθ`` turns the lever, ``-dM/dθ = hat(F) hat(r)``, whose skew part is
-    ``½ hat(M)`` (the symmetric part is in the groups' load stiffness, paper eq. 9-10 with the
-    moment term symmetrised). Checked against central differences of the cable loads in the tests.
-
-    Parameters
-    ----------
-    moments : (n, 3) ndarray  [N*m]
-        Load moments on frames 1..n (world axes, at the frame origins).
-
-    Returns
-    -------
-    (6n, 6n) ndarray
-        Non-zero only in the rotational 3x3 part of the diagonal blocks.
-
-    """
-    n = moments.shape[0]
-    out = np.zeros((n, 6, n, 6))
-    idx = np.arange(n)
-    half = 0.5 * moments
-    out[idx, 3, idx, 4] = -half[:, 2]
-    out[idx, 3, idx, 5] = half[:, 1]
-    out[idx, 4, idx, 3] = half[:, 2]
-    out[idx, 4, idx, 5] = -half[:, 0]
-    out[idx, 5, idx, 3] = -half[:, 1]
-    out[idx, 5, idx, 4] = half[:, 0]
-    return out.reshape(6 * n, 6 * n)
-
-
-def _is_symmetric(matrix):
-    """Return True if a matrix is symmetric to round-off."""
-    return bool(np.abs(matrix - matrix.T).max() <= 1e-12 * np.abs(matrix).max())
-
-
 def actuator_loads(actuators, actuation):
     """
     Return the follower load and the exact load tangent of an actuation, for the Newton engine.
 
-    The load stiffness comes from each actuator group's ``load_tangent(..., symmetric=False)``;
-    a group that returns only the symmetric part (the cables) is completed with the skew part of
-    its moments, :func:`rotation_skew`. Newton's convergence is then quadratic (with the
-    symmetric part alone it is linear, ~10x per iteration on the tendon trunks).
+    The load stiffness is the exact one of each actuator group, ``load_tangent(...,
+    symmetric=False)``: Newton's convergence is then quadratic (with the symmetric part alone it
+    is linear, ~10x per iteration on the tendon trunks).
 
     Parameters
     ----------
@@ -105,9 +66,6 @@ def actuator_loads(actuators, actuation):
         total = None
         for group, cols in groups:
             part = group.load_tangent(state.positions, state.rotations, a[cols], False)
-            if _is_symmetric(part):
-                moments = np.tensordot(a[cols], columns(state)[cols, 1:, 3:], axes=1)
-                part = part + rotation_skew(moments)
             total = part if total is None else total + part
         return total
 
