@@ -242,7 +242,7 @@ def test_follower_actuation_with_load_tangent_converges(name):
 
 
 def test_actuator_load_tangent_matches_central_differences():
-    """actuator_loads' tangent (cables: symmetric part + skew moment part) = -d loads / dq."""
+    """actuator_loads' tangent (exact, with the cables' skew moment part) = -d loads / dq."""
     scene = load_scene('tendon_6f_8c')
     actuation = np.array([3.0, 1.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.5])
     state = scene.forward(actuation, strict=True).state
