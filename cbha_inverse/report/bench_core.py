@@ -22,7 +22,7 @@ import sys
 import time
 
 from cbha_inverse.core import btd
-from cbha_inverse.core.assembly import assemble_tangent
+from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense
 from cbha_inverse.core.chain import ChainModel, rest_state
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import so3_exp
@@ -156,17 +156,6 @@ def bent_tangent(n_links, seed=0):
     return tangent.diagonal, tangent.upper
 
 
-def _dense_lower_fortran(diagonal, upper):
-    """Build the dense matrix (lower triangle, Fortran order) outside the timed region."""
-    n = diagonal.shape[0]
-    dense = np.zeros((6 * n, 6 * n), order='F')
-    for i in range(n):
-        dense[6 * i:6 * i + 6, 6 * i:6 * i + 6] = diagonal[i]
-        if i + 1 < n:
-            dense[6 * i + 6:6 * i + 12, 6 * i:6 * i + 6] = upper[i].T
-    return dense
-
-
 def btd_table(sizes, rhs_counts, budget, out):
     """
     Measure and print the BTD table; return its rows.
@@ -200,7 +189,9 @@ def btd_table(sizes, rhs_counts, budget, out):
     for n in sizes:
         diag, upper = bent_tangent(n)
         band = btd.to_lower_banded(diag, upper)
-        dense = _dense_lower_fortran(diag, upper) if n <= DENSE_MAX_FRAMES else None
+        # dense matrix for LAPACK, built outside the timed region
+        dense = (np.asfortranarray(blocks_to_dense(diag, upper))
+                 if n <= DENSE_MAX_FRAMES else None)
         rng = np.random.default_rng(n)
         for k in rhs_counts:
             rhs = np.asfortranarray(rng.normal(size=(6 * n, k)))
