@@ -1,11 +1,13 @@
-"""Tick helpers (Jl⁻¹ series, retraction, dense LU) and the solver's fallback factorizations."""
+"""Tick helpers (Jl⁻¹, log/exp, retraction, band Cholesky, dense LU) and the solver's fallbacks."""
 
 from cbha_inverse.core import control
 from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense, material_tangent
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
 from cbha_inverse.core.links import timoshenko_compliance
-from cbha_inverse.core.se3 import so3_exp
-from cbha_inverse.core.tick_math import DenseLU, exp_rotations, jl_coefficients, retract_frames
+from cbha_inverse.core.se3 import _jl_inv_coefficient, so3_exp, so3_log
+from cbha_inverse.core.tick_kernels import band_cholesky, band_solve
+from cbha_inverse.core.tick_math import (DenseLU, exp_rotations, jl_coefficients,
+                                         retract_frames, rotation_log)
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -20,11 +22,61 @@ def _chain(n):
 
 def test_jl_coefficients_are_continuous_at_the_switch():
     theta = np.array([0.5 - 1e-12, 0.5])
-    c, dc = jl_coefficients(theta, theta * theta)
+    c, dc = jl_coefficients(theta)
     assert c[0] == pytest.approx(c[1], rel=1e-11)
     assert dc[0] == pytest.approx(dc[1], rel=1e-8)
-    c0, _ = jl_coefficients(np.array([0.0]), np.array([0.0]))
+    c0, _ = jl_coefficients(np.array([0.0]))
     assert c0[0] == pytest.approx(1.0 / 12.0)
+
+
+def test_jl_coefficients_match_se3():
+    theta = np.concatenate([[0.0, 1e-9], np.linspace(1e-3, 3.1, 200)])
+    c, dc = jl_coefficients(theta)
+    c_ref, dc_ref = _jl_inv_coefficient(theta)
+    np.testing.assert_allclose(c, c_ref, rtol=1e-13)
+    np.testing.assert_allclose(dc, dc_ref, rtol=1e-10)
+
+
+@pytest.mark.parametrize('angle', [0.0, 1e-10, 0.3, 2.0, 2.4, 2.5, 3.0, np.pi - 1e-9])
+def test_rotation_log_inverts_exp_up_to_pi(angle):
+    rng = np.random.default_rng(11)
+    axes = rng.standard_normal((20, 3))
+    vectors = axes / np.linalg.norm(axes, axis=1, keepdims=True) * angle
+    out = np.empty(3)
+    for v, rot in zip(vectors, so3_exp(vectors)):
+        theta = rotation_log(rot, out)
+        np.testing.assert_allclose(out, v, atol=1e-12)
+        np.testing.assert_allclose(out, so3_log(rot), atol=1e-12)
+        assert theta == pytest.approx(angle, abs=1e-12)
+
+
+@pytest.mark.parametrize('size, kd', [(1, 0), (12, 11), (36, 17), (96, 11), (20, 19)])
+def test_band_cholesky_equals_dense_solve(size, kd):
+    rng = np.random.default_rng(size + kd)
+    a = rng.standard_normal((size, size))
+    r, c = np.indices((size, size))
+    a = np.where(np.abs(r - c) <= kd, a @ a.T + size * np.eye(size), 0.0)
+    band = np.zeros((size, kd + 1))
+    for d in range(kd + 1):
+        band[:size - d, d] = np.diagonal(a, -d)
+    assert band_cholesky(band) == 0
+    lower = np.zeros((size, size))
+    for d in range(kd + 1):
+        lower += np.diag(band[:size - d, d], -d)
+    np.testing.assert_allclose(lower, np.linalg.cholesky(a), atol=1e-12 * size)
+    rhs = rng.standard_normal((size, 5))
+    solved = rhs.copy()
+    band_solve(band, solved)
+    np.testing.assert_allclose(solved, np.linalg.solve(a, rhs), atol=1e-11)
+
+
+def test_band_cholesky_reports_the_first_bad_pivot():
+    a = np.diag([2.0, 3.0, -1.0, 4.0])
+    band = np.zeros((4, 2))
+    band[:, 0] = np.diag(a)
+    assert band_cholesky(band) == 3
+    band[:, 0] = [1.0, np.nan, 1.0, 1.0]
+    assert band_cholesky(band) == 2
 
 
 def test_retract_frames_and_exp_match_reference():

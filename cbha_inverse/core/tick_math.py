@@ -1,117 +1,218 @@
 """
-Small SO(3) helpers of the fused tick (:mod:`cbha_inverse.core.tick`), in few numpy calls.
+SO(3) helpers of the fused tick (:mod:`cbha_inverse.core.tick`), compiled with numba.
 
-Hats by one matrix product, the ``Jl⁻¹`` coefficients and ``exp`` by power series evaluated as one
-matrix product (their terms chosen so that the truncation is below round-off), the retraction
-of the frames (:func:`cbha_inverse.core.chain.retract`) and the dense LU of the fallback tangent.
+Per-link scalar forms of the ``Jl⁻¹`` coefficients, the rotation logarithm and exponential (the
+same formulas as :mod:`cbha_inverse.core.se3`, which stays the batched numpy reference and the
+tests' oracle), the retraction of the frames (:func:`cbha_inverse.core.chain.retract`) and the
+dense LU of the fallback tangent.
 """
 
-from cbha_inverse.core.se3 import HAT_BASIS, JL_SERIES
+import math
+
+from cbha_inverse.core.se3 import JL_SERIES
+import numba
 import numpy as np
 from scipy.linalg import lapack
 
 # c(t) = sum_k a_k t^(2k), the hat(phi)^2 coefficient of Jl^-1: the first 7 terms of the se3
-# series (truncation below round-off up to _SERIES_LIMIT), as one matrix product
+# series (truncation below round-off up to _SERIES_LIMIT)
 _JL_SERIES = np.array(JL_SERIES[:7])
-_JL_DSERIES = 2.0 * np.arange(1, 7) * _JL_SERIES[1:]
-_JL_POWERS = np.arange(7)
 _SERIES_LIMIT = 0.5
-HALF_HAT_BASIS = -0.5 * HAT_BASIS
-# sin(t)/t, (1 - cos t)/t^2 and cos t as series in t^2
-_EXP_POWERS = np.arange(8)
-_EXP_SERIES = np.array([[(-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 2)),
-                         (-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 3)),
-                         (-1.0) ** k / np.prod(np.arange(1.0, 2 * k + 1))] for k in range(8)])
 
 
-def hats_into(out, v):
-    """
-    Write ``hat(v)`` into a buffer (one small matrix product).
-
-    Parameters
-    ----------
-    out : (..., 3, 3) ndarray
-        C-contiguous buffer.
-    v : (..., 3) ndarray
-        Vectors.
-
-    Returns
-    -------
-    (..., 3, 3) ndarray
-        ``out``.
-
-    """
-    np.matmul(v.reshape(-1, 3), HAT_BASIS, out=out.reshape(-1, 9))
-    return out
-
-
-def jl_coefficients(theta, t2):
+@numba.njit(cache=True)
+def jl_coefficient(theta):
     """
     Return ``c(t)`` and ``c'(t)/t`` of ``Jl⁻¹(φ) = I - φ^/2 + c φ^²`` (as in ``se3``).
 
+    ``c(t) = 1/t² - cot(t/2) / (2t)``; below 0.5 rad both from the Taylor series in ``t²``
+    (7 terms, Horner), where the closed forms cancel.
+
     Parameters
     ----------
-    theta, t2 : (n,) ndarray
-        Angles [rad] and their squares.
+    theta : float  [rad]
+        Angle ``t = |φ|``.
+
+    Returns
+    -------
+    c, dc_over_t : float
+
+    """
+    if theta < _SERIES_LIMIT:
+        t2 = theta * theta
+        n = _JL_SERIES.size
+        c = _JL_SERIES[n - 1]
+        dc = 2.0 * (n - 1) * _JL_SERIES[n - 1]
+        for k in range(n - 2, -1, -1):
+            c = c * t2 + _JL_SERIES[k]
+            if k > 0:
+                dc = dc * t2 + 2.0 * k * _JL_SERIES[k]
+        return c, dc
+    half = 0.5 * theta
+    sin_half = math.sin(half)
+    cot = math.cos(half) / sin_half
+    c = 1.0 / (theta * theta) - cot / (2.0 * theta)
+    dc = (-2.0 / theta ** 3 + 1.0 / (4.0 * theta * sin_half * sin_half)
+          + cot / (2.0 * theta * theta)) / theta
+    return c, dc
+
+
+@numba.njit(cache=True)
+def jl_coefficients(theta):
+    """
+    Return :func:`jl_coefficient` for an array of angles.
+
+    Parameters
+    ----------
+    theta : (n,) ndarray  [rad]
+        Angles.
 
     Returns
     -------
     c, dc_over_t : (n,) ndarray
 
     """
-    # clamped: powers of tiny angles would be denormal numbers (~100x slower); exact anyway
-    powers = np.power(np.maximum(t2, 1e-30)[:, None], _JL_POWERS)
-    c = powers @ _JL_SERIES
-    dc = powers[:, :6] @ _JL_DSERIES
-    if theta.max() >= _SERIES_LIMIT:
-        big = theta >= _SERIES_LIMIT
-        t = theta[big]
-        half = 0.5 * t
-        cot = np.cos(half) / np.sin(half)
-        c[big] = 1.0 / (t * t) - cot / (2.0 * t)
-        dc[big] = (-2.0 / t ** 3 + 1.0 / (4.0 * t * np.sin(half) ** 2)
-                   + cot / (2.0 * t * t)) / t
+    c = np.empty(theta.size)
+    dc = np.empty(theta.size)
+    for i in range(theta.size):
+        c[i], dc[i] = jl_coefficient(theta[i])
     return c, dc
 
 
-def exp_rotations(rotvec, t2=None):
+@numba.njit(cache=True)
+def rotation_log(rot, out):
     """
-    Return ``exp(hat(v))`` for (n, 3) rotation vectors (Rodrigues, few numpy calls).
+    Write the rotation vector of a rotation matrix into ``out`` and return its angle.
 
-    ``R = I + a v^ + b v^²`` with ``a = sin t / t`` and ``b = (1 - cos t) / t²``: both from their
-    Taylor series (8 terms, truncation below 1e-19 up to 0.5 rad, which is the default
-    ``max_rotation_step``), the closed form above.
+    As :func:`cbha_inverse.core.se3.so3_log`: ``t = atan2(|vee(R)|, (tr R - 1) / 2)`` while
+    ``tr R > -0.5``, otherwise through the (Shepperd) quaternion, accurate up to pi.
+
+    Parameters
+    ----------
+    rot : (3, 3) ndarray
+        Rotation matrix.
+    out : (3,) ndarray
+        Receives ``φ`` [rad].
+
+    Returns
+    -------
+    float
+        ``t = |φ|`` [rad], in [0, pi].
+
+    """
+    d0 = 0.5 * (rot[2, 1] - rot[1, 2])
+    d1 = 0.5 * (rot[0, 2] - rot[2, 0])
+    d2 = 0.5 * (rot[1, 0] - rot[0, 1])
+    trace = rot[0, 0] + rot[1, 1] + rot[2, 2]
+    cos_t = 0.5 * trace - 0.5
+    if cos_t > -0.75:
+        sin_t = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        theta = math.atan2(sin_t, cos_t)
+        # sin_t = 0 only for d = 0, where any finite ratio gives the zero vector
+        ratio = theta / max(sin_t, 1e-300)
+        out[0], out[1], out[2] = d0 * ratio, d1 * ratio, d2 * ratio
+        return theta
+    # Shepperd: the largest of (tr, R00, R11, R22) picks the accurate formula; here w < 0.5
+    if rot[0, 0] >= rot[1, 1] and rot[0, 0] >= rot[2, 2]:
+        s = math.sqrt(max(1.0 + 2.0 * rot[0, 0] - trace, 1e-300))
+        x, y, z, w = 0.5 * s, (rot[0, 1] + rot[1, 0]) / (2.0 * s), (
+            rot[0, 2] + rot[2, 0]) / (2.0 * s), d0 / s
+    elif rot[1, 1] >= rot[2, 2]:
+        s = math.sqrt(max(1.0 + 2.0 * rot[1, 1] - trace, 1e-300))
+        x, y, z, w = (rot[0, 1] + rot[1, 0]) / (2.0 * s), 0.5 * s, (
+            rot[1, 2] + rot[2, 1]) / (2.0 * s), d1 / s
+    else:
+        s = math.sqrt(max(1.0 + 2.0 * rot[2, 2] - trace, 1e-300))
+        x, y, z, w = (rot[0, 2] + rot[2, 0]) / (2.0 * s), (rot[1, 2] + rot[2, 1]) / (
+            2.0 * s), 0.5 * s, d2 / s
+    if w < 0.0:
+        x, y, z, w = -x, -y, -z, -w
+    v = math.sqrt(x * x + y * y + z * z)
+    theta = 2.0 * math.atan2(v, w)
+    ratio = theta / v
+    out[0], out[1], out[2] = x * ratio, y * ratio, z * ratio
+    return theta
+
+
+@numba.njit(cache=True)
+def rotation_exp(rotvec, out):
+    """
+    Write ``exp(hat(v))`` into ``out`` (Rodrigues: ``I + a v^ + b v^²``).
+
+    ``a = sin t / t`` and ``b = (1 - cos t) / t²``; below 1e-4 rad from their Taylor series.
+
+    Parameters
+    ----------
+    rotvec : (3,) ndarray  [rad]
+        Axis times angle.
+    out : (3, 3) ndarray
+        Receives the rotation.
+
+    """
+    x, y, z = rotvec[0], rotvec[1], rotvec[2]
+    t2 = x * x + y * y + z * z
+    if t2 < 1e-8:
+        a = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)
+        b = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0)
+    else:
+        t = math.sqrt(t2)
+        a = math.sin(t) / t
+        b = (1.0 - math.cos(t)) / t2
+    cos_t = 1.0 - b * t2
+    out[0, 0] = cos_t + b * x * x
+    out[1, 1] = cos_t + b * y * y
+    out[2, 2] = cos_t + b * z * z
+    out[0, 1] = b * x * y - a * z
+    out[1, 0] = b * x * y + a * z
+    out[0, 2] = b * x * z + a * y
+    out[2, 0] = b * x * z - a * y
+    out[1, 2] = b * y * z - a * x
+    out[2, 1] = b * y * z + a * x
+
+
+@numba.njit(cache=True)
+def exp_rotations(rotvec):
+    """
+    Return ``exp(hat(v))`` for (n, 3) rotation vectors (:func:`rotation_exp` each).
 
     Parameters
     ----------
     rotvec : (n, 3) ndarray  [rad]
         Axis times angle.
-    t2 : (n,) ndarray, optional
-        Squared angles, if known.
 
     Returns
     -------
     (n, 3, 3) ndarray
 
     """
-    if t2 is None:
-        t2 = np.einsum('ni,ni->n', rotvec, rotvec)
-    if t2.max() <= 0.25:
-        # (clamped: powers of tiny angles would be denormal numbers, ~100x slower)
-        ab = np.power(np.maximum(t2, 1e-30)[:, None], _EXP_POWERS) @ _EXP_SERIES
-        a, b, cos = ab[:, 0], ab[:, 1], ab[:, 2:]
-    else:
-        theta = np.sqrt(t2)
-        small = theta < 1e-4
-        safe = np.where(small, 1.0, theta)
-        a = np.where(small, 1.0 - t2 / 6.0, np.sin(safe) / safe)
-        b = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
-        cos = (1.0 - b * t2)[:, None]
-    out = (rotvec[:, :, None] * rotvec[:, None, :]).reshape(-1, 9)
-    out *= b[:, None]
-    out += (a[:, None] * rotvec) @ HAT_BASIS
-    out[:, ::4] += cos
-    return out.reshape(-1, 3, 3)
+    out = np.empty((rotvec.shape[0], 3, 3))
+    for i in range(rotvec.shape[0]):
+        rotation_exp(rotvec[i], out[i])
+    return out
+
+
+@numba.njit(cache=True)
+def _retract_into(positions, rotations, increments, max_rotation):
+    """Apply the increments to frames 1..n in place (see :func:`retract_frames`)."""
+    largest = 0.0
+    for f in range(increments.shape[0]):
+        largest = max(largest, increments[f, 3] ** 2 + increments[f, 4] ** 2
+                      + increments[f, 5] ** 2)
+    largest = math.sqrt(largest)
+    factor = max_rotation / largest if largest > max_rotation else 1.0
+    step = np.empty(3)
+    rot = np.empty((3, 3))
+    old = np.empty((3, 3))
+    for f in range(increments.shape[0]):
+        for i in range(3):
+            positions[f + 1, i] += factor * increments[f, i]
+            step[i] = factor * increments[f, 3 + i]
+        rotation_exp(step, rot)
+        old[:, :] = rotations[f + 1]
+        for i in range(3):
+            for j in range(3):
+                rotations[f + 1, i, j] = (rot[i, 0] * old[0, j] + rot[i, 1] * old[1, j]
+                                          + rot[i, 2] * old[2, j])
 
 
 def retract_frames(positions, rotations, increments, max_rotation=None, in_place=False):
@@ -129,7 +230,7 @@ def retract_frames(positions, rotations, increments, max_rotation=None, in_place
     max_rotation : float, optional  [rad]
         Scale the whole step down so that no frame rotates more than this.
     in_place : bool
-        Update ``positions`` and ``rotations`` instead of new arrays.
+        Update ``positions`` and ``rotations`` (C-contiguous float arrays) instead of new arrays.
 
     Returns
     -------
@@ -137,24 +238,11 @@ def retract_frames(positions, rotations, increments, max_rotation=None, in_place
         ``x += dx``, ``R ← exp(dθ) R``.
 
     """
-    rot = increments[:, 3:]
-    t2 = np.einsum('ni,ni->n', rot, rot)
-    if max_rotation is not None:
-        largest = float(t2.max())
-        if largest > max_rotation * max_rotation:
-            factor = max_rotation / largest ** 0.5
-            increments = increments * factor
-            rot = increments[:, 3:]
-            t2 = t2 * (factor * factor)
-    if in_place:
-        new_positions, new_rotations = positions, rotations
-    else:
-        new_positions = positions.copy()
-        new_rotations = np.empty_like(rotations)
-        new_rotations[0] = rotations[0]
-    new_positions[1:] += increments[:, :3]
-    np.matmul(exp_rotations(rot, t2), rotations[1:], out=new_rotations[1:])
-    return new_positions, new_rotations
+    if not in_place:
+        positions, rotations = positions.copy(), rotations.copy()
+    _retract_into(positions, rotations, np.ascontiguousarray(increments, dtype=float),
+                  math.inf if max_rotation is None else float(max_rotation))
+    return positions, rotations
 
 
 class DenseLU:

@@ -1,0 +1,436 @@
+"""
+Compiled kernels of one linearisation tick (numba): links, cables, assembly, band Cholesky.
+
+The reference path (:func:`cbha_inverse.core.assembly.assemble_tangent` and the actuators'
+``evaluate`` / ``load_tangent``) is batched numpy; a tick of it is a few hundred numpy calls of
+1-3 µs each, ten times the arithmetic. These kernels compute the same quantities (equal to
+round-off, tested against the reference) in one pass per link, span and column:
+
+- :func:`link_pass`, per link ``l`` (frames ``a = l``, ``b = l + 1``): the deformation ``δ``
+  (DESIGN §3), the local b-side wrench ``L = [-s_f; -Jl⁻ᵀ(φ) s_r] + Σ_c p_c (G0_c + H_c δ)``
+  (paper eq. 9 plus the condensed cavities of :mod:`cbha_inverse.core.cavity_linear`) rotated to
+  world axes and gathered onto the two frames (paper eq. 5-7), and the 12 x 12 world tangent
+  ``Dᵀ M D`` + geometric terms, ``M = (Bᵀ K + Z(dJ) - H_p) B`` (paper eq. 8 plus the exact
+  cavity load stiffness);
+- :func:`cable_pass`: cable columns, their loads, the span stiffness ``C P Cᵀ``
+  (``P = λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the point
+  moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``;
+- :func:`scatter_add`: every block value into the symmetric band storage by a constant index;
+- :func:`band_cholesky` / :func:`band_solve`: ``K = L Lᵀ`` in LAPACK's lower band layout
+  (``band[c, r - c] = K[r, c]``, C order, half-bandwidth ``kd``) and the multi-RHS solve.
+"""
+
+import math
+
+from cbha_inverse.core.tick_math import jl_coefficient, rotation_log
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def _hat(v, out):
+    """Write ``hat(v)`` (``hat(v) @ b = v x b``) into a (3, 3) array."""
+    out[0, 0] = out[1, 1] = out[2, 2] = 0.0
+    out[0, 1], out[0, 2] = -v[2], v[1]
+    out[1, 0], out[1, 2] = v[2], -v[0]
+    out[2, 0], out[2, 1] = -v[1], v[0]
+
+
+@numba.njit(cache=True)
+def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
+              cavity_wrench, cavity_stiffness, rhs, blocks):
+    """
+    Write every link's wrenches into ``rhs`` and its world tangent into ``blocks``.
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    stiffness : (n, 6, 6) ndarray  [N/m, N, N*m/rad]
+        Link stiffness ``K``.
+    rest_offsets : (n, 3) ndarray  [m]
+        ``d0``.
+    rest_rotations_t : (n, 3, 3) ndarray
+        ``Q0ᵀ``, or a (0, 3, 3) array when every ``Q0`` is the identity.
+    actuation : (m,) ndarray  [Pa, N]
+        ``λ`` (the cavity pressures enter the wrench and the load stiffness).
+    cavity_wrench : (n, c, 6) ndarray  [N/Pa, N*m/Pa]
+        ``G0`` of every condensed cavity part per link (``c = m`` with cavities, else 0).
+    cavity_stiffness : (n, c, 6, 6) ndarray
+        ``H`` of the same parts (derivative of the local wrench per unit pressure).
+    rhs : (6n, m + 1) ndarray
+        Zeroed here; receives the link wrenches (column 0) and, with cavities, ``J_aᵀ``
+        (columns ``1 + c``).
+    blocks : (n, 12, 12) ndarray
+        Receives the link tangents in world axes, rows and columns (frame a, frame b); only
+        their symmetric part is meaningful.
+
+    """
+    n = stiffness.shape[0]
+    n_cav = cavity_wrench.shape[1]
+    kc = 1 + n_cav
+    rhs[:, :] = 0.0
+    rel = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    delta = np.empty(6)
+    stress = np.empty(6)
+    jinv = np.empty((3, 3))
+    a = np.empty((6, 6))
+    mat = np.empty((6, 6))
+    dmat = np.zeros((6, 12))
+    md = np.empty((6, 12))
+    local = np.empty((6, kc))
+    world = np.empty((6, kc))
+    diff = np.empty(3)
+    diff_hat = np.empty((3, 3))
+    f_hat = np.empty((3, 3))
+    m_hat = np.empty((3, 3))
+    for link in range(n):
+        ra = rotations[link]
+        rb = rotations[link + 1]
+        for i in range(3):
+            diff[i] = positions[link + 1, i] - positions[link, i]
+        for i in range(3):
+            for j in range(3):
+                rel[i, j] = ra[0, i] * rb[0, j] + ra[1, i] * rb[1, j] + ra[2, i] * rb[2, j]
+        if rest_rotations_t.shape[0] > 0:
+            q0t = rest_rotations_t[link]
+            tmp[:, :] = rel
+            for i in range(3):
+                for j in range(3):
+                    rel[i, j] = (tmp[i, 0] * q0t[0, j] + tmp[i, 1] * q0t[1, j]
+                                 + tmp[i, 2] * q0t[2, j])
+        for i in range(3):
+            delta[i] = (ra[0, i] * diff[0] + ra[1, i] * diff[1] + ra[2, i] * diff[2]
+                        - rest_offsets[link, i])
+        theta = rotation_log(rel, delta[3:])
+        phi = delta[3:]
+        t2 = theta * theta
+        c, dc = jl_coefficient(theta)
+        k = stiffness[link]
+        for i in range(6):
+            acc = 0.0
+            for j in range(6):
+                acc += k[i, j] * delta[j]
+            stress[i] = acc
+        # Jl^-1 = (1 - c t^2) I + c phi phi^T - hat(phi) / 2
+        for i in range(3):
+            for j in range(3):
+                jinv[i, j] = c * phi[i] * phi[j]
+            jinv[i, i] += 1.0 - c * t2
+        jinv[0, 1] += 0.5 * phi[2]
+        jinv[1, 0] -= 0.5 * phi[2]
+        jinv[0, 2] -= 0.5 * phi[1]
+        jinv[2, 0] += 0.5 * phi[1]
+        jinv[1, 2] += 0.5 * phi[0]
+        jinv[2, 1] -= 0.5 * phi[0]
+        # a = B^T K - H_p with B = diag(I, Jl^-1), H_p = sum_c p_c H_c
+        for j in range(6):
+            for i in range(3):
+                a[i, j] = k[i, j]
+                a[3 + i, j] = jinv[0, i] * k[3, j] + jinv[1, i] * k[4, j] + jinv[2, i] * k[5, j]
+        for cav in range(n_cav):
+            p = actuation[cav]
+            if p != 0.0:
+                h = cavity_stiffness[link, cav]
+                for i in range(6):
+                    for j in range(6):
+                        a[i, j] -= p * h[i, j]
+        # local b-side wrench: column 0 total (-a delta + G0_p), columns 1.. per unit pressure
+        for i in range(6):
+            acc = 0.0
+            for j in range(6):
+                acc += a[i, j] * delta[j]
+            local[i, 0] = -acc
+        for cav in range(n_cav):
+            p = actuation[cav]
+            g0 = cavity_wrench[link, cav]
+            h = cavity_stiffness[link, cav]
+            for i in range(6):
+                acc = g0[i]
+                for j in range(6):
+                    acc += h[i, j] * delta[j]
+                local[i, 1 + cav] = acc
+                local[i, 0] += p * g0[i]
+        # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a)
+        for col in range(kc):
+            for part in range(2):
+                for i in range(3):
+                    world[3 * part + i, col] = (ra[i, 0] * local[3 * part, col]
+                                                + ra[i, 1] * local[3 * part + 1, col]
+                                                + ra[i, 2] * local[3 * part + 2, col])
+        row_b = 6 * link
+        row_a = 6 * (link - 1)
+        for col in range(kc):
+            for i in range(6):
+                rhs[row_b + i, col] += world[i, col]
+            if link > 0:
+                for i in range(6):
+                    rhs[row_a + i, col] -= world[i, col]
+                rhs[row_a + 3, col] -= diff[1] * world[2, col] - diff[2] * world[1, col]
+                rhs[row_a + 4, col] -= diff[2] * world[0, col] - diff[0] * world[2, col]
+                rhs[row_a + 5, col] -= diff[0] * world[1, col] - diff[1] * world[0, col]
+        # a[3:, 3:] += d(Jl^-T s_r)/dphi (se3.so3_left_jacobian_inverse_transpose_derivative)
+        s_r = stress[3:]
+        ps = phi[0] * s_r[0] + phi[1] * s_r[1] + phi[2] * s_r[2]
+        for i in range(3):
+            left0 = dc * (phi[i] * ps - t2 * s_r[i]) - 2.0 * c * s_r[i]
+            left1 = c * phi[i]
+            for j in range(3):
+                a[3 + i, 3 + j] += left0 * phi[j] + left1 * s_r[j]
+            a[3 + i, 3 + i] += c * ps
+        a[3, 4] += 0.5 * s_r[2]
+        a[4, 3] -= 0.5 * s_r[2]
+        a[3, 5] -= 0.5 * s_r[1]
+        a[5, 3] += 0.5 * s_r[1]
+        a[4, 5] += 0.5 * s_r[0]
+        a[5, 4] -= 0.5 * s_r[0]
+        # mat = a B
+        for i in range(6):
+            for j in range(3):
+                mat[i, j] = a[i, j]
+                mat[i, 3 + j] = a[i, 3] * jinv[0, j] + a[i, 4] * jinv[1, j] + a[i, 5] * jinv[2, j]
+        # D = d delta / d(q_a, q_b): [-Ra^T, Ra^T d^, Ra^T, 0; 0, -Ra^T, 0, Ra^T]
+        _hat(diff, diff_hat)
+        for i in range(3):
+            for j in range(3):
+                dmat[i, j] = -ra[j, i]
+                dmat[i, 6 + j] = ra[j, i]
+                dmat[3 + i, 3 + j] = -ra[j, i]
+                dmat[3 + i, 9 + j] = ra[j, i]
+                dmat[i, 3 + j] = (ra[0, i] * diff_hat[0, j] + ra[1, i] * diff_hat[1, j]
+                                  + ra[2, i] * diff_hat[2, j])
+        for i in range(6):
+            for j in range(12):
+                acc = 0.0
+                for q in range(6):
+                    acc += mat[i, q] * dmat[q, j]
+                md[i, j] = acc
+        out = blocks[link]
+        for i in range(12):
+            for j in range(12):
+                acc = 0.0
+                for q in range(6):
+                    acc += dmat[q, i] * md[q, j]
+                out[i, j] = acc
+        # geometric terms (b-side world force F, moment M), symmetric part only, in the
+        # a-rotation columns: [-2F^; -F^ d^; 2F^; M^]
+        _hat(world[:3, 0], f_hat)
+        _hat(world[3:, 0], m_hat)
+        for i in range(3):
+            for j in range(3):
+                out[i, 3 + j] -= 2.0 * f_hat[i, j]
+                out[6 + i, 3 + j] += 2.0 * f_hat[i, j]
+                out[9 + i, 3 + j] += m_hat[i, j]
+                out[3 + i, 3 + j] -= (f_hat[i, 0] * diff_hat[0, j] + f_hat[i, 1] * diff_hat[1, j]
+                                      + f_hat[i, 2] * diff_hat[2, j])
+
+
+@numba.njit(cache=True)
+def cable_pass(positions, rotations, actuation, frames, offsets, span_start, span_end,
+               point_force, span_owner, point_owner, columns, span_pair, point_slot, rhs,
+               pair_values, moment_values):
+    """
+    Add one cable group's columns and loads to ``rhs``; write its stiffness blocks.
+
+    Same quantities as :class:`cbha_inverse.core.actuation.CableGroup` (``evaluate`` and the
+    symmetric ``load_tangent``).
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    actuation : (m,) ndarray  [N]
+        All actuators (the tensions are at ``columns``).
+    frames : (P,) int ndarray
+        Frame of every routing point.
+    offsets : (P, 3) ndarray  [m]
+        Routing points in their frame's axes.
+    span_start, span_end : (S,) int ndarray
+        Points of every straight span.
+    point_force : (P, S) ndarray
+        Force on each point per unit span direction and unit tension (+1 / -1 incidence).
+    span_owner, point_owner : (S,), (P,) int ndarray
+        Cable (0..m_c - 1) of every span and point.
+    columns : (m_c,) int ndarray
+        Actuator column of every cable.
+    span_pair : (S,) int ndarray
+        Frame-pair block that receives each span's stiffness.
+    point_slot : (P,) int ndarray
+        Moment block (one per frame used) that receives each point's moment stiffness.
+    rhs : (6n, m + 1) ndarray
+        Column 0 (residual) and the cables' ``J_aᵀ`` columns are added to.
+    pair_values : (n_pairs, 12, 12) ndarray
+        Receives the span blocks summed per frame pair.
+    moment_values : (n_slots, 3, 3) ndarray
+        Receives the point moment blocks summed per frame.
+
+    """
+    n_points = frames.size
+    n_spans = span_start.size
+    levers = np.empty((n_points, 3))
+    points = np.empty((n_points, 3))
+    for p in range(n_points):
+        rot = rotations[frames[p]]
+        for i in range(3):
+            levers[p, i] = rot[i, 0] * offsets[p, 0] + rot[i, 1] * offsets[p, 1] + rot[
+                i, 2] * offsets[p, 2]
+            points[p, i] = positions[frames[p], i] + levers[p, i]
+    units = np.empty((n_spans, 3))
+    lengths = np.empty(n_spans)
+    for s in range(n_spans):
+        for i in range(3):
+            units[s, i] = points[span_end[s], i] - points[span_start[s], i]
+        length = math.sqrt(units[s, 0] ** 2 + units[s, 1] ** 2 + units[s, 2] ** 2)
+        lengths[s] = length
+        for i in range(3):
+            units[s, i] /= length
+    forces = np.zeros((n_points, 3))
+    for p in range(n_points):
+        for s in range(n_spans):
+            weight = point_force[p, s]
+            if weight != 0.0:
+                for i in range(3):
+                    forces[p, i] += weight * units[s, i]
+    moment_values[:, :, :] = 0.0
+    for p in range(n_points):
+        f, r = forces[p], levers[p]
+        tension = actuation[columns[point_owner[p]]]
+        if frames[p] > 0:
+            row = 6 * (frames[p] - 1)
+            col = 1 + columns[point_owner[p]]
+            wrench = (f[0], f[1], f[2], r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2],
+                      r[0] * f[1] - r[1] * f[0])
+            for i in range(6):
+                rhs[row + i, col] += wrench[i]
+                rhs[row + i, 0] += tension * wrench[i]
+        # A = sum r (t F)^T per frame; the block is tr(A) I - A
+        block = moment_values[point_slot[p]]
+        for i in range(3):
+            for j in range(3):
+                block[i, j] -= tension * r[i] * f[j]
+        trace = tension * (r[0] * f[0] + r[1] * f[1] + r[2] * f[2])
+        for i in range(3):
+            block[i, i] += trace
+    pair_values[:, :, :] = 0.0
+    proj = np.empty((3, 3))
+    cmat = np.zeros((12, 3))
+    cp = np.empty((12, 3))
+    for s in range(n_spans):
+        scale = actuation[columns[span_owner[s]]] / lengths[s]
+        u = units[s]
+        for i in range(3):
+            for j in range(3):
+                proj[i, j] = -scale * u[i] * u[j]
+            proj[i, i] += scale
+        # C = [I; hat(r_start); -I; -hat(r_end)]
+        _hat(levers[span_start[s]], cmat[3:6])
+        _hat(levers[span_end[s]], cmat[9:12])
+        for i in range(3):
+            for j in range(3):
+                cmat[i, j] = 1.0 if i == j else 0.0
+                cmat[6 + i, j] = -1.0 if i == j else 0.0
+                cmat[9 + i, j] = -cmat[9 + i, j]
+        for i in range(12):
+            for j in range(3):
+                cp[i, j] = cmat[i, 0] * proj[0, j] + cmat[i, 1] * proj[1, j] + cmat[i, 2] * proj[
+                    2, j]
+        out = pair_values[span_pair[s]]
+        for i in range(12):
+            for j in range(12):
+                out[i, j] += cp[i, 0] * cmat[j, 0] + cp[i, 1] * cmat[j, 1] + cp[i, 2] * cmat[j, 2]
+
+
+@numba.njit(cache=True)
+def scatter_add(index, values, weights, out):
+    """
+    Zero ``out`` and add ``weights * values`` at ``index`` (a compiled ``np.bincount``).
+
+    Parameters
+    ----------
+    index : (V,) int ndarray
+        Slot of every value in ``out``.
+    values, weights : (V,) ndarray
+        Values and their weights.
+    out : (S,) ndarray
+        Receives the sums.
+
+    """
+    out[:] = 0.0
+    for i in range(index.size):
+        out[index[i]] += weights[i] * values[i]
+
+
+@numba.njit(cache=True)
+def band_cholesky(band):
+    """
+    Factor a symmetric positive definite band matrix in place, ``K = L Lᵀ`` (as LAPACK dpbtrf).
+
+    Parameters
+    ----------
+    band : (N, kd + 1) ndarray
+        Lower band storage, ``band[c, r - c] = K[r, c]`` for ``0 <= r - c <= kd`` (C order: the
+        Fortran ``(kd + 1, N)`` layout of LAPACK); overwritten by ``L`` in the same layout.
+
+    Returns
+    -------
+    int
+        0 on success, else ``j + 1`` for the first column whose pivot is not positive (or not
+        finite); ``band`` is then partly overwritten.
+
+    """
+    size, width = band.shape
+    kd = width - 1
+    for j in range(size):
+        first = max(0, j - kd)
+        pivot = band[j, 0]
+        for q in range(first, j):
+            pivot -= band[q, j - q] ** 2
+        if not pivot > 0.0 or not math.isfinite(pivot):
+            return j + 1
+        diagonal = math.sqrt(pivot)
+        band[j, 0] = diagonal
+        for i in range(j + 1, min(size, j + kd + 1)):
+            acc = band[j, i - j]
+            for q in range(max(0, i - kd), j):
+                acc -= band[q, i - q] * band[q, j - q]
+            band[j, i - j] = acc / diagonal
+    return 0
+
+
+@numba.njit(cache=True)
+def band_solve(factor, rhs):
+    """
+    Solve ``L Lᵀ X = rhs`` in place with a factor of :func:`band_cholesky`.
+
+    Parameters
+    ----------
+    factor : (N, kd + 1) ndarray
+        ``L`` in lower band storage.
+    rhs : (N, c) ndarray
+        Right-hand sides (C order), overwritten by ``X``.
+
+    """
+    size, width = factor.shape
+    kd = width - 1
+    n_rhs = rhs.shape[1]
+    for i in range(size):
+        for q in range(max(0, i - kd), i):
+            weight = factor[q, i - q]
+            for col in range(n_rhs):
+                rhs[i, col] -= weight * rhs[q, col]
+        inverse = 1.0 / factor[i, 0]
+        for col in range(n_rhs):
+            rhs[i, col] *= inverse
+    for i in range(size - 1, -1, -1):
+        for q in range(i + 1, min(size, i + kd + 1)):
+            weight = factor[i, q - i]
+            for col in range(n_rhs):
+                rhs[i, col] -= weight * rhs[q, col]
+        inverse = 1.0 / factor[i, 0]
+        for col in range(n_rhs):
+            rhs[i, col] *= inverse
