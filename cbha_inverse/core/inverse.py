@@ -30,6 +30,7 @@ between equivalent solutions on a saturated target).
 
 from dataclasses import dataclass
 
+from cbha_inverse.core import qp_kernels
 import numpy as np
 
 
@@ -211,23 +212,9 @@ def qp_matrices(w_ea, w_aa, scale, *, energy_weight=1e-6, proximal_weight=1e-4):
     QPMatrices
 
     """
-    w = w_ea * scale
-    tracking = w.T @ w
-    m = scale.size
-    norm = tracking.trace() / m
-    if not norm > 0.0:
-        norm = 1.0
-    w /= norm
-    tracking /= norm
-    hessian = tracking.copy()
-    hessian.flat[::m + 1] += proximal_weight
-    energy = w_aa * (scale[:, None] * scale)
-    energy_norm = energy.trace() / m
-    if energy_norm > 0.0 and energy_weight > 0.0:
-        energy += energy.T
-        energy *= (energy_weight / energy_norm) * 0.5
-        hessian += energy
-    return QPMatrices(hessian, tracking, w, scale, proximal_weight)
+    hessian, tracking, weighted_w = qp_kernels.qp_hessians(
+        w_ea, w_aa, scale, float(energy_weight), float(proximal_weight))
+    return QPMatrices(hessian, tracking, weighted_w, scale, proximal_weight)
 
 
 def qp_problem(matrices, delta_free, previous, lower_bounds, upper_bounds, rate_limit=None):
@@ -252,14 +239,8 @@ def qp_problem(matrices, delta_free, previous, lower_bounds, upper_bounds, rate_
     QPProblem
 
     """
-    scale = matrices.scale
-    x_prev = previous / scale
-    tracking_gradient = matrices.weighted_w.T @ delta_free
-    gradient = tracking_gradient - matrices.proximal_weight * x_prev
-    lower = lower_bounds / scale
-    upper = upper_bounds / scale
-    if rate_limit is not None:
-        lower = np.maximum(lower, x_prev - rate_limit / scale)
-        upper = np.minimum(upper, x_prev + rate_limit / scale)
-    return QPProblem(matrices.hessian, gradient, lower, upper, scale, x_prev,
+    gradient, lower, upper, x_prev, tracking_gradient = qp_kernels.qp_vectors(
+        matrices.weighted_w, float(matrices.proximal_weight), matrices.scale, delta_free,
+        previous, lower_bounds, upper_bounds, rate_limit)
+    return QPProblem(matrices.hessian, gradient, lower, upper, matrices.scale, x_prev,
                      matrices.tracking_hessian, tracking_gradient)

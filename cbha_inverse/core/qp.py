@@ -8,9 +8,9 @@ saturation. proxsuite's status is always returned to the caller.
 
 from dataclasses import dataclass
 
+from cbha_inverse.core import qp_kernels
 import numpy as np
 import proxsuite
-from scipy.linalg import lapack
 
 
 _STATUS = {
@@ -20,6 +20,12 @@ _STATUS = {
     'PROXQP_SOLVED_CLOSEST_PRIMAL_FEASIBLE': 'closest_primal_feasible',
     'PROXQP_DUAL_INFEASIBLE': 'dual_infeasible',
     'PROXQP_NOT_RUN': 'not_run',
+}
+
+_ACTIVE_SET_STATUS = {
+    qp_kernels.SOLVED: 'solved',
+    qp_kernels.MAX_ITERATIONS: 'max_iterations',
+    qp_kernels.SINGULAR: 'singular',
 }
 
 
@@ -133,13 +139,14 @@ class ActiveSetQP:
     Exact box-QP solver for small problems (m ≲ 30): principal pivoting on the active set.
 
     Each iteration fixes the variables of the current active set at their bounds and solves the
-    others from the KKT equations (LAPACK ``dposv`` on the free block of the SPD Hessian); the
+    others from the KKT equations (a Cholesky solve of the free block of the SPD Hessian); the
     variables that leave the box become active and the active ones whose multiplier has the wrong
     sign become free (block pivoting for the first iterations, then one variable at a time,
     Murty's rule, which terminates for positive definite Hessians). The active set of the previous
     tick is the warm start, so a tracking tick usually takes one iteration. The result satisfies
     the KKT conditions to round-off (checked); if not within ``max_iterations``, ``ok`` is False
-    and the caller falls back to proxsuite.
+    and the caller falls back to proxsuite. The iteration is the compiled kernel
+    :func:`cbha_inverse.core.qp_kernels.active_set_box_qp`.
 
     Parameters
     ----------
@@ -177,58 +184,15 @@ class ActiveSetQP:
             ``'singular'`` (``ok`` False, ``x`` the previous actuation clipped into the box).
 
         """
-        h, g = problem.hessian, problem.gradient
-        lower, upper = problem.lower, problem.upper
-        state = self._state.copy()
-        # the problem is normalised (|H| ~ 1): absolute tolerance on the multipliers
-        scale = 1e-12 * (2.0 + float(np.abs(g).max()))
-        for iteration in range(1, self.max_iterations + 1):
-            free = state == 0
-            if free.all():
-                # interior guess: the Newton point; only the box can be violated
-                _, x, info = lapack.dposv(h, -g)
-                if info != 0:
-                    break
-                below = x < lower - 1e-13
-                above = x > upper + 1e-13
-                if not (below.any() or above.any()):
-                    self._state = state
-                    return QPSolution(np.minimum(np.maximum(x, lower), upper), 'solved',
-                                      iteration, True)
-                wrong = np.zeros_like(below)
-            else:
-                x = np.where(state < 0, lower, upper)
-                info = 0
-                if free.any():
-                    h_free = h[free]
-                    bound = ~free
-                    _, xf, info = lapack.dposv(h_free[:, free],
-                                               -g[free] - h_free[:, bound] @ x[bound])
-                    x[free] = xf
-                if info != 0:
-                    break
-                grad = h @ x + g
-                below = free & (x < lower - 1e-13)
-                above = free & (x > upper + 1e-13)
-                wrong = ((state < 0) & (grad < -scale)) | ((state > 0) & (grad > scale))
-            bad = below | above | wrong
-            if not bad.any():
-                self._state = state
-                return QPSolution(np.minimum(np.maximum(x, lower), upper), 'solved', iteration,
-                                  True)
-            if iteration > 3:
-                # Murty's rule: pivot only the first violating variable (finite termination)
-                first = int(np.argmax(bad))
-                bad = np.zeros_like(bad)
-                bad[first] = True
-                below, above, wrong = below & bad, above & bad, wrong & bad
-            state[below] = -1
-            state[above] = 1
-            state[wrong] = 0
+        x, code, iterations, state = qp_kernels.active_set_box_qp(
+            problem.hessian, problem.gradient, problem.lower, problem.upper, self._state,
+            self.max_iterations)
+        if code == qp_kernels.SOLVED:
+            self._state = state
+            return QPSolution(x, 'solved', iterations, True)
         self.reset()
-        x = np.minimum(np.maximum(problem.previous, lower), upper)
-        return QPSolution(x, 'max_iterations' if iteration == self.max_iterations else 'singular',
-                          iteration, False)
+        x = np.minimum(np.maximum(problem.previous, problem.lower), problem.upper)
+        return QPSolution(x, _ACTIVE_SET_STATUS[code], iterations, False)
 
 
 def polish(problem, x, tolerance=1e-4):
@@ -257,35 +221,9 @@ def polish(problem, x, tolerance=1e-4):
         The refined (or the given) solution.
 
     """
-    h, g = problem.hessian, problem.gradient
-    near_lower = x - problem.lower < tolerance
-    near_upper = problem.upper - x < tolerance
-    if not (near_lower.any() or near_upper.any()):
-        return x
-    grad = h @ x + g
-    at_lower = near_lower & (grad > 0.0)
-    at_upper = near_upper & (grad < 0.0)
-    active = at_lower | at_upper
-    if not active.any():
-        return x
-    y = np.where(at_lower, problem.lower, np.where(at_upper, problem.upper, x))
-    free = ~active
-    if free.any():
-        h_free = h[free]
-        _, solution, info = lapack.dposv(h_free[:, free], -g[free] - h_free[:, active] @ y[active])
-        if info != 0:
-            return x
-        y[free] = solution
-    grad = h @ y + g
-    if not (_inside(problem, y) and (grad[at_lower] >= 0.0).all()
-            and (grad[at_upper] <= 0.0).all()):
-        return x
-    return y
-
-
-def _inside(problem, x):
-    """Whether ``x`` lies in the box of ``problem``."""
-    return bool((x >= problem.lower).all() and (x <= problem.upper).all())
+    y, accepted = qp_kernels.polish_box_qp(problem.hessian, problem.gradient, problem.lower,
+                                           problem.upper, x, tolerance)
+    return y if accepted else x
 
 
 def projected_gauss_seidel(problem, x0=None, max_iterations=500, tolerance=1e-10):
@@ -352,9 +290,5 @@ def binding_bounds(problem, x, tolerance=1e-6):
         ``True`` where ``x`` sits on a bound and the tracking gradient points out of the box.
 
     """
-    near_lower = x <= problem.lower + tolerance
-    near_upper = x >= problem.upper - tolerance
-    if not (near_lower.any() or near_upper.any()):
-        return near_lower
-    grad = problem.tracking_hessian @ x + problem.tracking_gradient
-    return (near_lower & (grad > tolerance)) | (near_upper & (grad < -tolerance))
+    return qp_kernels.bounds_binding(problem.tracking_hessian, problem.tracking_gradient,
+                                     problem.lower, problem.upper, x, tolerance)
