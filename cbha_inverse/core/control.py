@@ -27,8 +27,9 @@ actuation. Each step is limited to ``max_rotation_step`` radians per frame so a 
 throw the linearisation off.
 """
 
-from dataclasses import dataclass
+import math
 import time
+from typing import NamedTuple
 
 from cbha_inverse.core.assembly import assemble_tangent, material_tangent
 from cbha_inverse.core.btd import factorize
@@ -39,12 +40,12 @@ from cbha_inverse.core.inverse_types import InverseOptions, TickResult
 from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
                                   projected_gauss_seidel)
 from cbha_inverse.core.tick import TickModel
-from cbha_inverse.core.tick_math import DenseLU, retract_frames as _retract
+from cbha_inverse.core.tick_kernels import project_effectors
+from cbha_inverse.core.tick_math import apply_linear_step, DenseLU, retract_frames as _retract
 import numpy as np
 
 
-@dataclass(frozen=True)
-class _Linearization:
+class _Linearization(NamedTuple):
     """What a linearisation tick keeps for the linear ticks that follow it (paper eq. 11)."""
 
     w_ea: np.ndarray
@@ -105,8 +106,10 @@ class InverseSolver:
         self._active_set = ActiveSetQP(m)
         self._tick = TickModel(model, actuators, self._external)
         self._m, self._k = m, effectors.n_effectors
-        self._effector_rows = (6 * (effectors.frames - 1)[:, None] + np.arange(3)).reshape(-1)
-        self._zero_levers = not np.any(effectors.offsets)
+        step = self.options.max_rotation_step
+        self._max_rotation = math.inf if step is None else float(step)
+        self._effector_frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
+        self._effector_offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
         self.reset()
 
     def reset(self, state=None, actuation=None):
@@ -138,9 +141,11 @@ class InverseSolver:
         if self._pending is None:
             return self._positions, self._rotations
         free_step, solved_a, previous = self._pending
-        increments = (free_step + solved_a @ (self.actuation - previous)).reshape(-1, 6)
-        return _retract(self._positions, self._rotations, increments,
-                        self.options.max_rotation_step, in_place)
+        positions, rotations = ((self._positions, self._rotations) if in_place
+                                else (self._positions.copy(), self._rotations.copy()))
+        apply_linear_step(positions, rotations, free_step, solved_a, self.actuation - previous,
+                          self._max_rotation)
+        return positions, rotations
 
     def _materialise(self):
         """Apply the pending linear step to the stored frames."""
@@ -340,26 +345,14 @@ class InverseSolver:
             if factorization is None:
                 return t_assembly, t_factor, None
             solved = factorization.solve(rhs)
-        m = self._m
-        if self._zero_levers:
-            moved = solved[self._effector_rows]
-            effector_positions = positions[self.effectors.frames]
-        else:
-            n = self.model.n_links
-            levers = self.effectors.levers(rotations)
-            moved = self.effectors.apply_jacobian(solved.reshape(n, 6, m + 1), levers)
-            moved = moved.reshape(-1, m + 1)
-            effector_positions = positions[self.effectors.frames] + levers
-        w_ea = moved[:, 1:]
-        jat = rhs[:, 1:]
-        w_aa = jat.T @ solved[:, 1:]
+        w_ea, w_aa, offset, residual_norm = project_effectors(
+            solved, rhs, positions, rotations, self._effector_frames, self._effector_offsets,
+            previous)
         matrices = qp_matrices(w_ea, w_aa, self._scale,
                                energy_weight=self.options.energy_weight,
                                proximal_weight=self.options.proximal_weight)
-        offset = effector_positions.reshape(-1) + moved[:, 0] - w_ea @ previous
-        residual = rhs[:, 0]
         lin = _Linearization(w_ea, matrices, offset, solved[:, 0], solved[:, 1:], previous,
-                             float(np.sqrt(residual @ residual)))
+                             residual_norm)
         return t_assembly, t_factor, lin
 
     def _newton_step(self, actuation):

@@ -41,7 +41,6 @@ class CableTerms:
         self.offsets = np.ascontiguousarray(group.offsets, dtype=float)
         self.start = np.ascontiguousarray(group.segment_start, dtype=np.int64)
         self.end = np.ascontiguousarray(group.segment_end, dtype=np.int64)
-        self.point_force = np.ascontiguousarray(group._point_force, dtype=float)
         self.span_owner = np.ascontiguousarray(group._segment_owner, dtype=np.int64)
         self.point_owner = np.ascontiguousarray(group._point_owner, dtype=np.int64)
         pairs = {}
@@ -74,6 +73,6 @@ class CableTerms:
 
         """
         cable_pass(positions, rotations, actuation, self.frames, self.offsets, self.start,
-                   self.end, self.point_force, self.span_owner, self.point_owner, self.columns,
+                   self.end, self.span_owner, self.point_owner, self.columns,
                    self.span_pair, self.point_slot, rhs, pair_values.reshape(-1, 12, 12),
                    moment_values.reshape(-1, 3, 3))

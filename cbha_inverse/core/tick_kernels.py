@@ -16,8 +16,8 @@ round-off, tested against the reference) in one pass per link, span and column:
   (``P = λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the point
   moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``;
 - :func:`scatter_add`: every block value into the symmetric band storage by a constant index;
-- :func:`band_cholesky` / :func:`band_solve`: ``K = L Lᵀ`` in LAPACK's lower band layout
-  (``band[c, r - c] = K[r, c]``, C order, half-bandwidth ``kd``) and the multi-RHS solve.
+- :func:`band_cholesky` / :func:`band_solve`: ``K = L Lᵀ`` in row band storage
+  (``band[r, kd + c - r] = K[r, c]``, C order, half-bandwidth ``kd``) and the multi-RHS solve.
 """
 
 import math
@@ -230,8 +230,8 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
 
 @numba.njit(cache=True)
 def cable_pass(positions, rotations, actuation, frames, offsets, span_start, span_end,
-               point_force, span_owner, point_owner, columns, span_pair, point_slot, rhs,
-               pair_values, moment_values):
+               span_owner, point_owner, columns, span_pair, point_slot, rhs, pair_values,
+               moment_values):
     """
     Add one cable group's columns and loads to ``rhs``; write its stiffness blocks.
 
@@ -251,9 +251,7 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
     offsets : (P, 3) ndarray  [m]
         Routing points in their frame's axes.
     span_start, span_end : (S,) int ndarray
-        Points of every straight span.
-    point_force : (P, S) ndarray
-        Force on each point per unit span direction and unit tension (+1 / -1 incidence).
+        Points of every straight span (consecutive points of one cable).
     span_owner, point_owner : (S,), (P,) int ndarray
         Cable (0..m_c - 1) of every span and point.
     columns : (m_c,) int ndarray
@@ -289,13 +287,12 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
         lengths[s] = length
         for i in range(3):
             units[s, i] /= length
+    # a span pulls its start point toward its end and the end point back (unit tension)
     forces = np.zeros((n_points, 3))
-    for p in range(n_points):
-        for s in range(n_spans):
-            weight = point_force[p, s]
-            if weight != 0.0:
-                for i in range(3):
-                    forces[p, i] += weight * units[s, i]
+    for s in range(n_spans):
+        for i in range(3):
+            forces[span_start[s], i] += units[s, i]
+            forces[span_end[s], i] -= units[s, i]
     moment_values[:, :, :] = 0.0
     for p in range(n_points):
         f, r = forces[p], levers[p]
@@ -339,10 +336,14 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
             for j in range(3):
                 cp[i, j] = cmat[i, 0] * proj[0, j] + cmat[i, 1] * proj[1, j] + cmat[i, 2] * proj[
                     2, j]
+        # C P C^T is symmetric: the lower triangle, mirrored
         out = pair_values[span_pair[s]]
         for i in range(12):
-            for j in range(12):
-                out[i, j] += cp[i, 0] * cmat[j, 0] + cp[i, 1] * cmat[j, 1] + cp[i, 2] * cmat[j, 2]
+            for j in range(i + 1):
+                value = cp[i, 0] * cmat[j, 0] + cp[i, 1] * cmat[j, 1] + cp[i, 2] * cmat[j, 2]
+                out[i, j] += value
+                if j < i:
+                    out[j, i] += value
 
 
 @numba.njit(cache=True)
@@ -368,13 +369,17 @@ def scatter_add(index, values, weights, out):
 @numba.njit(cache=True)
 def band_cholesky(band):
     """
-    Factor a symmetric positive definite band matrix in place, ``K = L Lᵀ`` (as LAPACK dpbtrf).
+    Factor a symmetric positive definite band matrix in place, ``K = L Lᵀ``.
+
+    Row-oriented (Cholesky-Crout): every entry of ``L`` is a dot product of two stored rows, so
+    the inner loops run over contiguous memory.
 
     Parameters
     ----------
     band : (N, kd + 1) ndarray
-        Lower band storage, ``band[c, r - c] = K[r, c]`` for ``0 <= r - c <= kd`` (C order: the
-        Fortran ``(kd + 1, N)`` layout of LAPACK); overwritten by ``L`` in the same layout.
+        Row band storage of the lower triangle, ``band[r, kd + c - r] = K[r, c]`` for
+        ``r - kd <= c <= r`` (C order; the diagonal is the last column, entries before the
+        matrix start are ignored); overwritten by ``L`` in the same layout.
 
     Returns
     -------
@@ -385,20 +390,20 @@ def band_cholesky(band):
     """
     size, width = band.shape
     kd = width - 1
-    for j in range(size):
-        first = max(0, j - kd)
-        pivot = band[j, 0]
-        for q in range(first, j):
-            pivot -= band[q, j - q] ** 2
-        if not pivot > 0.0 or not math.isfinite(pivot):
-            return j + 1
-        diagonal = math.sqrt(pivot)
-        band[j, 0] = diagonal
-        for i in range(j + 1, min(size, j + kd + 1)):
-            acc = band[j, i - j]
-            for q in range(max(0, i - kd), j):
-                acc -= band[q, i - q] * band[q, j - q]
-            band[j, i - j] = acc / diagonal
+    for i in range(size):
+        first = max(0, i - kd)
+        row = band[i]
+        for j in range(first, i + 1):
+            other = band[j]
+            acc = row[kd + j - i]
+            for q in range(first, j):
+                acc -= row[kd + q - i] * other[kd + q - j]
+            if j < i:
+                row[kd + j - i] = acc / other[kd]
+            elif acc > 0.0 and math.isfinite(acc):
+                row[kd] = math.sqrt(acc)
+            else:
+                return i + 1
     return 0
 
 
@@ -410,7 +415,7 @@ def band_solve(factor, rhs):
     Parameters
     ----------
     factor : (N, kd + 1) ndarray
-        ``L`` in lower band storage.
+        ``L`` in row band storage.
     rhs : (N, c) ndarray
         Right-hand sides (C order), overwritten by ``X``.
 
@@ -420,17 +425,94 @@ def band_solve(factor, rhs):
     n_rhs = rhs.shape[1]
     for i in range(size):
         for q in range(max(0, i - kd), i):
-            weight = factor[q, i - q]
+            weight = factor[i, kd + q - i]
             for col in range(n_rhs):
                 rhs[i, col] -= weight * rhs[q, col]
-        inverse = 1.0 / factor[i, 0]
+        inverse = 1.0 / factor[i, kd]
         for col in range(n_rhs):
             rhs[i, col] *= inverse
     for i in range(size - 1, -1, -1):
-        for q in range(i + 1, min(size, i + kd + 1)):
-            weight = factor[i, q - i]
-            for col in range(n_rhs):
-                rhs[i, col] -= weight * rhs[q, col]
-        inverse = 1.0 / factor[i, 0]
+        inverse = 1.0 / factor[i, kd]
         for col in range(n_rhs):
             rhs[i, col] *= inverse
+        for q in range(max(0, i - kd), i):
+            weight = factor[i, kd + q - i]
+            for col in range(n_rhs):
+                rhs[q, col] -= weight * rhs[i, col]
+
+
+@numba.njit(cache=True)
+def project_effectors(solved, rhs, positions, rotations, effector_frames, effector_offsets,
+                      previous):
+    """
+    Project a solved tick onto the effectors and actuators (DESIGN §6 step 2).
+
+    With ``solved = K⁻¹ [r, J_aᵀ]`` and the effector Jacobian ``J_e`` (block ``[I, -r^]`` on
+    the effector's frame, ``r = R_f o``, :mod:`cbha_inverse.core.effectors`):
+    ``W_ea = J_e K⁻¹ J_aᵀ``, ``W_aa = J_a K⁻¹ J_aᵀ`` and the free effector positions
+    ``p_e + J_e K⁻¹ r``, returned relative to the previous actuation so that
+    ``δ_free = offset - target`` (as :func:`cbha_inverse.core.inverse.project_constraints`).
+
+    Parameters
+    ----------
+    solved : (6n, m + 1) ndarray
+        ``K⁻¹ [r, J_aᵀ]``.
+    rhs : (6n, m + 1) ndarray
+        ``[r, J_aᵀ]``.
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    effector_frames : (k,) int ndarray
+        Frame of every effector (1..n).
+    effector_offsets : (k, 3) ndarray  [m]
+        Effector points in their frame's axes.
+    previous : (m,) ndarray
+        ``λ_prev``.
+
+    Returns
+    -------
+    w_ea : (3k, m) ndarray  [m/N, m/Pa]
+    w_aa : (m, m) ndarray
+    offset : (3k,) ndarray  [m]
+        ``p_e + J_e K⁻¹ r - W_ea λ_prev``.
+    residual_norm : float  [N, N*m]
+        ``|r|``.
+
+    """
+    size, width = solved.shape
+    m = width - 1
+    k = effector_frames.size
+    moved = np.empty((3 * k, width))
+    offset = np.empty(3 * k)
+    for e in range(k):
+        frame = effector_frames[e]
+        rot = rotations[frame]
+        lever = np.empty(3)
+        for i in range(3):
+            lever[i] = (rot[i, 0] * effector_offsets[e, 0] + rot[i, 1] * effector_offsets[e, 1]
+                        + rot[i, 2] * effector_offsets[e, 2])
+            offset[3 * e + i] = positions[frame, i] + lever[i]
+        base = 6 * (frame - 1)
+        for col in range(width):
+            rx, ry, rz = solved[base + 3, col], solved[base + 4, col], solved[base + 5, col]
+            # dp = dx + dθ x r
+            moved[3 * e, col] = solved[base, col] + ry * lever[2] - rz * lever[1]
+            moved[3 * e + 1, col] = solved[base + 1, col] + rz * lever[0] - rx * lever[2]
+            moved[3 * e + 2, col] = solved[base + 2, col] + rx * lever[1] - ry * lever[0]
+    w_ea = np.ascontiguousarray(moved[:, 1:])
+    for row in range(3 * k):
+        acc = offset[row] + moved[row, 0]
+        for j in range(m):
+            acc -= w_ea[row, j] * previous[j]
+        offset[row] = acc
+    w_aa = np.zeros((m, m))
+    residual = 0.0
+    for q in range(size):
+        residual += rhs[q, 0] * rhs[q, 0]
+        for i in range(m):
+            weight = rhs[q, 1 + i]
+            if weight != 0.0:
+                for j in range(m):
+                    w_aa[i, j] += weight * solved[q, 1 + j]
+    return w_ea, w_aa, offset, math.sqrt(residual)

@@ -215,6 +215,37 @@ def _retract_into(positions, rotations, increments, max_rotation):
                                           + rot[i, 2] * old[2, j])
 
 
+@numba.njit(cache=True)
+def apply_linear_step(positions, rotations, free_step, solved_actuators, change, max_rotation):
+    """
+    Apply the Newton step of a factored tick, ``dq = K⁻¹ r + K⁻¹ J_aᵀ Δλ``, in place.
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins (updated).
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (updated).
+    free_step : (6n,) ndarray  [m, rad]
+        ``K⁻¹ r``.
+    solved_actuators : (6n, m) ndarray
+        ``K⁻¹ J_aᵀ``.
+    change : (m,) ndarray
+        ``Δλ = λ - λ_prev``.
+    max_rotation : float  [rad]
+        Scale the whole step down so that no frame rotates more than this.
+
+    """
+    size, m = solved_actuators.shape
+    increments = np.empty((size // 6, 6))
+    for row in range(size):
+        acc = free_step[row]
+        for j in range(m):
+            acc += solved_actuators[row, j] * change[j]
+        increments[row // 6, row % 6] = acc
+    _retract_into(positions, rotations, increments, max_rotation)
+
+
 def retract_frames(positions, rotations, increments, max_rotation=None, in_place=False):
     """
     Apply world-axis increments to frames 1..n (as :func:`cbha_inverse.core.chain.retract`).
