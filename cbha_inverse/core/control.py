@@ -136,6 +136,21 @@ class InverseSolver:
         self._age = 0
         self._prepared = False
 
+    def warm_up(self):
+        """
+        Run two ticks toward the current effector positions, then restore state and actuation.
+
+        The first tick of a process compiles the numba kernels (or loads them from numba's
+        on-disk cache, ~0.3 s); a node calls this before its control loop starts so that no
+        control tick pays for it. The warm start of the QP is forgotten.
+        """
+        state, actuation = self.state, self.actuation.copy()
+        targets = self.effector_positions()
+        self.step(targets)
+        self.prepare()
+        self.step(targets)
+        self.reset(state, actuation)
+
     def _current(self, in_place=False):
         """Return the frames with the pending linear step applied (stored if ``in_place``)."""
         if self._pending is None:
