@@ -58,11 +58,11 @@ def test_band_cholesky_equals_dense_solve(size, kd):
     a = np.where(np.abs(r - c) <= kd, a @ a.T + size * np.eye(size), 0.0)
     band = np.zeros((size, kd + 1))
     for d in range(kd + 1):
-        band[d:, kd - d] = np.diagonal(a, -d)
+        band[:size - d, d] = np.diagonal(a, -d)
     assert band_cholesky(band) == 0
     lower = np.zeros((size, size))
     for d in range(kd + 1):
-        lower += np.diag(band[d:, kd - d], -d)
+        lower += np.diag(band[:size - d, d], -d)
     np.testing.assert_allclose(lower, np.linalg.cholesky(a), atol=1e-12 * size)
     rhs = rng.standard_normal((size, 5))
     solved = rhs.copy()
@@ -73,9 +73,9 @@ def test_band_cholesky_equals_dense_solve(size, kd):
 def test_band_cholesky_reports_the_first_bad_pivot():
     a = np.diag([2.0, 3.0, -1.0, 4.0])
     band = np.zeros((4, 2))
-    band[:, 1] = np.diag(a)
+    band[:, 0] = np.diag(a)
     assert band_cholesky(band) == 3
-    band[:, 1] = [1.0, np.nan, 1.0, 1.0]
+    band[:, 0] = [1.0, np.nan, 1.0, 1.0]
     assert band_cholesky(band) == 2
 
 

@@ -35,12 +35,12 @@ from cbha_inverse.core.assembly import assemble_tangent, material_tangent
 from cbha_inverse.core.btd import factorize
 from cbha_inverse.core.chain import ChainState, rest_state
 from cbha_inverse.core.correction import TargetCorrector  # noqa: F401 (public re-export)
-from cbha_inverse.core.inverse import qp_matrices, qp_problem, QPProblem
+from cbha_inverse.core.inverse import qp_matrices, qp_problem
 from cbha_inverse.core.inverse_types import InverseOptions, TickResult
 from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
                                   projected_gauss_seidel)
 from cbha_inverse.core.tick import TickModel
-from cbha_inverse.core.tick_kernels import project_effectors
+from cbha_inverse.core.tick_kernels import project_effectors, tick_outcome
 from cbha_inverse.core.tick_math import apply_linear_step, DenseLU, retract_frames as _retract
 import numpy as np
 
@@ -93,8 +93,6 @@ class InverseSolver:
         m = actuators.n_actuators
         self._scale = (self.upper_bounds - self.lower_bounds if scale is None
                        else np.asarray(scale, dtype=float))
-        self._x_lower = self.lower_bounds / self._scale
-        self._x_upper = self.upper_bounds / self._scale
         self._rate = (None if self.options.rate_limit is None
                       else np.broadcast_to(np.asarray(self.options.rate_limit, float), (m,)))
         n = model.n_links
@@ -260,17 +258,8 @@ class InverseSolver:
             self._age = 1 if prepared else self._age + 1
         delta_free = lin.offset - targets.reshape(-1)
         t_projection = time.perf_counter()
-        if self._rate is None:
-            # qp_problem with the constant normalised box
-            x_prev = previous / self._scale
-            tracking_gradient = lin.matrices.weighted_w.T @ delta_free
-            problem = QPProblem(lin.matrices.hessian,
-                                tracking_gradient - lin.matrices.proximal_weight * x_prev,
-                                self._x_lower, self._x_upper, self._scale, x_prev,
-                                lin.matrices.tracking_hessian, tracking_gradient)
-        else:
-            problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
-                                 self.upper_bounds, rate_limit=self._rate)
+        problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
+                             self.upper_bounds, rate_limit=self._rate)
         status = 'solved'
         qp_solver, same_hessian = self.options.qp_solver, not (fresh or prepared)
         if qp_solver == 'active_set':
@@ -286,14 +275,13 @@ class InverseSolver:
                 solution = type(solution)(solution.x, self._qp_status_text(solution), 0, True)
         elif qp_solver == 'gauss_seidel':
             solution = projected_gauss_seidel(problem)
-        actuation = np.minimum(np.maximum(problem.scale * solution.x, self.lower_bounds),
-                               self.upper_bounds)
+        actuation, gap, largest_gap, largest_move = tick_outcome(
+            lin.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
+            self.upper_bounds)
         saturated = binding_bounds(problem, solution.x)
         if status == 'solved' and saturated.any():
             status = 'saturated'
-        gap = lin.w_ea @ actuation + delta_free
-        if self._age < self.options.relinearize_every and np.abs(
-                solution.x - problem.previous).max() > 0.02:
+        if self._age < self.options.relinearize_every and largest_move > 0.02:
             # the actuation moves fast: the next tick relinearises
             self._age = self.options.relinearize_every
         t_qp = time.perf_counter()
@@ -313,9 +301,7 @@ class InverseSolver:
                    'projection': t_projection - t_factor, 'qp': t_qp - t_projection,
                    'update': t_end - t_qp, 'total': t_end - t_start}
         return TickResult(actuation, effector_positions, status, solution.status,
-                          solution.iterations, saturated,
-                          float(np.sqrt((gap.reshape(-1, 3) ** 2).sum(axis=1).max())),
-                          lin.residual_norm, timings)
+                          solution.iterations, saturated, largest_gap, lin.residual_norm, timings)
 
     def prepare(self):
         """

@@ -29,6 +29,7 @@ between equivalent solutions on a saturated target).
 """
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from cbha_inverse.core import qp_kernels
 import numpy as np
@@ -101,10 +102,11 @@ def project_constraints(factorization, jat, residual, effectors, levers, effecto
     return Projection(w_ea, w_aa, delta_free, solved)
 
 
-@dataclass(frozen=True)
-class QPProblem:
+class QPProblem(NamedTuple):
     """
     The actuation QP in dimensionless variables ``x = λ / σ`` (see the module docstring).
+
+    Immutable (a named tuple: built every tick, five times cheaper than a frozen dataclass).
 
     Attributes
     ----------
@@ -165,8 +167,7 @@ def actuation_qp(projection, previous, lower_bounds, upper_bounds, scale, *,
                       rate_limit=rate_limit)
 
 
-@dataclass(frozen=True)
-class QPMatrices:
+class QPMatrices(NamedTuple):
     """
     The parts of the actuation QP that depend only on the linearisation (not on the target).
 

@@ -6,7 +6,7 @@ The problem itself (:class:`cbha_inverse.core.inverse.QPProblem`) is built in
 saturation. proxsuite's status is always returned to the caller.
 """
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from cbha_inverse.core import qp_kernels
 import numpy as np
@@ -29,8 +29,7 @@ _ACTIVE_SET_STATUS = {
 }
 
 
-@dataclass(frozen=True)
-class QPSolution:
+class QPSolution(NamedTuple):
     """
     A QP solution in dimensionless variables.
 

@@ -12,7 +12,7 @@ quantities (equal to round-off, tested) with the compiled kernels of
 - one pass per cable group gives its columns, loads and span / point stiffness blocks;
 - every block is added into the lower band of the tangent by a constant index that also
   symmetrises (weights ½ on the mirrored entries): the symmetric tangent the solver factors,
-  in row band storage with the half-bandwidth of the scene (cables that skip frames
+  in LAPACK's lower band layout with the half-bandwidth of the scene (cables that skip frames
   widen it), factored and solved by the compiled band Cholesky.
 
 Actuator groups other than :class:`~cbha_inverse.core.actuation.CableGroup` and
@@ -112,17 +112,16 @@ class TickModel:
         valid = (rows >= 0) & (cols >= 0)
         lo, hi = np.minimum(rows, cols), np.maximum(rows, cols)
         self._weights = np.where(rows == cols, 1.0, 0.5)
-        # row band storage of the lower triangle (entry (r, c) at [r, kd + c - r] of a C-order
-        # (N, kd + 1) array, see tick_kernels.band_cholesky); base-frame entries go to a trash
-        # slot at the end
+        # lower band storage (entry (r, c) at [c, r - c] of a C-order (N, kd + 1) array, the
+        # Fortran (kd + 1, N) layout of LAPACK); base-frame entries go to a trash slot at the end
         kd = size - 1 if self._generic else int((hi - lo)[valid].max())
         self.kd = kd
-        self._index = np.where(valid, hi * (kd + 1) + kd + lo - hi, size * (kd + 1))
+        self._index = np.where(valid, lo * (kd + 1) + hi - lo, size * (kd + 1))
         self._band = np.zeros(size * (kd + 1) + 1)
-        r, d = np.meshgrid(np.arange(size), np.arange(kd + 1), indexing='ij')
-        inside = (r + d >= kd).reshape(-1)
+        c, d = np.meshgrid(np.arange(size), np.arange(kd + 1), indexing='ij')
+        inside = (c + d < size).reshape(-1)
         self._band_slots = np.flatnonzero(inside)
-        self._dense_slots = (r * size + r + d - kd).reshape(-1)[inside]
+        self._dense_slots = ((c + d) * size + c).reshape(-1)[inside]
         self._values = np.zeros(count)
         self._link_values = self._values[:n * 144].reshape(n, 12, 12)
         self._cable_values = [(cab, self._values[p], self._values[q])
@@ -144,8 +143,8 @@ class TickModel:
         Returns
         -------
         tangent : (6n, kd + 1) ndarray
-            ``K`` (structure + symmetric load stiffness) in row band storage,
-            ``tangent[r, kd + c - r] = K[r, c]`` (``c <= r``), for :meth:`factor`;
+            ``K`` (structure + symmetric load stiffness) in lower band storage,
+            ``tangent[c, r - c] = K[r, c]`` (``c <= r``), for :meth:`factor`;
             :meth:`dense` converts it. A buffer of this object (overwritten by the next call).
         rhs : (6n, m + 1) ndarray
             Column 0: the residual ``f(q) + f_ext + J_aᵀ λ``; columns 1..m: ``J_aᵀ``. A buffer

@@ -16,8 +16,8 @@ round-off, tested against the reference) in one pass per link, span and column:
   (``P = λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the point
   moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``;
 - :func:`scatter_add`: every block value into the symmetric band storage by a constant index;
-- :func:`band_cholesky` / :func:`band_solve`: ``K = L Lᵀ`` in row band storage
-  (``band[r, kd + c - r] = K[r, c]``, C order, half-bandwidth ``kd``) and the multi-RHS solve.
+- :func:`band_cholesky` / :func:`band_solve`: ``K = L Lᵀ`` in LAPACK's lower band layout
+  (``band[c, r - c] = K[r, c]``, C order, half-bandwidth ``kd``) and the multi-RHS solve.
 """
 
 import math
@@ -25,6 +25,13 @@ import math
 from cbha_inverse.core.tick_math import jl_coefficient, rotation_log
 import numba
 import numpy as np
+
+
+# cable span blocks (see cable_pass): base matrix and sign of each 3-row block of C, and the
+# slot of the summed product B_x P B_y^T (x >= y; x, y = 0: I, 1: S, 2: T)
+_CABLE_BASE = np.array([0, 1, 0, 2])
+_CABLE_SIGN = np.array([1.0, 1.0, -1.0, -1.0])
+_CABLE_PRODUCT = np.array([[0, -1, -1], [1, 3, -1], [2, 4, 5]])
 
 
 @numba.njit(cache=True)
@@ -79,8 +86,7 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
     jinv = np.empty((3, 3))
     a = np.empty((6, 6))
     mat = np.empty((6, 6))
-    dmat = np.zeros((6, 12))
-    md = np.empty((6, 12))
+    rotated = np.empty((6, 6))
     local = np.empty((6, kc))
     world = np.empty((6, kc))
     diff = np.empty(3)
@@ -192,29 +198,39 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
             for j in range(3):
                 mat[i, j] = a[i, j]
                 mat[i, 3 + j] = a[i, 3] * jinv[0, j] + a[i, 4] * jinv[1, j] + a[i, 5] * jinv[2, j]
-        # D = d delta / d(q_a, q_b): [-Ra^T, Ra^T d^, Ra^T, 0; 0, -Ra^T, 0, Ra^T]
+        # D = d delta / d(q_a, q_b) = R^T E with R = diag(Ra, Ra) and E = [E_a, I],
+        # E_a = [-I, d^; 0, -I]: the world tangent is E^T (R mat R^T) E, blocks
+        # [E_a^T M E_a, E_a^T M; M E_a, M] for M = R mat R^T
         _hat(diff, diff_hat)
-        for i in range(3):
-            for j in range(3):
-                dmat[i, j] = -ra[j, i]
-                dmat[i, 6 + j] = ra[j, i]
-                dmat[3 + i, 3 + j] = -ra[j, i]
-                dmat[3 + i, 9 + j] = ra[j, i]
-                dmat[i, 3 + j] = (ra[0, i] * diff_hat[0, j] + ra[1, i] * diff_hat[1, j]
-                                  + ra[2, i] * diff_hat[2, j])
-        for i in range(6):
-            for j in range(12):
-                acc = 0.0
-                for q in range(6):
-                    acc += mat[i, q] * dmat[q, j]
-                md[i, j] = acc
+        for p in range(2):
+            for q in range(2):
+                for i in range(3):
+                    for j in range(3):
+                        tmp[i, j] = (mat[3 * p + i, 3 * q] * ra[j, 0]
+                                     + mat[3 * p + i, 3 * q + 1] * ra[j, 1]
+                                     + mat[3 * p + i, 3 * q + 2] * ra[j, 2])
+                for i in range(3):
+                    for j in range(3):
+                        rotated[3 * p + i, 3 * q + j] = (ra[i, 0] * tmp[0, j] + ra[i, 1] * tmp[1, j]
+                                                         + ra[i, 2] * tmp[2, j])
         out = blocks[link]
-        for i in range(12):
-            for j in range(12):
-                acc = 0.0
-                for q in range(6):
-                    acc += dmat[q, i] * md[q, j]
-                out[i, j] = acc
+        for i in range(6):
+            for j in range(6):
+                out[6 + i, 6 + j] = rotated[i, j]
+            for j in range(3):
+                # M E_a
+                out[6 + i, j] = -rotated[i, j]
+                out[6 + i, 3 + j] = (rotated[i, 0] * diff_hat[0, j] + rotated[i, 1] * diff_hat[1, j]
+                                     + rotated[i, 2] * diff_hat[2, j] - rotated[i, 3 + j])
+        for j in range(6):
+            for i in range(3):
+                # E_a^T M and E_a^T (M E_a)
+                out[i, 6 + j] = -rotated[i, j]
+                out[3 + i, 6 + j] = -(diff_hat[i, 0] * rotated[0, j] + diff_hat[i, 1] * rotated[1, j]
+                                      + diff_hat[i, 2] * rotated[2, j]) - rotated[3 + i, j]
+                out[i, j] = -out[6 + i, j]
+                out[3 + i, j] = -(diff_hat[i, 0] * out[6, j] + diff_hat[i, 1] * out[7, j]
+                                  + diff_hat[i, 2] * out[8, j]) - out[9 + i, j]
         # geometric terms (b-side world force F, moment M), symmetric part only, in the
         # a-rotation columns: [-2F^; -F^ d^; 2F^; M^]
         _hat(world[:3, 0], f_hat)
@@ -313,10 +329,16 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
         trace = tension * (r[0] * f[0] + r[1] * f[1] + r[2] * f[2])
         for i in range(3):
             block[i, i] += trace
-    pair_values[:, :, :] = 0.0
+    # C P C^T with C = [I; S; -I; -T] (S, T the hats of the start and end levers): block (i, j)
+    # is sign_i sign_j B_i P B_j^T with B = (I, S, I, T), sign = (1, 1, -1, -1); only the six
+    # products P, SP, TP, SPS^T, TPS^T, TPT^T are summed per frame pair, then expanded
+    n_pairs = pair_values.shape[0]
+    sums = np.zeros((n_pairs, 6, 3, 3))
     proj = np.empty((3, 3))
-    cmat = np.zeros((12, 3))
-    cp = np.empty((12, 3))
+    s_hat = np.empty((3, 3))
+    t_hat = np.empty((3, 3))
+    sp = np.empty((3, 3))
+    tp = np.empty((3, 3))
     for s in range(n_spans):
         scale = actuation[columns[span_owner[s]]] / lengths[s]
         u = units[s]
@@ -324,26 +346,38 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
             for j in range(3):
                 proj[i, j] = -scale * u[i] * u[j]
             proj[i, i] += scale
-        # C = [I; hat(r_start); -I; -hat(r_end)]
-        _hat(levers[span_start[s]], cmat[3:6])
-        _hat(levers[span_end[s]], cmat[9:12])
+        _hat(levers[span_start[s]], s_hat)
+        _hat(levers[span_end[s]], t_hat)
         for i in range(3):
             for j in range(3):
-                cmat[i, j] = 1.0 if i == j else 0.0
-                cmat[6 + i, j] = -1.0 if i == j else 0.0
-                cmat[9 + i, j] = -cmat[9 + i, j]
-        for i in range(12):
+                sp[i, j] = s_hat[i, 0] * proj[0, j] + s_hat[i, 1] * proj[1, j] + s_hat[
+                    i, 2] * proj[2, j]
+                tp[i, j] = t_hat[i, 0] * proj[0, j] + t_hat[i, 1] * proj[1, j] + t_hat[
+                    i, 2] * proj[2, j]
+        acc = sums[span_pair[s]]
+        for i in range(3):
             for j in range(3):
-                cp[i, j] = cmat[i, 0] * proj[0, j] + cmat[i, 1] * proj[1, j] + cmat[i, 2] * proj[
-                    2, j]
-        # C P C^T is symmetric: the lower triangle, mirrored
-        out = pair_values[span_pair[s]]
-        for i in range(12):
-            for j in range(i + 1):
-                value = cp[i, 0] * cmat[j, 0] + cp[i, 1] * cmat[j, 1] + cp[i, 2] * cmat[j, 2]
-                out[i, j] += value
-                if j < i:
-                    out[j, i] += value
+                acc[0, i, j] += proj[i, j]
+                acc[1, i, j] += sp[i, j]
+                acc[2, i, j] += tp[i, j]
+                acc[3, i, j] += sp[i, 0] * s_hat[j, 0] + sp[i, 1] * s_hat[j, 1] + sp[
+                    i, 2] * s_hat[j, 2]
+                acc[4, i, j] += tp[i, 0] * s_hat[j, 0] + tp[i, 1] * s_hat[j, 1] + tp[
+                    i, 2] * s_hat[j, 2]
+                acc[5, i, j] += tp[i, 0] * t_hat[j, 0] + tp[i, 1] * t_hat[j, 1] + tp[
+                    i, 2] * t_hat[j, 2]
+    for pair in range(n_pairs):
+        out = pair_values[pair]
+        acc = sums[pair]
+        for bi in range(4):
+            for bj in range(4):
+                x, y = _CABLE_BASE[bi], _CABLE_BASE[bj]
+                sign = _CABLE_SIGN[bi] * _CABLE_SIGN[bj]
+                for i in range(3):
+                    for j in range(3):
+                        value = (acc[_CABLE_PRODUCT[x, y], i, j] if x >= y
+                                 else acc[_CABLE_PRODUCT[y, x], j, i])
+                        out[3 * bi + i, 3 * bj + j] = sign * value
 
 
 @numba.njit(cache=True)
@@ -369,17 +403,17 @@ def scatter_add(index, values, weights, out):
 @numba.njit(cache=True)
 def band_cholesky(band):
     """
-    Factor a symmetric positive definite band matrix in place, ``K = L Lᵀ``.
+    Factor a symmetric positive definite band matrix in place, ``K = L Lᵀ`` (as LAPACK dpbtf2).
 
-    Row-oriented (Cholesky-Crout): every entry of ``L`` is a dot product of two stored rows, so
-    the inner loops run over contiguous memory.
+    Right-looking: each column of ``L`` is scaled, then the trailing block takes its rank-one
+    update; the innermost loop is an axpy over contiguous memory (no loop-carried dependency).
 
     Parameters
     ----------
     band : (N, kd + 1) ndarray
-        Row band storage of the lower triangle, ``band[r, kd + c - r] = K[r, c]`` for
-        ``r - kd <= c <= r`` (C order; the diagonal is the last column, entries before the
-        matrix start are ignored); overwritten by ``L`` in the same layout.
+        Lower band storage, ``band[c, r - c] = K[r, c]`` for ``0 <= r - c <= kd`` (C order: the
+        Fortran ``(kd + 1, N)`` layout of LAPACK; entries past the matrix end are ignored);
+        overwritten by ``L`` in the same layout.
 
     Returns
     -------
@@ -390,20 +424,22 @@ def band_cholesky(band):
     """
     size, width = band.shape
     kd = width - 1
-    for i in range(size):
-        first = max(0, i - kd)
-        row = band[i]
-        for j in range(first, i + 1):
-            other = band[j]
-            acc = row[kd + j - i]
-            for q in range(first, j):
-                acc -= row[kd + q - i] * other[kd + q - j]
-            if j < i:
-                row[kd + j - i] = acc / other[kd]
-            elif acc > 0.0 and math.isfinite(acc):
-                row[kd] = math.sqrt(acc)
-            else:
-                return i + 1
+    for j in range(size):
+        column = band[j]
+        pivot = column[0]
+        if not (pivot > 0.0 and math.isfinite(pivot)):
+            return j + 1
+        diagonal = math.sqrt(pivot)
+        column[0] = diagonal
+        below = min(kd, size - 1 - j)
+        inverse = 1.0 / diagonal
+        for a in range(1, below + 1):
+            column[a] *= inverse
+        for b in range(1, below + 1):
+            weight = column[b]
+            target = band[j + b]
+            for a in range(b, below + 1):
+                target[a - b] -= column[a] * weight
     return 0
 
 
@@ -415,7 +451,7 @@ def band_solve(factor, rhs):
     Parameters
     ----------
     factor : (N, kd + 1) ndarray
-        ``L`` in row band storage.
+        ``L`` in lower band storage.
     rhs : (N, c) ndarray
         Right-hand sides (C order), overwritten by ``X``.
 
@@ -423,22 +459,22 @@ def band_solve(factor, rhs):
     size, width = factor.shape
     kd = width - 1
     n_rhs = rhs.shape[1]
-    for i in range(size):
-        for q in range(max(0, i - kd), i):
-            weight = factor[i, kd + q - i]
-            for col in range(n_rhs):
-                rhs[i, col] -= weight * rhs[q, col]
-        inverse = 1.0 / factor[i, kd]
+    for j in range(size):
+        inverse = 1.0 / factor[j, 0]
         for col in range(n_rhs):
-            rhs[i, col] *= inverse
-    for i in range(size - 1, -1, -1):
-        inverse = 1.0 / factor[i, kd]
-        for col in range(n_rhs):
-            rhs[i, col] *= inverse
-        for q in range(max(0, i - kd), i):
-            weight = factor[i, kd + q - i]
+            rhs[j, col] *= inverse
+        for a in range(1, min(kd, size - 1 - j) + 1):
+            weight = factor[j, a]
             for col in range(n_rhs):
-                rhs[q, col] -= weight * rhs[i, col]
+                rhs[j + a, col] -= weight * rhs[j, col]
+    for j in range(size - 1, -1, -1):
+        for a in range(1, min(kd, size - 1 - j) + 1):
+            weight = factor[j, a]
+            for col in range(n_rhs):
+                rhs[j, col] -= weight * rhs[j + a, col]
+        inverse = 1.0 / factor[j, 0]
+        for col in range(n_rhs):
+            rhs[j, col] *= inverse
 
 
 @numba.njit(cache=True)
@@ -516,3 +552,51 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
                 for j in range(m):
                     w_aa[i, j] += weight * solved[q, 1 + j]
     return w_ea, w_aa, offset, math.sqrt(residual)
+
+
+@numba.njit(cache=True)
+def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bounds):
+    """
+    Return the actuation of a QP solution and the linear model's remaining effector gap.
+
+    Parameters
+    ----------
+    w_ea : (3k, m) ndarray  [m/N, m/Pa]
+        Effector-actuator compliance.
+    delta_free : (3k,) ndarray  [m]
+        ``δ_e^free`` (free effector positions minus targets).
+    scale : (m,) ndarray
+        ``σ``: ``λ = σ x``.
+    x, x_previous : (m,) ndarray
+        QP solution and the previous actuation, dimensionless.
+    lower_bounds, upper_bounds : (m,) ndarray
+        Actuator bounds.
+
+    Returns
+    -------
+    actuation : (m,) ndarray  [N, Pa]
+        ``σ x`` clipped into the bounds.
+    gap : (3k,) ndarray  [m]
+        ``W_ea λ + δ_free`` (paper eq. 11: predicted effector minus target).
+    largest_gap : float  [m]
+        Largest effector distance ``max_e |gap_e|``.
+    largest_move : float
+        ``max |x - x_previous|`` (dimensionless actuation change).
+
+    """
+    rows, m = w_ea.shape
+    actuation = np.empty(m)
+    largest_move = 0.0
+    for j in range(m):
+        actuation[j] = min(max(scale[j] * x[j], lower_bounds[j]), upper_bounds[j])
+        largest_move = max(largest_move, abs(x[j] - x_previous[j]))
+    gap = np.empty(rows)
+    for r in range(rows):
+        acc = delta_free[r]
+        for j in range(m):
+            acc += w_ea[r, j] * actuation[j]
+        gap[r] = acc
+    largest = 0.0
+    for e in range(rows // 3):
+        largest = max(largest, gap[3 * e] ** 2 + gap[3 * e + 1] ** 2 + gap[3 * e + 2] ** 2)
+    return actuation, gap, math.sqrt(largest), largest_move
