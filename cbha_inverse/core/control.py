@@ -239,7 +239,7 @@ class InverseSolver:
                 targets = targets.reshape(k, 3)
             else:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
-        if not np.isfinite(targets).all():
+        if not all(map(math.isfinite, targets.flat)):
             return self._held('rejected', t_start)
         lin = self._linearization
         prepared, self._prepared = self._prepared, False
