@@ -211,8 +211,8 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
                                      + mat[3 * p + i, 3 * q + 2] * ra[j, 2])
                 for i in range(3):
                     for j in range(3):
-                        rotated[3 * p + i, 3 * q + j] = (ra[i, 0] * tmp[0, j] + ra[i, 1] * tmp[1, j]
-                                                         + ra[i, 2] * tmp[2, j])
+                        rotated[3 * p + i, 3 * q + j] = (
+                            ra[i, 0] * tmp[0, j] + ra[i, 1] * tmp[1, j] + ra[i, 2] * tmp[2, j])
         out = blocks[link]
         for i in range(6):
             for j in range(6):
@@ -220,13 +220,15 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
             for j in range(3):
                 # M E_a
                 out[6 + i, j] = -rotated[i, j]
-                out[6 + i, 3 + j] = (rotated[i, 0] * diff_hat[0, j] + rotated[i, 1] * diff_hat[1, j]
+                out[6 + i, 3 + j] = (rotated[i, 0] * diff_hat[0, j]
+                                     + rotated[i, 1] * diff_hat[1, j]
                                      + rotated[i, 2] * diff_hat[2, j] - rotated[i, 3 + j])
         for j in range(6):
             for i in range(3):
                 # E_a^T M and E_a^T (M E_a)
                 out[i, 6 + j] = -rotated[i, j]
-                out[3 + i, 6 + j] = -(diff_hat[i, 0] * rotated[0, j] + diff_hat[i, 1] * rotated[1, j]
+                out[3 + i, 6 + j] = -(diff_hat[i, 0] * rotated[0, j]
+                                      + diff_hat[i, 1] * rotated[1, j]
                                       + diff_hat[i, 2] * rotated[2, j]) - rotated[3 + i, j]
                 out[i, j] = -out[6 + i, j]
                 out[3 + i, j] = -(diff_hat[i, 0] * out[6, j] + diff_hat[i, 1] * out[7, j]
