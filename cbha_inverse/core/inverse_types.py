@@ -19,9 +19,13 @@ class InverseOptions:
     rate_limit : tuple of float or None
         Largest change per tick of each actuator (N or Pa), ``None`` for none.
     qp_solver : str
-        ``'proxsuite'`` (default), ``'active_set'`` (exact principal pivoting on the active set,
-        :class:`cbha_inverse.core.qp.ActiveSetQP`, faster for the small ``m`` of the scenes;
-        proxsuite takes over when it does not converge) or ``'gauss_seidel'`` (the paper's).
+        ``'active_set'`` (default: principal pivoting on the active set,
+        :class:`cbha_inverse.core.qp.ActiveSetQP`, compiled with numba), ``'proxsuite'``
+        (dense, warm-started) or ``'gauss_seidel'`` (the paper's projected Gauss-Seidel). The
+        active set is the default because it returns the exact KKT solution of the box QP and
+        costs ~3 µs for ``m ≤ 16`` actuators, against ~30-60 µs for proxsuite's update and
+        solve. proxsuite stays available and is the automatic fallback: it takes over (status
+        checked) when the active set does not converge.
     newton_steps : int
         Newton steps per tick (1 = the update reuses the tick's factorization).
     max_rotation_step : float  [rad]
@@ -43,7 +47,7 @@ class InverseOptions:
     energy_weight: float = 1e-6
     proximal_weight: float = 1e-4
     rate_limit: tuple = None
-    qp_solver: str = 'proxsuite'
+    qp_solver: str = 'active_set'
     newton_steps: int = 1
     max_rotation_step: float = 0.5
     eps_abs: float = 1e-10
@@ -51,8 +55,8 @@ class InverseOptions:
 
     def __post_init__(self):
         """Validate."""
-        if self.qp_solver not in ('proxsuite', 'active_set', 'gauss_seidel'):
-            raise ValueError(f"qp_solver must be 'proxsuite', 'active_set' or 'gauss_seidel', "
+        if self.qp_solver not in ('active_set', 'proxsuite', 'gauss_seidel'):
+            raise ValueError(f"qp_solver must be 'active_set', 'proxsuite' or 'gauss_seidel', "
                              f'not {self.qp_solver!r}')
         if self.newton_steps < 1:
             raise ValueError('newton_steps must be >= 1')

@@ -74,9 +74,10 @@ class InverseSolverParams:
     relinearize_every: int = param(1, 'ticks between linearisations (1 = every tick, the paper; '
                                    'N > 1 re-solves the QP of the last linear model in between)',
                                    low=1, high=1000)
-    qp_solver: str = param('proxsuite', 'QP of each tick: proxsuite (dense, warm-started), '
-                           'active_set (exact small box QP, proxsuite fallback) or gauss_seidel '
-                           '(the paper)', choices=('proxsuite', 'active_set', 'gauss_seidel'))
+    qp_solver: str = param('active_set', 'QP of each tick: active_set (exact KKT solution of '
+                           'the small box QP, proxsuite takes over if it does not converge), '
+                           'proxsuite (dense, warm-started) or gauss_seidel (the paper)',
+                           choices=('active_set', 'proxsuite', 'gauss_seidel'))
     marker_period: float = param(0.1, 'period of the backbone markers [s]', low=0.01, high=60.0)
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
@@ -165,6 +166,11 @@ class InverseSolverNode(Node):
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
                                                      qp_solver=p.qp_solver)
+        # compile the numba kernels (or load them from the cache) before any tick is timed
+        started = time.perf_counter()
+        self.solver.warm_up()
+        self.get_logger().info(f'solver warm-up (numba kernels) took '
+                               f'{time.perf_counter() - started:.2f} s')
         self.corrector = TargetCorrector(1, gain=p.loop_gain if p.mode == 'closed' else 0.0,
                                          max_correction=p.max_correction)
 

@@ -1,0 +1,23 @@
+"""The install-time warm-up fills numba's cache for every kernel module of the tick."""
+
+import os
+import subprocess
+import sys
+
+from cbha_inverse.paths import config_path
+
+
+def test_warmup_writes_the_numba_cache_of_every_kernel_module(tmp_path):
+    """A cold warm-up of one scene (~20 s of compiling) into an empty ``NUMBA_CACHE_DIR``."""
+    cache = tmp_path / 'numba'
+    env = {**os.environ, 'NUMBA_CACHE_DIR': str(cache)}
+    code = ('import sys; from cbha_inverse.core.warmup import main; '
+            "main(['--scenes', 'tendon_6f_8c']); "
+            "print('rclpy' in sys.modules)")
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, env=env,
+                         cwd=str(config_path().parents[0]), check=True, timeout=120)
+    lines = out.stdout.strip().splitlines()
+    assert lines[-2].startswith('warm-up: ') and lines[-2].endswith('(tendon_6f_8c)'), out.stdout
+    assert lines[-1] == 'False', 'the warm-up must not import rclpy'
+    indexed = {path.name.split('.')[0] for path in cache.rglob('*.nbi')}
+    assert {'tick_kernels', 'tick_math', 'qp_kernels'} <= indexed, sorted(indexed)
