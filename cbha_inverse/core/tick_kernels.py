@@ -44,6 +44,17 @@ def _hat(v, out):
 
 
 @numba.njit(cache=True)
+def _add_scaled_hat(out, v, weight):
+    """Add ``weight * hat(v)`` to a (3, 3) array (view)."""
+    out[0, 1] -= weight * v[2]
+    out[1, 0] += weight * v[2]
+    out[0, 2] += weight * v[1]
+    out[2, 0] -= weight * v[1]
+    out[1, 2] -= weight * v[0]
+    out[2, 1] += weight * v[0]
+
+
+@numba.njit(cache=True)
 def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
               cavity_wrench, cavity_stiffness, rhs, blocks):
     """
@@ -126,12 +137,7 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
             for j in range(3):
                 jinv[i, j] = c * phi[i] * phi[j]
             jinv[i, i] += 1.0 - c * t2
-        jinv[0, 1] += 0.5 * phi[2]
-        jinv[1, 0] -= 0.5 * phi[2]
-        jinv[0, 2] -= 0.5 * phi[1]
-        jinv[2, 0] += 0.5 * phi[1]
-        jinv[1, 2] += 0.5 * phi[0]
-        jinv[2, 1] -= 0.5 * phi[0]
+        _add_scaled_hat(jinv, phi, -0.5)
         # a = B^T K - H_p with B = diag(I, Jl^-1), H_p = sum_c p_c H_c
         for j in range(6):
             for i in range(3):
@@ -187,12 +193,7 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
             for j in range(3):
                 a[3 + i, 3 + j] += left0 * phi[j] + left1 * s_r[j]
             a[3 + i, 3 + i] += c * ps
-        a[3, 4] += 0.5 * s_r[2]
-        a[4, 3] -= 0.5 * s_r[2]
-        a[3, 5] -= 0.5 * s_r[1]
-        a[5, 3] += 0.5 * s_r[1]
-        a[4, 5] += 0.5 * s_r[0]
-        a[5, 4] -= 0.5 * s_r[0]
+        _add_scaled_hat(a[3:, 3:], s_r, -0.5)
         # mat = a B
         for i in range(6):
             for j in range(3):
