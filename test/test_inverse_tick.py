@@ -8,7 +8,7 @@ from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import so3_exp
 from cbha_inverse.core.tick import TickModel
-from cbha_inverse.core.tick_math import exp_rotations
+from cbha_inverse.core.tick_math import rotation_exp
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -81,7 +81,10 @@ def test_exp_rotations_matches_so3_exp():
     small = rng.standard_normal((40, 3)) * np.logspace(-12, -0.4, 40)[:, None]
     large = rng.standard_normal((10, 3))
     for v in (small, large, np.zeros((2, 3))):
-        np.testing.assert_allclose(exp_rotations(v), so3_exp(v), atol=2e-15)
+        out = np.empty((len(v), 3, 3))
+        for vector, rotation in zip(v, out):
+            rotation_exp(vector, rotation)
+        np.testing.assert_allclose(out, so3_exp(v), atol=2e-15)
 
 
 @pytest.mark.parametrize('name', ['tendon_10f_16c', 'cbha'])
@@ -98,3 +101,56 @@ def test_active_set_option_gives_the_proxsuite_actuation(name):
         assert b.status == a.status and b.qp_status == 'solved'
         np.testing.assert_allclose(b.actuation, a.actuation, rtol=1e-5,
                                    atol=1e-7 * scene.upper_bounds.max())
+
+
+def test_project_effectors_equals_the_dense_jacobian_projection():
+    """W_ea = J_e K⁻¹ J_aᵀ, W_aa = J_a K⁻¹ J_aᵀ and the free positions, with lever arms."""
+    from cbha_inverse.core.effectors import PointEffectors
+    from cbha_inverse.core.tick_kernels import project_effectors
+    rng = np.random.default_rng(12)
+    n, m = 5, 3
+    model = ChainModel.from_compliances(
+        np.broadcast_to(timoshenko_compliance(0.02, 2e7, 0.45, 0.006), (n, 6, 6)),
+        np.tile([0.02, 0.0, 0.0], (n, 1)))
+    state = retract(rest_state(model), 0.1 * rng.standard_normal((n, 6)))
+    effectors = PointEffectors(['mid', 'tip'], [2, 5], [[0.0, 0.01, 0.0], [0.004, -0.002, 0.003]],
+                               model.n_frames)
+    kmat = rng.standard_normal((6 * n, 6 * n))
+    kmat = kmat @ kmat.T + 6 * n * np.eye(6 * n)
+    rhs = rng.standard_normal((6 * n, m + 1))
+    solved = np.linalg.solve(kmat, rhs)
+    previous = rng.uniform(0.0, 5.0, m)
+    w_ea, w_aa, offset, residual_norm = project_effectors(
+        solved, rhs, state.positions, state.rotations, effectors.frames.astype(np.int64),
+        effectors.offsets, previous)
+    jac = effectors.jacobian(state.rotations)
+    jat = rhs[:, 1:]
+    np.testing.assert_allclose(w_ea, jac @ np.linalg.solve(kmat, jat), atol=1e-14)
+    np.testing.assert_allclose(w_aa, jat.T @ np.linalg.solve(kmat, jat), atol=1e-13)
+    free = (effectors.positions(state.positions, state.rotations).reshape(-1)
+            + jac @ np.linalg.solve(kmat, rhs[:, 0]))
+    np.testing.assert_allclose(offset, free - w_ea @ previous, atol=1e-14)
+    assert residual_norm == pytest.approx(np.linalg.norm(rhs[:, 0]), rel=1e-14)
+
+
+def test_apply_linear_step_is_the_retraction_of_the_newton_step():
+    from cbha_inverse.core.tick_math import apply_linear_step
+    rng = np.random.default_rng(13)
+    n, m = 4, 3
+    model = ChainModel.from_compliances(
+        np.broadcast_to(timoshenko_compliance(0.02, 2e7, 0.45, 0.006), (n, 6, 6)),
+        np.tile([0.02, 0.0, 0.0], (n, 1)))
+    state = retract(rest_state(model), 0.1 * rng.standard_normal((n, 6)))
+    free_step = 0.05 * rng.standard_normal(6 * n)
+    solved_actuators = 0.05 * rng.standard_normal((6 * n, m))
+    change = rng.standard_normal(m)
+    increments = (free_step + solved_actuators @ change).reshape(n, 6)
+    for limit, expected in ((10.0, increments), (0.01, None)):
+        positions, rotations = state.positions.copy(), state.rotations.copy()
+        apply_linear_step(positions, rotations, free_step, solved_actuators, change, limit)
+        if expected is None:
+            largest = np.linalg.norm(increments[:, 3:], axis=1).max()
+            expected = increments * (limit / largest)
+        reference = retract(state, expected)
+        np.testing.assert_allclose(positions, reference.positions, atol=1e-15)
+        np.testing.assert_allclose(rotations, reference.rotations, atol=1e-14)

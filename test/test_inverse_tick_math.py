@@ -6,12 +6,23 @@ from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import _jl_inv_coefficient, so3_exp, so3_log
 from cbha_inverse.core.tick_kernels import band_cholesky, band_solve
-from cbha_inverse.core.tick_math import (DenseLU, exp_rotations, jl_coefficients,
-                                         retract_frames, rotation_log)
+from cbha_inverse.core.tick_math import (DenseLU, jl_coefficient, retract_frames, rotation_exp,
+                                         rotation_log)
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
+
+
+def jl_coefficients(theta):
+    return np.array([jl_coefficient(t) for t in theta]).T
+
+
+def exp_rotations(rotvec):
+    out = np.empty((len(rotvec), 3, 3))
+    for v, rot in zip(rotvec, out):
+        rotation_exp(v, rot)
+    return out
 
 
 def _chain(n):

@@ -58,28 +58,6 @@ def jl_coefficient(theta):
 
 
 @numba.njit(cache=True)
-def jl_coefficients(theta):
-    """
-    Return :func:`jl_coefficient` for an array of angles.
-
-    Parameters
-    ----------
-    theta : (n,) ndarray  [rad]
-        Angles.
-
-    Returns
-    -------
-    c, dc_over_t : (n,) ndarray
-
-    """
-    c = np.empty(theta.size)
-    dc = np.empty(theta.size)
-    for i in range(theta.size):
-        c[i], dc[i] = jl_coefficient(theta[i])
-    return c, dc
-
-
-@numba.njit(cache=True)
 def rotation_log(rot, out):
     """
     Write the rotation vector of a rotation matrix into ``out`` and return its angle.
@@ -168,27 +146,6 @@ def rotation_exp(rotvec, out):
     out[2, 0] = b * x * z - a * y
     out[1, 2] = b * y * z - a * x
     out[2, 1] = b * y * z + a * x
-
-
-@numba.njit(cache=True)
-def exp_rotations(rotvec):
-    """
-    Return ``exp(hat(v))`` for (n, 3) rotation vectors (:func:`rotation_exp` each).
-
-    Parameters
-    ----------
-    rotvec : (n, 3) ndarray  [rad]
-        Axis times angle.
-
-    Returns
-    -------
-    (n, 3, 3) ndarray
-
-    """
-    out = np.empty((rotvec.shape[0], 3, 3))
-    for i in range(rotvec.shape[0]):
-        rotation_exp(rotvec[i], out[i])
-    return out
 
 
 @numba.njit(cache=True)

@@ -11,7 +11,7 @@ positions) beside the figures reported in the paper (SOFA, 2.66 GHz Core i7, 201
 ``relinearize_every`` option: 1 linearises at every tick (DESIGN §6); 5 keeps a linearisation for
 up to 5 ticks (the ticks in between only re-solve the QP of the linear model, so their phases
 before the QP are ~0 and the median is theirs; the p99 is the linearisation tick). ``QP``
-compares proxsuite (the default) with the exact active-set solver. The last columns give this
+compares the exact active-set solver (the default) with proxsuite. The last columns give this
 machine's goal (median / p99, ``ok`` when met), the paper's tick time and the ratio paper / ours.
 """
 
