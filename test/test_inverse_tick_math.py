@@ -2,10 +2,10 @@
 
 from cbha_inverse.core import control
 from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense, material_tangent
+from cbha_inverse.core.band_kernels import band_cholesky, band_solve
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import _jl_inv_coefficient, so3_exp, so3_log
-from cbha_inverse.core.tick_kernels import band_cholesky, band_solve
 from cbha_inverse.core.tick_math import (DenseLU, jl_coefficient, retract_frames, rotation_exp,
                                          rotation_log)
 from cbha_inverse.paths import config_path

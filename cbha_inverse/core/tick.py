@@ -22,10 +22,10 @@ every frame, so the band is then the full lower triangle).
 """
 
 from cbha_inverse.core.actuation import CableGroup
+from cbha_inverse.core.band_kernels import band_cholesky, band_solve
 from cbha_inverse.core.cavity_linear import LinearCavityGroup
 from cbha_inverse.core.tick_cables import CableTerms
-from cbha_inverse.core.tick_kernels import (band_cholesky, band_solve, link_pass,
-                                            scatter_add)
+from cbha_inverse.core.tick_kernels import link_pass, scatter_add
 import numpy as np
 
 

@@ -1,7 +1,8 @@
 """
 Compile the numba kernels of the control tick into numba's on-disk cache (run at install).
 
-The per-tick kernels (:mod:`cbha_inverse.core.tick_kernels`, :mod:`cbha_inverse.core.tick_math`,
+The per-tick kernels (:mod:`cbha_inverse.core.tick_kernels`,
+:mod:`cbha_inverse.core.band_kernels`, :mod:`cbha_inverse.core.tick_math`,
 :mod:`cbha_inverse.core.qp_kernels`) are ``numba.njit(cache=True)``: the first process that calls
 them compiles them (~15 s on the 2-core development machine) and writes the machine code to
 ``__pycache__`` next to the sources (or to ``NUMBA_CACHE_DIR``); later processes load it (~0.25 s
