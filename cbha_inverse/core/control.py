@@ -93,8 +93,10 @@ class InverseSolver:
         m = actuators.n_actuators
         self._scale = (self.upper_bounds - self.lower_bounds if scale is None
                        else np.asarray(scale, dtype=float))
+        # a plain C-order copy: one compiled signature of the QP kernels whatever was given
         self._rate = (None if self.options.rate_limit is None
-                      else np.broadcast_to(np.asarray(self.options.rate_limit, float), (m,)))
+                      else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
+                                                    (m,))))
         n = model.n_links
         external = np.zeros((n, 6))
         if gravity is not None:
@@ -345,7 +347,8 @@ class InverseSolver:
             t_factor = time.perf_counter()
             if factorization is None:
                 return t_assembly, t_factor, None
-            solved = factorization.solve(rhs)
+            # C order, as the main path: the compiled projection then needs no second signature
+            solved = np.ascontiguousarray(factorization.solve(rhs))
         w_ea, w_aa, offset, residual_norm = project_effectors(
             solved, rhs, positions, rotations, self._effector_frames, self._effector_offsets,
             previous)
