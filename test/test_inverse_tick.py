@@ -1,5 +1,8 @@
 """The fused tick model against the reference assembly, actuator columns and load stiffness."""
 
+import subprocess
+import sys
+
 from cbha_inverse.core.actuation import ActuatorSet
 from cbha_inverse.core.assembly import assemble_tangent
 from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart, tube_surface
@@ -154,3 +157,47 @@ def test_apply_linear_step_is_the_retraction_of_the_newton_step():
         reference = retract(state, expected)
         np.testing.assert_allclose(positions, reference.positions, atol=1e-15)
         np.testing.assert_allclose(rotations, reference.rotations, atol=1e-14)
+
+
+_NO_NEW_COMPILE = """
+import sys
+import numpy as np
+from numba.core.registry import CPUDispatcher
+from cbha_inverse.core import band_kernels, qp_kernels, tick_kernels, tick_math
+from cbha_inverse.scene import load_scene
+
+
+def signatures():
+    return {f'{module.__name__}.{name}': len(value.signatures)
+            for module in (band_kernels, qp_kernels, tick_kernels, tick_math)
+            for name, value in vars(module).items() if isinstance(value, CPUDispatcher)}
+
+
+scene = load_scene(sys.argv[1])
+solver = scene.make_inverse_solver()
+if sys.argv[2] == 'warm':
+    solver.warm_up()
+before = signatures()
+centre = np.asarray(scene.workspace_center, dtype=float)
+for target in [centre, centre + 0.005, centre + 0.5, np.full_like(centre, np.nan), centre]:
+    solver.step(target)
+    solver.prepare()
+    solver.step(target)
+after = signatures()
+print(sorted(name for name in after if after[name] != before[name]))
+"""
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+def test_warm_up_compiles_everything_a_control_loop_calls(name):
+    """In a fresh process, no tick after ``warm_up`` compiles (or loads) another kernel."""
+    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
+        pytest.skip('the condensed CBHA segment is not generated yet')
+    runs = {}
+    for mode in ('warm', 'cold'):
+        done = subprocess.run([sys.executable, '-c', _NO_NEW_COMPILE, name, mode],
+                              capture_output=True, text=True, timeout=240, check=True)
+        runs[mode] = done.stdout.strip().splitlines()[-1]
+    assert runs['warm'] == '[]'
+    # without the warm-up the same ticks do compile: the check above can fail
+    assert runs['cold'] != '[]'
