@@ -11,6 +11,7 @@ microseconds, less than the call overhead of the LAPACK wrappers.
 import math
 
 import numba
+import numpy as np
 
 
 @numba.njit(cache=True)
@@ -88,3 +89,137 @@ def band_solve(factor, rhs):
         inverse = 1.0 / factor[j, 0]
         for col in range(n_rhs):
             rhs[j, col] *= inverse
+
+
+#: band width 2b of the frame chain's block-tridiagonal matrices (b = 6), a compile-time constant
+#: of :func:`_cholesky_width12` and :func:`_solve_width12`
+FRAME_BAND_WIDTH = 12
+
+
+@numba.njit(cache=True)
+def _cholesky_width12(band):
+    """
+    :func:`band_cholesky` for ``kd + 1 = 12``, with constant trip counts away from the end.
+
+    The loops of a column that is at least 12 rows from the end run over the whole width (zeros
+    included): with a constant trip count LLVM unrolls and vectorises them, which measured ~1.5x
+    faster than the envelope-length loops at n = 6 ... 1000 blocks.
+    """
+    size = band.shape[0]
+    for j in range(size):
+        column = band[j]
+        pivot = column[0]
+        if not (pivot > 0.0 and math.isfinite(pivot)):
+            return j + 1
+        diagonal = math.sqrt(pivot)
+        column[0] = diagonal
+        inverse = 1.0 / diagonal
+        if j + FRAME_BAND_WIDTH <= size:
+            for a in range(1, FRAME_BAND_WIDTH):
+                column[a] *= inverse
+            for b in range(1, FRAME_BAND_WIDTH):
+                weight = column[b]
+                target = band[j + b]
+                for a in range(b, FRAME_BAND_WIDTH):
+                    target[a - b] -= column[a] * weight
+        else:
+            below = size - 1 - j
+            for a in range(1, below + 1):
+                column[a] *= inverse
+            for b in range(1, below + 1):
+                weight = column[b]
+                target = band[j + b]
+                for a in range(b, below + 1):
+                    target[a - b] -= column[a] * weight
+    return 0
+
+
+@numba.njit(cache=True)
+def _solve_width12(factor, rhs):
+    """
+    :func:`band_solve` for ``kd + 1 = 12`` (the band width a compile-time constant).
+
+    The loops over the band keep their run-time length (``min(11, N - 1 - j)``): the innermost
+    loop runs over the right-hand sides, and unrolling the band loop around it measured slower.
+    """
+    size = factor.shape[0]
+    n_rhs = rhs.shape[1]
+    for j in range(size):
+        inverse = 1.0 / factor[j, 0]
+        for col in range(n_rhs):
+            rhs[j, col] *= inverse
+        below = min(FRAME_BAND_WIDTH - 1, size - 1 - j)
+        for a in range(1, below + 1):
+            weight = factor[j, a]
+            for col in range(n_rhs):
+                rhs[j + a, col] -= weight * rhs[j, col]
+    for j in range(size - 1, -1, -1):
+        below = min(FRAME_BAND_WIDTH - 1, size - 1 - j)
+        for a in range(1, below + 1):
+            weight = factor[j, a]
+            for col in range(n_rhs):
+                rhs[j, col] -= weight * rhs[j + a, col]
+        inverse = 1.0 / factor[j, 0]
+        for col in range(n_rhs):
+            rhs[j, col] *= inverse
+
+
+@numba.njit(cache=True)
+def btd_band_cholesky(diagonal, upper):
+    """
+    Build the lower band of a symmetric block-tridiagonal matrix and factor it, ``K = L Lᵀ``.
+
+    The band (half-bandwidth ``kd = 2b - 1``) is written straight from the blocks: row
+    ``c = k b + i`` (block k, component i) holds ``D_k[i, i:]`` at offsets ``0 ... b - 1 - i``
+    and ``U_k[i, :]`` (block (k+1, k) is ``U_kᵀ``) at offsets ``b - i ... 2b - 1 - i``; its last
+    ``i`` slots are zero (Cholesky creates no fill there). Then it is factored in place, with
+    :func:`_cholesky_width12` for b = 6 and :func:`band_cholesky` otherwise.
+
+    Parameters
+    ----------
+    diagonal : (n, b, b) ndarray
+        Diagonal blocks (C order; only their upper triangles are read).
+    upper : (n - 1, b, b) ndarray
+        Blocks (k, k+1) (C order).
+
+    Returns
+    -------
+    factor : (n b, 2b) ndarray
+        ``L`` in the lower band storage of :func:`band_cholesky`, ``factor[c, r - c] = L[r, c]``.
+    info : int
+        0 on success, else ``j + 1`` for the first column whose pivot is not positive (or not
+        finite); ``factor[j, 0]`` is then that pivot and ``factor`` is partly overwritten.
+
+    """
+    n, b = diagonal.shape[0], diagonal.shape[1]
+    band = np.zeros((n * b, 2 * b))
+    for k in range(n):
+        for i in range(b):
+            row = band[k * b + i]
+            for m in range(i, b):
+                row[m - i] = diagonal[k, i, m]
+            if k + 1 < n:
+                for m in range(b):
+                    row[b - i + m] = upper[k, i, m]
+    if 2 * b == FRAME_BAND_WIDTH:
+        return band, _cholesky_width12(band)
+    return band, band_cholesky(band)
+
+
+@numba.njit(cache=True)
+def btd_band_solve(factor, rhs):
+    """
+    Solve ``L Lᵀ X = rhs`` in place with a factor of :func:`btd_band_cholesky`.
+
+    Parameters
+    ----------
+    factor : (N, kd + 1) ndarray
+        ``L`` in lower band storage.
+    rhs : (N, c) ndarray
+        Right-hand sides (C order), overwritten by ``X``.
+
+    """
+    if factor.shape[1] == FRAME_BAND_WIDTH:
+        _solve_width12(factor, rhs)
+    else:
+        band_solve(factor, rhs)

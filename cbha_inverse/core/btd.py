@@ -10,29 +10,46 @@ the frame chain is block tridiagonal). Storage::
     [       U_1^T D_2   ...     ]
     [             ...   D_{n-1} ]
 
-Backends (all exact direct methods; ``method='auto'`` picks by size with the thresholds
-:data:`AUTO_DENSE_MAX`, :data:`AUTO_HYBRID_MAX` and :data:`AUTO_CYCLIC_MIN`, measured with
-``cbha_bench_core``):
+Backends (all exact direct methods; ``method='auto'`` is ``'compiled'`` at every size, see
+:func:`choose_method` and the table below):
 
+- ``'compiled'``: numba kernels (:func:`~cbha_inverse.core.band_kernels.btd_band_cholesky`,
+  :func:`~cbha_inverse.core.band_kernels.btd_band_solve`): one call writes the (bn, 2b) lower
+  band (C order, ``band[c, r - c] = A[r, c]``) straight from the blocks and factors it, one call
+  solves all right-hand sides. No LAPACK wrapper, so ~5 us less fixed cost per call at small n,
+  and for b = 6 the factor loops have constant trip counts; the default;
 - ``'banded'``: LAPACK banded Cholesky ``dpbtrf``/``dpbtrs`` on the (2b, bn) lower band storage
   (half-bandwidth 2b - 1 = 11), built from the blocks by two strided copies. The band of a
   block-tridiagonal matrix holds exactly its blocks, so this *is* a block-tridiagonal
-  Cholesky, run by compiled code; 'auto' uses it above :data:`AUTO_HYBRID_MAX` blocks;
+  Cholesky, run by compiled code;
 - ``'hybrid'``: the same ``dpbtrf`` factor scattered into a dense triangle and solved with
   ``dpotrs`` (level-3 ``dtrsm`` on all right-hand sides at once instead of ``dpbtrs``'s
-  column-by-column ``dtbsv``): the fastest for the control tick's chains (up to
-  :data:`AUTO_HYBRID_MAX` blocks) with many right-hand sides, chosen by 'auto' only when BLAS
-  is single-threaded (see :func:`blas_single_threaded`);
+  column-by-column ``dtbsv``); slow with threaded BLAS (see :func:`blas_single_threaded`);
 - ``'dense'``: LAPACK ``dpotrf``/``dpotrs`` on the assembled (bn x bn) matrix, written through
-  strided block views: the least Python overhead, 'auto' uses it up to :data:`AUTO_DENSE_MAX`
-  blocks;
+  strided block views;
 - ``'cyclic'``: block cyclic reduction, i.e. the block LDL^T (Cholesky) factorisation of the
   odd-even permuted matrix, each of its log2(n) levels vectorised over all its blocks with
-  batched numpy (``cholesky``, ``inv``, ``matmul``). Exact and O(n), but measured slower than
-  ``dpbtrf`` on the reference machine, so 'auto' does not choose it;
+  batched numpy (``cholesky``, ``inv``, ``matmul``). Exact and O(n), but slower than the band
+  kernels;
 - ``'block'``: the textbook sequential block Cholesky, one Python iteration per block (LAPACK
   on the 6x6 blocks): the readable reference; its per-block interpreter cost (~10 us) is what
   the compiled band kernels remove.
+
+Factorisation + solve of rest tangents of curved 6-DOF frame chains (n blocks, k right-hand
+sides), ``cbha_bench_core`` on the 2-core development machine, ``OPENBLAS_NUM_THREADS=1``,
+microseconds; LAPACK pb = ``dpbtrf`` + ``dpbtrs`` on ready band storage::
+
+        n   k   LAPACK pb   compiled  ratio   hybrid    dense   banded   cyclic    block
+        6   6        10.8        9.7   0.90     26.5     20.3     25.2    181.5    119.2
+        6  20        26.6       11.0   0.41     29.9     23.3     41.8    185.1    125.5
+       16   6        26.9       17.8   0.66     46.1     49.2     42.9    254.5    303.9
+       16  20        68.8       18.4   0.27     56.1     58.7     85.7    262.9    325.3
+      100   6       162.9       84.8   0.52    562.6   2596.1    190.6    620.4   1854.9
+      100  20       431.1       90.0   0.21    736.2   2777.9    461.3    669.4   1959.3
+     1000   6      1618.6      804.0   0.50        -        -   1750.3   3088.9  18579.7
+     1000  20      4305.4      963.0   0.22        -        -   4444.0   3642.1  19754.2
+    10000   6     16341.7     8060.8   0.49        -        -  17410.5  26963.2 184732.0
+    10000  20     43589.5     9809.5   0.23        -        -  44767.2  42972.2 196921.8
 
 Every backend detects a matrix that is not positive definite and raises
 :class:`NotPositiveDefiniteError` naming the block; :attr:`BTDFactorization.condition_estimate`
@@ -42,18 +59,11 @@ Hager-Higham estimator with the factor's own solves otherwise).
 
 import os
 
+from cbha_inverse.core.band_kernels import btd_band_cholesky, btd_band_solve
 import numpy as np
 from scipy.linalg import lapack
 
-#: largest number of blocks for which 'auto' uses the dense backend
-AUTO_DENSE_MAX = 8
-#: largest number of blocks for which 'auto' uses the hybrid backend (banded above)
-AUTO_HYBRID_MAX = 24
-#: smallest number of blocks for which 'auto' would use cyclic reduction: never on the reference
-#: machine (its factorisation measured 2-4x slower than dpbtrf at n = 1000 and 10000)
-AUTO_CYCLIC_MIN = None
-
-METHODS = ('auto', 'hybrid', 'dense', 'banded', 'cyclic', 'block')
+METHODS = ('auto', 'compiled', 'hybrid', 'dense', 'banded', 'cyclic', 'block')
 _MASKS = {}
 
 
@@ -204,7 +214,7 @@ class BTDFactorization:
     Attributes
     ----------
     method : str
-        Backend used: 'dense', 'banded' or 'cyclic'.
+        Backend used (one of :data:`METHODS` other than 'auto').
     n_blocks : int
         Number of diagonal blocks n.
     block_size : int
@@ -326,6 +336,37 @@ def _factor_hybrid(diagonal, upper):
                             dense_factor=factor)
 
 
+def _kernel_array(array):
+    """Return ``array`` as a writable C-ordered float array (one numba signature, no recompile)."""
+    if array.flags.c_contiguous and array.flags.writeable and array.dtype == np.float64:
+        return array
+    return np.array(array, dtype=np.float64, order='C')
+
+
+def _factor_compiled(diagonal, upper):
+    """
+    Compiled band Cholesky backend (numba, :mod:`cbha_inverse.core.band_kernels`).
+
+    One kernel call writes the (bn, 2b) lower band straight from the blocks and factors it
+    within the block-tridiagonal envelope; each solve copies the right-hand sides into a
+    C-ordered array and runs one forward and one back substitution on all of them at once.
+    """
+    b = diagonal.shape[1]
+    factor, info = btd_band_cholesky(_kernel_array(diagonal), _kernel_array(upper))
+    if info > 0:
+        pivot = factor[info - 1, 0]
+        if not np.isfinite(pivot):
+            raise ValueError(f'compiled band Cholesky failed: non-finite pivot at row {info - 1}')
+        raise not_pd_error(info - 1, b, pivot, 'compiled band Cholesky')
+
+    def solver(rhs):
+        x = np.array(rhs, dtype=np.float64, order='C')
+        btd_band_solve(factor, x)
+        return x
+
+    return BTDFactorization('compiled', (diagonal, upper), solver)
+
+
 def blas_single_threaded():
     """
     Return True if the environment pins OpenBLAS/OpenMP to one thread.
@@ -346,7 +387,10 @@ def blas_single_threaded():
 
 def choose_method(n_blocks):
     """
-    Return the backend ``'auto'`` uses for ``n_blocks`` blocks.
+    Return the backend ``'auto'`` uses for ``n_blocks`` blocks: ``'compiled'`` for every size.
+
+    It measured fastest at every n and number of right-hand sides of ``cbha_bench_core`` (see the
+    module docstring), and it uses no BLAS, so the choice does not depend on BLAS threading.
 
     Parameters
     ----------
@@ -358,13 +402,11 @@ def choose_method(n_blocks):
     str
 
     """
-    if n_blocks <= AUTO_DENSE_MAX:
-        return 'dense'
-    if n_blocks <= AUTO_HYBRID_MAX and blas_single_threaded():
-        return 'hybrid'
-    if AUTO_CYCLIC_MIN is not None and n_blocks >= AUTO_CYCLIC_MIN:
-        return 'cyclic'
-    return 'banded'
+    return 'compiled'
+
+
+_BACKENDS = {'compiled': _factor_compiled, 'dense': _factor_dense, 'hybrid': _factor_hybrid,
+             'banded': _factor_banded}
 
 
 def factorize(diagonal, upper, method='auto', max_condition=None):
@@ -377,8 +419,8 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
         Diagonal blocks (symmetric).
     upper : (n - 1, b, b) array_like
         ``upper[i]`` = block (i, i+1); block (i+1, i) is its transpose.
-    method : {'auto', 'hybrid', 'dense', 'banded', 'cyclic', 'block'}
-        Backend; 'auto' chooses by size (see :func:`choose_method`).
+    method : {'auto', 'compiled', 'hybrid', 'dense', 'banded', 'cyclic', 'block'}
+        Backend; 'auto' is 'compiled' (see :func:`choose_method`).
     max_condition : float, optional
         If given, the condition estimate is computed at once and a larger one raises
         :class:`IllConditionedError` (otherwise it is computed on first access).
@@ -399,17 +441,15 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
 
     """
     diagonal, upper = _check_blocks(diagonal, upper)
-    if method not in METHODS:
-        raise ValueError(f'method must be one of {METHODS}, got {method!r}')
     if method == 'auto':
         method = choose_method(diagonal.shape[0])
-    if method in ('cyclic', 'block'):
+    backend = _BACKENDS.get(method)
+    if backend is None:
+        if method not in METHODS:
+            raise ValueError(f'method must be one of {METHODS}, got {method!r}')
         from cbha_inverse.core import btd_reference   # imports this module: load lazily
         backend = {'cyclic': btd_reference.factor_cyclic,
                    'block': btd_reference.factor_block}[method]
-    else:
-        backend = {'dense': _factor_dense, 'hybrid': _factor_hybrid,
-                   'banded': _factor_banded}[method]
     factorization = backend(diagonal, upper)
     if max_condition is not None and not factorization.condition_estimate <= max_condition:
         raise IllConditionedError(
