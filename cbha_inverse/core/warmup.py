@@ -6,7 +6,8 @@ The per-tick kernels (:mod:`cbha_inverse.core.tick_kernels`,
 :mod:`cbha_inverse.core.qp_kernels`) are ``numba.njit(cache=True)``: the first process that calls
 them compiles them (~15 s on the 2-core development machine) and writes the machine code to
 ``__pycache__`` next to the sources (or to ``NUMBA_CACHE_DIR``); later processes load it (~0.25 s
-for a first tick). This module runs representative ticks on every scene and QP solver so that the
+for a first tick). This module runs representative ticks on every scene and QP solver, and one
+solve of the compiled BTD backend of the static solver (:mod:`cbha_inverse.core.btd`), so that the
 compile happens once, at install, and never inside a timed test, the demo or a control loop.
 
 Usage: ``python -m cbha_inverse.core.warmup [--scenes NAME ...]``. Pure numerics, no rclpy.
@@ -16,6 +17,7 @@ import argparse
 import sys
 import time
 
+from cbha_inverse.core import btd
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -131,6 +133,9 @@ def main(argv=None):
                         help='scenes to run (default: all)')
     args = parser.parse_args(argv)
     started = time.perf_counter()
+    # the compiled BTD backend of the static solver (plant, forward model, the tick's fallback):
+    # its inputs are normalised to one type, so one small solve compiles all it ever needs
+    btd.solve(np.tile(np.eye(6), (2, 1, 1)), np.zeros((1, 6, 6)), np.ones(12))
     ran = []
     for name in args.scenes:
         if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
