@@ -142,3 +142,39 @@ def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkey
     material = blocks_to_dense(*material_tangent(model, ChainState(positions, rotations)))
     factor = solver._factor(positions, rotations, actuation)
     np.testing.assert_allclose(material @ factor.solve(rhs), rhs, atol=1e-9)
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+def test_ticks_through_the_fallback_factorization_still_reach_the_target(name, monkeypatch):
+    """The tick's Cholesky refused every time: the LU fallback path still converges (0.1 mm)."""
+    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
+        pytest.skip('the condensed CBHA segment is not generated yet')
+    scene = load_scene(name)
+    rng = np.random.default_rng(21)
+    m = len(scene.actuator_names)
+    actuation = scene.lower_bounds + (scene.upper_bounds - scene.lower_bounds) * rng.uniform(
+        0.0, 0.5, m)
+    target = scene.forward(actuation, strict=True).effector_positions
+    solver = scene.make_inverse_solver()
+    calls = []
+    monkeypatch.setattr(solver._tick, 'factor', lambda tangent: calls.append(1))
+    for _ in range(30):
+        out = solver.step(target)
+        assert out.status in ('solved', 'saturated')
+    assert len(calls) == 30
+    reached = scene.forward(out.actuation, initial_state=solver.state, strict=True)
+    assert np.linalg.norm(reached.effector_positions - target, axis=1).max() < 1e-4
+
+
+def test_a_tick_without_any_factorization_holds_the_actuation(monkeypatch):
+    scene = load_scene('tendon_6f_8c')
+    solver = scene.make_inverse_solver()
+    first = solver.step(scene.workspace_center + 0.002)
+    state = solver.state
+    monkeypatch.setattr(solver._tick, 'factor', lambda tangent: None)
+    monkeypatch.setattr(solver, '_factor', lambda positions, rotations, actuation: None)
+    held = solver.step(scene.workspace_center - 0.002)
+    assert held.status == 'not_positive_definite'
+    np.testing.assert_array_equal(held.actuation, first.actuation)
+    np.testing.assert_array_equal(solver.state.positions, state.positions)
+    assert np.isfinite(held.effector_positions).all()
