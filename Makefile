@@ -12,7 +12,8 @@ VPY := $(VENV)/bin/python
 PINS_STAMP := $(VENV)/.pins-stamp
 INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
-KERNEL_SOURCES := $(wildcard cbha_inverse/core/*_kernels.py) cbha_inverse/core/tick_math.py
+KERNEL_SOURCES := $(wildcard cbha_inverse/core/*_kernels.py) cbha_inverse/core/tick_math.py \
+  cbha_inverse/core/tick_cables.py
 DEMO_OUT ?= output/demo
 PYTEST_ARGS ?=
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores

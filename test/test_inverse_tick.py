@@ -163,13 +163,13 @@ _NO_NEW_COMPILE = """
 import sys
 import numpy as np
 from numba.core.registry import CPUDispatcher
-from cbha_inverse.core import band_kernels, qp_kernels, tick_kernels, tick_math
+from cbha_inverse.core import band_kernels, qp_kernels, tick_cables, tick_kernels, tick_math
 from cbha_inverse.scene import load_scene
 
 
 def signatures():
     return {f'{module.__name__}.{name}': len(value.signatures)
-            for module in (band_kernels, qp_kernels, tick_kernels, tick_math)
+            for module in (band_kernels, qp_kernels, tick_cables, tick_kernels, tick_math)
             for name, value in vars(module).items() if isinstance(value, CPUDispatcher)}
 
 
