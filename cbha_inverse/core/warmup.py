@@ -6,9 +6,10 @@ The per-tick kernels (:mod:`cbha_inverse.core.tick_kernels`,
 :mod:`cbha_inverse.core.tick_math`, :mod:`cbha_inverse.core.qp_kernels`) are
 ``numba.njit(cache=True)``: the first process that calls them compiles them (~15 s on the 2-core
 development machine) and writes the machine code to ``__pycache__`` next to the sources (or to
-``NUMBA_CACHE_DIR``); later processes load it (~0.25 s for a first tick). This module runs representative ticks on every scene and QP solver, and one
-solve of the compiled BTD backend of the static solver (:mod:`cbha_inverse.core.btd`), so that the
-compile happens once, at install, and never inside a timed test, the demo or a control loop.
+``NUMBA_CACHE_DIR``); later processes load it (~0.25 s for a first tick). This module runs
+representative ticks on every scene and QP solver, and one solve of the compiled BTD backend of
+the static solver (:mod:`cbha_inverse.core.btd`), so that the compile happens once, at install,
+and never inside a timed test, the demo or a control loop.
 
 Usage: ``python -m cbha_inverse.core.warmup [--scenes NAME ...]``. Pure numerics, no rclpy.
 """
