@@ -24,7 +24,8 @@ Backends (all exact direct methods; ``method='auto'`` is ``'compiled'`` at every
   Cholesky, run by compiled code;
 - ``'hybrid'``: the same ``dpbtrf`` factor scattered into a dense triangle and solved with
   ``dpotrs`` (level-3 ``dtrsm`` on all right-hand sides at once instead of ``dpbtrs``'s
-  column-by-column ``dtbsv``); slow with threaded BLAS (see :func:`blas_single_threaded`);
+  column-by-column ``dtbsv``); slow with threaded BLAS (see
+  :func:`cbha_inverse.core.btd_reference.blas_single_threaded`);
 - ``'dense'``: LAPACK ``dpotrf``/``dpotrs`` on the assembled (bn x bn) matrix, written through
   strided block views;
 - ``'cyclic'``: block cyclic reduction, i.e. the block LDL^T (Cholesky) factorisation of the
@@ -51,13 +52,13 @@ microseconds; LAPACK pb = ``dpbtrf`` + ``dpbtrs`` on ready band storage::
     10000   6     16341.7     8060.8   0.49        -        -  17410.5  26963.2 184732.0
     10000  20     43589.5     9809.5   0.23        -        -  44767.2  42972.2 196921.8
 
-Every backend detects a matrix that is not positive definite and raises
-:class:`NotPositiveDefiniteError` naming the block; :attr:`BTDFactorization.condition_estimate`
-is the 1-norm condition number estimate (LAPACK ``dpocon`` for the dense backend, the
-Hager-Higham estimator with the factor's own solves otherwise).
+All but 'compiled' live in :mod:`cbha_inverse.core.btd_reference` (the comparison points of the
+benchmark and the tests' oracles). Every backend detects a matrix that is not positive definite
+and raises :class:`NotPositiveDefiniteError` naming the block;
+:attr:`BTDFactorization.condition_estimate` is the 1-norm condition number estimate (LAPACK
+``dpocon`` for the dense backend, the Hager-Higham estimator with the factor's own solves
+otherwise).
 """
-
-import os
 
 from cbha_inverse.core.band_kernels import btd_band_cholesky, btd_band_solve
 import numpy as np
@@ -161,23 +162,6 @@ def _upper_mask(b):
     return _MASKS[b]
 
 
-def _dense_lower(diagonal, upper):
-    """
-    Assemble the dense matrix for LAPACK ``uplo='L'`` without a copy (Fortran order).
-
-    The diagonal and upper blocks are written into a C-ordered array through block views with
-    row stride ``b (bn + 1)`` (slices of a reshaped flat buffer); its transpose is
-    Fortran-contiguous and holds them as the lower triangle.
-    """
-    n, b = diagonal.shape[:2]
-    size = n * b
-    step = b * (size + 1)
-    flat = np.zeros(n * step)
-    flat.reshape(n, step)[:, :b * size].reshape(n, b, size)[:, :, :b] = diagonal
-    flat.reshape(n, step)[:-1, b:b + b * size].reshape(n - 1, b, size)[:, :, :b] = upper
-    return flat[:size * size].reshape(size, size).T
-
-
 def not_pd_error(row, block_size, pivot, how):
     """Build the error for a failed pivot at global row ``row`` (0-based)."""
     block, comp = divmod(int(row), block_size)
@@ -273,69 +257,6 @@ class BTDFactorization:
         return self._solver(rhs)
 
 
-def _factor_dense(diagonal, upper):
-    """Dense LAPACK Cholesky backend."""
-    n, b = diagonal.shape[:2]
-    factor, info = lapack.dpotrf(_dense_lower(diagonal, upper), lower=1, clean=0, overwrite_a=1)
-    if info > 0:
-        raise not_pd_error(info - 1, b, factor[info - 1, info - 1], 'dense Cholesky')
-    if info < 0 or not np.isfinite(factor.diagonal()).all():
-        raise ValueError('dense Cholesky failed: non-finite entries or illegal argument')
-    return BTDFactorization('dense', (diagonal, upper), _dense_solver(factor),
-                            dense_factor=factor)
-
-
-def _dense_solver(factor):
-    """Return ``rhs -> A^-1 rhs`` for a dense lower Cholesky factor (``dpotrs``, level 3)."""
-    def solver(rhs):
-        x, _ = lapack.dpotrs(factor, rhs, lower=1)
-        return x
-
-    return solver
-
-
-def _band_cholesky(diagonal, upper):
-    """Banded Cholesky factor (``dpbtrf``) of checked blocks; raises on failure."""
-    b = diagonal.shape[1]
-    factor, info = lapack.dpbtrf(_band(diagonal, upper), lower=1, overwrite_ab=1)
-    if info > 0:
-        raise not_pd_error(info - 1, b, factor[0, info - 1], 'banded Cholesky')
-    if info < 0 or not np.isfinite(factor[0]).all():
-        raise ValueError('banded Cholesky failed: non-finite entries or illegal argument')
-    return factor
-
-
-def _factor_banded(diagonal, upper):
-    """LAPACK banded Cholesky backend (dpbtrf / dpbtrs)."""
-    factor = _band_cholesky(diagonal, upper)
-
-    def solver(rhs):
-        x, _ = lapack.dpbtrs(factor, rhs, lower=1)
-        return x
-
-    return BTDFactorization('banded', (diagonal, upper), solver)
-
-
-def _factor_hybrid(diagonal, upper):
-    """
-    Banded Cholesky factor, solved with dense triangular solves (small n, many RHS).
-
-    ``dpbtrf`` factorises in O(n); the band factor is then scattered into a dense lower
-    triangle (one strided copy: column j of the Fortran array holds ``L[j + r, j]`` at offset
-    ``j (N + 1) + r``) so that ``dpotrs`` solves all right-hand sides with level-3 ``dtrsm``
-    instead of ``dpbtrs``'s column-by-column ``dtbsv``.
-    """
-    n, b = diagonal.shape[:2]
-    band = _band_cholesky(diagonal, upper)
-    size = n * b
-    flat = np.zeros(size * (size + 1) + 2 * b)
-    width = min(2 * b, size + 1)
-    flat[:size * (size + 1)].reshape(size, size + 1)[:, :width] = band.T[:, :width]
-    factor = flat[:size * size].reshape(size, size).T
-    return BTDFactorization('hybrid', (diagonal, upper), _dense_solver(factor),
-                            dense_factor=factor)
-
-
 def _kernel_array(array):
     """Return ``array`` as a writable C-ordered float array (one numba signature, no recompile)."""
     if array.flags.c_contiguous and array.flags.writeable and array.dtype == np.float64:
@@ -367,24 +288,6 @@ def _factor_compiled(diagonal, upper):
     return BTDFactorization('compiled', (diagonal, upper), solver)
 
 
-def blas_single_threaded():
-    """
-    Return True if the environment pins OpenBLAS/OpenMP to one thread.
-
-    The 'hybrid' backend solves with level-3 ``dtrsm``; with threaded OpenBLAS on a loaded
-    machine a 96 x 96 triangular solve with 20 right-hand sides was measured at 30 ms instead of
-    30 us (thread wake-up), while the level-2 ``dpbtrs`` of 'banded' is never threaded. 'auto'
-    uses 'hybrid' only when ``OPENBLAS_NUM_THREADS`` (or ``OMP_NUM_THREADS``) is 1.
-
-    Returns
-    -------
-    bool
-
-    """
-    value = os.environ.get('OPENBLAS_NUM_THREADS', os.environ.get('OMP_NUM_THREADS'))
-    return value is not None and value.strip() == '1'
-
-
 def choose_method(n_blocks):
     """
     Return the backend ``'auto'`` uses for ``n_blocks`` blocks: ``'compiled'`` for every size.
@@ -405,8 +308,9 @@ def choose_method(n_blocks):
     return 'compiled'
 
 
-_BACKENDS = {'compiled': _factor_compiled, 'dense': _factor_dense, 'hybrid': _factor_hybrid,
-             'banded': _factor_banded}
+_REFERENCE_BACKENDS = {'dense': 'factor_dense', 'hybrid': 'factor_hybrid',
+                       'banded': 'factor_banded', 'cyclic': 'factor_cyclic',
+                       'block': 'factor_block'}
 
 
 def factorize(diagonal, upper, method='auto', max_condition=None):
@@ -443,13 +347,13 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
     diagonal, upper = _check_blocks(diagonal, upper)
     if method == 'auto':
         method = choose_method(diagonal.shape[0])
-    backend = _BACKENDS.get(method)
-    if backend is None:
-        if method not in METHODS:
-            raise ValueError(f'method must be one of {METHODS}, got {method!r}')
+    if method == 'compiled':
+        backend = _factor_compiled
+    elif method in _REFERENCE_BACKENDS:
         from cbha_inverse.core import btd_reference   # imports this module: load lazily
-        backend = {'cyclic': btd_reference.factor_cyclic,
-                   'block': btd_reference.factor_block}[method]
+        backend = getattr(btd_reference, _REFERENCE_BACKENDS[method])
+    else:
+        raise ValueError(f'method must be one of {METHODS}, got {method!r}')
     factorization = backend(diagonal, upper)
     if max_condition is not None and not factorization.condition_estimate <= max_condition:
         raise IllConditionedError(

@@ -1,18 +1,122 @@
 """
-Reference backends of the block-tridiagonal solver (see :mod:`cbha_inverse.core.btd`).
+Reference and LAPACK backends of the block-tridiagonal solver (see :mod:`cbha_inverse.core.btd`).
 
+- :func:`factor_dense`, :func:`factor_banded`, :func:`factor_hybrid`: LAPACK through scipy
+  (``dpotrf``/``dpotrs`` on the dense matrix, ``dpbtrf``/``dpbtrs`` on the band, the band factor
+  solved densely), the comparison points of ``cbha_bench_core``;
 - :func:`factor_block`: the textbook sequential block Cholesky, one Python iteration per block;
 - :func:`factor_cyclic`: block cyclic reduction (block LDL^T of the odd-even permuted matrix),
   each of its log2(n) levels vectorised over all its blocks.
 
-Both are exact and O(n); ``cbha_bench_core`` measures them against the LAPACK band kernels that
-``factorize(method='auto')`` uses. Call them through ``factorize(..., method='block')`` or
-``method='cyclic'``.
+All are exact; ``cbha_bench_core`` measures them against the compiled band kernels that
+``factorize(method='auto')`` uses. Call them through ``factorize(..., method=...)`` with
+``'dense'``, ``'banded'``, ``'hybrid'``, ``'block'`` or ``'cyclic'``.
 """
 
-from cbha_inverse.core.btd import BTDFactorization, not_pd_error, NotPositiveDefiniteError
+import os
+
+from cbha_inverse.core.btd import (BTDFactorization, not_pd_error, NotPositiveDefiniteError,
+                                   to_lower_banded)
 import numpy as np
 from scipy.linalg import blas, lapack
+
+
+def _dense_lower(diagonal, upper):
+    """
+    Assemble the dense matrix for LAPACK ``uplo='L'`` without a copy (Fortran order).
+
+    The diagonal and upper blocks are written into a C-ordered array through block views with
+    row stride ``b (bn + 1)`` (slices of a reshaped flat buffer); its transpose is
+    Fortran-contiguous and holds them as the lower triangle.
+    """
+    n, b = diagonal.shape[:2]
+    size = n * b
+    step = b * (size + 1)
+    flat = np.zeros(n * step)
+    flat.reshape(n, step)[:, :b * size].reshape(n, b, size)[:, :, :b] = diagonal
+    flat.reshape(n, step)[:-1, b:b + b * size].reshape(n - 1, b, size)[:, :, :b] = upper
+    return flat[:size * size].reshape(size, size).T
+
+
+def factor_dense(diagonal, upper):
+    """Dense LAPACK Cholesky backend."""
+    n, b = diagonal.shape[:2]
+    factor, info = lapack.dpotrf(_dense_lower(diagonal, upper), lower=1, clean=0, overwrite_a=1)
+    if info > 0:
+        raise not_pd_error(info - 1, b, factor[info - 1, info - 1], 'dense Cholesky')
+    if info < 0 or not np.isfinite(factor.diagonal()).all():
+        raise ValueError('dense Cholesky failed: non-finite entries or illegal argument')
+    return BTDFactorization('dense', (diagonal, upper), _dense_solver(factor),
+                            dense_factor=factor)
+
+
+def _dense_solver(factor):
+    """Return ``rhs -> A^-1 rhs`` for a dense lower Cholesky factor (``dpotrs``, level 3)."""
+    def solver(rhs):
+        x, _ = lapack.dpotrs(factor, rhs, lower=1)
+        return x
+
+    return solver
+
+
+def _band_cholesky(diagonal, upper):
+    """Banded Cholesky factor (``dpbtrf``) of checked blocks; raises on failure."""
+    b = diagonal.shape[1]
+    factor, info = lapack.dpbtrf(to_lower_banded(diagonal, upper), lower=1, overwrite_ab=1)
+    if info > 0:
+        raise not_pd_error(info - 1, b, factor[0, info - 1], 'banded Cholesky')
+    if info < 0 or not np.isfinite(factor[0]).all():
+        raise ValueError('banded Cholesky failed: non-finite entries or illegal argument')
+    return factor
+
+
+def factor_banded(diagonal, upper):
+    """LAPACK banded Cholesky backend (dpbtrf / dpbtrs)."""
+    factor = _band_cholesky(diagonal, upper)
+
+    def solver(rhs):
+        x, _ = lapack.dpbtrs(factor, rhs, lower=1)
+        return x
+
+    return BTDFactorization('banded', (diagonal, upper), solver)
+
+
+def factor_hybrid(diagonal, upper):
+    """
+    Banded Cholesky factor, solved with dense triangular solves (small n, many RHS).
+
+    ``dpbtrf`` factorises in O(n); the band factor is then scattered into a dense lower
+    triangle (one strided copy: column j of the Fortran array holds ``L[j + r, j]`` at offset
+    ``j (N + 1) + r``) so that ``dpotrs`` solves all right-hand sides with level-3 ``dtrsm``
+    instead of ``dpbtrs``'s column-by-column ``dtbsv``.
+    """
+    n, b = diagonal.shape[:2]
+    band = _band_cholesky(diagonal, upper)
+    size = n * b
+    flat = np.zeros(size * (size + 1) + 2 * b)
+    width = min(2 * b, size + 1)
+    flat[:size * (size + 1)].reshape(size, size + 1)[:, :width] = band.T[:, :width]
+    factor = flat[:size * size].reshape(size, size).T
+    return BTDFactorization('hybrid', (diagonal, upper), _dense_solver(factor),
+                            dense_factor=factor)
+
+
+def blas_single_threaded():
+    """
+    Return True if the environment pins OpenBLAS/OpenMP to one thread.
+
+    The 'hybrid' backend solves with level-3 ``dtrsm``; with threaded OpenBLAS on a loaded
+    machine a 96 x 96 triangular solve with 20 right-hand sides was measured at 30 ms instead of
+    30 us (thread wake-up), while the level-2 ``dpbtrs`` of 'banded' is never threaded. 'auto'
+    uses 'hybrid' only when ``OPENBLAS_NUM_THREADS`` (or ``OMP_NUM_THREADS``) is 1.
+
+    Returns
+    -------
+    bool
+
+    """
+    value = os.environ.get('OPENBLAS_NUM_THREADS', os.environ.get('OMP_NUM_THREADS'))
+    return value is not None and value.strip() == '1'
 
 
 def factor_block(diagonal, upper):

@@ -21,7 +21,7 @@ import platform
 import sys
 import time
 
-from cbha_inverse.core import btd
+from cbha_inverse.core import btd, btd_reference
 from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense
 from cbha_inverse.core.chain import ChainModel, rest_state
 from cbha_inverse.core.links import timoshenko_compliance
@@ -242,7 +242,7 @@ def btd_table(sizes, rhs_counts, budget, out):
     print(f'dense LAPACK skipped above n = {DENSE_MAX_FRAMES} frames (6n x 6n dense matrix; '
           f'at n = 1000 it is 288 MB and seconds per factorisation).', file=out)
     print(f"'auto' uses {', '.join(sorted({row['method'] for row in rows}))} at these sizes "
-          f'(BLAS single-threaded: {btd.blas_single_threaded()}).', file=out)
+          f'(BLAS single-threaded: {btd_reference.blas_single_threaded()}).', file=out)
     return rows
 
 
