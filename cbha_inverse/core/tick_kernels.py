@@ -1,5 +1,5 @@
 """
-Compiled kernels of one linearisation tick (numba): links, cables, assembly, band Cholesky.
+Compiled kernels of one linearisation tick (numba): links, assembly, projection, outcome.
 
 The reference path (:func:`cbha_inverse.core.assembly.assemble_tangent` and the actuators'
 ``evaluate`` / ``load_tangent``) is batched numpy; a tick of it is a few hundred numpy calls of
@@ -36,7 +36,7 @@ def hat_into(v, out):
 
 
 @numba.njit(cache=True)
-def _add_scaledhat_into(out, v, weight):
+def _add_scaled_hat(out, v, weight):
     """Add ``weight * hat(v)`` to a (3, 3) array (view)."""
     out[0, 1] -= weight * v[2]
     out[1, 0] += weight * v[2]
@@ -129,7 +129,7 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
             for j in range(3):
                 jinv[i, j] = c * phi[i] * phi[j]
             jinv[i, i] += 1.0 - c * t2
-        _add_scaledhat_into(jinv, phi, -0.5)
+        _add_scaled_hat(jinv, phi, -0.5)
         # a = B^T K - H_p with B = diag(I, Jl^-1), H_p = sum_c p_c H_c
         for j in range(6):
             for i in range(3):
@@ -185,7 +185,7 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
             for j in range(3):
                 a[3 + i, 3 + j] += left0 * phi[j] + left1 * s_r[j]
             a[3 + i, 3 + i] += c * ps
-        _add_scaledhat_into(a[3:, 3:], s_r, -0.5)
+        _add_scaled_hat(a[3:, 3:], s_r, -0.5)
         # mat = a B
         for i in range(6):
             for j in range(3):
