@@ -40,15 +40,15 @@ def band_cholesky(band):
     """
     if band.shape[1] == FRAME_BAND_WIDTH:
         return _cholesky_width12(band)
-    return _cholesky_any_width(band)
+    return _cholesky_columns(band, 0)
 
 
 @numba.njit(cache=True)
-def _cholesky_any_width(band):
-    """:func:`band_cholesky` for any half-bandwidth (envelope-length loops)."""
+def _cholesky_columns(band, first):
+    """Factor columns ``first`` ... N - 1 of :func:`band_cholesky` (envelope-length loops)."""
     size, width = band.shape
     kd = width - 1
-    for j in range(size):
+    for j in range(first, size):
         column = band[j]
         pivot = column[0]
         if not (pivot > 0.0 and math.isfinite(pivot)):
@@ -113,10 +113,12 @@ def _cholesky_width12(band):
 
     The loops of a column that is at least 12 rows from the end run over the whole width (zeros
     included): with a constant trip count LLVM unrolls and vectorises them, which measured ~1.5x
-    faster than the envelope-length loops at n = 6 ... 1000 blocks.
+    faster than the envelope-length loops at n = 6 ... 1000 blocks; the last 11 columns use
+    :func:`_cholesky_columns`.
     """
     size = band.shape[0]
-    for j in range(size):
+    full = max(size - FRAME_BAND_WIDTH + 1, 0)
+    for j in range(full):
         column = band[j]
         pivot = column[0]
         if not (pivot > 0.0 and math.isfinite(pivot)):
@@ -124,24 +126,15 @@ def _cholesky_width12(band):
         diagonal = math.sqrt(pivot)
         column[0] = diagonal
         inverse = 1.0 / diagonal
-        if j + FRAME_BAND_WIDTH <= size:
-            for a in range(1, FRAME_BAND_WIDTH):
-                column[a] *= inverse
-            for b in range(1, FRAME_BAND_WIDTH):
-                weight = column[b]
-                target = band[j + b]
-                for a in range(b, FRAME_BAND_WIDTH):
-                    target[a - b] -= column[a] * weight
-        else:
-            below = size - 1 - j
-            for a in range(1, below + 1):
-                column[a] *= inverse
-            for b in range(1, below + 1):
-                weight = column[b]
-                target = band[j + b]
-                for a in range(b, below + 1):
-                    target[a - b] -= column[a] * weight
-    return 0
+        for a in range(1, FRAME_BAND_WIDTH):
+            column[a] *= inverse
+        for b in range(1, FRAME_BAND_WIDTH):
+            weight = column[b]
+            target = band[j + b]
+            for a in range(b, FRAME_BAND_WIDTH):
+                target[a - b] -= column[a] * weight
+    # the last 11 columns: the envelope ends at the matrix end
+    return _cholesky_columns(band, full)
 
 
 @numba.njit(cache=True)
