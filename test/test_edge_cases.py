@@ -112,18 +112,18 @@ def test_repeated_waypoints_give_no_garbage():
 
 
 @pytest.mark.parametrize('arguments, match', [
-    (dict(shape='circle', radius=0.0), 'radius'),
-    (dict(shape='circle', center=(0.0, math.nan, 0.0)), 'center'),
-    (dict(shape='square', side=-1.0), 'side'),
-    (dict(shape='square', center=(0.0, 0.0)), 'center'),
-    (dict(shape='circle', speed=0.0), 'speed'),
-    (dict(shape='circle', laps=-1), 'laps'),
-    (dict(shape='circle', start_hold=-1.0), 'start_hold'),
-    (dict(shape='waypoints', waypoints=[[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]), r'\(V, 3\)'),
-    (dict(shape='waypoints', waypoints=[0.0, 0.0, 0.0, 1.0]), '3 numbers per point'),
-    (dict(shape='waypoints', waypoints=[0.0, 0.0, 0.0, 1.0, math.inf, 0.0]), 'finite'),
-    (dict(shape='waypoints', waypoints=[1.0, 1.0, 1.0, 1.0, 1.0, 1.0]), 'zero length'),
-    (dict(shape='triangle'), 'shape must be one of'),
+    ({'shape': 'circle', 'radius': 0.0}, 'radius'),
+    ({'shape': 'circle', 'center': (0.0, math.nan, 0.0)}, 'center'),
+    ({'shape': 'square', 'side': -1.0}, 'side'),
+    ({'shape': 'square', 'center': (0.0, 0.0)}, 'center'),
+    ({'shape': 'circle', 'speed': 0.0}, 'speed'),
+    ({'shape': 'circle', 'laps': -1}, 'laps'),
+    ({'shape': 'circle', 'start_hold': -1.0}, 'start_hold'),
+    ({'shape': 'waypoints', 'waypoints': [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]}, r'\(V, 3\)'),
+    ({'shape': 'waypoints', 'waypoints': [0.0, 0.0, 0.0, 1.0]}, '3 numbers per point'),
+    ({'shape': 'waypoints', 'waypoints': [0.0, 0.0, 0.0, 1.0, math.inf, 0.0]}, 'finite'),
+    ({'shape': 'waypoints', 'waypoints': [1.0, 1.0, 1.0, 1.0, 1.0, 1.0]}, 'zero length'),
+    ({'shape': 'triangle'}, 'shape must be one of'),
 ])
 def test_bad_trajectory_arguments_name_the_argument(arguments, match):
     with pytest.raises(ValueError, match=match):
