@@ -69,7 +69,14 @@ def test_pressure_in_one_tube_bends_a_section_plausibly(segment, spec):
     upper = cavity_frame_wrenches(points, triangles, spec['geometry']['segment_length'])[1]
     angle = np.degrees(np.linalg.norm(8 * segment.compliance[3:, 3:] @ upper[3:]) * 150e3)
     print(f'150 kPa in one tube bends an 8-segment section by about {angle:.1f} deg (linear)')
-    assert 45.0 <= angle <= 90.0
+    # derivation: the tube's net load is an axial force F along its own axis, which lies at the
+    # pitch radius d from the backbone, so the moment at the frame has the magnitude F d
+    pitch = spec['geometry']['tube_pitch_radius']
+    assert np.linalg.norm(upper[3:]) == pytest.approx(abs(upper[0]) * pitch, rel=1e-3)
+    # source of the value: the effective modulus in meshes/cbha_segment.yaml is calibrated so
+    # that this linear estimate is 63 deg (its material comment); 1 % covers the mesh
+    # convergence of the committed P2 segment (< 0.5 %, the mesh convergence test below)
+    assert angle == pytest.approx(63.0, rel=0.01)
     model = chain_from_segments([segment] * 8)
     assert model.n_links == 8 and np.isclose(model.masses.sum(), 8 * segment.mass)
 

@@ -66,12 +66,26 @@ def test_rate_limit_bounds_the_change():
 
 
 def test_redundant_qp_is_deterministic_and_unique():
+    """
+    8 actuators for 3 tracked coordinates: the regularised QP has one minimiser.
+
+    Three different methods reach it: proxsuite, the exact active set and projected Gauss-Seidel
+    started from three different corners of the box.
+    """
     rng = np.random.default_rng(4)
     problem, _ = _problem(rng, k=1, m=8)
     assert np.linalg.eigvalsh(problem.hessian).min() > 0.0
     first = ActuationQP(8).solve(problem).x
     second = ActuationQP(8).solve(problem).x
     np.testing.assert_array_equal(first, second)
+    exact = ActiveSetQP(8).solve(problem)
+    assert exact.ok
+    np.testing.assert_allclose(first, exact.x, atol=1e-6)
+    for start in (problem.lower, problem.upper, 0.5 * (problem.lower + problem.upper)):
+        sweeps = projected_gauss_seidel(problem, x0=start, max_iterations=200000,
+                                        tolerance=1e-14)
+        assert sweeps.ok
+        np.testing.assert_allclose(sweeps.x, exact.x, atol=1e-6)
 
 
 def test_target_corrector_integrates_clamps_and_stops_winding_up():

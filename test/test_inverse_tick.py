@@ -12,7 +12,6 @@ from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import so3_exp
 from cbha_inverse.core.tick import TickModel
 from cbha_inverse.core.tick_math import rotation_exp
-from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
@@ -47,8 +46,6 @@ def _check(model, actuators, external, state, actuation):
 
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'tendon_10f_16c', 'cbha'])
 def test_tick_model_equals_reference_on_the_scenes(name):
-    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
-        pytest.skip('the condensed CBHA segment is not generated yet')
     scene = load_scene(name)
     rng = np.random.default_rng(7)
     n = scene.model.n_links
@@ -92,8 +89,6 @@ def test_exp_rotations_matches_so3_exp():
 
 @pytest.mark.parametrize('name', ['tendon_10f_16c', 'cbha'])
 def test_active_set_option_gives_the_proxsuite_actuation(name):
-    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
-        pytest.skip('the condensed CBHA segment is not generated yet')
     scene = load_scene(name)
     far = scene.workspace_center + 0.02
     runs = []
@@ -191,8 +186,6 @@ print(sorted(name for name in after if after[name] != before[name]))
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
 def test_warm_up_compiles_everything_a_control_loop_calls(name):
     """In a fresh process, no tick after ``warm_up`` compiles (or loads) another kernel."""
-    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
-        pytest.skip('the condensed CBHA segment is not generated yet')
     runs = {}
     for mode in ('warm', 'cold'):
         done = subprocess.run([sys.executable, '-c', _NO_NEW_COMPILE, name, mode],

@@ -8,7 +8,6 @@ from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import _jl_inv_coefficient, so3_exp, so3_log
 from cbha_inverse.core.tick_math import (DenseLU, jl_coefficient, retract_frames, rotation_exp,
                                          rotation_log)
-from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
@@ -118,8 +117,6 @@ def test_dense_lu_solves_and_detects_singular():
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
 def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkeypatch):
     """LU of the exact structure + load tangent; BTD Cholesky of the material one if LU fails."""
-    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
-        pytest.skip('the condensed CBHA segment is not generated yet')
     scene = load_scene(name)
     model, n, m = scene.model, scene.model.n_links, len(scene.actuator_names)
     rng = np.random.default_rng(8)
@@ -147,8 +144,6 @@ def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkey
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
 def test_ticks_through_the_fallback_factorization_still_reach_the_target(name, monkeypatch):
     """The tick's Cholesky refused every time: the LU fallback path still converges (0.1 mm)."""
-    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
-        pytest.skip('the condensed CBHA segment is not generated yet')
     scene = load_scene(name)
     rng = np.random.default_rng(21)
     m = len(scene.actuator_names)

@@ -15,8 +15,6 @@ ALL_SCENES = TENDON_SCENES + ['cbha']
 
 
 def _load(name):
-    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
-        pytest.skip('the condensed CBHA segment is not generated yet')
     return load_scene(config_path('scenes', f'{name}.yaml'))
 
 
