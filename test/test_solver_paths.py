@@ -1,8 +1,10 @@
 """
-Paths of the controller that no other test takes: Newton steps per tick, the QP fallback, the
-``timer`` trigger, measurement-to-target matching by stamp, and the node's handling of a solver
-that raises, returns non-finite pressures or fails to linearise (real nodes over real DDS; the
-failures are injected into the node's own solver object).
+Paths of the controller that no other test takes.
+
+Newton steps per tick, the QP fallback, the ``timer`` trigger, measurement-to-target matching
+by stamp, and the node's handling of a solver that raises, returns non-finite pressures or fails
+to linearise (real nodes over real DDS; the failures are injected into the node's own solver
+object).
 """
 
 import contextlib
@@ -48,7 +50,7 @@ def test_newton_steps_bring_the_model_to_the_static_equilibrium(steps):
 
 
 def test_proxsuite_failure_falls_back_to_gauss_seidel():
-    """proxsuite limited to one iteration fails: the tick reports qp_fallback, never NaN."""
+    """A proxsuite limited to one iteration fails: the tick reports qp_fallback, never NaN."""
     scene, target = _target()
     solver = scene.make_inverse_solver(qp_solver='proxsuite')
     solver._qp = ActuationQP(len(scene.actuator_names), max_iterations=1)
@@ -101,8 +103,7 @@ def _point(point, stamp_ns=0):
 
 
 @pytest.mark.parametrize('trigger', ['target', 'timer'])
-def test_target_trigger_solves_each_target_timer_trigger_solves_per_period(rclpy_context,
-                                                                          trigger):
+def test_target_trigger_solves_each_target_timer_trigger_per_period(rclpy_context, trigger):
     """A burst of 20 targets in ~0.1 s: 20 ticks when triggered by targets, ~1 at 5 Hz."""
     solver = _solver_node(rclpy_context, trigger=trigger, rate_hz=5.0)
     with _running(rclpy_context, solver) as (executor, _, target_pub, _, _):
