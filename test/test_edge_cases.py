@@ -15,7 +15,8 @@ from cbha_inverse.core.qp import ActiveSetQP, ActuationQP, projected_gauss_seide
 from cbha_inverse.core.safety import (
     bounded_command, check_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
 from cbha_inverse.core.trajectory import (
-    circle_trajectory, make_trajectory, polyline_points, square_trajectory, waypoint_trajectory)
+    circle_points, circle_trajectory, make_trajectory, polyline_points, square_trajectory,
+    square_vertices, waypoint_trajectory)
 from cbha_inverse.ros.conversions import backbone_markers
 import numpy as np
 import pytest
@@ -34,11 +35,12 @@ def test_workspace_box_is_closed_and_stores_float_corners():
 
 
 @pytest.mark.parametrize('lower, upper, match', [
-    ((0.0, 0.0), (1.0, 1.0, 1.0), '3 components'),
-    ((0.0, 0.0, 0.0), (1.0, 1.0), '3 components'),
-    ((0.0, 0.0, math.nan), (1.0, 1.0, 1.0), 'finite'),
-    ((0.0, 0.0, 0.0), (1.0, math.inf, 1.0), 'finite'),
-    ((0.0, 1.0, 0.0), (1.0, 1.0, 1.0), 'below upper'),
+    ((0.0, 0.0), (1.0, 1.0, 1.0), '^workspace box corners must have 3 components each$'),
+    ((0.0, 0.0, 0.0), (1.0, 1.0), '^workspace box corners must have 3 components each$'),
+    ((0.0, 0.0, math.nan), (1.0, 1.0, 1.0), '^workspace box corners must be finite$'),
+    ((0.0, 0.0, 0.0), (1.0, math.inf, 1.0), '^workspace box corners must be finite$'),
+    ((0.0, 1.0, 0.0), (1.0, 1.0, 1.0),
+     r'^workspace box lower \[0.0, 1.0, 0.0\] must be below upper \[1.0, 1.0, 1.0\] in'),
 ])
 def test_workspace_box_rejects_bad_corners(lower, upper, match):
     with pytest.raises(ValueError, match=match):
@@ -54,9 +56,9 @@ def test_rejections_say_what_is_wrong():
     assert check_command([1.0, math.nan, 1.0], 3, 10.0).detail == 'non-finite pressure'
     assert check_command([1.0, 11.0, 1.0], 3, 10.0).detail == (
         'pressure outside [0, 10] Pa: [1.0, 11.0, 1.0]')
-    with pytest.raises(ValueError, match='command has 2 values, expected 3'):
+    with pytest.raises(ValueError, match='^command has 2 values, expected 3$'):
         bounded_command([1.0, 2.0], np.zeros(3), np.ones(3))
-    with pytest.raises(ValueError, match='command is not finite'):
+    with pytest.raises(ValueError, match='^command is not finite$'):
         bounded_command([1.0, math.inf, 2.0], np.zeros(3), np.ones(3))
     with pytest.raises(ValueError, match=r'timeout must be a finite number > 0, got -1\.0'):
         StalenessWatch(-1.0)
@@ -112,22 +114,47 @@ def test_repeated_waypoints_give_no_garbage():
 
 
 @pytest.mark.parametrize('arguments, match', [
-    ({'shape': 'circle', 'radius': 0.0}, 'radius'),
-    ({'shape': 'circle', 'center': (0.0, math.nan, 0.0)}, 'center'),
-    ({'shape': 'square', 'side': -1.0}, 'side'),
-    ({'shape': 'square', 'center': (0.0, 0.0)}, 'center'),
-    ({'shape': 'circle', 'speed': 0.0}, 'speed'),
-    ({'shape': 'circle', 'laps': -1}, 'laps'),
-    ({'shape': 'circle', 'start_hold': -1.0}, 'start_hold'),
-    ({'shape': 'waypoints', 'waypoints': [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]}, r'\(V, 3\)'),
-    ({'shape': 'waypoints', 'waypoints': [0.0, 0.0, 0.0, 1.0]}, '3 numbers per point'),
-    ({'shape': 'waypoints', 'waypoints': [0.0, 0.0, 0.0, 1.0, math.inf, 0.0]}, 'finite'),
-    ({'shape': 'waypoints', 'waypoints': [1.0, 1.0, 1.0, 1.0, 1.0, 1.0]}, 'zero length'),
-    ({'shape': 'triangle'}, 'shape must be one of'),
+    ({'shape': 'circle', 'radius': 0.0}, '^radius must be a finite number > 0'),
+    ({'shape': 'circle', 'center': (0.0, math.nan, 0.0)}, '^center must be finite'),
+    ({'shape': 'square', 'side': -1.0}, '^side must be a finite number > 0'),
+    ({'shape': 'square', 'center': (0.0, 0.0)}, '^center must have 3 components'),
+    ({'shape': 'circle', 'speed': 0.0}, '^speed must be a finite number > 0'),
+    ({'shape': 'circle', 'laps': -1}, r'^laps must be an integer >= 0'),
+    ({'shape': 'circle', 'start_hold': -1.0}, '^start_hold must be a finite number >= 0'),
+    ({'shape': 'waypoints', 'waypoints': [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]},
+     r'^waypoints must be \(V, 3\) with V >= 2'),
+    ({'shape': 'waypoints', 'waypoints': [0.0, 0.0, 0.0, 1.0]},
+     '^a flat waypoint list needs 3 numbers per point'),
+    ({'shape': 'waypoints', 'waypoints': [0.0, 0.0, 0.0, 1.0, math.inf, 0.0]},
+     '^waypoints must be finite$'),
+    ({'shape': 'waypoints', 'waypoints': [1.0, 1.0, 1.0, 1.0, 1.0, 1.0]},
+     '^waypoints span a path of zero length$'),
+    ({'shape': 'triangle'}, '^shape must be one of'),
 ])
 def test_bad_trajectory_arguments_name_the_argument(arguments, match):
     with pytest.raises(ValueError, match=match):
         make_trajectory(**arguments)
+
+
+@pytest.mark.parametrize('call, match', [
+    (lambda: circle_points((0.0, math.inf, 0.0), 0.06, 'yz', [0.0]), '^center must be finite'),
+    (lambda: circle_points((0.0, 0.0, 0.0), -0.06, 'yz', [0.0]),
+     '^radius must be a finite number > 0'),
+    (lambda: square_vertices((0.0, 0.0), 0.08, 'yz'), '^center must have 3 components'),
+    (lambda: square_vertices((0.0, 0.0, 0.0), 0.0, 'yz'), '^side must be a finite number > 0'),
+])
+def test_path_point_functions_validate_their_own_inputs(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_last_lap_ends_exactly_at_the_path_length():
+    # exact binary numbers: side 0.25 m (length 1 m) at 0.5 m/s, the lap ends at t = 2 s
+    path = square_trajectory((0.0, 0.0, 0.0), 0.25, 'yz', speed=0.5, laps=1)
+    assert path.duration == 2.0
+    assert path.arc_length([1.0, 2.0, 3.0]).tolist() == [0.5, 1.0, 1.0]
+    endless = square_trajectory((0.0, 0.0, 0.0), 0.25, 'yz', speed=0.5)
+    assert endless.arc_length([1.0, 2.0, 3.0]).tolist() == [0.5, 0.0, 0.5]
 
 
 def test_make_trajectory_defaults_are_the_papers_and_pass_every_argument():
@@ -163,24 +190,56 @@ def _exact(problem):
 
 
 def test_proxsuite_warm_started_updates_solve_each_new_problem():
-    """Same Hessian (only g and the box sent), then a new Hessian: each answer is its own QP's."""
+    """
+    Same Hessian (only g and the box sent), then a new Hessian: each answer is its own QP's.
+
+    The gradients are large, so both bounds of every box are active somewhere: a gradient or a
+    bound that was not sent gives a different solution.
+    """
     rng = np.random.default_rng(3)
-    m = 5
+    m = 6
     a = rng.standard_normal((m, m))
-    first = _problem(a @ a.T + np.eye(m), rng.standard_normal(m), -np.ones(m), np.ones(m))
+    hessian = a @ a.T + np.eye(m)
+    signs = np.array([1.0, -1.0] * (m // 2))
+    first = _problem(hessian, 50.0 * signs, -np.ones(m), np.ones(m))
     solver = ActuationQP(m)
-    problems = [first,
-                first._replace(gradient=3.0 * rng.standard_normal(m),
-                               lower=-0.3 * np.ones(m), upper=0.2 * np.ones(m)),
-                first._replace(gradient=rng.standard_normal(m), lower=-0.5 * np.ones(m))]
     b = rng.standard_normal((m, m))
-    problems.append(problems[-1]._replace(hessian=b @ b.T + 0.1 * np.eye(m),
-                                          upper=0.4 * np.ones(m)))
-    for index, problem in enumerate(problems):
-        solution = solver.solve(problem, same_hessian=index in (1, 2))
+    problems = [
+        (first, False),
+        (first._replace(gradient=-50.0 * signs), True),
+        (first._replace(gradient=-50.0 * signs, lower=-0.3 * np.ones(m)), True),
+        (first._replace(gradient=-50.0 * signs, lower=-0.3 * np.ones(m),
+                        upper=0.2 * np.ones(m)), True),
+        (first._replace(hessian=b @ b.T + 0.1 * np.eye(m), gradient=40.0 * signs,
+                        lower=-0.7 * np.ones(m), upper=0.6 * np.ones(m)), False),
+        (first._replace(hessian=hessian, gradient=-40.0 * signs, lower=-0.4 * np.ones(m),
+                        upper=0.5 * np.ones(m)), False),
+    ]
+    previous = None
+    for problem, same_hessian in problems:
+        solution = solver.solve(problem, same_hessian=same_hessian)
         assert solution.ok is True and solution.status == 'solved'
-        assert type(solution.iterations) is int and solution.iterations >= 1
-        np.testing.assert_allclose(solution.x, _exact(problem), atol=1e-8)
+        assert type(solution.iterations) is int and solution.iterations >= 0
+        exact = _exact(problem)
+        np.testing.assert_allclose(solution.x, exact, atol=1e-8)
+        assert np.any(exact == problem.lower) and np.any(exact == problem.upper)
+        assert previous is None or not np.allclose(exact, previous)
+        previous = exact
+
+
+def test_proxsuite_warm_start_repeats_a_solved_problem_without_iterations():
+    rng = np.random.default_rng(6)
+    m = 6
+    a = rng.standard_normal((m, m))
+    problem = _problem(a @ a.T + np.eye(m), 5.0 * rng.standard_normal(m), -np.ones(m),
+                       np.ones(m))
+    solver = ActuationQP(m)
+    cold = solver.solve(problem)
+    warm = solver.solve(problem, same_hessian=True)
+    assert cold.iterations > 0 and warm.iterations == 0
+    np.testing.assert_allclose(warm.x, cold.x, atol=1e-12)
+    solver.reset()
+    assert solver.solve(problem).iterations == cold.iterations
 
 
 def test_proxsuite_not_converged_keeps_the_previous_actuation():
@@ -216,6 +275,16 @@ def test_projected_gauss_seidel_statuses_start_and_sweeps():
     np.testing.assert_allclose(one_sweep.x, [x_first, x_second], atol=1e-15)
     from_previous = projected_gauss_seidel(coupled, max_iterations=1)
     np.testing.assert_allclose(from_previous.x[0], -(1.0 + 1.9 * 5.0) / 2.0, atol=1e-15)
+    # a start outside the box is clipped into it first (both sides)
+    outside = coupled._replace(lower=np.array([-1.0, 2.0]), upper=np.array([1.0, 3.0]),
+                               previous=np.array([-7.0, 7.0]))
+    clipped_sweep = projected_gauss_seidel(outside, max_iterations=1).x
+    x_first = min(max(-1.0 - (2.0 * -1.0 + 1.9 * 3.0 + 1.0) / 2.0, -1.0), 1.0)
+    x_second = min(max(3.0 - (1.9 * x_first + 2.0 * 3.0 - 1.0) / 2.0, 2.0), 3.0)
+    np.testing.assert_allclose(clipped_sweep, [x_first, x_second], atol=1e-15)
+    # a step of exactly 1 is taken like any other
+    unit = projected_gauss_seidel(_problem([[1.0]], [-1.0], [-5.0], [5.0]))
+    assert unit.x.tolist() == [1.0] and unit.ok
 
 
 def test_active_set_iteration_budget_and_failure_flag():
