@@ -15,22 +15,29 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import (
     InvalidParameterTypeException, InvalidParameterValueException,
     ParameterAlreadyDeclaredException, ParameterUninitializedException)
+from rclpy.parameter import Parameter
+
+# ROS type names of the Python defaults, for messages and --help
+_TYPE_NAMES = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
+_UNSET_TYPES = {'string_array': Parameter.Type.STRING_ARRAY}
 
 
 class ParameterError(ValueError):
     """A parameter has the wrong type, is outside its range or not one of its choices."""
 
 
-def param(default, description, *, low=None, high=None, choices=None, ros_name=None):
+def param(default, description, *, low=None, high=None, choices=None, ros_name=None,
+          unset_type=None):
     """
     Return a dataclass field that describes one ROS parameter.
 
     Parameters
     ----------
-    default : bool, int, float, str or tuple
+    default : bool, int, float, str, tuple or None
         Default value; its type is the parameter's type (a tuple of floats is a double array, of
         str a string array). Write floats as floats (``1.0``), as ROS parameters are strictly
-        typed.
+        typed. ``None``: no default (the parameter is unset unless given; needs
+        ``unset_type``).
     description : str
         What the parameter means, with its unit.
     low, high : float or int, optional
@@ -39,6 +46,8 @@ def param(default, description, *, low=None, high=None, choices=None, ros_name=N
         Allowed values of a string parameter.
     ros_name : str, optional
         Parameter name when it differs from the field name (e.g. dotted names).
+    unset_type : str, optional
+        ROS type of a parameter without default: ``'string_array'``.
 
     Returns
     -------
@@ -48,9 +57,76 @@ def param(default, description, *, low=None, high=None, choices=None, ros_name=N
     """
     if (low is None) != (high is None):
         raise TypeError('give both low and high, or neither')
+    if (default is None) != (unset_type is not None):
+        raise TypeError('a parameter without default needs unset_type, and only it')
     return field(default=default, metadata={
         'description': description, 'low': low, 'high': high,
-        'choices': tuple(choices) if choices is not None else None, 'ros_name': ros_name})
+        'choices': tuple(choices) if choices is not None else None, 'ros_name': ros_name,
+        'unset_type': unset_type})
+
+
+def type_name(default, metadata):
+    """
+    Return the ROS type name of a parameter (``double``, ``string_array``, ...).
+
+    Parameters
+    ----------
+    default : object
+        The parameter's default (``None`` if it has none).
+    metadata : mapping
+        The field metadata written by :func:`param`.
+
+    Returns
+    -------
+    str
+        The type name as ROS writes it.
+
+    """
+    if default is None:
+        return metadata['unset_type']
+    if isinstance(default, tuple):
+        item = type(default[0]) if default else str
+        return f'{_TYPE_NAMES[item]}_array'
+    return _TYPE_NAMES[type(default)]
+
+
+def _value_text(value):
+    """Write a default as it is written in a params file."""
+    if value is None:
+        return 'unset'
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, tuple):
+        return '[' + ', '.join(_value_text(v) for v in value) + ']'
+    return repr(value) if isinstance(value, str) else f'{value!r}'
+
+
+def parameter_help(params_class):
+    """
+    Describe every parameter of a node for ``--help``: name, type, default, range, description.
+
+    Parameters
+    ----------
+    params_class : type
+        A frozen dataclass whose fields were made with :func:`param`.
+
+    Returns
+    -------
+    str
+        One entry per parameter (two lines each), in declaration order.
+
+    """
+    entries = []
+    for spec in fields(params_class):
+        metadata = spec.metadata
+        name = metadata.get('ros_name') or spec.name
+        facts = [type_name(spec.default, metadata), f'default {_value_text(spec.default)}']
+        if metadata.get('low') is not None:
+            facts.append(f"range [{metadata['low']:g}, {metadata['high']:g}]")
+        if metadata.get('choices'):
+            facts.append('one of ' + '|'.join(metadata['choices']))
+        entries.append(f"  {name} ({', '.join(facts)})\n      {metadata['description']}")
+    return '\n'.join(entries)
 
 
 def describe(name, default, metadata):
@@ -117,14 +193,19 @@ def declare_parameters(node, params_class):
         name = spec.metadata.get('ros_name') or spec.name
         default = spec.default
         ros_default = list(default) if isinstance(default, tuple) else default
+        if default is None:
+            ros_default = _UNSET_TYPES[spec.metadata['unset_type']]
         descriptor = describe(name, default, spec.metadata)
         try:
             value = node.declare_parameter(name, ros_default, descriptor).value
-        except InvalidParameterTypeException as exc:
+        except InvalidParameterTypeException:
+            expected = type_name(default, spec.metadata)
+            hint = ' (write floats with a decimal point: 1.0, not 1)' if 'double' in expected \
+                else ''
+            given = getattr(node, '_parameter_overrides', {}).get(name)
+            got = '' if given is None else f', got {given.type_.name.lower()} {given.value!r}'
             raise ParameterError(
-                f'parameter {name!r} has the wrong type (expected {type(default).__name__}'
-                f'{" of floats written with .0" if isinstance(default, (float, tuple)) else ""}):'
-                f' {exc}') from None
+                f'parameter {name!r} must be of type {expected}{hint}{got}') from None
         except InvalidParameterValueException as exc:
             raise ParameterError(f'parameter {name!r} is out of range: {exc}') from None
         except (ParameterAlreadyDeclaredException, ParameterUninitializedException) as exc:
@@ -133,7 +214,7 @@ def declare_parameters(node, params_class):
         if choices and value not in choices:
             raise ParameterError(
                 f'parameter {name!r} must be one of {list(choices)}, got {value!r}')
-        values[spec.name] = tuple(value) if isinstance(default, tuple) else value
+        values[spec.name] = tuple(value) if isinstance(value, list) else value
     try:
         return params_class(**values)
     except ValueError as exc:
