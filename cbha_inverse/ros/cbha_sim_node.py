@@ -102,7 +102,7 @@ class CbhaSimNode(Node):
                                  f'the scene actuators {list(names)}')
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
-            raise ParameterError(f'{NODE_NAME}: {exc}') from None
+            raise ParameterError(str(exc)) from None
         self.order = np.array([names.index(name) for name in self.valve_names])
         self.plant = StaticPlant(self.scene, tolerance=p.tolerance,
                                  max_iterations=p.max_iterations)
@@ -216,7 +216,7 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters.
 
     """
-    return run_node(CbhaSimNode, NODE_NAME, argv)
+    return run_node(CbhaSimNode, NODE_NAME, argv, params_class=CbhaSimParams)
 
 
 if __name__ == '__main__':

@@ -124,7 +124,7 @@ class InverseSolverNode(Node):
             self._setup_model()
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
-            raise ParameterError(f'{NODE_NAME}: {exc}') from None
+            raise ParameterError(str(exc)) from None
         p = self.params
         self.period = 1.0 / p.rate_hz
         self.target = None
@@ -413,7 +413,7 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters.
 
     """
-    return run_node(InverseSolverNode, NODE_NAME, argv)
+    return run_node(InverseSolverNode, NODE_NAME, argv, params_class=InverseSolverParams)
 
 
 if __name__ == '__main__':

@@ -219,3 +219,84 @@ def declare_parameters(node, params_class):
         return params_class(**values)
     except ValueError as exc:
         raise ParameterError(str(exc)) from None
+
+
+def _type_problem(value, expected):
+    """Return why ``value`` is not of ROS type ``expected`` ('' if it is)."""
+    checks = {'double': lambda v: isinstance(v, float), 'integer': lambda v: isinstance(v, int)
+              and not isinstance(v, bool), 'bool': lambda v: isinstance(v, bool),
+              'string': lambda v: isinstance(v, str)}
+    if expected.endswith('_array'):
+        item = checks[expected[:-len('_array')]]
+        if isinstance(value, list) and value and all(item(v) for v in value):
+            return ''
+    elif checks[expected](value):
+        return ''
+    hint = ''
+    if 'double' in expected and (isinstance(value, int) or isinstance(value, list) and any(
+            isinstance(v, int) for v in value)):
+        hint = ' (write floats with a decimal point: 1.0, not 1)'
+    return f'must be of type {expected}{hint}, got {value!r}'
+
+
+def check_params_files(argv, node_name, params_class):
+    """
+    Check every ``--params-file`` of a node's command line before rclpy reads it.
+
+    rclpy reports a broken params file as a traceback and a wrong-typed entry without the file;
+    this names the file and the key. Applicable sections are ``/**`` and those whose last name is
+    the node's; there, every parameter of ``params_class`` must have its type, range and choices.
+    Other keys are left alone (one file may serve several nodes).
+
+    Parameters
+    ----------
+    argv : list of str
+        The command line (``--ros-args ... --params-file FILE ...``).
+    node_name : str
+        The node's name.
+    params_class : type or None
+        Its parameters dataclass (None: check the file structure only).
+
+    Raises
+    ------
+    cbha_inverse.errors.ConfigError
+        Naming the file, the key and what is wrong.
+
+    """
+    from cbha_inverse.config_files import read_yaml
+    from cbha_inverse.errors import ConfigError
+    files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
+    specs = {} if params_class is None else {
+        spec.metadata.get('ros_name') or spec.name: spec for spec in fields(params_class)}
+    for path in files:
+        data = read_yaml(path)
+        for section, content in data.items():
+            if not isinstance(content, dict) or not isinstance(
+                    content.get('ros__parameters'), dict):
+                raise ConfigError(path, f'{section}', 'must hold a ros__parameters: mapping')
+            if str(section).split('/')[-1] not in ('**', '*', node_name):
+                continue
+            for name, value in _flatten(content['ros__parameters']):
+                spec = specs.get(name)
+                if spec is None:
+                    continue
+                key = f'{section}.ros__parameters.{name}'
+                problem = _type_problem(value, type_name(spec.default, spec.metadata))
+                low, high = spec.metadata.get('low'), spec.metadata.get('high')
+                choices = spec.metadata.get('choices')
+                if not problem and low is not None and not low <= value <= high:
+                    problem = f'must lie in [{low:g}, {high:g}], got {value!r}'
+                if not problem and choices and value not in choices:
+                    problem = f'must be one of {list(choices)}, got {value!r}'
+                if problem:
+                    raise ConfigError(path, key, problem)
+
+
+def _flatten(mapping, prefix=''):
+    """Yield (dotted name, value) of a nested ``ros__parameters`` mapping."""
+    for key, value in mapping.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, dict):
+            yield from _flatten(value, f'{name}.')
+        else:
+            yield name, value
