@@ -19,7 +19,8 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = 'cbha_inverse'
 NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim')
-COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo')
+COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo', 'cbha_launch',
+                       'cbha_scene')
 
 
 def _child_env(prefix):
@@ -65,6 +66,8 @@ def test_install_has_ros2_run_layout(colcon_install, monkeypatch):
         assert (share / 'config' / f'{node}.yaml').is_file(), f'no params file for {node}'
     assert (share / 'package.xml').read_text() == (REPO_ROOT / 'package.xml').read_text()
     assert any((share / 'meshes').iterdir()), 'meshes/ not installed'
+    for installed in ('launch/sim.launch.py', 'launch/robot.launch.py', 'rviz/cbha.rviz'):
+        assert (share / installed).read_text() == (REPO_ROOT / installed).read_text(), installed
 
 
 def test_installed_package_finds_its_share_dir(colcon_install):
