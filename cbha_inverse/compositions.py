@@ -142,7 +142,8 @@ def _common(feedback_default, feedback_choices, mode_default):
         Argument('scene', 'cbha.yaml', 'scene YAML of the model (and the plant): a path, or a '
                  'name in config/scenes'),
         Argument('mode', mode_default, 'inverse_solver loop: open (model only) or closed '
-                 '(integral correction from tip/measured)', ('open', 'closed')),
+                 '(integral correction from tip/measured; without feedback it holds, so use '
+                 'open with feedback:=none)', ('open', 'closed')),
         Argument('feedback', feedback_default, 'source of tip/measured', feedback_choices),
     )
 

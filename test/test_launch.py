@@ -158,3 +158,23 @@ def test_cbha_launch_stops_every_node_when_one_fails(tmp_path):
     assert 'inverse_solver exited with status 2: stopping the others' in output
     assert re.search(r'exit statuses: trajectory 0, inverse_solver 2, cbha_sim 0', output), output
     assert time.monotonic() - start < 45.0
+
+
+def test_rviz_view_shows_what_the_nodes_publish_with_matching_qos():
+    from cbha_inverse.ros.inverse_solver_node import InverseSolverParams
+    from cbha_inverse.ros.qos import MARKER_QOS, TARGET_QOS
+    from rclpy.qos import ReliabilityPolicy
+
+    view = yaml.safe_load((REPO_ROOT / 'rviz' / 'cbha.rviz').read_text())
+    manager = view['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == InverseSolverParams().frame_id
+    published = {'/cbha/backbone': ('rviz_default_plugins/MarkerArray', MARKER_QOS),
+                 '/cbha/tip/measured': ('rviz_default_plugins/PointStamped', MEASURED_QOS),
+                 '/cbha/target': ('rviz_default_plugins/PointStamped', TARGET_QOS)}
+    shown = {d['Topic']['Value']: d for d in manager['Displays'] if 'Topic' in d}
+    assert set(shown) == set(published)
+    for topic, (display_class, qos) in published.items():
+        assert shown[topic]['Class'] == display_class
+        reliable = qos.reliability == ReliabilityPolicy.RELIABLE
+        assert shown[topic]['Topic']['Reliability Policy'] == (
+            'Reliable' if reliable else 'Best Effort'), topic

@@ -232,10 +232,10 @@ def _type_problem(value, expected):
             return ''
     elif checks[expected](value):
         return ''
-    hint = ''
-    if 'double' in expected and (isinstance(value, int) or isinstance(value, list) and any(
-            isinstance(v, int) for v in value)):
-        hint = ' (write floats with a decimal point: 1.0, not 1)'
+    items = value if isinstance(value, list) else [value]
+    integers = any(isinstance(v, int) and not isinstance(v, bool) for v in items)
+    hint = ' (write floats with a decimal point: 1.0, not 1)' if (
+        'double' in expected and integers) else ''
     return f'must be of type {expected}{hint}, got {value!r}'
 
 
