@@ -4,7 +4,7 @@ Read the package's YAML files so that every mistake becomes one :class:`ConfigEr
 :func:`read_yaml` turns a missing file, an unreadable one, a YAML syntax error (with its line)
 or a wrong top-level type into ``ConfigError(path, key, problem)``; :class:`Section` reads typed
 keys from a parsed mapping and names the dotted key of whatever is missing or wrong
-(``chain.sections[1].count: must be an integer, got 'eight'``). Scene, segment, geometry and
+(``chain.sections[1].count: must be an integer, got str 'eight'``). Scene, segment, geometry and
 params files all go through here.
 """
 
@@ -15,6 +15,7 @@ from cbha_inverse.errors import ConfigError
 import yaml
 
 _MISSING = object()
+_KIND_NAMES = {dict: 'mapping of keys', list: 'list'}
 
 
 def read_yaml(path, *, expect=dict):
@@ -59,9 +60,6 @@ def read_yaml(path, *, expect=dict):
         raise ConfigError(path, 'top level', f'must be a {_KIND_NAMES.get(expect, expect)}, got '
                           f'{_describe(data)}')
     return data
-
-
-_KIND_NAMES = {dict: 'mapping of keys', list: 'list'}
 
 
 def _describe(value):
