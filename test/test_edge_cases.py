@@ -63,7 +63,7 @@ def test_rejections_say_what_is_wrong():
     with pytest.raises(ValueError, match=r'timeout must be a finite number > 0, got -1\.0'):
         StalenessWatch(-1.0)
     with pytest.raises(ValueError, match=r"action must be one of \('hold', 'vent'\), got 'x'"):
-        stale_action(False, False, False, 'x')
+        stale_action(False, False, 'x')
 
 
 # trajectories -----------------------------------------------------------------------------

@@ -6,7 +6,7 @@ Node behaviours over real DDS that a planted bug would break unseen, each agains
   order, and the plant's tip is the scene's static equilibrium of the named tube's pressure;
 - the simulator's transport latency and first-order valve response, measured from a step command
   on the tip stamps (tip -> pressure through the scene's own forward model);
-- hold vs vent told apart by value: the held command is the last solved one, not the vent value;
+- hold vs vent on stale feedback told apart by value: the held command is the last solved one;
 - the trajectory's period and speed to 2 %, measured on the message stamps.
 """
 
@@ -193,56 +193,60 @@ def test_simulator_latency_and_first_order_valves_from_a_step(rclpy_context):
 
 
 @pytest.mark.parametrize('action', ['hold', 'vent'])
-def test_stale_target_holds_the_last_solved_command_or_vents(rclpy_context, action):
+def test_stale_feedback_holds_the_last_solved_command_or_vents(rclpy_context, action):
     """
-    After the target goes stale: hold = exactly the last command solved, vent = the vent value.
+    Closed loop, measurements stop: hold = exactly the last command solved, vent = the vent value.
 
-    The target moves until ``last_target``; the solver keeps converging (commands change every
-    tick) until the target is ``timeout`` old. The held command must be one of the commands of
-    the last ticks before that moment, differ from the command at ``last_target`` and from the
-    vent value; venting must publish the vent value, which no solved command equals.
+    Targets keep moving all along; the measurements stop at ``last_measured``. Until the feedback
+    is ``timeout`` old the solver follows the targets (the commands change every tick); after
+    that, hold must repeat one of the commands of the last ticks before that moment (not the
+    vent value, not an older command), and vent must publish the vent value, which no solved
+    command equals.
     """
     timeout, vent, max_tension = 0.2, 1.0, 10.0
     names = list(load_scene(TENDON).actuator_names)
     solver = _node(InverseSolverNode, rclpy_context, scene=TENDON, valve_names=names,
-                   rate_hz=100.0, max_pressure=max_tension, target_timeout=timeout,
-                   stale_action=action, vent_pressure=vent)
+                   rate_hz=100.0, max_pressure=max_tension, mode='closed',
+                   feedback_timeout=timeout, stale_action=action, vent_pressure=vent)
     client = Node('client', context=rclpy_context, namespace='/cbha')
     target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    measured_pub = client.create_publisher(PointStamped, 'tip/measured', MEASURED_QOS)
     commands = []
     client.create_subscription(Float64MultiArray, 'pressure_command', lambda m: commands.append(
         (time.monotonic(), np.array(m.data))), COMMAND_QOS)
-    center = (0.117, 0.0, -0.005)
+    center = np.array([0.117, 0.0, -0.005])
     with _spinning(rclpy_context, solver, client) as executor:
-        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
+        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
+                          and measured_pub.get_subscription_count() > 0, 10.0)
         first_target = time.monotonic()
-        end = first_target + 0.5
+        last_measured = None
         i = 0
-        while time.monotonic() < end:
-            target_pub.publish(_point((center[0], 0.01 * np.cos(0.1 * i),
-                                       0.01 * np.sin(0.1 * i))))
+        while time.monotonic() < first_target + 1.0:
+            target_pub.publish(_point(center + [0.0, 0.01 * np.cos(0.1 * i),
+                                                0.01 * np.sin(0.1 * i)]))
+            if time.monotonic() < first_target + 0.5:
+                measured_pub.publish(_point(center))
+                last_measured = time.monotonic()
             i += 1
             spin_for(executor, 0.01)
-        last_target = time.monotonic()
-        spin_for(executor, timeout + 0.4)
-    stale_at = last_target + timeout
+    assert solver.decision == action
+    stale_at = last_measured + timeout
     settled = [c for t, c in commands if t > stale_at + 0.05]
     assert len(settled) > 10
-    at_last_target = [c for t, c in commands if t <= last_target][-1]
     for command in settled:
         np.testing.assert_array_equal(command, settled[0])
+    running = [c for t, c in commands if first_target + 0.1 < t <= stale_at - 0.06]
+    assert running and not any(np.allclose(c, vent) for c in running)
     if action == 'vent':
         np.testing.assert_array_equal(settled[0], np.full(len(names), vent))
-        # before the first target the node vents too: compare with the running phase only
-        running = [c for t, c in commands if first_target + 0.1 < t < last_target]
-        assert running and not any(np.allclose(c, vent) for c in running)
         return
     held = settled[0]
-    assert not np.allclose(held, vent) and not np.array_equal(held, at_last_target)
+    assert not np.allclose(held, vent)
+    at_last_measured = [c for t, c in commands if t <= last_measured][-1]
+    assert not np.array_equal(held, at_last_measured)
     last_ticks = [c for t, c in commands if stale_at - 0.06 < t <= stale_at + 0.03]
     assert any(np.array_equal(held, c) for c in last_ticks), 'held value was not solved last'
-    # and the solver was still moving then: the running commands just before are not all equal
-    running = [c for t, c in commands if last_target < t <= stale_at - 0.06]
+    # and the solver was still moving then: the running commands are not all equal
     assert len({c.tobytes() for c in running}) > 1
 
 

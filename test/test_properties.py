@@ -196,8 +196,9 @@ def test_staleness_decision(timeout, target_age, feedback_age, closed, never_fed
     target_stale = now - (now - target_age) > timeout
     feedback_stale = never_fed or now - (now - feedback_age) > timeout
     assert target.stale(now) == target_stale and feedback.stale(now) == feedback_stale
-    decision = stale_action(target.stale(now), feedback.stale(now), closed, action)
-    expected = action if target_stale or (closed and feedback_stale) else 'run'
+    # a stale target stays the set-point: only stale feedback in closed loop holds or vents
+    decision = stale_action(feedback.stale(now), closed, action)
+    expected = action if closed and feedback_stale else 'run'
     assert decision == expected
 
 

@@ -122,9 +122,9 @@ def test_bellows_segment_writes_its_cavities_and_needs_them_cached(tmp_path, cap
     assert (tmp_path / 'cbha_segment_cavity_left.vtk').is_file()
 
 
-def test_bad_inputs_exit_1_with_one_line(tmp_path, capsys):
+def test_a_broken_geometry_exits_2_with_one_line_naming_file_and_key(tmp_path, capsys):
     broken = tmp_path / 'broken.yaml'
     broken.write_text('name: broken\nkind: cylinder\n')
-    assert main([str(broken), '--output-dir', str(tmp_path)]) == 1
+    assert main([str(broken), '--output-dir', str(tmp_path)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith('condense_segment: error:') and err.count('\n') == 1
+    assert err == f'condense_segment: error: {broken}: mesh: missing\n'
