@@ -60,9 +60,9 @@ def test_plant_reaches_the_equilibrium_of_an_independent_root_solve(scene_name, 
     result = plant.update(actuation)
     assert result.converged
     np.testing.assert_allclose(result.positions, reference, atol=1e-7)
-    # the actuation moves the frames by centimetres, far more than the tolerance
+    # the actuation moves the tip frame by > 5 mm, far more than the 0.1 um tolerance
     from cbha_inverse.core.chain import rest_state
-    assert np.abs(reference - rest_state(scene.model).positions).max() > 1e-2
+    assert np.abs(reference - rest_state(scene.model).positions).max() > 5e-3
     # warm start: a small change converges in a few iterations from the previous equilibrium
     nudged = np.asarray(actuation) * 0.98
     again = plant.update(nudged)
