@@ -413,7 +413,7 @@ def _newton(problem, state, lam, max_iterations):
 
 def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
                 initial_state=None, tolerance=1e-10, absolute_tolerance=None, max_iterations=50,
-                max_load_steps=64, max_rotation_step=None):
+                max_load_steps=64, max_rotation_step=None, check_warnings=True):
     """
     Solve ``f(q) + f_dead + f_load(q) = 0`` for the frames of a chain (paper eq. 9).
 
@@ -444,6 +444,9 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
         Load steps allowed (attempts, successful or not; the warm start counts as one).
     max_rotation_step : float, optional  [rad]
         Largest link rotation of a line search's first trial step.
+    check_warnings : bool
+        Check the converged state for the warnings of the module docstring (one more tangent
+        and factorization; a plant updated at every tick turns it off).
 
     Returns
     -------
@@ -495,7 +498,7 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
         if lam == 0.0 and warm is not None:
             state = warm  # no equilibrium reached: the warm iterate is the better place to resume
         final = _point(problem, state, 1.0)
-    warnings = (result_warnings(problem, final) if converged else ())
+    warnings = result_warnings(problem, final) if converged and check_warnings else ()
     return NewtonResult(state, bool(converged), int(total), float(final[3]), final[2],
                         int(steps), float(lam), message, warnings)
 
