@@ -18,6 +18,8 @@ import sys
 import time
 import tracemalloc
 
+from cbha_inverse.core.assembly import assemble_tangent
+from cbha_inverse.core.btd import factorize
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.paths import config_path
@@ -53,6 +55,12 @@ def _outcome(res):
     return _told(res.warnings) if res.converged else res.message
 
 
+def _condition(model, state):
+    """Return the 1-norm condition estimate of the tangent at a state (BTD Cholesky)."""
+    tangent = assemble_tangent(model, state)
+    return float(factorize(tangent.diagonal, tangent.upper).condition_estimate)
+
+
 def _small_tip_force(compliances, offsets, deflection):
     """Tip force along +y [N] whose linear tip deflection is ``deflection`` [m]."""
     unit = linear_tip_displacement(compliances, offsets, np.array([0.0, 1.0, 0, 0, 0, 0]))
@@ -84,11 +92,13 @@ def stiffness_cases(quick):
             err = float(np.linalg.norm(res.positions[-1] - offsets.sum(0) - ref)
                         / np.linalg.norm(ref))
             ok = res.converged and np.all(np.isfinite(res.positions)) and err < 1e-4
+            condition = _condition(model, res.state)
             cases.append(Case('stiffness ratio', f'{kind} x 1e{exponent:+d}',
-                              'converged, tip vs linear chain flexibility (1e-4)', bool(ok),
-                              err, _outcome(res),
+                              'converged, tip vs linear chain flexibility (1e-4); condition '
+                              'estimate of the tangent', bool(ok), err,
+                              f'{_outcome(res)} (condition {condition:.1e})',
                               {'exponent': exponent, 'kind': kind,
-                               'iterations': res.iterations,
+                               'iterations': res.iterations, 'condition': condition,
                                'residual_over_load': res.residual_norm / wrench[1]}))
     return cases
 
