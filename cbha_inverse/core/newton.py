@@ -49,10 +49,10 @@ so a pure moment load judges the force residual against it and vice versa. A sta
    and the Newton correction from that state moves no frame by more than
    ``_ROUNDOFF_STEP * x_ref`` (1e-8) nor turns one by more than ``_ROUNDOFF_STEP`` rad: the
    correction is applied (unless it is below ``1000 eps``, i.e. noise) and the corrected state
-   is returned. ``floor_i`` is the round-off level of the
-   internal wrench at frame i, ``64 eps max(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) /
-   L_c)`` over the (at most two) links meeting at frame i, with ``x_ref = L_c + |base position|``
-   (max-abs entries of their stiffness blocks). A near-rigid link (compliance / 1e9) has forces
+   is returned. ``floor_i`` is the round-off level of the internal wrench at frame i,
+   ``64 eps max(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` over the (at most two)
+   links meeting at frame i, with ``x_ref = L_c + |base position|`` (max-abs entries of their
+   stiffness blocks). A near-rigid link (compliance / 1e9) has forces
    that no double-precision state resolves below its floor, so its frames can only converge
    this way; the floor of one stiff link never lets the residual of other frames pass, and the
    rest state under a small load never passes (its correction is the deflection). The result
@@ -65,7 +65,7 @@ A non-finite residual never converges. With ``absolute_tolerance`` the test is i
 Warnings (:attr:`NewtonResult.warnings`, checked at the returned state): round-off limited
 convergence (above), a tangent that is not positive definite at the equilibrium (an unstable
 equilibrium, e.g. the straight shape under a compression above the buckling load:
-:func:`stability_warnings`) and links strained beyond the small-strain range of their
+:func:`_stability_warnings`) and links strained beyond the small-strain range of their
 compliance: an axial deformation above ``STRAIN_LIMIT`` (10 %) of the rest length, or a
 rotation above ``ROTATION_LIMIT`` (0.5 rad) within one link. The links are linear elastic in
 their corotated frame; beyond those limits refine the chain (more, shorter links).
@@ -498,12 +498,12 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
         if lam == 0.0 and warm is not None:
             state = warm  # no equilibrium reached: the warm iterate is the better place to resume
         final = _point(problem, state, 1.0)
-    warnings = result_warnings(problem, final) if converged and check_warnings else ()
+    warnings = _result_warnings(problem, final) if converged and check_warnings else ()
     return NewtonResult(state, bool(converged), int(total), float(final[3]), final[2],
                         int(steps), float(lam), message, warnings)
 
 
-def result_warnings(problem, point):
+def _result_warnings(problem, point):
     """
     Return the warnings (tuple of str) about a converged point (module docstring).
 
@@ -533,7 +533,7 @@ def result_warnings(problem, point):
                 'its links are too stiff relative to the load to resolve their forces in double '
                 'precision (stiffness ratio too large; merge the stiff link into its neighbour)')
     warnings.extend(strain_warnings(problem.model, terms))
-    warnings.extend(stability_warnings(problem, state, terms))
+    warnings.extend(_stability_warnings(problem, state, terms))
     return tuple(warnings)
 
 
@@ -575,7 +575,7 @@ def strain_warnings(model, terms):
     return out
 
 
-def stability_warnings(problem, state, terms):
+def _stability_warnings(problem, state, terms):
     """
     Warn when the tangent at an equilibrium is not positive definite (unstable equilibrium).
 
