@@ -229,3 +229,20 @@ def test_near_incompressible_p1_warns():
     fine = condense_cylinder(0.02, 0.01, poisson_ratio=0.4, **common)
     assert any('lock' in text for text in locked.warnings)
     assert fine.warnings == ()
+
+
+@pytest.mark.parametrize('args', [
+    (np.nan, 1e9, 0.3, 0.01), (0.1, np.inf, 0.3, 0.01), (0.1, 1e9, np.nan, 0.01),
+    (0.1, 1e9, 0.3, np.inf),
+])
+def test_timoshenko_compliance_refuses_non_finite_arguments(args):
+    """A NaN length or an infinite modulus used to give a NaN or zero compliance."""
+    with pytest.raises(ValueError, match='finite'):
+        timoshenko_compliance(*args)
+
+
+def test_condensation_refuses_a_non_finite_modulus():
+    """A NaN Young's modulus used to fail deep in the sparse factorization."""
+    with pytest.raises(ValueError, match='finite'):
+        condense_cylinder(0.02, 0.01, youngs_modulus=np.nan, poisson_ratio=0.3,
+                          mesh_size=0.006, order=1)
