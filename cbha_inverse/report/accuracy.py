@@ -104,7 +104,7 @@ def body_rows(quick):
 def mesh_rows(quick):
     """Return the rows of (c): P1 / P2 and mesh size of a cylinder vs the finest P2 mesh."""
     from cbha_inverse.fem.condensation import condense_cylinder
-    sizes = (0.012, 0.009, 0.006) if quick else (0.012, 0.009, 0.006, 0.004, 0.003)
+    sizes = (0.012, 0.009, 0.006) if quick else (0.012, 0.009, 0.006, 0.004)
     finest = condense_cylinder(0.1, 0.01, youngs_modulus=E_MOD, poisson_ratio=NU,
                                mesh_size=0.6 * sizes[-1])
     rows = []
