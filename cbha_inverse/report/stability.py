@@ -10,7 +10,7 @@ message): no case may return success with a wrong answer. Writes ``stability.md`
 """
 
 import argparse
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 import json
 from pathlib import Path
 import platform
@@ -18,10 +18,13 @@ import sys
 import time
 import tracemalloc
 
+from cbha_inverse.core.actuation import ActuatorSet, CableGroup
 from cbha_inverse.core.assembly import assemble_tangent
 from cbha_inverse.core.btd import factorize
+from cbha_inverse.core.control import InverseSolver
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static
+from cbha_inverse.errors import ConfigError
 from cbha_inverse.paths import config_path
 from cbha_inverse.report.references import (elastica_tip, linear_tip_displacement,
                                             straight_beam_chain)
@@ -275,8 +278,21 @@ def _bounded(solver, out):
                 and np.all(out.actuation <= solver.upper_bounds))
 
 
+def _zero_range_solver(scene):
+    """
+    Return an inverse solver of ``scene`` whose second cable has zero range.
+
+    A scene file refuses ``max_tension: 0`` (a ConfigError naming the key); the core solver,
+    given such an actuator set directly, fixes the actuator at its bound.
+    """
+    cables = list(scene.actuators.groups[0].cables)
+    cables[1] = replace(cables[1], max_tension=0.0)
+    actuators = ActuatorSet([CableGroup(cables, scene.model.n_frames)], scene.model.n_frames)
+    return InverseSolver(scene.model, actuators, scene.effectors, gravity=scene.gravity)
+
+
 def actuator_cases(tmp_dir):
-    """Redundant (coincident) and zero-range actuators: semi-definite QP."""
+    """Redundant (coincident) and zero-range actuators: semi-definite QP; zero range in a file."""
     def duplicate(spec):
         twin = dict(spec['cables'][0])
         twin['name'] = 'tip_0_twin'
@@ -286,10 +302,12 @@ def actuator_cases(tmp_dir):
         spec['cables'][1]['max_tension'] = 0.0
 
     cases = []
-    for name, edit, check in (('coincident cables', duplicate, 'twins share the tension'),
-                              ('zero-range cable', zero_range, 'fixed at 0')):
-        scene = _scene_with(tmp_dir, edit)
-        solver = scene.make_inverse_solver()
+    base = load_scene('tendon_6f_8c')
+    for name, scene, check in (('coincident cables', _scene_with(tmp_dir, duplicate),
+                                'twins share the tension'),
+                               ('zero-range cable (core API)', base, 'fixed at 0')):
+        solver = (scene.make_inverse_solver() if name == 'coincident cables'
+                  else _zero_range_solver(scene))
         m = len(scene.actuator_names)
         actuation = np.zeros(m)
         actuation[[0, 2, 4]] = [3.0, 1.0, 1.0]
@@ -304,6 +322,14 @@ def actuator_cases(tmp_dir):
         cases.append(Case('actuators', name, f'bounded, target reached (1 um), {check}',
                           bool(ok), err, _told(solver.warnings + out.warnings),
                           {'status': out.status}))
+    try:
+        _scene_with(tmp_dir, zero_range)
+        message, ok = 'accepted', False
+    except ConfigError as exc:
+        message, ok = str(exc), 'max_tension' in str(exc) and '\n' not in str(exc)
+    cases.append(Case('actuators', 'zero-range cable (scene file)',
+                      'refused at load: one line naming the file and the key', ok,
+                      float('nan'), message, {}))
     return cases
 
 
