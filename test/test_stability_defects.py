@@ -247,3 +247,16 @@ def test_condensation_refuses_a_non_finite_modulus():
     with pytest.raises(ValueError, match='finite'):
         condense_cylinder(0.02, 0.01, youngs_modulus=np.nan, poisson_ratio=0.3,
                           mesh_size=0.006, order=1)
+
+
+def test_condense_segment_command_prints_the_locking_warning(tmp_path, capsys):
+    """The console script tells the user, not only the returned object."""
+    from cbha_inverse.fem.cli import main as condense_main
+    spec = yaml.safe_load((PACKAGE / 'meshes' / 'cylinder_segment.yaml').read_text(
+        encoding='utf-8'))
+    spec['material']['poisson_ratio'] = 0.49
+    spec['mesh'] = {'order': 1, 'mesh_size': 0.006}
+    geometry = tmp_path / 'locked.yaml'
+    geometry.write_text(yaml.safe_dump(spec), encoding='utf-8')
+    assert condense_main([str(geometry), '--output', str(tmp_path / 'segment.yaml')]) == 0
+    assert 'warning: P1 tetrahedra lock at nu = 0.49' in capsys.readouterr().out
