@@ -577,12 +577,13 @@ def strain_warnings(model, terms):
 
 def _stability_warnings(problem, state, terms):
     """
-    Warn when the tangent at an equilibrium is not positive definite (unstable equilibrium).
+    Warn when the tangent at an equilibrium is not positive definite (possibly unstable).
 
     The symmetric part of the exact tangent ``K + L`` (structure and load stiffness) is
     factorised by BTD Cholesky (structure alone) or dense Cholesky (with a load stiffness); a
-    failure means a direction of decreasing stiffness: the equilibrium is unstable, e.g. the
-    straight shape under a compression above the buckling load.
+    failure means a direction of decreasing stiffness. Under dead forces the equilibrium is then
+    unstable (e.g. the straight shape above the buckling load); under moments or follower loads,
+    which are not conservative in 3D, it is a warning sign rather than a proof.
 
     Returns
     -------
@@ -598,7 +599,7 @@ def _stability_warnings(problem, state, terms):
             matrix = tangent.to_dense() + np.asarray(load, dtype=float)
             np.linalg.cholesky(0.5 * (matrix + matrix.T))
     except (np.linalg.LinAlgError, ValueError):
-        return ['the equilibrium is unstable (tangent stiffness not positive definite): a '
-                'compression above the buckling load, lateral buckling under a large moment '
-                'or a snap-through; the structure need not take the returned shape']
+        return ['the tangent stiffness is not positive definite at this equilibrium: it may be '
+                'unstable (a compression above the buckling load, lateral buckling under a large '
+                'end moment, a snap-through) and the structure need not take the returned shape']
     return []
