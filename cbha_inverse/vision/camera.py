@@ -121,7 +121,11 @@ def camera_model(width, height, distortion_model, distortion, camera_matrix, rec
         Naming the field that is wrong (a ``ValueError``).
 
     """
-    if int(width) != width or int(height) != height or width <= 0 or height <= 0:
+    try:
+        size_ok = int(width) == width > 0 and int(height) == height > 0
+    except (TypeError, ValueError):
+        size_ok = False
+    if not size_ok:
         raise CameraFieldError('size', f'must be positive integers, got {width} x {height}')
     if distortion_model not in DISTORTION_SIZES:
         raise CameraFieldError('distortion_model', f'must be one of '
@@ -270,8 +274,6 @@ def camera_from_yaml(text, path='<string>'):
                             name=document.get('camera_name', 'camera'), **fields)
     except CameraFieldError as exc:
         raise ConfigError(path, YAML_KEYS[exc.field], exc.problem) from None
-    except TypeError as exc:
-        raise ConfigError(path, 'image_width', f'must be an integer: {exc}') from None
 
 
 def load_camera_yaml(path):
