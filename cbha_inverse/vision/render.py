@@ -6,9 +6,9 @@ Each camera's raw image is rendered by ray casting through its lens model: every
 optical frame by inverting the distortion ``D`` (``cv2.undistortPoints``, once per camera on a
 grid of ``RAY_GRID`` px, interpolated bilinearly: the distortion is smooth, the interpolation
 error stays below 1e-3 px), so the image is distorted as the real lens would distort it. A sphere
-covers the samples whose ray passes within its radius; its shade falls off towards the limb (Lambert, light at the camera). On a
-textured background (smooth random grey with a blue-green tint, no red), the marker is then
-blurred (Gaussian) and sensor noise is added. Distractors (more spheres, e.g. a red blob) and the
+covers the samples whose ray passes within its radius; its shade falls off towards the limb
+(Lambert, light at the camera). On a textured background (smooth random grey with a blue-green
+tint, no red), the marker is then blurred (Gaussian) and sensor noise is added. Distractors (more spheres, e.g. a red blob) and the
 backbone (grey anti-aliased polyline, clutter) can be drawn too.
 
 The background with its noise comes from a small pool rendered once per camera, and only the
