@@ -8,8 +8,9 @@ grid of ``RAY_GRID`` px, interpolated bilinearly: the distortion is smooth, the 
 error stays below 1e-3 px), so the image is distorted as the real lens would distort it. A sphere
 covers the samples whose ray passes within its radius; its shade falls off towards the limb
 (Lambert, light at the camera). On a textured background (smooth random grey with a blue-green
-tint, no red), the marker is then blurred (Gaussian) and sensor noise is added. Distractors (more spheres, e.g. a red blob) and the
-backbone (grey anti-aliased polyline, clutter) can be drawn too.
+tint, no red), the marker is then blurred (Gaussian) and sensor noise is added. Distractors
+(more spheres, e.g. a red blob) and the backbone (grey anti-aliased polyline, clutter) can be
+drawn too.
 
 The background with its noise comes from a small pool rendered once per camera, and only the
 marker's region gets fresh noise per frame: a 1280x1024 pair costs a few milliseconds.
