@@ -56,6 +56,35 @@ class RenderSettings:
     noise_pool: int = 4
 
 
+def _bilinear_samples(corners, samples):
+    """
+    Interpolate values given at cell corners at S x S points inside every cell.
+
+    Parameters
+    ----------
+    corners : (R + 1, C + 1, 2) ndarray
+        Values at the corners of R x C cells.
+    samples : int
+        S: points per cell side, at the fractions ``(j + 0.5) / S``.
+
+    Returns
+    -------
+    (R, S, C, S, 2) ndarray
+        Bilinear interpolation (row-major: cell row, sample row, cell column, sample column).
+
+    """
+    weights = (np.arange(samples) + 0.5) / samples
+    wv = weights[None, :, None, None, None]
+    wu = weights[None, None, None, :, None]
+
+    def corner(rows, cols):
+        return corners[rows, cols][:, None, :, None, :]
+
+    low, high = slice(None, -1), slice(1, None)
+    return ((1 - wv) * ((1 - wu) * corner(low, low) + wu * corner(low, high))
+            + wv * ((1 - wu) * corner(high, low) + wu * corner(high, high)))
+
+
 def textured_background(width, height, rng):
     """
     Return a smooth random background without red (BGR, uint8).
@@ -110,7 +139,7 @@ class CameraRenderer:
         self.grid_rays = normalized_rays(
             camera, np.stack([mesh_u.ravel(), mesh_v.ravel()], -1)).reshape(
             grid_v.size, grid_u.size, 2)
-        blurred = self._blur(clean.astype(np.float32))
+        blurred = self.blur(clean.astype(np.float32))
         self.pool = [np.clip(blurred + rng.normal(0.0, settings.noise_std, blurred.shape), 0,
                              255).astype(np.uint8) for _ in range(max(settings.noise_pool, 1))]
 
@@ -137,7 +166,26 @@ class CameraRenderer:
         return ((1 - av) * ((1 - au) * grid[iv, iu] + au * grid[iv, iu + 1])
                 + av * ((1 - au) * grid[iv + 1, iu] + au * grid[iv + 1, iu + 1]))
 
-    def _blur(self, image):
+    def pixel_rays(self):
+        """
+        Return the rays of every pixel centre (computed once, then cached).
+
+        Returns
+        -------
+        (height * width, 3) ndarray of float32
+            ``(x / z, y / z, 1)`` in the raw optical frame, row by row.
+
+        """
+        if getattr(self, '_pixel_rays', None) is None:
+            # the pixels of one grid cell sit at the fractions (j + 0.5) / RAY_GRID of the cell
+            cells = _bilinear_samples(self.grid_rays, RAY_GRID)
+            rows, cols = self.camera.height, self.camera.width
+            rays = cells.reshape(cells.shape[0] * RAY_GRID, cells.shape[2] * RAY_GRID, 2)
+            rays = rays[:rows, :cols].reshape(-1, 2)
+            self._pixel_rays = np.column_stack([rays, np.ones(len(rays))]).astype(np.float32)
+        return self._pixel_rays
+
+    def blur(self, image):
         sigma = self.settings.blur_sigma
         return cv2.GaussianBlur(image, (0, 0), sigma) if sigma > 0.0 else image
 
@@ -202,7 +250,7 @@ class CameraRenderer:
         base = self.clean[top:bottom, left:right].astype(np.float32)
         marker = lit[..., None] * np.asarray(colour, np.float32)
         composite = base * (1.0 - coverage[..., None]) + marker
-        composite = self._blur(composite)
+        composite = self.blur(composite)
         noisy = composite + self.rng.normal(0.0, self.settings.noise_std, composite.shape)
         inner = (slice(blur_pad, rows - blur_pad), slice(blur_pad, cols - blur_pad))
         target = image[top:bottom, left:right]
@@ -214,17 +262,7 @@ class CameraRenderer:
                                          np.arange(top, bottom + 1) - 0.5)
         corners = self.rays(corner_u.ravel(), corner_v.ravel()).reshape(
             bottom - top + 1, right - left + 1, 2)
-        weights = (np.arange(samples) + 0.5) / samples
-        wv = weights[None, :, None, None, None]
-        wu = weights[None, None, None, :, None]
-
-        def corner(rows, cols):
-            return corners[rows, cols][:, None, :, None, :]
-
-        low, high = slice(None, -1), slice(1, None)
-        rays = ((1 - wv) * ((1 - wu) * corner(low, low) + wu * corner(low, high))
-                + wv * ((1 - wu) * corner(high, low) + wu * corner(high, high)))
-        return rays.reshape(-1, 2)
+        return _bilinear_samples(corners, samples).reshape(-1, 2)
 
     def _draw_polyline(self, image, points, thickness, colour):
         points = points[points[:, 2] > 0.05]
@@ -303,3 +341,73 @@ class StereoRenderer:
             spheres = [(c, r, settings.marker_bgr) for c, r in zip(centres, radii)]
             images.append(renderer.render(spheres, polylines))
         return images[0], images[1]
+
+
+def render_checkerboard(renderer, rotation, origin, pattern, square):
+    """
+    Render a planar checkerboard into the raw image of one camera (grey, anti-aliased).
+
+    Every pixel's ray (the renderer's lens model) is intersected with the board plane; the
+    checker value is box-filtered over the pixel's footprint on the board (a ramp one pixel
+    wide across each edge), then blurred and noised like the marker images.
+
+    Parameters
+    ----------
+    renderer : CameraRenderer
+        The camera (rays, blur and noise settings, randomness).
+    rotation : (3, 3) array_like
+        Board axes (columns: along the pattern's rows, along its columns, normal) in the raw
+        optical frame.
+    origin : (3,) array_like  [m]
+        The board's outer corner (a white margin of one square surrounds the squares) in the
+        raw optical frame.
+    pattern : (2,) tuple of int
+        Inner corners per row and per column (OpenCV's ``patternSize``), e.g. ``(9, 6)``.
+    square : float  [m]
+        Side of a square.
+
+    Returns
+    -------
+    (height, width) ndarray of uint8
+        The mono image.
+
+    """
+    camera = renderer.camera
+    columns, rows = pattern[0] + 1, pattern[1] + 1
+    rotation = np.asarray(rotation, np.float32)
+    origin = np.asarray(origin, np.float32)
+    # only the board's bounding box in the image is ray cast; the rest is background
+    outline = origin + np.array([[0, 0], [columns + 2, 0], [0, rows + 2], [columns + 2, rows + 2]],
+                                np.float32) * square @ rotation[:, :2].T
+    left, top, right, bottom = 0, 0, camera.width, camera.height
+    if np.all(outline[:, 2] > 0.0):
+        pixels = project_raw(camera, outline)
+        left, top = np.clip(np.floor(pixels.min(axis=0)).astype(int) - 8, 0, None)
+        right = int(np.clip(np.ceil(pixels[:, 0].max()) + 9, left, camera.width))
+        bottom = int(np.clip(np.ceil(pixels[:, 1].max()) + 9, top, camera.height))
+    directions = renderer.pixel_rays().reshape(camera.height, camera.width, 3)[
+        top:bottom, left:right].reshape(-1, 3)
+    normal = rotation[:, 2]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        distance = (normal @ origin) / (directions @ normal)
+    hits = directions * distance[:, None] - origin
+    board = (hits @ rotation[:, :2]).reshape(bottom - top, right - left, 2) / square - 1.0
+    value = np.ones(board.shape[:2], np.float32)
+    for axis in range(2):
+        coordinate = board[..., axis]
+        footprint = np.abs(np.gradient(coordinate, axis=0)) + np.abs(
+            np.gradient(coordinate, axis=1))
+        fraction = coordinate - np.floor(coordinate)
+        edge = np.minimum(fraction, 1.0 - fraction) / np.maximum(footprint, 1e-9)
+        parity = np.where(np.floor(coordinate) % 2 == 0, 1.0, -1.0).astype(np.float32)
+        value *= parity * np.clip(2.0 * edge, -1.0, 1.0)
+    inside = ((board[..., 0] >= 0) & (board[..., 0] <= columns) & (board[..., 1] >= 0)
+              & (board[..., 1] <= rows))
+    margin = ((board[..., 0] >= -1) & (board[..., 0] <= columns + 1) & (board[..., 1] >= -1)
+              & (board[..., 1] <= rows + 1) & (distance.reshape(board.shape[:2]) > 0))
+    image = np.full((camera.height, camera.width), 90.0, np.float32)
+    crop = np.where(margin, np.float32(235.0), np.float32(90.0))
+    image[top:bottom, left:right] = np.where(inside, 125.0 + 110.0 * value, crop)
+    image = renderer.blur(image)
+    noisy = image + renderer.rng.normal(0.0, renderer.settings.noise_std, image.shape)
+    return np.clip(noisy, 0, 255).astype(np.uint8)
