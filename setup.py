@@ -35,6 +35,7 @@ CONSOLE_SCRIPTS = [
     'cbha_bench_inverse = cbha_inverse.report.bench_inverse:main',
     'cbha_fem_report = cbha_inverse.report.fem_report:main',
     'stereo_calibrate = cbha_inverse.vision.calibrate_cli:main',
+    'cbha_bench_stereo = cbha_inverse.report.bench_stereo:main',
 ]
 
 setup(
