@@ -164,3 +164,37 @@ def test_depth_and_epipolar_limits_reject(rig):
     far_left = project_raw(rig.left, far)[0]
     far_right = project_raw(rig.right, rig.right_from_left(far))[0]
     assert triangulate(rig, far_left, far_right).reason == 'depth'
+
+
+def test_mono_images_track_a_bright_sphere(rig):
+    """mono8: the brightest blob above mono_threshold is the marker (a lit white sphere)."""
+    import cv2
+    white = StereoRenderer(rig, RenderSettings(marker_bgr=(255, 255, 255)), seed=3)
+    tracker = StereoTracker(rig, MarkerParams(window=0, mono_threshold=240))
+    p_base = np.array([0.21, -0.04, 0.01])
+    left, right = (cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) for image in white.render(p_base))
+    result = tracker.track(left, right, order='mono')
+    assert result.ok, result
+    assert np.linalg.norm(result.p_base - p_base) < 1.0e-3
+
+
+def test_aruco_tag_centre_window_and_ambiguity():
+    """An ArUco tag of the configured id is found at its centre; two of them are ambiguous."""
+    import cv2
+    from cbha_inverse.vision.marker import MarkerTracker
+    params = MarkerParams(kind='aruco', aruco_dictionary='DICT_4X4_50', aruco_id=7, window=60)
+    dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+    tag = cv2.aruco.generateImageMarker(dictionary, 7, 60)
+    other = cv2.aruco.generateImageMarker(dictionary, 3, 60)
+    image = np.full((480, 640), 255, np.uint8)
+    image[200:260, 300:360] = tag
+    image[50:110, 50:110] = other
+    tracker = MarkerTracker(params)
+    found = tracker.detect(image, 'mono')
+    assert found.found and np.linalg.norm(found.centroid - [329.5, 229.5]) < 0.6, found
+    again = tracker.detect(image, 'mono')
+    assert again.windowed and np.linalg.norm(again.centroid - found.centroid) < 0.1
+    image[350:410, 500:560] = tag
+    assert MarkerTracker(params).detect(image, 'mono').reason == 'ambiguous'
+    with pytest.raises(ValueError, match='unknown ArUco dictionary'):
+        MarkerTracker(MarkerParams(kind='aruco', aruco_dictionary='DICT_NOPE'))
