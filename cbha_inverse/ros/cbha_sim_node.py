@@ -119,6 +119,7 @@ class CbhaSimNode(Node):
         self.rejected = {}
         self.accepted = 0
         self.last_result = None
+        self.last_stamp = None
         self.not_converged = 0
         self.failures = 0
         self.tick_times = TimingStats()
@@ -151,8 +152,10 @@ class CbhaSimNode(Node):
             raise ParameterError(f'{NODE_NAME}: {exc}') from None
 
         def shape():
-            result = self.last_result
-            return None if result is None else (result.effector_positions[-1], result.positions)
+            result, stamp = self.last_result, self.last_stamp
+            if result is None:
+                return None
+            return result.effector_positions[-1], result.positions, stamp
 
         return SimulatedCameras(self, rig, p.camera_rate_hz, p.marker_radius, p.seed, shape)
 
@@ -186,10 +189,10 @@ class CbhaSimNode(Node):
             self.get_logger().error(f'plant update failed, state kept: {exc!r}',
                                     throttle_duration_sec=self.params.log_throttle)
             return
-        self.last_result = result
+        stamp = self.get_clock().now().to_msg()
+        self.last_result, self.last_stamp = result, stamp
         self.not_converged += not result.converged
         tip = result.effector_positions[-1]
-        stamp = self.get_clock().now().to_msg()
         noisy = tip + self.rng.normal(0.0, self.params.noise_std, 3)
         if self.params.tip_output != 'stereo':
             self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))

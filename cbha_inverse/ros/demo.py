@@ -124,7 +124,7 @@ def _stop(processes):
 
 
 class Recorder:
-    """Subscribe to target, tip/true and /diagnostics (one rclpy node in this process)."""
+    """Subscribe to target, tip/true, tip/measured and /diagnostics (one node in this process)."""
 
     def __init__(self, context):
         from cbha_inverse.ros.qos import DIAGNOSTICS_QOS, MEASURED_QOS, TARGET_QOS
@@ -134,10 +134,12 @@ class Recorder:
         from rclpy.node import Node
 
         self.node = Node('cbha_demo_recorder', context=context, namespace=NAMESPACE)
-        self.targets, self.tips, self.diagnostics = [], [], {}
+        self.targets, self.tips, self.measured, self.diagnostics = [], [], [], {}
         self.node.create_subscription(PointStamped, 'target', self._point(self.targets),
                                       TARGET_QOS)
         self.node.create_subscription(PointStamped, 'tip/true', self._point(self.tips),
+                                      MEASURED_QOS)
+        self.node.create_subscription(PointStamped, 'tip/measured', self._point(self.measured),
                                       MEASURED_QOS)
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
                                       DIAGNOSTICS_QOS)
@@ -167,6 +169,7 @@ class Recorder:
         """Forget what was recorded."""
         self.targets.clear()
         self.tips.clear()
+        self.measured.clear()
         self.diagnostics.clear()
 
     def close(self):
@@ -253,7 +256,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     moving = [t[1:] for t in targets if start <= t[0] <= end]
     tip_path = [t[1:] for t in tips if start <= t[0] <= end]
     np.savez_compressed(run_dir / 'recording.npz', targets=np.array(targets), tips=np.array(tips),
-                        window=np.array([start, end]))
+                        measured=np.array(recorder.measured), window=np.array([start, end]))
     stereo = {} if feedback != 'stereo' else {
         'stereo_detection_rate': number(tracking, 'detection_rate'),
         'stereo_processing_median_ms': number(tracking, 'processing_median_ms'),

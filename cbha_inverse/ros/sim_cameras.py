@@ -4,7 +4,9 @@ Rendered stereo cameras of ``cbha_sim`` (``tip_output: stereo | both``).
 At ``camera_rate_hz`` the current tip marker (and the backbone, as clutter) is rendered into both
 cameras of a rig (:class:`cbha_inverse.vision.render.StereoRenderer`: lens distortion, blur,
 noise) and published as ``stereo/{left,right}/image_raw`` (bgr8, RELIABLE) with
-``stereo/{left,right}/camera_info``, both images with the same stamp (a hardware-triggered pair).
+``stereo/{left,right}/camera_info``, both images stamped with the time of the plant state they
+show (a hardware-triggered pair exposed at that instant); a frame whose state has not changed
+since the last one is not sent again.
 This module imports OpenCV; ``cbha_sim`` imports it only when stereo output is on.
 """
 
@@ -34,8 +36,8 @@ class SimulatedCameras:
     seed : int
         Seed of the texture and the image noise.
     shape : callable
-        ``shape() -> (tip (3,), backbone (n + 1, 3)) or None`` in ``cbha_base`` [m]: the plant's
-        current state (None: nothing to render yet).
+        ``shape() -> (tip (3,), backbone (n + 1, 3), stamp) or None``: the plant's current state
+        in ``cbha_base`` [m] and its time (``builtin_interfaces/Time``); None: nothing yet.
 
     """
 
@@ -49,15 +51,16 @@ class SimulatedCameras:
         self.infos = {side: node.create_publisher(CameraInfo, f'stereo/{side}/camera_info',
                                                   reliable(10)) for side in ('left', 'right')}
         self.frames = 0
+        self._last_stamp = None
         self.timer = node.create_timer(1.0 / rate_hz, self.publish)
 
     def publish(self):
         """Render the current tip into both cameras and publish the pair with its camera_info."""
         state = self.shape()
-        if state is None:
+        if state is None or state[2] == self._last_stamp:
             return
-        tip, backbone = state
-        stamp = self.node.get_clock().now().to_msg()
+        tip, backbone, stamp = state
+        self._last_stamp = stamp
         pair = self.renderer.render(tip, backbone=backbone)
         for side, camera, pixels in zip(('left', 'right'), (self.rig.left, self.rig.right), pair):
             frame_id = f'stereo_{side}_optical'

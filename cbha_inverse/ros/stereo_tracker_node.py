@@ -235,6 +235,9 @@ class StereoTrackerNode(Node):
 
     def _process(self, left, right):
         start = time.perf_counter()
+        if self.tracker is None:
+            self._count('no_camera_model', 'image pair before both camera models')
+            return
         if left[2] != right[2]:
             self._count('encoding_mismatch', 'left and right images have different encodings')
             return
