@@ -198,3 +198,22 @@ def test_aruco_tag_centre_window_and_ambiguity():
     assert MarkerTracker(params).detect(image, 'mono').reason == 'ambiguous'
     with pytest.raises(ValueError, match='unknown ArUco dictionary'):
         MarkerTracker(MarkerParams(kind='aruco', aruco_dictionary='DICT_NOPE'))
+
+
+def test_coarse_full_frame_search_equals_the_direct_search(rig, renderer):
+    """The subsampled first pass finds the same blob, so the same centroid, as the direct one."""
+    from cbha_inverse.vision.marker import detect_sphere_coarse
+    rng = np.random.default_rng(12)
+    params = MarkerParams()
+    small = StereoRenderer(rig, RenderSettings(marker_radius=0.0025), seed=2)
+    reasons = []
+    for images, radius in ((renderer, 0.006), (small, 0.0025)):
+        for p_base in rng.uniform(REACH_MIN, REACH_MAX, (10, 3)):
+            left, _ = images.render(p_base, distractors=[p_base + [0.0, 0.05, 0.0]],
+                                    distractor_radii=[rng.uniform(0.3, 1.0) * radius])
+            direct = detect_sphere(left, params)
+            coarse = detect_sphere_coarse(left, params, step=2)
+            assert (direct.reason, direct.candidates) == (coarse.reason, coarse.candidates)
+            assert np.array_equal(direct.centroid, coarse.centroid, equal_nan=True)
+            reasons.append(direct.reason)
+    assert 'ok' in reasons and 'ambiguous' in reasons

@@ -91,6 +91,8 @@ class StereoTrackerParams:
                                   ros_name='marker.aruco_dictionary')
     aruco_id: int = param(0, 'ArUco tag id of the marker', low=0, high=100000,
                           ros_name='marker.aruco_id')
+    coarse_step: int = param(2, 'full-frame search: subsampling step of the first pass '
+                             '(1 = none)', low=1, high=8, ros_name='marker.coarse_step')
     max_epipolar_error: float = param(2.0, 'largest |v_left - v_right| after rectification '
                                       '[px]', low=0.0, high=1000.0)
     max_reprojection_error: float = param(1.5, 'largest reprojection error [px]', low=0.0,
@@ -136,9 +138,12 @@ class StereoTrackerNode(Node):
             p = self.params
             self.pose = check_pose(p.base_from_left)
             self.marker = MarkerParams(
-                p.marker_kind, p.hue_max_low, p.hue_min_high, p.saturation_min, p.value_min,
-                p.mono_threshold, p.min_area, p.max_area, p.min_circularity, p.ambiguity_ratio,
-                p.window, p.aruco_dictionary, p.aruco_id)
+                kind=p.marker_kind, hue_max_low=p.hue_max_low, hue_min_high=p.hue_min_high,
+                saturation_min=p.saturation_min, value_min=p.value_min,
+                mono_threshold=p.mono_threshold, min_area=p.min_area, max_area=p.max_area,
+                min_circularity=p.min_circularity, ambiguity_ratio=p.ambiguity_ratio,
+                window=p.window, aruco_dictionary=p.aruco_dictionary, aruco_id=p.aruco_id,
+                coarse_step=p.coarse_step)
             self.limits = StereoLimits(p.max_epipolar_error, p.max_reprojection_error,
                                        p.min_depth, p.max_depth)
             self.cameras = {}

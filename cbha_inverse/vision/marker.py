@@ -15,7 +15,7 @@ the mean of its four corners (refined to sub-pixel). Two tags with that id are a
 the marker is not found there.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -50,6 +50,8 @@ class MarkerParams:
         ``cv2.aruco`` predefined dictionary name, e.g. ``DICT_4X4_50``.
     aruco_id : int
         Tag id of the marker.
+    coarse_step : int
+        Full-frame search: subsampling step of the first pass (1: none).
 
     """
 
@@ -66,6 +68,7 @@ class MarkerParams:
     window: int = 48
     aruco_dictionary: str = 'DICT_4X4_50'
     aruco_id: int = 0
+    coarse_step: int = 2
 
 
 @dataclass(frozen=True)
@@ -124,8 +127,83 @@ def detect_sphere(image, params, order='bgr', offset=(0, 0), skip_border=False):
         The centroid in full-image coordinates, or why there is none.
 
     """
+    candidates = sphere_candidates(image, params, order, skip_border)
+    return _decide(candidates, image, params, order, offset)
+
+
+def detect_sphere_coarse(image, params, order='bgr', step=2):
+    """
+    Detect the red sphere in a full frame, searching a subsampled copy first.
+
+    The blobs found in the image subsampled by ``step`` (any shape, a quarter of the scaled
+    least area: the polygon area of a tiny contour is far below its pixel count) are measured
+    again at full resolution in a window around each (the 16 largest), and the best of those
+    decides, as in :func:`detect_sphere`. A blob that disappears in the subsampling is a few
+    pixels wide: below ``min_area`` for ``step`` 2, or too small against the marker to make
+    the image ambiguous.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) ndarray of uint8
+        The full image.
+    params : MarkerParams
+        Limits.
+    order : str
+        ``bgr``, ``rgb`` or ``mono``.
+    step : int
+        Subsampling step (1: search the full resolution directly).
+
+    Returns
+    -------
+    Detection
+        The centroid, or why there is none.
+
+    """
+    if step <= 1:
+        return detect_sphere(image, params, order)
+    small = np.ascontiguousarray(image[::step, ::step])
+    coarse_params = replace(params, min_area=params.min_area / step ** 2 / 4.0,
+                            max_area=params.max_area / step ** 2 * 2.0, min_circularity=0.0)
+    rows, cols = image.shape[:2]
+    found, seen = [], set()
+    for _, contour in sphere_candidates(small, coarse_params, order)[:16]:
+        x0, y0, width, height = cv2.boundingRect(contour)
+        pad = 3 * step + 4
+        left, top = max(x0 * step - pad, 0), max(y0 * step - pad, 0)
+        right = min((x0 + width) * step + pad, cols)
+        bottom = min((y0 + height) * step + pad, rows)
+        for score, fine in sphere_candidates(image[top:bottom, left:right], params, order):
+            fine = fine + np.array([left, top], dtype=fine.dtype)
+            key = tuple(cv2.boundingRect(fine))
+            if key not in seen:
+                seen.add(key)
+                found.append((score, fine))
+    found.sort(key=lambda item: -item[0])
+    return _decide(found, image, params, order, (0, 0))
+
+
+def sphere_candidates(image, params, order='bgr', skip_border=False):
+    """
+    Return the blobs of an image that pass the colour, area and circularity limits.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) ndarray of uint8
+        The image (``order`` says which).
+    params : MarkerParams
+        Limits.
+    order : str
+        ``bgr``, ``rgb`` or ``mono``.
+    skip_border : bool
+        Ignore blobs that touch the border of ``image``.
+
+    Returns
+    -------
+    list of (float, ndarray)
+        ``(area * circularity, contour)``, best first (contours in ``image`` pixels).
+
+    """
     if order == 'mono':
-        weight_source = image.astype(np.int16) - params.mono_threshold
         mask = (image >= params.mono_threshold).astype(np.uint8)
     else:
         hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV if order == 'bgr' else cv2.COLOR_RGB2HSV)
@@ -134,9 +212,6 @@ def detect_sphere(image, params, order='bgr', offset=(0, 0), skip_border=False):
         high = cv2.inRange(hsv, (params.hue_min_high, params.saturation_min, params.value_min),
                            (179, 255, 255))
         mask = cv2.bitwise_or(low, high)
-        red = 2 if order == 'bgr' else 0
-        channels = image.astype(np.int16)
-        weight_source = channels[..., red] - np.maximum(channels[..., 1], channels[..., 2 - red])
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     candidates = []
     rows, cols = mask.shape
@@ -152,29 +227,40 @@ def detect_sphere(image, params, order='bgr', offset=(0, 0), skip_border=False):
         circularity = 4.0 * np.pi * area / max(perimeter * perimeter, 1e-12)
         if circularity >= params.min_circularity:
             candidates.append((area * circularity, contour))
+    candidates.sort(key=lambda item: -item[0])
+    return candidates
+
+
+def _decide(candidates, image, params, order, offset):
+    """Apply the ambiguity rule to sorted candidates and measure the winner's centroid."""
     if not candidates:
         return NOT_FOUND
-    candidates.sort(key=lambda item: -item[0])
     if len(candidates) > 1 and candidates[1][0] >= params.ambiguity_ratio * candidates[0][0]:
         return Detection(False, 'ambiguous', np.full(2, np.nan), len(candidates))
-    centroid = _weighted_centroid(candidates[0][1], weight_source)
+    centroid = _weighted_centroid(candidates[0][1], image, params, order)
     if centroid is None:
         return NOT_FOUND
     return Detection(True, 'ok', centroid + np.asarray(offset, dtype=float), len(candidates))
 
 
-def _weighted_centroid(contour, weight_source):
+def _weighted_centroid(contour, image, params, order):
     """Return the weighted centroid [px] over the contour's blob grown by 2 px, or None."""
     x0, y0, width, height = cv2.boundingRect(contour)
     pad = 3
-    rows, cols = weight_source.shape[:2]
+    rows, cols = image.shape[:2]
     top, left = max(y0 - pad, 0), max(x0 - pad, 0)
     bottom, right = min(y0 + height + pad, rows), min(x0 + width + pad, cols)
+    crop = image[top:bottom, left:right].astype(np.int16)
+    if order == 'mono':
+        weight_source = crop - params.mono_threshold
+    else:
+        red = 2 if order == 'bgr' else 0
+        weight_source = crop[..., red] - np.maximum(crop[..., 1], crop[..., 2 - red])
     blob = np.zeros((bottom - top, right - left), np.uint8)
-    cv2.drawContours(blob, [contour - np.array([left, top])], -1, 1, thickness=cv2.FILLED)
+    cv2.drawContours(blob, [contour - np.array([left, top], dtype=contour.dtype)], -1, 1,
+                     thickness=cv2.FILLED)
     blob = cv2.dilate(blob, np.ones((5, 5), np.uint8))
-    weights = np.clip(weight_source[top:bottom, left:right], 0, None).astype(np.float64)
-    weights *= blob
+    weights = np.clip(weight_source, 0, None).astype(np.float64) * blob
     total = weights.sum()
     if not total > 0.0:
         return None
@@ -264,7 +350,9 @@ class MarkerTracker:
             if windowed and found.found and not _inside_margin(found.centroid, offset, image):
                 return NOT_FOUND
             return found
-        return detect_sphere(image, self.params, order, offset, skip_border=windowed)
+        if windowed:
+            return detect_sphere(image, self.params, order, offset, skip_border=True)
+        return detect_sphere_coarse(image, self.params, order, self.params.coarse_step)
 
     def detect(self, image, order='bgr'):
         """
