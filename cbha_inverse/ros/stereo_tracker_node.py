@@ -310,7 +310,7 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters or camera files.
 
     """
-    return run_node(StereoTrackerNode, NODE_NAME, argv)
+    return run_node(StereoTrackerNode, NODE_NAME, argv, params_class=StereoTrackerParams)
 
 
 if __name__ == '__main__':
