@@ -157,6 +157,17 @@ def test_last_lap_ends_exactly_at_the_path_length():
     assert endless.arc_length([1.0, 2.0, 3.0]).tolist() == [0.5, 0.0, 0.5]
 
 
+def test_path_constructor_defaults_are_the_papers():
+    """Bosman et al. 2015, section V: circle at 2.5 cm/s, square at 3.1 cm/s, in the y-z plane."""
+    circle = circle_trajectory((0.0, 0.0, 0.0), 0.06)
+    assert (circle.plane, circle.speed, circle.laps, circle.start_hold) == ('yz', 0.025, 0, 0.0)
+    square = square_trajectory((0.0, 0.0, 0.0), 0.08)
+    assert (square.plane, square.speed, square.laps, square.start_hold) == ('yz', 0.031, 0, 0.0)
+    line = waypoint_trajectory([(0.0, 0.0, 0.0), (0.0, 0.0, 0.5)], 0.1)
+    assert (line.closed, line.laps, line.start_hold) == (False, 0, 0.0)
+    assert make_trajectory('square').length == pytest.approx(4 * 0.08)
+
+
 def test_make_trajectory_defaults_are_the_papers_and_pass_every_argument():
     circle = make_trajectory('circle')
     assert (circle.speed, circle.radius, circle.plane, circle.laps, circle.start_hold) == (
