@@ -27,7 +27,7 @@ def test_demo_runs_a_short_closed_loop_lap(tmp_path):
     result = subprocess.run(
         [sys.executable, '-m', 'cbha_inverse.ros.demo', '--output', str(tmp_path),
          '--shapes', 'circle', '--modes', 'closed', '--radius', str(radius),
-         '--circle-speed', '0.02', '--start-hold', '0.3'],
+         '--circle-speed', '0.02', '--start-hold', '0.3', '--feedback', 'direct'],
         cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=240)
     assert result.returncode == 0, result.stdout + result.stderr
     summary = json.loads((tmp_path / 'summary.json').read_text())
