@@ -22,7 +22,8 @@ def run_node(node_class, node_name, argv=None):
     Returns
     -------
     int
-        0 after SIGINT/SIGTERM, 2 on invalid parameters or an unusable scene.
+        0 after SIGINT/SIGTERM, 2 on invalid parameters, an unusable scene or a message package
+        that a node imports at start and cannot find (``ModuleNotFoundError``).
 
     """
     rclpy.init(args=argv)
@@ -37,7 +38,7 @@ def run_node(node_class, node_name, argv=None):
         # construction fail instead of raising ExternalShutdownException: still a clean stop.
         if rclpy.ok():
             raise
-    except (ParameterError, FileNotFoundError) as exc:
+    except (ParameterError, FileNotFoundError, ModuleNotFoundError) as exc:
         rclpy.logging.get_logger(node_name).fatal(str(exc))
         return 2
     finally:
