@@ -39,7 +39,8 @@ from cbha_inverse.core.safety import check_command, StalenessWatch
 from cbha_inverse.ros.conversions import command_array, command_message
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK, WARN
 from cbha_inverse.ros.params import declare_parameters, param, ParameterError
-from cbha_inverse.ros.qos import COMMAND_QOS, MEASURED_QOS, reliable
+from cbha_inverse.ros.qos import (
+    COMMAND_QOS, DRIVER_READINGS_QOS, DRIVER_SET_POINTS_QOS, MEASURED_QOS)
 from cbha_inverse.ros.runner import run_node
 import numpy as np
 from rclpy.node import Node
@@ -56,9 +57,6 @@ MISSING_MESSAGES = (
 
 STRING_POTS = tuple(f'string_pot_{name}' for name in ARM_VALVES)
 """Default names of the six string potentiometers (one per arm bellows, channel order)."""
-
-DRIVER_QOS = reliable(1)
-"""``set_bha_pressures`` / ``bha_readings``: reliable, newest only (the driver's queue depth 1)."""
 
 
 @dataclass(frozen=True)
@@ -205,14 +203,14 @@ class RobotinoBridgeNode(Node):
         self.command_rate = RateMeter(now)
         self.reading_rate = RateMeter(now)
         self.driver_publisher = self.create_publisher(
-            self.set_pressures_type, p.driver_command_topic, DRIVER_QOS)
+            self.set_pressures_type, p.driver_command_topic, DRIVER_SET_POINTS_QOS)
         self.measured_publisher = self.create_publisher(
-            Float64MultiArray, 'pressure_measured', COMMAND_QOS)
+            Float64MultiArray, 'pressure_measured', MEASURED_QOS)
         self.pots_publisher = self.create_publisher(JointState, 'string_pots', MEASURED_QOS)
         self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
                                  COMMAND_QOS)
         self.create_subscription(readings_type, p.driver_readings_topic, self._on_readings,
-                                 DRIVER_QOS)
+                                 DRIVER_READINGS_QOS)
         self.timer = self.create_timer(1.0 / p.rate_hz, self._on_timer)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
