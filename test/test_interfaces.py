@@ -16,12 +16,12 @@ from cbha_inverse.interfaces.rosidl_exports import broken_exports, repair_export
 import pytest
 from ros_helpers import child_env, REPO_ROOT
 
-EXPORT = '''add_library(std_msgs::std_msgs__rosidl_generator_py SHARED IMPORTED)
+EXPORT = """add_library(std_msgs::std_msgs__rosidl_generator_py SHARED IMPORTED)
 
 set_target_properties(std_msgs::std_msgs__rosidl_generator_py PROPERTIES
   INTERFACE_INCLUDE_DIRECTORIES "{folders}"
 )
-'''
+"""
 
 
 def _write_export(prefix, package, folders):
