@@ -310,3 +310,18 @@ def test_closed_loop_through_bridge_and_driver_tracks_like_the_direct_loop(rclpy
     assert set_points > 200
     assert bridged_rms < 0.025 * (0.013 + 2.0 / 50.0)
     assert bridged_rms < direct_rms + 0.35e-3
+
+
+@pytest.mark.parametrize('overrides, match', [
+    ({'valve_names': ['inner_over', 'elbow']}, 'unknown valve names'),
+    ({'valve_names': ['inner_over', 'inner_over']}, 'duplicate'),
+    ({'wrist_bar': [0.1]}, 'wrist_bar'),
+    ({'wrist_bar': [0.1, 1.4], 'max_bar': 1.0}, 'wrist_bar'),
+    ({'vent_pressure': 1e5, 'max_pressure': 5e4}, 'vent_pressure'),
+    ({'max_bar': 2.0}, 'max_bar'),
+    ({'stale_action': 'coast'}, 'stale_action'),
+])
+def test_invalid_parameters_are_refused_at_start(rclpy_context, overrides, match):
+    from cbha_inverse.ros.params import ParameterError
+    with pytest.raises(ParameterError, match=match):
+        _bridge(rclpy_context, **overrides)
