@@ -94,9 +94,10 @@ def check_build_tools(env):
     if colcon is None:
         raise BuildError('colcon not found: pip install colcon-common-extensions '
                          '(requirements-dev.txt), or source a ROS 2 Jazzy install')
-    for tool in ('cmake', 'cc', 'c++'):
-        if shutil.which(tool, path=env['PATH']) is None:
-            raise BuildError(f'{tool} not found: install CMake and a C/C++ compiler '
+    for what, names in (('cmake', ('cmake',)), ('a C compiler', ('cc', 'gcc', 'clang')),
+                        ('a C++ compiler', ('c++', 'g++', 'clang++'))):
+        if not any(shutil.which(name, path=env['PATH']) for name in names):
+            raise BuildError(f'{what} not found on PATH: install CMake and a C/C++ compiler '
                              '(Debian/Ubuntu: apt-get install cmake g++)')
     prefixes = _prefixes(env)
     for name in REQUIRED_CMAKE_PACKAGES:
