@@ -66,8 +66,18 @@ def test_missing_build_tool_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch
     assert env['AMENT_PREFIX_PATH'].split(os.pathsep)[-1] == sys.prefix
     with pytest.raises(BuildError, match='colcon not found'):
         check_build_tools({'PATH': str(tmp_path), 'AMENT_PREFIX_PATH': str(tmp_path)})
-    monkeypatch.setenv('PATH', str(tmp_path))
+    colcon = tmp_path / 'colcon'
+    colcon.write_text('#!/bin/sh\n')
+    colcon.chmod(0o755)
+    with pytest.raises(BuildError, match='cmake not found'):
+        check_build_tools({'PATH': str(tmp_path), 'AMENT_PREFIX_PATH': str(tmp_path)})
+    real_tools = {'PATH': os.environ['PATH'] + os.pathsep + str(tmp_path),
+                  'AMENT_PREFIX_PATH': str(tmp_path)}
     monkeypatch.setattr(sys, 'prefix', str(tmp_path))
+    with pytest.raises(BuildError, match='CMake package ament_cmake not found'):
+        check_build_tools(real_tools)
+    monkeypatch.setenv('PATH', str(tmp_path))
+    colcon.unlink()
     monkeypatch.setattr('sysconfig.get_paths', lambda: {'scripts': str(tmp_path)})
     assert main(['--workspace', str(tmp_path / 'ws')]) == 2
     err = capsys.readouterr().err.strip()
