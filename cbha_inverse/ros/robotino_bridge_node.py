@@ -190,7 +190,6 @@ class RobotinoBridgeNode(Node):
                                              p.valve_names, p.max_bar, (0.0, 0.0))
         self.set_points = self.vent_bar.copy()
         self.sent = None
-        self.command = None
         self.measured = None
         self.decision = 'waiting'
         self.rejected = {}
@@ -233,7 +232,6 @@ class RobotinoBridgeNode(Node):
             return
         self.command_rate.add()
         self.command_watch.mark(time.monotonic())
-        self.command = values
         self.set_points = robotino_bar_command(values, p.valve_names, p.max_bar, p.wrist_bar)
         self._set_decision('run')
         self._send(self.set_points)
@@ -296,7 +294,8 @@ class RobotinoBridgeNode(Node):
                   'readings': self.readings, 'reading_rate_hz': self.reading_rate.rate(now),
                   'reading_age_s': self.reading_watch.age(now), 'rejected_total': total,
                   **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
-                  'set_points_bar': ' '.join(f'{v:.3f}' for v in self.set_points)}
+                  'sent_bar': ' '.join(f'{v:.3f}' for v in self.sent) if self.sent is not None
+                  else ''}
         if self.sent is not None and self.measured is not None:
             commanded = self.sent[self.channels] * PASCAL_PER_BAR
             for name, error in zip(p.valve_names, self.measured - commanded):
