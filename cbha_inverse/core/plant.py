@@ -84,6 +84,10 @@ class StaticPlant:
         self._external = external
         self._state = rest_state(self.model)
 
+    def reset(self):
+        """Return to the rest shape (the next update starts from it)."""
+        self._state = rest_state(self.model)
+
     def residual(self, actuation):
         """Return the equilibrium residual ``r`` (6n,) at the current state."""
         internal = internal_wrenches(self.model, self._state)
