@@ -65,15 +65,8 @@ def _command(values):
 
 
 def _commanded(driver):
-    """
-    Return the set-points the driver received other than the vent set-points (all 0 bar).
-
-    Until its first valid command the bridge vents (stale stream), so these come first.
-    """
-    vented = [np.all(values == 0.0) for _, values in driver.received]
-    first = vented.index(False) if False in vented else len(vented)
-    assert all(not v for v in vented[first:]), 'vent set-points after a command'
-    return [values for _, values in driver.received[first:]]
+    """Return the set-points the driver received (nothing comes before the first command)."""
+    return [values for _, values in driver.received]
 
 
 def test_commands_reach_all_eight_channels_in_bar_with_wrist_and_cap(rclpy_context,
@@ -160,6 +153,25 @@ def test_stale_command_stream_vents_or_holds_within_the_timeout(rclpy_context, r
         assert first - last_command < timeout + 0.1
 
 
+@pytest.mark.parametrize('publish_idle', [False, True])
+def test_before_the_first_command_nothing_or_the_vent_set_points(rclpy_context, robotino_msgs,
+                                                                  publish_idle):
+    bridge = _bridge(rclpy_context, command_timeout=0.05, rate_hz=100.0, vent_pressure=1e4,
+                     publish_idle=publish_idle)
+    driver = DriverStandIn(rclpy_context)
+    with _spinning(rclpy_context, bridge, driver) as executor:
+        assert spin_until(executor, lambda: bridge.driver_publisher.get_subscription_count() > 0,
+                          10.0)
+        spin_for(executor, 0.3)
+    assert bridge.decision == 'waiting'
+    if publish_idle:
+        assert len(driver.received) >= 5
+        for _, values in driver.received:
+            np.testing.assert_allclose(values, [0.1] * 6 + [0.0] * 2, rtol=1e-6)
+    else:
+        assert driver.received == []
+
+
 def test_readings_become_pressure_measured_in_pascal_and_string_pots(rclpy_context,
                                                                      robotino_msgs):
     bridge = _bridge(rclpy_context, valve_names=list(PERMUTED), diagnostics_period=0.1)
@@ -213,17 +225,19 @@ def test_bridge_process_from_the_params_file_with_the_built_messages(rclpy_conte
     try:
         with _spinning(rclpy_context, driver, client) as executor:
             assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0, 20.0)
-            assert spin_until(executor, lambda: driver.received, 5.0), 'no vent before command'
-            np.testing.assert_array_equal(driver.received[-1][1], np.zeros(8))
-            count = len(driver.received)
             command_pub.publish(_command([1e4, 2e4, 3e4, 4e4, 5e4, 6e4]))
-            assert spin_until(executor, lambda: any(
-                np.allclose(v, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.0, 0.0])
-                for _, v in driver.received[count:]), 5.0)
+            assert spin_until(executor, lambda: driver.received, 5.0)
+            # the shipped file: stale after 0.5 s -> vent, republished at 50 Hz
+            assert spin_until(executor, lambda: len(driver.received) > 5, 5.0)
     finally:
         process.terminate()
         output = process.communicate(timeout=20)[0]
     assert process.returncode == 0, output
+    np.testing.assert_allclose(driver.received[0][1], [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.0, 0.0],
+                               rtol=1e-6)
+    assert driver.received[1][0] - driver.received[0][0] > 0.45, 'vented before the timeout'
+    for _, values in driver.received[1:]:
+        np.testing.assert_array_equal(values, np.zeros(8))
 
 
 def test_missing_robotino_msgs_stops_with_one_line_and_exit_2():

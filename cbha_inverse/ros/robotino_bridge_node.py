@@ -14,7 +14,9 @@ reliable) and forwards each valid command at once to ``/set_bha_pressures`` thro
 with throttling and counted). When no valid command arrived within ``command_timeout`` (steady
 clock), the bridge publishes at ``rate_hz`` either the last forwarded set-points (``hold``) or
 the vent set-points (``vent``: arm channels at ``vent_pressure``, wrist at 0), as the solver
-does. Until the first valid command the held set-points are the vent set-points.
+does with stale feedback. As the solver, it publishes nothing before the first valid command
+(another publisher of ``/set_bha_pressures`` is not overridden), or the vent set-points at
+``rate_hz`` with ``publish_idle: true``.
 
 Each ``/bha_readings`` message is republished as ``pressure_measured`` (Float64MultiArray, Pa in
 ``valve_names`` order, :func:`cbha_inverse.core.robotino.robotino_pressures`) and
@@ -81,6 +83,9 @@ class RobotinoBridgeParams:
                                  high=MAX_BAR * PASCAL_PER_BAR)
     reading_timeout: float = param(0.5, 'bha_readings older than this are reported stale in '
                                    'diagnostics [s]', low=0.001, high=3600.0)
+    publish_idle: bool = param(False, 'before the first valid command, publish the vent '
+                               'set-points at rate_hz (false: publish nothing until a command '
+                               'arrives)')
     rate_hz: float = param(50.0, 'watchdog rate, and publication rate of hold/vent set-points '
                            '[Hz]', low=1.0, high=1000.0)
     driver_command_topic: str = param('/set_bha_pressures', "topic of the driver's "
@@ -181,9 +186,9 @@ class RobotinoBridgeNode(Node):
         try:
             self.params = declare_parameters(self, RobotinoBridgeParams)
             self.set_pressures_type, readings_type = import_robotino_msgs()
-        except (ParameterError, ModuleNotFoundError) as exc:
+        except (ParameterError, ModuleNotFoundError):
             self.destroy_node()
-            raise type(exc)(f'{NODE_NAME}: {exc}') from None
+            raise
         p = self.params
         self.channels = np.array([CHANNELS[name] for name in p.valve_names])
         self.vent_bar = robotino_bar_command(np.full(len(p.valve_names), p.vent_pressure),
@@ -239,6 +244,10 @@ class RobotinoBridgeNode(Node):
 
     def _on_timer(self):
         if not self.command_watch.stale(time.monotonic()):
+            return
+        if self.decision == 'waiting':
+            if self.params.publish_idle:
+                self._send(self.vent_bar)
             return
         action = self.params.stale_action
         self._set_decision(action)
@@ -327,7 +336,7 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters or a missing ``robotino_msgs``.
 
     """
-    return run_node(RobotinoBridgeNode, NODE_NAME, argv)
+    return run_node(RobotinoBridgeNode, NODE_NAME, argv, params_class=RobotinoBridgeParams)
 
 
 if __name__ == '__main__':
