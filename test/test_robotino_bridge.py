@@ -155,7 +155,7 @@ def test_stale_command_stream_vents_or_holds_within_the_timeout(rclpy_context, r
 
 @pytest.mark.parametrize('publish_idle', [False, True])
 def test_before_the_first_command_nothing_or_the_vent_set_points(rclpy_context, robotino_msgs,
-                                                                  publish_idle):
+                                                                 publish_idle):
     bridge = _bridge(rclpy_context, command_timeout=0.05, rate_hz=100.0, vent_pressure=1e4,
                      publish_idle=publish_idle)
     driver = DriverStandIn(rclpy_context)
