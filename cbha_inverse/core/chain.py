@@ -21,7 +21,7 @@ def _frozen(array):
 
 def checked_array(value, shape, name):
     """
-    Return ``value`` as a float ndarray, raising ValueError (naming it) unless of ``shape``.
+    Return ``value`` as a finite float ndarray of ``shape``; raise ValueError (naming it) if not.
 
     Parameters
     ----------
@@ -40,6 +40,8 @@ def checked_array(value, shape, name):
     out = np.asarray(value, dtype=float)
     if out.shape != tuple(shape):
         raise ValueError(f'{name} must have shape {tuple(shape)}, got {out.shape}')
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f'{name} must be finite (got NaN or inf)')
     return out
 
 
@@ -116,14 +118,18 @@ class ChainModel:
         Raises
         ------
         ValueError
-            On inconsistent shapes, a non-symmetric or non-positive-definite compliance, or a
-            rotation that is not orthonormal.
+            On inconsistent shapes, a non-finite value (NaN or inf in any argument), a
+            non-symmetric or non-positive-definite compliance, or a rotation that is not
+            orthonormal.
 
         """
         comp = np.array(compliances, dtype=float)
         if comp.ndim != 3 or comp.shape[1:] != (6, 6) or comp.shape[0] < 1:
             raise ValueError(f'compliances must have shape (n, 6, 6), got {comp.shape}')
         n = comp.shape[0]
+        bad = np.nonzero(~np.all(np.isfinite(comp), axis=(1, 2)))[0]
+        if bad.size:
+            raise ValueError(f'compliance of link {bad[0]} is not finite (NaN or inf)')
         scale = np.abs(comp).max(axis=(1, 2))
         asym = np.abs(comp - np.swapaxes(comp, 1, 2)).max(axis=(1, 2))
         bad = np.nonzero(asym > 1e-8 * scale)[0]
@@ -145,12 +151,12 @@ class ChainModel:
             rots = checked_array(rest_rotations, (n, 3, 3), 'rest_rotations')
             _check_rotations(rots, 'rest_rotations')
         mass = np.zeros(n) if masses is None else np.array(masses, dtype=float)
-        if mass.shape != (n,) or np.any(mass < 0.0):
-            raise ValueError(f'masses must be {n} non-negative values')
-        base_x = np.zeros(3) if base_position is None else np.array(base_position, dtype=float)
-        base_r = np.eye(3) if base_rotation is None else np.array(base_rotation, dtype=float)
-        if base_x.shape != (3,) or base_r.shape != (3, 3):
-            raise ValueError('base_position must be (3,) and base_rotation (3, 3)')
+        if mass.shape != (n,) or not np.all(np.isfinite(mass)) or np.any(mass < 0.0):
+            raise ValueError(f'masses must be {n} finite non-negative values')
+        base_x = (np.zeros(3) if base_position is None
+                  else checked_array(base_position, (3,), 'base_position'))
+        base_r = (np.eye(3) if base_rotation is None
+                  else checked_array(base_rotation, (3, 3), 'base_rotation'))
         _check_rotations(base_r[None], 'base_rotation')
         return cls(_frozen(comp), _frozen(stiff), _frozen(offsets), _frozen(rots),
                    _frozen(mass), _frozen(base_x), _frozen(base_r))

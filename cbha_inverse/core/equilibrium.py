@@ -74,7 +74,7 @@ def actuator_loads(actuators, actuation):
 
 def solve_equilibrium(model, actuators, actuation, external=None, initial_state=None, *,
                       tolerance=1e-10, absolute_tolerance=None, max_iterations=50,
-                      max_load_steps=64, max_rotation_step=None):
+                      max_load_steps=64, max_rotation_step=None, check_warnings=True):
     """
     Solve ``f(q) + f_ext + J_a(q)ᵀ λ = 0`` for the frames (paper eq. 9).
 
@@ -100,6 +100,8 @@ def solve_equilibrium(model, actuators, actuation, external=None, initial_state=
         Load steps allowed (a warm start counts as one).
     max_rotation_step : float, optional  [rad]
         Largest link rotation of a line search's first trial step.
+    check_warnings : bool
+        Check the equilibrium for warnings (:func:`cbha_inverse.core.newton.solve_chain`).
 
     Returns
     -------
@@ -113,4 +115,5 @@ def solve_equilibrium(model, actuators, actuation, external=None, initial_state=
     return solve_chain(model, external, load_function=load_function, load_tangent=load_tangent,
                        initial_state=initial_state, tolerance=tolerance,
                        absolute_tolerance=absolute_tolerance, max_iterations=max_iterations,
-                       max_load_steps=max_load_steps, max_rotation_step=max_rotation_step)
+                       max_load_steps=max_load_steps, max_rotation_step=max_rotation_step,
+                       check_warnings=check_warnings)

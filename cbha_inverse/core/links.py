@@ -98,6 +98,8 @@ def timoshenko_compliance(length, youngs_modulus, poisson_ratio, outer_radius, i
     e_mod = float(youngs_modulus)
     r_o = float(outer_radius)
     r_i = float(inner_radius)
+    if not all(np.isfinite([length, e_mod, r_o, r_i, float(poisson_ratio)])):
+        raise ValueError('length, youngs_modulus, poisson_ratio and radii must be finite')
     if length <= 0.0 or e_mod <= 0.0 or r_o <= 0.0 or not 0.0 <= r_i < r_o:
         raise ValueError('need length > 0, youngs_modulus > 0 and 0 <= inner < outer radius')
     if not -1.0 < poisson_ratio < 0.5:

@@ -38,17 +38,37 @@ factor:
   (no convergence within ``max_iterations`` or a failed line search) is halved, successful steps
   double the increment.
 
-Convergence test (``residual_norm`` reports the left-hand side), by default relative::
+Convergence test (``residual_norm`` reports the left-hand side), by default relative. Forces
+and moments are compared in one unit: ``r_scaled`` is the residual with moments divided by the
+chain length L_c (so both parts are in N), and the force and moment parts of the applied loads
+and of the internal wrenches give one ``load_scale`` (the largest scaled component of either),
+so a pure moment load judges the force residual against it and vice versa. A state converges:
 
-    max |r_scaled| <= tolerance * load_scale + floor
+1. if every component is finite and ``max |r_scaled| <= tolerance * load_scale``; or
+2. (round-off limited) if every frame's residual is within ``tolerance * load_scale + floor_i``
+   and the Newton correction from that state moves no frame by more than
+   ``_ROUNDOFF_STEP * x_ref`` (1e-8) nor turns one by more than ``_ROUNDOFF_STEP`` rad: the
+   correction is applied (unless it is below ``1000 eps``, i.e. noise) and the corrected state
+   is returned. ``floor_i`` is the round-off level of the internal wrench at frame i,
+   ``64 eps max(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` over the (at most two)
+   links meeting at frame i, with ``x_ref = L_c + |base position|`` (max-abs entries of their
+   stiffness blocks). A near-rigid link (compliance / 1e9) has forces
+   that no double-precision state resolves below its floor, so its frames can only converge
+   this way; the floor of one stiff link never lets the residual of other frames pass, and the
+   rest state under a small load never passes (its correction is the deflection). The result
+   then carries a warning when the residual exceeds ``_ROUNDOFF_WARNING`` (1e-4) of the
+   applied load.
 
-``r_scaled`` is the residual with moments divided by the chain length L_c (so both are in N);
-``load_scale`` is the largest scaled component of the applied loads and of the internal wrenches
-at the current state; ``floor`` is the round-off level of the internal forces,
-``64 eps max_links(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` with ``x_ref = L_c +
-|base position|`` (max-abs entries of the stiffness blocks), below which no residual is
-meaningful. With ``absolute_tolerance`` the test is instead ``|r|_2 <= absolute_tolerance``
-(unscaled Euclidean norm in N and N*m, the plant's contract).
+A non-finite residual never converges. With ``absolute_tolerance`` the test is instead
+``|r|_2 <= absolute_tolerance`` (unscaled Euclidean norm in N and N*m, the plant's contract).
+
+Warnings (:attr:`NewtonResult.warnings`, checked at the returned state): round-off limited
+convergence (above), a tangent that is not positive definite at the equilibrium (an unstable
+equilibrium, e.g. the straight shape under a compression above the buckling load:
+:func:`_stability_warnings`) and links strained beyond the small-strain range of their
+compliance: an axial deformation above ``STRAIN_LIMIT`` (10 %) of the rest length, or a
+rotation above ``ROTATION_LIMIT`` (0.5 rad) within one link. The links are linear elastic in
+their corotated frame; beyond those limits refine the chain (more, shorter links).
 """
 
 from dataclasses import dataclass
@@ -64,6 +84,16 @@ from scipy.linalg import solve_banded
 _ARMIJO = 1e-4
 _MAX_HALVINGS = 6
 _MIN_LOAD_INCREMENT = 1.0 / 2 ** 20
+# round-off limited convergence: a Newton correction below sqrt(eps) of the chain's size is
+# applied and ends the iteration; one below 1000 eps is noise and is not even applied
+_ROUNDOFF_STEP = 1e-8
+_ROUNDOFF_NOISE = 1e3 * np.finfo(float).eps
+# a round-off limited residual above this fraction of the applied load gives a warning
+_ROUNDOFF_WARNING = 1e-4
+#: largest axial link deformation, as a fraction of the rest length, before a warning
+STRAIN_LIMIT = 0.1
+#: largest rotation within one link [rad] before a warning
+ROTATION_LIMIT = 0.5
 # dense LU of (6n)^2 beats the banded one (which builds its band storage in Python) up to ~20
 # links (single-threaded BLAS: 96 vs 132 us at 16 links, 183 vs 154 us at 24)
 _DENSE_MAX_LINKS = 20
@@ -94,6 +124,9 @@ class NewtonResult:
         Fraction of the load in equilibrium at ``state`` (1.0 when converged).
     message : str
         What happened, in words.
+    warnings : tuple of str
+        What the user should know about the returned state (module docstring): round-off
+        limited residual, unstable equilibrium, strain beyond the links' range.
 
     """
 
@@ -105,16 +138,29 @@ class NewtonResult:
     load_steps: int
     load_factor: float
     message: str
+    warnings: tuple = ()
 
 
 def _residual_floor(model, length):
-    """Round-off level of the scaled internal wrenches (see the module docstring)."""
+    """
+    Round-off level of the scaled internal wrench at each of frames 1..n (module docstring).
+
+    Returns
+    -------
+    (n,) ndarray  [N]
+
+    """
     k = np.abs(model.stiffnesses)
-    k_tt = k[:, :3, :3].max()
-    k_tr = max(k[:, :3, 3:].max(), k[:, 3:, :3].max())
-    k_rr = k[:, 3:, 3:].max()
+    k_tt = k[:, :3, :3].max(axis=(1, 2))
+    k_tr = np.maximum(k[:, :3, 3:].max(axis=(1, 2)), k[:, 3:, :3].max(axis=(1, 2)))
+    k_rr = k[:, 3:, 3:].max(axis=(1, 2))
     x_ref = length + float(np.linalg.norm(model.base_position))
-    return 64.0 * np.finfo(float).eps * max(k_tt * x_ref + k_tr, (k_tr * x_ref + k_rr) / length)
+    per_link = 64.0 * np.finfo(float).eps * np.maximum(k_tt * x_ref + k_tr,
+                                                       (k_tr * x_ref + k_rr) / length)
+    # frame j (1..n) is the end of link j - 1 and the start of link j
+    per_frame = per_link.copy()
+    per_frame[:-1] = np.maximum(per_frame[:-1], per_link[1:])
+    return per_frame
 
 
 def _scaled(wrenches, length):
@@ -166,6 +212,7 @@ class _Problem:
         self.max_rotation_step = max_rotation_step
         self.length = model.length if model.length > 0.0 else 1.0
         self.floor = _residual_floor(model, self.length)
+        self.x_ref = self.length + float(np.linalg.norm(model.base_position))
 
     def loads(self, state, lam):
         """Return the applied wrenches (n, 6) at load factor ``lam``."""
@@ -178,20 +225,40 @@ class _Problem:
         return lam * loads
 
     def evaluate(self, state, lam, internal=None):
-        """Return (residual, convergence measure, scaled 2-norm, converged flag)."""
+        """
+        Return (residual, convergence measure, scaled 2-norm, converged, within round-off).
+
+        ``converged`` is test 1 of the module docstring; ``within round-off`` is the residual
+        part of test 2 (the caller checks the Newton correction).
+        """
         if internal is None:
             internal = internal_wrenches(self.model, state)
         loads = self.loads(state, lam)
         res = internal + loads
         scaled = _scaled(res, self.length)
-        r_two = float(np.linalg.norm(scaled))
+        if not np.all(np.isfinite(scaled)):
+            return res, float('inf'), float('inf'), False, False
         if self.absolute is not None:
             measure = float(np.linalg.norm(res))
-            return res, measure, r_two, measure <= self.absolute
-        scale = max(np.abs(_scaled(loads, self.length)).max(),
-                    np.abs(_scaled(internal, self.length)).max())
-        measure = float(np.abs(scaled).max())
-        return res, measure, r_two, measure <= self.tolerance * scale + self.floor
+            return res, measure, float(np.linalg.norm(scaled)), measure <= self.absolute, False
+        # the line search's merit: the part of the residual above each frame's round-off floor
+        r_two = float(np.linalg.norm(np.maximum(np.abs(scaled) - self.floor[:, None], 0.0)))
+        scale = self.load_scale(loads, internal)
+        per_frame = np.abs(scaled).max(axis=1)
+        measure = float(per_frame.max())
+        bound = self.tolerance * scale
+        return (res, measure, r_two, measure <= bound,
+                bool(np.all(per_frame <= bound + self.floor)))
+
+    def load_scale(self, loads, internal):
+        """Return the largest scaled component of the applied and internal wrenches [N]."""
+        return max(np.abs(_scaled(loads, self.length)).max(),
+                   np.abs(_scaled(internal, self.length)).max())
+
+    def roundoff_step(self, step, relative):
+        """Return whether a Newton correction (n, 6) is below ``relative`` (module docstring)."""
+        return bool(np.abs(step[:, :3]).max() <= relative * self.x_ref
+                    and np.abs(step[:, 3:]).max() <= relative)
 
     def exact_step(self, state, terms, lam, res):
         """Newton step with the exact tangent ``K + lam L`` (LU)."""
@@ -270,7 +337,12 @@ def _relative_update(model, state, step, terms):
 
 
 def _point(problem, state, lam, terms=None):
-    """Evaluate a state: (state, link terms, residual, measure, scaled 2-norm, converged)."""
+    """
+    Evaluate a state.
+
+    Returns ``(state, link terms, residual, measure, scaled 2-norm, converged, within
+    round-off)`` (see :meth:`_Problem.evaluate`).
+    """
     if terms is None:
         terms = chain_terms(problem.model, state)
     internal = internal_wrenches(problem.model, state, terms)
@@ -281,12 +353,14 @@ def _line_search(problem, point, lam, step):
     """
     Backtrack along the Newton step (in deformation coordinates) on the residual norm.
 
-    Armijo test on the Euclidean norm of the scaled residual, ``|r(a)| <= (1 - 1e-4 a) |r(0)|``,
+    Armijo test on the Euclidean norm of the scaled residual above the round-off floor of each
+    frame (module docstring; the plain scaled norm with an absolute tolerance),
+    ``|r(a)| <= (1 - 1e-4 a) |r(0)|``,
     halving ``a`` at most ``_MAX_HALVINGS`` times; returns the accepted point (see
     :func:`_point`), or None (the caller then tries the fallback direction or cuts the load step,
     which is cheaper than creeping along a poor direction).
     """
-    state, terms, _, _, r_two, _ = point
+    state, terms, _, _, r_two, _, _ = point
     poses, link_rotation = _relative_update(problem.model, state, step, terms)
     alpha = problem.first_alpha(link_rotation)
     for _ in range(_MAX_HALVINGS):
@@ -302,14 +376,14 @@ def _newton(problem, state, lam, max_iterations):
     point = _point(problem, state, lam)
     iterations = 0
     while True:
-        state, terms, res, measure, _, ok = point
+        state, terms, res, measure, _, ok, roundoff = point
         if ok:
             return True, point, iterations, 'converged'
         if not np.isfinite(measure):
             return False, point, iterations, 'non-finite residual'
-        if iterations >= max_iterations:
+        exhausted = iterations >= max_iterations
+        if exhausted and not roundoff:
             return False, point, iterations, 'iteration budget exhausted'
-        iterations += 1
         accepted, why = None, ''
         for direction in (problem.exact_step, problem.material_step):
             try:
@@ -317,10 +391,21 @@ def _newton(problem, state, lam, max_iterations):
             except np.linalg.LinAlgError as exc:
                 why = str(exc) or 'singular tangent'
                 continue
+            if roundoff and problem.roundoff_step(step, _ROUNDOFF_NOISE):
+                # the correction is noise itself (e.g. the rest shape under no load)
+                return True, point, iterations, 'converged (round-off limited)'
+            if roundoff and problem.roundoff_step(step, _ROUNDOFF_STEP):
+                corrected = _point(problem, _relative_update(problem.model, state, step,
+                                                             terms)[0](1.0), lam)
+                if corrected[5] or corrected[6]:
+                    return True, corrected, iterations + 1, 'converged (round-off limited)'
+            if exhausted:
+                return False, point, iterations, 'iteration budget exhausted'
             accepted = _line_search(problem, point, lam, step)
             if accepted is not None:
                 break
             why = 'line search failed'
+        iterations += 1
         if accepted is None:
             return False, point, iterations, why
         point = accepted
@@ -328,7 +413,7 @@ def _newton(problem, state, lam, max_iterations):
 
 def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
                 initial_state=None, tolerance=1e-10, absolute_tolerance=None, max_iterations=50,
-                max_load_steps=64, max_rotation_step=None):
+                max_load_steps=64, max_rotation_step=None, check_warnings=True):
     """
     Solve ``f(q) + f_dead + f_load(q) = 0`` for the frames of a chain (paper eq. 9).
 
@@ -359,6 +444,9 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
         Load steps allowed (attempts, successful or not; the warm start counts as one).
     max_rotation_step : float, optional  [rad]
         Largest link rotation of a line search's first trial step.
+    check_warnings : bool
+        Check the converged state for the warnings of the module docstring (one more tangent
+        and factorization; a plant updated at every tick turns it off).
 
     Returns
     -------
@@ -374,8 +462,8 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
     lam, increment, steps, total, message = 0.0, 1.0, 0, 0, ''
     state, warm, final = None, None, None
     if initial_state is not None:
-        if initial_state.positions.shape != (model.n_frames, 3):
-            raise ValueError('initial_state does not match the model')
+        checked_array(initial_state.positions, (model.n_frames, 3), 'initial_state.positions')
+        checked_array(initial_state.rotations, (model.n_frames, 3, 3), 'initial_state.rotations')
         steps = 1
         ok, point, total, why = _newton(problem, initial_state, 1.0, max_iterations)
         if ok:
@@ -410,5 +498,108 @@ def solve_chain(model, external=None, *, load_function=None, load_tangent=None,
         if lam == 0.0 and warm is not None:
             state = warm  # no equilibrium reached: the warm iterate is the better place to resume
         final = _point(problem, state, 1.0)
+    warnings = _result_warnings(problem, final) if converged and check_warnings else ()
     return NewtonResult(state, bool(converged), int(total), float(final[3]), final[2],
-                        int(steps), float(lam), message)
+                        int(steps), float(lam), message, warnings)
+
+
+def _result_warnings(problem, point):
+    """
+    Return the warnings (tuple of str) about a converged point (module docstring).
+
+    Parameters
+    ----------
+    problem : _Problem
+        The problem solved.
+    point : tuple
+        From :func:`_point` at the full load.
+
+    Returns
+    -------
+    tuple of str
+
+    """
+    state, terms, _, measure = point[:4]
+    warnings = []
+    if problem.absolute is None:
+        loads = problem.loads(state, 1.0)
+        applied = np.abs(_scaled(loads, problem.length)).max()
+        if applied > 0.0 and measure > problem.tolerance * problem.load_scale(
+                loads, point[2] - loads) and measure > _ROUNDOFF_WARNING * applied:
+            worst = int(np.argmax(np.abs(_scaled(point[2], problem.length)).max(axis=1))) + 1
+            warnings.append(
+                f'residual {measure:.3g} N is limited by round-off at frame {worst} '
+                f'({measure / max(applied, np.finfo(float).tiny):.2g} of the applied load): '
+                'its links are too stiff relative to the load to resolve their forces in double '
+                'precision (stiffness ratio too large; merge the stiff link into its neighbour)')
+    warnings.extend(strain_warnings(problem.model, terms))
+    warnings.extend(_stability_warnings(problem, state, terms))
+    return tuple(warnings)
+
+
+def strain_warnings(model, terms):
+    """
+    Warn about links deformed beyond the small-strain range of their compliance.
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+    terms : LinkTerms
+        Link terms at the state (:func:`cbha_inverse.core.assembly.chain_terms`).
+
+    Returns
+    -------
+    list of str
+        Empty when every link's axial deformation (along its rest offset) is below
+        ``STRAIN_LIMIT`` of its rest length and its rotation below ``ROTATION_LIMIT``.
+
+    """
+    rest = np.linalg.norm(model.rest_offsets, axis=1)
+    safe = np.where(rest > 0.0, rest, 1.0)
+    # axial: the transverse part of the offset change is mostly the chord turning with bending,
+    # which the rotation limit covers
+    strain = np.abs(np.einsum('ij,ij->i', terms.offset, model.rest_offsets) / safe - rest) / safe
+    strain[rest == 0.0] = 0.0
+    rotation = np.linalg.norm(terms.phi, axis=1)
+    out = []
+    worst = int(np.argmax(strain))
+    if strain[worst] > STRAIN_LIMIT:
+        out.append(f'link {worst} is strained axially by {strain[worst]:.3g} of its rest '
+                   f'length (small-strain limit {STRAIN_LIMIT:g}): its linear compliance is not '
+                   'accurate there')
+    worst = int(np.argmax(rotation))
+    if rotation[worst] > ROTATION_LIMIT:
+        out.append(f'link {worst} turns by {rotation[worst]:.3g} rad within one link (limit '
+                   f'{ROTATION_LIMIT:g} rad): use more, shorter links')
+    return out
+
+
+def _stability_warnings(problem, state, terms):
+    """
+    Warn when the tangent at an equilibrium is not positive definite (possibly unstable).
+
+    The symmetric part of the exact tangent ``K + L`` (structure and load stiffness) is
+    factorised by BTD Cholesky (structure alone) or dense Cholesky (with a load stiffness); a
+    failure means a direction of decreasing stiffness. Under dead forces the equilibrium is then
+    unstable (e.g. the straight shape above the buckling load); under moments or follower loads,
+    which are not conservative in 3D, it is a warning sign rather than a proof.
+
+    Returns
+    -------
+    list of str
+
+    """
+    tangent = assemble_tangent(problem.model, state, terms)
+    load = None if problem.load_tangent is None else problem.load_tangent(state)
+    try:
+        if load is None:
+            btd.factorize(tangent.diagonal, tangent.upper)
+        else:
+            matrix = tangent.to_dense() + np.asarray(load, dtype=float)
+            np.linalg.cholesky(0.5 * (matrix + matrix.T))
+    except (np.linalg.LinAlgError, ValueError):
+        return ['the tangent stiffness is not positive definite at this equilibrium: it may be '
+                'unstable (a compression above the buckling load, lateral buckling under a large '
+                'end moment, a snap-through) and the structure need not take the returned shape']
+    return []

@@ -115,7 +115,8 @@ class StaticPlant:
                                 self._state, absolute_tolerance=self.tolerance,
                                 max_iterations=self.max_iterations,
                                 max_load_steps=self.max_load_steps,
-                                max_rotation_step=self.max_rotation_step)
+                                max_rotation_step=self.max_rotation_step,
+                                check_warnings=False)
         self._state = res.state
         positions, rotations = res.state.positions, res.state.rotations
         return PlantResult(np.array(positions), self.effectors.positions(positions, rotations),

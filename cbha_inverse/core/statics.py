@@ -52,6 +52,10 @@ class StaticResult:
         Fraction of the load in equilibrium at the returned state (1.0 when converged).
     message : str
         What happened, in words.
+    warnings : tuple of str
+        What the user should know about a converged state: round-off limited residual, an
+        unstable equilibrium (buckling), links strained beyond their small-strain range
+        (:mod:`cbha_inverse.core.newton`).
 
     """
 
@@ -65,6 +69,7 @@ class StaticResult:
     load_steps: int
     load_factor: float
     message: str
+    warnings: tuple = ()
 
 
 def external_wrenches(model, tip_wrench=None, frame_wrenches=None, gravity=None):
@@ -141,6 +146,14 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         ``converged`` is False (with a message) if the full load was not reached; the state is
         then the last equilibrium found (at ``load_factor`` < 1) or the last iterate.
 
+    Raises
+    ------
+    ValueError
+        If a load or the gravity has the wrong shape or is not finite, or ``initial_state``
+        does not match the model.
+    StaticConvergenceError
+        With ``strict``, if the solve did not converge.
+
     """
     res = solve_chain(model, external_wrenches(model, tip_wrench, frame_wrenches, gravity),
                       load_function=load_function, load_tangent=load_tangent,
@@ -149,7 +162,7 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
     state = res.state
     result = StaticResult(state.positions, state.quaternions, state.rotations, state,
                           res.converged, res.iterations, res.residual_norm, res.load_steps,
-                          res.load_factor, res.message)
+                          res.load_factor, res.message, res.warnings)
     if strict and not result.converged:
         raise StaticConvergenceError(result)
     return result

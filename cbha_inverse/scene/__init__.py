@@ -72,6 +72,9 @@ class ForwardResult:
         The static solver's message.
     state : cbha_inverse.core.chain.ChainState
         The equilibrium state (e.g. to reset an inverse solver there).
+    warnings : tuple of str
+        What the user should know about the equilibrium (unstable, strained beyond the links'
+        range, round-off limited: :mod:`cbha_inverse.core.newton`).
 
     """
 
@@ -85,6 +88,7 @@ class ForwardResult:
     residual_norm: float
     message: str
     state: object
+    warnings: tuple = ()
 
 
 class Scene:
@@ -167,7 +171,8 @@ class Scene:
         st = res.state
         return ForwardResult(st.positions, st.quaternions, st.rotations,
                              self.effectors.positions(st.positions, st.rotations), a,
-                             res.converged, res.iterations, res.residual_norm, res.message, st)
+                             res.converged, res.iterations, res.residual_norm, res.message, st,
+                             res.warnings)
 
     @cached_property
     def _external(self):
