@@ -12,6 +12,7 @@ VPY := $(VENV)/bin/python
 PINS_STAMP := $(VENV)/.pins-stamp
 INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
+EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/*_kernels.py) cbha_inverse/core/tick_math.py \
   cbha_inverse/core/tick_cables.py
 KERNEL_TESTS ?= test/test_qp_kernels.py test/test_inverse_tick_math.py test/test_core_btd.py
@@ -54,7 +55,7 @@ mutate: install
 
 venv: $(PINS_STAMP)
 
-install: $(INSTALL_STAMP) $(KERNELS_STAMP)
+install: $(INSTALL_STAMP) $(KERNELS_STAMP) $(EXPORTS_STAMP)
 
 $(PINS_STAMP): requirements.txt requirements-dev.txt constraints.txt
 	@if [ -z "$(PYTHON)" ]; then \
@@ -70,6 +71,13 @@ $(INSTALL_STAMP): $(PINS_STAMP) setup.py setup.cfg package.xml
 
 $(KERNELS_STAMP): $(INSTALL_STAMP) $(KERNEL_SOURCES)
 	$(VPY) -m cbha_inverse.core.warmup
+	@touch $@
+
+# The ROS interface wheels' CMake export files name the wheel builder's Python/numpy include
+# folders; rewrite them to this venv's (idempotent, touches only $(VENV)/share) so that colcon can
+# build an interface package such as robotino_msgs (cbha_build_robotino_msgs, the bridge tests).
+$(EXPORTS_STAMP): $(PINS_STAMP)
+	$(VPY) -m cbha_inverse.interfaces.rosidl_exports $(VENV)
 	@touch $@
 
 lint: install
