@@ -12,6 +12,7 @@ import math
 from builtin_interfaces.msg import Time
 from cbha_inverse.core.inverse import QPProblem
 from cbha_inverse.core.qp import ActiveSetQP, ActuationQP, projected_gauss_seidel
+from cbha_inverse.core.robotino import robotino_bar_command, robotino_pressures
 from cbha_inverse.core.safety import (
     bounded_command, check_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
 from cbha_inverse.core.trajectory import (
@@ -64,6 +65,24 @@ def test_rejections_say_what_is_wrong():
         StalenessWatch(-1.0)
     with pytest.raises(ValueError, match=r"action must be one of \('hold', 'vent'\), got 'x'"):
         stale_action(False, False, 'x')
+
+
+# the Robotino mapping ---------------------------------------------------------------------
+def test_wrist_set_points_are_clipped_and_never_non_finite():
+    arm = [1e4] * 6
+    np.testing.assert_array_equal(robotino_bar_command(arm, wrist_bar=(-0.5, math.nan))[6:],
+                                  [0.0, 0.0])
+    np.testing.assert_array_equal(robotino_bar_command(arm, wrist_bar=(9.0, math.inf))[6:],
+                                  [1.5, 0.0])
+    np.testing.assert_array_equal(robotino_bar_command(arm, wrist_bar=(0.25, 1.0))[6:],
+                                  [0.25, 1.0])
+
+
+def test_driver_readings_need_every_named_channel():
+    with pytest.raises(ValueError, match='^5 channels read, valve_names need 6$'):
+        robotino_pressures([0.1] * 5)
+    np.testing.assert_allclose(robotino_pressures([0.1, 0.2, 0.3, 0.4, 0.5, 0.6]),
+                               [1e4, 2e4, 3e4, 4e4, 5e4, 6e4])
 
 
 # trajectories -----------------------------------------------------------------------------
