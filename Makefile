@@ -65,6 +65,11 @@ bench: install
 report: install
 	$(VPY) -m cbha_inverse.report.cli all
 
+# Replay regression goldens (test/replay.py): replays test/data/replay/* and rewrites goldens.npz.
+.PHONY: goldens
+goldens: install
+	$(VPY) test/regen_goldens.py
+
 # Re-pin the transitive dependencies after changing requirements*.txt.
 constraints: $(PINS_STAMP)
 	( echo '# Transitive pins: pip freeze of a venv made from requirements-dev.txt. Regenerate: make constraints'; \

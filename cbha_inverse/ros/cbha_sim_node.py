@@ -10,6 +10,8 @@ plant (:class:`cbha_inverse.core.plant.StaticPlant`: the scene loaded with a del
 ``stiffness_scale`` error and its own ``gravity``) is moved to the equilibrium of the current
 valve pressures by warm-started Newton steps, and the tip is published on ``tip/measured``
 (PointStamped, sensor data QoS) with Gaussian noise (seeded) and, noise-free, on ``tip/true``.
+Time (ticks, latency, valve lag, stamps) is the node clock: with ``use_sim_time`` the plant runs
+on ``/clock``.
 
 ``tip_output: stereo`` replaces ``tip/measured`` by rendered stereo cameras (the tip marker drawn
 into both cameras of ``camera_rig`` at ``camera_rate_hz``: ``stereo/{left,right}/image_raw`` and
@@ -178,8 +180,11 @@ class CbhaSimNode(Node):
             return
         in_scene_order = np.empty(len(self.order))
         in_scene_order[self.order] = values
-        self.pending.append((time.monotonic() + self.params.latency, in_scene_order))
+        self.pending.append((self._node_seconds() + self.params.latency, in_scene_order))
         self.accepted += 1
+
+    def _node_seconds(self):
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_reset(self, request, response):
         """``~/reset``: plant at rest, valves vented, pending commands dropped."""
@@ -196,10 +201,11 @@ class CbhaSimNode(Node):
 
     def _tick(self):
         start = time.perf_counter()
-        now = time.monotonic()
+        now = self._node_seconds()
         while self.pending and self.pending[0][0] <= now:
             self.setpoint = self.pending.popleft()[1]
-        dt = 0.0 if self._last_tick is None else now - self._last_tick
+        # node clock (use_sim_time: /clock); a clock that jumps back (a looped bag) is a pause
+        dt = 0.0 if self._last_tick is None else max(now - self._last_tick, 0.0)
         self._last_tick = now
         tau = self.params.valve_time_constant
         blend = 1.0 if tau == 0.0 else -math.expm1(-dt / tau)
