@@ -25,6 +25,7 @@ TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 POINT = 'geometry_msgs/msg/PointStamped'
 ARRAY = 'std_msgs/msg/Float64MultiArray'
 
+
 def _point_bytes(k):
     message = TYPESTORE.types[POINT](
         header=TYPESTORE.types['std_msgs/msg/Header'](
