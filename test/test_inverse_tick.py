@@ -4,7 +4,7 @@ import subprocess
 import sys
 
 from cbha_inverse.core.actuation import ActuatorSet
-from cbha_inverse.core.assembly import assemble_tangent
+from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense, material_tangent
 from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart, tube_surface
 from cbha_inverse.core.cavity_linear import LinearCavityGroup
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
@@ -59,6 +59,54 @@ def test_tick_model_equals_reference_on_the_scenes(name):
     external = np.zeros(6 * n)
     external[2::6] = -0.01
     _check(scene.model, scene.actuators, external, state, actuation)
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+def test_exact_and_material_systems_match_differences_and_the_reference(name):
+    """
+    Newton's exact tangent = central differences of the compiled residual; material = oracle.
+
+    The exact tangent (structure + the actuators' exact load stiffness, not symmetric) against
+    ``-dr/dq`` by central differences of :meth:`TickModel.evaluate` (world increments applied
+    by ``retract``) and against the numpy oracle; the material tangent against the oracle's
+    ``Dᵀ K D`` of the links; the residual is the same in all three evaluations.
+    """
+    if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
+        pytest.skip('the condensed CBHA segment is not generated yet')
+    scene = load_scene(name)
+    model, n = scene.model, scene.model.n_links
+    rng = np.random.default_rng(11)
+    state = retract(rest_state(model), np.concatenate(
+        [0.002 * rng.standard_normal((n, 3)), 0.2 * rng.standard_normal((n, 3))], axis=1))
+    actuation = scene.upper_bounds * rng.uniform(0.2, 0.7, len(scene.actuator_names))
+    external = np.zeros(6 * n)
+    external[2::6] = -0.01
+    tick = TickModel(model, scene.actuators, external)
+    tangent, rhs = tick.exact_system(state.positions, state.rotations, actuation)
+    exact, residual = tick.dense_exact(tangent), rhs[:, 0].copy()
+    h = 1e-6
+    columns = []
+    for e in np.eye(6 * n):
+        plus = retract(state, h * e.reshape(n, 6))
+        minus = retract(state, -h * e.reshape(n, 6))
+        r_plus = tick.evaluate(plus.positions, plus.rotations, actuation)[:, 0].copy()
+        r_minus = tick.evaluate(minus.positions, minus.rotations, actuation)[:, 0]
+        columns.append(-(r_plus - r_minus) / (2 * h))
+    differences = np.stack(columns, axis=1)
+    scale = np.abs(differences).max()
+    error = np.abs(exact - differences).max()
+    assert error <= 1e-6 * scale
+    # the non-symmetric part is resolved: the symmetric part alone misses the differences
+    assert np.abs(0.5 * (exact + exact.T) - differences).max() > 100.0 * error
+    reference = (assemble_tangent(model, state).to_dense(exact=True)
+                 + scene.actuators.load_tangent(state.positions, state.rotations, actuation,
+                                                symmetric=False))
+    np.testing.assert_allclose(exact, reference, atol=1e-10 * scale)
+    material, rhs = tick.material_system(state.positions, state.rotations, actuation)
+    np.testing.assert_allclose(rhs[:, 0], residual, rtol=0, atol=1e-12 * np.abs(residual).max())
+    oracle = blocks_to_dense(*material_tangent(model, state))
+    np.testing.assert_allclose(tick.dense(material), np.tril(oracle),
+                               atol=1e-12 * np.abs(oracle).max())
 
 
 def test_tick_model_large_angles_rest_rotations_and_mixed_groups():
@@ -175,10 +223,10 @@ def signatures():
 
 scene = load_scene(sys.argv[1])
 solver = scene.make_inverse_solver()
+centre = np.asarray(scene.workspace_center, dtype=float)
 if sys.argv[2] == 'warm':
     solver.warm_up()
 before = signatures()
-centre = np.asarray(scene.workspace_center, dtype=float)
 for target in [centre, centre + 0.005, centre + 0.5, np.full_like(centre, np.nan), centre]:
     solver.step(target)
     solver.prepare()

@@ -1,4 +1,4 @@
-"""Tick helpers (Jl⁻¹, log/exp, retraction, band Cholesky, dense LU) and the solver's fallbacks."""
+"""Tick helpers (Jl⁻¹, log/exp, retraction, band Cholesky, band LU) and the solver's fallbacks."""
 
 from cbha_inverse.core import control
 from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense, material_tangent
@@ -6,8 +6,7 @@ from cbha_inverse.core.band_kernels import band_cholesky, band_solve
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import _jl_inv_coefficient, so3_exp, so3_log
-from cbha_inverse.core.tick_math import (DenseLU, jl_coefficient, retract_frames, rotation_exp,
-                                         rotation_log)
+from cbha_inverse.core.tick_math import jl_coefficient, retract_frames, rotation_exp, rotation_log
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -104,15 +103,22 @@ def test_retract_frames_and_exp_match_reference():
     np.testing.assert_allclose(exp_rotations(v), so3_exp(v), atol=1e-14)
 
 
-def test_dense_lu_solves_and_detects_singular():
+def test_band_lu_solves_the_exact_tangent_and_detects_singular():
+    """LAPACK band LU of the exact (non-symmetric) tangent: solves; a zero column is refused."""
+    scene = load_scene('tendon_6f_8c')
+    model, n, m = scene.model, scene.model.n_links, len(scene.actuator_names)
     rng = np.random.default_rng(4)
-    a = rng.standard_normal((12, 12)) + 12 * np.eye(12)
-    rhs = rng.standard_normal((12, 3))
-    np.testing.assert_allclose(a @ DenseLU(a).solve(rhs), rhs, atol=1e-10)
-    bad = a.copy()
-    bad[:, 7] = 0.0
-    with pytest.raises(np.linalg.LinAlgError, match='singular'):
-        DenseLU(bad)
+    state = retract(rest_state(model), 0.05 * rng.standard_normal((n, 6)))
+    actuation = scene.upper_bounds * rng.uniform(0.2, 0.7, m)
+    system = control.TickModel(model, scene.actuators, np.zeros(6 * n))
+    tangent, _ = system.exact_system(state.positions, state.rotations, actuation)
+    dense = system.dense_exact(tangent)
+    assert np.abs(dense - dense.T).max() > 1e-3 * np.abs(dense).max()   # not symmetric
+    rhs = rng.standard_normal((6 * n, 3))
+    np.testing.assert_allclose(dense @ system.factor_exact(tangent).solve(rhs), rhs, atol=1e-9)
+    tangent, _ = system.exact_system(state.positions, state.rotations, actuation)
+    tangent[7] = 0.0    # column 7 of the matrix (general band storage, C order)
+    assert system.factor_exact(tangent) is None
 
 
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
@@ -132,13 +138,13 @@ def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkey
     exact = (assemble_tangent(model, ChainState(positions, rotations)).to_dense(exact=True)
              + scene.actuators.load_tangent(positions, rotations, actuation, symmetric=False))
     factor = solver._factor(positions, rotations, actuation)
-    assert factor.method == 'dense_lu'
+    assert factor.method == 'band_lu'
     np.testing.assert_allclose(exact @ factor.solve(rhs), rhs, atol=1e-9)
 
-    def singular(matrix):
-        raise np.linalg.LinAlgError('singular')
+    def singular(self, tangent):
+        return None
 
-    monkeypatch.setattr(control, 'DenseLU', singular)
+    monkeypatch.setattr(control.TickModel, 'factor_exact', singular)
     material = blocks_to_dense(*material_tangent(model, ChainState(positions, rotations)))
     factor = solver._factor(positions, rotations, actuation)
     np.testing.assert_allclose(material @ factor.solve(rhs), rhs, atol=1e-9)

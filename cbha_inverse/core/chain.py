@@ -8,7 +8,8 @@ solve lives in a :class:`ChainState` (pinocchio's Model/Data split).
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.se3 import quat_from_matrix, so3_exp
+from cbha_inverse.core.se3 import quat_from_matrix
+from cbha_inverse.core.tick_math import retract_frames
 import numpy as np
 
 
@@ -231,8 +232,6 @@ def retract(state, increments):
 
     """
     inc = checked_array(increments, (state.positions.shape[0] - 1, 6), 'increments')
-    pos = state.positions.copy()
-    rot = state.rotations.copy()
-    pos[1:] += inc[:, :3]
-    rot[1:] = so3_exp(inc[:, 3:]) @ rot[1:]
-    return ChainState(pos, rot)
+    positions = np.array(state.positions, dtype=float, order='C')
+    rotations = np.array(state.rotations, dtype=float, order='C')
+    return ChainState(*retract_frames(positions, rotations, inc, in_place=True))

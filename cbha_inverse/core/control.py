@@ -4,13 +4,13 @@ The per-tick inverse-simulation controller (DESIGN §6, paper §IV).
 :class:`InverseSolver` holds the immutable model (chain, actuators, effectors, gravity) and a
 mutable tick state (frame poses, current actuation, QP warm start). One :meth:`InverseSolver.step`:
 
-1. linearise at the current state in one fused pass (:class:`cbha_inverse.core.tick.TickModel`,
-   equal to ``assemble_tangent`` + the actuators' ``evaluate`` / ``load_tangent``): tangent
-   stiffness ``K`` (structure + symmetric load stiffness), actuator columns ``J_aᵀ`` and the
-   residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
-2. factor ``K`` (LAPACK Cholesky: dense for short chains, band for long ones) and solve
-   ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS call, giving ``W_ea``, ``W_aa`` and ``δ_e^free`` (as
-   :func:`cbha_inverse.core.inverse.project_constraints`);
+1. linearise at the current state in one fused pass of the compiled kernels
+   (:class:`cbha_inverse.core.tick.TickModel`, the same evaluation as the static solver's):
+   tangent stiffness ``K`` (symmetric part of structure + load stiffness), actuator columns
+   ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
+2. factor ``K`` (compiled band Cholesky) and solve ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS pass,
+   giving ``W_ea``, ``W_aa`` and ``δ_e^free``
+   (:func:`cbha_inverse.core.tick_kernels.project_effectors`);
 3. solve the regularised box QP (proxsuite, warm-started, or the exact active-set solver; projected
    Gauss-Seidel on request or as a fallback if proxsuite reports a failure);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
@@ -31,17 +31,16 @@ import math
 import time
 from typing import NamedTuple
 
-from cbha_inverse.core.assembly import assemble_tangent, material_tangent
-from cbha_inverse.core.btd import factorize
 from cbha_inverse.core.chain import ChainState, rest_state
 from cbha_inverse.core.correction import TargetCorrector  # noqa: F401 (public re-export)
 from cbha_inverse.core.inverse import qp_matrices, qp_problem
 from cbha_inverse.core.inverse_types import InverseOptions, TickResult
 from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
                                   projected_gauss_seidel)
+from cbha_inverse.core.statics import external_wrenches
 from cbha_inverse.core.tick import TickModel
 from cbha_inverse.core.tick_kernels import project_effectors, tick_outcome
-from cbha_inverse.core.tick_math import apply_linear_step, DenseLU, retract_frames as _retract
+from cbha_inverse.core.tick_math import apply_linear_step, retract_frames as _retract
 import numpy as np
 
 
@@ -55,6 +54,18 @@ class _Linearization(NamedTuple):
     solved_actuators: np.ndarray  # K⁻¹ J_aᵀ
     previous: np.ndarray          # λ_prev at the linearisation
     residual_norm: float
+
+
+class _CholeskyFactor:
+    """A band Cholesky factor of :class:`~cbha_inverse.core.tick.TickModel` with ``solve``."""
+
+    def __init__(self, factor):
+        """Keep the factor."""
+        self._factor = factor
+
+    def solve(self, rhs):
+        """Return ``K⁻¹ rhs`` (C order)."""
+        return TickModel.solve(self._factor, rhs)
 
 
 class InverseSolver:
@@ -97,11 +108,7 @@ class InverseSolver:
         self._rate = (None if self.options.rate_limit is None
                       else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
                                                     (m,))))
-        n = model.n_links
-        external = np.zeros((n, 6))
-        if gravity is not None:
-            external[:, :3] = np.asarray(model.masses, dtype=float)[:, None] * np.asarray(gravity)
-        self._external = external.reshape(-1)
+        self._external = external_wrenches(model, gravity=gravity).reshape(-1)
         self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
         self._active_set = ActiveSetQP(m)
         self._tick = TickModel(model, actuators, self._external)
@@ -184,25 +191,19 @@ class InverseSolver:
 
         The normal case (:meth:`_linearise`) is the Cholesky factorization of structure +
         symmetric load stiffness; when it fails:
-        1. LU of structure + load stiffness, both exact (non-symmetric; high pressures):
-           :func:`~cbha_inverse.core.assembly.assemble_tangent` and the actuators' exact
-           ``load_tangent``;
-        2. BTD Cholesky of the material tangent alone
-           (:func:`~cbha_inverse.core.assembly.material_tangent`, paper eq. 8; far from
-           equilibrium).
+        1. band LU of the exact tangent, structure + load stiffness (non-symmetric; high
+           pressures), :meth:`~cbha_inverse.core.tick.TickModel.exact_system`;
+        2. band Cholesky of the material tangent alone (paper eq. 8; far from equilibrium),
+           :meth:`~cbha_inverse.core.tick.TickModel.material_system`.
         The residual is exact in every case, so only the convergence rate changes.
         """
-        state = ChainState(positions, rotations)
-        load = self.actuators.load_tangent(positions, rotations, actuation, symmetric=False)
-        if load is not None:
-            try:
-                return DenseLU(assemble_tangent(self.model, state).to_dense(exact=True) + load)
-            except np.linalg.LinAlgError:
-                pass
-        try:
-            return factorize(*material_tangent(self.model, state))
-        except np.linalg.LinAlgError:
-            return None
+        tangent, _ = self._tick.exact_system(positions, rotations, actuation)
+        factor = self._tick.factor_exact(tangent)
+        if factor is not None:
+            return factor
+        tangent, _ = self._tick.material_system(positions, rotations, actuation)
+        factor = self._tick.factor(tangent)
+        return None if factor is None else _CholeskyFactor(factor)
 
     def _held(self, status, started, qp_status='not_run'):
         """Return a tick result that keeps the actuation and the state."""

@@ -5,44 +5,14 @@ The simulated robot (``cbha_sim``) must not share the controller's model: it is 
 same scene with a deliberate stiffness error and its own gravity (see
 :func:`cbha_inverse.scene.load_scene`), and every plant tick solves the static equilibrium
 (paper eq. 9) ``f(q) + f_ext + J_a(q)ᵀ λ = 0`` for the applied actuation ``λ`` with the package's
-Newton engine (:func:`cbha_inverse.core.equilibrium.solve_equilibrium`): exact tangent including
-the actuators' load stiffness (LU, material-tangent fallback), line search, warm start from the
-previous equilibrium and, should that fail, load stepping from the rest shape. Pure numpy, no ROS.
+one static solver (:func:`cbha_inverse.core.statics.solve_static`, the compiled kernels of the
+controller's tick): exact tangent including the actuators' load stiffness, line search, warm
+start from the previous equilibrium and, should that fail, load stepping from the rest shape.
+No ROS.
 """
 
-from dataclasses import dataclass
-
-from cbha_inverse.core.assembly import internal_wrenches
 from cbha_inverse.core.chain import rest_state
-from cbha_inverse.core.equilibrium import actuator_loads, solve_equilibrium
-import numpy as np
-
-
-@dataclass(frozen=True)
-class PlantResult:
-    """
-    Equilibrium reached by one plant update.
-
-    Attributes
-    ----------
-    positions : (n + 1, 3) ndarray  [m]
-        Frame origins.
-    effector_positions : (k, 3) ndarray  [m]
-        Effector points.
-    iterations : int
-        Newton iterations of this update.
-    residual_norm : float  [N, N*m]
-        Equilibrium residual norm at the end.
-    converged : bool
-        Whether ``residual_norm <= tolerance``.
-
-    """
-
-    positions: np.ndarray
-    effector_positions: np.ndarray
-    iterations: int
-    residual_norm: float
-    converged: bool
+from cbha_inverse.core.statics import solve_static
 
 
 class StaticPlant:
@@ -78,18 +48,20 @@ class StaticPlant:
         self.max_rotation_step = (None if max_rotation_step is None
                                   else float(max_rotation_step))
         self.max_load_steps = int(max_load_steps)
-        external = np.zeros((self.model.n_links, 6))
-        if scene.gravity is not None:
-            external[:, :3] = np.asarray(self.model.masses, dtype=float)[:, None] * scene.gravity
-        self._external = external
+        self.gravity = scene.gravity
         self._state = rest_state(self.model)
 
     def residual(self, actuation):
         """Return the equilibrium residual ``r`` (6n,) at the current state."""
-        internal = internal_wrenches(self.model, self._state)
-        load_function, _ = actuator_loads(self.actuators, actuation)
-        loads = 0.0 if load_function is None else load_function(self._state)
-        return (internal + self._external + loads).reshape(-1)
+        return self._solve(actuation, max_iterations=0, max_load_steps=1).residual.reshape(-1)
+
+    def _solve(self, actuation, max_iterations, max_load_steps):
+        """Solve from the current state (see :meth:`update`)."""
+        return solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
+                            actuation=actuation, effectors=self.effectors,
+                            initial_state=self._state, absolute_tolerance=self.tolerance,
+                            max_iterations=max_iterations, max_load_steps=max_load_steps,
+                            max_rotation_step=self.max_rotation_step)
 
     def update(self, actuation):
         """
@@ -102,17 +74,11 @@ class StaticPlant:
 
         Returns
         -------
-        PlantResult
-            The state reached (``converged`` False if the budget did not suffice; the next
-            update continues from it).
+        cbha_inverse.core.statics.StaticResult
+            The state reached with its ``effector_positions`` (``converged`` False if the budget
+            did not suffice; the next update continues from it).
 
         """
-        res = solve_equilibrium(self.model, self.actuators, actuation, self._external,
-                                self._state, absolute_tolerance=self.tolerance,
-                                max_iterations=self.max_iterations,
-                                max_load_steps=self.max_load_steps,
-                                max_rotation_step=self.max_rotation_step)
+        res = self._solve(actuation, self.max_iterations, self.max_load_steps)
         self._state = res.state
-        positions, rotations = res.state.positions, res.state.rotations
-        return PlantResult(np.array(positions), self.effectors.positions(positions, rotations),
-                           res.iterations, res.residual_norm, res.converged)
+        return res

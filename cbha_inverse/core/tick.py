@@ -27,6 +27,7 @@ from cbha_inverse.core.cavity_linear import LinearCavityGroup
 from cbha_inverse.core.tick_cables import CableTerms
 from cbha_inverse.core.tick_kernels import link_pass, scatter_add
 import numpy as np
+from scipy.linalg import lapack
 
 
 class TickModel:
@@ -83,6 +84,7 @@ class TickModel:
         self._cavity_wrench = g0 if has_cavities else np.zeros((n, 0, 6))
         self._cavity_stiffness = hess if has_cavities else np.zeros((n, 0, 6, 6))
         self._rhs = np.zeros((6 * n, m + 1))
+        self._generic_loads = []
         # values of the assembly: link blocks, cable pair blocks, cable point moments
         rows, cols = [], []
         f = np.arange(n)
@@ -118,6 +120,16 @@ class TickModel:
         self.kd = kd
         self._index = np.where(valid, lo * (kd + 1) + hi - lo, size * (kd + 1))
         self._band = np.zeros(size * (kd + 1) + 1)
+        # general band storage of the exact tangent for LAPACK's LU (dgbtrf, kl = ku = kd):
+        # entry (r, c) at [c, 2 kd + r - c] of a C-order (N, 3 kd + 1) array
+        width = 3 * kd + 1
+        self._exact_index = np.where(valid, cols * width + 2 * kd + rows - cols, size * width)
+        self._exact_band = np.zeros(size * width + 1)
+        self._ones = np.ones(rows.size)
+        r_full, c_full = np.meshgrid(np.arange(size), np.arange(size), indexing='ij')
+        inside_exact = np.abs(r_full - c_full).reshape(-1) <= kd
+        self._exact_dense_slots = np.flatnonzero(inside_exact)
+        self._exact_slots = (c_full * width + 2 * kd + r_full - c_full).reshape(-1)[inside_exact]
         c, d = np.meshgrid(np.arange(size), np.arange(kd + 1), indexing='ij')
         inside = (c + d < size).reshape(-1)
         self._band_slots = np.flatnonzero(inside)
@@ -126,6 +138,52 @@ class TickModel:
         self._link_values = self._values[:n * 144].reshape(n, 12, 12)
         self._cable_values = [(cab, self._values[p], self._values[q])
                               for cab, (p, q) in zip(self._cables, slices)]
+
+    def evaluate(self, positions, rotations, actuation, load_factor=1.0, material=False):
+        """
+        Run the compiled passes: residual, actuator columns and every tangent block.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        actuation : (m,) ndarray  [N, Pa]
+            ``λ`` (enters the residual and the load stiffness).
+        load_factor : float
+            Factor on the constant external wrenches (load stepping; 1 in a tick).
+        material : bool
+            Keep only the material tangent of the links (:meth:`material_system`).
+
+        Returns
+        -------
+        rhs : (6n, m + 1) ndarray
+            Column 0: the residual ``f(q) + load_factor f_ext + J_aᵀ λ``; columns 1..m:
+            ``J_aᵀ``. A buffer of this object (overwritten by the next call).
+
+        """
+        positions = np.ascontiguousarray(positions, dtype=float)
+        rotations = np.ascontiguousarray(rotations, dtype=float)
+        actuation = np.ascontiguousarray(actuation, dtype=float)
+        rhs = self._rhs
+        link_pass(positions, rotations, self.stiffness, self.rest_offsets, self._q0t, actuation,
+                  self._cavity_wrench, self._cavity_stiffness, rhs, self._link_values, material)
+        for cab, pair_values, moment_values in self._cable_values:
+            cab.evaluate(positions, rotations, actuation, rhs, pair_values, moment_values)
+            if material:
+                pair_values[:] = 0.0
+                moment_values[:] = 0.0
+        rhs[:, 0] += load_factor * self.external
+        self._generic_loads = []
+        for group, cols in self._generic:
+            wrenches, _ = group.evaluate(positions, rotations, False)
+            jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
+            rhs[:, 1 + cols] = jat.T
+            rhs[:, 0] += actuation[cols] @ jat
+            if hasattr(group, 'load_tangent') and not material:
+                self._generic_loads.append((group, positions, rotations, actuation[cols]))
+        return rhs
 
     def linearise(self, positions, rotations, actuation):
         """
@@ -143,36 +201,76 @@ class TickModel:
         Returns
         -------
         tangent : (6n, kd + 1) ndarray
-            ``K`` (structure + symmetric load stiffness) in lower band storage,
+            ``K`` (symmetric part of structure + load stiffness) in lower band storage,
             ``tangent[c, r - c] = K[r, c]`` (``c <= r``), for :meth:`factor`;
             :meth:`dense` converts it. A buffer of this object (overwritten by the next call).
         rhs : (6n, m + 1) ndarray
-            Column 0: the residual ``f(q) + f_ext + J_aᵀ λ``; columns 1..m: ``J_aᵀ``. A buffer
-            of this object (overwritten by the next call).
+            As :meth:`evaluate`.
 
         """
-        positions = np.ascontiguousarray(positions, dtype=float)
-        rotations = np.ascontiguousarray(rotations, dtype=float)
-        actuation = np.ascontiguousarray(actuation, dtype=float)
-        rhs = self._rhs
-        link_pass(positions, rotations, self.stiffness, self.rest_offsets, self._q0t, actuation,
-                  self._cavity_wrench, self._cavity_stiffness, rhs, self._link_values)
-        for cab, pair_values, moment_values in self._cable_values:
-            cab.evaluate(positions, rotations, actuation, rhs, pair_values, moment_values)
-        rhs[:, 0] += self.external
+        rhs = self.evaluate(positions, rotations, actuation)
+        return self._symmetric_band(), rhs
+
+    def material_system(self, positions, rotations, actuation, load_factor=1.0):
+        """
+        Return the material tangent (lower band, SPD) and the right-hand sides.
+
+        The links' ``Dᵀ Bᵀ K B D`` alone (paper eq. 8): no geometric part, no load stiffness,
+        so it stays positive definite far from equilibrium (the fallback of a step whose
+        exact tangent is singular or indefinite). Arguments and results as :meth:`linearise`.
+
+        """
+        rhs = self.evaluate(positions, rotations, actuation, load_factor, material=True)
+        return self._symmetric_band(), rhs
+
+    def exact_system(self, positions, rotations, actuation, load_factor=1.0):
+        """
+        Return the exact tangent (general band) and the right-hand sides.
+
+        ``K = -d r / dq`` including the geometric part and the actuators' exact load stiffness
+        (not symmetric): Newton's tangent (quadratic convergence). Arguments as
+        :meth:`evaluate`.
+
+        Returns
+        -------
+        tangent : (6n, 3 kd + 1) ndarray
+            ``tangent[c, 2 kd + r - c] = K[r, c]`` for ``|r - c| <= kd``: the Fortran
+            ``(3 kd + 1, N)`` layout of LAPACK's ``dgbtrf`` (rows ``0 .. kd - 1`` of that layout
+            are its workspace), for :func:`factor_exact`; :meth:`dense_exact` converts it.
+            A buffer of this object.
+        rhs : (6n, m + 1) ndarray
+            As :meth:`evaluate`.
+
+        """
+        rhs = self.evaluate(positions, rotations, actuation, load_factor)
+        return self.exact_tangent(), rhs
+
+    def exact_tangent(self):
+        """
+        Return the exact tangent of the last :meth:`evaluate` (see :meth:`exact_system`).
+
+        Returns
+        -------
+        (6n, 3 kd + 1) ndarray
+            General band storage, a buffer of this object.
+
+        """
+        scatter_add(self._exact_index, self._values, self._ones, self._exact_band)
+        tangent = self._exact_band[:-1].reshape(self.size, 3 * self.kd + 1)
+        for group, pos, rot, amount in self._generic_loads:
+            load = group.load_tangent(pos, rot, amount, False)
+            tangent.reshape(-1)[self._exact_slots] += load.reshape(-1)[self._exact_dense_slots]
+        return tangent
+
+    def _symmetric_band(self):
+        """Scatter the blocks of the last :meth:`evaluate` into the symmetric lower band."""
         scatter_add(self._index, self._values, self._weights, self._band)
         tangent = self._band[:-1].reshape(self.size, self.kd + 1)
-        for group, cols in self._generic:
-            wrenches, _ = group.evaluate(positions, rotations, False)
-            jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
-            rhs[:, 1 + cols] = jat.T
-            rhs[:, 0] += actuation[cols] @ jat
-            load = group.load_tangent(positions, rotations, actuation[cols], True) if hasattr(
-                group, 'load_tangent') else None
-            if load is not None:
-                tangent.reshape(-1)[self._band_slots] += (
-                    0.5 * (load + load.T)).reshape(-1)[self._dense_slots]
-        return tangent, rhs
+        for group, pos, rot, amount in self._generic_loads:
+            load = group.load_tangent(pos, rot, amount, True)
+            tangent.reshape(-1)[self._band_slots] += (
+                0.5 * (load + load.T)).reshape(-1)[self._dense_slots]
+        return tangent
 
     @staticmethod
     def factor(tangent):
@@ -233,6 +331,45 @@ class TickModel:
         factor = self.factor(tangent)
         return None if factor is None else self.solve(factor, rhs)
 
+    def dense_exact(self, tangent):
+        """
+        Return the general band storage of :meth:`exact_system` as a dense matrix.
+
+        Parameters
+        ----------
+        tangent : (6n, 3 kd + 1) ndarray
+            From :meth:`exact_system`.
+
+        Returns
+        -------
+        (6n, 6n) ndarray
+
+        """
+        out = np.zeros((self.size, self.size))
+        out.reshape(-1)[self._exact_dense_slots] = np.asarray(tangent).reshape(-1)[
+            self._exact_slots]
+        return out
+
+    def factor_exact(self, tangent):
+        """
+        Factor the tangent of :meth:`exact_system` in place (LAPACK band LU, ``dgbtrf``).
+
+        Parameters
+        ----------
+        tangent : (6n, 3 kd + 1) ndarray
+            From :meth:`exact_system` (overwritten by the factor).
+
+        Returns
+        -------
+        BandLU or None
+            ``None`` if the tangent is singular or not finite.
+
+        """
+        if not np.all(np.isfinite(tangent)):
+            return None
+        lu, pivots, info = lapack.dgbtrf(tangent.T, self.kd, self.kd, overwrite_ab=1)
+        return BandLU(lu, pivots, self.kd) if info == 0 else None
+
     def dense(self, tangent):
         """
         Return the band storage of :meth:`linearise` as a full lower-triangular matrix.
@@ -251,6 +388,50 @@ class TickModel:
         out = np.zeros((self.size, self.size))
         out.reshape(-1)[self._dense_slots] = np.asarray(tangent).reshape(-1)[self._band_slots]
         return out
+
+
+class BandLU:
+    """
+    LU factor of a general band matrix (LAPACK ``dgbtrf``) with multi-RHS solves.
+
+    Parameters
+    ----------
+    lu : (3 kd + 1, N) ndarray
+        Factor in LAPACK's general band layout (Fortran order).
+    pivots : (N,) int ndarray
+        Row interchanges.
+    kd : int
+        Number of sub- and super-diagonals of the factored matrix.
+
+    """
+
+    method = 'band_lu'
+
+    def __init__(self, lu, pivots, kd):
+        """Keep the factor."""
+        self._lu, self._pivots, self._kd = lu, pivots, kd
+
+    def solve(self, rhs):
+        """
+        Solve ``K X = rhs``.
+
+        Parameters
+        ----------
+        rhs : (N,) or (N, c) ndarray
+            Right-hand sides.
+
+        Returns
+        -------
+        ndarray
+            Same shape as ``rhs`` (C order).
+
+        """
+        rhs = np.asarray(rhs, dtype=float)
+        columns = rhs.reshape(rhs.shape[0], -1)
+        x, info = lapack.dgbtrs(self._lu, self._kd, self._kd, columns, self._pivots)
+        if info != 0:
+            raise np.linalg.LinAlgError(f'dgbtrs failed (info {info})')
+        return np.ascontiguousarray(x).reshape(rhs.shape)
 
 
 def _matches_links(group, model):

@@ -48,7 +48,7 @@ def _add_scaled_hat(out, v, weight):
 
 @numba.njit(cache=True)
 def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-              cavity_wrench, cavity_stiffness, rhs, blocks):
+              cavity_wrench, cavity_stiffness, rhs, blocks, material):
     """
     Write every link's wrenches into ``rhs`` and its world tangent into ``blocks``.
 
@@ -74,8 +74,12 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
         Zeroed here; receives the link wrenches (column 0) and, with cavities, ``J_aᵀ``
         (columns ``1 + c``).
     blocks : (n, 12, 12) ndarray
-        Receives the link tangents in world axes, rows and columns (frame a, frame b); only
-        their symmetric part is meaningful.
+        Receives the link tangents ``-d[w_a; w_b]/d[dq_a; dq_b]`` in world axes, rows and
+        columns (frame a, frame b): exact (not symmetric; material, geometric and cavity load
+        stiffness), or with ``material`` the material part ``Dᵀ Bᵀ K B D`` alone (paper eq. 8,
+        symmetric positive semi-definite whatever the loads).
+    material : bool
+        Write the material tangent instead of the exact one (the residual is the same).
 
     """
     n = stiffness.shape[0]
@@ -130,19 +134,13 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
                 jinv[i, j] = c * phi[i] * phi[j]
             jinv[i, i] += 1.0 - c * t2
         _add_scaled_hat(jinv, phi, -0.5)
-        # a = B^T K - H_p with B = diag(I, Jl^-1), H_p = sum_c p_c H_c
+        # a = B^T K with B = diag(I, Jl^-1)
         for j in range(6):
             for i in range(3):
                 a[i, j] = k[i, j]
                 a[3 + i, j] = jinv[0, i] * k[3, j] + jinv[1, i] * k[4, j] + jinv[2, i] * k[5, j]
-        for cav in range(n_cav):
-            p = actuation[cav]
-            if p != 0.0:
-                h = cavity_stiffness[link, cav]
-                for i in range(6):
-                    for j in range(6):
-                        a[i, j] -= p * h[i, j]
-        # local b-side wrench: column 0 total (-a delta + G0_p), columns 1.. per unit pressure
+        # local b-side wrench: column 0 total (-B^T K delta + sum_c p_c (G0_c + H_c delta)),
+        # columns 1.. per unit pressure
         for i in range(6):
             acc = 0.0
             for j in range(6):
@@ -157,7 +155,12 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
                 for j in range(6):
                     acc += h[i, j] * delta[j]
                 local[i, 1 + cav] = acc
-                local[i, 0] += p * g0[i]
+                local[i, 0] += p * acc
+            # the exact tangent's cavity load stiffness: a -= p_c H_c
+            if p != 0.0 and not material:
+                for i in range(6):
+                    for j in range(6):
+                        a[i, j] -= p * h[i, j]
         # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a)
         for col in range(kc):
             for part in range(2):
@@ -176,16 +179,17 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
                 rhs[row_a + 3, col] -= diff[1] * world[2, col] - diff[2] * world[1, col]
                 rhs[row_a + 4, col] -= diff[2] * world[0, col] - diff[0] * world[2, col]
                 rhs[row_a + 5, col] -= diff[0] * world[1, col] - diff[1] * world[0, col]
-        # a[3:, 3:] += d(Jl^-T s_r)/dphi (se3.so3_left_jacobian_inverse_transpose_derivative)
-        s_r = stress[3:]
-        ps = phi[0] * s_r[0] + phi[1] * s_r[1] + phi[2] * s_r[2]
-        for i in range(3):
-            left0 = dc * (phi[i] * ps - t2 * s_r[i]) - 2.0 * c * s_r[i]
-            left1 = c * phi[i]
-            for j in range(3):
-                a[3 + i, 3 + j] += left0 * phi[j] + left1 * s_r[j]
-            a[3 + i, 3 + i] += c * ps
-        _add_scaled_hat(a[3:, 3:], s_r, -0.5)
+        if not material:
+            # a[3:, 3:] += d(Jl^-T s_r)/dphi
+            s_r = stress[3:]
+            ps = phi[0] * s_r[0] + phi[1] * s_r[1] + phi[2] * s_r[2]
+            for i in range(3):
+                left0 = dc * (phi[i] * ps - t2 * s_r[i]) - 2.0 * c * s_r[i]
+                left1 = c * phi[i]
+                for j in range(3):
+                    a[3 + i, 3 + j] += left0 * phi[j] + left1 * s_r[j]
+                a[3 + i, 3 + i] += c * ps
+            _add_scaled_hat(a[3:, 3:], s_r, -0.5)
         # mat = a B
         for i in range(6):
             for j in range(3):
@@ -226,17 +230,23 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
                 out[i, j] = -out[6 + i, j]
                 out[3 + i, j] = -(diff_hat[i, 0] * out[6, j] + diff_hat[i, 1] * out[7, j]
                                   + diff_hat[i, 2] * out[8, j]) - out[9 + i, j]
-        # geometric terms (b-side world force F, moment M), symmetric part only, in the
-        # a-rotation columns: [-2F^; -F^ d^; 2F^; M^]
+        if material:
+            continue
+        # geometric terms of the b-side world wrench (F, M) = R_a L: turning frame a turns it
+        # (dF = -F^ dθ_a, dM = -M^ dθ_a) and the lever d = x_b - x_a of the a-side moment
+        # -M - d x F moves with x_a, x_b
         hat_into(world[:3, 0], f_hat)
         hat_into(world[3:, 0], m_hat)
         for i in range(3):
             for j in range(3):
-                out[i, 3 + j] -= 2.0 * f_hat[i, j]
-                out[6 + i, 3 + j] += 2.0 * f_hat[i, j]
+                out[i, 3 + j] -= f_hat[i, j]
+                out[3 + i, j] += f_hat[i, j]
+                out[3 + i, 6 + j] -= f_hat[i, j]
+                out[6 + i, 3 + j] += f_hat[i, j]
                 out[9 + i, 3 + j] += m_hat[i, j]
-                out[3 + i, 3 + j] -= (f_hat[i, 0] * diff_hat[0, j] + f_hat[i, 1] * diff_hat[1, j]
-                                      + f_hat[i, 2] * diff_hat[2, j])
+                out[3 + i, 3 + j] -= m_hat[i, j] + (diff_hat[i, 0] * f_hat[0, j]
+                                                    + diff_hat[i, 1] * f_hat[1, j]
+                                                    + diff_hat[i, 2] * f_hat[2, j])
 
 
 @numba.njit(cache=True)

@@ -12,7 +12,6 @@ import math
 from cbha_inverse.core.se3 import JL_SERIES
 import numba
 import numpy as np
-from scipy.linalg import lapack
 
 # c(t) = sum_k a_k t^(2k), the hat(phi)^2 coefficient of Jl^-1: the first 7 terms of the se3
 # series (truncation below round-off up to _SERIES_LIMIT)
@@ -203,6 +202,135 @@ def apply_linear_step(positions, rotations, free_step, solved_actuators, change,
     _retract_into(positions, rotations, increments, max_rotation)
 
 
+@numba.njit(cache=True)
+def deformation_step(positions, rotations, rest_rotations, step, coordinates):
+    """
+    Map world increments of frames 1..n to increments of the links' deformation coordinates.
+
+    The coordinates of link ``l`` (frames ``a = l``, ``b = l + 1``) are its offset
+    ``u = R_aᵀ (x_b - x_a)`` and rotation vector ``φ = log(R_aᵀ R_b Q0ᵀ)``; their increments
+    linearise the link deformation (DESIGN §3)::
+
+        du = R_aᵀ (dx_b - dx_a - dθ_a x (x_b - x_a)),   dφ = Jl⁻¹(φ) R_aᵀ (dθ_b - dθ_a)
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    rest_rotations : (n, 3, 3) ndarray
+        ``Q0``.
+    step : (n, 6) ndarray  [m, rad]
+        World increments ``(dx, dθ)`` of frames 1..n.
+    coordinates : (n, 12) ndarray
+        Receives ``(u, φ, du, dφ)`` per link.
+
+    Returns
+    -------
+    float  [rad]
+        The largest ``|dφ|``.
+
+    """
+    n = step.shape[0]
+    rel = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    phi = np.empty(3)
+    dx = np.empty(3)
+    dt = np.empty(3)
+    local = np.empty(3)
+    largest = 0.0
+    for link in range(n):
+        ra = rotations[link]
+        rb = rotations[link + 1]
+        q0 = rest_rotations[link]
+        for i in range(3):
+            for j in range(3):
+                tmp[i, j] = ra[0, i] * rb[0, j] + ra[1, i] * rb[1, j] + ra[2, i] * rb[2, j]
+        for i in range(3):
+            for j in range(3):
+                rel[i, j] = tmp[i, 0] * q0[j, 0] + tmp[i, 1] * q0[j, 1] + tmp[i, 2] * q0[j, 2]
+        theta = rotation_log(rel, phi)
+        c, _ = jl_coefficient(theta)
+        diff0 = positions[link + 1, 0] - positions[link, 0]
+        diff1 = positions[link + 1, 1] - positions[link, 1]
+        diff2 = positions[link + 1, 2] - positions[link, 2]
+        if link > 0:
+            a = step[link - 1]
+            dx[0] = step[link, 0] - a[0] - (a[4] * diff2 - a[5] * diff1)
+            dx[1] = step[link, 1] - a[1] - (a[5] * diff0 - a[3] * diff2)
+            dx[2] = step[link, 2] - a[2] - (a[3] * diff1 - a[4] * diff0)
+            for i in range(3):
+                dt[i] = step[link, 3 + i] - a[3 + i]
+        else:
+            for i in range(3):
+                dx[i] = step[link, i]
+                dt[i] = step[link, 3 + i]
+        out = coordinates[link]
+        for i in range(3):
+            out[i] = ra[0, i] * diff0 + ra[1, i] * diff1 + ra[2, i] * diff2
+            out[3 + i] = phi[i]
+            out[6 + i] = ra[0, i] * dx[0] + ra[1, i] * dx[1] + ra[2, i] * dx[2]
+            local[i] = ra[0, i] * dt[0] + ra[1, i] * dt[1] + ra[2, i] * dt[2]
+        # Jl^-1 = (1 - c t^2) I + c phi phi^T - hat(phi) / 2
+        dot = phi[0] * local[0] + phi[1] * local[1] + phi[2] * local[2]
+        cross = (phi[1] * local[2] - phi[2] * local[1], phi[2] * local[0] - phi[0] * local[2],
+                 phi[0] * local[1] - phi[1] * local[0])
+        size = 0.0
+        for i in range(3):
+            value = (1.0 - c * theta * theta) * local[i] + c * phi[i] * dot - 0.5 * cross[i]
+            out[9 + i] = value
+            size += value * value
+        largest = max(largest, size)
+    return math.sqrt(largest)
+
+
+@numba.njit(cache=True)
+def deformed_poses(coordinates, alpha, rest_rotations, positions, rotations):
+    """
+    Set frames 1..n from deformation coordinates advanced by ``alpha`` (forward kinematics).
+
+    ``R_b = R_a exp(φ + α dφ) Q0`` and ``x_b = x_a + R_a (u + α du)`` from the fixed base
+    (coordinates of :func:`deformation_step`): a bending increment carries the rest of the chain
+    along rigidly, which keeps full Newton steps acceptable at large rotations.
+
+    Parameters
+    ----------
+    coordinates : (n, 12) ndarray
+        ``(u, φ, du, dφ)`` per link.
+    alpha : float
+        Step length.
+    rest_rotations : (n, 3, 3) ndarray
+        ``Q0``.
+    positions : (n + 1, 3) ndarray  [m]
+        Row 0 is the base (kept); rows 1..n are written.
+    rotations : (n + 1, 3, 3) ndarray
+        Row 0 is the base (kept); rows 1..n are written.
+
+    """
+    n = coordinates.shape[0]
+    vec = np.empty(3)
+    rel = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    for link in range(n):
+        out = coordinates[link]
+        for i in range(3):
+            vec[i] = out[3 + i] + alpha * out[9 + i]
+        rotation_exp(vec, tmp)
+        q0 = rest_rotations[link]
+        for i in range(3):
+            for j in range(3):
+                rel[i, j] = tmp[i, 0] * q0[0, j] + tmp[i, 1] * q0[1, j] + tmp[i, 2] * q0[2, j]
+        ra = rotations[link]
+        for i in range(3):
+            arm = 0.0
+            for j in range(3):
+                arm += ra[i, j] * (out[j] + alpha * out[6 + j])
+                rotations[link + 1, i, j] = (ra[i, 0] * rel[0, j] + ra[i, 1] * rel[1, j]
+                                             + ra[i, 2] * rel[2, j])
+            positions[link + 1, i] = positions[link, i] + arm
+
+
 def retract_frames(positions, rotations, increments, max_rotation=None, in_place=False):
     """
     Apply world-axis increments to frames 1..n (as :func:`cbha_inverse.core.chain.retract`).
@@ -231,53 +359,3 @@ def retract_frames(positions, rotations, increments, max_rotation=None, in_place
     _retract_into(positions, rotations, np.ascontiguousarray(increments, dtype=float),
                   math.inf if max_rotation is None else float(max_rotation))
     return positions, rotations
-
-
-class DenseLU:
-    """
-    LAPACK LU factorization (``dgetrf``) of a square matrix with multi-RHS solves.
-
-    The fallback factorization of a tick whose tangent is not symmetric positive definite
-    (structure plus exact non-symmetric load stiffness at high pressure, see
-    :meth:`cbha_inverse.core.control.InverseSolver._factor`).
-
-    Parameters
-    ----------
-    matrix : (N, N) ndarray
-        Square matrix (copied).
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        If the matrix is singular.
-
-    """
-
-    method = 'dense_lu'
-
-    def __init__(self, matrix):
-        """Factor a copy."""
-        lu, piv, info = lapack.dgetrf(np.array(matrix, dtype=float, order='F'))
-        if info != 0:
-            raise np.linalg.LinAlgError(f'tangent stiffness singular (LU pivot {info})')
-        self._lu, self._piv = lu, piv
-
-    def solve(self, rhs):
-        """
-        Solve ``K X = rhs``.
-
-        Parameters
-        ----------
-        rhs : (N,) or (N, k) ndarray
-            Right-hand sides.
-
-        Returns
-        -------
-        ndarray
-            Same shape as ``rhs``.
-
-        """
-        x, info = lapack.dgetrs(self._lu, self._piv, rhs)
-        if info != 0:
-            raise np.linalg.LinAlgError(f'dgetrs failed (info {info})')
-        return x
