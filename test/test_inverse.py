@@ -1,9 +1,9 @@
 """The actuation QP (proxsuite and projected Gauss-Seidel) and the closed-loop target corrector."""
 
-from cbha_inverse.core.control import TargetCorrector
-from cbha_inverse.core.inverse import actuation_qp, Projection
-from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
-                                  projected_gauss_seidel)
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, ActuationQP, binding_bounds,
+                                          projected_gauss_seidel)
+from cbha_inverse.core.inverse.qp_problem import actuation_qp, Projection
+from cbha_inverse.core.inverse.solver import TargetCorrector
 import numpy as np
 import pytest
 

@@ -3,34 +3,35 @@
 import subprocess
 import sys
 
-from cbha_inverse.core.actuation import ActuatorSet
-from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense, material_tangent
-from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart, tube_surface
-from cbha_inverse.core.cavity_linear import LinearCavityGroup
+from cbha_inverse.core._kernels.so3 import rotation_exp
+from cbha_inverse.core.actuation.actuators import ActuatorSet
+from cbha_inverse.core.actuation.cavities import Cavity, CavityGroup, CavityPart, tube_surface
+from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
 from cbha_inverse.core.links import timoshenko_compliance
-from cbha_inverse.core.se3 import so3_exp
-from cbha_inverse.core.tick import TickModel
-from cbha_inverse.core.tick_math import rotation_exp
+from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
+from oracles.actuation import oracle
+from oracles.chain_forces import assemble_tangent, blocks_to_dense, material_tangent
+from oracles.se3 import so3_exp
 import pytest
 
 
 def _reference(model, actuators, external, positions, rotations, actuation):
     system = assemble_tangent(model, ChainState(positions, rotations))
     internal, tangent = system.internal, system.to_dense()
-    load = actuators.load_tangent(positions, rotations, actuation)
+    load = oracle(actuators).load_tangent(positions, rotations, actuation)
     if load is not None:
         tangent += load
-    wrenches, _ = actuators.evaluate(positions, rotations, False)
+    wrenches, _ = oracle(actuators).evaluate(positions, rotations, False)
     jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
     return internal.reshape(-1) + external + actuation @ jat, jat, tangent
 
 
 def _check(model, actuators, external, state, actuation):
-    tick = TickModel(model, actuators, external)
+    tick = EquilibriumSystem(model, actuators, external)
     tangent, rhs = tick.linearise(state.positions, state.rotations, actuation)
     residual, jat, reference = _reference(model, actuators, external, state.positions,
                                           state.rotations, actuation)
@@ -67,8 +68,8 @@ def test_exact_and_material_systems_match_differences_and_the_reference(name):
     Newton's exact tangent = central differences of the compiled residual; material = oracle.
 
     The exact tangent (structure + the actuators' exact load stiffness, not symmetric) against
-    ``-dr/dq`` by central differences of :meth:`TickModel.evaluate` (world increments applied
-    by ``retract``) and against the numpy oracle; the material tangent against the oracle's
+    ``-dr/dq`` by central differences of :meth:`EquilibriumSystem.evaluate` (world increments
+    applied by ``retract``) and against the numpy oracle; the material tangent against the oracle's
     ``Dᵀ K D`` of the links; the residual is the same in all three evaluations.
     """
     if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
@@ -81,7 +82,7 @@ def test_exact_and_material_systems_match_differences_and_the_reference(name):
     actuation = scene.upper_bounds * rng.uniform(0.2, 0.7, len(scene.actuator_names))
     external = np.zeros(6 * n)
     external[2::6] = -0.01
-    tick = TickModel(model, scene.actuators, external)
+    tick = EquilibriumSystem(model, scene.actuators, external)
     tangent, rhs = tick.exact_system(state.positions, state.rotations, actuation)
     exact, residual = tick.dense_exact(tangent), rhs[:, 0].copy()
     h = 1e-6
@@ -98,15 +99,15 @@ def test_exact_and_material_systems_match_differences_and_the_reference(name):
     assert error <= 1e-6 * scale
     # the non-symmetric part is resolved: the symmetric part alone misses the differences
     assert np.abs(0.5 * (exact + exact.T) - differences).max() > 100.0 * error
-    reference = (assemble_tangent(model, state).to_dense(exact=True)
-                 + scene.actuators.load_tangent(state.positions, state.rotations, actuation,
-                                                symmetric=False))
+    load = oracle(scene.actuators).load_tangent(state.positions, state.rotations, actuation,
+                                                symmetric=False)
+    reference = assemble_tangent(model, state).to_dense(exact=True) + load
     np.testing.assert_allclose(exact, reference, atol=1e-10 * scale)
     material, rhs = tick.material_system(state.positions, state.rotations, actuation)
     np.testing.assert_allclose(rhs[:, 0], residual, rtol=0, atol=1e-12 * np.abs(residual).max())
-    oracle = blocks_to_dense(*material_tangent(model, state))
-    np.testing.assert_allclose(tick.dense(material), np.tril(oracle),
-                               atol=1e-12 * np.abs(oracle).max())
+    material_reference = blocks_to_dense(*material_tangent(model, state))
+    np.testing.assert_allclose(tick.dense(material), np.tril(material_reference),
+                               atol=1e-12 * np.abs(material_reference).max())
 
 
 def test_tick_model_large_angles_rest_rotations_and_mixed_groups():
@@ -156,8 +157,8 @@ def test_active_set_option_gives_the_proxsuite_actuation(name):
 
 def test_project_effectors_equals_the_dense_jacobian_projection():
     """W_ea = J_e K⁻¹ J_aᵀ, W_aa = J_a K⁻¹ J_aᵀ and the free positions, with lever arms."""
-    from cbha_inverse.core.effectors import PointEffectors
-    from cbha_inverse.core.tick_kernels import project_effectors
+    from cbha_inverse.core.actuation.effectors import PointEffectors
+    from cbha_inverse.core._kernels.projection import project_effectors
     rng = np.random.default_rng(12)
     n, m = 5, 3
     model = ChainModel.from_compliances(
@@ -185,7 +186,7 @@ def test_project_effectors_equals_the_dense_jacobian_projection():
 
 
 def test_apply_linear_step_is_the_retraction_of_the_newton_step():
-    from cbha_inverse.core.tick_math import apply_linear_step
+    from cbha_inverse.core._kernels.retraction import apply_linear_step
     rng = np.random.default_rng(13)
     n, m = 4, 3
     model = ChainModel.from_compliances(
@@ -211,13 +212,13 @@ _NO_NEW_COMPILE = """
 import sys
 import numpy as np
 from numba.core.registry import CPUDispatcher
-from cbha_inverse.core import band_kernels, qp_kernels, tick_cables, tick_kernels, tick_math
+from cbha_inverse.core._kernels import kernel_modules
 from cbha_inverse.scene import load_scene
 
 
 def signatures():
     return {f'{module.__name__}.{name}': len(value.signatures)
-            for module in (band_kernels, qp_kernels, tick_cables, tick_kernels, tick_math)
+            for module in kernel_modules()
             for name, value in vars(module).items() if isinstance(value, CPUDispatcher)}
 
 

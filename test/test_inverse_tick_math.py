@@ -1,15 +1,17 @@
 """Tick helpers (Jl⁻¹, log/exp, retraction, band Cholesky, band LU) and the solver's fallbacks."""
 
-from cbha_inverse.core import control
-from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense, material_tangent
-from cbha_inverse.core.band_kernels import band_cholesky, band_solve
+from cbha_inverse.core._kernels.band import band_cholesky, band_solve
+from cbha_inverse.core._kernels.retraction import retract_frames
+from cbha_inverse.core._kernels.so3 import jl_coefficient, rotation_exp, rotation_log
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
+from cbha_inverse.core.inverse import solver as control
 from cbha_inverse.core.links import timoshenko_compliance
-from cbha_inverse.core.se3 import _jl_inv_coefficient, so3_exp, so3_log
-from cbha_inverse.core.tick_math import jl_coefficient, retract_frames, rotation_exp, rotation_log
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
+from oracles.actuation import oracle
+from oracles.chain_forces import assemble_tangent, blocks_to_dense, material_tangent
+from oracles.se3 import _jl_inv_coefficient, so3_exp, so3_log
 import pytest
 
 
@@ -110,7 +112,7 @@ def test_band_lu_solves_the_exact_tangent_and_detects_singular():
     rng = np.random.default_rng(4)
     state = retract(rest_state(model), 0.05 * rng.standard_normal((n, 6)))
     actuation = scene.upper_bounds * rng.uniform(0.2, 0.7, m)
-    system = control.TickModel(model, scene.actuators, np.zeros(6 * n))
+    system = control.EquilibriumSystem(model, scene.actuators, np.zeros(6 * n))
     tangent, _ = system.exact_system(state.positions, state.rotations, actuation)
     dense = system.dense_exact(tangent)
     assert np.abs(dense - dense.T).max() > 1e-3 * np.abs(dense).max()   # not symmetric
@@ -136,7 +138,8 @@ def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkey
     rhs = rng.standard_normal((6 * n, m + 1))
     solver = scene.make_inverse_solver()
     exact = (assemble_tangent(model, ChainState(positions, rotations)).to_dense(exact=True)
-             + scene.actuators.load_tangent(positions, rotations, actuation, symmetric=False))
+             + oracle(scene.actuators).load_tangent(positions, rotations, actuation,
+                                                    symmetric=False))
     factor = solver._factor(positions, rotations, actuation)
     assert factor.method == 'band_lu'
     np.testing.assert_allclose(exact @ factor.solve(rhs), rhs, atol=1e-9)
@@ -144,7 +147,7 @@ def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkey
     def singular(self, tangent):
         return None
 
-    monkeypatch.setattr(control.TickModel, 'factor_exact', singular)
+    monkeypatch.setattr(control.EquilibriumSystem, 'factor_exact', singular)
     material = blocks_to_dense(*material_tangent(model, ChainState(positions, rotations)))
     factor = solver._factor(positions, rotations, actuation)
     np.testing.assert_allclose(material @ factor.solve(rhs), rhs, atol=1e-9)

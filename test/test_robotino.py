@@ -2,7 +2,7 @@
 
 import math
 
-from cbha_inverse.core.robotino import ARM_VALVES, robotino_bar_command
+from cbha_inverse.robot.robotino import ARM_VALVES, robotino_bar_command
 import numpy as np
 import pytest
 

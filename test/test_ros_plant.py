@@ -1,7 +1,7 @@
 """The pure parts behind cbha_sim and cbha_demo: the plant and the tracking metrics."""
 
-from cbha_inverse.core.plant import StaticPlant
 from cbha_inverse.report.tracking import plot_runs, tracking_errors
+from cbha_inverse.robot.plant import StaticPlant
 from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest

@@ -2,7 +2,7 @@
 
 import math
 
-from cbha_inverse.core.safety import (
+from cbha_inverse.robot.safety import (
     bounded_command, check_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
 import numpy as np
 import pytest

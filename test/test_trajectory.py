@@ -2,7 +2,7 @@
 
 import math
 
-from cbha_inverse.core.trajectory import (
+from cbha_inverse.robot.trajectory import (
     circle_trajectory, make_trajectory, plane_axes, square_trajectory, waypoint_trajectory)
 import numpy as np
 import pytest

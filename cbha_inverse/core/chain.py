@@ -8,8 +8,8 @@ solve lives in a :class:`ChainState` (pinocchio's Model/Data split).
 
 from dataclasses import dataclass
 
+from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core.se3 import quat_from_matrix
-from cbha_inverse.core.tick_math import retract_frames
 import numpy as np
 
 

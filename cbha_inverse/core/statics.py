@@ -3,7 +3,7 @@ Quasi-static equilibrium of a frame chain under loads and actuation (paper eq. 9
 
 :func:`solve_static` is the package's one solver of eq. 9, behind the scenes' forward model
 (:meth:`cbha_inverse.scene.Scene.forward`) and the simulated plant
-(:class:`cbha_inverse.core.plant.StaticPlant`). It solves, for the poses of frames 1..n,
+(:class:`cbha_inverse.robot.plant.StaticPlant`). It solves, for the poses of frames 1..n,
 
     r(q) = f(q) + lam (f_dead + J_a(q)ᵀ λ + f_load(q)) = 0
 
@@ -11,7 +11,7 @@ with ``f`` the internal wrenches, ``f_dead`` constant world wrenches (tip, frame
 gravity: :func:`external_wrenches`), ``J_a(q)ᵀ λ`` the actuators' configuration-dependent
 (follower) wrenches, ``f_load`` optional user follower loads and ``lam`` the load factor. The
 residual and every tangent come from the compiled kernels the control tick runs
-(:class:`cbha_inverse.core.tick.TickModel`), so the controller, the statics and the plant
+(:class:`cbha_inverse.core.system.EquilibriumSystem`), so the controller, the statics and the plant
 evaluate the same physics with the same code:
 
 - Newton increments ``dq = T⁻¹ r`` (world axes, as for :func:`cbha_inverse.core.chain.retract`)
@@ -23,7 +23,7 @@ evaluate the same physics with the same code:
   whatever the stresses, compiled band Cholesky): a modified-Newton step, robust where ``T``
   is indefinite or singular (a chain near a limit point, high pressure);
 - the increment is applied in the chain's deformation coordinates
-  (:func:`cbha_inverse.core.tick_math.deformation_step`): full Newton steps stay acceptable at
+  (:func:`cbha_inverse.core._kernels.so3.deformation_step`): full Newton steps stay acceptable at
   large rotations of slender chains (the PL^2/EI = 10 elastica converges from rest in one load
   step of 7 iterations);
 - backtracking line search on the Euclidean norm of the scaled residual (Armijo, factor 1/2),
@@ -50,10 +50,10 @@ from dataclasses import dataclass
 from typing import NamedTuple
 import weakref
 
-from cbha_inverse.core.actuation import ActuatorSet
+from cbha_inverse.core._kernels.retraction import deformation_step, deformed_poses
+from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.chain import ChainState, checked_array, rest_state
-from cbha_inverse.core.tick import TickModel
-from cbha_inverse.core.tick_math import deformation_step, deformed_poses
+from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
 _ARMIJO = 1e-4
@@ -160,6 +160,30 @@ def external_wrenches(model, tip_wrench=None, frame_wrenches=None, gravity=None)
     return ext
 
 
+def chain_stiffness(model, state=None):
+    """
+    Return the symmetric tangent stiffness of a bare chain over frames 1..n (dense).
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+    state : ChainState, optional
+        Frame poses (default: the rest shape, where the tangent is the assembled ``K`` of the
+        links, paper eq. 8).
+
+    Returns
+    -------
+    (6n, 6n) ndarray  [N/m, N, N*m/rad]
+
+    """
+    state = rest_state(model) if state is None else state
+    system = _system(model, None)
+    tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
+    lower = system.dense(tangent)
+    return lower + np.tril(lower, -1).T
+
+
 def _residual_floor(model, length):
     """Round-off level of the scaled internal wrenches (see the module docstring)."""
     k = np.abs(model.stiffnesses)
@@ -190,12 +214,12 @@ def _system(model, actuators):
                                             'actuated': weakref.WeakKeyDictionary()})
     if actuators is None:
         if per_model['chain'] is None:
-            per_model['chain'] = TickModel(model, ActuatorSet((), model.n_frames),
-                                           np.zeros(6 * model.n_links))
+            per_model['chain'] = EquilibriumSystem(model, ActuatorSet((), model.n_frames),
+                                                   np.zeros(6 * model.n_links))
         return per_model['chain']
     system = per_model['actuated'].get(actuators)
     if system is None:
-        system = TickModel(model, actuators, np.zeros(6 * model.n_links))
+        system = EquilibriumSystem(model, actuators, np.zeros(6 * model.n_links))
         per_model['actuated'][actuators] = system
     return system
 
@@ -368,12 +392,12 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         Dead wrenches at frames 1..n, world axes.
     gravity : (3,) array_like, optional  [m/s^2]
         Acting on the masses lumped at frames 1..n (force only).
-    actuators : cbha_inverse.core.actuation.ActuatorSet, optional
+    actuators : cbha_inverse.core.actuation.cables.ActuatorSet, optional
         The actuators (cables, cavities): follower loads ``J_a(q)ᵀ λ`` with their exact load
         stiffness.
     actuation : (m,) array_like, optional  [N or Pa]
         ``λ`` in actuator order (zero by default).
-    effectors : cbha_inverse.core.effectors.PointEffectors, optional
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors, optional
         Effector points reported in the result.
     load_function : callable, optional
         ``load_function(state) -> (n, 6)`` extra configuration-dependent wrenches (world axes,

@@ -24,9 +24,9 @@ import subprocess
 import sys
 import time
 
-from cbha_inverse.core.trajectory import make_trajectory
 from cbha_inverse.paths import config_path
 from cbha_inverse.report.tracking import plot_runs, tracking_errors
+from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.scene import load_scene
 import numpy as np
 import yaml

@@ -8,9 +8,9 @@ Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/m
 With ``trigger: target`` a valid target is solved and its command published inside the target
 callback (lowest target-to-command latency); the timer at ``rate_hz`` ticks the solver only when no
 target came during the last period (the model keeps converging at a fixed target) and runs the
-staleness watchdog. Every input passes :mod:`cbha_inverse.core.safety` first; a rejected message
+staleness watchdog. Every input passes :mod:`cbha_inverse.robot.safety` first; a rejected message
 is counted and logged (throttled) and the last valid command stays. Every command passes
-:func:`cbha_inverse.core.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
+:func:`cbha_inverse.robot.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
 """
 
 import bisect
@@ -20,9 +20,9 @@ import math
 import sys
 import time
 
-from cbha_inverse.core.control import TargetCorrector
-from cbha_inverse.core.robotino import ARM_VALVES
-from cbha_inverse.core.safety import (
+from cbha_inverse.core.inverse.solver import TargetCorrector
+from cbha_inverse.robot.robotino import ARM_VALVES
+from cbha_inverse.robot.safety import (
     bounded_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
 from cbha_inverse.ros.conversions import backbone_markers, command_message, point_array
 from cbha_inverse.ros.diagnostics import (

@@ -33,10 +33,11 @@ trunks, Timoshenko beams and cables) and ``cbha`` (16 condensed bellows segments
 from functools import cached_property
 from pathlib import Path
 
-from cbha_inverse.core.actuation import ActuatorSet, Cable, CableGroup
+from cbha_inverse.core.actuation.actuators import ActuatorSet
+from cbha_inverse.core.actuation.cables import Cable, CableGroup
+from cbha_inverse.core.actuation.effectors import PointEffectors
 from cbha_inverse.core.chain import ChainModel
-from cbha_inverse.core.control import InverseOptions, InverseSolver
-from cbha_inverse.core.effectors import PointEffectors
+from cbha_inverse.core.inverse.solver import InverseOptions, InverseSolver
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.paths import config_path
@@ -56,8 +57,8 @@ class Scene:
     description : str
     base_frame : str
     model : cbha_inverse.core.chain.ChainModel
-    actuators : cbha_inverse.core.actuation.ActuatorSet
-    effectors : cbha_inverse.core.effectors.PointEffectors
+    actuators : cbha_inverse.core.actuation.cables.ActuatorSet
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
     gravity : (3,) ndarray or None  [m/s^2]
     actuator_names, effector_names : tuple of str
     lower_bounds, upper_bounds : (m,) ndarray  [N or Pa]
@@ -160,13 +161,13 @@ class Scene:
         Parameters
         ----------
         **options
-            Fields of :class:`cbha_inverse.core.control.InverseOptions` (``energy_weight``,
+            Fields of :class:`cbha_inverse.core.inverse.solver.InverseOptions` (``energy_weight``,
             ``proximal_weight``, ``rate_limit``, ``qp_solver``, ``newton_steps``, ...); the
             scene's ``solver`` section gives the defaults.
 
         Returns
         -------
-        cbha_inverse.core.control.InverseSolver
+        cbha_inverse.core.inverse.solver.InverseSolver
             Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult``.
 
         """

@@ -1,6 +1,7 @@
 """Actuator follower loads and their load stiffness as callables (numpy oracle)."""
 
 import numpy as np
+from oracles.actuation import oracle
 
 
 def actuator_loads(actuators, actuation):
@@ -13,7 +14,7 @@ def actuator_loads(actuators, actuation):
 
     Parameters
     ----------
-    actuators : cbha_inverse.core.actuation.ActuatorSet
+    actuators : cbha_inverse.core.actuation.cables.ActuatorSet
         The actuators.
     actuation : (m,) array_like  [N or Pa]
         Applied actuation in column order.
@@ -27,6 +28,7 @@ def actuator_loads(actuators, actuation):
 
     """
     a = np.asarray(actuation, dtype=float).reshape(-1)
+    actuators = oracle(actuators)
 
     def load_function(state):
         wrenches = actuators.evaluate(state.positions, state.rotations, False)[0]

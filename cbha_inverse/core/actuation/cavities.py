@@ -5,24 +5,48 @@ Per unit pressure each vertex receives the outward normal times one third of the
 areas; the vertices follow the two frames that enclose them by linear skinning along the segment
 axis, and the transposed skinning Jacobian maps the vertex forces to frame wrenches. For a closed
 surface the vertex force is exactly the gradient of the enclosed volume, so a column is
-``+d(volume)/dq`` (see :mod:`cbha_inverse.core.actuation` for the sign conventions).
+``+d(volume)/dq`` (see :mod:`cbha_inverse.core.actuation.cables` for the sign conventions).
 
 Two evaluators share this geometry:
 
 - :class:`CavityGroup` evaluates the skinned mesh (exact, cost proportional to the vertices);
-- :class:`cbha_inverse.core.cavity_linear.LinearCavityGroup` condenses each skinned segment
-  cavity, like the compliance of a segment, onto its two frames: the wrench on the upper frame
-  is affine in the corotational deformation of the segment (``G0 + H δ``, frame-i axes, fitted
-  by central differences of the exact mesh at rest) and the lower frame gets the equilibrating
-  wrench. It costs one small operation per segment and is the default of the online solver; its
-  error against the exact mesh is second order in the segment deformation (tested).
+- :class:`cbha_inverse.core.actuation.condensed_cavities.LinearCavityGroup` condenses each
+  skinned segment cavity, like the compliance of a segment, onto its two frames: the wrench on
+  the upper frame is affine in the corotational deformation of the segment (``G0 + H δ``,
+  frame-i axes, fitted by central differences of the exact mesh at rest) and the lower frame
+  gets the equilibrating wrench. It costs one small operation per segment and is the default of
+  the online solver; its error against the exact mesh is second order in the segment
+  deformation (tested).
 """
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.actuation import cross, point_wrenches
+from cbha_inverse.core.se3 import cross
 import numpy as np
 import scipy.sparse as sp
+
+
+def point_wrenches(levers, forces):
+    """
+    Map forces applied at points to wrenches at frame origins (paper Fig. 4, rigid mapping).
+
+    A force ``F`` at ``p = x_f + r`` does the virtual work ``F · (dx_f + dθ_f × r)``, so the
+    wrench at the frame origin is ``[F; r × F]`` (world axes).
+
+    Parameters
+    ----------
+    levers : (P, 3) ndarray  [m]
+        ``r = p - x_f``, world axes.
+    forces : (P, 3) ndarray  [N]
+        Forces, world axes.
+
+    Returns
+    -------
+    (P, 6) ndarray  [N, N*m]
+        Wrenches at the frame origins.
+
+    """
+    return np.concatenate([forces, cross(levers, forces)], axis=1)
 
 
 @dataclass(frozen=True)

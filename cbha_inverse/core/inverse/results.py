@@ -1,4 +1,4 @@
-"""Options and per-tick result of the inverse solver (:mod:`cbha_inverse.core.control`)."""
+"""Options and per-tick result of the inverse solver (:mod:`cbha_inverse.core.inverse.solver`)."""
 
 from dataclasses import dataclass, field
 
@@ -13,14 +13,15 @@ class InverseOptions:
     Attributes
     ----------
     energy_weight : float
-        ``ε_E`` of the actuation-energy term (unit-free, see :mod:`cbha_inverse.core.inverse`).
+        ``ε_E`` of the actuation-energy term (unit-free, see
+        :mod:`cbha_inverse.core.inverse.qp_problem`).
     proximal_weight : float
         ``ε_P`` of the tick-to-tick smoothing term (unit-free).
     rate_limit : tuple of float or None
         Largest change per tick of each actuator (N or Pa), ``None`` for none.
     qp_solver : str
         ``'active_set'`` (default: principal pivoting on the active set,
-        :class:`cbha_inverse.core.qp.ActiveSetQP`, compiled with numba), ``'proxsuite'``
+        :class:`cbha_inverse.core.inverse.qp.ActiveSetQP`, compiled with numba), ``'proxsuite'``
         (dense, warm-started) or ``'gauss_seidel'`` (the paper's projected Gauss-Seidel). The
         active set is the default because it returns the exact KKT solution of the box QP and
         costs ~3 µs for ``m ≤ 16`` actuators, against ~30-60 µs for proxsuite's update and

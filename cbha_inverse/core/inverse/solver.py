@@ -5,12 +5,12 @@ The per-tick inverse-simulation controller (DESIGN §6, paper §IV).
 mutable tick state (frame poses, current actuation, QP warm start). One :meth:`InverseSolver.step`:
 
 1. linearise at the current state in one fused pass of the compiled kernels
-   (:class:`cbha_inverse.core.tick.TickModel`, the same evaluation as the static solver's):
+   (:class:`cbha_inverse.core.system.EquilibriumSystem`, the static solver's evaluation too):
    tangent stiffness ``K`` (symmetric part of structure + load stiffness), actuator columns
    ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
 2. factor ``K`` (compiled band Cholesky) and solve ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS pass,
    giving ``W_ea``, ``W_aa`` and ``δ_e^free``
-   (:func:`cbha_inverse.core.tick_kernels.project_effectors`);
+   (:func:`cbha_inverse.core._kernels.links.project_effectors`);
 3. solve the regularised box QP (proxsuite, warm-started, or the exact active-set solver; projected
    Gauss-Seidel on request or as a fallback if proxsuite reports a failure);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
@@ -18,8 +18,8 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    further full Newton steps at fixed ``λ`` if requested (or, with ``relinearize_every > 1``,
    keep the linear model for a few ticks; see :class:`InverseOptions`).
 
-The closed-loop :class:`~cbha_inverse.core.correction.TargetCorrector` lives in
-:mod:`cbha_inverse.core.correction` (re-exported here).
+The closed-loop :class:`~cbha_inverse.core.inverse.correction.TargetCorrector` lives in
+:mod:`cbha_inverse.core.inverse.correction` (re-exported here).
 
 Repeated ticks therefore run Newton's method on the coupled problem (equilibrium plus optimal
 actuation); at a fixed target the state converges to the static equilibrium of the returned
@@ -31,16 +31,16 @@ import math
 import time
 from typing import NamedTuple
 
+from cbha_inverse.core._kernels.projection import project_effectors, tick_outcome
+from cbha_inverse.core._kernels.retraction import apply_linear_step, retract_frames as _retract
 from cbha_inverse.core.chain import ChainState, rest_state
-from cbha_inverse.core.correction import TargetCorrector  # noqa: F401 (public re-export)
-from cbha_inverse.core.inverse import qp_matrices, qp_problem
-from cbha_inverse.core.inverse_types import InverseOptions, TickResult
-from cbha_inverse.core.qp import (ActiveSetQP, ActuationQP, binding_bounds,
-                                  projected_gauss_seidel)
+from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, ActuationQP, binding_bounds,
+                                          projected_gauss_seidel)
+from cbha_inverse.core.inverse.qp_problem import qp_matrices, qp_problem
+from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.statics import external_wrenches
-from cbha_inverse.core.tick import TickModel
-from cbha_inverse.core.tick_kernels import project_effectors, tick_outcome
-from cbha_inverse.core.tick_math import apply_linear_step, retract_frames as _retract
+from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
 
@@ -57,7 +57,7 @@ class _Linearization(NamedTuple):
 
 
 class _CholeskyFactor:
-    """A band Cholesky factor of :class:`~cbha_inverse.core.tick.TickModel` with ``solve``."""
+    """A band Cholesky factor of the equilibrium system, with ``solve``."""
 
     def __init__(self, factor):
         """Keep the factor."""
@@ -65,7 +65,7 @@ class _CholeskyFactor:
 
     def solve(self, rhs):
         """Return ``K⁻¹ rhs`` (C order)."""
-        return TickModel.solve(self._factor, rhs)
+        return EquilibriumSystem.solve(self._factor, rhs)
 
 
 class InverseSolver:
@@ -76,9 +76,9 @@ class InverseSolver:
     ----------
     model : cbha_inverse.core.chain.ChainModel
         The frame chain.
-    actuators : cbha_inverse.core.actuation.ActuatorSet
+    actuators : cbha_inverse.core.actuation.cables.ActuatorSet
         Its actuators (``m``).
-    effectors : cbha_inverse.core.effectors.PointEffectors
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
         Its effector points (``k``).
     gravity : (3,) array_like or None  [m/s^2]
         Gravity acting on the lumped masses.
@@ -111,7 +111,7 @@ class InverseSolver:
         self._external = external_wrenches(model, gravity=gravity).reshape(-1)
         self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
         self._active_set = ActiveSetQP(m)
-        self._tick = TickModel(model, actuators, self._external)
+        self._tick = EquilibriumSystem(model, actuators, self._external)
         self._m, self._k = m, effectors.n_effectors
         step = self.options.max_rotation_step
         self._max_rotation = math.inf if step is None else float(step)
@@ -192,9 +192,9 @@ class InverseSolver:
         The normal case (:meth:`_linearise`) is the Cholesky factorization of structure +
         symmetric load stiffness; when it fails:
         1. band LU of the exact tangent, structure + load stiffness (non-symmetric; high
-           pressures), :meth:`~cbha_inverse.core.tick.TickModel.exact_system`;
+           pressures), :meth:`~cbha_inverse.core.system.EquilibriumSystem.exact_system`;
         2. band Cholesky of the material tangent alone (paper eq. 8; far from equilibrium),
-           :meth:`~cbha_inverse.core.tick.TickModel.material_system`.
+           :meth:`~cbha_inverse.core.system.EquilibriumSystem.material_system`.
         The residual is exact in every case, so only the convergence rate changes.
         """
         tangent, _ = self._tick.exact_system(positions, rotations, actuation)

@@ -5,7 +5,8 @@ Storage is LAPACK's lower band layout in C order, ``band[c, r - c] = K[r, c]`` f
 ``0 <= r - c <= kd`` (an (N, kd + 1) array: the Fortran (kd + 1, N) array of ``dpbtrf``). The
 factorisation is right-looking, as LAPACK's unblocked ``dpbtf2``: every innermost loop is an axpy
 over contiguous memory. For the small systems of a control tick (N ≤ ~100, kd ≤ ~20) it costs a few
-microseconds, less than the call overhead of the LAPACK wrappers.
+microseconds, less than the call overhead of the LAPACK wrappers. :func:`scatter_add` writes the
+assembled blocks into a band storage by a constant index.
 """
 
 import math
@@ -224,3 +225,23 @@ def btd_band_solve(factor, rhs):
         _solve_width12(factor, rhs)
     else:
         band_solve(factor, rhs)
+
+
+@numba.njit(cache=True)
+def scatter_add(index, values, weights, out):
+    """
+    Zero ``out`` and add ``weights * values`` at ``index`` (a compiled ``np.bincount``).
+
+    Parameters
+    ----------
+    index : (V,) int ndarray
+        Slot of every value in ``out``.
+    values, weights : (V,) ndarray
+        Values and their weights.
+    out : (S,) ndarray
+        Receives the sums.
+
+    """
+    out[:] = 0.0
+    for i in range(index.size):
+        out[index[i]] += weights[i] * values[i]

@@ -1,14 +1,14 @@
 """
 Solvers of the box-constrained actuation QP (paper eq. 13): proxsuite and projected Gauss-Seidel.
 
-The problem itself (:class:`cbha_inverse.core.inverse.QPProblem`) is built in
-:mod:`cbha_inverse.core.inverse`; here it is solved, polished onto its active set and checked for
-saturation. proxsuite's status is always returned to the caller.
+The problem itself (:class:`cbha_inverse.core.inverse.qp_problem.QPProblem`) is built in
+:mod:`cbha_inverse.core.inverse.qp_problem`; here it is solved, polished onto its active set
+and checked for saturation. proxsuite's status is always returned to the caller.
 """
 
 from typing import NamedTuple
 
-from cbha_inverse.core import qp_kernels
+from cbha_inverse.core._kernels import qp as qp_kernels
 import numpy as np
 import proxsuite
 
@@ -145,7 +145,7 @@ class ActiveSetQP:
     tick is the warm start, so a tracking tick usually takes one iteration. The result satisfies
     the KKT conditions to round-off (checked); if not within ``max_iterations``, ``ok`` is False
     and the caller falls back to proxsuite. The iteration is the compiled kernel
-    :func:`cbha_inverse.core.qp_kernels.active_set_box_qp`.
+    :func:`cbha_inverse.core._kernels.qp.active_set_box_qp`.
 
     Parameters
     ----------

@@ -1,49 +1,24 @@
 """
-Compiled kernels of one linearisation tick (numba): links, assembly, projection, outcome.
+Compiled pass over the compliance links (numba): deformation, wrenches, tangent blocks.
 
-The reference path (:func:`cbha_inverse.core.assembly.assemble_tangent` and the actuators'
-``evaluate`` / ``load_tangent``) is batched numpy; a tick of it is a few hundred numpy calls of
-1-3 µs each, ten times the arithmetic. These kernels compute the same quantities (equal to
-round-off, tested against the reference) in one pass per link, span and column:
-
-- :func:`link_pass`, per link ``l`` (frames ``a = l``, ``b = l + 1``): the deformation ``δ``
-  (DESIGN §3), the local b-side wrench ``L = [-s_f; -Jl⁻ᵀ(φ) s_r] + Σ_c p_c (G0_c + H_c δ)``
-  (paper eq. 9 plus the condensed cavities of :mod:`cbha_inverse.core.cavity_linear`) rotated to
-  world axes and gathered onto the two frames (paper eq. 5-7), and the 12 x 12 world tangent
-  ``Dᵀ M D`` + geometric terms, ``M = (Bᵀ K + Z(dJ) - H_p) B`` (paper eq. 8 plus the exact
-  cavity load stiffness);
-- :func:`cbha_inverse.core.tick_cables.cable_pass`: the cables' columns, loads and stiffness;
-- :func:`scatter_add`: every block value into the symmetric band storage by a constant index
-  (factored by :mod:`cbha_inverse.core.band_kernels`);
-- :func:`project_effectors` and :func:`tick_outcome`: ``W_ea``, ``W_aa``, the free effector
-  positions, and the actuation and remaining gap of a QP solution.
+:func:`link_pass`, per link ``l`` (frames ``a = l``, ``b = l + 1``): the deformation ``δ``
+(DESIGN §3), the local b-side wrench ``L = [-s_f; -Jl⁻ᵀ(φ) s_r] + Σ_c p_c (G0_c + H_c δ)``
+(paper eq. 9 plus the condensed cavities of
+:mod:`cbha_inverse.core.actuation.condensed_cavities`) rotated to world axes and gathered onto
+the two frames (paper eq. 5-7), and the exact 12 x 12 world tangent ``Eᵀ R M Rᵀ E`` + the
+geometric terms of the rotated wrench, ``M = (Bᵀ K + Z(dJ) - H_p) B`` (paper eq. 8 plus the
+exact cavity load stiffness), or the material part alone. The one implementation of the link
+equations: the control tick, the static solver, the scenes' forward model and the plant all run
+it (through :class:`cbha_inverse.core.system.EquilibriumSystem`); the readable numpy version is
+a test oracle (``test/oracles/chain_forces.py``).
 """
 
 import math
 
-from cbha_inverse.core.tick_math import jl_coefficient, rotation_log
+from cbha_inverse.core._kernels.so3 import (_add_scaled_hat, hat_into, jl_coefficient,
+                                           left_jacobian_inverse_into, rotation_log)
 import numba
 import numpy as np
-
-
-@numba.njit(cache=True)
-def hat_into(v, out):
-    """Write ``hat(v)`` (``hat(v) @ b = v x b``) into a (3, 3) array."""
-    out[0, 0] = out[1, 1] = out[2, 2] = 0.0
-    out[0, 1], out[0, 2] = -v[2], v[1]
-    out[1, 0], out[1, 2] = v[2], -v[0]
-    out[2, 0], out[2, 1] = -v[1], v[0]
-
-
-@numba.njit(cache=True)
-def _add_scaled_hat(out, v, weight):
-    """Add ``weight * hat(v)`` to a (3, 3) array (view)."""
-    out[0, 1] -= weight * v[2]
-    out[1, 0] += weight * v[2]
-    out[0, 2] += weight * v[1]
-    out[2, 0] -= weight * v[1]
-    out[1, 2] -= weight * v[0]
-    out[2, 1] += weight * v[0]
 
 
 @numba.njit(cache=True)
@@ -128,12 +103,7 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
             for j in range(6):
                 acc += k[i, j] * delta[j]
             stress[i] = acc
-        # Jl^-1 = (1 - c t^2) I + c phi phi^T - hat(phi) / 2
-        for i in range(3):
-            for j in range(3):
-                jinv[i, j] = c * phi[i] * phi[j]
-            jinv[i, i] += 1.0 - c * t2
-        _add_scaled_hat(jinv, phi, -0.5)
+        left_jacobian_inverse_into(phi, theta, c, jinv)
         # a = B^T K with B = diag(I, Jl^-1)
         for j in range(6):
             for i in range(3):
@@ -247,148 +217,3 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
                 out[3 + i, 3 + j] -= m_hat[i, j] + (diff_hat[i, 0] * f_hat[0, j]
                                                     + diff_hat[i, 1] * f_hat[1, j]
                                                     + diff_hat[i, 2] * f_hat[2, j])
-
-
-@numba.njit(cache=True)
-def scatter_add(index, values, weights, out):
-    """
-    Zero ``out`` and add ``weights * values`` at ``index`` (a compiled ``np.bincount``).
-
-    Parameters
-    ----------
-    index : (V,) int ndarray
-        Slot of every value in ``out``.
-    values, weights : (V,) ndarray
-        Values and their weights.
-    out : (S,) ndarray
-        Receives the sums.
-
-    """
-    out[:] = 0.0
-    for i in range(index.size):
-        out[index[i]] += weights[i] * values[i]
-
-
-@numba.njit(cache=True)
-def project_effectors(solved, rhs, positions, rotations, effector_frames, effector_offsets,
-                      previous):
-    """
-    Project a solved tick onto the effectors and actuators (DESIGN §6 step 2).
-
-    With ``solved = K⁻¹ [r, J_aᵀ]`` and the effector Jacobian ``J_e`` (block ``[I, -r^]`` on
-    the effector's frame, ``r = R_f o``, :mod:`cbha_inverse.core.effectors`):
-    ``W_ea = J_e K⁻¹ J_aᵀ``, ``W_aa = J_a K⁻¹ J_aᵀ`` and the free effector positions
-    ``p_e + J_e K⁻¹ r``, returned relative to the previous actuation so that
-    ``δ_free = offset - target`` (as :func:`cbha_inverse.core.inverse.project_constraints`).
-
-    Parameters
-    ----------
-    solved : (6n, m + 1) ndarray
-        ``K⁻¹ [r, J_aᵀ]``.
-    rhs : (6n, m + 1) ndarray
-        ``[r, J_aᵀ]``.
-    positions : (n + 1, 3) ndarray  [m]
-        Frame origins.
-    rotations : (n + 1, 3, 3) ndarray
-        Frame rotations.
-    effector_frames : (k,) int ndarray
-        Frame of every effector (1..n).
-    effector_offsets : (k, 3) ndarray  [m]
-        Effector points in their frame's axes.
-    previous : (m,) ndarray
-        ``λ_prev``.
-
-    Returns
-    -------
-    w_ea : (3k, m) ndarray  [m/N, m/Pa]
-    w_aa : (m, m) ndarray
-    offset : (3k,) ndarray  [m]
-        ``p_e + J_e K⁻¹ r - W_ea λ_prev``.
-    residual_norm : float  [N, N*m]
-        ``|r|``.
-
-    """
-    size, width = solved.shape
-    m = width - 1
-    k = effector_frames.size
-    moved = np.empty((3 * k, width))
-    offset = np.empty(3 * k)
-    for e in range(k):
-        frame = effector_frames[e]
-        rot = rotations[frame]
-        lever = np.empty(3)
-        for i in range(3):
-            lever[i] = (rot[i, 0] * effector_offsets[e, 0] + rot[i, 1] * effector_offsets[e, 1]
-                        + rot[i, 2] * effector_offsets[e, 2])
-            offset[3 * e + i] = positions[frame, i] + lever[i]
-        base = 6 * (frame - 1)
-        for col in range(width):
-            rx, ry, rz = solved[base + 3, col], solved[base + 4, col], solved[base + 5, col]
-            # dp = dx + dθ x r
-            moved[3 * e, col] = solved[base, col] + ry * lever[2] - rz * lever[1]
-            moved[3 * e + 1, col] = solved[base + 1, col] + rz * lever[0] - rx * lever[2]
-            moved[3 * e + 2, col] = solved[base + 2, col] + rx * lever[1] - ry * lever[0]
-    w_ea = np.ascontiguousarray(moved[:, 1:])
-    for row in range(3 * k):
-        acc = offset[row] + moved[row, 0]
-        for j in range(m):
-            acc -= w_ea[row, j] * previous[j]
-        offset[row] = acc
-    w_aa = np.zeros((m, m))
-    residual = 0.0
-    for q in range(size):
-        residual += rhs[q, 0] * rhs[q, 0]
-        for i in range(m):
-            weight = rhs[q, 1 + i]
-            if weight != 0.0:
-                for j in range(m):
-                    w_aa[i, j] += weight * solved[q, 1 + j]
-    return w_ea, w_aa, offset, math.sqrt(residual)
-
-
-@numba.njit(cache=True)
-def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bounds):
-    """
-    Return the actuation of a QP solution and the linear model's remaining effector gap.
-
-    Parameters
-    ----------
-    w_ea : (3k, m) ndarray  [m/N, m/Pa]
-        Effector-actuator compliance.
-    delta_free : (3k,) ndarray  [m]
-        ``δ_e^free`` (free effector positions minus targets).
-    scale : (m,) ndarray
-        ``σ``: ``λ = σ x``.
-    x, x_previous : (m,) ndarray
-        QP solution and the previous actuation, dimensionless.
-    lower_bounds, upper_bounds : (m,) ndarray
-        Actuator bounds.
-
-    Returns
-    -------
-    actuation : (m,) ndarray  [N, Pa]
-        ``σ x`` clipped into the bounds.
-    gap : (3k,) ndarray  [m]
-        ``W_ea λ + δ_free`` (paper eq. 11: predicted effector minus target).
-    largest_gap : float  [m]
-        Largest effector distance ``max_e |gap_e|``.
-    largest_move : float
-        ``max |x - x_previous|`` (dimensionless actuation change).
-
-    """
-    rows, m = w_ea.shape
-    actuation = np.empty(m)
-    largest_move = 0.0
-    for j in range(m):
-        actuation[j] = min(max(scale[j] * x[j], lower_bounds[j]), upper_bounds[j])
-        largest_move = max(largest_move, abs(x[j] - x_previous[j]))
-    gap = np.empty(rows)
-    for r in range(rows):
-        acc = delta_free[r]
-        for j in range(m):
-            acc += w_ea[r, j] * actuation[j]
-        gap[r] = acc
-    largest = 0.0
-    for e in range(rows // 3):
-        largest = max(largest, gap[3 * e] ** 2 + gap[3 * e + 1] ** 2 + gap[3 * e + 2] ** 2)
-    return actuation, gap, math.sqrt(largest), largest_move

@@ -1,150 +1,17 @@
 """
-SO(3) helpers of the fused tick (:mod:`cbha_inverse.core.tick`), compiled with numba.
+Compiled updates of the frames: world-axis retraction and the chain's deformation coordinates.
 
-Per-link scalar forms of the ``Jl⁻¹`` coefficients, the rotation logarithm and exponential (the
-same formulas as :mod:`cbha_inverse.core.se3`, which stays the batched numpy reference and the
-tests' oracle), the retraction of the frames (:func:`cbha_inverse.core.chain.retract`) and the
-dense LU of the fallback tangent.
+:func:`retract_frames` (``x += dx``, ``R ← exp(dθ) R``, DESIGN §3) and the Newton step of a
+factored tick (:func:`apply_linear_step`); :func:`deformation_step` and :func:`deformed_poses`
+apply an increment in the links' deformation coordinates (the static solver's line search).
 """
 
 import math
 
-from cbha_inverse.core.se3 import JL_SERIES
+from cbha_inverse.core._kernels.so3 import (jl_coefficient, left_jacobian_inverse_into,
+                                           rotation_exp, rotation_log)
 import numba
 import numpy as np
-
-# c(t) = sum_k a_k t^(2k), the hat(phi)^2 coefficient of Jl^-1: the first 7 terms of the se3
-# series (truncation below round-off up to _SERIES_LIMIT)
-_JL_SERIES = np.array(JL_SERIES[:7])
-_SERIES_LIMIT = 0.5
-
-
-@numba.njit(cache=True)
-def jl_coefficient(theta):
-    """
-    Return ``c(t)`` and ``c'(t)/t`` of ``Jl⁻¹(φ) = I - φ^/2 + c φ^²`` (as in ``se3``).
-
-    ``c(t) = 1/t² - cot(t/2) / (2t)``; below 0.5 rad both from the Taylor series in ``t²``
-    (7 terms, Horner), where the closed forms cancel.
-
-    Parameters
-    ----------
-    theta : float  [rad]
-        Angle ``t = |φ|``.
-
-    Returns
-    -------
-    c, dc_over_t : float
-
-    """
-    if theta < _SERIES_LIMIT:
-        t2 = theta * theta
-        n = _JL_SERIES.size
-        c = _JL_SERIES[n - 1]
-        dc = 2.0 * (n - 1) * _JL_SERIES[n - 1]
-        for k in range(n - 2, -1, -1):
-            c = c * t2 + _JL_SERIES[k]
-            if k > 0:
-                dc = dc * t2 + 2.0 * k * _JL_SERIES[k]
-        return c, dc
-    half = 0.5 * theta
-    sin_half = math.sin(half)
-    cot = math.cos(half) / sin_half
-    c = 1.0 / (theta * theta) - cot / (2.0 * theta)
-    dc = (-2.0 / theta ** 3 + 1.0 / (4.0 * theta * sin_half * sin_half)
-          + cot / (2.0 * theta * theta)) / theta
-    return c, dc
-
-
-@numba.njit(cache=True)
-def rotation_log(rot, out):
-    """
-    Write the rotation vector of a rotation matrix into ``out`` and return its angle.
-
-    As :func:`cbha_inverse.core.se3.so3_log`: ``t = atan2(|vee(R)|, (tr R - 1) / 2)`` while
-    ``tr R > -0.5``, otherwise through the (Shepperd) quaternion, accurate up to pi.
-
-    Parameters
-    ----------
-    rot : (3, 3) ndarray
-        Rotation matrix.
-    out : (3,) ndarray
-        Receives ``φ`` [rad].
-
-    Returns
-    -------
-    float
-        ``t = |φ|`` [rad], in [0, pi].
-
-    """
-    d0 = 0.5 * (rot[2, 1] - rot[1, 2])
-    d1 = 0.5 * (rot[0, 2] - rot[2, 0])
-    d2 = 0.5 * (rot[1, 0] - rot[0, 1])
-    trace = rot[0, 0] + rot[1, 1] + rot[2, 2]
-    cos_t = 0.5 * trace - 0.5
-    if cos_t > -0.75:
-        sin_t = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        theta = math.atan2(sin_t, cos_t)
-        # sin_t = 0 only for d = 0, where any finite ratio gives the zero vector
-        ratio = theta / max(sin_t, 1e-300)
-        out[0], out[1], out[2] = d0 * ratio, d1 * ratio, d2 * ratio
-        return theta
-    # Shepperd: the largest of (tr, R00, R11, R22) picks the accurate formula; here w < 0.5
-    if rot[0, 0] >= rot[1, 1] and rot[0, 0] >= rot[2, 2]:
-        s = math.sqrt(max(1.0 + 2.0 * rot[0, 0] - trace, 1e-300))
-        x, y, z, w = 0.5 * s, (rot[0, 1] + rot[1, 0]) / (2.0 * s), (
-            rot[0, 2] + rot[2, 0]) / (2.0 * s), d0 / s
-    elif rot[1, 1] >= rot[2, 2]:
-        s = math.sqrt(max(1.0 + 2.0 * rot[1, 1] - trace, 1e-300))
-        x, y, z, w = (rot[0, 1] + rot[1, 0]) / (2.0 * s), 0.5 * s, (
-            rot[1, 2] + rot[2, 1]) / (2.0 * s), d1 / s
-    else:
-        s = math.sqrt(max(1.0 + 2.0 * rot[2, 2] - trace, 1e-300))
-        x, y, z, w = (rot[0, 2] + rot[2, 0]) / (2.0 * s), (rot[1, 2] + rot[2, 1]) / (
-            2.0 * s), 0.5 * s, d2 / s
-    if w < 0.0:
-        x, y, z, w = -x, -y, -z, -w
-    v = math.sqrt(x * x + y * y + z * z)
-    theta = 2.0 * math.atan2(v, w)
-    ratio = theta / v
-    out[0], out[1], out[2] = x * ratio, y * ratio, z * ratio
-    return theta
-
-
-@numba.njit(cache=True)
-def rotation_exp(rotvec, out):
-    """
-    Write ``exp(hat(v))`` into ``out`` (Rodrigues: ``I + a v^ + b v^²``).
-
-    ``a = sin t / t`` and ``b = (1 - cos t) / t²``; below 1e-4 rad from their Taylor series.
-
-    Parameters
-    ----------
-    rotvec : (3,) ndarray  [rad]
-        Axis times angle.
-    out : (3, 3) ndarray
-        Receives the rotation.
-
-    """
-    x, y, z = rotvec[0], rotvec[1], rotvec[2]
-    t2 = x * x + y * y + z * z
-    if t2 < 1e-8:
-        a = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)
-        b = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0)
-    else:
-        t = math.sqrt(t2)
-        a = math.sin(t) / t
-        b = (1.0 - math.cos(t)) / t2
-    cos_t = 1.0 - b * t2
-    out[0, 0] = cos_t + b * x * x
-    out[1, 1] = cos_t + b * y * y
-    out[2, 2] = cos_t + b * z * z
-    out[0, 1] = b * x * y - a * z
-    out[1, 0] = b * x * y + a * z
-    out[0, 2] = b * x * z + a * y
-    out[2, 0] = b * x * z - a * y
-    out[1, 2] = b * y * z - a * x
-    out[2, 1] = b * y * z + a * x
 
 
 @numba.njit(cache=True)
@@ -239,6 +106,7 @@ def deformation_step(positions, rotations, rest_rotations, step, coordinates):
     dx = np.empty(3)
     dt = np.empty(3)
     local = np.empty(3)
+    jinv = np.empty((3, 3))
     largest = 0.0
     for link in range(n):
         ra = rotations[link]
@@ -272,13 +140,10 @@ def deformation_step(positions, rotations, rest_rotations, step, coordinates):
             out[3 + i] = phi[i]
             out[6 + i] = ra[0, i] * dx[0] + ra[1, i] * dx[1] + ra[2, i] * dx[2]
             local[i] = ra[0, i] * dt[0] + ra[1, i] * dt[1] + ra[2, i] * dt[2]
-        # Jl^-1 = (1 - c t^2) I + c phi phi^T - hat(phi) / 2
-        dot = phi[0] * local[0] + phi[1] * local[1] + phi[2] * local[2]
-        cross = (phi[1] * local[2] - phi[2] * local[1], phi[2] * local[0] - phi[0] * local[2],
-                 phi[0] * local[1] - phi[1] * local[0])
+        left_jacobian_inverse_into(phi, theta, c, jinv)
         size = 0.0
         for i in range(3):
-            value = (1.0 - c * theta * theta) * local[i] + c * phi[i] * dot - 0.5 * cross[i]
+            value = jinv[i, 0] * local[0] + jinv[i, 1] * local[1] + jinv[i, 2] * local[2]
             out[9 + i] = value
             size += value * value
         largest = max(largest, size)
@@ -333,7 +198,7 @@ def deformed_poses(coordinates, alpha, rest_rotations, positions, rotations):
 
 def retract_frames(positions, rotations, increments, max_rotation=None, in_place=False):
     """
-    Apply world-axis increments to frames 1..n (as :func:`cbha_inverse.core.chain.retract`).
+    Apply world-axis increments to frames 1..n (behind :func:`cbha_inverse.core.chain.retract`).
 
     Parameters
     ----------

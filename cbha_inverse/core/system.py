@@ -1,44 +1,44 @@
 """
-Fused linearisation of one inverse-solver tick: chain, cables and condensed cavities at once.
+The compiled evaluation of the chain's equilibrium: residual, actuator columns and tangents.
 
-The reference path of a tick (:func:`cbha_inverse.core.assembly.assemble_tangent` for the chain,
-``ActuatorSet.evaluate`` / ``load_tangent`` for the actuators, DESIGN §6 step 1) builds several
-dense ``6n x 6n`` matrices in a few hundred numpy calls. :class:`TickModel` computes the same
-quantities (equal to round-off, tested) with the compiled kernels of
-:mod:`cbha_inverse.core.tick_kernels`:
+:class:`EquilibriumSystem` is the one evaluator of paper eq. 9,
+``r(q) = f(q) + f_ext + J_a(q)ᵀ λ``, behind the controller's tick
+(:class:`cbha_inverse.core.inverse.solver.InverseSolver`), the static solver
+(:func:`cbha_inverse.core.statics.solve_static`), the scenes' forward model and the simulated
+plant. With the compiled kernels of :mod:`cbha_inverse.core._kernels`:
 
 - one pass over the links gives the residual, the condensed cavities' columns and every link's
-  12 x 12 world tangent (structure of paper eq. 8 plus the exact cavity load stiffness);
+  exact 12 x 12 world tangent (paper eq. 8 with the geometric part and the exact cavity load
+  stiffness), or its material part alone (:meth:`EquilibriumSystem.material_system`);
 - one pass per cable group gives its columns, loads and span / point stiffness blocks;
-- every block is added into the lower band of the tangent by a constant index that also
-  symmetrises (weights ½ on the mirrored entries): the symmetric tangent the solver factors,
-  in LAPACK's lower band layout with the half-bandwidth of the scene (cables that skip frames
-  widen it), factored and solved by the compiled band Cholesky.
+- every block is added by a constant index into one of two band storages: the lower band of the
+  symmetric part (weights ½ on the mirrored entries, the control tick's Cholesky,
+  :meth:`EquilibriumSystem.linearise`), or the general band of the exact, non-symmetric tangent
+  (Newton's LU, :meth:`EquilibriumSystem.exact_system`), with the half-bandwidth of the scene
+  (cables that skip frames widen it).
 
-Actuator groups other than :class:`~cbha_inverse.core.actuation.CableGroup` and
-:class:`~cbha_inverse.core.cavity_linear.LinearCavityGroup` (e.g. the skinned mesh cavities) are
-evaluated through their own ``evaluate`` / ``load_tangent`` (slower, same result; they couple
-every frame, so the band is then the full lower triangle).
+Skinned-mesh cavities (:class:`~cbha_inverse.core.actuation.cavities.CavityGroup`, the exact
+but slow cavity model) are evaluated through their own ``evaluate``; they couple every frame, so
+the band is then the full matrix.
 """
 
-from cbha_inverse.core.actuation import CableGroup
-from cbha_inverse.core.band_kernels import band_cholesky, band_solve
-from cbha_inverse.core.cavity_linear import LinearCavityGroup
-from cbha_inverse.core.tick_cables import CableTerms
-from cbha_inverse.core.tick_kernels import link_pass, scatter_add
+from cbha_inverse.core._kernels.band import band_cholesky, band_solve, scatter_add
+from cbha_inverse.core._kernels.links import link_pass
+from cbha_inverse.core.actuation.cables import CableGroup, CableTerms
+from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 import numpy as np
 from scipy.linalg import lapack
 
 
-class TickModel:
+class EquilibriumSystem:
     """
-    Preallocated fused evaluator of everything a linearisation tick needs.
+    Preallocated compiled evaluator of the equilibrium of a chain and its actuators.
 
     Parameters
     ----------
     model : cbha_inverse.core.chain.ChainModel
         The chain.
-    actuators : cbha_inverse.core.actuation.ActuatorSet
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
         The actuators (``m``).
     external : (6n,) ndarray  [N, N*m]
         Constant external wrenches on frames 1..n (gravity).
@@ -71,7 +71,10 @@ class TickModel:
             cols = [position[name] for name in group.names]
             if isinstance(group, CableGroup):
                 self._cables.append(CableTerms(group, cols, model.n_frames))
-            elif isinstance(group, LinearCavityGroup) and _matches_links(group, model):
+            elif isinstance(group, LinearCavityGroup):
+                if not _matches_links(group, model):
+                    raise ValueError(f'condensed cavities {group.names}: every part must lie on '
+                                     'one link and carry its rest offset and rotation')
                 for e in range(group.lower.size):
                     col = cols[group.owner[e]]
                     g0[group.lower[e], col] += group.g0[e]
@@ -84,7 +87,6 @@ class TickModel:
         self._cavity_wrench = g0 if has_cavities else np.zeros((n, 0, 6))
         self._cavity_stiffness = hess if has_cavities else np.zeros((n, 0, 6, 6))
         self._rhs = np.zeros((6 * n, m + 1))
-        self._generic_loads = []
         # values of the assembly: link blocks, cable pair blocks, cable point moments
         rows, cols = [], []
         f = np.arange(n)
@@ -175,14 +177,11 @@ class TickModel:
                 pair_values[:] = 0.0
                 moment_values[:] = 0.0
         rhs[:, 0] += load_factor * self.external
-        self._generic_loads = []
         for group, cols in self._generic:
             wrenches, _ = group.evaluate(positions, rotations, False)
             jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
             rhs[:, 1 + cols] = jat.T
             rhs[:, 0] += actuation[cols] @ jat
-            if hasattr(group, 'load_tangent') and not material:
-                self._generic_loads.append((group, positions, rotations, actuation[cols]))
         return rhs
 
     def linearise(self, positions, rotations, actuation):
@@ -256,21 +255,12 @@ class TickModel:
 
         """
         scatter_add(self._exact_index, self._values, self._ones, self._exact_band)
-        tangent = self._exact_band[:-1].reshape(self.size, 3 * self.kd + 1)
-        for group, pos, rot, amount in self._generic_loads:
-            load = group.load_tangent(pos, rot, amount, False)
-            tangent.reshape(-1)[self._exact_slots] += load.reshape(-1)[self._exact_dense_slots]
-        return tangent
+        return self._exact_band[:-1].reshape(self.size, 3 * self.kd + 1)
 
     def _symmetric_band(self):
         """Scatter the blocks of the last :meth:`evaluate` into the symmetric lower band."""
         scatter_add(self._index, self._values, self._weights, self._band)
-        tangent = self._band[:-1].reshape(self.size, self.kd + 1)
-        for group, pos, rot, amount in self._generic_loads:
-            load = group.load_tangent(pos, rot, amount, True)
-            tangent.reshape(-1)[self._band_slots] += (
-                0.5 * (load + load.T)).reshape(-1)[self._dense_slots]
-        return tangent
+        return self._band[:-1].reshape(self.size, self.kd + 1)
 
     @staticmethod
     def factor(tangent):
@@ -369,6 +359,32 @@ class TickModel:
             return None
         lu, pivots, info = lapack.dgbtrf(tangent.T, self.kd, self.kd, overwrite_ab=1)
         return BandLU(lu, pivots, self.kd) if info == 0 else None
+
+    def blocks(self, tangent):
+        """
+        Return the lower band of :meth:`linearise` as block-tridiagonal blocks.
+
+        Parameters
+        ----------
+        tangent : (6n, 12) ndarray
+            From :meth:`linearise` of a chain whose actuators act within a link.
+
+        Returns
+        -------
+        diagonal : (n, 6, 6) ndarray
+            Diagonal blocks.
+        upper : (n - 1, 6, 6) ndarray
+            ``upper[i]`` = block (i, i + 1).
+
+        """
+        if self.kd != 11:
+            raise ValueError(f'the tangent is not block tridiagonal (half-bandwidth {self.kd})')
+        band = np.asarray(tangent).reshape(self.n, 6, 12)
+        a, b = np.meshgrid(np.arange(6), np.arange(6), indexing='ij')
+        low, high = np.minimum(a, b), np.maximum(a, b)
+        diagonal = band[:, low, high - low]
+        upper = band[:-1, a, 6 + b - a]
+        return diagonal, upper
 
     def dense(self, tangent):
         """

@@ -1,17 +1,15 @@
 """
-Cable part of the fused tick (:mod:`cbha_inverse.core.tick`): routing data and compiled kernel.
+Compiled cable terms of the equilibrium (DESIGN §5): columns of ``J_aᵀ``, loads, load stiffness.
 
-Same quantities as :class:`cbha_inverse.core.actuation.CableGroup` (``evaluate`` and the
-symmetric ``load_tangent``): :func:`cable_pass` (numba) computes the cable columns, their loads,
-the span stiffness ``C P Cᵀ`` (``P = λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per
-frame pair and the point moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``; :class:`CableTerms` holds
-the constant routing and the index arrays (which frame-pair block receives each span's
-stiffness and which frame's moment block each point's).
+:func:`cable_pass` (numba) computes the cable columns, their loads, the span stiffness
+``C P Cᵀ`` (``P = λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the
+exact point moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``, for the routing data of
+:class:`cbha_inverse.core.actuation.cables.CableTerms`.
 """
 
 import math
 
-from cbha_inverse.core.tick_kernels import hat_into
+from cbha_inverse.core._kernels.so3 import hat_into
 import numba
 import numpy as np
 
@@ -22,73 +20,6 @@ _CABLE_SIGN = np.array([1.0, 1.0, -1.0, -1.0])
 _CABLE_PRODUCT = np.array([[0, -1, -1], [1, 3, -1], [2, 4, 5]])
 
 
-class CableTerms:
-    """
-    Precomputed evaluator of one :class:`~cbha_inverse.core.actuation.CableGroup` for a tick.
-
-    Parameters
-    ----------
-    group : cbha_inverse.core.actuation.CableGroup
-        The cables.
-    columns : sequence of int
-        Their columns in the actuator order.
-    n_frames : int
-        Number of frames (base included).
-
-    Attributes
-    ----------
-    pairs : list of (int, int)
-        Frame pairs ``(a, b)`` of the spans, one 12 x 12 stiffness block each.
-    moment_frames : list of int
-        Frames carrying routing points, one 3 x 3 moment block each.
-
-    """
-
-    def __init__(self, group, columns, n_frames):
-        """Precompute the routing and the block of every span and point."""
-        self.n_frames = int(n_frames)
-        self.columns = np.asarray(columns, dtype=np.int64)
-        self.frames = np.ascontiguousarray(group.frames, dtype=np.int64)
-        self.offsets = np.ascontiguousarray(group.offsets, dtype=float)
-        self.start = np.ascontiguousarray(group.segment_start, dtype=np.int64)
-        self.end = np.ascontiguousarray(group.segment_end, dtype=np.int64)
-        self.span_owner = np.ascontiguousarray(group._segment_owner, dtype=np.int64)
-        self.point_owner = np.ascontiguousarray(group._point_owner, dtype=np.int64)
-        pairs = {}
-        self.span_pair = np.array([
-            pairs.setdefault((int(self.frames[s]), int(self.frames[e])), len(pairs))
-            for s, e in zip(self.start, self.end)], dtype=np.int64)
-        self.pairs = list(pairs)
-        self.moment_frames = sorted({int(f) for f in self.frames})
-        slot = {f: i for i, f in enumerate(self.moment_frames)}
-        self.point_slot = np.array([slot[int(f)] for f in self.frames], dtype=np.int64)
-
-    def evaluate(self, positions, rotations, actuation, rhs, pair_values, moment_values):
-        """
-        Add the cable columns and loads to ``rhs``; write the stiffness blocks.
-
-        Parameters
-        ----------
-        positions : (n + 1, 3) ndarray  [m]
-            Frame origins.
-        rotations : (n + 1, 3, 3) ndarray
-            Frame rotations.
-        actuation : (m,) ndarray  [N]
-            All actuators (the cable tensions are taken at :attr:`columns`).
-        rhs : (6n, m + 1) ndarray
-            C-contiguous; residual (column 0) and ``J_aᵀ`` (columns ``1 + j``), added to.
-        pair_values : (P * 144,) ndarray
-            Receives the span stiffness blocks summed per frame pair (12 x 12 each).
-        moment_values : (F * 9,) ndarray
-            Receives the point moment blocks summed per frame (3 x 3 each).
-
-        """
-        cable_pass(positions, rotations, actuation, self.frames, self.offsets, self.start,
-                   self.end, self.span_owner, self.point_owner, self.columns,
-                   self.span_pair, self.point_slot, rhs, pair_values.reshape(-1, 12, 12),
-                   moment_values.reshape(-1, 3, 3))
-
-
 @numba.njit(cache=True)
 def cable_pass(positions, rotations, actuation, frames, offsets, span_start, span_end,
                span_owner, point_owner, columns, span_pair, point_slot, rhs, pair_values,
@@ -96,8 +27,8 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
     """
     Add one cable group's columns and loads to ``rhs``; write its stiffness blocks.
 
-    Same quantities as :class:`cbha_inverse.core.actuation.CableGroup` (``evaluate`` and the
-    symmetric ``load_tangent``).
+    The span blocks are symmetric; the point moment blocks are the exact (non-symmetric) load
+    stiffness, whose symmetric part the control tick keeps.
 
     Parameters
     ----------

@@ -1,24 +1,22 @@
 """
-Compile the numba kernels of the control tick into numba's on-disk cache (run at install).
+Compile the numba kernels into numba's on-disk cache (run at install).
 
-The per-tick kernels (:mod:`cbha_inverse.core.tick_kernels`,
-:mod:`cbha_inverse.core.tick_cables`, :mod:`cbha_inverse.core.band_kernels`,
-:mod:`cbha_inverse.core.tick_math`, :mod:`cbha_inverse.core.qp_kernels`) are
-``numba.njit(cache=True)``: the first process that calls them compiles them (~15 s on the 2-core
-development machine) and writes the machine code to ``__pycache__`` next to the sources (or to
-``NUMBA_CACHE_DIR``); later processes load it (~0.25 s for a first tick). This module runs
-representative ticks on every scene and QP solver, and one solve of the compiled BTD backend of
-the static solver (:mod:`cbha_inverse.core.btd`), so that the compile happens once, at install,
-and never inside a timed test, the demo or a control loop.
+The kernels (every module of :mod:`cbha_inverse.core._kernels`) are ``numba.njit(cache=True)``:
+the first process that calls them compiles them (~15 s on the 2-core development machine) and
+writes the machine code to ``__pycache__`` next to the sources (or to ``NUMBA_CACHE_DIR``); later
+processes load it (~0.25 s for a first tick). This module runs representative ticks and static
+solves on every scene and QP solver, and one solve of the compiled BTD backend
+(:mod:`cbha_inverse.core.linalg.btd`, the benchmark's), so that the compile happens once, at
+install, and never inside a timed test, the demo or a control loop.
 
-Usage: ``python -m cbha_inverse.core.warmup [--scenes NAME ...]``. Pure numerics, no rclpy.
+Usage: ``python -m cbha_inverse.warmup [--scenes NAME ...]``. Pure numerics, no rclpy.
 """
 
 import argparse
 import sys
 import time
 
-from cbha_inverse.core import btd
+from cbha_inverse.core.linalg import btd
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -102,6 +100,8 @@ def warm_scene(name):
     scene = load_scene(name)
     radius = 0.06 if name == 'cbha' else 0.01
     targets = warm_targets(scene.workspace_center, radius)
+    # the static solver's kernels (forward model, plant): one solve at mid actuation
+    scene.forward(0.5 * (scene.lower_bounds + scene.upper_bounds))
     ticks = 0
     for options in option_sets(len(scene.actuator_names),
                                scene.upper_bounds - scene.lower_bounds):
@@ -134,8 +134,8 @@ def main(argv=None):
                         help='scenes to run (default: all)')
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    # the compiled BTD backend of the static solver (plant, forward model, the tick's fallback):
-    # its inputs are normalised to one type, so one small solve compiles all it ever needs
+    # the compiled BTD backend (its inputs are normalised to one type, so one small solve
+    # compiles all it ever needs)
     btd.solve(np.tile(np.eye(6), (2, 1, 1)), np.zeros((1, 6, 6)), np.ones(12))
     ran = []
     for name in args.scenes:

@@ -23,15 +23,15 @@ and ``s_P`` scale factors that give both terms the magnitude of the tracking ter
 it picks the least-effort solution among redundant ones (no co-contraction) and makes the QP
 strictly convex; the proximal term smooths the actuation from tick to tick and vanishes at a fixed
 point, so it adds no steady-state error. Defaults (see
-:class:`cbha_inverse.core.control.InverseOptions`): ``ε_E = 1e-6`` (its bias on a reachable target
-is a few micrometres at most), ``ε_P = 1e-4`` (enough to stop redundant tendons from alternating
-between equivalent solutions on a saturated target).
+:class:`cbha_inverse.core.inverse.results.InverseOptions`): ``ε_E = 1e-6`` (its bias on a
+reachable target is a few micrometres at most), ``ε_P = 1e-4`` (enough to stop redundant
+tendons from alternating between equivalent solutions on a saturated target).
 """
 
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from cbha_inverse.core import qp_kernels
+from cbha_inverse.core._kernels import qp as qp_kernels
 import numpy as np
 
 
@@ -72,7 +72,7 @@ def project_constraints(factorization, jat, residual, effectors, levers, effecto
         ``J_aᵀ`` stored by rows (one row per actuator) over frames ``1..n``.
     residual : (6n,) ndarray  [N, N*m]
         ``f(q) + f_ext + J_aᵀ λ_prev`` at the current state.
-    effectors : cbha_inverse.core.effectors.PointEffectors
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
         The effector points.
     levers : (k, 3) ndarray  [m]
         Effector levers at the current state.

@@ -13,58 +13,46 @@ the frame chain is block tridiagonal). Storage::
 Backends (all exact direct methods; ``method='auto'`` is ``'compiled'`` at every size, see
 :func:`choose_method` and the table below):
 
-- ``'compiled'``: numba kernels (:func:`~cbha_inverse.core.band_kernels.btd_band_cholesky`,
-  :func:`~cbha_inverse.core.band_kernels.btd_band_solve`): one call writes the (bn, 2b) lower
+- ``'compiled'``: numba kernels (:func:`~cbha_inverse.core._kernels.band.btd_band_cholesky`,
+  :func:`~cbha_inverse.core._kernels.band.btd_band_solve`): one call writes the (bn, 2b) lower
   band (C order, ``band[c, r - c] = A[r, c]``) straight from the blocks and factors it, one call
   solves all right-hand sides. No LAPACK wrapper, so ~5 us less fixed cost per call at small n,
-  and for b = 6 the factor loops have constant trip counts; the default;
+  and for b = 6 the factor loops have constant trip counts; the default, and the factorisation
+  of the control tick and the static solver
+  (:class:`cbha_inverse.core.system.EquilibriumSystem`);
 - ``'banded'``: LAPACK banded Cholesky ``dpbtrf``/``dpbtrs`` on the (2b, bn) lower band storage
-  (half-bandwidth 2b - 1 = 11), built from the blocks by two strided copies. The band of a
-  block-tridiagonal matrix holds exactly its blocks, so this *is* a block-tridiagonal
-  Cholesky, run by compiled code;
-- ``'hybrid'``: the same ``dpbtrf`` factor scattered into a dense triangle and solved with
-  ``dpotrs`` (level-3 ``dtrsm`` on all right-hand sides at once instead of ``dpbtrs``'s
-  column-by-column ``dtbsv``); slow with threaded BLAS (see
-  :func:`cbha_inverse.core.btd_reference.blas_single_threaded`);
+  (half-bandwidth 2b - 1 = 11), built from the blocks by two strided copies: the comparison
+  point DESIGN §3 asks for;
 - ``'dense'``: LAPACK ``dpotrf``/``dpotrs`` on the assembled (bn x bn) matrix, written through
-  strided block views;
-- ``'cyclic'``: block cyclic reduction, i.e. the block LDL^T (Cholesky) factorisation of the
-  odd-even permuted matrix, each of its log2(n) levels vectorised over all its blocks with
-  batched numpy (``cholesky``, ``inv``, ``matmul``). Exact and O(n), but slower than the band
-  kernels;
-- ``'block'``: the textbook sequential block Cholesky, one Python iteration per block (LAPACK
-  on the 6x6 blocks): the readable reference; its per-block interpreter cost (~10 us) is what
-  the compiled band kernels remove.
+  strided block views: the dense comparison point.
 
 Factorisation + solve of rest tangents of curved 6-DOF frame chains (n blocks, k right-hand
 sides), ``cbha_bench_core`` on the 2-core development machine, ``OPENBLAS_NUM_THREADS=1``,
 microseconds; LAPACK pb = ``dpbtrf`` + ``dpbtrs`` on ready band storage::
 
-        n   k   LAPACK pb   compiled  ratio   hybrid    dense   banded   cyclic    block
-        6   6        10.8        9.7   0.90     26.5     20.3     25.2    181.5    119.2
-        6  20        26.6       11.0   0.41     29.9     23.3     41.8    185.1    125.5
-       16   6        26.9       17.8   0.66     46.1     49.2     42.9    254.5    303.9
-       16  20        68.8       18.4   0.27     56.1     58.7     85.7    262.9    325.3
-      100   6       162.9       84.8   0.52    562.6   2596.1    190.6    620.4   1854.9
-      100  20       431.1       90.0   0.21    736.2   2777.9    461.3    669.4   1959.3
-     1000   6      1618.6      804.0   0.50        -        -   1750.3   3088.9  18579.7
-     1000  20      4305.4      963.0   0.22        -        -   4444.0   3642.1  19754.2
-    10000   6     16341.7     8060.8   0.49        -        -  17410.5  26963.2 184732.0
-    10000  20     43589.5     9809.5   0.23        -        -  44767.2  42972.2 196921.8
+        n   k   LAPACK pb   compiled  ratio    dense   banded
+        6   6        10.8        9.7   0.90     20.3     25.2
+        6  20        26.6       11.0   0.41     23.3     41.8
+       16   6        26.9       17.8   0.66     49.2     42.9
+       16  20        68.8       18.4   0.27     58.7     85.7
+      100   6       162.9       84.8   0.52   2596.1    190.6
+      100  20       431.1       90.0   0.21   2777.9    461.3
+     1000   6      1618.6      804.0   0.50        -   1750.3
+     1000  20      4305.4      963.0   0.22        -   4444.0
+    10000   6     16341.7     8060.8   0.49        -  17410.5
+    10000  20     43589.5     9809.5   0.23        -  44767.2
 
-All but 'compiled' live in :mod:`cbha_inverse.core.btd_reference` (the comparison points of the
-benchmark and the tests' oracles). Every backend detects a matrix that is not positive definite
-and raises :class:`NotPositiveDefiniteError` naming the block;
-:attr:`BTDFactorization.condition_estimate` is the 1-norm condition number estimate (LAPACK
-``dpocon`` for the dense backend, the Hager-Higham estimator with the factor's own solves
-otherwise).
+Every backend detects a matrix that is not positive definite and raises
+:class:`NotPositiveDefiniteError` naming the block; :attr:`BTDFactorization.condition_estimate`
+is the 1-norm condition number estimate (LAPACK ``dpocon`` for the dense backend, the
+Hager-Higham estimator with the factor's own solves otherwise).
 """
 
-from cbha_inverse.core.band_kernels import btd_band_cholesky, btd_band_solve
+from cbha_inverse.core._kernels.band import btd_band_cholesky, btd_band_solve
 import numpy as np
 from scipy.linalg import lapack
 
-METHODS = ('auto', 'compiled', 'hybrid', 'dense', 'banded', 'cyclic', 'block')
+METHODS = ('auto', 'compiled', 'dense', 'banded')
 _MASKS = {}
 
 
@@ -110,6 +98,32 @@ def block_one_norm(diagonal, upper):
     col[1:] += absu.sum(axis=1)        # block (i, i+1) contributes to columns of block i+1
     col[:-1] += absu.sum(axis=2)       # block (i+1, i) = U_i^T contributes to block i
     return float(col.max())
+
+
+def to_dense(diagonal, upper):
+    """
+    Return the dense symmetric matrix of BTD blocks (the dense comparison's input).
+
+    Parameters
+    ----------
+    diagonal : (n, b, b) array_like
+        Diagonal blocks.
+    upper : (n - 1, b, b) array_like
+        Blocks (i, i+1); block (i+1, i) is the transpose.
+
+    Returns
+    -------
+    (bn, bn) ndarray
+
+    """
+    diagonal, upper = _check_blocks(diagonal, upper)
+    n, b = diagonal.shape[:2]
+    out = np.zeros((n, b, n, b))
+    idx = np.arange(n)
+    out[idx, :, idx, :] = diagonal
+    out[idx[:-1], :, idx[1:], :] = upper
+    out[idx[1:], :, idx[:-1], :] = np.swapaxes(upper, 1, 2)
+    return out.reshape(n * b, n * b)
 
 
 def to_lower_banded(diagonal, upper):
@@ -266,7 +280,7 @@ def _kernel_array(array):
 
 def _factor_compiled(diagonal, upper):
     """
-    Compiled band Cholesky backend (numba, :mod:`cbha_inverse.core.band_kernels`).
+    Compiled band Cholesky backend (numba, :mod:`cbha_inverse.core._kernels.band`).
 
     One kernel call writes the (bn, 2b) lower band straight from the blocks and factors it
     within the block-tridiagonal envelope; each solve copies the right-hand sides into a
@@ -308,9 +322,67 @@ def choose_method(n_blocks):
     return 'compiled'
 
 
-_REFERENCE_BACKENDS = {'dense': 'factor_dense', 'hybrid': 'factor_hybrid',
-                       'banded': 'factor_banded', 'cyclic': 'factor_cyclic',
-                       'block': 'factor_block'}
+def _dense_lower(diagonal, upper):
+    """
+    Assemble the dense matrix for LAPACK ``uplo='L'`` without a copy (Fortran order).
+
+    The diagonal and upper blocks are written into a C-ordered array through block views with
+    row stride ``b (bn + 1)`` (slices of a reshaped flat buffer); its transpose is
+    Fortran-contiguous and holds them as the lower triangle.
+    """
+    n, b = diagonal.shape[:2]
+    size = n * b
+    step = b * (size + 1)
+    flat = np.zeros(n * step)
+    flat.reshape(n, step)[:, :b * size].reshape(n, b, size)[:, :, :b] = diagonal
+    flat.reshape(n, step)[:-1, b:b + b * size].reshape(n - 1, b, size)[:, :, :b] = upper
+    return flat[:size * size].reshape(size, size).T
+
+
+def _factor_dense(diagonal, upper):
+    """Dense LAPACK Cholesky backend."""
+    n, b = diagonal.shape[:2]
+    factor, info = lapack.dpotrf(_dense_lower(diagonal, upper), lower=1, clean=0, overwrite_a=1)
+    if info > 0:
+        raise not_pd_error(info - 1, b, factor[info - 1, info - 1], 'dense Cholesky')
+    if info < 0 or not np.isfinite(factor.diagonal()).all():
+        raise ValueError('dense Cholesky failed: non-finite entries or illegal argument')
+    return BTDFactorization('dense', (diagonal, upper), _dense_solver(factor),
+                            dense_factor=factor)
+
+
+def _dense_solver(factor):
+    """Return ``rhs -> A^-1 rhs`` for a dense lower Cholesky factor (``dpotrs``, level 3)."""
+    def solver(rhs):
+        x, _ = lapack.dpotrs(factor, rhs, lower=1)
+        return x
+
+    return solver
+
+
+def _band_cholesky(diagonal, upper):
+    """Banded Cholesky factor (``dpbtrf``) of checked blocks; raises on failure."""
+    b = diagonal.shape[1]
+    factor, info = lapack.dpbtrf(to_lower_banded(diagonal, upper), lower=1, overwrite_ab=1)
+    if info > 0:
+        raise not_pd_error(info - 1, b, factor[0, info - 1], 'banded Cholesky')
+    if info < 0 or not np.isfinite(factor[0]).all():
+        raise ValueError('banded Cholesky failed: non-finite entries or illegal argument')
+    return factor
+
+
+def _factor_banded(diagonal, upper):
+    """LAPACK banded Cholesky backend (dpbtrf / dpbtrs)."""
+    factor = _band_cholesky(diagonal, upper)
+
+    def solver(rhs):
+        x, _ = lapack.dpbtrs(factor, rhs, lower=1)
+        return x
+
+    return BTDFactorization('banded', (diagonal, upper), solver)
+
+
+_BACKENDS = {'compiled': _factor_compiled, 'dense': _factor_dense, 'banded': _factor_banded}
 
 
 def factorize(diagonal, upper, method='auto', max_condition=None):
@@ -323,7 +395,7 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
         Diagonal blocks (symmetric).
     upper : (n - 1, b, b) array_like
         ``upper[i]`` = block (i, i+1); block (i+1, i) is its transpose.
-    method : {'auto', 'compiled', 'hybrid', 'dense', 'banded', 'cyclic', 'block'}
+    method : {'auto', 'compiled', 'dense', 'banded'}
         Backend; 'auto' is 'compiled' (see :func:`choose_method`).
     max_condition : float, optional
         If given, the condition estimate is computed at once and a larger one raises
@@ -347,12 +419,8 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
     diagonal, upper = _check_blocks(diagonal, upper)
     if method == 'auto':
         method = choose_method(diagonal.shape[0])
-    if method == 'compiled':
-        backend = _factor_compiled
-    elif method in _REFERENCE_BACKENDS:
-        from cbha_inverse.core import btd_reference   # imports this module: load lazily
-        backend = getattr(btd_reference, _REFERENCE_BACKENDS[method])
-    else:
+    backend = _BACKENDS.get(method)
+    if backend is None:
         raise ValueError(f'method must be one of {METHODS}, got {method!r}')
     factorization = backend(diagonal, upper)
     if max_condition is not None and not factorization.condition_estimate <= max_condition:

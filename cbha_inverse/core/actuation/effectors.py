@@ -7,7 +7,7 @@ at once. With retract increments ``dp = dx_f + dθ_f × r = dx_f - r × dθ_f`` 
 i.e. the ``J_e`` block of the effector is ``[I, -r^]`` on frame ``f``.
 """
 
-from cbha_inverse.core.actuation import cross
+from cbha_inverse.core.se3 import cross
 import numpy as np
 
 
