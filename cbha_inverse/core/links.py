@@ -14,6 +14,63 @@ the equations).
 
 import numpy as np
 
+#: Largest accepted asymmetry of a compliance, ``max |C_ij - C_ji| / sqrt(C_ii C_jj)``, before it
+#: is symmetrised: the round-off of a condensation (a sparse solve of ~1e5 unknowns and a 6 x 6
+#: inversion, condition up to ~1e8) stays below it, while any modelling error (a wrong coupling,
+#: a transposed offset) is far above.
+COMPLIANCE_SYMMETRY_TOLERANCE = 1e-8
+
+
+def checked_compliance(compliance, name='compliance'):
+    """
+    Check that a 6x6 compliance is finite, symmetric at round-off level and positive definite.
+
+    The one validation of a link compliance (Timoshenko, condensed, read from a segment YAML or
+    given to :meth:`cbha_inverse.core.chain.ChainModel.from_compliances`).
+
+    Parameters
+    ----------
+    compliance : (6, 6) array_like  [m/N, 1/N, rad/(N*m)]
+        The compliance C.
+    name : str
+        What to call it in the error message.
+
+    Returns
+    -------
+    sym : (6, 6) ndarray
+        ``(C + Cᵀ) / 2``.
+    asymmetry : float
+        ``max |C_ij - C_ji| / sqrt(C_ii C_jj)`` before symmetrising.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        (a ``ValueError``) naming ``name``: not (6, 6), not finite, asymmetric beyond
+        :data:`COMPLIANCE_SYMMETRY_TOLERANCE`, or not positive definite.
+
+    """
+    c = np.asarray(compliance, dtype=float)
+    if c.shape != (6, 6):
+        raise np.linalg.LinAlgError(f'{name} must have shape (6, 6), got {c.shape}')
+    if not np.all(np.isfinite(c)):
+        raise np.linalg.LinAlgError(f'{name} contains NaN or inf')
+    diagonal = np.diag(c)
+    if np.any(diagonal <= 0.0):
+        raise np.linalg.LinAlgError(f'{name} is not positive definite (non-positive diagonal '
+                                    'term)')
+    scale = 1.0 / np.sqrt(diagonal)
+    asymmetry = float(np.max(np.abs(c - c.T) * np.outer(scale, scale)))
+    if asymmetry > COMPLIANCE_SYMMETRY_TOLERANCE:
+        raise np.linalg.LinAlgError(
+            f'{name} is asymmetric beyond round-off: {asymmetry:.3e} > '
+            f'{COMPLIANCE_SYMMETRY_TOLERANCE:.0e}')
+    sym = 0.5 * (c + c.T)
+    smallest = np.linalg.eigvalsh(sym * np.outer(scale, scale))[0]
+    if smallest <= 0.0:
+        raise np.linalg.LinAlgError(f'{name} is not positive definite (smallest scaled '
+                                    f'eigenvalue {smallest:.3e})')
+    return sym, asymmetry
+
 
 def cowper_shear_coefficient(poisson_ratio, outer_radius, inner_radius=0.0):
     """

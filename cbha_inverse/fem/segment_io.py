@@ -10,6 +10,8 @@ import json
 from pathlib import Path
 
 from cbha_inverse import __version__
+from cbha_inverse.core.links import checked_compliance
+from cbha_inverse.errors import ConfigError
 import numpy as np
 import yaml
 
@@ -267,11 +269,10 @@ def load_segment(path):
     if compliance.shape != (6, 6) or offset.shape != (3,) or rotation.shape != (3, 3):
         raise ValueError(f'{path}: compliance (6, 6), rest_offset (3,), rest_rotation (3, 3) '
                          'expected')
-    if not np.allclose(compliance, compliance.T, rtol=1e-12, atol=0.0):
-        raise ValueError(f'{path}: compliance is not symmetric')
-    scale = 1.0 / np.sqrt(np.abs(np.diag(compliance)))
-    if np.linalg.eigvalsh(compliance * np.outer(scale, scale))[0] <= 0.0:
-        raise ValueError(f'{path}: compliance is not positive definite')
+    try:
+        compliance, _ = checked_compliance(compliance, 'the matrix')
+    except np.linalg.LinAlgError as exc:
+        raise ConfigError(path, 'compliance', str(exc)) from None
     cavities = tuple(Cavity(c['name'], *read_cavity(path.parent / c['file']))
                      for c in data.get('cavities') or [])
     known = {'name', 'compliance', 'rest_offset', 'rest_rotation', 'mass_kg', 'cavities'}
