@@ -50,6 +50,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 import weakref
 
+from cbha_inverse.core._kernels.residual import residual_measures
 from cbha_inverse.core._kernels.retraction import deformation_step, deformed_poses
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.chain import ChainState, checked_array, rest_state
@@ -194,13 +195,6 @@ def _residual_floor(model, length):
     return 64.0 * np.finfo(float).eps * max(k_tt * x_ref + k_tr, (k_tr * x_ref + k_rr) / length)
 
 
-def _scaled(wrenches, length):
-    """Return wrenches with moments divided by the characteristic length."""
-    out = wrenches.copy()
-    out[:, 3:] /= length
-    return out
-
-
 _SYSTEMS = weakref.WeakKeyDictionary()
 
 
@@ -242,7 +236,8 @@ class _Problem:
         self.model = model
         self.system = _system(model, actuators)
         self.actuation = actuation
-        self.external = external
+        self.external = np.ascontiguousarray(external, dtype=float).reshape(-1)
+        self._no_extra = np.zeros(6 * model.n_links)
         self.load_function = load_function
         self.load_tangent = load_tangent
         self.tolerance = float(tolerance)
@@ -257,25 +252,21 @@ class _Problem:
     def point(self, state, lam):
         """Evaluate a state at load factor ``lam`` (residual, convergence test)."""
         n = self.model.n_links
-        rhs = self.system.evaluate(state.positions, state.rotations, lam * self.actuation)
+        actuation = lam * self.actuation
+        rhs = self.system.evaluate(state.positions, state.rotations, actuation)
         self._evaluated = (state, lam)
-        loads = lam * (self.external + (rhs[:, 1:] @ self.actuation).reshape(n, 6))
-        res = rhs[:, 0].reshape(n, 6) + lam * self.external
+        extra = self._no_extra
         if self.load_function is not None:
             extra = np.asarray(self.load_function(state), dtype=float)
             if extra.shape != (n, 6):
                 raise ValueError(f'load_function must return shape {(n, 6)}')
-            loads += lam * extra
-            res += lam * extra
-        scaled = _scaled(res, self.length)
-        r_two = float(np.linalg.norm(scaled))
+            extra = np.ascontiguousarray(extra.reshape(-1))
+        res = np.empty(6 * n)
+        measure, r_two, norm, scale = residual_measures(rhs, actuation, self.external, extra,
+                                                        lam, self.length, res)
+        res = res.reshape(n, 6)
         if self.absolute is not None:
-            measure = float(np.linalg.norm(res))
-            return _Point(state, res, measure, r_two, measure <= self.absolute)
-        internal = res - loads
-        scale = max(np.abs(_scaled(loads, self.length)).max(),
-                    np.abs(_scaled(internal, self.length)).max())
-        measure = float(np.abs(scaled).max())
+            return _Point(state, res, norm, r_two, norm <= self.absolute)
         return _Point(state, res, measure, r_two, measure <= self.tolerance * scale + self.floor)
 
     def exact_step(self, state, lam, res):

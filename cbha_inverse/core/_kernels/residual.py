@@ -1,0 +1,69 @@
+"""
+Compiled convergence measures of the static solver's residual (DESIGN §3, paper eq. 9).
+
+:func:`residual_measures` adds the dead loads to the residual of a linearisation pass and
+returns, in one loop, the norms :mod:`cbha_inverse.core.statics` tests convergence with.
+"""
+
+import math
+
+import numba
+
+
+@numba.njit(cache=True)
+def residual_measures(rhs, actuation, dead, extra, load_factor, length, out):
+    """
+    Write the residual ``r = f(q) + lam (f_dead + J_aᵀ λ + f_extra)`` and return its measures.
+
+    Moments are divided by the chain length (``r_scaled`` in N) for the relative measures.
+
+    Parameters
+    ----------
+    rhs : (6n, m + 1) ndarray
+        A linearisation pass at the actuation ``lam λ``, without dead loads: column 0 is
+        ``f(q) + J_aᵀ (lam λ)``, columns 1..m are ``J_aᵀ``.
+    actuation : (m,) ndarray  [N, Pa]
+        ``lam λ``.
+    dead : (6n,) ndarray  [N, N*m]
+        ``f_dead``.
+    extra : (6n,) ndarray  [N, N*m]
+        ``f_extra`` (user follower loads at the state; zeros without).
+    load_factor : float
+        ``lam``.
+    length : float  [m]
+        Chain length.
+    out : (6n,) ndarray
+        Receives ``r``.
+
+    Returns
+    -------
+    measure : float  [N]
+        ``max |r_scaled|`` (``inf`` if any component is not finite).
+    scaled_norm : float  [N]
+        ``|r_scaled|_2`` (the line search's merit).
+    norm : float  [N, N*m]
+        ``|r|_2``.
+    load_scale : float  [N]
+        Largest scaled component of the applied loads and of the internal wrenches.
+
+    """
+    size, width = rhs.shape
+    measure, squares, squares_raw, load_scale = 0.0, 0.0, 0.0, 0.0
+    finite = True
+    for row in range(size):
+        load = load_factor * (dead[row] + extra[row])
+        for j in range(width - 1):
+            load += rhs[row, 1 + j] * actuation[j]
+        r = rhs[row, 0] + load_factor * (dead[row] + extra[row])
+        out[row] = r
+        if not math.isfinite(r):
+            finite = False
+        weight = 1.0 if row % 6 < 3 else 1.0 / length
+        scaled = r * weight
+        measure = max(measure, abs(scaled))
+        squares += scaled * scaled
+        squares_raw += r * r
+        load_scale = max(load_scale, abs(load * weight), abs((r - load) * weight))
+    if not finite:
+        return math.inf, math.inf, math.inf, load_scale
+    return measure, math.sqrt(squares), math.sqrt(squares_raw), load_scale
