@@ -1,11 +1,29 @@
 """The actuation QP (proxsuite and projected Gauss-Seidel) and the closed-loop target corrector."""
 
+from typing import NamedTuple
+
 from cbha_inverse.core.inverse.qp import (ActiveSetQP, ActuationQP, binding_bounds,
                                           projected_gauss_seidel)
-from cbha_inverse.core.inverse.qp_problem import actuation_qp, Projection
+from cbha_inverse.core.inverse.qp_problem import qp_matrices, qp_problem
 from cbha_inverse.core.inverse.solver import TargetCorrector
 import numpy as np
 import pytest
+
+
+class Projection(NamedTuple):
+    """The projected mechanics of a test problem (paper eq. 11-12)."""
+
+    w_ea: np.ndarray
+    w_aa: np.ndarray
+    delta_free: np.ndarray
+    solved: object
+
+
+def actuation_qp(projection, previous, lower_bounds, upper_bounds, scale, rate_limit=None):
+    """Build the tick's QP (default weights) from a projection, as the solver does."""
+    matrices = qp_matrices(projection.w_ea, projection.w_aa, scale)
+    return qp_problem(matrices, projection.delta_free, previous, lower_bounds, upper_bounds,
+                      rate_limit=rate_limit)
 
 
 def _problem(rng, k=3, m=8, gap=0.01, previous=None, rate=None):

@@ -17,7 +17,6 @@ import numpy as np
 import scipy.sparse.linalg as spla
 
 
-
 @dataclass(frozen=True)
 class CondensedSegment:
     """

@@ -28,78 +28,10 @@ reachable target is a few micrometres at most), ``ε_P = 1e-4`` (enough to stop 
 tendons from alternating between equivalent solutions on a saturated target).
 """
 
-from dataclasses import dataclass
 from typing import NamedTuple
 
 from cbha_inverse.core._kernels import qp as qp_kernels
 import numpy as np
-
-
-@dataclass(frozen=True)
-class Projection:
-    """
-    The mechanics projected onto the effectors and actuators (paper eq. 11-12).
-
-    Attributes
-    ----------
-    w_ea : (3k, m) ndarray
-        Effector-actuator compliance ``J_e K⁻¹ J_aᵀ``  [m per N or Pa].
-    w_aa : (m, m) ndarray
-        Actuator-actuator compliance ``J_a K⁻¹ J_aᵀ``.
-    delta_free : (3k,) ndarray  [m]
-        Effector-to-target gap of the linearised model without actuation.
-    solved : (6n, m + 1) ndarray
-        ``K⁻¹ [J_aᵀ, r]``, reused for the state update.
-
-    """
-
-    w_ea: np.ndarray
-    w_aa: np.ndarray
-    delta_free: np.ndarray
-    solved: np.ndarray
-
-
-def project_constraints(factorization, jat, residual, effectors, levers, effector_positions,
-                        targets, previous):
-    """
-    Compute ``W_ea``, ``W_aa`` and ``δ_e^free`` with one multi-RHS solve (paper eq. 11-12).
-
-    Parameters
-    ----------
-    factorization : object with ``solve(rhs)``
-        Factorization of the tangent stiffness ``K`` (6n x 6n, block tridiagonal).
-    jat : (m, 6n) ndarray
-        ``J_aᵀ`` stored by rows (one row per actuator) over frames ``1..n``.
-    residual : (6n,) ndarray  [N, N*m]
-        ``f(q) + f_ext + J_aᵀ λ_prev`` at the current state.
-    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
-        The effector points.
-    levers : (k, 3) ndarray  [m]
-        Effector levers at the current state.
-    effector_positions : (k, 3) ndarray  [m]
-        Effector positions at the current state.
-    targets : (k, 3) ndarray  [m]
-        Desired positions.
-    previous : (m,) ndarray
-        ``λ_prev`` (the actuation contained in ``residual``).
-
-    Returns
-    -------
-    Projection
-        The projected problem.
-
-    """
-    m = jat.shape[0]
-    rhs = np.empty((jat.shape[1], m + 1))
-    rhs[:, :m] = jat.T
-    rhs[:, m] = residual
-    solved = factorization.solve(rhs)
-    moved = effectors.apply_jacobian(solved.reshape(-1, 6, m + 1), levers)
-    w_ea = moved[:, :, :m].reshape(-1, m)
-    w_aa = jat @ solved[:, :m]
-    delta_free = ((effector_positions - targets).reshape(-1) + moved[:, :, m].reshape(-1)
-                  - w_ea @ previous)
-    return Projection(w_ea, w_aa, delta_free, solved)
 
 
 class QPProblem(NamedTuple):
@@ -131,40 +63,6 @@ class QPProblem(NamedTuple):
     previous: np.ndarray
     tracking_hessian: np.ndarray
     tracking_gradient: np.ndarray
-
-
-def actuation_qp(projection, previous, lower_bounds, upper_bounds, scale, *,
-                 energy_weight=1e-6, proximal_weight=1e-4, rate_limit=None):
-    """
-    Build the regularised, normalised QP of paper eq. 13 (module docstring).
-
-    Parameters
-    ----------
-    projection : Projection
-        From :func:`project_constraints`.
-    previous : (m,) ndarray
-        ``λ_prev``.
-    lower_bounds, upper_bounds : (m,) ndarray
-        Actuator bounds.
-    scale : (m,) ndarray
-        ``σ`` (actuator range), positive and finite.
-    energy_weight : float
-        ``ε_E`` (unit-free).
-    proximal_weight : float
-        ``ε_P`` (unit-free).
-    rate_limit : (m,) ndarray or None
-        Largest change of each actuator per tick (same unit as the actuation).
-
-    Returns
-    -------
-    QPProblem
-        The problem, ready for :class:`ActuationQP` or :func:`projected_gauss_seidel`.
-
-    """
-    matrices = qp_matrices(projection.w_ea, projection.w_aa, scale,
-                           energy_weight=energy_weight, proximal_weight=proximal_weight)
-    return qp_problem(matrices, projection.delta_free, previous, lower_bounds, upper_bounds,
-                      rate_limit=rate_limit)
 
 
 class QPMatrices(NamedTuple):
