@@ -103,7 +103,7 @@ def band_solve(factor, rhs):
 
 
 #: band width 2b of the frame chain's block-tridiagonal matrices (b = 6), a compile-time constant
-#: of :func:`_cholesky_width12` and :func:`_solve_width12`
+#: of :func:`_cholesky_width12`
 FRAME_BAND_WIDTH = 12
 
 
@@ -136,36 +136,6 @@ def _cholesky_width12(band):
                 target[a - b] -= column[a] * weight
     # the last 11 columns: the envelope ends at the matrix end
     return _cholesky_columns(band, full)
-
-
-@numba.njit(cache=True)
-def _solve_width12(factor, rhs):
-    """
-    :func:`band_solve` for ``kd + 1 = 12`` (the band width a compile-time constant).
-
-    The loops over the band keep their run-time length (``min(11, N - 1 - j)``): the innermost
-    loop runs over the right-hand sides, and unrolling the band loop around it measured slower.
-    """
-    size = factor.shape[0]
-    n_rhs = rhs.shape[1]
-    for j in range(size):
-        inverse = 1.0 / factor[j, 0]
-        for col in range(n_rhs):
-            rhs[j, col] *= inverse
-        below = min(FRAME_BAND_WIDTH - 1, size - 1 - j)
-        for a in range(1, below + 1):
-            weight = factor[j, a]
-            for col in range(n_rhs):
-                rhs[j + a, col] -= weight * rhs[j, col]
-    for j in range(size - 1, -1, -1):
-        below = min(FRAME_BAND_WIDTH - 1, size - 1 - j)
-        for a in range(1, below + 1):
-            weight = factor[j, a]
-            for col in range(n_rhs):
-                rhs[j, col] -= weight * rhs[j + a, col]
-        inverse = 1.0 / factor[j, 0]
-        for col in range(n_rhs):
-            rhs[j, col] *= inverse
 
 
 @numba.njit(cache=True)
@@ -206,25 +176,6 @@ def btd_band_cholesky(diagonal, upper):
                 for m in range(b):
                     row[b - i + m] = upper[k, i, m]
     return band, band_cholesky(band)
-
-
-@numba.njit(cache=True)
-def btd_band_solve(factor, rhs):
-    """
-    Solve ``L Lᵀ X = rhs`` in place with a factor of :func:`btd_band_cholesky`.
-
-    Parameters
-    ----------
-    factor : (N, kd + 1) ndarray
-        ``L`` in lower band storage.
-    rhs : (N, c) ndarray
-        Right-hand sides (C order), overwritten by ``X``.
-
-    """
-    if factor.shape[1] == FRAME_BAND_WIDTH:
-        _solve_width12(factor, rhs)
-    else:
-        band_solve(factor, rhs)
 
 
 @numba.njit(cache=True)

@@ -14,7 +14,7 @@ Backends (all exact direct methods; ``method='auto'`` is ``'compiled'`` at every
 :func:`choose_method` and the table below):
 
 - ``'compiled'``: numba kernels (:func:`~cbha_inverse.core._kernels.band.btd_band_cholesky`,
-  :func:`~cbha_inverse.core._kernels.band.btd_band_solve`): one call writes the (bn, 2b) lower
+  :func:`~cbha_inverse.core._kernels.band.band_solve`): one call writes the (bn, 2b) lower
   band (C order, ``band[c, r - c] = A[r, c]``) straight from the blocks and factors it, one call
   solves all right-hand sides. No LAPACK wrapper, so ~5 us less fixed cost per call at small n,
   and for b = 6 the factor loops have constant trip counts; the default, and the factorisation
@@ -48,7 +48,7 @@ is the 1-norm condition number estimate (LAPACK ``dpocon`` for the dense backend
 Hager-Higham estimator with the factor's own solves otherwise).
 """
 
-from cbha_inverse.core._kernels.band import btd_band_cholesky, btd_band_solve
+from cbha_inverse.core._kernels.band import btd_band_cholesky, band_solve
 import numpy as np
 from scipy.linalg import lapack
 
@@ -296,7 +296,7 @@ def _factor_compiled(diagonal, upper):
 
     def solver(rhs):
         x = np.array(rhs, dtype=np.float64, order='C')
-        btd_band_solve(factor, x)
+        band_solve(factor, x)
         return x
 
     return BTDFactorization('compiled', (diagonal, upper), solver)
