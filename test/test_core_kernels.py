@@ -1,4 +1,4 @@
-"""Tick helpers (Jl⁻¹, log/exp, retraction, band Cholesky, band LU) and the solver's fallbacks."""
+"""Kernels (Jl⁻¹, log/exp, retraction, band Cholesky), band LU and the solver's fallbacks."""
 
 from cbha_inverse.core._kernels.band import band_cholesky, band_solve
 from cbha_inverse.core._kernels.retraction import retract_frames

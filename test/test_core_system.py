@@ -1,4 +1,4 @@
-"""The fused tick model against the reference assembly, actuator columns and load stiffness."""
+"""The compiled equilibrium system against the numpy oracles, finite differences and warm-up."""
 
 import subprocess
 import sys
