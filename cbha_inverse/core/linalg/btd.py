@@ -48,7 +48,7 @@ is the 1-norm condition number estimate (LAPACK ``dpocon`` for the dense backend
 Hager-Higham estimator with the factor's own solves otherwise).
 """
 
-from cbha_inverse.core._kernels.band import btd_band_cholesky, band_solve
+from cbha_inverse.core._kernels.band import band_solve, btd_band_cholesky
 import numpy as np
 from scipy.linalg import lapack
 
