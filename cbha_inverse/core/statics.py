@@ -23,7 +23,7 @@ evaluate the same physics with the same code:
   whatever the stresses, compiled band Cholesky): a modified-Newton step, robust where ``T``
   is indefinite or singular (a chain near a limit point, high pressure);
 - the increment is applied in the chain's deformation coordinates
-  (:func:`cbha_inverse.core._kernels.so3.deformation_step`): full Newton steps stay acceptable at
+  (:func:`cbha_inverse.core._kernels.retraction.deformation_step`): full Newton steps stay acceptable at
   large rotations of slender chains (the PL^2/EI = 10 elastica converges from rest in one load
   step of 7 iterations);
 - backtracking line search on the Euclidean norm of the scaled residual (Armijo, factor 1/2),
@@ -383,7 +383,7 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         Dead wrenches at frames 1..n, world axes.
     gravity : (3,) array_like, optional  [m/s^2]
         Acting on the masses lumped at frames 1..n (force only).
-    actuators : cbha_inverse.core.actuation.cables.ActuatorSet, optional
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet, optional
         The actuators (cables, cavities): follower loads ``J_a(q)ᵀ λ`` with their exact load
         stiffness.
     actuation : (m,) array_like, optional  [N or Pa]

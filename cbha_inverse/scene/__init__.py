@@ -57,7 +57,7 @@ class Scene:
     description : str
     base_frame : str
     model : cbha_inverse.core.chain.ChainModel
-    actuators : cbha_inverse.core.actuation.cables.ActuatorSet
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
     effectors : cbha_inverse.core.actuation.effectors.PointEffectors
     gravity : (3,) ndarray or None  [m/s^2]
     actuator_names, effector_names : tuple of str

@@ -512,7 +512,7 @@ def material_tangent(model, state, terms=None):
     """
     Material part of the chain tangent (paper eq. 8): symmetric positive definite BTD blocks.
 
-    Per link ``B^T K B`` (:func:`cbha_inverse.core.links.local_material_tangent`), rotated to
+    Per link ``B^T K B`` (:func:`local_material_tangent`), rotated to
     world axes and assembled over frames 1..n; no geometric (stress) part, so it stays positive
     definite whatever the loads.
 

@@ -14,7 +14,7 @@ def actuator_loads(actuators, actuation):
 
     Parameters
     ----------
-    actuators : cbha_inverse.core.actuation.cables.ActuatorSet
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
         The actuators.
     actuation : (m,) array_like  [N or Pa]
         Applied actuation in column order.

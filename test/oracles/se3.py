@@ -20,8 +20,7 @@ import numpy as np
 
 _SERIES_ANGLE = 1.0
 #: ``|B_(2k+2)| / (2k+2)!``, k = 0..9: Taylor coefficients of ``c(t)`` in ``t**2``, the
-#: ``hat(phi)**2`` coefficient of the inverse left Jacobian (see :func:`_jl_inv_coefficient`;
-#: also used by :mod:`cbha_inverse.core.tick_math`)
+#: ``hat(phi)**2`` coefficient of the inverse left Jacobian (see :func:`_jl_inv_coefficient`)
 JL_SERIES = (1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 47900160.0,
              691.0 / (2730.0 * 479001600.0), 7.0 / (6.0 * 87178291200.0),
              3617.0 / (510.0 * 20922789888000.0), 43867.0 / (798.0 * 6402373705728000.0),

@@ -20,7 +20,7 @@ class ActuatorSet:
         Objects with ``names``, ``n_actuators``, ``lower_bounds``, ``upper_bounds`` and
         ``evaluate(positions, rotations) -> (wrenches (m_g, n + 1, 6), displacements (m_g,))``
         (:class:`CableGroup`, :class:`cbha_inverse.core.actuation.cavities.CavityGroup`,
-        :class:`cbha_inverse.core.actuation.cavities.LinearCavityGroup`).
+        :class:`cbha_inverse.core.actuation.condensed_cavities.LinearCavityGroup`).
     n_frames : int
         Number of frames (base included).
     order : sequence of str, optional

@@ -10,7 +10,7 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
 2. factor ``K`` (compiled band Cholesky) and solve ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS pass,
    giving ``W_ea``, ``W_aa`` and ``δ_e^free``
-   (:func:`cbha_inverse.core._kernels.links.project_effectors`);
+   (:func:`cbha_inverse.core._kernels.projection.project_effectors`);
 3. solve the regularised box QP (proxsuite, warm-started, or the exact active-set solver; projected
    Gauss-Seidel on request or as a fallback if proxsuite reports a failure);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
@@ -76,7 +76,7 @@ class InverseSolver:
     ----------
     model : cbha_inverse.core.chain.ChainModel
         The frame chain.
-    actuators : cbha_inverse.core.actuation.cables.ActuatorSet
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
         Its actuators (``m``).
     effectors : cbha_inverse.core.actuation.effectors.PointEffectors
         Its effector points (``k``).
@@ -263,21 +263,7 @@ class InverseSolver:
         t_projection = time.perf_counter()
         problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._rate)
-        status = 'solved'
-        qp_solver, same_hessian = self.options.qp_solver, not (fresh or prepared)
-        if qp_solver == 'active_set':
-            solution = self._active_set.solve(problem)
-            if not solution.ok:
-                # proxsuite (status checked) takes over; it has not seen this Hessian
-                qp_solver, same_hessian = 'proxsuite', False
-        if qp_solver == 'proxsuite':
-            solution = self._qp.solve(problem, same_hessian=same_hessian)
-            if not solution.ok:
-                status = 'qp_fallback'
-                solution = projected_gauss_seidel(problem)
-                solution = type(solution)(solution.x, self._qp_status_text(solution), 0, True)
-        elif qp_solver == 'gauss_seidel':
-            solution = projected_gauss_seidel(problem)
+        solution, status = self._solve_qp(problem, same_hessian=not (fresh or prepared))
         actuation, gap, largest_gap, largest_move = tick_outcome(
             lin.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
             self.upper_bounds)
@@ -305,6 +291,31 @@ class InverseSolver:
                    'update': t_end - t_qp, 'total': t_end - t_start}
         return TickResult(actuation, effector_positions, status, solution.status,
                           solution.iterations, saturated, largest_gap, lin.residual_norm, timings)
+
+    def _solve_qp(self, problem, same_hessian):
+        """
+        Solve the tick's QP (DESIGN §6 step 3) with the selected solver and its fallbacks.
+
+        The active set falls back to proxsuite when it does not converge, proxsuite (status
+        checked) to projected Gauss-Seidel. Returns ``(solution, status)``, the status
+        ``'solved'`` or ``'qp_fallback'``.
+        """
+        status = 'solved'
+        qp_solver = self.options.qp_solver
+        if qp_solver == 'active_set':
+            solution = self._active_set.solve(problem)
+            if solution.ok:
+                return solution, status
+            # proxsuite (status checked) takes over; it has not seen this Hessian
+            qp_solver, same_hessian = 'proxsuite', False
+        if qp_solver == 'proxsuite':
+            solution = self._qp.solve(problem, same_hessian=same_hessian)
+            if not solution.ok:
+                status = 'qp_fallback'
+                solution = projected_gauss_seidel(problem)
+                solution = type(solution)(solution.x, self._qp_status_text(solution), 0, True)
+            return solution, status
+        return projected_gauss_seidel(problem), status
 
     def prepare(self):
         """
