@@ -44,6 +44,9 @@ class CondensedSegment:
         Target element size used (NaN if the mesh was given).
     timings : dict
         Seconds spent in 'mesh', 'assembly', 'factor', 'solve', 'total'.
+    cavities : tuple of (str, (P, 3) ndarray, (T, 3) int ndarray)
+        The pressure cavities of the segment (name, surface points [m] in segment coordinates,
+        outward-oriented triangles); empty for a segment without cavities.
 
     """
 
@@ -58,6 +61,7 @@ class CondensedSegment:
     asymmetry: float
     mesh_size: float
     timings: dict = field(default_factory=dict)
+    cavities: tuple = ()
 
     @property
     def stiffness(self):
@@ -257,10 +261,11 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
     Returns
     -------
     CondensedSegment
-        Segment compliance at the upper vertebra frame; counts cover all tubes.
+        Segment compliance at the upper vertebra frame; counts cover all tubes; ``cavities``
+        holds one closed surface per tube.
 
     """
-    from cbha_inverse.fem.bellows import geometry_tube_centres
+    from cbha_inverse.fem.bellows import cavity_surface, geometry_tube_centres
     from cbha_inverse.fem.geometry import bellows_tube_mesh
     geom, mat = spec['geometry'], spec['material']
     mesh_size = float(mesh_size or spec['mesh']['mesh_size'])
@@ -284,7 +289,9 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
     return CondensedSegment(compliance, tube.rest_offset, tube.rest_rotation,
                             n_tubes * tube.mass + geom.get('vertebra_mass', 0.0), order,
                             n_tubes * tube.n_nodes, n_tubes * tube.n_elements,
-                            n_tubes * tube.n_dofs, max(asym, tube.asymmetry), mesh_size, timings)
+                            n_tubes * tube.n_dofs, max(asym, tube.asymmetry), mesh_size, timings,
+                            tuple((t['name'], *cavity_surface(geom, i))
+                                  for i, t in enumerate(geom['tubes'])))
 
 
 def condense_segment(mesh_or_geometry, youngs_modulus=None, poisson_ratio=None, *,
