@@ -33,6 +33,8 @@ CONSOLE_SCRIPTS = [
     'cbha_bench_core = cbha_inverse.report.bench_core:main',
     'cbha_bench_inverse = cbha_inverse.report.bench_inverse:main',
     'cbha_fem_report = cbha_inverse.report.fem_report:main',
+    'cbha_launch = cbha_inverse.launcher:main',
+    'cbha_scene = cbha_inverse.scene.cli:main',
 ]
 
 setup(
@@ -44,6 +46,8 @@ setup(
         (f'share/{PACKAGE_NAME}', ['package.xml']),
         *tree_data_files('config'),
         *tree_data_files('meshes'),
+        *tree_data_files('launch'),
+        *tree_data_files('rviz'),
     ],
     install_requires=['setuptools'],
     zip_safe=False,

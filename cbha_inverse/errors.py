@@ -27,3 +27,35 @@ class ConfigError(ValueError):
         self.key = str(key)
         self.problem = str(problem)
         super().__init__(f'{self.path}: {self.key}: {self.problem}')
+
+
+#: Exit status of a command or node stopped by a bad configuration file or parameter.
+CONFIG_ERROR_EXIT = 2
+
+
+def report_config_error(program, error, stream=None):
+    """
+    Print a configuration error as one line on stderr and return the exit status.
+
+    The one place where commands and nodes turn a :class:`ConfigError` (or a parameter error)
+    into what the user sees: ``<program>: error: <file>: <key>: <problem>``, no traceback.
+
+    Parameters
+    ----------
+    program : str
+        The command or node name.
+    error : Exception
+        The error; its message is printed on one line (newlines become ``; ``).
+    stream : file-like, optional
+        Where to print (default ``sys.stderr``).
+
+    Returns
+    -------
+    int
+        :data:`CONFIG_ERROR_EXIT` (2).
+
+    """
+    import sys
+    text = '; '.join(line.strip() for line in str(error).splitlines() if line.strip())
+    print(f'{program}: error: {text}', file=sys.stderr if stream is None else stream, flush=True)
+    return CONFIG_ERROR_EXIT

@@ -19,7 +19,8 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = 'cbha_inverse'
 NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim')
-COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo')
+COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo', 'cbha_launch',
+                       'cbha_scene')
 
 
 def _child_env(prefix):
@@ -65,6 +66,8 @@ def test_install_has_ros2_run_layout(colcon_install, monkeypatch):
         assert (share / 'config' / f'{node}.yaml').is_file(), f'no params file for {node}'
     assert (share / 'package.xml').read_text() == (REPO_ROOT / 'package.xml').read_text()
     assert any((share / 'meshes').iterdir()), 'meshes/ not installed'
+    for installed in ('launch/sim.launch.py', 'launch/robot.launch.py', 'rviz/cbha.rviz'):
+        assert (share / installed).read_text() == (REPO_ROOT / installed).read_text(), installed
 
 
 def test_installed_package_finds_its_share_dir(colcon_install):
@@ -110,3 +113,17 @@ def test_ros2_run_trajectory_publishes_targets(colcon_install, rclpy_context, mo
     assert len(received) >= 5, f'received {len(received)} targets; node output:\n{output}'
     assert all(msg.header.frame_id == 'cbha_base' for msg in received)
     assert process.returncode == 0, f'exit code {process.returncode} on SIGTERM:\n{output}'
+
+
+def test_installed_cbha_launch_uses_the_installed_params_files(colcon_install):
+    """``cbha_launch`` of the install resolves every params file in the install's share dir."""
+    prefix = colcon_install / PACKAGE
+    result = subprocess.run([str(prefix / 'lib' / PACKAGE / 'cbha_launch'), 'sim', '--dry-run'],
+                            env=_child_env(prefix), cwd=prefix, capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert [line.split(':')[0] for line in lines] == ['trajectory', 'inverse_solver', 'cbha_sim']
+    for line in lines:
+        node = line.split(':')[0]
+        assert f"--params-file {prefix / 'share' / PACKAGE / 'config' / node}.yaml" in line, line

@@ -113,7 +113,7 @@ def test_cli_writes_then_reuses_the_cached_segment(tmp_path, capsys):
     assert 'cached' in capsys.readouterr().out
     seg = load_segment(tmp_path / 'cylinder_segment.yaml')
     assert seg.metadata['mesh_size'] == 0.006 and seg.cavities == ()
-    assert main([str(tmp_path / 'missing.yaml')]) == 1
+    assert main([str(tmp_path / 'missing.yaml')]) == 2
 
 
 def test_cli_condenses_a_geo_file(tmp_path, capsys):
@@ -127,7 +127,7 @@ def test_cli_condenses_a_geo_file(tmp_path, capsys):
     # rigid ends stop the Poisson contraction: slightly stiffer than L / (E A)
     assert 0.95 < seg.compliance[0, 0] / (0.03 / (1e6 * 1e-4)) < 1.0
     assert main(args) == 0 and 'cached' in capsys.readouterr().out
-    assert main([str(geo), '--output-dir', str(tmp_path)]) == 1
+    assert main([str(geo), '--output-dir', str(tmp_path)]) == 2
 
 
 def test_segment_yaml_round_trip(tmp_path, segment):

@@ -65,4 +65,4 @@ def test_bad_params_file_exits_nonzero_with_message(tmp_path):
          '--params-file', str(params)],
         cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
-    assert 'radius' in result.stderr and 'wrong type' in result.stderr
+    assert 'radius' in result.stderr and 'must be of type double' in result.stderr

@@ -23,9 +23,9 @@ evaluate the same physics with the same code:
   whatever the stresses, compiled band Cholesky): a modified-Newton step, robust where ``T``
   is indefinite or singular (a chain near a limit point, high pressure);
 - the increment is applied in the chain's deformation coordinates
-  (:func:`cbha_inverse.core._kernels.retraction.deformation_step`): full Newton steps stay acceptable at
-  large rotations of slender chains (the PL^2/EI = 10 elastica converges from rest in one load
-  step of 7 iterations);
+  (:func:`cbha_inverse.core._kernels.retraction.deformation_step`): full Newton steps stay
+  acceptable at large rotations of slender chains (the PL^2/EI = 10 elastica converges from rest
+  in one load step of 7 iterations);
 - backtracking line search on the Euclidean norm of the scaled residual (Armijo, factor 1/2),
   optionally starting from a step shortened so that no link turns by more than
   ``max_rotation_step``;

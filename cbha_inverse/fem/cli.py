@@ -1,9 +1,13 @@
 """
 Console script ``condense_segment``: geometry YAML -> condensed segment YAML (+ cavity surfaces).
 
-Usage: ``condense_segment [meshes/cbha_segment.yaml] [--output-dir config/segments]
-[--order 2] [--mesh-size 0.0005] [--force]``. Same inputs (sha256 of the geometry file, the mesh
-parameters and the package version) reuse the existing file, which is said on stdout.
+Usage: ``condense_segment [GEOMETRY] [--output FILE | --output-dir DIR] [--order 2]
+[--mesh-size 0.0005] [--force]``. The segment YAML ``<name>.yaml`` (and its cavity surfaces) goes
+to ``--output`` or ``--output-dir``, else next to the geometry file; never into the package's own
+data (the default geometry ``meshes/cbha_segment.yaml`` of an install): for those, into the
+current directory. Same inputs (sha256 of the geometry file, the mesh parameters and the package
+version) reuse the existing file, which is said on stdout. A broken geometry file prints one line
+naming the file and the key, exit code 2.
 """
 
 import argparse
@@ -11,9 +15,12 @@ from pathlib import Path
 import sys
 
 from cbha_inverse import __version__
-from cbha_inverse.paths import config_path, meshes_path
+from cbha_inverse.config_files import read_section
+from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.paths import meshes_path, share_dir
 import numpy as np
-import yaml
+
+PROGRAM = 'condense_segment'
 
 
 def _parser():
@@ -22,8 +29,11 @@ def _parser():
         description='Condense a volumetric FE segment onto its two vertebra frames (6x6 C).')
     parser.add_argument('geometry', nargs='?', default=None,
                         help='geometry YAML (default: meshes/cbha_segment.yaml)')
-    parser.add_argument('--output-dir', default=None,
-                        help='output directory (default: config/segments)')
+    output = parser.add_mutually_exclusive_group()
+    output.add_argument('--output', default=None,
+                        help='segment YAML to write (default: <name>.yaml next to the geometry)')
+    output.add_argument('--output-dir', default=None,
+                        help='directory of <name>.yaml (default: that of the geometry)')
     parser.add_argument('--order', type=int, choices=(1, 2), default=None,
                         help='element order (default: the YAML mesh.order)')
     parser.add_argument('--mesh-size', type=float, default=None,
@@ -77,7 +87,7 @@ def pressure_notes(spec, segment, cavities, pressure=150e3, n_segments=8):
     return notes
 
 
-def run_geo(args, geometry, output_dir, out):
+def run_geo(args, geometry, target, out):
     """
     Condense a ``.geo`` geometry (end faces on the planes of smallest and largest x).
 
@@ -87,8 +97,8 @@ def run_geo(args, geometry, output_dir, out):
         Parsed options (material, order, mesh size, segment length, force).
     geometry : pathlib.Path
         The ``.geo`` file.
-    output_dir : pathlib.Path
-        Output directory.
+    target : pathlib.Path
+        The segment YAML to write.
     out : file-like
         Where progress is printed.
 
@@ -100,11 +110,11 @@ def run_geo(args, geometry, output_dir, out):
     """
     from cbha_inverse.fem.segment_io import cached_segment, inputs_sha256, write_segment
     if args.youngs_modulus is None or args.poisson_ratio is None or args.mesh_size is None:
-        raise ValueError('a .geo geometry needs --youngs-modulus, --poisson-ratio, --mesh-size')
+        raise ConfigError(geometry, 'material', 'a .geo geometry needs --youngs-modulus, '
+                          '--poisson-ratio and --mesh-size')
     order = args.order or 2
     material = {'name': 'cli', 'youngs_modulus': args.youngs_modulus,
                 'poisson_ratio': args.poisson_ratio, 'density': args.density}
-    target = Path(output_dir) / f'{geometry.stem}.yaml'
     sha = inputs_sha256(geometry, order, args.mesh_size,
                         version=f'{__version__}|{material}|{args.segment_length}')
     if not args.force and cached_segment(target, sha):
@@ -123,7 +133,105 @@ def run_geo(args, geometry, output_dir, out):
     return target
 
 
-def run(geometry, output_dir, order=None, mesh_size=None, force=False, out=None):
+def check_geometry(geometry):
+    """
+    Read a geometry YAML and check every key the condensation reads.
+
+    Parameters
+    ----------
+    geometry : pathlib.Path
+        The geometry YAML (``meshes/*.yaml`` format: ``name``, ``kind``, ``geometry``,
+        ``material``, ``mesh``).
+
+    Returns
+    -------
+    dict
+        The parsed file.
+
+    Raises
+    ------
+    cbha_inverse.errors.ConfigError
+        Naming the file and the key that is missing, mistyped or out of range.
+
+    """
+    spec = read_section(geometry)
+    spec.text('name')
+    kind = spec.text('kind', 'bellows_segment', choices=('bellows_segment', 'cylinder'))
+    mesh = spec.section('mesh')
+    mesh.number('mesh_size', positive=True)
+    if mesh.has('order') and mesh.integer('order') not in (1, 2):
+        raise mesh.error('order', f"must be 1 or 2, got {mesh.data['order']}")
+    material = spec.section('material')
+    material.number('youngs_modulus', positive=True)
+    poisson = material.number('poisson_ratio')
+    if not -1.0 < poisson < 0.5:
+        raise material.error('poisson_ratio', f'must lie in (-1, 0.5), got {poisson:g}')
+    material.number('density', 0.0, minimum=0.0)
+    shape = spec.section('geometry')
+    if kind == 'cylinder':
+        outer = shape.number('outer_radius', positive=True)
+        shape.number('length', positive=True)
+        if shape.number('inner_radius', 0.0, minimum=0.0) >= outer:
+            raise shape.error('inner_radius', 'must be below outer_radius')
+        return spec.data
+    for key in ('segment_length', 'vertebra_thickness', 'tube_pitch_radius', 'tube_mean_radius',
+                'corrugation_amplitude', 'wall_thickness'):
+        shape.number(key, positive=True)
+    shape.integer('corrugation_periods', minimum=1)
+    shape.number('vertebra_mass', 0.0, minimum=0.0)
+    tubes = shape.sections('tubes')
+    if not tubes:
+        raise shape.error('tubes', 'at least one tube is needed')
+    for tube in tubes:
+        tube.text('name')
+        tube.number('angle_deg')
+    return spec.data
+
+
+def segment_target(geometry, name, output=None, output_dir=None):
+    """
+    Return where the segment YAML of a geometry goes.
+
+    Parameters
+    ----------
+    geometry : pathlib.Path
+        The geometry file.
+    name : str
+        The segment name (``<name>.yaml``).
+    output : path-like, optional
+        Explicit segment YAML path.
+    output_dir : path-like, optional
+        Explicit directory.
+
+    Returns
+    -------
+    pathlib.Path
+        ``output``; else ``output_dir/<name>.yaml``; else ``<name>.yaml`` next to the geometry,
+        or in the current directory when the geometry is one of the package's own data files
+        (an install tree is overwritten by the next build, or read-only).
+
+    Raises
+    ------
+    cbha_inverse.errors.ConfigError
+        If the segment YAML would overwrite the geometry file.
+
+    """
+    if output is not None:
+        target = Path(output)
+    elif output_dir is not None:
+        target = Path(output_dir) / f'{name}.yaml'
+    elif geometry.resolve().is_relative_to(share_dir().resolve()):
+        target = Path.cwd() / f'{name}.yaml'
+    else:
+        target = geometry.parent / f'{name}.yaml'
+    if target.resolve() == geometry.resolve():
+        raise ConfigError(geometry, 'name', f'the segment YAML {target} would overwrite the '
+                          'geometry file: give --output')
+    return target
+
+
+def run(geometry, output=None, output_dir=None, order=None, mesh_size=None, force=False,
+        out=None):
     """
     Condense one geometry YAML and write (or reuse) its segment YAML.
 
@@ -131,8 +239,8 @@ def run(geometry, output_dir, order=None, mesh_size=None, force=False, out=None)
     ----------
     geometry : path-like
         Geometry YAML.
-    output_dir : path-like
-        Directory of the segment YAML.
+    output, output_dir : path-like, optional
+        Where the segment YAML goes (see :func:`segment_target`).
     order : int, optional
         Element order override.
     mesh_size : float, optional  [m]
@@ -151,11 +259,12 @@ def run(geometry, output_dir, order=None, mesh_size=None, force=False, out=None)
     from cbha_inverse.fem.segment_io import cached_segment, inputs_sha256, write_segment
     out = sys.stdout if out is None else out
     geometry = Path(geometry)
-    spec = yaml.safe_load(geometry.read_text())
+    spec = check_geometry(geometry)
     order = int(order or spec['mesh'].get('order', 2))
     mesh_size = float(mesh_size or spec['mesh']['mesh_size'])
     name = spec['name']
-    target = Path(output_dir) / f'{name}.yaml'
+    target = segment_target(geometry, name, output, output_dir)
+    target.parent.mkdir(parents=True, exist_ok=True)
     sha = inputs_sha256(geometry, order, mesh_size)
     if not force and cached_segment(target, sha):
         print(f'{target}: cached (same inputs, sha256 {sha[:12]}), not recomputed', file=out)
@@ -186,20 +295,23 @@ def main(argv=None):
     Returns
     -------
     int
-        Exit status (0 on success, 1 on an input error).
+        Exit status: 0 on success, 2 on a bad input file or option (one line on stderr).
 
     """
     args = _parser().parse_args(argv)
     geometry = Path(args.geometry) if args.geometry else meshes_path('cbha_segment.yaml')
-    output_dir = Path(args.output_dir) if args.output_dir else config_path('segments')
     try:
         if geometry.suffix == '.geo':
-            run_geo(args, geometry, output_dir, sys.stdout)
+            if not geometry.is_file():
+                raise ConfigError(geometry, 'file', 'no such file')
+            run_geo(args, geometry, segment_target(geometry, geometry.stem, args.output,
+                                                   args.output_dir), sys.stdout)
         else:
-            run(geometry, output_dir, args.order, args.mesh_size, args.force)
-    except (OSError, ValueError, KeyError, np.linalg.LinAlgError) as exc:
-        print(f'condense_segment: error: {exc}', file=sys.stderr)
-        return 1
+            run(geometry, args.output, args.output_dir, args.order, args.mesh_size, args.force)
+    except ConfigError as exc:
+        return report_config_error(PROGRAM, exc)
+    except (OSError, ValueError, np.linalg.LinAlgError) as exc:
+        return report_config_error(PROGRAM, f'{geometry}: {exc}')
     return 0
 
 

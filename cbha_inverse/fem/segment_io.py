@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 
 from cbha_inverse import __version__
+from cbha_inverse.config_files import read_yaml
 from cbha_inverse.core.links import checked_compliance
 from cbha_inverse.errors import ConfigError
 import numpy as np
@@ -253,28 +254,44 @@ def load_segment(path):
 
     Raises
     ------
-    ValueError
-        If the compliance is not a symmetric positive definite 6x6 matrix or a field is missing.
+    cbha_inverse.errors.ConfigError
+        If the file is not valid YAML, a field is missing or malformed, or the compliance is not
+        a symmetric positive definite 6x6 matrix.
 
     """
     path = Path(path)
-    data = yaml.safe_load(path.read_text())
-    try:
-        compliance = np.array(data['compliance'], dtype=float)
-        offset = np.array(data['rest_offset'], dtype=float)
-        rotation = np.array(data['rest_rotation'], dtype=float)
-        mass = float(data['mass_kg'])
-    except (KeyError, TypeError) as exc:
-        raise ValueError(f'{path}: missing or malformed field ({exc})') from exc
-    if compliance.shape != (6, 6) or offset.shape != (3,) or rotation.shape != (3, 3):
-        raise ValueError(f'{path}: compliance (6, 6), rest_offset (3,), rest_rotation (3, 3) '
-                         'expected')
+    data = read_yaml(path)
+    arrays = {}
+    for key, shape in (('compliance', (6, 6)), ('rest_offset', (3,)), ('rest_rotation', (3, 3))):
+        if data.get(key) is None:
+            raise ConfigError(path, key, 'missing')
+        try:
+            arrays[key] = np.array(data[key], dtype=float)
+        except (TypeError, ValueError):
+            arrays[key] = None
+        if arrays[key] is None or arrays[key].shape != shape or not np.all(
+                np.isfinite(arrays[key])):
+            raise ConfigError(path, key, f'must be a {shape} array of finite numbers')
+    compliance, offset, rotation = (arrays['compliance'], arrays['rest_offset'],
+                                    arrays['rest_rotation'])
+    mass = data.get('mass_kg')
+    if isinstance(mass, bool) or not isinstance(mass, (int, float)) or not mass >= 0.0:
+        raise ConfigError(path, 'mass_kg', f'must be a number >= 0, got {mass!r}')
+    mass = float(mass)
     try:
         compliance, _ = checked_compliance(compliance, 'the matrix')
     except np.linalg.LinAlgError as exc:
         raise ConfigError(path, 'compliance', str(exc)) from None
-    cavities = tuple(Cavity(c['name'], *read_cavity(path.parent / c['file']))
-                     for c in data.get('cavities') or [])
+    cavities = []
+    for i, item in enumerate(data.get('cavities') or []):
+        if not (isinstance(item, dict) and isinstance(item.get('name'), str)
+                and isinstance(item.get('file'), str)):
+            raise ConfigError(path, f'cavities[{i}]', 'needs a name and a file (strings)')
+        surface = path.parent / item['file']
+        if not surface.is_file():
+            raise ConfigError(path, f'cavities[{i}].file', f'no cavity surface {surface}')
+        cavities.append(Cavity(item['name'], *read_cavity(surface)))
+    cavities = tuple(cavities)
     known = {'name', 'compliance', 'rest_offset', 'rest_rotation', 'mass_kg', 'cavities'}
     metadata = {k: v for k, v in data.items() if k not in known}
     return Segment(str(data.get('name', path.stem)), compliance, offset, rotation, mass,

@@ -23,6 +23,7 @@ import os
 import sys
 import time
 
+from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.scene import load_scene
 import numpy as np
 
@@ -286,6 +287,11 @@ def main(argv=None):
                         help='ticks between linearisations to compare (1 = every tick)')
     parser.add_argument('--json', help='write the rows to this JSON file')
     args = parser.parse_args(argv)
+    try:
+        for name in args.scenes:
+            load_scene(name)
+    except (ConfigError, FileNotFoundError) as exc:
+        return report_config_error('cbha_bench_inverse', exc)
     rows = []
     started = time.perf_counter()
     for name in args.scenes:

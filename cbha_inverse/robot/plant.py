@@ -51,6 +51,10 @@ class StaticPlant:
         self.gravity = scene.gravity
         self._state = rest_state(self.model)
 
+    def reset(self):
+        """Return to the rest shape (the next update starts from it)."""
+        self._state = rest_state(self.model)
+
     def residual(self, actuation):
         """Return the equilibrium residual ``r`` (6n,) at the current state."""
         return self._solve(actuation, max_iterations=0, max_load_steps=1).residual.reshape(-1)

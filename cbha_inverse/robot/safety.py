@@ -9,9 +9,9 @@ The nodes call these functions on every message and before every publication:
   finite, within ``[0, p_max]``);
 - :func:`bounded_command` is the last gate before a command is published: it never lets a NaN
   or an out-of-range pressure through;
-- :class:`StalenessWatch` and :func:`stale_action` decide when to hold or vent, on a steady clock
-  (``time.monotonic``) passed in by the caller, so that a bag replay or ``use_sim_time`` cannot
-  fool the watchdog.
+- :class:`StalenessWatch` and :func:`stale_action` decide when to hold or vent (stale feedback;
+  a stale target stays the set-point), on a steady clock (``time.monotonic``) passed in by the
+  caller, so that a bag replay or ``use_sim_time`` cannot fool the watchdog.
 """
 
 from dataclasses import dataclass
@@ -213,20 +213,22 @@ class StalenessWatch:
         return self.age(now) > self.timeout
 
 
-def stale_action(target_stale, feedback_stale, closed_loop, action):
+def stale_action(feedback_stale, closed_loop, action):
     """
     Decide what the controller does this tick.
 
+    A target that stops arriving is not stale in this sense: the last valid target stays the
+    set-point and the model keeps converging to it. What holds or vents is stale *feedback*: a
+    closed loop without a recent measurement cannot correct its model.
+
     Parameters
     ----------
-    target_stale : bool
-        No valid target within its timeout.
     feedback_stale : bool
         No valid measurement within its timeout.
     closed_loop : bool
         Whether the controller needs feedback (closed-loop mode).
     action : str
-        Configured reaction to stale inputs: ``'hold'`` (keep the last command) or ``'vent'``
+        Configured reaction to stale feedback: ``'hold'`` (keep the last command) or ``'vent'``
         (command the safe pressure).
 
     Returns
@@ -237,6 +239,6 @@ def stale_action(target_stale, feedback_stale, closed_loop, action):
     """
     if action not in ACTIONS:
         raise ValueError(f'action must be one of {ACTIONS}, got {action!r}')
-    if target_stale or (closed_loop and feedback_stale):
+    if closed_loop and feedback_stale:
         return action
     return 'run'

@@ -10,6 +10,7 @@ plant (:class:`cbha_inverse.robot.plant.StaticPlant`: the scene loaded with a de
 ``stiffness_scale`` error and its own ``gravity``) is moved to the equilibrium of the current
 valve pressures by warm-started Newton steps, and the tip is published on ``tip/measured``
 (PointStamped, sensor data QoS) with Gaussian noise (seeded) and, noise-free, on ``tip/true``.
+Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 """
 
 import collections
@@ -31,6 +32,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 
 NODE_NAME = 'cbha_sim'
 
@@ -43,7 +45,10 @@ class CbhaSimParams:
     stiffness_scale: float = param(0.9, 'plant stiffness / nominal stiffness (model error) [-]',
                                    low=0.01, high=100.0)
     gravity: tuple = param((0.0, 0.0, -9.81), 'plant gravity in cbha_base [m/s^2]')
-    valve_names: tuple = param(ARM_VALVES, 'command order: a permutation of the scene actuators')
+    valve_names: tuple = param(None, 'command order: a permutation of the scene actuators '
+                               '(unset: the scene order; the CBHA scene order is the vendor '
+                               f'channels 0-5, {", ".join(ARM_VALVES)})',
+                               unset_type='string_array')
     max_pressure: float = param(150000.0, 'driver limit [Pa]: commands above are rejected',
                                 low=0.0, high=1.0e7)
     valve_time_constant: float = param(0.01, 'first-order valve response [s] (paper: 10 ms)',
@@ -91,13 +96,14 @@ class CbhaSimNode(Node):
             self.scene = load_scene(p.scene, stiffness_scale=p.stiffness_scale,
                                     gravity=p.gravity)
             names = self.scene.actuator_names
-            if sorted(p.valve_names) != sorted(names):
-                raise ValueError(f'valve_names {list(p.valve_names)} must be a permutation of '
+            self.valve_names = names if p.valve_names is None else p.valve_names
+            if sorted(self.valve_names) != sorted(names):
+                raise ValueError(f'valve_names {list(self.valve_names)} must be a permutation of '
                                  f'the scene actuators {list(names)}')
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
-            raise ParameterError(f'{NODE_NAME}: {exc}') from None
-        self.order = np.array([names.index(name) for name in p.valve_names])
+            raise ParameterError(str(exc)) from None
+        self.order = np.array([names.index(name) for name in self.valve_names])
         self.plant = StaticPlant(self.scene, tolerance=p.tolerance,
                                  max_iterations=p.max_iterations)
         self.rng = np.random.default_rng(p.seed)
@@ -109,6 +115,7 @@ class CbhaSimNode(Node):
         self.last_result = None
         self.not_converged = 0
         self.failures = 0
+        self.resets = 0
         self.tick_times = TimingStats()
         self._last_tick = None
         self.measured_publisher = self.create_publisher(PointStamped, 'tip/measured',
@@ -116,6 +123,7 @@ class CbhaSimNode(Node):
         self.truth_publisher = self.create_publisher(PointStamped, 'tip/true', MEASURED_QOS)
         self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
                                  COMMAND_QOS)
+        self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
@@ -135,6 +143,19 @@ class CbhaSimNode(Node):
         in_scene_order[self.order] = values
         self.pending.append((time.monotonic() + self.params.latency, in_scene_order))
         self.accepted += 1
+
+    def _on_reset(self, request, response):
+        """``~/reset``: plant at rest, valves vented, pending commands dropped."""
+        self.plant.reset()
+        self.setpoint = np.zeros_like(self.setpoint)
+        self.pressures = np.zeros_like(self.pressures)
+        self.pending.clear()
+        self.last_result = None
+        self.resets += 1
+        response.success = True
+        response.message = 'plant at rest, valves at 0 Pa'
+        self.get_logger().info(response.message)
+        return response
 
     def _tick(self):
         start = time.perf_counter()
@@ -166,6 +187,7 @@ class CbhaSimNode(Node):
         result = self.last_result
         total = sum(self.rejected.values())
         values = {'accepted_commands': self.accepted, 'rejected_total': total,
+                  'resets': self.resets,
                   **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
                   'valve_pressures_pa': ' '.join(f'{v:.0f}' for v in self.pressures[self.order]),
                   'newton_iterations': result.iterations if result else 0,
@@ -194,7 +216,7 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters.
 
     """
-    return run_node(CbhaSimNode, NODE_NAME, argv)
+    return run_node(CbhaSimNode, NODE_NAME, argv, params_class=CbhaSimParams)
 
 
 if __name__ == '__main__':

@@ -24,6 +24,8 @@ import subprocess
 import sys
 import time
 
+from cbha_inverse.config_files import read_yaml
+from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.paths import config_path
 from cbha_inverse.report.tracking import plot_runs, tracking_errors
 from cbha_inverse.robot.trajectory import make_trajectory
@@ -245,11 +247,14 @@ def main(argv=None):
     wall = time.monotonic()
     output = Path(args.output)
     output.mkdir(parents=True, exist_ok=True)
-    scene = load_scene(args.scene)
+    try:
+        scene = load_scene(args.scene)
+        configured = read_yaml(config_path('inverse_solver.yaml'))
+    except (ConfigError, FileNotFoundError) as exc:
+        return report_config_error('cbha_demo', exc)
     center = scene.workspace_center[-1]
-    configured = yaml.safe_load(config_path('inverse_solver.yaml').read_text())
-    valve_names = configured['/**']['ros__parameters']['valve_names']
-    if sorted(valve_names) != sorted(scene.actuator_names):
+    valve_names = configured.get('/**', {}).get('ros__parameters', {}).get('valve_names')
+    if valve_names is None or sorted(valve_names) != sorted(scene.actuator_names):
         valve_names = list(scene.actuator_names)
     domain = args.domain
     reservation = None
@@ -265,8 +270,9 @@ def main(argv=None):
                                            'FASTDDS_BUILTIN_TRANSPORTS')})
     if domain is not None:
         os.environ['ROS_DOMAIN_ID'] = str(domain)
+    used_domain = env.get('ROS_DOMAIN_ID') or '0 (unset: the default)'
     print(f'cbha_demo: scene {scene.name}, centre {[round(float(v), 4) for v in center]} m, '
-          f'plant stiffness x{args.stiffness_scale:g}, ROS_DOMAIN_ID {domain}, '
+          f'plant stiffness x{args.stiffness_scale:g}, ROS_DOMAIN_ID {used_domain}, '
           f'output {output}', flush=True)
     import rclpy
     from rclpy.signals import SignalHandlerOptions

@@ -5,11 +5,16 @@ Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/m
 (PointStamped, sensor data); publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order =
 ``valve_names``, reliable), ``/diagnostics`` (~1 Hz) and ``backbone`` (MarkerArray).
 
-With ``trigger: target`` a valid target is solved and its command published inside the target
-callback (lowest target-to-command latency); the timer at ``rate_hz`` ticks the solver only when no
-target came during the last period (the model keeps converging at a fixed target) and runs the
-staleness watchdog. Every input passes :mod:`cbha_inverse.robot.safety` first; a rejected message
-is counted and logged (throttled) and the last valid command stays. Every command passes
+Nothing is published before the first valid target (``publish_idle: true`` publishes the vent
+command meanwhile). With ``trigger: target`` a valid target is solved and its command published
+inside the target callback (lowest target-to-command latency); the timer at ``rate_hz`` ticks the
+solver only when no target came during the last period, so a target sent once, or one that stops
+arriving, stays the set-point and the model keeps converging to it. What holds or vents
+(``stale_action``) is stale feedback in closed loop. Services: ``~/enable`` (std_srvs/SetBool:
+stop commanding, or resume) and ``~/reset`` (std_srvs/Trigger: model state and closed-loop
+correction back to rest; the set-point stays). Every input passes
+:mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
+the last valid command stays. Every command passes
 :func:`cbha_inverse.robot.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
 """
 
@@ -35,6 +40,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'inverse_solver'
@@ -51,21 +57,27 @@ class InverseSolverParams:
                          choices=('target', 'timer'))
     mode: str = param('open', 'open: model only (the paper); closed: integral correction from '
                       'tip/measured', choices=('open', 'closed'))
-    valve_names: tuple = param(ARM_VALVES, 'command order: a permutation of the scene actuators')
+    valve_names: tuple = param(None, 'command order: a permutation of the scene actuators '
+                               '(unset: the scene order; the CBHA scene order is the vendor '
+                               f'channels 0-5, {", ".join(ARM_VALVES)})',
+                               unset_type='string_array')
     max_pressure: float = param(150000.0, 'p_max [Pa] ceiling of every command (1.5 bar)',
                                 low=0.0, high=1.0e7)
-    target_timeout: float = param(0.5, 'target older than this is stale [s] (steady clock)',
-                                  low=0.001, high=3600.0)
+    target_timeout: float = param(0.5, 'a target older than this is reported stale [s] '
+                                  '(steady clock; it stays the set-point, the model keeps '
+                                  'converging to it)', low=0.001, high=3600.0)
     feedback_timeout: float = param(0.5, 'closed loop: measurement older than this is stale [s]',
                                     low=0.001, high=3600.0)
-    stale_action: str = param('hold', 'on stale inputs: hold the last command or vent',
-                              choices=('hold', 'vent'))
+    stale_action: str = param('hold', 'closed loop, on stale feedback: hold the last command '
+                              'or vent', choices=('hold', 'vent'))
+    publish_idle: bool = param(False, 'before the first valid target, publish the vent command '
+                               'at rate_hz (false: publish nothing until a target arrives)')
     vent_pressure: float = param(0.0, 'safe pressure commanded when venting [Pa]',
                                  low=0.0, high=1.0e7)
     frame_id: str = param('cbha_base', 'the only accepted frame_id of target and tip/measured')
-    workspace_min: tuple = param((-0.5, -0.5, -0.5), 'workspace box lower corner [m]: targets '
+    workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected')
-    workspace_max: tuple = param((0.8, 0.5, 0.5), 'workspace box upper corner [m]')
+    workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]')
     loop_gain: float = param(0.1, 'closed loop: integral gain per measurement [-]',
                              low=0.0, high=1.0)
     max_correction: float = param(0.03, 'closed loop: largest target correction [m]',
@@ -112,7 +124,7 @@ class InverseSolverNode(Node):
             self._setup_model()
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
-            raise ParameterError(f'{NODE_NAME}: {exc}') from None
+            raise ParameterError(str(exc)) from None
         p = self.params
         self.period = 1.0 / p.rate_hz
         self.target = None
@@ -123,6 +135,9 @@ class InverseSolverNode(Node):
         self.feedback_watch = StalenessWatch(p.feedback_timeout)
         self.command = self.vent_command.copy()
         self.decision = 'waiting'
+        self.enabled = True
+        self.resets = 0
+        self.target_stale = False
         self.last_result = None
         self._last_solve = -math.inf
         self.rejected = {}
@@ -136,11 +151,13 @@ class InverseSolverNode(Node):
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
         self.create_subscription(PointStamped, 'tip/measured', self._on_measured, MEASURED_QOS)
+        self.create_service(SetBool, '~/enable', self._on_enable)
+        self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)
         self.marker_timer = self.create_timer(p.marker_period, self._publish_markers)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
-            f'scene {self.scene.name}: {len(p.valve_names)} valves {list(p.valve_names)}, '
+            f'scene {self.scene.name}: {len(self.valve_names)} valves {list(self.valve_names)}, '
             f'p_max {self.upper.max():g}, {p.mode} loop, trigger {p.trigger} at {p.rate_hz:g} Hz,'
             f' stale -> {p.stale_action}; {self.command_publisher.topic_name}')
 
@@ -152,10 +169,11 @@ class InverseSolverNode(Node):
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
         names = self.scene.actuator_names
-        if sorted(p.valve_names) != sorted(names):
-            raise ValueError(f'valve_names {list(p.valve_names)} must be a permutation of the '
+        self.valve_names = names if p.valve_names is None else p.valve_names
+        if sorted(self.valve_names) != sorted(names):
+            raise ValueError(f'valve_names {list(self.valve_names)} must be a permutation of the '
                              f'scene actuators {list(names)}')
-        self.order = np.array([names.index(name) for name in p.valve_names])
+        self.order = np.array([names.index(name) for name in self.valve_names])
         self.lower = np.maximum(self.scene.lower_bounds[self.order], 0.0)
         self.upper = np.minimum(self.scene.upper_bounds[self.order], p.max_pressure)
         if np.any(self.lower > self.upper):
@@ -202,7 +220,7 @@ class InverseSolverNode(Node):
             return
         self.measured = point
         self.feedback_watch.mark(time.monotonic())
-        if self.params.mode == 'closed' and self.target is not None:
+        if self.params.mode == 'closed' and self.target is not None and self.enabled:
             saturated = self.last_result is not None and self.last_result.status == 'saturated'
             reference = self._target_at(_stamp_ns(message))
             self.corrector.update(reference[None], point[None], saturated=saturated)
@@ -227,13 +245,32 @@ class InverseSolverNode(Node):
 
     # control --------------------------------------------------------------------------------
     def _decide(self):
+        """Return this tick's decision: disabled, waiting, run, hold or vent (logged on change)."""
         now = time.monotonic()
-        decision = stale_action(self.target_watch.stale(now), self.feedback_watch.stale(now),
-                                self.params.mode == 'closed', self.params.stale_action)
-        label = 'waiting' if self.target is None else decision
-        if label != self.decision:
-            self.get_logger().info(f'{self.decision} -> {label}')
-            self.decision = label
+        if not self.enabled:
+            decision = 'disabled'
+        elif self.target is None:
+            decision = 'waiting'
+        else:
+            decision = stale_action(self.feedback_watch.stale(now), self.params.mode == 'closed',
+                                    self.params.stale_action)
+        logger = self.get_logger()
+        if decision != self.decision:
+            # rclpy refuses two severities from one call site: one call per severity
+            if decision in ('hold', 'vent'):
+                logger.warn(f'{self.decision} -> {decision}: no tip/measured for '
+                            f'{self.feedback_watch.age(now):.2f} s')
+            else:
+                logger.info(f'{self.decision} -> {decision}')
+            self.decision = decision
+        target_stale = self.target is not None and self.target_watch.stale(now)
+        if target_stale != self.target_stale:
+            self.target_stale = target_stale
+            if target_stale:
+                logger.warn(f'no target for {self.target_watch.age(now):.2f} s: the last one '
+                            'stays the set-point')
+            else:
+                logger.info('targets arrive again')
         return decision
 
     def _on_timer(self):
@@ -244,8 +281,35 @@ class InverseSolverNode(Node):
                 self._solve_and_publish()
         elif decision == 'hold':
             self._publish(self.command)
-        else:
+        elif decision == 'vent' or (decision == 'waiting' and self.params.publish_idle):
             self._publish(self.vent_command)
+
+    def _on_enable(self, request, response):
+        """``~/enable``: false stops commanding (no solve, no publication), true resumes."""
+        self.enabled = bool(request.data)
+        self._decide()
+        response.success = True
+        response.message = ('enabled: commanding' if self.enabled
+                            else 'disabled: not commanding until ~/enable true')
+        if self.enabled:
+            self.get_logger().info(response.message)
+        else:
+            self.get_logger().warn(response.message)
+        return response
+
+    def _on_reset(self, request, response):
+        """``~/reset``: model state and closed-loop correction back to rest."""
+        self.solver.reset()
+        self.corrector.reset()
+        self.last_result = None
+        self.target_error = math.nan
+        self._last_solve = -math.inf
+        self.resets += 1
+        response.success = True
+        response.message = ('model and correction at rest; the next command starts from rest'
+                            + ('' if self.target is None else ' toward the current target'))
+        self.get_logger().info(response.message)
+        return response
 
     def _solve_and_publish(self):
         """Tick the solver, publish the command, prepare the next tick; return the publish time."""
@@ -286,7 +350,7 @@ class InverseSolverNode(Node):
     def _publish(self, command):
         command = bounded_command(command, self.lower, self.upper)
         self.command = command
-        self.command_publisher.publish(command_message(command, self.params.valve_names))
+        self.command_publisher.publish(command_message(command, self.valve_names))
         self.published += 1
 
     # outputs --------------------------------------------------------------------------------
@@ -298,7 +362,8 @@ class InverseSolverNode(Node):
     def _statuses(self):
         now = time.monotonic()
         result = self.last_result
-        values = {'mode': self.params.mode, 'decision': self.decision, 'ticks': self.ticks,
+        values = {'mode': self.params.mode, 'decision': self.decision, 'enabled': self.enabled,
+                  'resets': self.resets, 'target_stale': self.target_stale, 'ticks': self.ticks,
                   'published': self.published, 'last_status': result.status if result else '',
                   'qp_status': result.qp_status if result else '',
                   'residual_norm': result.residual_norm if result else math.nan,
@@ -315,9 +380,13 @@ class InverseSolverNode(Node):
         if result is not None and result.status == 'not_positive_definite':
             level, message = ERROR, 'model tangent not positive definite: holding'
         elif self.decision in ('hold', 'vent'):
-            level, message = WARN, f'stale input: {self.decision}'
+            level, message = WARN, f'stale feedback: {self.decision}'
+        elif self.decision == 'disabled':
+            level, message = OK, 'disabled (~/enable false): not commanding'
         elif self.decision == 'waiting':
             level, message = OK, 'waiting for a target'
+        elif self.target_stale:
+            level, message = OK, 'no recent target: converging to the last one'
         else:
             level, message = OK, f'running ({result.status if result else "no tick yet"})'
         total = sum(self.rejected.values())
@@ -344,7 +413,7 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters.
 
     """
-    return run_node(InverseSolverNode, NODE_NAME, argv)
+    return run_node(InverseSolverNode, NODE_NAME, argv, params_class=InverseSolverParams)
 
 
 if __name__ == '__main__':

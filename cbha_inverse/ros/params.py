@@ -15,22 +15,29 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import (
     InvalidParameterTypeException, InvalidParameterValueException,
     ParameterAlreadyDeclaredException, ParameterUninitializedException)
+from rclpy.parameter import Parameter
+
+# ROS type names of the Python defaults, for messages and --help
+_TYPE_NAMES = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
+_UNSET_TYPES = {'string_array': Parameter.Type.STRING_ARRAY}
 
 
 class ParameterError(ValueError):
     """A parameter has the wrong type, is outside its range or not one of its choices."""
 
 
-def param(default, description, *, low=None, high=None, choices=None, ros_name=None):
+def param(default, description, *, low=None, high=None, choices=None, ros_name=None,
+          unset_type=None):
     """
     Return a dataclass field that describes one ROS parameter.
 
     Parameters
     ----------
-    default : bool, int, float, str or tuple
+    default : bool, int, float, str, tuple or None
         Default value; its type is the parameter's type (a tuple of floats is a double array, of
         str a string array). Write floats as floats (``1.0``), as ROS parameters are strictly
-        typed.
+        typed. ``None``: no default (the parameter is unset unless given; needs
+        ``unset_type``).
     description : str
         What the parameter means, with its unit.
     low, high : float or int, optional
@@ -39,6 +46,8 @@ def param(default, description, *, low=None, high=None, choices=None, ros_name=N
         Allowed values of a string parameter.
     ros_name : str, optional
         Parameter name when it differs from the field name (e.g. dotted names).
+    unset_type : str, optional
+        ROS type of a parameter without default: ``'string_array'``.
 
     Returns
     -------
@@ -48,9 +57,76 @@ def param(default, description, *, low=None, high=None, choices=None, ros_name=N
     """
     if (low is None) != (high is None):
         raise TypeError('give both low and high, or neither')
+    if (default is None) != (unset_type is not None):
+        raise TypeError('a parameter without default needs unset_type, and only it')
     return field(default=default, metadata={
         'description': description, 'low': low, 'high': high,
-        'choices': tuple(choices) if choices is not None else None, 'ros_name': ros_name})
+        'choices': tuple(choices) if choices is not None else None, 'ros_name': ros_name,
+        'unset_type': unset_type})
+
+
+def type_name(default, metadata):
+    """
+    Return the ROS type name of a parameter (``double``, ``string_array``, ...).
+
+    Parameters
+    ----------
+    default : object
+        The parameter's default (``None`` if it has none).
+    metadata : mapping
+        The field metadata written by :func:`param`.
+
+    Returns
+    -------
+    str
+        The type name as ROS writes it.
+
+    """
+    if default is None:
+        return metadata['unset_type']
+    if isinstance(default, tuple):
+        item = type(default[0]) if default else str
+        return f'{_TYPE_NAMES[item]}_array'
+    return _TYPE_NAMES[type(default)]
+
+
+def _value_text(value):
+    """Write a default as it is written in a params file."""
+    if value is None:
+        return 'unset'
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, tuple):
+        return '[' + ', '.join(_value_text(v) for v in value) + ']'
+    return repr(value) if isinstance(value, str) else f'{value!r}'
+
+
+def parameter_help(params_class):
+    """
+    Describe every parameter of a node for ``--help``: name, type, default, range, description.
+
+    Parameters
+    ----------
+    params_class : type
+        A frozen dataclass whose fields were made with :func:`param`.
+
+    Returns
+    -------
+    str
+        One entry per parameter (two lines each), in declaration order.
+
+    """
+    entries = []
+    for spec in fields(params_class):
+        metadata = spec.metadata
+        name = metadata.get('ros_name') or spec.name
+        facts = [type_name(spec.default, metadata), f'default {_value_text(spec.default)}']
+        if metadata.get('low') is not None:
+            facts.append(f"range [{metadata['low']:g}, {metadata['high']:g}]")
+        if metadata.get('choices'):
+            facts.append('one of ' + '|'.join(metadata['choices']))
+        entries.append(f"  {name} ({', '.join(facts)})\n      {metadata['description']}")
+    return '\n'.join(entries)
 
 
 def describe(name, default, metadata):
@@ -117,14 +193,19 @@ def declare_parameters(node, params_class):
         name = spec.metadata.get('ros_name') or spec.name
         default = spec.default
         ros_default = list(default) if isinstance(default, tuple) else default
+        if default is None:
+            ros_default = _UNSET_TYPES[spec.metadata['unset_type']]
         descriptor = describe(name, default, spec.metadata)
         try:
             value = node.declare_parameter(name, ros_default, descriptor).value
-        except InvalidParameterTypeException as exc:
+        except InvalidParameterTypeException:
+            expected = type_name(default, spec.metadata)
+            hint = ' (write floats with a decimal point: 1.0, not 1)' if 'double' in expected \
+                else ''
+            given = getattr(node, '_parameter_overrides', {}).get(name)
+            got = '' if given is None else f', got {given.type_.name.lower()} {given.value!r}'
             raise ParameterError(
-                f'parameter {name!r} has the wrong type (expected {type(default).__name__}'
-                f'{" of floats written with .0" if isinstance(default, (float, tuple)) else ""}):'
-                f' {exc}') from None
+                f'parameter {name!r} must be of type {expected}{hint}{got}') from None
         except InvalidParameterValueException as exc:
             raise ParameterError(f'parameter {name!r} is out of range: {exc}') from None
         except (ParameterAlreadyDeclaredException, ParameterUninitializedException) as exc:
@@ -133,8 +214,89 @@ def declare_parameters(node, params_class):
         if choices and value not in choices:
             raise ParameterError(
                 f'parameter {name!r} must be one of {list(choices)}, got {value!r}')
-        values[spec.name] = tuple(value) if isinstance(default, tuple) else value
+        values[spec.name] = tuple(value) if isinstance(value, list) else value
     try:
         return params_class(**values)
     except ValueError as exc:
         raise ParameterError(str(exc)) from None
+
+
+def _type_problem(value, expected):
+    """Return why ``value`` is not of ROS type ``expected`` ('' if it is)."""
+    checks = {'double': lambda v: isinstance(v, float), 'integer': lambda v: isinstance(v, int)
+              and not isinstance(v, bool), 'bool': lambda v: isinstance(v, bool),
+              'string': lambda v: isinstance(v, str)}
+    if expected.endswith('_array'):
+        item = checks[expected[:-len('_array')]]
+        if isinstance(value, list) and value and all(item(v) for v in value):
+            return ''
+    elif checks[expected](value):
+        return ''
+    items = value if isinstance(value, list) else [value]
+    integers = any(isinstance(v, int) and not isinstance(v, bool) for v in items)
+    hint = ' (write floats with a decimal point: 1.0, not 1)' if (
+        'double' in expected and integers) else ''
+    return f'must be of type {expected}{hint}, got {value!r}'
+
+
+def check_params_files(argv, node_name, params_class):
+    """
+    Check every ``--params-file`` of a node's command line before rclpy reads it.
+
+    rclpy reports a broken params file as a traceback and a wrong-typed entry without the file;
+    this names the file and the key. Applicable sections are ``/**`` and those whose last name is
+    the node's; there, every parameter of ``params_class`` must have its type, range and choices.
+    Other keys are left alone (one file may serve several nodes).
+
+    Parameters
+    ----------
+    argv : list of str
+        The command line (``--ros-args ... --params-file FILE ...``).
+    node_name : str
+        The node's name.
+    params_class : type or None
+        Its parameters dataclass (None: check the file structure only).
+
+    Raises
+    ------
+    cbha_inverse.errors.ConfigError
+        Naming the file, the key and what is wrong.
+
+    """
+    from cbha_inverse.config_files import read_yaml
+    from cbha_inverse.errors import ConfigError
+    files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
+    specs = {} if params_class is None else {
+        spec.metadata.get('ros_name') or spec.name: spec for spec in fields(params_class)}
+    for path in files:
+        data = read_yaml(path)
+        for section, content in data.items():
+            if not isinstance(content, dict) or not isinstance(
+                    content.get('ros__parameters'), dict):
+                raise ConfigError(path, f'{section}', 'must hold a ros__parameters: mapping')
+            if str(section).split('/')[-1] not in ('**', '*', node_name):
+                continue
+            for name, value in _flatten(content['ros__parameters']):
+                spec = specs.get(name)
+                if spec is None:
+                    continue
+                key = f'{section}.ros__parameters.{name}'
+                problem = _type_problem(value, type_name(spec.default, spec.metadata))
+                low, high = spec.metadata.get('low'), spec.metadata.get('high')
+                choices = spec.metadata.get('choices')
+                if not problem and low is not None and not low <= value <= high:
+                    problem = f'must lie in [{low:g}, {high:g}], got {value!r}'
+                if not problem and choices and value not in choices:
+                    problem = f'must be one of {list(choices)}, got {value!r}'
+                if problem:
+                    raise ConfigError(path, key, problem)
+
+
+def _flatten(mapping, prefix=''):
+    """Yield (dotted name, value) of a nested ``ros__parameters`` mapping."""
+    for key, value in mapping.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, dict):
+            yield from _flatten(value, f'{name}.')
+        else:
+            yield name, value

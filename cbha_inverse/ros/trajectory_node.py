@@ -27,15 +27,16 @@ class TrajectoryParams:
     """Parameters of the ``trajectory`` node (defaults: the paper's circle, section V)."""
 
     shape: str = param('circle', 'path shape', choices=SHAPES)
-    center: tuple = param((0.0, 0.0, 0.0),
-                          'circle/square centre [m] in frame_id, 3 numbers (x, y, z)')
+    center: tuple = param((0.2308, 0.0, -0.0292),
+                          'circle/square centre [m] in frame_id, 3 numbers (x, y, z); default: '
+                          'the CBHA scene workspace centre (tip at mid pressure)')
     radius: float = param(0.06, 'circle radius [m] (paper: 0.06)', low=0.0, high=10.0)
     side: float = param(0.08, 'square side [m] (paper: 0.08)', low=0.0, high=10.0)
     plane: str = param('yz', 'plane of circle/square: first axis, second axis (paper: yz)',
                        choices=PLANES)
     speed: float = param(0.025, 'speed along the path [m/s] (paper: 0.025 circle, 0.031 '
                          'square)', low=0.0, high=10.0)
-    waypoints: tuple = param((0.0, 0.0, 0.0, 0.0, 0.01, 0.0),
+    waypoints: tuple = param((0.2308, 0.0, -0.0292, 0.2308, 0.03, -0.0292, 0.2308, 0.03, 0.0008),
                              'waypoints [m] as a flat list x0, y0, z0, x1, ... (shape waypoints)')
     loop: bool = param(False, 'waypoints: return to the first waypoint and repeat')
     laps: int = param(0, 'laps to run, then hold the end point (0 = forever)', low=0, high=100000)
@@ -74,7 +75,7 @@ class TrajectoryNode(Node):
                 start_hold=p.start_hold)
         except ValueError as exc:
             self.destroy_node()
-            raise ParameterError(f'{NODE_NAME}: invalid parameters: {exc}') from None
+            raise ParameterError(f'invalid parameters: {exc}') from None
         self.publisher = self.create_publisher(PointStamped, 'target', TARGET_QOS)
         self._start = None
         self.published = 0
@@ -131,7 +132,7 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters.
 
     """
-    return run_node(TrajectoryNode, NODE_NAME, argv)
+    return run_node(TrajectoryNode, NODE_NAME, argv, params_class=TrajectoryParams)
 
 
 if __name__ == '__main__':

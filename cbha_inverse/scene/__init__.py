@@ -30,9 +30,11 @@ Scenes shipped in ``config/scenes``: ``tendon_6f_8c`` and ``tendon_10f_16c`` (th
 trunks, Timoshenko beams and cables) and ``cbha`` (16 condensed bellows segments, 6 cavities).
 """
 
+from dataclasses import fields
 from functools import cached_property
 from pathlib import Path
 
+from cbha_inverse.config_files import read_section
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import Cable, CableGroup
 from cbha_inverse.core.actuation.effectors import PointEffectors
@@ -42,7 +44,6 @@ from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.paths import config_path
 import numpy as np
-import yaml
 
 
 class Scene:
@@ -220,75 +221,122 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None):
     -------
     Scene
 
+    Raises
+    ------
+    FileNotFoundError
+        If no scene of that path or name exists.
+    cbha_inverse.errors.ConfigError
+        If the scene (or a segment file it names) is not valid YAML, misses a key or has a value
+        of the wrong type or range: the message names the file and the key.
+
     """
     if not stiffness_scale > 0.0:
         raise ValueError('stiffness_scale must be positive')
     path = resolve_scene_path(path)
-    with open(path, encoding='utf-8') as f:
-        spec = yaml.safe_load(f)
-    chain = spec['chain']
-    kind = chain.get('type')
+    spec = read_section(path)
+    chain = spec.section('chain')
+    kind = chain.text('type', choices=('beam_vertebrae', 'segments'))
     if kind == 'beam_vertebrae':
         model = _beam_chain(chain, stiffness_scale)
         vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
-    elif kind == 'segments':
+    else:
         from cbha_inverse.scene.segments import segment_chain
         model, sections, parts = segment_chain(chain, path.parent, stiffness_scale)
         vertebra_frames = np.arange(model.n_frames)
-    else:
-        raise ValueError(f'{path}: unknown chain type {kind!r}')
     groups = []
-    if spec.get('cables'):
-        groups.append(CableGroup(_cables(spec['cables'], model, vertebra_frames),
+    if spec.has('cables'):
+        groups.append(CableGroup(_cables(spec.sections('cables'), vertebra_frames),
                                  model.n_frames))
-    if spec.get('cavities'):
+    if spec.has('cavities'):
         from cbha_inverse.scene.segments import cavity_group
-        groups.append(cavity_group(spec['cavities'], sections, parts, model.n_frames,
-                                   spec.get('cavity_model', 'linear')))
-    actuators = ActuatorSet(groups, model.n_frames, spec.get('actuator_order'))
-    effectors = _effectors(spec['effectors'], model, vertebra_frames)
-    g = spec.get('gravity', [0.0, 0.0, -9.81]) if gravity is None else gravity
-    return Scene(spec.get('name', path.stem), model, actuators, effectors, g,
-                 description=spec.get('description', ''),
-                 base_frame=spec.get('base_frame', 'cbha_base'),
-                 workspace=spec.get('workspace_center'), solver_defaults=spec.get('solver'))
+        groups.append(cavity_group(spec.sections('cavities'), sections, parts, model.n_frames,
+                                   spec.text('cavity_model', 'linear',
+                                             choices=('linear', 'mesh'))))
+    if not groups:
+        raise spec.error('cables', 'a scene needs cables or cavities (no actuator)')
+    actuators = _actuator_set(spec, groups, model.n_frames)
+    effector_items = spec.sections('effectors')
+    if not effector_items:
+        raise spec.error('effectors', 'at least one effector is needed')
+    effectors = _effectors(effector_items, model, vertebra_frames)
+    g = spec.vector('gravity', 3, (0.0, 0.0, -9.81)) if gravity is None else gravity
+    return Scene(spec.text('name', path.stem), model, actuators, effectors, g,
+                 description=spec.text('description', ''),
+                 base_frame=spec.text('base_frame', 'cbha_base'),
+                 workspace=_workspace(spec), solver_defaults=_solver_defaults(spec))
+
+
+def _actuator_set(spec, groups, n_frames):
+    """Build the actuator set in the scene's ``actuator_order`` (names checked)."""
+    order = spec.data.get('actuator_order')
+    try:
+        return ActuatorSet(groups, n_frames, order)
+    except ValueError as exc:
+        raise spec.error('actuator_order', str(exc)) from None
+
+
+def _workspace(spec):
+    """Return ``workspace_center``: None, three coordinates or ``{actuation_fraction: f}``."""
+    if not spec.has('workspace_center'):
+        return None
+    if isinstance(spec.data['workspace_center'], dict):
+        center = spec.section('workspace_center')
+        return {'actuation_fraction': center.number('actuation_fraction', minimum=0.0)}
+    return spec.vector('workspace_center', 3)
+
+
+def _solver_defaults(spec):
+    """Return the scene's ``solver`` section, its keys checked against ``InverseOptions``."""
+    if not spec.has('solver'):
+        return None
+    solver = spec.section('solver')
+    known = {f.name for f in fields(InverseOptions)}
+    for key in solver.data:
+        if key not in known:
+            raise solver.error(key, f'unknown solver option (known: {sorted(known)})')
+    return dict(solver.data)
 
 
 def _vertebra_frames(chain):
     """Frame index of vertebra v (0 = base) for a beam_vertebrae chain."""
-    return np.arange(int(chain['n_vertebrae']) + 1) * int(chain['beams_per_interval'])
+    return (np.arange(chain.integer('n_vertebrae', minimum=1) + 1)
+            * chain.integer('beams_per_interval', minimum=1))
 
 
 def _beam_chain(chain, stiffness_scale):
     """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene."""
-    n_v, per = int(chain['n_vertebrae']), int(chain['beams_per_interval'])
-    b = chain['backbone']
-    length = float(chain['interval_length']) / per
-    c = timoshenko_compliance(length, float(b['youngs_modulus']), float(b['poisson_ratio']),
-                              float(b['outer_radius']), float(b.get('inner_radius', 0.0)))
+    n_v = chain.integer('n_vertebrae', minimum=1)
+    per = chain.integer('beams_per_interval', minimum=1)
+    b = chain.section('backbone')
+    length = chain.number('interval_length', positive=True) / per
+    outer = b.number('outer_radius', positive=True)
+    inner = b.number('inner_radius', 0.0, minimum=0.0)
+    if inner >= outer:
+        raise b.error('inner_radius', f'must be below outer_radius {outer:g}, got {inner:g}')
+    c = timoshenko_compliance(length, b.number('youngs_modulus', positive=True),
+                              b.number('poisson_ratio', minimum=-1.0), outer, inner)
     n = n_v * per
-    area = np.pi * (float(b['outer_radius']) ** 2 - float(b.get('inner_radius', 0.0)) ** 2)
-    masses = np.full(n, float(b.get('density', 0.0)) * area * length)
-    masses[per - 1::per] += float(chain.get('vertebra_mass', 0.0))
+    area = np.pi * (outer ** 2 - inner ** 2)
+    masses = np.full(n, b.number('density', 0.0, minimum=0.0) * area * length)
+    masses[per - 1::per] += chain.number('vertebra_mass', 0.0, minimum=0.0)
     offsets = np.tile([length, 0.0, 0.0], (n, 1))
     return ChainModel.from_compliances(np.broadcast_to(c / stiffness_scale, (n, 6, 6)), offsets,
                                        masses=masses)
 
 
-def _cables(items, model, vertebra_frames):
+def _cables(items, vertebra_frames):
     """Route each cable from the base through every vertebra up to its end vertebra."""
     cables = []
     for item in items:
-        angle = np.deg2rad(float(item['angle_deg']))
-        radius = float(item['radius'])
-        end = int(item['end_vertebra'])
+        angle = np.deg2rad(item.number('angle_deg'))
+        radius = item.number('radius', positive=True)
+        end = item.integer('end_vertebra')
         if not 1 <= end < len(vertebra_frames):
-            raise ValueError(f"cable {item['name']!r}: end_vertebra {end} outside "
-                             f'1..{len(vertebra_frames) - 1}')
+            raise item.error('end_vertebra', f'{end} outside 1..{len(vertebra_frames) - 1}')
         frames = vertebra_frames[:end + 1]
         offset = np.array([0.0, radius * np.cos(angle), radius * np.sin(angle)])
-        cables.append(Cable(str(item['name']), frames, np.tile(offset, (len(frames), 1)),
-                            float(item['max_tension'])))
+        cables.append(Cable(item.text('name'), frames, np.tile(offset, (len(frames), 1)),
+                            item.number('max_tension', positive=True)))
     return cables
 
 
@@ -296,12 +344,18 @@ def _effectors(items, model, vertebra_frames):
     """Build the effector points."""
     names, frames, offsets = [], [], []
     for item in items:
-        if 'vertebra' in item:
-            frame = int(vertebra_frames[int(item['vertebra'])])
+        if item.has('vertebra'):
+            vertebra = item.integer('vertebra', minimum=0)
+            if vertebra >= len(vertebra_frames):
+                raise item.error('vertebra', f'{vertebra} outside 0..{len(vertebra_frames) - 1}')
+            frame = int(vertebra_frames[vertebra])
+        elif item.data.get('frame', 'tip') == 'tip':
+            frame = model.n_links
         else:
-            frame = item.get('frame', 'tip')
-            frame = model.n_links if frame == 'tip' else int(frame)
-        names.append(str(item['name']))
+            frame = item.integer('frame', minimum=0)
+            if frame > model.n_links:
+                raise item.error('frame', f'{frame} outside 0..{model.n_links} (or tip)')
+        names.append(item.text('name'))
         frames.append(frame)
-        offsets.append(item.get('offset', [0.0, 0.0, 0.0]))
+        offsets.append(item.vector('offset', 3, (0.0, 0.0, 0.0)))
     return PointEffectors(names, frames, offsets, model.n_frames)

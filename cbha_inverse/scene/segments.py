@@ -19,7 +19,7 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0):
 
     Parameters
     ----------
-    chain : dict
+    chain : cbha_inverse.config_files.Section
         The scene's ``chain`` section: ``sections: [{name, segment, count}]`` (segment path
         relative to the scene file).
     base_dir : pathlib.Path
@@ -40,11 +40,18 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0):
     from cbha_inverse.fem.segment_io import load_segment
     compliances, offsets, rotations, masses = [], [], [], []
     sections, parts = {}, {}
-    for item in chain['sections']:
-        segment = load_segment(Path(base_dir, item['segment']))
-        count = int(item['count'])
-        sections[item['name']] = (len(compliances), count)
-        parts[item['name']] = segment
+    items = chain.sections('sections')
+    if not items:
+        raise chain.error('sections', 'at least one section is needed')
+    for item in items:
+        segment_path = Path(base_dir, item.text('segment'))
+        if not segment_path.is_file():
+            raise item.error('segment', f'no segment file {segment_path}')
+        segment = load_segment(segment_path)
+        count = item.integer('count', minimum=1)
+        name = item.text('name')
+        sections[name] = (len(compliances), count)
+        parts[name] = segment
         for _ in range(count):
             compliances.append(np.asarray(segment.compliance, dtype=float) / stiffness_scale)
             offsets.append(np.asarray(segment.rest_offset, dtype=float))
@@ -92,7 +99,7 @@ def cavity_group(items, sections, segments, n_frames, model='linear'):
 
     Parameters
     ----------
-    items : list of dict
+    items : list of cbha_inverse.config_files.Section
         The scene's ``cavities``: ``{name, section, cavity, max_pressure}``.
     sections : dict
         ``name -> (first link index, count)`` from :func:`segment_chain`.
@@ -112,19 +119,23 @@ def cavity_group(items, sections, segments, n_frames, model='linear'):
     """
     cavities = []
     for item in items:
-        section = item['section']
+        section = item.text('section')
+        if section not in sections:
+            raise item.error('section', f'no chain section {section!r} (has {sorted(sections)})')
         first, count = sections[section]
         segment = segments[section]
         surfaces = cavity_surfaces(segment)
-        if item['cavity'] not in surfaces:
-            raise ValueError(f"segment of section {section!r} has no cavity {item['cavity']!r} "
-                             f'(has {sorted(surfaces)})')
-        points, triangles = surfaces[item['cavity']]
+        cavity = item.text('cavity')
+        if cavity not in surfaces:
+            raise item.error('cavity', f'the segment of section {section!r} has no cavity '
+                             f'{cavity!r} (has {sorted(surfaces)})')
+        points, triangles = surfaces[cavity]
         offset = np.asarray(segment.rest_offset, dtype=float)
         rotation = np.asarray(segment.rest_rotation, dtype=float)
         parts = tuple(CavityPart(points, triangles, first + s, offset, rotation)
                       for s in range(count))
-        cavities.append(Cavity(str(item['name']), parts, float(item['max_pressure'])))
+        cavities.append(Cavity(item.text('name'), parts,
+                               item.number('max_pressure', positive=True)))
     if model == 'linear':
         return LinearCavityGroup(cavities, n_frames)
     if model == 'mesh':

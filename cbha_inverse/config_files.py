@@ -1,0 +1,192 @@
+"""
+Read the package's YAML files so that every mistake becomes one :class:`ConfigError`.
+
+:func:`read_yaml` turns a missing file, an unreadable one, a YAML syntax error (with its line)
+or a wrong top-level type into ``ConfigError(path, key, problem)``; :class:`Section` reads typed
+keys from a parsed mapping and names the dotted key of whatever is missing or wrong
+(``chain.sections[1].count: must be an integer, got str 'eight'``). Scene, segment, geometry and
+params files all go through here.
+"""
+
+import math
+from pathlib import Path
+
+from cbha_inverse.errors import ConfigError
+import yaml
+
+_MISSING = object()
+_KIND_NAMES = {dict: 'mapping of keys', list: 'list'}
+
+
+def read_yaml(path, *, expect=dict):
+    """
+    Parse a YAML file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    expect : type
+        Required type of the top-level value (``dict`` by default).
+
+    Returns
+    -------
+    object
+        The parsed document.
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing or unreadable, is not valid YAML (key ``line N``) or its top level
+        is not an ``expect``.
+
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding='utf-8')
+    except FileNotFoundError:
+        raise ConfigError(path, 'file', 'no such file') from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, 'file', f'cannot be read ({exc})') from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, 'problem_mark', None)
+        where = f'line {mark.line + 1}' if mark is not None else 'yaml'
+        problem = ' '.join(str(part) for part in (getattr(exc, 'context', None),
+                                                  getattr(exc, 'problem', None)) if part)
+        raise ConfigError(path, where, f'invalid YAML: {problem or exc}') from None
+    if not isinstance(data, expect):
+        raise ConfigError(path, 'top level', f'must be a {_KIND_NAMES.get(expect, expect)}, got '
+                          f'{_describe(data)}')
+    return data
+
+
+def _describe(value):
+    """Name a YAML value for a message."""
+    if value is None:
+        return 'nothing (empty)'
+    if isinstance(value, dict):
+        return 'a mapping'
+    if isinstance(value, list):
+        return f'a list of {len(value)}'
+    return f'{type(value).__name__} {value!r}'
+
+
+class Section:
+    """
+    A mapping read from a configuration file, with its place in the file for error messages.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    data : object
+        The parsed value (must be a mapping).
+    where : str
+        Dotted key of this mapping in the file ('' at the top level).
+
+    Raises
+    ------
+    ConfigError
+        If ``data`` is not a mapping.
+
+    """
+
+    def __init__(self, path, data, where=''):
+        """Check that ``data`` is a mapping."""
+        self.path = Path(path)
+        self.where = where
+        if not isinstance(data, dict):
+            raise ConfigError(self.path, where or 'top level',
+                              f'must be a mapping of keys, got {_describe(data)}')
+        self.data = data
+
+    def key(self, name):
+        """Return the dotted key of ``name`` in this section."""
+        return f'{self.where}.{name}' if self.where else str(name)
+
+    def error(self, name, problem):
+        """Return a ``ConfigError`` about key ``name`` of this section."""
+        return ConfigError(self.path, self.key(name), problem)
+
+    def has(self, name):
+        """Return whether the key is present (and not null)."""
+        return self.data.get(name) is not None
+
+    def _raw(self, name, default):
+        value = self.data.get(name)
+        if value is None:
+            if default is _MISSING:
+                raise self.error(name, 'missing')
+            return default, False
+        return value, True
+
+    def number(self, name, default=_MISSING, *, positive=False, minimum=None):
+        """Return a finite float (optionally > 0 or >= ``minimum``)."""
+        value, given = self._raw(name, default)
+        if not given:
+            return value
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.error(name, f'must be a number, got {_describe(value)}')
+        value = float(value)
+        if not math.isfinite(value):
+            raise self.error(name, f'must be finite, got {value}')
+        if positive and value <= 0.0:
+            raise self.error(name, f'must be > 0, got {value:g}')
+        if minimum is not None and value < minimum:
+            raise self.error(name, f'must be >= {minimum:g}, got {value:g}')
+        return value
+
+    def integer(self, name, default=_MISSING, *, minimum=None):
+        """Return an int (optionally >= ``minimum``)."""
+        value, given = self._raw(name, default)
+        if not given:
+            return value
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(name, f'must be an integer, got {_describe(value)}')
+        if minimum is not None and value < minimum:
+            raise self.error(name, f'must be >= {minimum}, got {value}')
+        return value
+
+    def text(self, name, default=_MISSING, *, choices=None):
+        """Return a string (optionally one of ``choices``)."""
+        value, given = self._raw(name, default)
+        if not given:
+            return value
+        if not isinstance(value, str):
+            raise self.error(name, f'must be a string, got {_describe(value)}')
+        if choices is not None and value not in choices:
+            raise self.error(name, f'must be one of {list(choices)}, got {value!r}')
+        return value
+
+    def vector(self, name, size, default=_MISSING):
+        """Return a tuple of ``size`` finite floats."""
+        value, given = self._raw(name, default)
+        if not given:
+            return value
+        if (not isinstance(value, list) or len(value) != size or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value)):
+            raise self.error(name, f'must be a list of {size} finite numbers, got '
+                             f'{_describe(value)}')
+        return tuple(float(v) for v in value)
+
+    def section(self, name, default=_MISSING):
+        """Return the sub-mapping ``name`` as a ``Section``."""
+        value, given = self._raw(name, default)
+        return Section(self.path, value, self.key(name)) if given else value
+
+    def sections(self, name, default=_MISSING):
+        """Return the list of mappings ``name`` as ``Section`` objects."""
+        value, given = self._raw(name, default)
+        if not given:
+            return value
+        if not isinstance(value, list):
+            raise self.error(name, f'must be a list, got {_describe(value)}')
+        return [Section(self.path, item, f'{self.key(name)}[{i}]') for i, item in enumerate(value)]
+
+
+def read_section(path):
+    """Parse a YAML mapping file and return it as the top-level :class:`Section`."""
+    return Section(path, read_yaml(path))

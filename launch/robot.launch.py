@@ -1,0 +1,35 @@
+"""
+A real arm: inverse_solver + robotino_bridge (+ stereo_tracker with feedback:=stereo).
+
+``ros2 launch cbha_inverse robot.launch.py [name:=value ...]``; ``ros2 launch cbha_inverse
+robot.launch.py --show-args`` lists the arguments. The composition is the table
+``cbha_inverse.compositions.COMPOSITIONS['robot']``, which ``cbha_launch robot`` runs without the
+``launch`` package: both start the same nodes with the same params files and overrides.
+"""
+
+from cbha_inverse.compositions import COMPOSITIONS, resolve
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+COMPOSITION = COMPOSITIONS['robot']
+
+
+def _nodes(context):
+    values = {argument.name: LaunchConfiguration(argument.name).perform(context)
+              for argument in COMPOSITION.all_arguments()}
+    return [Node(package='cbha_inverse', executable=process.executable,
+                 name=process.executable, namespace=process.namespace,
+                 parameters=[*process.params_files, process.parameters], output='screen')
+            for process in resolve(COMPOSITION, values)]
+
+
+def generate_launch_description():
+    """Declare the composition's arguments and start its nodes."""
+    arguments = [DeclareLaunchArgument(argument.name, default_value=argument.default,
+                                       description=argument.description,
+                                       **({'choices': list(argument.choices)}
+                                          if argument.choices else {}))
+                 for argument in COMPOSITION.all_arguments()]
+    return LaunchDescription([*arguments, OpaqueFunction(function=_nodes)])
