@@ -23,7 +23,7 @@ def _frozen(array):
 
 def checked_array(value, shape, name):
     """
-    Return ``value`` as a float ndarray, raising ValueError (naming it) unless of ``shape``.
+    Return ``value`` as a finite float ndarray of ``shape``; raise ValueError (naming it) if not.
 
     Parameters
     ----------
@@ -42,6 +42,8 @@ def checked_array(value, shape, name):
     out = np.asarray(value, dtype=float)
     if out.shape != tuple(shape):
         raise ValueError(f'{name} must have shape {tuple(shape)}, got {out.shape}')
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f'{name} must be finite (got NaN or inf)')
     return out
 
 
@@ -118,7 +120,8 @@ class ChainModel:
         Raises
         ------
         ValueError
-            On inconsistent shapes, a non-symmetric or non-positive-definite compliance, or a
+            On inconsistent shapes, a non-finite value (NaN or inf in any argument), a
+            compliance that fails :func:`cbha_inverse.core.links.checked_compliance`, or a
             rotation that is not orthonormal.
 
         """
@@ -137,12 +140,12 @@ class ChainModel:
             rots = checked_array(rest_rotations, (n, 3, 3), 'rest_rotations')
             _check_rotations(rots, 'rest_rotations')
         mass = np.zeros(n) if masses is None else np.array(masses, dtype=float)
-        if mass.shape != (n,) or np.any(mass < 0.0):
-            raise ValueError(f'masses must be {n} non-negative values')
-        base_x = np.zeros(3) if base_position is None else np.array(base_position, dtype=float)
-        base_r = np.eye(3) if base_rotation is None else np.array(base_rotation, dtype=float)
-        if base_x.shape != (3,) or base_r.shape != (3, 3):
-            raise ValueError('base_position must be (3,) and base_rotation (3, 3)')
+        if mass.shape != (n,) or not np.all(np.isfinite(mass)) or np.any(mass < 0.0):
+            raise ValueError(f'masses must be {n} finite non-negative values')
+        base_x = (np.zeros(3) if base_position is None
+                  else checked_array(base_position, (3,), 'base_position'))
+        base_r = (np.eye(3) if base_rotation is None
+                  else checked_array(base_rotation, (3, 3), 'base_rotation'))
         _check_rotations(base_r[None], 'base_rotation')
         return cls(_frozen(comp), _frozen(stiff), _frozen(offsets), _frozen(rots),
                    _frozen(mass), _frozen(base_x), _frozen(base_r))

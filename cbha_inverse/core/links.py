@@ -53,7 +53,7 @@ def checked_compliance(compliance, name='compliance'):
     if c.shape != (6, 6):
         raise np.linalg.LinAlgError(f'{name} must have shape (6, 6), got {c.shape}')
     if not np.all(np.isfinite(c)):
-        raise np.linalg.LinAlgError(f'{name} contains NaN or inf')
+        raise np.linalg.LinAlgError(f'{name} is not finite (NaN or inf)')
     diagonal = np.diag(c)
     if np.any(diagonal <= 0.0):
         raise np.linalg.LinAlgError(f'{name} is not positive definite (non-positive diagonal '
@@ -133,6 +133,8 @@ def timoshenko_compliance(length, youngs_modulus, poisson_ratio, outer_radius, i
     e_mod = float(youngs_modulus)
     r_o = float(outer_radius)
     r_i = float(inner_radius)
+    if not all(np.isfinite([length, e_mod, r_o, r_i, float(poisson_ratio)])):
+        raise ValueError('length, youngs_modulus, poisson_ratio and radii must be finite')
     if length <= 0.0 or e_mod <= 0.0 or r_o <= 0.0 or not 0.0 <= r_i < r_o:
         raise ValueError('need length > 0, youngs_modulus > 0 and 0 <= inner < outer radius')
     if not -1.0 < poisson_ratio < 0.5:

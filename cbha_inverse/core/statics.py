@@ -33,17 +33,37 @@ evaluate the same physics with the same code:
   if it fails, the full load from the rest shape; a load step that fails (no convergence within
   ``max_iterations`` or a failed line search) is halved, successful steps double the increment.
 
-Convergence test (``residual_norm`` reports the left-hand side), by default relative::
+Convergence test (``residual_norm`` reports the left-hand side), by default relative. Forces
+and moments are compared in one unit: ``r_scaled`` is the residual with moments divided by the
+chain length L_c (so both parts are in N), and the force and moment parts of the applied loads
+and of the internal wrenches give one ``load_scale`` (the largest scaled component of either),
+so a pure moment load judges the force residual against it and vice versa. A state converges:
 
-    max |r_scaled| <= tolerance * load_scale + floor
+1. if every component is finite and ``max |r_scaled| <= tolerance * load_scale``; or
+2. (round-off limited) if every frame's residual is within ``tolerance * load_scale + floor_i``
+   and the Newton correction from that state moves no frame by more than
+   ``_ROUNDOFF_STEP * x_ref`` (1e-8) nor turns one by more than ``_ROUNDOFF_STEP`` rad: the
+   correction is applied (unless it is below ``1000 eps``, i.e. noise) and the corrected state
+   is returned. ``floor_i`` is the round-off level of the internal wrench at frame i,
+   ``64 eps max(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` over the (at most two)
+   links meeting at frame i, with ``x_ref = L_c + |base position|`` (max-abs entries of their
+   stiffness blocks). A near-rigid link (compliance / 1e9) has forces
+   that no double-precision state resolves below its floor, so its frames can only converge
+   this way; the floor of one stiff link never lets the residual of other frames pass, and the
+   rest state under a small load never passes (its correction is the deflection). The result
+   then carries a warning when the residual exceeds ``_ROUNDOFF_WARNING`` (1e-4) of the
+   applied load.
 
-``r_scaled`` is the residual with moments divided by the chain length L_c (so both are in N);
-``load_scale`` is the largest scaled component of the applied loads and of the internal wrenches
-at the current state; ``floor`` is the round-off level of the internal forces,
-``64 eps max_links(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` with ``x_ref = L_c +
-|base position|`` (max-abs entries of the stiffness blocks), below which no residual is
-meaningful. With ``absolute_tolerance`` the test is instead ``|r|_2 <= absolute_tolerance``
-(unscaled Euclidean norm in N and N*m, the plant's contract).
+A non-finite residual never converges. With ``absolute_tolerance`` the test is instead
+``|r|_2 <= absolute_tolerance`` (unscaled Euclidean norm in N and N*m, the plant's contract).
+
+Warnings (:attr:`StaticResult.warnings`, checked at the returned state): round-off limited
+convergence (above), a tangent that is not positive definite at the equilibrium (an unstable
+equilibrium, e.g. the straight shape under a compression above the buckling load:
+``_stability_warnings``) and links strained beyond the small-strain range of their
+compliance: an axial deformation above ``STRAIN_LIMIT`` (10 %) of the rest length, or a
+rotation above ``ROTATION_LIMIT`` (0.5 rad) within one link. The links are linear elastic in
+their corotated frame; beyond those limits refine the chain (more, shorter links).
 """
 
 from dataclasses import dataclass
@@ -60,6 +80,16 @@ import numpy as np
 _ARMIJO = 1e-4
 _MAX_HALVINGS = 6
 _MIN_LOAD_INCREMENT = 1.0 / 2 ** 20
+# round-off limited convergence: a Newton correction below sqrt(eps) of the chain's size is
+# applied and ends the iteration; one below 1000 eps is noise and is not even applied
+_ROUNDOFF_STEP = 1e-8
+_ROUNDOFF_NOISE = 1e3 * np.finfo(float).eps
+# a round-off limited residual above this fraction of the applied load gives a warning
+_ROUNDOFF_WARNING = 1e-4
+#: largest axial link deformation, as a fraction of the rest length, before a warning
+STRAIN_LIMIT = 0.1
+#: largest rotation within one link [rad] before a warning
+ROTATION_LIMIT = 0.5
 
 
 class StaticConvergenceError(RuntimeError):
@@ -104,6 +134,10 @@ class StaticResult:
         The applied actuation (empty without actuators).
     effector_positions : (k, 3) ndarray  [m]
         The effector points at the returned state ((0, 3) without effectors).
+    warnings : tuple of str
+        What the user should know about a converged state: round-off limited residual, an
+        unstable equilibrium (buckling), links strained beyond their small-strain range
+        (module docstring).
 
     Notes
     -----
@@ -125,6 +159,7 @@ class StaticResult:
     message: str
     actuation: np.ndarray
     effector_positions: np.ndarray
+    warnings: tuple = ()
 
 
 def external_wrenches(model, tip_wrench=None, frame_wrenches=None, gravity=None):
@@ -186,13 +221,25 @@ def chain_stiffness(model, state=None):
 
 
 def _residual_floor(model, length):
-    """Round-off level of the scaled internal wrenches (see the module docstring)."""
+    """
+    Round-off level of the scaled internal wrench at each of frames 1..n (module docstring).
+
+    Returns
+    -------
+    (n,) ndarray  [N]
+
+    """
     k = np.abs(model.stiffnesses)
-    k_tt = k[:, :3, :3].max()
-    k_tr = max(k[:, :3, 3:].max(), k[:, 3:, :3].max())
-    k_rr = k[:, 3:, 3:].max()
+    k_tt = k[:, :3, :3].max(axis=(1, 2))
+    k_tr = np.maximum(k[:, :3, 3:].max(axis=(1, 2)), k[:, 3:, :3].max(axis=(1, 2)))
+    k_rr = k[:, 3:, 3:].max(axis=(1, 2))
     x_ref = length + float(np.linalg.norm(model.base_position))
-    return 64.0 * np.finfo(float).eps * max(k_tt * x_ref + k_tr, (k_tr * x_ref + k_rr) / length)
+    per_link = 64.0 * np.finfo(float).eps * np.maximum(k_tt * x_ref + k_tr,
+                                                       (k_tr * x_ref + k_rr) / length)
+    # frame j (1..n) is the end of link j - 1 and the start of link j
+    per_frame = per_link.copy()
+    per_frame[:-1] = np.maximum(per_frame[:-1], per_link[1:])
+    return per_frame
 
 
 _SYSTEMS = weakref.WeakKeyDictionary()
@@ -224,8 +271,10 @@ class _Point(NamedTuple):
     state: ChainState
     residual: np.ndarray   # (n, 6) r
     measure: float         # convergence measure (module docstring)
-    norm: float            # Euclidean norm of the scaled residual (line search)
-    converged: bool
+    norm: float            # line-search merit (scaled residual above the round-off floors)
+    converged: bool        # test 1 of the module docstring (or the absolute test)
+    roundoff: bool         # the residual part of test 2 (the caller checks the correction)
+    load_scale: float      # largest scaled applied or internal wrench component [N]
 
 
 class _Problem:
@@ -244,7 +293,9 @@ class _Problem:
         self.absolute = None if absolute_tolerance is None else float(absolute_tolerance)
         self.max_rotation_step = max_rotation_step
         self.length = model.length if model.length > 0.0 else 1.0
-        self.floor = _residual_floor(model, self.length)
+        self.floor = np.ascontiguousarray(_residual_floor(model, self.length))
+        self.x_ref = self.length + float(np.linalg.norm(model.base_position))
+        self._frame_max = np.empty(model.n_links)
         self.rest_rotations = np.ascontiguousarray(model.rest_rotations, dtype=float)
         self.coordinates = np.empty((model.n_links, 12))
         self._evaluated = None
@@ -262,12 +313,29 @@ class _Problem:
                 raise ValueError(f'load_function must return shape {(n, 6)}')
             extra = np.ascontiguousarray(extra.reshape(-1))
         res = np.empty(6 * n)
-        measure, r_two, norm, scale = residual_measures(rhs, actuation, self.external, extra,
-                                                        lam, self.length, res)
+        measure, merit, scaled_norm, norm, scale = residual_measures(
+            rhs, actuation, self.external, extra, lam, self.length, self.floor, res,
+            self._frame_max)
         res = res.reshape(n, 6)
         if self.absolute is not None:
-            return _Point(state, res, norm, r_two, norm <= self.absolute)
-        return _Point(state, res, measure, r_two, measure <= self.tolerance * scale + self.floor)
+            return _Point(state, res, norm, scaled_norm, norm <= self.absolute, False, scale)
+        bound = self.tolerance * scale
+        return _Point(state, res, measure, merit, measure <= bound,
+                      bool(np.all(self._frame_max <= bound + self.floor)), scale)
+
+    def roundoff_step(self, step, relative):
+        """Return whether a Newton correction (n, 6) is below ``relative`` (module docstring)."""
+        return bool(np.abs(step[:, :3]).max() <= relative * self.x_ref
+                    and np.abs(step[:, 3:]).max() <= relative)
+
+    def coordinates_of(self, state, step=None):
+        """Return the links' deformation coordinates ``(u, φ, du, dφ)`` (n, 12) for a step."""
+        step = np.zeros((self.model.n_links, 6)) if step is None else step
+        largest = deformation_step(
+            np.ascontiguousarray(state.positions, dtype=float),
+            np.ascontiguousarray(state.rotations, dtype=float), self.rest_rotations,
+            np.ascontiguousarray(step, dtype=float), self.coordinates)
+        return self.coordinates, largest
 
     def exact_step(self, state, lam, res):
         """Newton step with the exact tangent (band LU)."""
@@ -318,16 +386,14 @@ def _line_search(problem, point, lam, step):
     """
     Backtrack along the Newton step (in deformation coordinates) on the residual norm.
 
-    Armijo test on the Euclidean norm of the scaled residual, ``|r(a)| <= (1 - 1e-4 a) |r(0)|``,
-    halving ``a`` at most ``_MAX_HALVINGS`` times; returns the accepted point, or None (the
-    caller then tries the fallback direction or cuts the load step, which is cheaper than
-    creeping along a poor direction).
+    Armijo test on the Euclidean norm of the scaled residual above the round-off floor of each
+    frame (module docstring; the plain scaled norm with an absolute tolerance),
+    ``|r(a)| <= (1 - 1e-4 a) |r(0)|``, halving ``a`` at most ``_MAX_HALVINGS`` times; returns
+    the accepted point, or None (the caller then tries the fallback direction or cuts the load
+    step, which is cheaper than creeping along a poor direction).
     """
     state = point.state
-    link_rotation = deformation_step(
-        np.ascontiguousarray(state.positions, dtype=float),
-        np.ascontiguousarray(state.rotations, dtype=float), problem.rest_rotations,
-        np.ascontiguousarray(step, dtype=float), problem.coordinates)
+    _, link_rotation = problem.coordinates_of(state, step)
     alpha = problem.first_alpha(link_rotation)
     for _ in range(_MAX_HALVINGS):
         trial = problem.point(problem.poses(state, alpha), lam)
@@ -346,9 +412,9 @@ def _newton(problem, state, lam, max_iterations):
             return True, point, iterations, 'converged'
         if not np.isfinite(point.measure):
             return False, point, iterations, 'non-finite residual'
-        if iterations >= max_iterations:
+        exhausted = iterations >= max_iterations
+        if exhausted and not point.roundoff:
             return False, point, iterations, 'iteration budget exhausted'
-        iterations += 1
         accepted, why = None, ''
         for direction in (problem.exact_step, problem.material_step):
             try:
@@ -356,10 +422,21 @@ def _newton(problem, state, lam, max_iterations):
             except np.linalg.LinAlgError as exc:
                 why = str(exc) or 'singular tangent'
                 continue
+            if point.roundoff and problem.roundoff_step(step, _ROUNDOFF_NOISE):
+                # the correction is noise itself (e.g. the rest shape under no load)
+                return True, point, iterations, 'converged (round-off limited)'
+            if point.roundoff and problem.roundoff_step(step, _ROUNDOFF_STEP):
+                problem.coordinates_of(point.state, step)
+                corrected = problem.point(problem.poses(point.state, 1.0), lam)
+                if corrected.converged or corrected.roundoff:
+                    return True, corrected, iterations + 1, 'converged (round-off limited)'
+            if exhausted:
+                return False, point, iterations, 'iteration budget exhausted'
             accepted = _line_search(problem, point, lam, step)
             if accepted is not None:
                 break
             why = 'line search failed'
+        iterations += 1
         if accepted is None:
             return False, point, iterations, why
         point = accepted
@@ -369,7 +446,7 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
                  actuators=None, actuation=None, effectors=None, load_function=None,
                  load_tangent=None, initial_state=None, tolerance=1e-10,
                  absolute_tolerance=None, max_iterations=50, max_load_steps=64,
-                 max_rotation_step=None, strict=False):
+                 max_rotation_step=None, strict=False, check_warnings=True):
     """
     Solve for the static equilibrium of a chain under loads and actuation (paper eq. 9).
 
@@ -413,11 +490,22 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         Largest link rotation of a line search's first trial step.
     strict : bool
         Raise :class:`StaticConvergenceError` instead of returning an unconverged result.
+    check_warnings : bool
+        Check the converged state for the warnings of the module docstring (one more
+        evaluation and factorization; a plant updated at every tick turns it off).
 
     Returns
     -------
     StaticResult
         ``converged`` is False (with a message) if the full load was not reached.
+
+    Raises
+    ------
+    ValueError
+        If a load, the gravity or the actuation has the wrong shape or is not finite, or
+        ``initial_state`` does not match the model.
+    StaticConvergenceError
+        With ``strict``, if the solve did not converge.
 
     """
     external = external_wrenches(model, tip_wrench, frame_wrenches, gravity)
@@ -429,8 +517,8 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
     lam, increment, steps, total, message = 0.0, 1.0, 0, 0, ''
     state, warm, final = None, None, None
     if initial_state is not None:
-        if initial_state.positions.shape != (model.n_frames, 3):
-            raise ValueError('initial_state does not match the model')
+        checked_array(initial_state.positions, (model.n_frames, 3), 'initial_state.positions')
+        checked_array(initial_state.rotations, (model.n_frames, 3, 3), 'initial_state.rotations')
         steps = 1
         ok, point, total, why = _newton(problem, initial_state, 1.0, max_iterations)
         if ok:
@@ -467,9 +555,128 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         final = problem.point(state, 1.0)
     effector_positions = (np.zeros((0, 3)) if effectors is None
                           else effectors.positions(state.positions, state.rotations))
+    warnings = _result_warnings(problem, final) if converged and check_warnings else ()
     result = StaticResult(state.positions, state.quaternions, state.rotations, state,
                           bool(converged), int(total), float(final.measure), final.residual,
-                          int(steps), float(lam), message, amount, effector_positions)
+                          int(steps), float(lam), message, amount, effector_positions, warnings)
     if strict and not result.converged:
         raise StaticConvergenceError(result)
     return result
+
+
+def _result_warnings(problem, point):
+    """
+    Return the warnings (tuple of str) about a converged point (module docstring).
+
+    Parameters
+    ----------
+    problem : _Problem
+        The problem solved.
+    point : _Point
+        The converged point at the full load.
+
+    Returns
+    -------
+    tuple of str
+
+    """
+    state = point.state
+    warnings = []
+    if problem.absolute is None:
+        rhs = problem.system.evaluate(state.positions, state.rotations, problem.actuation)
+        applied = (rhs[:, 1:] @ problem.actuation + problem.external).reshape(-1, 6)
+        if problem.load_function is not None:
+            applied = applied + np.asarray(problem.load_function(state), dtype=float)
+        scaled = np.abs(applied)
+        scaled[:, 3:] /= problem.length
+        largest = scaled.max()
+        if (largest > 0.0 and point.measure > problem.tolerance * point.load_scale
+                and point.measure > _ROUNDOFF_WARNING * largest):
+            residual = np.abs(point.residual)
+            residual[:, 3:] /= problem.length
+            worst = int(np.argmax(residual.max(axis=1))) + 1
+            warnings.append(
+                f'residual {point.measure:.3g} N is limited by round-off at frame {worst} '
+                f'({point.measure / max(largest, np.finfo(float).tiny):.2g} of the applied '
+                'load): its links are too stiff relative to the load to resolve their forces in '
+                'double precision (stiffness ratio too large; merge the stiff link into its '
+                'neighbour)')
+    coordinates, _ = problem.coordinates_of(state)
+    warnings.extend(strain_warnings(problem.model, coordinates[:, :3], coordinates[:, 3:6]))
+    warnings.extend(_stability_warnings(problem, state))
+    return tuple(warnings)
+
+
+def strain_warnings(model, offsets, rotation_vectors):
+    """
+    Warn about links deformed beyond the small-strain range of their compliance.
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+    offsets : (n, 3) ndarray  [m]
+        ``R_aᵀ (x_b - x_a)`` of every link at the state.
+    rotation_vectors : (n, 3) ndarray  [rad]
+        ``log(R_aᵀ R_b Q0ᵀ)`` of every link.
+
+    Returns
+    -------
+    list of str
+        Empty when every link's axial deformation (along its rest offset) is below
+        ``STRAIN_LIMIT`` of its rest length and its rotation below ``ROTATION_LIMIT``.
+
+    """
+    rest = np.linalg.norm(model.rest_offsets, axis=1)
+    safe = np.where(rest > 0.0, rest, 1.0)
+    # axial: the transverse part of the offset change is mostly the chord turning with bending,
+    # which the rotation limit covers
+    strain = np.abs(np.einsum('ij,ij->i', offsets, model.rest_offsets) / safe - rest) / safe
+    strain[rest == 0.0] = 0.0
+    rotation = np.linalg.norm(rotation_vectors, axis=1)
+    out = []
+    worst = int(np.argmax(strain))
+    if strain[worst] > STRAIN_LIMIT:
+        out.append(f'link {worst} is strained axially by {strain[worst]:.3g} of its rest '
+                   f'length (small-strain limit {STRAIN_LIMIT:g}): its linear compliance is not '
+                   'accurate there')
+    worst = int(np.argmax(rotation))
+    if rotation[worst] > ROTATION_LIMIT:
+        out.append(f'link {worst} turns by {rotation[worst]:.3g} rad within one link (limit '
+                   f'{ROTATION_LIMIT:g} rad): use more, shorter links')
+    return out
+
+
+def _stability_warnings(problem, state):
+    """
+    Warn when the tangent at an equilibrium is not positive definite (unstable equilibrium).
+
+    The symmetric part of the exact tangent (structure and the actuators' load stiffness, plus
+    a user ``load_tangent``) is factorised by Cholesky; a failure means a direction of
+    decreasing stiffness: the equilibrium is unstable, e.g. the straight shape under a
+    compression above the buckling load.
+
+    Returns
+    -------
+    list of str
+
+    """
+    system = problem.system
+    tangent, _ = system.linearise(state.positions, state.rotations, problem.actuation)
+    load = None if problem.load_tangent is None else problem.load_tangent(state)
+    if load is None:
+        stable = system.factor(tangent) is not None
+    else:
+        lower = system.dense(tangent)
+        load = np.asarray(load, dtype=float)
+        matrix = lower + np.tril(lower, -1).T + 0.5 * (load + load.T)
+        try:
+            np.linalg.cholesky(matrix)
+            stable = True
+        except np.linalg.LinAlgError:
+            stable = False
+    if stable:
+        return []
+    return ['the equilibrium is unstable (tangent stiffness not positive definite): a '
+            'compression above the buckling load, lateral buckling under a large moment '
+            'or a snap-through; the structure need not take the returned shape']

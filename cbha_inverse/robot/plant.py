@@ -65,7 +65,7 @@ class StaticPlant:
                             actuation=actuation, effectors=self.effectors,
                             initial_state=self._state, absolute_tolerance=self.tolerance,
                             max_iterations=max_iterations, max_load_steps=max_load_steps,
-                            max_rotation_step=self.max_rotation_step)
+                            max_rotation_step=self.max_rotation_step, check_warnings=False)
 
     def update(self, actuation):
         """

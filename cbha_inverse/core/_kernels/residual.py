@@ -11,7 +11,7 @@ import numba
 
 
 @numba.njit(cache=True)
-def residual_measures(rhs, actuation, dead, extra, load_factor, length, out):
+def residual_measures(rhs, actuation, dead, extra, load_factor, length, floor, out, frame_max):
     """
     Write the residual ``r = f(q) + lam (f_dead + J_aᵀ λ + f_extra)`` and return its measures.
 
@@ -32,15 +32,22 @@ def residual_measures(rhs, actuation, dead, extra, load_factor, length, out):
         ``lam``.
     length : float  [m]
         Chain length.
+    floor : (n,) ndarray  [N]
+        Round-off level of the scaled internal wrench at each of frames 1..n.
     out : (6n,) ndarray
         Receives ``r``.
+    frame_max : (n,) ndarray
+        Receives ``max |r_scaled|`` of each frame.
 
     Returns
     -------
     measure : float  [N]
         ``max |r_scaled|`` (``inf`` if any component is not finite).
+    merit : float  [N]
+        Euclidean norm of the part of ``|r_scaled|`` above each frame's floor (the line search's
+        merit).
     scaled_norm : float  [N]
-        ``|r_scaled|_2`` (the line search's merit).
+        ``|r_scaled|_2``.
     norm : float  [N, N*m]
         ``|r|_2``.
     load_scale : float  [N]
@@ -48,9 +55,12 @@ def residual_measures(rhs, actuation, dead, extra, load_factor, length, out):
 
     """
     size, width = rhs.shape
-    measure, squares, squares_raw, load_scale = 0.0, 0.0, 0.0, 0.0
+    measure, merit, squares, squares_raw, load_scale = 0.0, 0.0, 0.0, 0.0, 0.0
     finite = True
     for row in range(size):
+        frame = row // 6
+        if row % 6 == 0:
+            frame_max[frame] = 0.0
         load = load_factor * (dead[row] + extra[row])
         for j in range(width - 1):
             load += rhs[row, 1 + j] * actuation[j]
@@ -59,11 +69,14 @@ def residual_measures(rhs, actuation, dead, extra, load_factor, length, out):
         if not math.isfinite(r):
             finite = False
         weight = 1.0 if row % 6 < 3 else 1.0 / length
-        scaled = r * weight
-        measure = max(measure, abs(scaled))
+        scaled = abs(r * weight)
+        frame_max[frame] = max(frame_max[frame], scaled)
+        measure = max(measure, scaled)
+        above = max(scaled - floor[frame], 0.0)
+        merit += above * above
         squares += scaled * scaled
         squares_raw += r * r
         load_scale = max(load_scale, abs(load * weight), abs((r - load) * weight))
     if not finite:
-        return math.inf, math.inf, math.inf, load_scale
-    return measure, math.sqrt(squares), math.sqrt(squares_raw), load_scale
+        return math.inf, math.inf, math.inf, math.inf, load_scale
+    return measure, math.sqrt(merit), math.sqrt(squares), math.sqrt(squares_raw), load_scale

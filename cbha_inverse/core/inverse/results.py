@@ -82,7 +82,8 @@ class TickResult:
         actuator is held by a bound the target pushes against: closest reachable point),
         ``'qp_fallback'`` (proxsuite failed, the Gauss-Seidel solution is used),
         ``'not_positive_definite'`` (tangent not SPD: actuation held, state unchanged) or
-        ``'rejected'`` (non-finite target: actuation held, state unchanged).
+        ``'rejected'`` (non-finite target or non-finite QP solution: actuation held, state
+        unchanged).
     qp_status : str
         The QP solver's own status.
     qp_iterations : int
@@ -95,6 +96,9 @@ class TickResult:
         Norm of the equilibrium residual at the last linearisation (before its update).
     timings : dict
         Seconds spent in ``assembly``, ``factor``, ``projection``, ``qp``, ``update``, ``total``.
+    warnings : tuple of str
+        What the user should know about this tick (a clamped or rejected target, a held
+        non-finite QP solution); a node logs them.
 
     """
 
@@ -107,3 +111,4 @@ class TickResult:
     predicted_error: float
     residual_norm: float
     timings: dict = field(default_factory=dict)
+    warnings: tuple = ()

@@ -43,6 +43,9 @@ from cbha_inverse.core.statics import external_wrenches
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
+# targets farther from the base than this many chain lengths are clamped onto that sphere
+_REACH_FACTOR = 2.0
+
 
 class _Linearization(NamedTuple):
     """What a linearisation tick keeps for the linear ticks that follow it (paper eq. 11)."""
@@ -85,7 +88,28 @@ class InverseSolver:
     options : InverseOptions, optional
         Solver options.
     scale : (m,) array_like, optional
-        Actuator scales ``σ`` (default: ``upper - lower``).
+        Actuator scales ``σ`` (default: ``upper - lower``; an actuator with zero range is
+        fixed at its bound and scaled like the widest one, see :attr:`warnings`).
+
+    Attributes
+    ----------
+    warnings : tuple of str
+        What the user should know about the set-up (zero-range actuators); a node logs them.
+
+    Raises
+    ------
+    ValueError
+        If an actuator has no finite upper bound, a lower bound above its upper bound, or a
+        given ``scale`` is not positive and finite.
+
+    Notes
+    -----
+    Every tick is overflow-safe: each effector target farther from the base than
+    ``_REACH_FACTOR`` times the chain's length (plus the effector offset) is moved along the
+    line from the base to it onto that sphere (no point beyond it is reachable, so the QP gives
+    the same saturated answer), and a tick whose QP returns a non-finite actuation holds the
+    last actuation and forgets the QP warm start (status ``'rejected'``), so the next sane
+    target is tracked again without :meth:`reset`.
 
     """
 
@@ -102,8 +126,21 @@ class InverseSolver:
         self.actuator_names = tuple(actuators.names)
         self.effector_names = tuple(effectors.names)
         m = actuators.n_actuators
-        self._scale = (self.upper_bounds - self.lower_bounds if scale is None
-                       else np.asarray(scale, dtype=float))
+        span = self.upper_bounds - self.lower_bounds
+        inverted = [name for name, width in zip(self.actuator_names, span) if not width >= 0.0]
+        if inverted:
+            raise ValueError(f'actuator {inverted[0]!r}: lower bound above the upper bound')
+        fixed = [name for name, width in zip(self.actuator_names, span) if width == 0.0]
+        self.warnings = tuple(f'actuator {name!r} has zero range: fixed at its bound'
+                              for name in fixed)
+        if scale is None:
+            # a zero-range actuator's x = λ/σ is fixed by its bounds whatever σ: any positive σ
+            self._scale = np.where(span > 0.0, span, span.max() if span.max() > 0.0 else 1.0)
+        else:
+            self._scale = np.array(scale, dtype=float)
+            if self._scale.shape != (m,) or not np.all(np.isfinite(self._scale)) or np.any(
+                    self._scale <= 0.0):
+                raise ValueError(f'scale must be {m} positive finite values')
         # a plain C-order copy: one compiled signature of the QP kernels whatever was given
         self._rate = (None if self.options.rate_limit is None
                       else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
@@ -117,6 +154,10 @@ class InverseSolver:
         self._max_rotation = math.inf if step is None else float(step)
         self._effector_frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
         self._effector_offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
+        # no effector can be farther from the base than this (overflow-safe targets)
+        self._base = np.array(model.base_position, dtype=float)
+        self._reach = _REACH_FACTOR * (model.length + np.linalg.norm(
+            self._effector_offsets, axis=1))
         self.reset()
 
     def reset(self, state=None, actuation=None):
@@ -205,14 +246,44 @@ class InverseSolver:
         factor = self._tick.factor(tangent)
         return None if factor is None else _CholeskyFactor(factor)
 
-    def _held(self, status, started, qp_status='not_run'):
+    def _held(self, status, started, qp_status='not_run', warnings=()):
         """Return a tick result that keeps the actuation and the state."""
         m = self.actuation.size
         elapsed = time.perf_counter() - started
         timings = {'assembly': 0.0, 'factor': 0.0, 'projection': 0.0, 'qp': 0.0, 'update': 0.0,
                    'total': elapsed}
         return TickResult(self.actuation.copy(), self.effector_positions(), status, qp_status, 0,
-                          np.zeros(m, dtype=bool), float('nan'), float('nan'), timings)
+                          np.zeros(m, dtype=bool), float('nan'), float('nan'), timings,
+                          tuple(warnings))
+
+    def _reachable(self, targets):
+        """
+        Return the targets moved onto the reach sphere when beyond it, and the warnings.
+
+        Parameters
+        ----------
+        targets : (k, 3) ndarray  [m]
+            Finite effector targets.
+
+        Returns
+        -------
+        targets : (k, 3) ndarray  [m]
+        warnings : tuple of str
+
+        """
+        away = targets - self._base
+        largest = np.abs(away).max(axis=1)
+        far = largest > self._reach
+        if not far.any():
+            return targets, ()
+        # direction without overflow: divide by the largest component before the norm
+        unit = away[far] / largest[far, None]
+        unit /= np.linalg.norm(unit, axis=1)[:, None]
+        clamped = targets.copy()
+        clamped[far] = self._base + self._reach[far, None] * unit
+        names = ', '.join(name for name, f in zip(self.effector_names, far) if f)
+        return clamped, (f'target of {names} is beyond any reach of the chain: clamped to '
+                         f'{self._reach[far].max():.3g} m from the base',)
 
     def step(self, targets):
         """
@@ -231,19 +302,21 @@ class InverseSolver:
         Raises
         ------
         ValueError
-            If ``targets`` does not have the shape (k, 3).
+            If ``targets`` does not have the shape (k, 3) (or (3,) for one effector): no other
+            shape, e.g. a transposed (3, k) array, is reinterpreted.
 
         """
         t_start = time.perf_counter()
         targets = np.asarray(targets, dtype=float)
         k = self._k
         if targets.shape != (k, 3):
-            if targets.size == 3 * k:
-                targets = targets.reshape(k, 3)
+            if k == 1 and targets.shape == (3,):
+                targets = targets.reshape(1, 3)
             else:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
         if not all(map(math.isfinite, targets.flat)):
-            return self._held('rejected', t_start)
+            return self._held('rejected', t_start, warnings=('non-finite target rejected',))
+        targets, warnings = self._reachable(targets)
         lin = self._linearization
         prepared, self._prepared = self._prepared, False
         fresh = lin is None or self._age >= self.options.relinearize_every
@@ -264,6 +337,12 @@ class InverseSolver:
         problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._rate)
         solution, status = self._solve_qp(problem, same_hessian=not (fresh or prepared))
+        if not all(map(math.isfinite, solution.x)):
+            # never a NaN actuation, never a poisoned warm start: hold, the next tick recovers
+            self._qp.reset()
+            self._active_set.reset()
+            return self._held('rejected', t_start, solution.status,
+                              warnings + ('QP returned a non-finite actuation: held',))
         actuation, gap, largest_gap, largest_move = tick_outcome(
             lin.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
             self.upper_bounds)
@@ -290,7 +369,8 @@ class InverseSolver:
                    'projection': t_projection - t_factor, 'qp': t_qp - t_projection,
                    'update': t_end - t_qp, 'total': t_end - t_start}
         return TickResult(actuation, effector_positions, status, solution.status,
-                          solution.iterations, saturated, largest_gap, lin.residual_norm, timings)
+                          solution.iterations, saturated, largest_gap, lin.residual_norm, timings,
+                          warnings)
 
     def _solve_qp(self, problem, same_hessian):
         """
