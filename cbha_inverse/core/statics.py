@@ -245,14 +245,38 @@ def _residual_floor(model, length):
 _SYSTEMS = weakref.WeakKeyDictionary()
 
 
+class _ChainConstants(NamedTuple):
+    """What every static problem of one chain model uses (computed once per model)."""
+
+    length: float              # characteristic length L_c [m] (1 for a zero-length chain)
+    x_ref: float               # L_c + |base position| [m]
+    floor: np.ndarray          # (n,) round-off floor per frame [N]
+    rest_rotations: np.ndarray  # (n, 3, 3) Q0, C order
+    rest: ChainState           # the rest shape (never modified)
+
+
+def _cached(model):
+    """Return the per-model cache entry (systems and constants)."""
+    entry = _SYSTEMS.get(model)
+    if entry is None:
+        length = model.length if model.length > 0.0 else 1.0
+        constants = _ChainConstants(
+            length, length + float(np.linalg.norm(model.base_position)),
+            np.ascontiguousarray(_residual_floor(model, length)),
+            np.ascontiguousarray(model.rest_rotations, dtype=float), rest_state(model))
+        entry = {'chain': None, 'actuated': weakref.WeakKeyDictionary(),
+                 'constants': constants}
+        _SYSTEMS[model] = entry
+    return entry
+
+
 def _system(model, actuators):
     """
     Return the compiled evaluator of a chain and its actuators, built once per pair.
 
     Its constant external wrenches are zero: the static problem adds its own dead loads.
     """
-    per_model = _SYSTEMS.setdefault(model, {'chain': None,
-                                            'actuated': weakref.WeakKeyDictionary()})
+    per_model = _cached(model)
     if actuators is None:
         if per_model['chain'] is None:
             per_model['chain'] = EquilibriumSystem(model, ActuatorSet((), model.n_frames),
@@ -292,11 +316,10 @@ class _Problem:
         self.tolerance = float(tolerance)
         self.absolute = None if absolute_tolerance is None else float(absolute_tolerance)
         self.max_rotation_step = max_rotation_step
-        self.length = model.length if model.length > 0.0 else 1.0
-        self.floor = np.ascontiguousarray(_residual_floor(model, self.length))
-        self.x_ref = self.length + float(np.linalg.norm(model.base_position))
+        constants = _cached(model)['constants']
+        self.length, self.x_ref, self.floor = constants.length, constants.x_ref, constants.floor
+        self.rest_rotations, self.rest = constants.rest_rotations, constants.rest
         self._frame_max = np.empty(model.n_links)
-        self.rest_rotations = np.ascontiguousarray(model.rest_rotations, dtype=float)
         self.coordinates = np.empty((model.n_links, 12))
         self._evaluated = None
 
@@ -313,15 +336,14 @@ class _Problem:
                 raise ValueError(f'load_function must return shape {(n, 6)}')
             extra = np.ascontiguousarray(extra.reshape(-1))
         res = np.empty(6 * n)
-        measure, merit, scaled_norm, norm, scale = residual_measures(
-            rhs, actuation, self.external, extra, lam, self.length, self.floor, res,
-            self._frame_max)
+        measure, merit, scaled_norm, norm, scale, within = residual_measures(
+            rhs, actuation, self.external, extra, lam, self.length, self.floor, self.tolerance,
+            res, self._frame_max)
         res = res.reshape(n, 6)
         if self.absolute is not None:
             return _Point(state, res, norm, scaled_norm, norm <= self.absolute, False, scale)
-        bound = self.tolerance * scale
-        return _Point(state, res, measure, merit, measure <= bound,
-                      bool(np.all(self._frame_max <= bound + self.floor)), scale)
+        return _Point(state, res, measure, merit, measure <= self.tolerance * scale, within,
+                      scale)
 
     def roundoff_step(self, step, relative):
         """Return whether a Newton correction (n, 6) is below ``relative`` (module docstring)."""
@@ -526,7 +548,7 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         else:
             message, warm = f'warm start failed: {why}', point.state
     if state is None:
-        state = rest_state(model)
+        state = problem.rest
     while lam < 1.0:
         if steps >= max_load_steps:
             message = (f'not converged: load step budget ({max_load_steps}) exhausted at load '
@@ -553,6 +575,8 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         if lam == 0.0 and warm is not None:
             state = warm  # no equilibrium reached: the warm iterate is the better place to resume
         final = problem.point(state, 1.0)
+    if state is problem.rest:
+        state = ChainState(state.positions.copy(), state.rotations.copy())  # keep the cache
     effector_positions = (np.zeros((0, 3)) if effectors is None
                           else effectors.positions(state.positions, state.rotations))
     warnings = _result_warnings(problem, final) if converged and check_warnings else ()
@@ -582,7 +606,8 @@ def _result_warnings(problem, point):
     """
     state = point.state
     warnings = []
-    if problem.absolute is None:
+    if problem.absolute is None and point.measure > problem.tolerance * point.load_scale:
+        # converged round-off limited: how large is the residual against the applied load?
         rhs = problem.system.evaluate(state.positions, state.rotations, problem.actuation)
         applied = (rhs[:, 1:] @ problem.actuation + problem.external).reshape(-1, 6)
         if problem.load_function is not None:
@@ -590,8 +615,7 @@ def _result_warnings(problem, point):
         scaled = np.abs(applied)
         scaled[:, 3:] /= problem.length
         largest = scaled.max()
-        if (largest > 0.0 and point.measure > problem.tolerance * point.load_scale
-                and point.measure > _ROUNDOFF_WARNING * largest):
+        if largest > 0.0 and point.measure > _ROUNDOFF_WARNING * largest:
             residual = np.abs(point.residual)
             residual[:, 3:] /= problem.length
             worst = int(np.argmax(residual.max(axis=1))) + 1

@@ -141,7 +141,7 @@ class EquilibriumSystem:
         self._cable_values = [(cab, self._values[p], self._values[q])
                               for cab, (p, q) in zip(self._cables, slices)]
 
-    def evaluate(self, positions, rotations, actuation, load_factor=1.0, material=False):
+    def evaluate(self, positions, rotations, actuation, material=False):
         """
         Run the compiled passes: residual, actuator columns and every tangent block.
 
@@ -153,15 +153,13 @@ class EquilibriumSystem:
             Frame rotations.
         actuation : (m,) ndarray  [N, Pa]
             ``λ`` (enters the residual and the load stiffness).
-        load_factor : float
-            Factor on the constant external wrenches (load stepping; 1 in a tick).
         material : bool
             Keep only the material tangent of the links (:meth:`material_system`).
 
         Returns
         -------
         rhs : (6n, m + 1) ndarray
-            Column 0: the residual ``f(q) + load_factor f_ext + J_aᵀ λ``; columns 1..m:
+            Column 0: the residual ``f(q) + f_ext + J_aᵀ λ``; columns 1..m:
             ``J_aᵀ``. A buffer of this object (overwritten by the next call).
 
         """
@@ -176,7 +174,7 @@ class EquilibriumSystem:
             if material:
                 pair_values[:] = 0.0
                 moment_values[:] = 0.0
-        rhs[:, 0] += load_factor * self.external
+        rhs[:, 0] += self.external
         for group, cols in self._generic:
             wrenches, _ = group.evaluate(positions, rotations, False)
             jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
@@ -210,7 +208,7 @@ class EquilibriumSystem:
         rhs = self.evaluate(positions, rotations, actuation)
         return self._symmetric_band(), rhs
 
-    def material_system(self, positions, rotations, actuation, load_factor=1.0):
+    def material_system(self, positions, rotations, actuation):
         """
         Return the material tangent (lower band, SPD) and the right-hand sides.
 
@@ -219,10 +217,10 @@ class EquilibriumSystem:
         exact tangent is singular or indefinite). Arguments and results as :meth:`linearise`.
 
         """
-        rhs = self.evaluate(positions, rotations, actuation, load_factor, material=True)
+        rhs = self.evaluate(positions, rotations, actuation, material=True)
         return self._symmetric_band(), rhs
 
-    def exact_system(self, positions, rotations, actuation, load_factor=1.0):
+    def exact_system(self, positions, rotations, actuation):
         """
         Return the exact tangent (general band) and the right-hand sides.
 
@@ -241,7 +239,7 @@ class EquilibriumSystem:
             As :meth:`evaluate`.
 
         """
-        rhs = self.evaluate(positions, rotations, actuation, load_factor)
+        rhs = self.evaluate(positions, rotations, actuation)
         return self.exact_tangent(), rhs
 
     def exact_tangent(self):

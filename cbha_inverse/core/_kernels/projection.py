@@ -2,7 +2,8 @@
 Compiled projection of a solved linearisation onto effectors and actuators (DESIGN §6 step 2).
 
 :func:`project_effectors` forms ``W_ea``, ``W_aa`` and the free effector positions from
-``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the actuation and remaining gap of a QP solution.
+``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the actuation and remaining gap of a QP solution;
+:func:`target_status` checks the targets of a tick.
 """
 
 import math
@@ -116,12 +117,17 @@ def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bou
         Largest effector distance ``max_e |gap_e|``.
     largest_move : float
         ``max |x - x_previous|`` (dimensionless actuation change).
+    finite : bool
+        Whether every ``x`` is finite (else the caller holds the actuation).
 
     """
     rows, m = w_ea.shape
     actuation = np.empty(m)
     largest_move = 0.0
+    finite = True
     for j in range(m):
+        if not math.isfinite(x[j]):
+            finite = False
         actuation[j] = min(max(scale[j] * x[j], lower_bounds[j]), upper_bounds[j])
         largest_move = max(largest_move, abs(x[j] - x_previous[j]))
     gap = np.empty(rows)
@@ -133,4 +139,35 @@ def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bou
     largest = 0.0
     for e in range(rows // 3):
         largest = max(largest, gap[3 * e] ** 2 + gap[3 * e + 1] ** 2 + gap[3 * e + 2] ** 2)
-    return actuation, gap, math.sqrt(largest), largest_move
+    return actuation, gap, math.sqrt(largest), largest_move, finite
+
+
+@numba.njit(cache=True)
+def target_status(targets, base, reach):
+    """
+    Check the effector targets of a tick: finite, and within reach of the chain.
+
+    Parameters
+    ----------
+    targets : (k, 3) ndarray  [m]
+        Effector targets.
+    base : (3,) ndarray  [m]
+        Base position.
+    reach : (k,) ndarray  [m]
+        Largest distance (max-abs component) an effector can be from the base.
+
+    Returns
+    -------
+    int
+        0: finite and within reach; 1: not finite; 2: finite but some target beyond reach.
+
+    """
+    status = 0
+    for e in range(targets.shape[0]):
+        for i in range(3):
+            value = targets[e, i]
+            if not math.isfinite(value):
+                return 1
+            if abs(value - base[i]) > reach[e]:
+                status = 2
+    return status

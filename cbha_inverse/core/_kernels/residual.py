@@ -11,7 +11,8 @@ import numba
 
 
 @numba.njit(cache=True)
-def residual_measures(rhs, actuation, dead, extra, load_factor, length, floor, out, frame_max):
+def residual_measures(rhs, actuation, dead, extra, load_factor, length, floor, tolerance, out,
+                      frame_max):
     """
     Write the residual ``r = f(q) + lam (f_dead + J_aᵀ λ + f_extra)`` and return its measures.
 
@@ -34,6 +35,8 @@ def residual_measures(rhs, actuation, dead, extra, load_factor, length, floor, o
         Chain length.
     floor : (n,) ndarray  [N]
         Round-off level of the scaled internal wrench at each of frames 1..n.
+    tolerance : float
+        Relative tolerance of the convergence test.
     out : (6n,) ndarray
         Receives ``r``.
     frame_max : (n,) ndarray
@@ -52,6 +55,10 @@ def residual_measures(rhs, actuation, dead, extra, load_factor, length, floor, o
         ``|r|_2``.
     load_scale : float  [N]
         Largest scaled component of the applied loads and of the internal wrenches.
+    within_roundoff : bool
+        Whether every frame's ``max |r_scaled|`` is within ``tolerance * load_scale`` plus its
+        floor (the residual part of the round-off limited test of
+        :mod:`cbha_inverse.core.statics`).
 
     """
     size, width = rhs.shape
@@ -78,5 +85,11 @@ def residual_measures(rhs, actuation, dead, extra, load_factor, length, floor, o
         squares_raw += r * r
         load_scale = max(load_scale, abs(load * weight), abs((r - load) * weight))
     if not finite:
-        return math.inf, math.inf, math.inf, math.inf, load_scale
-    return measure, math.sqrt(merit), math.sqrt(squares), math.sqrt(squares_raw), load_scale
+        return math.inf, math.inf, math.inf, math.inf, load_scale, False
+    bound = tolerance * load_scale
+    within = True
+    for frame in range(frame_max.size):
+        if frame_max[frame] > bound + floor[frame]:
+            within = False
+    return (measure, math.sqrt(merit), math.sqrt(squares), math.sqrt(squares_raw), load_scale,
+            within)

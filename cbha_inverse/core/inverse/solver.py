@@ -31,7 +31,8 @@ import math
 import time
 from typing import NamedTuple
 
-from cbha_inverse.core._kernels.projection import project_effectors, tick_outcome
+from cbha_inverse.core._kernels.projection import (project_effectors, target_status,
+                                                   tick_outcome)
 from cbha_inverse.core._kernels.retraction import apply_linear_step, retract_frames as _retract
 from cbha_inverse.core.chain import ChainState, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
@@ -274,8 +275,6 @@ class InverseSolver:
         away = targets - self._base
         largest = np.abs(away).max(axis=1)
         far = largest > self._reach
-        if not far.any():
-            return targets, ()
         # direction without overflow: divide by the largest component before the norm
         unit = away[far] / largest[far, None]
         unit /= np.linalg.norm(unit, axis=1)[:, None]
@@ -314,9 +313,11 @@ class InverseSolver:
                 targets = targets.reshape(1, 3)
             else:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
-        if not all(map(math.isfinite, targets.flat)):
+        targets = np.ascontiguousarray(targets)
+        checked = target_status(targets, self._base, self._reach)
+        if checked == 1:
             return self._held('rejected', t_start, warnings=('non-finite target rejected',))
-        targets, warnings = self._reachable(targets)
+        targets, warnings = self._reachable(targets) if checked == 2 else (targets, ())
         lin = self._linearization
         prepared, self._prepared = self._prepared, False
         fresh = lin is None or self._age >= self.options.relinearize_every
@@ -337,15 +338,15 @@ class InverseSolver:
         problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._rate)
         solution, status = self._solve_qp(problem, same_hessian=not (fresh or prepared))
-        if not all(map(math.isfinite, solution.x)):
+        actuation, gap, largest_gap, largest_move, finite = tick_outcome(
+            lin.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
+            self.upper_bounds)
+        if not finite:
             # never a NaN actuation, never a poisoned warm start: hold, the next tick recovers
             self._qp.reset()
             self._active_set.reset()
             return self._held('rejected', t_start, solution.status,
                               warnings + ('QP returned a non-finite actuation: held',))
-        actuation, gap, largest_gap, largest_move = tick_outcome(
-            lin.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
-            self.upper_bounds)
         saturated = binding_bounds(problem, solution.x)
         if status == 'solved' and saturated.any():
             status = 'saturated'
