@@ -26,6 +26,7 @@ CONSOLE_SCRIPTS = [
     'trajectory = cbha_inverse.ros.trajectory_node:main',
     'inverse_solver = cbha_inverse.ros.inverse_solver_node:main',
     'cbha_sim = cbha_inverse.ros.cbha_sim_node:main',
+    'stereo_tracker = cbha_inverse.ros.stereo_tracker_node:main',
     # commands
     'cbha_demo = cbha_inverse.ros.demo:main',
     'condense_segment = cbha_inverse.fem.cli:main',
@@ -35,6 +36,8 @@ CONSOLE_SCRIPTS = [
     'cbha_fem_report = cbha_inverse.report.fem_report:main',
     'cbha_launch = cbha_inverse.launcher:main',
     'cbha_scene = cbha_inverse.scene.cli:main',
+    'stereo_calibrate = cbha_inverse.vision.calibrate_cli:main',
+    'cbha_bench_stereo = cbha_inverse.report.bench_stereo:main',
 ]
 
 setup(

@@ -18,9 +18,9 @@ import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = 'cbha_inverse'
-NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim')
+NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim', 'stereo_tracker')
 COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo', 'cbha_launch',
-                       'cbha_scene')
+                       'cbha_scene', 'stereo_calibrate')
 
 
 def _child_env(prefix):

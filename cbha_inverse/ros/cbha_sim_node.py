@@ -10,6 +10,12 @@ plant (:class:`cbha_inverse.robot.plant.StaticPlant`: the scene loaded with a de
 ``stiffness_scale`` error and its own ``gravity``) is moved to the equilibrium of the current
 valve pressures by warm-started Newton steps, and the tip is published on ``tip/measured``
 (PointStamped, sensor data QoS) with Gaussian noise (seeded) and, noise-free, on ``tip/true``.
+
+``tip_output: stereo`` replaces ``tip/measured`` by rendered stereo cameras (the tip marker drawn
+into both cameras of ``camera_rig`` at ``camera_rate_hz``: ``stereo/{left,right}/image_raw`` and
+``camera_info``, see :mod:`cbha_inverse.ros.sim_cameras`) for ``stereo_tracker``; ``both``
+publishes both. OpenCV is imported only then.
+
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 """
 
@@ -68,6 +74,13 @@ class CbhaSimParams:
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected commands [s]',
                                 low=0.0, high=3600.0)
+    tip_output: str = param('point', 'tip feedback: tip/measured points, rendered stereo '
+                            'images, or both', choices=('point', 'stereo', 'both'))
+    camera_rig: str = param('cameras/rig.yaml', 'stereo output: rig file (a path, or relative '
+                            'to config/)')
+    camera_rate_hz: float = param(30.0, 'stereo output: frame rate [Hz]', low=0.1, high=1000.0)
+    marker_radius: float = param(0.006, 'stereo output: radius of the tip sphere [m]',
+                                 low=0.0005, high=0.1)
 
 
 class CbhaSimNode(Node):
@@ -113,6 +126,7 @@ class CbhaSimNode(Node):
         self.rejected = {}
         self.accepted = 0
         self.last_result = None
+        self.last_stamp = None
         self.not_converged = 0
         self.failures = 0
         self.resets = 0
@@ -125,11 +139,34 @@ class CbhaSimNode(Node):
                                  COMMAND_QOS)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
+        self.cameras = None
+        if p.tip_output != 'point':
+            self.cameras = self._start_cameras()
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
             f'plant {self.scene.name} x{p.stiffness_scale:g} stiffness, gravity '
             f'{list(p.gravity)}, valves {p.valve_time_constant * 1e3:g} ms, latency '
             f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm, {p.rate_hz:g} Hz')
+
+    def _start_cameras(self):
+        from cbha_inverse.paths import config_path
+        from cbha_inverse.ros.sim_cameras import SimulatedCameras
+        from cbha_inverse.vision.rig import load_rig
+        p = self.params
+        installed = config_path(p.camera_rig)
+        try:
+            rig = load_rig(installed if installed.is_file() else p.camera_rig)
+        except ValueError as exc:
+            self.destroy_node()
+            raise ParameterError(f'{NODE_NAME}: {exc}') from None
+
+        def shape():
+            result, stamp = self.last_result, self.last_stamp
+            if result is None:
+                return None
+            return result.effector_positions[-1], result.positions, stamp
+
+        return SimulatedCameras(self, rig, p.camera_rate_hz, p.marker_radius, p.seed, shape)
 
     def _on_command(self, message):
         values = command_array(message)
@@ -174,12 +211,13 @@ class CbhaSimNode(Node):
             self.get_logger().error(f'plant update failed, state kept: {exc!r}',
                                     throttle_duration_sec=self.params.log_throttle)
             return
-        self.last_result = result
+        stamp = self.get_clock().now().to_msg()
+        self.last_result, self.last_stamp = result, stamp
         self.not_converged += not result.converged
         tip = result.effector_positions[-1]
-        stamp = self.get_clock().now().to_msg()
         noisy = tip + self.rng.normal(0.0, self.params.noise_std, 3)
-        self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
+        if self.params.tip_output != 'stereo':
+            self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
         self.truth_publisher.publish(point_stamped(tip, stamp, self.params.frame_id))
         self.tick_times.add(time.perf_counter() - start)
 
@@ -193,7 +231,8 @@ class CbhaSimNode(Node):
                   'newton_iterations': result.iterations if result else 0,
                   'residual_norm': result.residual_norm if result else math.nan,
                   'not_converged_updates': self.not_converged, 'failed_updates': self.failures,
-                  **self.tick_times.summary('tick')}
+                  **self.tick_times.summary('tick'),
+                  'camera_frames': self.cameras.frames if self.cameras else 0}
         level = WARN if total or (result is not None and not result.converged) else OK
         message = (f'{total} rejected commands' if total else
                    'plant not converged' if level == WARN else 'ok')

@@ -13,6 +13,15 @@ y-z plane) and ``summary.json``, and per run the params files used, the node log
 
 Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
 centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
+
+``--feedback stereo`` adds the closed loop through the cameras: ``cbha_sim`` renders its tip
+marker into the rig ``--stereo-rig`` (default ``config/cameras/demo_rig.yaml``: the default rig at
+640x512, f = 700 px, so that ``make demo`` stays under two minutes) at ``--camera-rate`` frames/s,
+``stereo_tracker`` measures the tip from the images, and ``inverse_solver`` closes the loop on it
+with ``--stereo-loop-gain`` (0.2 per frame at 30 frames/s = 6 /s, below the 10 /s of direct
+feedback (0.1 x 100 Hz): a frame interval, the image transport and the tracking add ~50-70 ms of
+delay, and 10 /s rang after the start jump on the loaded 2-core machine). Its line is printed
+beside the direct-feedback runs.
 """
 
 import argparse
@@ -36,7 +45,8 @@ import yaml
 NODES = ('cbha_sim', 'inverse_solver', 'trajectory')
 MODULES = {'cbha_sim': 'cbha_inverse.ros.cbha_sim_node',
            'inverse_solver': 'cbha_inverse.ros.inverse_solver_node',
-           'trajectory': 'cbha_inverse.ros.trajectory_node'}
+           'trajectory': 'cbha_inverse.ros.trajectory_node',
+           'stereo_tracker': 'cbha_inverse.ros.stereo_tracker_node'}
 NAMESPACE = '/cbha'
 
 
@@ -55,6 +65,16 @@ def parse_args(argv):
                         help='time at the start point before moving [s] (not scored)')
     parser.add_argument('--stiffness-scale', type=float, default=0.9,
                         help='plant stiffness / model stiffness')
+    parser.add_argument('--feedback', default='direct,stereo',
+                        help='comma-separated: direct (tip/measured from the plant: every shape '
+                        'and mode) and/or stereo (closed loop through rendered cameras and '
+                        'stereo_tracker, for --stereo-shapes)')
+    parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
+    parser.add_argument('--stereo-rig', default='cameras/demo_rig.yaml',
+                        help='rig of the stereo runs (path, or relative to config/)')
+    parser.add_argument('--camera-rate', type=float, default=30.0, help='stereo frames/s')
+    parser.add_argument('--stereo-loop-gain', type=float, default=0.2,
+                        help='inverse_solver loop_gain of the stereo runs (per measurement)')
     parser.add_argument('--domain', type=int, default=None,
                         help='ROS_DOMAIN_ID for the run (default: the environment, else a free '
                         'one from domain_coordinator)')
@@ -108,7 +128,7 @@ def _stop(processes):
 
 
 class Recorder:
-    """Subscribe to target, tip/true and /diagnostics (one rclpy node in this process)."""
+    """Subscribe to target, tip/true, tip/measured and /diagnostics (one node in this process)."""
 
     def __init__(self, context):
         from cbha_inverse.ros.qos import DIAGNOSTICS_QOS, MEASURED_QOS, TARGET_QOS
@@ -118,10 +138,12 @@ class Recorder:
         from rclpy.node import Node
 
         self.node = Node('cbha_demo_recorder', context=context, namespace=NAMESPACE)
-        self.targets, self.tips, self.diagnostics = [], [], {}
+        self.targets, self.tips, self.measured, self.diagnostics = [], [], [], {}
         self.node.create_subscription(PointStamped, 'target', self._point(self.targets),
                                       TARGET_QOS)
         self.node.create_subscription(PointStamped, 'tip/true', self._point(self.tips),
+                                      MEASURED_QOS)
+        self.node.create_subscription(PointStamped, 'tip/measured', self._point(self.measured),
                                       MEASURED_QOS)
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
                                       DIAGNOSTICS_QOS)
@@ -151,6 +173,7 @@ class Recorder:
         """Forget what was recorded."""
         self.targets.clear()
         self.tips.clear()
+        self.measured.clear()
         self.diagnostics.clear()
 
     def close(self):
@@ -159,7 +182,24 @@ class Recorder:
         self.node.destroy_node()
 
 
-def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env):
+def _stereo_overrides(args):
+    """Return the cbha_sim and stereo_tracker overrides of a run through the cameras."""
+    from cbha_inverse.vision.rig import load_rig
+    rig_path = config_path(args.stereo_rig)
+    rig_path = rig_path if rig_path.is_file() else Path(args.stereo_rig)
+    rig = load_rig(rig_path)
+    with open(rig_path) as stream:
+        names = yaml.safe_load(stream)
+    sim = {'tip_output': 'stereo', 'camera_rig': str(rig_path),
+           'camera_rate_hz': args.camera_rate}
+    tracker = {'left_camera_info_file': str(rig_path.parent / names['left_camera_info']),
+               'right_camera_info_file': str(rig_path.parent / names['right_camera_info']),
+               'base_from_left': [float(v) for v in rig.base_from_left],
+               'diagnostics_period': 0.5}
+    return sim, tracker
+
+
+def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, feedback='direct'):
     """Run one shape in one mode for one lap and return its summary dict."""
     speed = args.circle_speed if shape == 'circle' else args.square_speed
     trajectory = make_trajectory(shape, center=center, radius=args.radius, side=args.side,
@@ -167,16 +207,23 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env):
     run_dir.mkdir(parents=True, exist_ok=True)
     recorder.clear()
     common = {'scene': args.scene, 'valve_names': list(valve_names)}
+    sim_extra, solver_extra, waited = {}, {}, ['cbha_sim', 'inverse_solver']
+    if feedback == 'stereo':
+        sim_extra, tracker_params = _stereo_overrides(args)
+        solver_extra = {'loop_gain': args.stereo_loop_gain}
+        waited.append('stereo_tracker')
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
-        **common, 'stiffness_scale': args.stiffness_scale}, env)}
+        **common, 'stiffness_scale': args.stiffness_scale, **sim_extra}, env)}
+    if feedback == 'stereo':
+        processes['stereo_tracker'] = _start('stereo_tracker', run_dir, tracker_params, env)
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
-        **common, 'mode': mode, 'diagnostics_period': 0.5}, env)
+        **common, 'mode': mode, 'diagnostics_period': 0.5, **solver_extra}, env)
     try:
-        # the trajectory starts once both nodes publish diagnostics (they spin), and keeps its
+        # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
         # clock at 0 until the solver and this recorder subscribe to its targets
         if not recorder.spin_until(lambda: all(
                 any(name.startswith(f'{node}:') for name in recorder.diagnostics)
-                for node in ('cbha_sim', 'inverse_solver')), 120.0):
+                for node in waited), 120.0):
             raise RuntimeError(f'nodes did not start, see the logs in {run_dir}')
         launched = time.time()  # targets stamped earlier are late messages of a previous run
         processes['trajectory'] = _start('trajectory', run_dir, {
@@ -202,6 +249,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env):
                              [t[0] for t in tips], [t[1:] for t in tips], start, end)
     control = recorder.diagnostics.get('inverse_solver: control', ({}, 0.0))[0]
     plant = recorder.diagnostics.get('cbha_sim: plant', ({}, 0.0))[0]
+    tracking = recorder.diagnostics.get('stereo_tracker: tracking', ({}, 0.0))[0]
 
     def number(values, key):
         try:
@@ -212,8 +260,15 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env):
     moving = [t[1:] for t in targets if start <= t[0] <= end]
     tip_path = [t[1:] for t in tips if start <= t[0] <= end]
     np.savez_compressed(run_dir / 'recording.npz', targets=np.array(targets), tips=np.array(tips),
-                        window=np.array([start, end]))
-    return {'shape': shape, 'mode': mode, 'speed_m_s': speed, 'lap_s': trajectory.lap_time,
+                        measured=np.array(recorder.measured), window=np.array([start, end]))
+    stereo = {} if feedback != 'stereo' else {
+        'stereo_detection_rate': number(tracking, 'detection_rate'),
+        'stereo_processing_median_ms': number(tracking, 'processing_median_ms'),
+        'stereo_processing_p99_ms': number(tracking, 'processing_p99_ms'),
+        'stereo_input_rate_hz': number(tracking, 'input_rate_hz'),
+        'stereo_rejected': number(tracking, 'rejected_total')}
+    return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo,
+            'speed_m_s': speed, 'lap_s': trajectory.lap_time,
             'rms_mm': errors.rms * 1e3, 'max_mm': errors.maximum * 1e3,
             'samples': int(errors.errors.size),
             'tick_median_ms': number(control, 'tick_median_ms'),
@@ -280,22 +335,36 @@ def main(argv=None):
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     recorder = Recorder(context)
     results = []
+    feedbacks = args.feedback.split(',')
+    runs = [(shape, mode, 'direct') for shape in args.shapes.split(',')
+            for mode in args.modes.split(',') if 'direct' in feedbacks]
+    runs += [(shape, 'closed', 'stereo') for shape in args.stereo_shapes.split(',')
+             if 'stereo' in feedbacks]
     try:
-        for shape in args.shapes.split(','):
-            for mode in args.modes.split(','):
-                result = run_once(recorder, output / f'{shape}_{mode}', shape, mode, args,
-                                  center, valve_names, env)
-                results.append(result)
-                print(f"{shape:6s} {mode:6s}: RMS {result['rms_mm']:6.3f} mm, max "
-                      f"{result['max_mm']:6.3f} mm | tick median {result['tick_median_ms']:.3f}"
-                      f" ms, p99 {result['tick_p99_ms']:.3f} ms | target->command latency "
-                      f"p99 {result['latency_p99_ms']:.3f} ms", flush=True)
+        for shape, mode, feedback in runs:
+            name = f'{shape}_{mode}' + ('_stereo' if feedback == 'stereo' else '')
+            result = run_once(recorder, output / name, shape, mode, args, center, valve_names,
+                              env, feedback)
+            results.append(result)
+            label = mode if feedback == 'direct' else 'stereo'
+            print(f"{shape:6s} {label:6s}: RMS {result['rms_mm']:6.3f} mm, max "
+                  f"{result['max_mm']:6.3f} mm | tick median {result['tick_median_ms']:.3f}"
+                  f" ms, p99 {result['tick_p99_ms']:.3f} ms | target->command latency "
+                  f"p99 {result['latency_p99_ms']:.3f} ms", flush=True)
+            if feedback == 'stereo':
+                print(f"{'':6s} {'':6s}  closed loop through the cameras ({args.camera_rate:g}"
+                      f' frames/s, {args.stereo_rig}): detection rate '
+                      f"{result['stereo_detection_rate']:.3f}, tracker median "
+                      f"{result['stereo_processing_median_ms']:.2f} ms, p99 "
+                      f"{result['stereo_processing_p99_ms']:.2f} ms per pair", flush=True)
     finally:
         recorder.close()
         rclpy.try_shutdown(context=context)
         if reservation is not None:
             reservation.__exit__(None, None, None)
-    plot_runs([{'title': f"{r['shape']} {r['mode']} loop", 'targets': r['_targets'],
+    plot_runs([{'title': f"{r['shape']} {r['mode']} loop"
+                + (' (stereo cameras)' if r['feedback'] == 'stereo' else ''),
+                'targets': r['_targets'],
                 'tips': r['_tips'], 'rms': r['rms_mm'] * 1e-3} for r in results],
               output / 'demo.png')
     summary = {'scene': scene.name, 'center_m': [float(v) for v in center],

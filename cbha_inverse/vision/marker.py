@@ -1,0 +1,399 @@
+"""
+Marker detection in one image: a red sphere (default, sub-pixel centroid) or an ArUco tag.
+
+Red sphere: pixels inside an HSV range (red wraps around hue 0: two hue bands) form candidate
+blobs (external contours); a blob is a candidate if its area and circularity ``4 pi A / P²`` lie
+within limits, and its score is ``area * circularity``. Two candidates whose scores differ by less
+than ``ambiguity_ratio`` are *ambiguous* and the image gives no marker. The centroid is the
+redness-weighted mean (``max(R - max(G, B), 0)``, brightness for mono images) over the blob
+grown by two pixels, so anti-aliased edge pixels count by their coverage: sub-pixel.
+
+ArUco (option): ``cv2.aruco`` finds the tag of the configured dictionary and id; the centroid is
+the mean of its four corners (refined to sub-pixel). Two tags with that id are ambiguous.
+
+:class:`MarkerTracker` searches a window around its last detection first and the full frame when
+the marker is not found there.
+"""
+
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MarkerParams:
+    """
+    Detection parameters (the node's ``marker.*`` parameters).
+
+    Attributes
+    ----------
+    kind : str
+        ``sphere`` (red sphere) or ``aruco``.
+    hue_max_low : int  [OpenCV hue 0..179]
+        Red band 1: hue in ``[0, hue_max_low]``.
+    hue_min_high : int
+        Red band 2: hue in ``[hue_min_high, 179]``.
+    saturation_min, value_min : int  [0..255]
+        Least saturation and value of a marker pixel.
+    mono_threshold : int  [0..255]
+        Mono images: least brightness of a marker pixel (the sphere is the brightest blob).
+    min_area, max_area : float  [px²]
+        Accepted blob area.
+    min_circularity : float  [-]
+        Least ``4 pi A / P²`` (1 for a disc).
+    ambiguity_ratio : float  [-]
+        Second-best score / best score above which the detection is ambiguous.
+    window : int  [px]
+        Half size of the search window around the last detection (0: always the full frame).
+    aruco_dictionary : str
+        ``cv2.aruco`` predefined dictionary name, e.g. ``DICT_4X4_50``.
+    aruco_id : int
+        Tag id of the marker.
+    coarse_step : int
+        Full-frame search: subsampling step of the first pass (1: none).
+
+    """
+
+    kind: str = 'sphere'
+    hue_max_low: int = 10
+    hue_min_high: int = 170
+    saturation_min: int = 120
+    value_min: int = 60
+    mono_threshold: int = 200
+    min_area: float = 20.0
+    max_area: float = 20000.0
+    min_circularity: float = 0.75
+    ambiguity_ratio: float = 0.3
+    window: int = 48
+    aruco_dictionary: str = 'DICT_4X4_50'
+    aruco_id: int = 0
+    coarse_step: int = 2
+
+
+@dataclass(frozen=True)
+class Detection:
+    """
+    The marker in one image (or why not).
+
+    Attributes
+    ----------
+    found : bool
+        Whether exactly one marker was found.
+    reason : str
+        ``ok``, ``no_marker`` or ``ambiguous``.
+    centroid : (2,) ndarray  [px]
+        Raw image coordinates (u right, v down; pixel centres at integers); NaN if not found.
+    candidates : int
+        Candidate blobs (tags) that passed the shape limits.
+    windowed : bool
+        Whether the result came from the search window.
+
+    """
+
+    found: bool
+    reason: str
+    centroid: np.ndarray
+    candidates: int
+    windowed: bool = False
+
+
+NOT_FOUND = Detection(False, 'no_marker', np.full(2, np.nan), 0)
+
+CHANNEL_ORDERS = ('bgr', 'rgb', 'mono')
+"""Pixel layouts accepted by the detectors: ``(H, W, 3)`` uint8 or ``(H, W)`` uint8."""
+
+
+def detect_sphere(image, params, order='bgr', offset=(0, 0), skip_border=False):
+    """
+    Detect the red sphere in an image (or a crop of one).
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) ndarray of uint8
+        The image (``order`` says which).
+    params : MarkerParams
+        Limits.
+    order : str
+        ``bgr``, ``rgb`` or ``mono``.
+    offset : (2,) int  [px]
+        Position of the crop's top-left pixel in the full image (added to the centroid).
+    skip_border : bool
+        Ignore blobs that touch the border of ``image`` (a crop cuts them: biased centroid).
+
+    Returns
+    -------
+    Detection
+        The centroid in full-image coordinates, or why there is none.
+
+    """
+    candidates = sphere_candidates(image, params, order, skip_border)
+    return _decide(candidates, image, params, order, offset)
+
+
+def detect_sphere_coarse(image, params, order='bgr', step=2):
+    """
+    Detect the red sphere in a full frame, searching a subsampled copy first.
+
+    The blobs found in the image subsampled by ``step`` (any shape, a quarter of the scaled
+    least area: the polygon area of a tiny contour is far below its pixel count) are measured
+    again at full resolution in a window around each (the 16 largest), and the best of those
+    decides, as in :func:`detect_sphere`. A blob that disappears in the subsampling is a few
+    pixels wide: below ``min_area`` for ``step`` 2, or too small against the marker to make
+    the image ambiguous.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) ndarray of uint8
+        The full image.
+    params : MarkerParams
+        Limits.
+    order : str
+        ``bgr``, ``rgb`` or ``mono``.
+    step : int
+        Subsampling step (1: search the full resolution directly).
+
+    Returns
+    -------
+    Detection
+        The centroid, or why there is none.
+
+    """
+    if step <= 1:
+        return detect_sphere(image, params, order)
+    small = np.ascontiguousarray(image[::step, ::step])
+    coarse_params = replace(params, min_area=params.min_area / step ** 2 / 4.0,
+                            max_area=params.max_area / step ** 2 * 2.0, min_circularity=0.0)
+    rows, cols = image.shape[:2]
+    found, seen = [], set()
+    for _, contour in sphere_candidates(small, coarse_params, order)[:16]:
+        x0, y0, width, height = cv2.boundingRect(contour)
+        pad = 3 * step + 4
+        left, top = max(x0 * step - pad, 0), max(y0 * step - pad, 0)
+        right = min((x0 + width) * step + pad, cols)
+        bottom = min((y0 + height) * step + pad, rows)
+        for score, fine in sphere_candidates(image[top:bottom, left:right], params, order):
+            fine = fine + np.array([left, top], dtype=fine.dtype)
+            key = tuple(cv2.boundingRect(fine))
+            if key not in seen:
+                seen.add(key)
+                found.append((score, fine))
+    found.sort(key=lambda item: -item[0])
+    return _decide(found, image, params, order, (0, 0))
+
+
+def sphere_candidates(image, params, order='bgr', skip_border=False):
+    """
+    Return the blobs of an image that pass the colour, area and circularity limits.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) ndarray of uint8
+        The image (``order`` says which).
+    params : MarkerParams
+        Limits.
+    order : str
+        ``bgr``, ``rgb`` or ``mono``.
+    skip_border : bool
+        Ignore blobs that touch the border of ``image``.
+
+    Returns
+    -------
+    list of (float, ndarray)
+        ``(area * circularity, contour)``, best first (contours in ``image`` pixels).
+
+    """
+    if order == 'mono':
+        mask = (image >= params.mono_threshold).astype(np.uint8)
+    else:
+        hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV if order == 'bgr' else cv2.COLOR_RGB2HSV)
+        low = cv2.inRange(hsv, (0, params.saturation_min, params.value_min),
+                          (params.hue_max_low, 255, 255))
+        high = cv2.inRange(hsv, (params.hue_min_high, params.saturation_min, params.value_min),
+                           (179, 255, 255))
+        mask = cv2.bitwise_or(low, high)
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    candidates = []
+    rows, cols = mask.shape
+    for contour in contours:
+        if skip_border:
+            x0, y0, width, height = cv2.boundingRect(contour)
+            if x0 == 0 or y0 == 0 or x0 + width == cols or y0 + height == rows:
+                continue
+        area = cv2.contourArea(contour)
+        if not params.min_area <= area <= params.max_area:
+            continue
+        perimeter = cv2.arcLength(contour, True)
+        circularity = 4.0 * np.pi * area / max(perimeter * perimeter, 1e-12)
+        if circularity >= params.min_circularity:
+            candidates.append((area * circularity, contour))
+    candidates.sort(key=lambda item: -item[0])
+    return candidates
+
+
+def _decide(candidates, image, params, order, offset):
+    """Apply the ambiguity rule to sorted candidates and measure the winner's centroid."""
+    if not candidates:
+        return NOT_FOUND
+    if len(candidates) > 1 and candidates[1][0] >= params.ambiguity_ratio * candidates[0][0]:
+        return Detection(False, 'ambiguous', np.full(2, np.nan), len(candidates))
+    centroid = _weighted_centroid(candidates[0][1], image, params, order)
+    if centroid is None:
+        return NOT_FOUND
+    return Detection(True, 'ok', centroid + np.asarray(offset, dtype=float), len(candidates))
+
+
+def _weighted_centroid(contour, image, params, order):
+    """Return the weighted centroid [px] over the contour's blob grown by 2 px, or None."""
+    x0, y0, width, height = cv2.boundingRect(contour)
+    pad = 3
+    rows, cols = image.shape[:2]
+    top, left = max(y0 - pad, 0), max(x0 - pad, 0)
+    bottom, right = min(y0 + height + pad, rows), min(x0 + width + pad, cols)
+    crop = image[top:bottom, left:right].astype(np.int16)
+    if order == 'mono':
+        weight_source = crop - params.mono_threshold
+    else:
+        red = 2 if order == 'bgr' else 0
+        weight_source = crop[..., red] - np.maximum(crop[..., 1], crop[..., 2 - red])
+    blob = np.zeros((bottom - top, right - left), np.uint8)
+    cv2.drawContours(blob, [contour - np.array([left, top], dtype=contour.dtype)], -1, 1,
+                     thickness=cv2.FILLED)
+    blob = cv2.dilate(blob, np.ones((5, 5), np.uint8))
+    weights = np.clip(weight_source, 0, None).astype(np.float64) * blob
+    total = weights.sum()
+    if not total > 0.0:
+        return None
+    v_index, u_index = np.indices(weights.shape)
+    return np.array([(weights * u_index).sum() / total + left,
+                     (weights * v_index).sum() / total + top])
+
+
+class ArucoDetector:
+    """
+    Find one ArUco tag (by dictionary and id) and return its centre.
+
+    Parameters
+    ----------
+    params : MarkerParams
+        ``aruco_dictionary`` and ``aruco_id``.
+
+    Raises
+    ------
+    ValueError
+        If the dictionary name is not one of ``cv2.aruco``'s predefined dictionaries.
+
+    """
+
+    def __init__(self, params):
+        name = params.aruco_dictionary
+        if not name.startswith('DICT_') or not hasattr(cv2.aruco, name):
+            raise ValueError(f'unknown ArUco dictionary {name!r} (e.g. DICT_4X4_50)')
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
+        parameters = cv2.aruco.DetectorParameters()
+        parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        self._detector = cv2.aruco.ArucoDetector(dictionary, parameters)
+        self._tag_id = int(params.aruco_id)
+
+    def detect(self, image, order='bgr', offset=(0, 0)):
+        """
+        Detect the tag.
+
+        Parameters
+        ----------
+        image : (H, W, 3) or (H, W) ndarray of uint8
+            The image.
+        order : str
+            ``bgr``, ``rgb`` or ``mono``.
+        offset : (2,) int  [px]
+            Position of the crop in the full image.
+
+        Returns
+        -------
+        Detection
+            The tag centre (mean of its four corners) or why there is none.
+
+        """
+        gray = image if order == 'mono' else cv2.cvtColor(
+            image, cv2.COLOR_BGR2GRAY if order == 'bgr' else cv2.COLOR_RGB2GRAY)
+        corners, ids, _ = self._detector.detectMarkers(gray)
+        if ids is None:
+            return NOT_FOUND
+        matches = [c for c, tag in zip(corners, ids.reshape(-1)) if tag == self._tag_id]
+        if not matches:
+            return NOT_FOUND
+        if len(matches) > 1:
+            return Detection(False, 'ambiguous', np.full(2, np.nan), len(matches))
+        centre = matches[0].reshape(4, 2).mean(axis=0).astype(float)
+        return Detection(True, 'ok', centre + np.asarray(offset, dtype=float), 1)
+
+
+class MarkerTracker:
+    """
+    Detect the marker in successive images of one camera, window first, full frame if lost.
+
+    Parameters
+    ----------
+    params : MarkerParams
+        Detection parameters (``kind`` chooses the detector).
+
+    """
+
+    def __init__(self, params):
+        self.params = params
+        self._aruco = ArucoDetector(params) if params.kind == 'aruco' else None
+        self.last = None
+
+    def _detect(self, image, order, offset=(0, 0), windowed=False):
+        if self._aruco is not None:
+            found = self._aruco.detect(image, order, offset)
+            if windowed and found.found and not _inside_margin(found.centroid, offset, image):
+                return NOT_FOUND
+            return found
+        if windowed:
+            return detect_sphere(image, self.params, order, offset, skip_border=True)
+        return detect_sphere_coarse(image, self.params, order, self.params.coarse_step)
+
+    def detect(self, image, order='bgr'):
+        """
+        Detect the marker, searching the window around the last detection first.
+
+        Parameters
+        ----------
+        image : (H, W, 3) or (H, W) ndarray of uint8
+            The full image.
+        order : str
+            ``bgr``, ``rgb`` or ``mono``.
+
+        Returns
+        -------
+        Detection
+            The marker (``windowed`` tells where it was found).
+
+        """
+        half = int(self.params.window)
+        if self.last is not None and half > 0:
+            rows, cols = image.shape[:2]
+            u, v = int(round(self.last[0])), int(round(self.last[1]))
+            left, top = max(u - half, 0), max(v - half, 0)
+            right, bottom = min(u + half + 1, cols), min(v + half + 1, rows)
+            if right - left > 4 and bottom - top > 4:
+                crop = image[top:bottom, left:right]
+                found = self._detect(crop, order, (left, top), windowed=True)
+                if found.found:
+                    self.last = found.centroid
+                    return Detection(True, 'ok', found.centroid, found.candidates, True)
+        found = self._detect(image, order)
+        self.last = found.centroid if found.found else None
+        return found
+
+    def reset(self):
+        """Forget the last detection (the next search covers the full frame)."""
+        self.last = None
+
+
+def _inside_margin(centroid, offset, crop, margin=16):
+    """Whether a tag centre lies well inside a crop (a tag cut by the border is not found)."""
+    u, v = centroid[0] - offset[0], centroid[1] - offset[1]
+    rows, cols = crop.shape[:2]
+    return margin <= u < cols - margin and margin <= v < rows - margin
