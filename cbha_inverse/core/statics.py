@@ -673,12 +673,13 @@ def strain_warnings(model, offsets, rotation_vectors):
 
 def _stability_warnings(problem, state):
     """
-    Warn when the tangent at an equilibrium is not positive definite (unstable equilibrium).
+    Warn when the tangent at an equilibrium is not positive definite (possibly unstable).
 
     The symmetric part of the exact tangent (structure and the actuators' load stiffness, plus
     a user ``load_tangent``) is factorised by Cholesky; a failure means a direction of
-    decreasing stiffness: the equilibrium is unstable, e.g. the straight shape under a
-    compression above the buckling load.
+    decreasing stiffness. Under dead forces the equilibrium is then unstable (e.g. the straight
+    shape above the buckling load); under moments or follower loads, which are not conservative
+    in 3D, it is a warning sign rather than a proof.
 
     Returns
     -------
@@ -701,6 +702,6 @@ def _stability_warnings(problem, state):
             stable = False
     if stable:
         return []
-    return ['the equilibrium is unstable (tangent stiffness not positive definite): a '
-            'compression above the buckling load, lateral buckling under a large moment '
-            'or a snap-through; the structure need not take the returned shape']
+    return ['the tangent stiffness is not positive definite at this equilibrium: it may be '
+            'unstable (a compression above the buckling load, lateral buckling under a large '
+            'end moment, a snap-through) and the structure need not take the returned shape']

@@ -44,6 +44,9 @@ class CondensedSegment:
         Target element size used (NaN if the mesh was given).
     timings : dict
         Seconds spent in 'mesh', 'assembly', 'factor', 'solve', 'total'.
+    warnings : tuple of str
+        What the user should know about the result: volumetric locking of the element order
+        at this Poisson ratio (:func:`locking_warnings`).
     cavities : tuple of (str, (P, 3) ndarray, (T, 3) int ndarray)
         The pressure cavities of the segment (name, surface points [m] in segment coordinates,
         outward-oriented triangles); empty for a segment without cavities.
@@ -61,6 +64,7 @@ class CondensedSegment:
     asymmetry: float
     mesh_size: float
     timings: dict = field(default_factory=dict)
+    warnings: tuple = ()
     cavities: tuple = ()
 
     @property
@@ -171,7 +175,45 @@ def condense_mesh(mesh, youngs_modulus, poisson_ratio, *, lower_x, upper_x, segm
     timings['total'] = mesh_time + t2 - t0
     return CondensedSegment(compliance, offset, np.eye(3), float(mass), mesh.order,
                             mesh.n_nodes, mesh.n_elements, coupling.n_reduced, asym,
-                            float(mesh_size), timings)
+                            float(mesh_size), timings,
+                            locking_warnings(mesh.order, poisson_ratio))
+
+
+#: Poisson ratio from which each element order locks (``cbha_report stability``, cylinder
+#: L 40 mm x R 10 mm, 3 mm mesh: P1 torsion compliance 6 % below its nu = 0.3 value on the
+#: same mesh at nu = 0.45, 24 % at 0.49, 95 % at 0.4999; P2 torsion within 0.2 %, but its
+#: bending compliance keeps falling, ~8 % below its nu = 0.3 value at 0.499, ~9 % at 0.4999)
+LOCKING_POISSON_RATIO = {1: 0.45, 2: 0.499}
+
+
+def locking_warnings(order, poisson_ratio):
+    """
+    Warn when tetrahedra of this order lock volumetrically at this Poisson ratio.
+
+    Parameters
+    ----------
+    order : {1, 2}
+        Element order.
+    poisson_ratio : float
+        Poisson's ratio.
+
+    Returns
+    -------
+    tuple of str
+        Empty below ``LOCKING_POISSON_RATIO[order]``.
+
+    """
+    limit = LOCKING_POISSON_RATIO[int(order)]
+    if float(poisson_ratio) < limit:
+        return ()
+    advice = 'use order 2 elements' if int(order) == 1 else 'keep nu below 0.499'
+    return (f'P{int(order)} tetrahedra lock at nu = {float(poisson_ratio):g} (>= {limit:g}): '
+            f'the condensed compliance is too stiff; {advice}',)
+
+
+def _given(value, default):
+    """Return ``value`` unless it is None (an explicit 0.0 is honoured), else ``default``."""
+    return default if value is None else value
 
 
 def condense_cylinder(length, outer_radius, inner_radius=0.0, *, youngs_modulus, poisson_ratio,
@@ -268,15 +310,15 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
     from cbha_inverse.fem.bellows import cavity_surface, geometry_tube_centres
     from cbha_inverse.fem.geometry import bellows_tube_mesh
     geom, mat = spec['geometry'], spec['material']
-    mesh_size = float(mesh_size or spec['mesh']['mesh_size'])
-    order = int(order or spec['mesh'].get('order', 2))
+    mesh_size = float(_given(mesh_size, spec['mesh']['mesh_size']))
+    order = int(_given(order, spec['mesh'].get('order', 2)))
     t0 = time.perf_counter()
     mesh = bellows_tube_mesh(geom, mesh_size=mesh_size, order=order)
     mesh_time = time.perf_counter() - t0
     length = geom['segment_length']
     half = 0.5 * geom['vertebra_thickness']
-    tube = condense_mesh(mesh, youngs_modulus or mat['youngs_modulus'],
-                         poisson_ratio or mat['poisson_ratio'], lower_x=half,
+    tube = condense_mesh(mesh, _given(youngs_modulus, mat['youngs_modulus']),
+                         _given(poisson_ratio, mat['poisson_ratio']), lower_x=half,
                          upper_x=length - half, segment_length=length, density=mat['density'],
                          mesh_size=mesh_size, mesh_time=mesh_time)
     t1 = time.perf_counter()
@@ -290,8 +332,9 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
                             n_tubes * tube.mass + geom.get('vertebra_mass', 0.0), order,
                             n_tubes * tube.n_nodes, n_tubes * tube.n_elements,
                             n_tubes * tube.n_dofs, max(asym, tube.asymmetry), mesh_size, timings,
-                            tuple((t['name'], *cavity_surface(geom, i))
-                                  for i, t in enumerate(geom['tubes'])))
+                            tube.warnings,
+                            cavities=tuple((t['name'], *cavity_surface(geom, i))
+                                           for i, t in enumerate(geom['tubes'])))
 
 
 def condense_segment(mesh_or_geometry, youngs_modulus=None, poisson_ratio=None, *,
@@ -332,9 +375,9 @@ def condense_segment(mesh_or_geometry, youngs_modulus=None, poisson_ratio=None, 
         lower_x = float(xs.min()) if lower_x is None else lower_x
         upper_x = float(xs.max()) if upper_x is None else upper_x
         return condense_mesh(mesh, youngs_modulus, poisson_ratio, lower_x=lower_x,
-                             upper_x=upper_x, segment_length=segment_length or upper_x,
+                             upper_x=upper_x, segment_length=_given(segment_length, upper_x),
                              density=density, extra_mass=extra_mass,
-                             mesh_size=mesh_size or float('nan'))
+                             mesh_size=_given(mesh_size, float('nan')))
     spec = mesh_or_geometry
     kind = spec.get('kind', 'bellows_segment')
     if kind == 'bellows_segment':
@@ -344,8 +387,8 @@ def condense_segment(mesh_or_geometry, youngs_modulus=None, poisson_ratio=None, 
         geom, mat = spec['geometry'], spec['material']
         return condense_cylinder(
             geom['length'], geom['outer_radius'], geom.get('inner_radius', 0.0),
-            youngs_modulus=youngs_modulus or mat['youngs_modulus'],
-            poisson_ratio=poisson_ratio or mat['poisson_ratio'],
-            mesh_size=mesh_size or spec['mesh']['mesh_size'],
-            order=order or spec['mesh'].get('order', 2), density=mat.get('density', 0.0))
+            youngs_modulus=_given(youngs_modulus, mat['youngs_modulus']),
+            poisson_ratio=_given(poisson_ratio, mat['poisson_ratio']),
+            mesh_size=_given(mesh_size, spec['mesh']['mesh_size']),
+            order=_given(order, spec['mesh'].get('order', 2)), density=mat.get('density', 0.0))
     raise ValueError(f'unknown segment kind {kind!r} (bellows_segment or cylinder)')

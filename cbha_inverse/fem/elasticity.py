@@ -103,6 +103,8 @@ def lame_parameters(youngs_modulus, poisson_ratio):
     """
     e_mod = np.asarray(youngs_modulus, dtype=float)
     nu = np.asarray(poisson_ratio, dtype=float)
+    if not (np.all(np.isfinite(e_mod)) and np.all(np.isfinite(nu))):
+        raise ValueError('youngs_modulus and poisson_ratio must be finite')
     if np.any(e_mod <= 0) or np.any(nu <= -1.0) or np.any(nu >= 0.5):
         raise ValueError('need E > 0 and -1 < nu < 0.5')
     return e_mod * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), e_mod / (2.0 * (1.0 + nu))

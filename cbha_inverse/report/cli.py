@@ -16,8 +16,15 @@ REPORTS = {
                 'inverse-model tick time per scene with its breakdown'),
     'fem': ('cbha_inverse.report.fem_report',
             'condensation error against run time, chain vs full FE'),
+    'stability': ('cbha_inverse.report.stability',
+                  'numerical stability on stiff and extreme cases ([--quick] [--output DIR])'),
+    'accuracy': ('cbha_inverse.report.accuracy',
+                 'error against run time, Pareto plots ([--quick] [--output DIR])'),
 }
-GROUPS = {'bench': ('core', 'inverse'), 'all': ('core', 'inverse', 'fem')}
+GROUPS = {'bench': ('core', 'inverse'),
+          'all': ('core', 'inverse', 'fem', 'stability', 'accuracy')}
+#: reports that take the common ``[--quick] [--output DIR]`` (passed on by a group run)
+COMMON_ARGS = ('stability', 'accuracy')
 
 
 def main(argv=None):
@@ -28,7 +35,8 @@ def main(argv=None):
     ----------
     argv : list of str, optional
         Command-line arguments (default ``sys.argv[1:]``); arguments after the report name are
-        passed to that report.
+        passed to that report (in a group, such as ``all --quick --output DIR``, to the reports
+        of ``COMMON_ARGS`` only).
 
     Returns
     -------
@@ -48,7 +56,7 @@ def main(argv=None):
     for name in names:
         module_name, text = REPORTS[name]
         print(f'== {name}: {text}', flush=True)
-        report_args = args.report_args if len(names) == 1 else []
+        report_args = (args.report_args if len(names) == 1 or name in COMMON_ARGS else [])
         code = importlib.import_module(module_name).main(report_args)
         if code:
             return code

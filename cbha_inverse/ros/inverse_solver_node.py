@@ -189,6 +189,8 @@ class InverseSolverNode(Node):
         self.solver.warm_up()
         self.get_logger().info(f'solver warm-up (numba kernels) took '
                                f'{time.perf_counter() - started:.2f} s')
+        for warning in self.solver.warnings:
+            self.get_logger().warning(f'scene {self.scene.name}: {warning}')
         self.corrector = TargetCorrector(1, gain=p.loop_gain if p.mode == 'closed' else 0.0,
                                          max_correction=p.max_correction)
 
@@ -324,6 +326,8 @@ class InverseSolverNode(Node):
             return time.perf_counter()
         self.last_result = result
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
+        for warning in result.warnings:
+            self.get_logger().warning(warning, throttle_duration_sec=self.params.log_throttle)
         self._last_solve = time.monotonic()
         self.ticks += 1
         try:
