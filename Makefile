@@ -12,6 +12,7 @@ VPY := $(VENV)/bin/python
 PINS_STAMP := $(VENV)/.pins-stamp
 INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
+EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
 DEMO_OUT ?= output/demo
 PYTEST_ARGS ?=
@@ -29,7 +30,7 @@ test: install
 
 venv: $(PINS_STAMP)
 
-install: $(INSTALL_STAMP) $(KERNELS_STAMP)
+install: $(INSTALL_STAMP) $(KERNELS_STAMP) $(EXPORTS_STAMP)
 
 $(PINS_STAMP): requirements.txt requirements-dev.txt constraints.txt
 	@if [ -z "$(PYTHON)" ]; then \
@@ -45,6 +46,13 @@ $(INSTALL_STAMP): $(PINS_STAMP) setup.py setup.cfg package.xml
 
 $(KERNELS_STAMP): $(INSTALL_STAMP) $(KERNEL_SOURCES)
 	$(VPY) -m cbha_inverse.warmup
+	@touch $@
+
+# The ROS interface wheels' CMake export files name the wheel builder's Python/numpy include
+# folders; rewrite them to this venv's (idempotent, touches only $(VENV)/share) so that colcon can
+# build an interface package such as robotino_msgs (cbha_build_robotino_msgs, the bridge tests).
+$(EXPORTS_STAMP): $(PINS_STAMP)
+	$(VPY) -m cbha_inverse.interfaces.rosidl_exports $(VENV)
 	@touch $@
 
 lint: install

@@ -38,6 +38,8 @@ CONSOLE_SCRIPTS = [
     'cbha_scene = cbha_inverse.scene.cli:main',
     'stereo_calibrate = cbha_inverse.vision.calibrate_cli:main',
     'cbha_bench_stereo = cbha_inverse.report.bench_stereo:main',
+    'robotino_bridge = cbha_inverse.ros.robotino_bridge_node:main',
+    'cbha_build_robotino_msgs = cbha_inverse.interfaces.robotino_msgs_build:main',
 ]
 
 setup(
@@ -52,6 +54,9 @@ setup(
         *tree_data_files('launch'),
         *tree_data_files('rviz'),
     ],
+    # the Robotino driver's messages, built on demand by cbha_build_robotino_msgs
+    package_data={'cbha_inverse.interfaces': ['robotino_msgs/*.txt', 'robotino_msgs/*.xml',
+                                              'robotino_msgs/msg/*.msg']},
     install_requires=['setuptools'],
     zip_safe=False,
     maintainer='cbha_inverse maintainers',

@@ -65,3 +65,16 @@ def rclpy_context():
         yield context
     finally:
         rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture(scope='session')
+def robotino_msgs(tmp_path_factory):
+    """
+    Build the shipped ``robotino_msgs`` with colcon once per session and load it.
+
+    Returns the install prefix; ``from robotino_msgs.msg import ...`` works afterwards in this
+    process, and ``robotino_helpers.robotino_child_env(prefix)`` gives child processes the
+    environment of its ``install/setup.sh``.
+    """
+    from robotino_helpers import build_and_load
+    return build_and_load(tmp_path_factory.mktemp('robotino_msgs_ws'))

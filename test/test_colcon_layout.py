@@ -18,9 +18,10 @@ import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = 'cbha_inverse'
-NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim', 'stereo_tracker')
+NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim', 'stereo_tracker',
+                    'robotino_bridge')
 COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo', 'cbha_launch',
-                       'cbha_scene', 'stereo_calibrate')
+                       'cbha_scene', 'stereo_calibrate', 'cbha_build_robotino_msgs')
 
 
 def _child_env(prefix):
@@ -127,3 +128,27 @@ def test_installed_cbha_launch_uses_the_installed_params_files(colcon_install):
     for line in lines:
         node = line.split(':')[0]
         assert f"--params-file {prefix / 'share' / PACKAGE / 'config' / node}.yaml" in line, line
+
+
+def test_shipped_robotino_msgs_is_installed_as_data_and_not_crawled(colcon_install, tmp_path):
+    """
+    The shipped interface package is package data, and colcon does not build it by itself.
+
+    colcon stops descending at a package's folder, so a workspace holding cbha_inverse lists
+    only cbha_inverse; a robotino_msgs of the driver's source in the same workspace cannot
+    clash with the copy (which ``cbha_build_robotino_msgs`` builds on request).
+    """
+    site = (colcon_install / PACKAGE / 'lib' /
+            f'python{sys.version_info.major}.{sys.version_info.minor}' / 'site-packages')
+    shipped = site / PACKAGE / 'interfaces' / 'robotino_msgs'
+    for name in ('package.xml', 'CMakeLists.txt', 'msg/SetBHAPressures.msg',
+                 'msg/BHAReadings.msg'):
+        assert (shipped / name).is_file(), f'{shipped / name} not installed'
+    (tmp_path / 'src').mkdir()
+    (tmp_path / 'src' / PACKAGE).symlink_to(REPO_ROOT, target_is_directory=True)
+    colcon = Path(sys.executable).with_name('colcon')
+    listed = subprocess.run([str(colcon), '--log-base', str(tmp_path / 'log'), 'list',
+                             '--names-only',
+                             '--base-paths', str(tmp_path / 'src')], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=120, check=True).stdout
+    assert listed.split() == [PACKAGE]

@@ -45,3 +45,11 @@ DIAGNOSTICS_QOS = reliable(10)
 
 MARKER_QOS = reliable(1)
 """``backbone`` (visualization_msgs/MarkerArray): reliable, newest only."""
+
+DRIVER_SET_POINTS_QOS = reliable(10)
+"""``/set_bha_pressures`` (robotino_msgs/SetBHAPressures, to the Robotino driver): reliable (a
+reliable writer reaches a reliable or a best-effort reader)."""
+
+DRIVER_READINGS_QOS = qos_profile_sensor_data
+"""``/bha_readings`` (robotino_msgs/BHAReadings, from the driver): sensor data, so that a driver
+that publishes reliable or best effort is received."""

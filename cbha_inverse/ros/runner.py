@@ -12,7 +12,6 @@ from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.ros.params import check_params_files, parameter_help, ParameterError
 import rclpy
 from rclpy.executors import ExternalShutdownException
-from rclpy.impl.implementation_singleton import rclpy_implementation
 
 
 def node_help(node_name, node_class, params_class):
@@ -68,8 +67,9 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
     Returns
     -------
     int
-        0 after SIGINT/SIGTERM or ``--help``, 2 on a bad params file, invalid parameters or an
-        unusable scene.
+        0 after SIGINT/SIGTERM or ``--help``, 2 on a bad params file, invalid parameters,
+        an unusable scene or a message package that a node imports at start and cannot
+        find (``ModuleNotFoundError``).
 
     """
     argv = list(sys.argv if argv is None else argv)
@@ -88,12 +88,13 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except rclpy_implementation.RCLError:
+    except RuntimeError:
         # A signal that shuts the context down while a callback runs makes the next wait-set
-        # construction fail instead of raising ExternalShutdownException: still a clean stop.
+        # construction (RCLError) or message take (a plain RuntimeError from the bindings) fail
+        # instead of raising ExternalShutdownException: still a clean stop.
         if rclpy.ok():
             raise
-    except (ParameterError, ConfigError, FileNotFoundError) as exc:
+    except (ParameterError, ConfigError, FileNotFoundError, ModuleNotFoundError) as exc:
         return report_config_error(node_name, exc)
     finally:
         if node is not None:

@@ -1,0 +1,118 @@
+"""
+The interface-building helpers: the rosidl export repair and the robotino_msgs build command.
+
+The repair runs on export files written here in the wheels' form (a missing builder Python and
+numpy include folder beside one that exists); the real build is exercised by the session fixture
+``robotino_msgs`` of the bridge tests.
+"""
+
+import os
+import subprocess
+import sys
+
+from cbha_inverse.interfaces.robotino_msgs_build import (
+    build_environment, BuildError, check_build_tools, interface_environment, main, SOURCE)
+from cbha_inverse.interfaces.rosidl_exports import broken_exports, repair_exports
+import pytest
+from ros_helpers import child_env, REPO_ROOT
+
+EXPORT = """add_library(std_msgs::std_msgs__rosidl_generator_py SHARED IMPORTED)
+
+set_target_properties(std_msgs::std_msgs__rosidl_generator_py PROPERTIES
+  INTERFACE_INCLUDE_DIRECTORIES "{folders}"
+)
+"""
+
+
+def _write_export(prefix, package, folders):
+    name = f'export_{package}__rosidl_generator_pyExport.cmake'
+    path = prefix / 'share' / package / 'cmake' / name
+    path.parent.mkdir(parents=True)
+    path.write_text(EXPORT.format(folders=';'.join(folders)))
+    return path
+
+
+def test_repair_rewrites_missing_builder_includes_once_and_leaves_the_rest(tmp_path):
+    python_include, numpy_include = tmp_path / 'py', tmp_path / 'np'
+    python_include.mkdir()
+    numpy_include.mkdir()
+    existing = tmp_path / 'existing_include'
+    existing.mkdir()
+    builder = ['/opt/python/cp311-cp311/include/python3.11',
+               '/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include']
+    broken = _write_export(tmp_path / 'venv', 'std_msgs', builder + [str(existing)])
+    unknown = _write_export(tmp_path / 'venv', 'odd_msgs', ['/nowhere/include'])
+    fine = _write_export(tmp_path / 'venv', 'fine_msgs', [str(existing), '${_IMPORT_PREFIX}/x'])
+    fine_text = fine.read_text()
+    assert broken_exports(tmp_path / 'venv') == [str(broken)]
+
+    result = repair_exports(tmp_path / 'venv', str(python_include), str(numpy_include))
+    assert result.scanned == 3 and result.rewritten == (str(broken),)
+    assert result.unresolved == ('/nowhere/include',)
+    assert f'"{python_include};{numpy_include};{existing}"' in broken.read_text()
+    assert fine.read_text() == fine_text and '/nowhere/include' in unknown.read_text()
+    assert broken_exports(tmp_path / 'venv') == []
+
+    again = repair_exports(tmp_path / 'venv', str(python_include), str(numpy_include))
+    assert again.rewritten == () and again.scanned == 3
+
+
+def test_this_venv_needs_no_repair_after_make_install():
+    assert broken_exports(sys.prefix) == []
+
+
+def test_missing_build_tool_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch):
+    env = build_environment({'PATH': str(tmp_path)})
+    assert env['AMENT_PREFIX_PATH'].split(os.pathsep)[-1] == sys.prefix
+    with pytest.raises(BuildError, match='colcon not found'):
+        check_build_tools({'PATH': str(tmp_path), 'AMENT_PREFIX_PATH': str(tmp_path)})
+    colcon = tmp_path / 'colcon'
+    colcon.write_text('#!/bin/sh\n')
+    colcon.chmod(0o755)
+    with pytest.raises(BuildError, match='cmake not found'):
+        check_build_tools({'PATH': str(tmp_path), 'AMENT_PREFIX_PATH': str(tmp_path)})
+    real_tools = {'PATH': os.environ['PATH'] + os.pathsep + str(tmp_path),
+                  'AMENT_PREFIX_PATH': str(tmp_path)}
+    monkeypatch.setattr(sys, 'prefix', str(tmp_path))
+    with pytest.raises(BuildError, match='CMake package ament_cmake not found'):
+        check_build_tools(real_tools)
+    monkeypatch.setenv('PATH', str(tmp_path))
+    colcon.unlink()
+    monkeypatch.setattr('sysconfig.get_paths', lambda: {'scripts': str(tmp_path)})
+    assert main(['--workspace', str(tmp_path / 'ws')]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith('cbha_build_robotino_msgs: colcon not found') and '\n' not in err
+
+
+def test_interface_environment_is_what_setup_sh_gives(tmp_path):
+    env = interface_environment(tmp_path / 'install' / 'robotino_msgs',
+                                {'LD_LIBRARY_PATH': '/a', 'PATH': '/bin'})
+    prefix = (tmp_path / 'install' / 'robotino_msgs').resolve()
+    version = f'python{sys.version_info.major}.{sys.version_info.minor}'
+    assert env['LD_LIBRARY_PATH'] == f'{prefix / "lib"}{os.pathsep}/a'
+    assert env['PYTHONPATH'] == str(prefix / 'lib' / version / 'site-packages')
+    assert env['AMENT_PREFIX_PATH'] == str(prefix) and env['PATH'] == '/bin'
+
+
+def test_shipped_messages_have_the_driver_fields():
+    """The field lines (comments aside) are the driver's, so the type hashes match it."""
+    def fields(name):
+        lines = (SOURCE / 'msg' / name).read_text().splitlines()
+        return [line.split('#')[0].split() for line in lines if line.split('#')[0].strip()]
+
+    assert fields('SetBHAPressures.msg') == [['float32[]', 'pressures']]
+    assert fields('BHAReadings.msg') == [['builtin_interfaces/Time', 'stamp'],
+                                         ['float32[]', 'pressures'], ['float32[]', 'cablepull']]
+
+
+def test_repair_command_line_on_a_prefix(tmp_path):
+    _write_export(tmp_path, 'std_msgs', ['/opt/python/cp311-cp311/include/python3.11'])
+    result = subprocess.run(
+        [sys.executable, '-m', 'cbha_inverse.interfaces.rosidl_exports', str(tmp_path)],
+        cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert '1 scanned, 1 rewritten' in result.stdout
+    missing = subprocess.run(
+        [sys.executable, '-m', 'cbha_inverse.interfaces.rosidl_exports', str(tmp_path / 'no')],
+        cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and missing.stderr.strip().endswith('not a folder')
