@@ -2,7 +2,7 @@
 #   make demo   venv from the pins, install, run the closed-loop CBHA scene in simulation
 #   make test   venv from the pins, install, run the whole test suite
 # The venv is rebuilt only when a pin file changes (stamp files), so warm runs start at once.
-# Installing also compiles the numba tick kernels into their on-disk cache (cbha_inverse.core.warmup,
+# Installing also compiles the numba kernels into their on-disk cache (cbha_inverse.warmup,
 # ~20 s once, again whenever a kernel module changes), so nothing timed later pays for the compile.
 
 # ROS 2 Jazzy wheels on PyPI are built for CPython 3.11.
@@ -13,8 +13,7 @@ PINS_STAMP := $(VENV)/.pins-stamp
 INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
 EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
-KERNEL_SOURCES := $(wildcard cbha_inverse/core/*_kernels.py) cbha_inverse/core/tick_math.py \
-  cbha_inverse/core/tick_cables.py
+KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
 DEMO_OUT ?= output/demo
 PYTEST_ARGS ?=
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
@@ -46,7 +45,7 @@ $(INSTALL_STAMP): $(PINS_STAMP) setup.py setup.cfg package.xml
 	@touch $@
 
 $(KERNELS_STAMP): $(INSTALL_STAMP) $(KERNEL_SOURCES)
-	$(VPY) -m cbha_inverse.core.warmup
+	$(VPY) -m cbha_inverse.warmup
 	@touch $@
 
 # The ROS interface wheels' CMake export files name the wheel builder's Python/numpy include

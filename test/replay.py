@@ -45,10 +45,10 @@ import threading
 import time
 
 from cbha_inverse.bag.storage import BagWriter, deserialize, open_bag
-from cbha_inverse.core.correction import TargetCorrector
-from cbha_inverse.core.plant import StaticPlant
-from cbha_inverse.core.trajectory import make_trajectory
+from cbha_inverse.core.inverse.correction import TargetCorrector
 from cbha_inverse.paths import config_path
+from cbha_inverse.robot.plant import StaticPlant
+from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.ros.bag_bench import set_priority
 from cbha_inverse.scene import load_scene
 import numpy as np

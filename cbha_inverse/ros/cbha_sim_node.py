@@ -6,7 +6,7 @@ and rejects malformed commands like a valve driver (wrong length, non-finite, ou
 ``[0, max_pressure]``: logged with throttling, counted, the last valid set-point stays). A valid
 command takes effect after the transport ``latency``; the valve pressures follow it with a
 first-order lag ``valve_time_constant`` (exact exponential step). Every tick at ``rate_hz`` the
-plant (:class:`cbha_inverse.core.plant.StaticPlant`: the scene loaded with a deliberate
+plant (:class:`cbha_inverse.robot.plant.StaticPlant`: the scene loaded with a deliberate
 ``stiffness_scale`` error and its own ``gravity``) is moved to the equilibrium of the current
 valve pressures by warm-started Newton steps, and the tip is published on ``tip/measured``
 (PointStamped, sensor data QoS) with Gaussian noise (seeded) and, noise-free, on ``tip/true``.
@@ -27,9 +27,9 @@ import math
 import sys
 import time
 
-from cbha_inverse.core.plant import StaticPlant
-from cbha_inverse.core.robotino import ARM_VALVES
-from cbha_inverse.core.safety import check_command
+from cbha_inverse.robot.plant import StaticPlant
+from cbha_inverse.robot.robotino import ARM_VALVES
+from cbha_inverse.robot.safety import check_command
 from cbha_inverse.ros.conversions import command_array, point_stamped
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK, TimingStats, WARN
 from cbha_inverse.ros.params import declare_parameters, param, ParameterError

@@ -38,10 +38,10 @@ import time
 
 from cbha_inverse.bag.evaluate import evaluate_bag
 from cbha_inverse.config_files import read_yaml
-from cbha_inverse.core.trajectory import make_trajectory
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.paths import config_path
 from cbha_inverse.report.tracking import plot_runs
+from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.scene import load_scene
 import numpy as np
 import yaml

@@ -16,9 +16,9 @@ clock (``use_sim_time``: ``/clock``, e.g. from ``cbha_bag play --clock``); the s
 still makes the node hold or vent. Services: ``~/enable`` (std_srvs/SetBool: stop commanding, or
 resume) and ``~/reset`` (std_srvs/Trigger: model state and closed-loop correction back to rest;
 the set-point stays). Every input passes
-:mod:`cbha_inverse.core.safety` first; a rejected message is counted and logged (throttled) and
+:mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
 the last valid command stays. Every command passes
-:func:`cbha_inverse.core.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
+:func:`cbha_inverse.robot.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
 """
 
 import bisect
@@ -28,9 +28,9 @@ import math
 import sys
 import time
 
-from cbha_inverse.core.control import TargetCorrector
-from cbha_inverse.core.robotino import ARM_VALVES
-from cbha_inverse.core.safety import (
+from cbha_inverse.core.inverse.solver import TargetCorrector
+from cbha_inverse.robot.robotino import ARM_VALVES
+from cbha_inverse.robot.safety import (
     bounded_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
 from cbha_inverse.ros.conversions import backbone_markers, command_message, point_array
 from cbha_inverse.ros.diagnostics import (
