@@ -2,7 +2,7 @@
 #   make demo   venv from the pins, install, run the closed-loop CBHA scene in simulation
 #   make test   venv from the pins, install, run the whole test suite
 # The venv is rebuilt only when a pin file changes (stamp files), so warm runs start at once.
-# Installing also compiles the numba tick kernels into their on-disk cache (cbha_inverse.core.warmup,
+# Installing also compiles the numba kernels into their on-disk cache (cbha_inverse.warmup,
 # ~20 s once, again whenever a kernel module changes), so nothing timed later pays for the compile.
 
 # ROS 2 Jazzy wheels on PyPI are built for CPython 3.11.
@@ -13,9 +13,8 @@ PINS_STAMP := $(VENV)/.pins-stamp
 INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
 EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
-KERNEL_SOURCES := $(wildcard cbha_inverse/core/*_kernels.py) cbha_inverse/core/tick_math.py \
-  cbha_inverse/core/tick_cables.py
-KERNEL_TESTS ?= test/test_qp_kernels.py test/test_inverse_tick_math.py test/test_core_btd.py
+KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
+KERNEL_TESTS ?= test/test_core_kernels_qp.py test/test_core_kernels.py test/test_core_linalg_btd.py
 COVERAGE_ARGS ?= --cov=cbha_inverse --cov-report=term:skip-covered
 comma := ,
 space := $(subst ,, )
@@ -42,7 +41,7 @@ test: install
 # (the test of numba's compiled signatures has nothing to check without the JIT).
 cover-kernels: install
 	NUMBA_DISABLE_JIT=1 $(VPY) -m pytest $(KERNEL_TESTS) -q --cov=cbha_inverse --cov-report= \
-	  --deselect test/test_core_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
+	  --deselect test/test_core_linalg_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
 	  $(PYTEST_ARGS)
 	$(VPY) -m coverage report --include='$(subst $(space),$(comma),$(KERNEL_SOURCES))'
 
@@ -70,7 +69,7 @@ $(INSTALL_STAMP): $(PINS_STAMP) setup.py setup.cfg package.xml
 	@touch $@
 
 $(KERNELS_STAMP): $(INSTALL_STAMP) $(KERNEL_SOURCES)
-	$(VPY) -m cbha_inverse.core.warmup
+	$(VPY) -m cbha_inverse.warmup
 	@touch $@
 
 # The ROS interface wheels' CMake export files name the wheel builder's Python/numpy include
@@ -88,6 +87,11 @@ bench: install
 
 report: install
 	$(VPY) -m cbha_inverse.report.cli all
+
+# Replay regression goldens (test/replay.py): replays test/data/replay/* and rewrites goldens.npz.
+.PHONY: goldens
+goldens: install
+	$(VPY) test/regen_goldens.py
 
 # Re-pin the transitive dependencies after changing requirements*.txt.
 constraints: $(PINS_STAMP)

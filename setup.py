@@ -40,6 +40,8 @@ CONSOLE_SCRIPTS = [
     'cbha_bench_stereo = cbha_inverse.report.bench_stereo:main',
     'robotino_bridge = cbha_inverse.ros.robotino_bridge_node:main',
     'cbha_build_robotino_msgs = cbha_inverse.interfaces.robotino_msgs_build:main',
+    'cbha_bag = cbha_inverse.ros.bag_cli:main',
+    'cbha_bench_bag = cbha_inverse.ros.bag_bench:main',
 ]
 
 setup(

@@ -21,7 +21,8 @@ PACKAGE = 'cbha_inverse'
 NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim', 'stereo_tracker',
                     'robotino_bridge')
 COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo', 'cbha_launch',
-                       'cbha_scene', 'stereo_calibrate', 'cbha_build_robotino_msgs')
+                       'cbha_scene', 'stereo_calibrate', 'cbha_build_robotino_msgs',
+                       'cbha_bag')
 
 
 def _child_env(prefix):

@@ -29,11 +29,12 @@ def test_demo_runs_a_short_closed_loop_lap(tmp_path):
          '--shapes', 'circle', '--modes', 'closed', '--radius', str(radius),
          '--circle-speed', '0.02', '--start-hold', '0.3', '--feedback', 'direct'],
         cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=240)
-    assert result.returncode == 0, result.stdout + result.stderr
     summary = json.loads((tmp_path / 'summary.json').read_text())
+    assert result.returncode == 0, (result.stdout + result.stderr, summary)
     (run,) = summary['runs']
     assert (run['shape'], run['mode']) == ('circle', 'closed')
-    assert run['exit_codes'] == {'cbha_sim': 0, 'inverse_solver': 0, 'trajectory': 0}
+    assert {'cbha_sim', 'inverse_solver', 'trajectory'} <= set(run['exit_codes'])
+    assert all(code == 0 for code in run['exit_codes'].values()), run['exit_codes']
     assert run['rms_mm'] < 0.25 * radius * 1e3
     # the tip is sampled by the recorder at the plant's 100 Hz over most of the lap
     assert run['samples'] > 0.5 * 100.0 * run['lap_s']
@@ -63,7 +64,7 @@ def test_inverse_report_ticks_reach_the_target(tmp_path, capsys):
     assert report_main(['inverse', '--scenes', 'tendon_6f_8c', '--ticks', '20', '--warmup', '2',
                         '--qp-solvers', 'active_set', '--relinearize-every', '1', '--json',
                         str(path)]) == 0
-    (row,) = json.loads(path.read_text())
+    (row,) = json.loads(path.read_text())['ticks']
     assert (row['scene'], row['qp_solver'], row['frames'], row['actuators']) == (
         'tendon_6f_8c', 'active_set', 6, 8)
     assert 0.0 < row['median']['total'] < 1.0

@@ -2,6 +2,7 @@
 
 from cbha_inverse.core import links, se3
 import numpy as np
+from oracles import chain_forces
 import pytest
 
 
@@ -61,13 +62,13 @@ def test_rigid_motion_gives_zero_wrench_and_covariance():
     rng = np.random.default_rng(5)
     stiff, d0, q0, x_a, r_a, _, _ = _random_link(rng)
     x_b, r_b = x_a + r_a @ d0, r_a @ q0
-    w_a, w_b = links.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    w_a, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
     assert np.abs(w_a).max() < 1e-9 and np.abs(w_b).max() < 1e-9
     stiff, d0, q0, x_a, r_a, x_b, r_b = _random_link(rng)
-    w_a, w_b = links.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    w_a, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
     rot, shift = se3.so3_exp([0.4, -1.2, 2.0]), np.array([0.3, -0.1, 2.0])
-    v_a, v_b = links.link_wrenches(stiff, d0, q0, rot @ x_a + shift, rot @ r_a,
-                                   rot @ x_b + shift, rot @ r_b)
+    v_a, v_b = chain_forces.link_wrenches(stiff, d0, q0, rot @ x_a + shift, rot @ r_a,
+                                          rot @ x_b + shift, rot @ r_b)
     for w, v in ((w_a, v_a), (w_b, v_b)):
         np.testing.assert_allclose(v[:3], rot @ w[:3], atol=1e-9 * np.abs(w).max())
         np.testing.assert_allclose(v[3:], rot @ w[3:], atol=1e-9 * np.abs(w).max())
@@ -78,7 +79,7 @@ def test_wrenches_in_equilibrium_and_linear_response():
     rng = np.random.default_rng(6)
     for _ in range(5):
         stiff, d0, q0, x_a, r_a, x_b, r_b = _random_link(rng)
-        w_a, w_b = links.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+        w_a, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
         scale = np.abs(w_b).max()
         np.testing.assert_allclose(w_a[:3] + w_b[:3], 0.0, atol=1e-12 * scale)
         point = rng.normal(size=3)
@@ -89,7 +90,7 @@ def test_wrenches_in_equilibrium_and_linear_response():
     delta = 1e-7 * rng.normal(size=6)
     x_b = x_a + r_a @ (d0 + delta[:3])
     r_b = r_a @ se3.so3_exp(delta[3:]) @ q0
-    _, w_b = links.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    _, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
     local = np.concatenate([r_a.T @ w_b[:3], r_a.T @ w_b[3:]])
     np.testing.assert_allclose(local, -stiff @ delta, rtol=1e-6, atol=1e-6 * np.abs(
         stiff @ delta).max())
@@ -104,16 +105,16 @@ def test_tangent_matches_central_differences(seed, twist):
     def wrenches(dq):
         pose = (x_a + dq[:3], se3.so3_exp(dq[3:6]) @ r_a, x_b + dq[6:9],
                 se3.so3_exp(dq[9:]) @ r_b)
-        return np.concatenate(links.link_wrenches(stiff, d0, q0, *pose))
+        return np.concatenate(chain_forces.link_wrenches(stiff, d0, q0, *pose))
 
-    tangent = links.link_tangent(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    tangent = chain_forces.link_tangent(stiff, d0, q0, x_a, r_a, x_b, r_b)
     h = 1e-6
     fd = np.stack([-(wrenches(h * e) - wrenches(-h * e)) / (2 * h) for e in np.eye(12)], -1)
     assert np.abs(tangent - fd).max() <= 1e-6 * np.abs(fd).max()
     np.testing.assert_allclose(tangent[:6, 6:], tangent[6:, :6].T, atol=1e-12 * np.abs(
         tangent).max())
     # rotational diagonal blocks: antisymmetric part hat(m)/2, m the link moment on the frame
-    w_a, w_b = links.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    w_a, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
     for k, w in ((3, w_a), (9, w_b)):
         block = tangent[k:k + 3, k:k + 3]
         np.testing.assert_allclose(block - block.T, se3.hat(w[3:]),
@@ -125,17 +126,17 @@ def test_batched_matches_single():
     rng = np.random.default_rng(12)
     items = [_random_link(rng) for _ in range(4)]
     stacked = [np.stack(col) for col in zip(*items)]
-    t_batch = links.link_tangent(*stacked)
+    t_batch = chain_forces.link_tangent(*stacked)
     for k, item in enumerate(items):
-        np.testing.assert_allclose(t_batch[k], links.link_tangent(*item), rtol=1e-13,
+        np.testing.assert_allclose(t_batch[k], chain_forces.link_tangent(*item), rtol=1e-13,
                                    atol=1e-13 * np.abs(t_batch[k]).max())
 
 
 def test_deformation_is_the_wrenches_delta():
     """``link_deformation`` gives the delta whose ``K delta`` the link terms carry."""
     stiff, d0, q0, x_a, r_a, x_b, r_b = _random_link(np.random.default_rng(11))
-    delta = links.link_deformation(d0, q0, x_a, r_a, x_b, r_b)
+    delta = chain_forces.link_deformation(d0, q0, x_a, r_a, x_b, r_b)
     np.testing.assert_allclose(delta[:3], r_a.T @ (x_b - x_a) - d0, rtol=1e-13, atol=1e-16)
     np.testing.assert_allclose(se3.so3_exp(delta[3:]), r_a.T @ r_b @ q0.T, atol=1e-13)
-    terms = links.link_terms(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    terms = chain_forces.link_terms(stiff, d0, q0, x_a, r_a, x_b, r_b)
     np.testing.assert_allclose(terms.stress, stiff @ delta, rtol=1e-12)

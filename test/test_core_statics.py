@@ -1,9 +1,11 @@
 """Tests of assembly and static equilibrium against closed forms and the exact elastica."""
 
-from cbha_inverse.core import assembly, chain, links, newton, se3, statics
-from cbha_inverse.core.equilibrium import actuator_loads
+from cbha_inverse.core import chain, links, se3, statics
 from cbha_inverse.scene import load_scene
 import numpy as np
+from oracles import chain_forces
+from oracles.actuation import oracle
+from oracles.loads import actuator_loads
 import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
@@ -23,7 +25,7 @@ def test_chaining_reproduces_whole_beam_compliance():
     lengths = np.array([0.05, 0.03, 0.07, 0.04, 0.06, 0.05])
     base_rot = se3.so3_exp([0.3, -0.7, 1.1])
     model = _beam_chain(lengths, base_rotation=base_rot)
-    tangent = assembly.assemble_tangent(model, chain.rest_state(model))
+    tangent = chain_forces.assemble_tangent(model, chain.rest_state(model))
     # rest shape: only round-off forces of the stiff axial links (EA/h * eps * length)
     assert np.abs(tangent.internal).max() < 1e-12 * np.abs(tangent.diagonal).max()
     flex = np.linalg.inv(tangent.to_dense())[-6:, -6:]
@@ -145,7 +147,7 @@ def test_gravity_frame_wrenches_and_load_function_agree():
     np.testing.assert_allclose(res_f.positions, res_g.positions, atol=1e-12)
     np.testing.assert_allclose(res_l.positions, res_g.positions, atol=1e-12)
     # equilibrium of the whole chain: base reaction balances the total weight
-    internal = assembly.internal_wrenches(model, res_g.state)
+    internal = chain_forces.internal_wrenches(model, res_g.state)
     np.testing.assert_allclose(internal[:, :3].sum(axis=0), -masses.sum() * g, atol=1e-10)
 
 
@@ -189,14 +191,14 @@ def test_assembled_tangent_matches_central_differences():
     rng = np.random.default_rng(21)
     state = chain.retract(chain.rest_state(model), rng.normal(scale=[2e-3] * 3 + [0.2] * 3,
                                                               size=(5, 6)))
-    tangent = assembly.assemble_tangent(model, state)
-    np.testing.assert_allclose(tangent.internal, assembly.internal_wrenches(model, state))
+    tangent = chain_forces.assemble_tangent(model, state)
+    np.testing.assert_allclose(tangent.internal, chain_forces.internal_wrenches(model, state))
     h = 1e-7
     cols = []
     for e in np.eye(30):
         inc = h * e.reshape(5, 6)
-        plus = assembly.internal_wrenches(model, chain.retract(state, inc))
-        minus = assembly.internal_wrenches(model, chain.retract(state, -inc))
+        plus = chain_forces.internal_wrenches(model, chain.retract(state, inc))
+        minus = chain_forces.internal_wrenches(model, chain.retract(state, -inc))
         cols.append(-(plus - minus).ravel() / (2 * h))
     fd = np.stack(cols, axis=1)
     exact = tangent.to_dense(exact=True)
@@ -223,7 +225,7 @@ def test_follower_actuation_with_load_tangent_converges(name):
 
     With the structural tangent alone these cases stalled (load factor 0.40 for the tendon
     trunk, 0.22 for the CBHA after 64 load steps). Independent check: the equilibrium residual
-    evaluated with assembly.internal_wrenches + gravity + the actuators' loads.
+    evaluated with chain_forces.internal_wrenches + gravity + the actuators' loads.
     """
     scene = load_scene(name)
     actuation, tip = (np.asarray(v, dtype=float) for v in _FORWARD_TIPS[name])
@@ -232,10 +234,10 @@ def test_follower_actuation_with_load_tangent_converges(name):
                                load_tangent=tangent, strict=True)
     assert res.load_steps == 1 and res.iterations <= 10, res.message
     st = res.state
-    applied = scene.actuators.loads(st.positions, st.rotations, actuation)[1:]
+    applied = oracle(scene.actuators).loads(st.positions, st.rotations, actuation)[1:]
     weight = np.zeros_like(applied)
     weight[:, :3] = scene.model.masses[:, None] * scene.gravity
-    residual = assembly.internal_wrenches(scene.model, st) + weight + applied
+    residual = chain_forces.internal_wrenches(scene.model, st) + weight + applied
     assert np.abs(residual).max() <= 1e-10 * np.abs(applied).max()
     np.testing.assert_allclose(res.positions[-1], tip, atol=1e-8)
     np.testing.assert_allclose(scene.forward(actuation).positions, res.positions, atol=1e-9)
@@ -268,8 +270,8 @@ def _material_reference(model, state):
     for i in range(n):
         r_a, r_b = state.rotations[i], state.rotations[i + 1]
         x_a, x_b = state.positions[i], state.positions[i + 1]
-        delta = links.link_deformation(model.rest_offsets[i], model.rest_rotations[i], x_a, r_a,
-                                       x_b, r_b)
+        delta = chain_forces.link_deformation(model.rest_offsets[i], model.rest_rotations[i],
+                                              x_a, r_a, x_b, r_b)
         jinv_rt = se3.so3_left_jacobian_inverse(delta[3:]) @ r_a.T
         d = np.zeros((6, 12))
         d[:3, :3], d[:3, 3:6], d[:3, 6:9] = -r_a.T, r_a.T @ se3.hat(x_b - x_a), r_a.T
@@ -282,8 +284,8 @@ def test_material_tangent_is_dtkd_and_positive_definite():
     """The fallback tangent equals ``Dᵀ K D`` of the links (dense, per link) and is SPD."""
     model = _elastica_chain(8)
     state = statics.solve_static(model, tip_wrench=[0.0, 6.0, 0.0, 0.0, 0.0, 0.0]).state
-    diagonal, upper = newton.material_tangent(model, state)
-    dense = assembly.blocks_to_dense(diagonal, upper)
+    diagonal, upper = chain_forces.material_tangent(model, state)
+    dense = chain_forces.blocks_to_dense(diagonal, upper)
     reference = _material_reference(model, state)
     np.testing.assert_allclose(dense, reference, rtol=0, atol=1e-12 * np.abs(reference).max())
     assert np.linalg.eigvalsh(dense).min() > 0.0
@@ -321,7 +323,7 @@ def test_material_fallback_converges_when_the_exact_tangent_fails(monkeypatch):
     def singular(*args):
         raise np.linalg.LinAlgError('singular tangent (test)')
 
-    monkeypatch.setattr(newton._Problem, 'exact_step', singular)
+    monkeypatch.setattr(statics._Problem, 'exact_step', singular)
     res = statics.solve_static(model, tip_wrench=load, max_iterations=200)
     assert res.converged, res.message
     assert res.iterations > reference.iterations

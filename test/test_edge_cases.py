@@ -10,12 +10,12 @@ status/iteration/ok fields and proxsuite's warm-started updates, the RViz marker
 import math
 
 from builtin_interfaces.msg import Time
-from cbha_inverse.core.inverse import QPProblem
-from cbha_inverse.core.qp import ActiveSetQP, ActuationQP, projected_gauss_seidel
-from cbha_inverse.core.robotino import robotino_bar_command, robotino_pressures
-from cbha_inverse.core.safety import (
+from cbha_inverse.core.inverse.qp import ActiveSetQP, ActuationQP, projected_gauss_seidel
+from cbha_inverse.core.inverse.qp_problem import QPProblem
+from cbha_inverse.robot.robotino import robotino_bar_command, robotino_pressures
+from cbha_inverse.robot.safety import (
     bounded_command, check_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
-from cbha_inverse.core.trajectory import (
+from cbha_inverse.robot.trajectory import (
     circle_points, circle_trajectory, make_trajectory, polyline_points, square_trajectory,
     square_vertices, waypoint_trajectory)
 from cbha_inverse.ros.conversions import backbone_markers

@@ -93,6 +93,12 @@ def test_per_tube_condensation_equals_the_three_tube_mesh(spec):
     fast = condense_bellows(spec, mesh_size=0.001, order=1, youngs_modulus=1.0e6)
     scale = np.sqrt(np.outer(np.diag(full.compliance), np.diag(full.compliance)))
     assert np.max(np.abs(fast.compliance - full.compliance) / scale) < 1e-8
+    # the condensation also produces the tubes' cavity surfaces (what the CLI writes)
+    assert [name for name, _, _ in fast.cavities] == [t['name'] for t in g['tubes']]
+    for i, (_, points, triangles) in enumerate(fast.cavities):
+        expected_points, expected_triangles = cavity_surface(g, i)
+        np.testing.assert_array_equal(points, expected_points)
+        np.testing.assert_array_equal(triangles, expected_triangles)
 
 
 def test_mesh_convergence_of_the_default_segment(segment, spec):

@@ -1,8 +1,7 @@
 """Condensation against Timoshenko, and chains of condensed segments against the full FE body."""
 
-from cbha_inverse.core.links import timoshenko_compliance
-from cbha_inverse.fem.condensation import (checked_symmetric, condense_cylinder,
-                                           relative_asymmetry)
+from cbha_inverse.core.links import checked_compliance, timoshenko_compliance
+from cbha_inverse.fem.condensation import condense_cylinder
 from cbha_inverse.fem.validation import large_bending, linear_chain_vs_full
 import numpy as np
 import pytest
@@ -48,17 +47,25 @@ def test_p1_locks_in_bending(slender):
 
 def test_symmetry_and_definiteness_checks_refuse_bad_matrices():
     good = timoshenko_compliance(0.05, E_MOD, NU, 0.01)
-    sym, asym = checked_symmetric(good)
+    sym, asym = checked_compliance(good)
     assert asym == 0.0 and np.array_equal(sym, good)
     skewed = good.copy()
     skewed[1, 5] *= 1.01
-    assert relative_asymmetry(skewed) > 1e-3
+    # the asymmetry relative to sqrt(C_ii C_jj), computed independently
+    expected = abs(skewed[1, 5] - skewed[5, 1]) / np.sqrt(skewed[1, 1] * skewed[5, 5])
+    assert expected > 1e-3
     with pytest.raises(np.linalg.LinAlgError, match='asymmetric'):
-        checked_symmetric(skewed)
+        checked_compliance(skewed)
+    slightly = good.copy()
+    slightly[1, 5] *= 1.0 + 1e-10
+    sym, asym = checked_compliance(slightly)
+    assert asym == pytest.approx(abs(slightly[1, 5] - slightly[5, 1])
+                                 / np.sqrt(slightly[1, 1] * slightly[5, 5]))
+    np.testing.assert_array_equal(sym, sym.T)
     indefinite = good.copy()
     indefinite[4, 4] = -indefinite[4, 4]
     with pytest.raises(np.linalg.LinAlgError, match='positive definite'):
-        checked_symmetric(indefinite)
+        checked_compliance(indefinite)
 
 
 def test_chain_of_four_condensed_segments_matches_linear_full_fe():

@@ -4,10 +4,11 @@ import json
 import subprocess
 import sys
 
-from cbha_inverse.core.control import TargetCorrector
+from cbha_inverse.core.inverse.solver import TargetCorrector
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
+from oracles.actuation import oracle
 import pytest
 
 TENDON_SCENES = ['tendon_6f_8c', 'tendon_10f_16c']
@@ -160,7 +161,7 @@ def test_forward_model_agrees_with_the_core_static_solver():
     ours = scene.forward(actuation, strict=True)
 
     def load(state):
-        return scene.actuators.loads(state.positions, state.rotations, actuation)[1:]
+        return oracle(scene.actuators).loads(state.positions, state.rotations, actuation)[1:]
 
     core = solve_static(scene.model, gravity=scene.gravity, load_function=load)
     assert core.converged, core.message

@@ -11,7 +11,7 @@ import contextlib
 import dataclasses
 import math
 
-from cbha_inverse.core.qp import ActuationQP
+from cbha_inverse.core.inverse.qp import ActuationQP
 from cbha_inverse.ros.inverse_solver_node import InverseSolverNode
 from cbha_inverse.ros.qos import COMMAND_QOS, MEASURED_QOS, TARGET_QOS
 from cbha_inverse.scene import load_scene

@@ -9,9 +9,10 @@ Timoshenko closed form of the whole beam, Euler's buckling load, and reachabilit
 from dataclasses import replace
 from pathlib import Path
 
-from cbha_inverse.core.actuation import ActuatorSet, CableGroup
+from cbha_inverse.core.actuation.actuators import ActuatorSet
+from cbha_inverse.core.actuation.cables import CableGroup
 from cbha_inverse.core.chain import ChainModel
-from cbha_inverse.core.control import InverseSolver
+from cbha_inverse.core.inverse.solver import InverseSolver
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static, StaticConvergenceError
 from cbha_inverse.fem.condensation import condense_cylinder, condense_segment

@@ -8,7 +8,9 @@ solve lives in a :class:`ChainState` (pinocchio's Model/Data split).
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.se3 import quat_from_matrix, so3_exp
+from cbha_inverse.core._kernels.retraction import retract_frames
+from cbha_inverse.core.links import checked_compliance
+from cbha_inverse.core.se3 import quat_from_matrix
 import numpy as np
 
 
@@ -119,29 +121,16 @@ class ChainModel:
         ------
         ValueError
             On inconsistent shapes, a non-finite value (NaN or inf in any argument), a
-            non-symmetric or non-positive-definite compliance, or a rotation that is not
-            orthonormal.
+            compliance that fails :func:`cbha_inverse.core.links.checked_compliance`, or a
+            rotation that is not orthonormal.
 
         """
         comp = np.array(compliances, dtype=float)
         if comp.ndim != 3 or comp.shape[1:] != (6, 6) or comp.shape[0] < 1:
             raise ValueError(f'compliances must have shape (n, 6, 6), got {comp.shape}')
         n = comp.shape[0]
-        bad = np.nonzero(~np.all(np.isfinite(comp), axis=(1, 2)))[0]
-        if bad.size:
-            raise ValueError(f'compliance of link {bad[0]} is not finite (NaN or inf)')
-        scale = np.abs(comp).max(axis=(1, 2))
-        asym = np.abs(comp - np.swapaxes(comp, 1, 2)).max(axis=(1, 2))
-        bad = np.nonzero(asym > 1e-8 * scale)[0]
-        if bad.size:
-            raise ValueError(f'compliance of link {bad[0]} is not symmetric')
-        comp = 0.5 * (comp + np.swapaxes(comp, 1, 2))
-        try:
-            np.linalg.cholesky(comp)
-        except np.linalg.LinAlgError:
-            eig = np.linalg.eigvalsh(comp).min(axis=1)
-            raise ValueError(
-                f'compliance of link {int(np.argmin(eig))} is not positive definite') from None
+        comp = np.array([checked_compliance(c, f'compliance of link {i}')[0]
+                         for i, c in enumerate(comp)])
         stiff = np.linalg.inv(comp)
         stiff = 0.5 * (stiff + np.swapaxes(stiff, 1, 2))
         offsets = checked_array(rest_offsets, (n, 3), 'rest_offsets')
@@ -237,8 +226,6 @@ def retract(state, increments):
 
     """
     inc = checked_array(increments, (state.positions.shape[0] - 1, 6), 'increments')
-    pos = state.positions.copy()
-    rot = state.rotations.copy()
-    pos[1:] += inc[:, :3]
-    rot[1:] = so3_exp(inc[:, 3:]) @ rot[1:]
-    return ChainState(pos, rot)
+    positions = np.array(state.positions, dtype=float, order='C')
+    rotations = np.array(state.rotations, dtype=float, order='C')
+    return ChainState(*retract_frames(positions, rotations, inc, in_place=True))

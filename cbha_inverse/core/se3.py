@@ -1,36 +1,31 @@
 """
-Rotation helpers on SO(3): hat/vee, exponential and logarithm, quaternions, Jacobians.
+Rotation helpers on SO(3), batched over arrays: hat/vee, exp/log, quaternions, ``Jl⁻¹``.
 
-Conventions (DESIGN §2): rotation vectors are axis * angle [rad]; quaternions are (x, y, z, w);
-every function is batched over leading axes (``(..., 3)`` vectors, ``(..., 3, 3)`` matrices).
-Rotation increments are applied on the left in world axes, ``R <- so3_exp(dtheta) @ R``, so the
-Jacobians used by the mechanics are the *left* Jacobians of SO(3).
+Conventions (DESIGN §2): rotation vectors are axis * angle [rad]; quaternions are (x, y, z, w)
+with ``w >= 0``; every function is batched over leading axes (``(..., 3)`` vectors,
+``(..., 3, 3)`` matrices). Rotation increments are applied on the left in world axes,
+``R <- so3_exp(dtheta) @ R``, so the Jacobians used by the mechanics are the *left* Jacobians.
 
-Where closed forms lose digits to cancellation, ``sinc`` forms or Taylor series are used;
-:func:`so3_log` reads the angle with ``atan2`` and, beyond 2.4 rad, goes through a (Shepperd)
-quaternion, which stays accurate up to pi.
+The maps with a compiled form run it (:mod:`cbha_inverse.core._kernels.so3`: one implementation
+for the kernels and for the numpy callers): ``so3_log`` reads the angle with ``atan2`` and,
+beyond 2.4 rad, goes through the (Shepperd) quaternion, which stays accurate up to pi; ``c(t)``
+of ``Jl⁻¹`` comes from its Taylor series below 0.5 rad, where the closed form cancels.
 """
 
+from cbha_inverse.core._kernels.so3 import (exp_batch, hat_batch, jl_coefficient_batch,
+                                            left_jacobian_inverse_batch, log_batch,
+                                            quaternion_batch)
 import numpy as np
 
-_SERIES_ANGLE = 1.0
-#: ``|B_(2k+2)| / (2k+2)!``, k = 0..9: Taylor coefficients of ``c(t)`` in ``t**2``, the
-#: ``hat(phi)**2`` coefficient of the inverse left Jacobian (see :func:`_jl_inv_coefficient`;
-#: also used by :mod:`cbha_inverse.core.tick_math`)
-JL_SERIES = (1.0 / 12.0, 1.0 / 720.0, 1.0 / 30240.0, 1.0 / 1209600.0, 1.0 / 47900160.0,
-             691.0 / (2730.0 * 479001600.0), 7.0 / (6.0 * 87178291200.0),
-             3617.0 / (510.0 * 20922789888000.0), 43867.0 / (798.0 * 6402373705728000.0),
-             174611.0 / (330.0 * 2432902008176640000.0))
-_EYE3 = np.eye(3)
-#: flattened ``R @ LOG_BASIS = (vee(R), tr(R) / 2)`` (9 x 4)
-LOG_BASIS = np.zeros((9, 4))
-LOG_BASIS[[7, 2, 3], [0, 1, 2]] = 0.5
-LOG_BASIS[[5, 6, 1], [0, 1, 2]] = -0.5
-LOG_BASIS[[0, 4, 8], 3] = 0.5
-#: ``hat(v) = v @ HAT_BASIS`` reshaped to 3x3 (one matmul instead of six scattered writes)
-HAT_BASIS = np.array([[0, 0, 0, 0, 0, -1, 0, 1, 0],
-                      [0, 0, 1, 0, 0, 0, -1, 0, 0],
-                      [0, -1, 0, 1, 0, 0, 0, 0, 0]], dtype=float)
+
+def _flat(array, item_shape):
+    """Return ``array`` as a C-ordered float array of shape (N,) + item_shape and its batch."""
+    array = np.asarray(array, dtype=float)
+    batch = array.shape[:array.ndim - len(item_shape)]
+    if array.shape[len(batch):] != item_shape:
+        raise ValueError(f'expected shape (..., {", ".join(map(str, item_shape))}), '
+                         f'got {array.shape}')
+    return np.ascontiguousarray(array.reshape((-1,) + item_shape)), batch
 
 
 def hat(v):
@@ -47,8 +42,8 @@ def hat(v):
     (..., 3, 3) ndarray
 
     """
-    v = np.asarray(v, dtype=float)
-    return (v @ HAT_BASIS).reshape(v.shape[:-1] + (3, 3))
+    flat, batch = _flat(v, (3,))
+    return hat_batch(flat).reshape(batch + (3, 3))
 
 
 def vee(m):
@@ -71,11 +66,26 @@ def vee(m):
                            m[..., 1, 0] - m[..., 0, 1]], axis=-1)
 
 
-def _angle_coefficients(theta):
-    """Return ``sin(t)/t`` and ``(1 - cos(t))/t**2 = sinc(t/2)**2 / 2`` without cancellation."""
-    a = np.sinc(theta * (1.0 / np.pi))
-    b = np.sinc(theta * (0.5 / np.pi))
-    return a, 0.5 * b * b
+def cross(a, b):
+    """
+    Return the row-wise cross product ``a × b`` (faster than ``numpy.cross`` for small batches).
+
+    Parameters
+    ----------
+    a, b : (..., 3) ndarray
+        Vectors.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        ``a × b``.
+
+    """
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def so3_exp(rotvec):
@@ -92,15 +102,8 @@ def so3_exp(rotvec):
     (..., 3, 3) ndarray
 
     """
-    rotvec = np.asarray(rotvec, dtype=float)
-    theta = np.linalg.norm(rotvec, axis=-1)
-    a, b = _angle_coefficients(theta)
-    k = hat(rotvec)
-    out = a[..., None, None] * k + b[..., None, None] * (k @ k)
-    out[..., 0, 0] += 1.0
-    out[..., 1, 1] += 1.0
-    out[..., 2, 2] += 1.0
-    return out
+    flat, batch = _flat(rotvec, (3,))
+    return exp_batch(flat).reshape(batch + (3, 3))
 
 
 def quat_from_matrix(rot):
@@ -117,32 +120,8 @@ def quat_from_matrix(rot):
     (..., 4) ndarray
 
     """
-    rot = np.asarray(rot, dtype=float)
-    r00, r11, r22 = rot[..., 0, 0], rot[..., 1, 1], rot[..., 2, 2]
-    trace = r00 + r11 + r22
-    # Four algebraically equal formulas; each is accurate when its pivot is the largest.
-    pivots = np.stack([trace, r00, r11, r22], axis=-1)
-    choice = np.argmax(pivots, axis=-1)
-    p = np.maximum(1.0 + 2.0 * np.take_along_axis(pivots, choice[..., None], -1)[..., 0]
-                   - trace, 1e-300)
-    s = np.sqrt(p)
-    d21 = rot[..., 2, 1] - rot[..., 1, 2]
-    d02 = rot[..., 0, 2] - rot[..., 2, 0]
-    d10 = rot[..., 1, 0] - rot[..., 0, 1]
-    s01 = rot[..., 0, 1] + rot[..., 1, 0]
-    s02 = rot[..., 0, 2] + rot[..., 2, 0]
-    s12 = rot[..., 1, 2] + rot[..., 2, 1]
-    half = 0.5 * s
-    inv = 0.5 / s
-    candidates = np.stack([
-        np.stack([d21 * inv, d02 * inv, d10 * inv, half], axis=-1),
-        np.stack([half, s01 * inv, s02 * inv, d21 * inv], axis=-1),
-        np.stack([s01 * inv, half, s12 * inv, d02 * inv], axis=-1),
-        np.stack([s02 * inv, s12 * inv, half, d10 * inv], axis=-1),
-    ], axis=-2)
-    q = np.take_along_axis(candidates, choice[..., None, None], -2)[..., 0, :]
-    q = np.where(q[..., 3:4] < 0.0, -q, q)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    flat, batch = _flat(rot, (3, 3))
+    return quaternion_batch(flat).reshape(batch + (4,))
 
 
 def matrix_from_quat(quat):
@@ -172,10 +151,6 @@ def matrix_from_quat(quat):
 def so3_log(rot):
     """
     Return the rotation vector of a rotation matrix, angle in [0, pi].
-
-    ``theta = atan2(|vee(R)|, (tr R - 1) / 2)`` and ``phi = vee(R) theta / sin(theta)`` while
-    ``tr R > -0.5`` (theta < 2.4 rad) for every input; otherwise through the quaternion,
-    ``theta = 2 atan2(|v|, w)``, which keeps full accuracy near pi.
 
     Parameters
     ----------
@@ -207,60 +182,30 @@ def so3_log_angle(rot):
         Their norms, in [0, pi].
 
     """
-    rot = np.asarray(rot, dtype=float)
-    # one product gives vee(R) = sin(t) axis and (tr R) / 2 = cos(t) + 1/2
-    mixed = rot.reshape(rot.shape[:-2] + (9,)) @ LOG_BASIS
-    cos_t = mixed[..., 3] - 0.5
-    if cos_t.size and cos_t.min() > -0.75:
-        d = mixed[..., :3]
-        sin_t = np.sqrt((d * d).sum(axis=-1))
-        theta = np.arctan2(sin_t, cos_t)
-        # sin_t = 0 only for d = 0, where any finite ratio gives the zero vector
-        return d * (theta / np.maximum(sin_t, 1e-300))[..., None], theta
-    q = quat_from_matrix(rot)
-    v = q[..., :3]
-    w = q[..., 3]
-    s = np.linalg.norm(v, axis=-1)
-    small = s < 1e-8
-    safe_s = np.where(small, 1.0, s)
-    safe_w = np.where(small, w, 1.0)
-    scale = np.where(small, 2.0 / safe_w * (1.0 - s * s / (3.0 * safe_w * safe_w)),
-                     2.0 * np.arctan2(s, w) / safe_s)
-    return v * scale[..., None], 2.0 * np.arctan2(s, w)
+    flat, batch = _flat(rot, (3, 3))
+    vectors, angles = log_batch(flat)
+    return vectors.reshape(batch + (3,)), angles.reshape(batch)
 
 
-def _jl_inv_coefficient(theta):
+def jl_inverse_coefficients(theta):
     """
     Return ``c(t) = 1/t**2 - (1 + cos t) / (2 t sin t)`` and ``c'(t) / t``.
 
-    ``c`` is the coefficient of ``hat(phi)**2`` in the inverse left Jacobian of SO(3). Below
-    ``_SERIES_ANGLE`` both come from ``c = sum_k |B_(2k+2)| / (2k+2)! t**(2k)`` (Bernoulli numbers;
-    truncation < 1e-13 relative), where the closed forms cancel (``c'`` like ``1/t**4``).
+    ``c`` is the coefficient of ``hat(phi)**2`` in the inverse left Jacobian of SO(3).
+
+    Parameters
+    ----------
+    theta : (...,) array_like  [rad]
+        Angles ``t``.
+
+    Returns
+    -------
+    c, dc_over_t : (...,) ndarray
+
     """
     theta = np.asarray(theta, dtype=float)
-    t2 = theta * theta
-    t_max = float(theta.max()) if theta.size else 0.0
-    # number of series terms: the first neglected term of c'/t is below 1e-17 of its value
-    terms = len(JL_SERIES)
-    while terms > 2 and 2.0 * (terms - 1) * JL_SERIES[terms - 1] * min(
-            t_max, _SERIES_ANGLE) ** (2 * terms - 4) < 1e-17 / 360.0:
-        terms -= 1
-    c = np.full_like(t2, JL_SERIES[terms - 1])
-    dc = np.full_like(t2, 2.0 * (terms - 1) * JL_SERIES[terms - 1])
-    for k in range(terms - 2, -1, -1):
-        c = c * t2 + JL_SERIES[k]
-        if k > 0:
-            dc = dc * t2 + 2.0 * k * JL_SERIES[k]
-    if theta.size == 0 or theta.max() < _SERIES_ANGLE:
-        return c, dc
-    big = theta >= _SERIES_ANGLE
-    t = np.where(big, theta, 1.0)
-    half = 0.5 * t
-    cot = np.cos(half) / np.sin(half)
-    csc2 = 1.0 / np.sin(half) ** 2
-    c_closed = 1.0 / (t * t) - cot / (2.0 * t)
-    dc_closed = (-2.0 / t ** 3 + csc2 / (4.0 * t) + cot / (2.0 * t * t)) / t
-    return np.where(big, c_closed, c), np.where(big, dc_closed, dc)
+    c, dc = jl_coefficient_batch(np.ascontiguousarray(theta.reshape(-1)))
+    return c.reshape(theta.shape), dc.reshape(theta.shape)
 
 
 def so3_left_jacobian_inverse(rotvec):
@@ -279,48 +224,5 @@ def so3_left_jacobian_inverse(rotvec):
     (..., 3, 3) ndarray
 
     """
-    rotvec = np.asarray(rotvec, dtype=float)
-    c, _ = _jl_inv_coefficient(np.sqrt(np.sum(rotvec * rotvec, axis=-1)))
-    return _jl_inv_from_hat(hat(rotvec), c)
-
-
-def _jl_inv_from_hat(phi_hat, c):
-    """``Jl^-1 = I - hat(phi)/2 + c hat(phi)^2`` from ``hat(phi)`` and ``c(|phi|)``."""
-    out = c[..., None, None] * (phi_hat @ phi_hat) - 0.5 * phi_hat
-    out += _EYE3
-    return out
-
-
-def so3_left_jacobian_inverse_transpose_derivative(rotvec, vec, coefficients=None):
-    """
-    Differentiate ``Jl^-1(phi)^T s`` with respect to ``phi`` for fixed ``s``.
-
-    With ``Jl^-1(phi)^T s = s + phi x s / 2 + c(t) (phi (phi . s) - t^2 s)``, ``t = |phi|``:
-    ``d/dphi = -hat(s)/2 + (c'(t)/t) (phi (phi . s) - t^2 s) phi^T
-    + c(t) ((phi . s) I + phi s^T - 2 s phi^T)``.
-
-    Parameters
-    ----------
-    rotvec : (..., 3) array_like  [rad]
-        Rotation vectors phi.
-    vec : (..., 3) array_like
-        Vectors s.
-    coefficients : tuple of two (...,) ndarrays, optional
-        ``(c(t), c'(t)/t)`` if already computed.
-
-    Returns
-    -------
-    (..., 3, 3) ndarray
-
-    """
-    phi = np.asarray(rotvec, dtype=float)
-    s = np.asarray(vec, dtype=float)
-    t2 = np.sum(phi * phi, axis=-1)
-    c, dc = _jl_inv_coefficient(np.sqrt(t2)) if coefficients is None else coefficients
-    ps = np.sum(phi * s, axis=-1)
-    a = dc[..., None] * (phi * ps[..., None] - t2[..., None] * s) - 2.0 * c[..., None] * s
-    out = a[..., :, None] * phi[..., None, :]
-    out += (c[..., None] * phi)[..., :, None] * s[..., None, :]
-    out -= 0.5 * hat(s)
-    out += (c * ps)[..., None, None] * _EYE3
-    return out
+    flat, batch = _flat(rotvec, (3,))
+    return left_jacobian_inverse_batch(flat).reshape(batch + (3, 3))

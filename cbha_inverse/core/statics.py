@@ -1,19 +1,95 @@
 """
-Quasi-static equilibrium of a frame chain under dead and follower loads (DESIGN §3, §11).
+Quasi-static equilibrium of a frame chain under loads and actuation (paper eq. 9, DESIGN §3, §11).
 
-:func:`solve_static` solves ``f(q) + f_ext = 0`` (paper eq. 9; actuation enters through
-``load_function`` and its ``load_tangent``) for the poses of frames 1..n. It is the public face of
-the package's one Newton engine, :func:`cbha_inverse.core.newton.solve_chain` (exact tangent,
-deformation-coordinate updates, line search, material-tangent fallback, load stepping; its module
-docstring states the method and the convergence test). This module adds the dead loads (tip and
-frame wrenches, gravity on the lumped masses) and the public result type.
+:func:`solve_static` is the package's one solver of eq. 9, behind the scenes' forward model
+(:meth:`cbha_inverse.scene.Scene.forward`) and the simulated plant
+(:class:`cbha_inverse.robot.plant.StaticPlant`). It solves, for the poses of frames 1..n,
+
+    r(q) = f(q) + lam (f_dead + J_a(q)ᵀ λ + f_load(q)) = 0
+
+with ``f`` the internal wrenches, ``f_dead`` constant world wrenches (tip, frame wrenches,
+gravity: :func:`external_wrenches`), ``J_a(q)ᵀ λ`` the actuators' configuration-dependent
+(follower) wrenches, ``f_load`` optional user follower loads and ``lam`` the load factor. The
+residual and every tangent come from the compiled kernels the control tick runs
+(:class:`cbha_inverse.core.system.EquilibriumSystem`), so the controller, the statics and the plant
+evaluate the same physics with the same code:
+
+- Newton increments ``dq = T⁻¹ r`` (world axes, as for :func:`cbha_inverse.core.chain.retract`)
+  with ``T = -dr/dq`` the exact, non-symmetric tangent: material + geometric part of the links
+  and the actuators' exact load stiffness (quadratic convergence; the structural tangent alone
+  sees a tendon-compressed backbone as unstable), factored by LAPACK's band LU (``dgbtrf``,
+  the bandwidth of the scene, O(n)). If the tangent is singular, the step is not finite or the
+  line search rejects it, the iteration falls back to the material tangent (paper eq. 8, SPD
+  whatever the stresses, compiled band Cholesky): a modified-Newton step, robust where ``T``
+  is indefinite or singular (a chain near a limit point, high pressure);
+- the increment is applied in the chain's deformation coordinates
+  (:func:`cbha_inverse.core._kernels.retraction.deformation_step`): full Newton steps stay
+  acceptable at large rotations of slender chains (the PL^2/EI = 10 elastica converges from rest
+  in one load step of 7 iterations);
+- backtracking line search on the Euclidean norm of the scaled residual (Armijo, factor 1/2),
+  optionally starting from a step shortened so that no link turns by more than
+  ``max_rotation_step``;
+- load stepping: a warm start (``initial_state``) is tried at the full load first; otherwise or
+  if it fails, the full load from the rest shape; a load step that fails (no convergence within
+  ``max_iterations`` or a failed line search) is halved, successful steps double the increment.
+
+Convergence test (``residual_norm`` reports the left-hand side), by default relative. Forces
+and moments are compared in one unit: ``r_scaled`` is the residual with moments divided by the
+chain length L_c (so both parts are in N), and the force and moment parts of the applied loads
+and of the internal wrenches give one ``load_scale`` (the largest scaled component of either),
+so a pure moment load judges the force residual against it and vice versa. A state converges:
+
+1. if every component is finite and ``max |r_scaled| <= tolerance * load_scale``; or
+2. (round-off limited) if every frame's residual is within ``tolerance * load_scale + floor_i``
+   and the Newton correction from that state moves no frame by more than
+   ``_ROUNDOFF_STEP * x_ref`` (1e-8) nor turns one by more than ``_ROUNDOFF_STEP`` rad: the
+   correction is applied (unless it is below ``1000 eps``, i.e. noise) and the corrected state
+   is returned. ``floor_i`` is the round-off level of the internal wrench at frame i,
+   ``64 eps max(|K_tt| x_ref + |K_tr|, (|K_rt| x_ref + |K_rr|) / L_c)`` over the (at most two)
+   links meeting at frame i, with ``x_ref = L_c + |base position|`` (max-abs entries of their
+   stiffness blocks). A near-rigid link (compliance / 1e9) has forces
+   that no double-precision state resolves below its floor, so its frames can only converge
+   this way; the floor of one stiff link never lets the residual of other frames pass, and the
+   rest state under a small load never passes (its correction is the deflection). The result
+   then carries a warning when the residual exceeds ``_ROUNDOFF_WARNING`` (1e-4) of the
+   applied load.
+
+A non-finite residual never converges. With ``absolute_tolerance`` the test is instead
+``|r|_2 <= absolute_tolerance`` (unscaled Euclidean norm in N and N*m, the plant's contract).
+
+Warnings (:attr:`StaticResult.warnings`, checked at the returned state): round-off limited
+convergence (above), a tangent that is not positive definite at the equilibrium (an unstable
+equilibrium, e.g. the straight shape under a compression above the buckling load:
+``_stability_warnings``) and links strained beyond the small-strain range of their
+compliance: an axial deformation above ``STRAIN_LIMIT`` (10 %) of the rest length, or a
+rotation above ``ROTATION_LIMIT`` (0.5 rad) within one link. The links are linear elastic in
+their corotated frame; beyond those limits refine the chain (more, shorter links).
 """
 
 from dataclasses import dataclass
+from typing import NamedTuple
+import weakref
 
-from cbha_inverse.core.chain import ChainState, checked_array
-from cbha_inverse.core.newton import solve_chain
+from cbha_inverse.core._kernels.residual import residual_measures
+from cbha_inverse.core._kernels.retraction import deformation_step, deformed_poses
+from cbha_inverse.core.actuation.actuators import ActuatorSet
+from cbha_inverse.core.chain import ChainState, checked_array, rest_state
+from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
+
+_ARMIJO = 1e-4
+_MAX_HALVINGS = 6
+_MIN_LOAD_INCREMENT = 1.0 / 2 ** 20
+# round-off limited convergence: a Newton correction below sqrt(eps) of the chain's size is
+# applied and ends the iteration; one below 1000 eps is noise and is not even applied
+_ROUNDOFF_STEP = 1e-8
+_ROUNDOFF_NOISE = 1e3 * np.finfo(float).eps
+# a round-off limited residual above this fraction of the applied load gives a warning
+_ROUNDOFF_WARNING = 1e-4
+#: largest axial link deformation, as a fraction of the rest length, before a warning
+STRAIN_LIMIT = 0.1
+#: largest rotation within one link [rad] before a warning
+ROTATION_LIMIT = 0.5
 
 
 class StaticConvergenceError(RuntimeError):
@@ -27,7 +103,7 @@ class StaticConvergenceError(RuntimeError):
 @dataclass(frozen=True, eq=False)
 class StaticResult:
     """
-    Result of :func:`solve_static`.
+    Result of :func:`solve_static`: an equilibrium of paper eq. 9, or why none was reached.
 
     Attributes
     ----------
@@ -40,22 +116,33 @@ class StaticResult:
     state : ChainState
         The same poses as a state (e.g. to warm-start the next solve).
     converged : bool
-        True only if the full load was reached and the residual test passed.
+        True only if the full load was reached and the convergence test passed.
     iterations : int
         Total Newton iterations over all load steps.
     residual_norm : float  [N]
-        Max-norm of the scaled residual (moments / chain length) of the returned state under
-        the full load.
+        Convergence measure (see the module docstring) of the returned state under the full
+        load.
+    residual : (n, 6) ndarray  [N, N*m]
+        The residual ``r`` of the returned state under the full load.
     load_steps : int
-        Load steps attempted (successful and failed).
+        Load steps attempted (successful and failed; a warm start counts as one).
     load_factor : float
         Fraction of the load in equilibrium at the returned state (1.0 when converged).
     message : str
         What happened, in words.
+    actuation : (m,) ndarray  [N or Pa]
+        The applied actuation (empty without actuators).
+    effector_positions : (k, 3) ndarray  [m]
+        The effector points at the returned state ((0, 3) without effectors).
     warnings : tuple of str
         What the user should know about a converged state: round-off limited residual, an
         unstable equilibrium (buckling), links strained beyond their small-strain range
-        (:mod:`cbha_inverse.core.newton`).
+        (module docstring).
+
+    Notes
+    -----
+    If not converged, the state is the last equilibrium at ``load_factor`` < 1, or (when no
+    load step succeeded after a warm start) the warm start's last iterate.
 
     """
 
@@ -66,15 +153,21 @@ class StaticResult:
     converged: bool
     iterations: int
     residual_norm: float
+    residual: np.ndarray
     load_steps: int
     load_factor: float
     message: str
+    actuation: np.ndarray
+    effector_positions: np.ndarray
     warnings: tuple = ()
 
 
 def external_wrenches(model, tip_wrench=None, frame_wrenches=None, gravity=None):
     """
     Dead external wrenches on frames 1..n (world axes, at the frame origins).
+
+    The one place where gravity becomes frame wrenches (the controller, the statics, the
+    scenes and the plant all call it).
 
     Parameters
     ----------
@@ -103,11 +196,281 @@ def external_wrenches(model, tip_wrench=None, frame_wrenches=None, gravity=None)
     return ext
 
 
-def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
-                 load_function=None, load_tangent=None, initial_state=None, tolerance=1e-10,
-                 max_iterations=50, max_load_steps=64, strict=False):
+def chain_stiffness(model, state=None):
     """
-    Solve for the static equilibrium of a chain under dead and follower loads (paper eq. 9).
+    Return the symmetric tangent stiffness of a bare chain over frames 1..n (dense).
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+    state : ChainState, optional
+        Frame poses (default: the rest shape, where the tangent is the assembled ``K`` of the
+        links, paper eq. 8).
+
+    Returns
+    -------
+    (6n, 6n) ndarray  [N/m, N, N*m/rad]
+
+    """
+    state = rest_state(model) if state is None else state
+    system = _system(model, None)
+    tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
+    lower = system.dense(tangent)
+    return lower + np.tril(lower, -1).T
+
+
+def _residual_floor(model, length):
+    """
+    Round-off level of the scaled internal wrench at each of frames 1..n (module docstring).
+
+    Returns
+    -------
+    (n,) ndarray  [N]
+
+    """
+    k = np.abs(model.stiffnesses)
+    k_tt = k[:, :3, :3].max(axis=(1, 2))
+    k_tr = np.maximum(k[:, :3, 3:].max(axis=(1, 2)), k[:, 3:, :3].max(axis=(1, 2)))
+    k_rr = k[:, 3:, 3:].max(axis=(1, 2))
+    x_ref = length + float(np.linalg.norm(model.base_position))
+    per_link = 64.0 * np.finfo(float).eps * np.maximum(k_tt * x_ref + k_tr,
+                                                       (k_tr * x_ref + k_rr) / length)
+    # frame j (1..n) is the end of link j - 1 and the start of link j
+    per_frame = per_link.copy()
+    per_frame[:-1] = np.maximum(per_frame[:-1], per_link[1:])
+    return per_frame
+
+
+_SYSTEMS = weakref.WeakKeyDictionary()
+
+
+class _ChainConstants(NamedTuple):
+    """What every static problem of one chain model uses (computed once per model)."""
+
+    length: float              # characteristic length L_c [m] (1 for a zero-length chain)
+    x_ref: float               # L_c + |base position| [m]
+    floor: np.ndarray          # (n,) round-off floor per frame [N]
+    rest_rotations: np.ndarray  # (n, 3, 3) Q0, C order
+    rest: ChainState           # the rest shape (never modified)
+
+
+def _cached(model):
+    """Return the per-model cache entry (systems and constants)."""
+    entry = _SYSTEMS.get(model)
+    if entry is None:
+        length = model.length if model.length > 0.0 else 1.0
+        constants = _ChainConstants(
+            length, length + float(np.linalg.norm(model.base_position)),
+            np.ascontiguousarray(_residual_floor(model, length)),
+            np.ascontiguousarray(model.rest_rotations, dtype=float), rest_state(model))
+        entry = {'chain': None, 'actuated': weakref.WeakKeyDictionary(),
+                 'constants': constants}
+        _SYSTEMS[model] = entry
+    return entry
+
+
+def _system(model, actuators):
+    """
+    Return the compiled evaluator of a chain and its actuators, built once per pair.
+
+    Its constant external wrenches are zero: the static problem adds its own dead loads.
+    """
+    per_model = _cached(model)
+    if actuators is None:
+        if per_model['chain'] is None:
+            per_model['chain'] = EquilibriumSystem(model, ActuatorSet((), model.n_frames),
+                                                   np.zeros(6 * model.n_links))
+        return per_model['chain']
+    system = per_model['actuated'].get(actuators)
+    if system is None:
+        system = EquilibriumSystem(model, actuators, np.zeros(6 * model.n_links))
+        per_model['actuated'][actuators] = system
+    return system
+
+
+class _Point(NamedTuple):
+    """A state evaluated at a load factor."""
+
+    state: ChainState
+    residual: np.ndarray   # (n, 6) r
+    measure: float         # convergence measure (module docstring)
+    norm: float            # line-search merit (scaled residual above the round-off floors)
+    converged: bool        # test 1 of the module docstring (or the absolute test)
+    roundoff: bool         # the residual part of test 2 (the caller checks the correction)
+    load_scale: float      # largest scaled applied or internal wrench component [N]
+
+
+class _Problem:
+    """One static problem: compiled evaluator, loads, convergence test and tangent solves."""
+
+    def __init__(self, model, actuators, actuation, external, load_function, load_tangent,
+                 tolerance, absolute_tolerance, max_rotation_step):
+        self.model = model
+        self.system = _system(model, actuators)
+        self.actuation = actuation
+        self.external = np.ascontiguousarray(external, dtype=float).reshape(-1)
+        self._no_extra = np.zeros(6 * model.n_links)
+        self.load_function = load_function
+        self.load_tangent = load_tangent
+        self.tolerance = float(tolerance)
+        self.absolute = None if absolute_tolerance is None else float(absolute_tolerance)
+        self.max_rotation_step = max_rotation_step
+        constants = _cached(model)['constants']
+        self.length, self.x_ref, self.floor = constants.length, constants.x_ref, constants.floor
+        self.rest_rotations, self.rest = constants.rest_rotations, constants.rest
+        self._frame_max = np.empty(model.n_links)
+        self.coordinates = np.empty((model.n_links, 12))
+        self._evaluated = None
+
+    def point(self, state, lam):
+        """Evaluate a state at load factor ``lam`` (residual, convergence test)."""
+        n = self.model.n_links
+        actuation = lam * self.actuation
+        rhs = self.system.evaluate(state.positions, state.rotations, actuation)
+        self._evaluated = (state, lam)
+        extra = self._no_extra
+        if self.load_function is not None:
+            extra = np.asarray(self.load_function(state), dtype=float)
+            if extra.shape != (n, 6):
+                raise ValueError(f'load_function must return shape {(n, 6)}')
+            extra = np.ascontiguousarray(extra.reshape(-1))
+        res = np.empty(6 * n)
+        measure, merit, scaled_norm, norm, scale, within = residual_measures(
+            rhs, actuation, self.external, extra, lam, self.length, self.floor, self.tolerance,
+            res, self._frame_max)
+        res = res.reshape(n, 6)
+        if self.absolute is not None:
+            return _Point(state, res, norm, scaled_norm, norm <= self.absolute, False, scale)
+        return _Point(state, res, measure, merit, measure <= self.tolerance * scale, within,
+                      scale)
+
+    def roundoff_step(self, step, relative):
+        """Return whether a Newton correction (n, 6) is below ``relative`` (module docstring)."""
+        return bool(np.abs(step[:, :3]).max() <= relative * self.x_ref
+                    and np.abs(step[:, 3:]).max() <= relative)
+
+    def coordinates_of(self, state, step=None):
+        """Return the links' deformation coordinates ``(u, φ, du, dφ)`` (n, 12) for a step."""
+        step = np.zeros((self.model.n_links, 6)) if step is None else step
+        largest = deformation_step(
+            np.ascontiguousarray(state.positions, dtype=float),
+            np.ascontiguousarray(state.rotations, dtype=float), self.rest_rotations,
+            np.ascontiguousarray(step, dtype=float), self.coordinates)
+        return self.coordinates, largest
+
+    def exact_step(self, state, lam, res):
+        """Newton step with the exact tangent (band LU)."""
+        if self._evaluated != (state, lam):
+            self.point(state, lam)
+        tangent = self.system.exact_tangent()
+        load = None if self.load_tangent is None or lam == 0.0 else self.load_tangent(state)
+        if load is not None:
+            matrix = self.system.dense_exact(tangent) + lam * np.asarray(load, dtype=float)
+            step = np.linalg.solve(matrix, res.reshape(-1))
+        else:
+            factor = self.system.factor_exact(tangent)
+            if factor is None:
+                raise np.linalg.LinAlgError('singular tangent')
+            step = factor.solve(res.reshape(-1))
+        if not np.all(np.isfinite(step)):
+            raise np.linalg.LinAlgError('singular tangent (non-finite Newton step)')
+        return step.reshape(-1, 6)
+
+    def material_step(self, state, lam, res):
+        """Modified-Newton step with the material tangent (SPD, band Cholesky): the fallback."""
+        tangent, _ = self.system.material_system(state.positions, state.rotations,
+                                                 lam * self.actuation)
+        self._evaluated = None
+        factor = self.system.factor(tangent)
+        if factor is None:
+            raise np.linalg.LinAlgError('material tangent not positive definite')
+        step = self.system.solve(factor, res.reshape(-1, 1))
+        if not np.all(np.isfinite(step)):
+            raise np.linalg.LinAlgError('non-finite material step')
+        return step.reshape(-1, 6)
+
+    def first_alpha(self, link_rotation):
+        """Return the first line-search step: no link turns by more than the limit."""
+        limit = self.max_rotation_step
+        if limit is None or link_rotation <= limit:
+            return 1.0
+        return limit / link_rotation
+
+    def poses(self, state, alpha):
+        """Return the state of the last :func:`deformation_step` advanced by ``alpha``."""
+        positions, rotations = state.positions.copy(), state.rotations.copy()
+        deformed_poses(self.coordinates, alpha, self.rest_rotations, positions, rotations)
+        return ChainState(positions, rotations)
+
+
+def _line_search(problem, point, lam, step):
+    """
+    Backtrack along the Newton step (in deformation coordinates) on the residual norm.
+
+    Armijo test on the Euclidean norm of the scaled residual above the round-off floor of each
+    frame (module docstring; the plain scaled norm with an absolute tolerance),
+    ``|r(a)| <= (1 - 1e-4 a) |r(0)|``, halving ``a`` at most ``_MAX_HALVINGS`` times; returns
+    the accepted point, or None (the caller then tries the fallback direction or cuts the load
+    step, which is cheaper than creeping along a poor direction).
+    """
+    state = point.state
+    _, link_rotation = problem.coordinates_of(state, step)
+    alpha = problem.first_alpha(link_rotation)
+    for _ in range(_MAX_HALVINGS):
+        trial = problem.point(problem.poses(state, alpha), lam)
+        if trial.converged or trial.norm <= (1.0 - _ARMIJO * alpha) * point.norm:
+            return trial
+        alpha *= 0.5
+    return None
+
+
+def _newton(problem, state, lam, max_iterations):
+    """Newton iterations at a fixed load factor; returns (ok, last point, iterations, why)."""
+    point = problem.point(state, lam)
+    iterations = 0
+    while True:
+        if point.converged:
+            return True, point, iterations, 'converged'
+        if not np.isfinite(point.measure):
+            return False, point, iterations, 'non-finite residual'
+        exhausted = iterations >= max_iterations
+        if exhausted and not point.roundoff:
+            return False, point, iterations, 'iteration budget exhausted'
+        accepted, why = None, ''
+        for direction in (problem.exact_step, problem.material_step):
+            try:
+                step = direction(point.state, lam, point.residual)
+            except np.linalg.LinAlgError as exc:
+                why = str(exc) or 'singular tangent'
+                continue
+            if point.roundoff and problem.roundoff_step(step, _ROUNDOFF_NOISE):
+                # the correction is noise itself (e.g. the rest shape under no load)
+                return True, point, iterations, 'converged (round-off limited)'
+            if point.roundoff and problem.roundoff_step(step, _ROUNDOFF_STEP):
+                problem.coordinates_of(point.state, step)
+                corrected = problem.point(problem.poses(point.state, 1.0), lam)
+                if corrected.converged or corrected.roundoff:
+                    return True, corrected, iterations + 1, 'converged (round-off limited)'
+            if exhausted:
+                return False, point, iterations, 'iteration budget exhausted'
+            accepted = _line_search(problem, point, lam, step)
+            if accepted is not None:
+                break
+            why = 'line search failed'
+        iterations += 1
+        if accepted is None:
+            return False, point, iterations, why
+        point = accepted
+
+
+def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
+                 actuators=None, actuation=None, effectors=None, load_function=None,
+                 load_tangent=None, initial_state=None, tolerance=1e-10,
+                 absolute_tolerance=None, max_iterations=50, max_load_steps=64,
+                 max_rotation_step=None, strict=False, check_warnings=True):
+    """
+    Solve for the static equilibrium of a chain under loads and actuation (paper eq. 9).
 
     Parameters
     ----------
@@ -119,50 +482,226 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         Dead wrenches at frames 1..n, world axes.
     gravity : (3,) array_like, optional  [m/s^2]
         Acting on the masses lumped at frames 1..n (force only).
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet, optional
+        The actuators (cables, cavities): follower loads ``J_a(q)ᵀ λ`` with their exact load
+        stiffness.
+    actuation : (m,) array_like, optional  [N or Pa]
+        ``λ`` in actuator order (zero by default).
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors, optional
+        Effector points reported in the result.
     load_function : callable, optional
         ``load_function(state) -> (n, 6)`` extra configuration-dependent wrenches (world axes,
-        at frames 1..n), e.g. cables or pressure; scaled by the load factor like the dead loads.
+        at frames 1..n); scaled by the load factor like the dead loads.
     load_tangent : callable, optional
-        ``load_tangent(state) -> (6n, 6n)`` ndarray: the load stiffness ``-d load_function / dq``
-        over frames 1..n (world-axis increments as in ``retract``, at the full load).
-        :func:`cbha_inverse.core.equilibrium.actuator_loads` returns both callables for a
-        scene's actuators. Without it the follower loads are not differentiated, which
-        converges slowly and stalls under large cable tensions or pressures.
+        ``load_tangent(state) -> (6n, 6n)`` ndarray (or None): the load stiffness
+        ``-d load_function / dq`` over frames 1..n (world-axis increments as in ``retract``,
+        at the full load). Without it the extra loads are not differentiated, which converges
+        slowly and stalls under large follower loads.
     initial_state : ChainState, optional
         Warm start (e.g. the previous solution): Newton on the full load from it; if that
         fails, load stepping from the rest shape (the default start).
     tolerance : float
-        Relative residual tolerance (see :mod:`cbha_inverse.core.newton`).
+        Relative residual tolerance (module docstring).
+    absolute_tolerance : float, optional  [N, N*m]
+        Converge on ``|r|_2 <= absolute_tolerance`` instead.
     max_iterations : int
-        Newton iterations allowed per load step.
+        Newton iterations allowed per load step (and for the warm start).
     max_load_steps : int
-        Load steps allowed (attempts, successful or not).
+        Load steps allowed (attempts, successful or not; the warm start counts as one).
+    max_rotation_step : float, optional  [rad]
+        Largest link rotation of a line search's first trial step.
     strict : bool
         Raise :class:`StaticConvergenceError` instead of returning an unconverged result.
+    check_warnings : bool
+        Check the converged state for the warnings of the module docstring (one more
+        evaluation and factorization; a plant updated at every tick turns it off).
 
     Returns
     -------
     StaticResult
-        ``converged`` is False (with a message) if the full load was not reached; the state is
-        then the last equilibrium found (at ``load_factor`` < 1) or the last iterate.
+        ``converged`` is False (with a message) if the full load was not reached.
 
     Raises
     ------
     ValueError
-        If a load or the gravity has the wrong shape or is not finite, or ``initial_state``
-        does not match the model.
+        If a load, the gravity or the actuation has the wrong shape or is not finite, or
+        ``initial_state`` does not match the model.
     StaticConvergenceError
         With ``strict``, if the solve did not converge.
 
     """
-    res = solve_chain(model, external_wrenches(model, tip_wrench, frame_wrenches, gravity),
-                      load_function=load_function, load_tangent=load_tangent,
-                      initial_state=initial_state, tolerance=tolerance,
-                      max_iterations=max_iterations, max_load_steps=max_load_steps)
-    state = res.state
+    external = external_wrenches(model, tip_wrench, frame_wrenches, gravity)
+    m = 0 if actuators is None else actuators.n_actuators
+    amount = np.zeros(m) if actuation is None else checked_array(
+        np.asarray(actuation, dtype=float).reshape(-1), (m,), 'actuation')
+    problem = _Problem(model, actuators, amount, external, load_function, load_tangent,
+                       tolerance, absolute_tolerance, max_rotation_step)
+    lam, increment, steps, total, message = 0.0, 1.0, 0, 0, ''
+    state, warm, final = None, None, None
+    if initial_state is not None:
+        checked_array(initial_state.positions, (model.n_frames, 3), 'initial_state.positions')
+        checked_array(initial_state.rotations, (model.n_frames, 3, 3), 'initial_state.rotations')
+        steps = 1
+        ok, point, total, why = _newton(problem, initial_state, 1.0, max_iterations)
+        if ok:
+            state, lam, final = point.state, 1.0, point
+        else:
+            message, warm = f'warm start failed: {why}', point.state
+    if state is None:
+        state = problem.rest
+    while lam < 1.0:
+        if steps >= max_load_steps:
+            message = (f'not converged: load step budget ({max_load_steps}) exhausted at load '
+                       f'factor {lam:.6g} ({message})')
+            break
+        if increment < _MIN_LOAD_INCREMENT:
+            message = (f'not converged: load increment below {_MIN_LOAD_INCREMENT:.3g} at load '
+                       f'factor {lam:.6g} ({message})')
+            break
+        target = min(1.0, lam + increment)
+        steps += 1
+        ok, point, its, why = _newton(problem, state, target, max_iterations)
+        total += its
+        if ok:
+            state, lam, final = point.state, target, point
+            increment = min(2.0 * increment, 1.0)
+        else:
+            increment *= 0.5
+            message = f'last failure at load factor {target:.6g}: {why}'
+    converged = lam >= 1.0
+    if converged:
+        message = f'converged in {total} Newton iterations, {steps} load step(s)'
+    else:
+        if lam == 0.0 and warm is not None:
+            state = warm  # no equilibrium reached: the warm iterate is the better place to resume
+        final = problem.point(state, 1.0)
+    if state is problem.rest:
+        state = ChainState(state.positions.copy(), state.rotations.copy())  # keep the cache
+    effector_positions = (np.zeros((0, 3)) if effectors is None
+                          else effectors.positions(state.positions, state.rotations))
+    warnings = _result_warnings(problem, final) if converged and check_warnings else ()
     result = StaticResult(state.positions, state.quaternions, state.rotations, state,
-                          res.converged, res.iterations, res.residual_norm, res.load_steps,
-                          res.load_factor, res.message, res.warnings)
+                          bool(converged), int(total), float(final.measure), final.residual,
+                          int(steps), float(lam), message, amount, effector_positions, warnings)
     if strict and not result.converged:
         raise StaticConvergenceError(result)
     return result
+
+
+def _result_warnings(problem, point):
+    """
+    Return the warnings (tuple of str) about a converged point (module docstring).
+
+    Parameters
+    ----------
+    problem : _Problem
+        The problem solved.
+    point : _Point
+        The converged point at the full load.
+
+    Returns
+    -------
+    tuple of str
+
+    """
+    state = point.state
+    warnings = []
+    if problem.absolute is None and point.measure > problem.tolerance * point.load_scale:
+        # converged round-off limited: how large is the residual against the applied load?
+        rhs = problem.system.evaluate(state.positions, state.rotations, problem.actuation)
+        applied = (rhs[:, 1:] @ problem.actuation + problem.external).reshape(-1, 6)
+        if problem.load_function is not None:
+            applied = applied + np.asarray(problem.load_function(state), dtype=float)
+        scaled = np.abs(applied)
+        scaled[:, 3:] /= problem.length
+        largest = scaled.max()
+        if largest > 0.0 and point.measure > _ROUNDOFF_WARNING * largest:
+            residual = np.abs(point.residual)
+            residual[:, 3:] /= problem.length
+            worst = int(np.argmax(residual.max(axis=1))) + 1
+            warnings.append(
+                f'residual {point.measure:.3g} N is limited by round-off at frame {worst} '
+                f'({point.measure / max(largest, np.finfo(float).tiny):.2g} of the applied '
+                'load): its links are too stiff relative to the load to resolve their forces in '
+                'double precision (stiffness ratio too large; merge the stiff link into its '
+                'neighbour)')
+    coordinates, _ = problem.coordinates_of(state)
+    warnings.extend(strain_warnings(problem.model, coordinates[:, :3], coordinates[:, 3:6]))
+    warnings.extend(_stability_warnings(problem, state))
+    return tuple(warnings)
+
+
+def strain_warnings(model, offsets, rotation_vectors):
+    """
+    Warn about links deformed beyond the small-strain range of their compliance.
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain.
+    offsets : (n, 3) ndarray  [m]
+        ``R_aᵀ (x_b - x_a)`` of every link at the state.
+    rotation_vectors : (n, 3) ndarray  [rad]
+        ``log(R_aᵀ R_b Q0ᵀ)`` of every link.
+
+    Returns
+    -------
+    list of str
+        Empty when every link's axial deformation (along its rest offset) is below
+        ``STRAIN_LIMIT`` of its rest length and its rotation below ``ROTATION_LIMIT``.
+
+    """
+    rest = np.linalg.norm(model.rest_offsets, axis=1)
+    safe = np.where(rest > 0.0, rest, 1.0)
+    # axial: the transverse part of the offset change is mostly the chord turning with bending,
+    # which the rotation limit covers
+    strain = np.abs(np.einsum('ij,ij->i', offsets, model.rest_offsets) / safe - rest) / safe
+    strain[rest == 0.0] = 0.0
+    rotation = np.linalg.norm(rotation_vectors, axis=1)
+    out = []
+    worst = int(np.argmax(strain))
+    if strain[worst] > STRAIN_LIMIT:
+        out.append(f'link {worst} is strained axially by {strain[worst]:.3g} of its rest '
+                   f'length (small-strain limit {STRAIN_LIMIT:g}): its linear compliance is not '
+                   'accurate there')
+    worst = int(np.argmax(rotation))
+    if rotation[worst] > ROTATION_LIMIT:
+        out.append(f'link {worst} turns by {rotation[worst]:.3g} rad within one link (limit '
+                   f'{ROTATION_LIMIT:g} rad): use more, shorter links')
+    return out
+
+
+def _stability_warnings(problem, state):
+    """
+    Warn when the tangent at an equilibrium is not positive definite (possibly unstable).
+
+    The symmetric part of the exact tangent (structure and the actuators' load stiffness, plus
+    a user ``load_tangent``) is factorised by Cholesky; a failure means a direction of
+    decreasing stiffness. Under dead forces the equilibrium is then unstable (e.g. the straight
+    shape above the buckling load); under moments or follower loads, which are not conservative
+    in 3D, it is a warning sign rather than a proof.
+
+    Returns
+    -------
+    list of str
+
+    """
+    system = problem.system
+    tangent, _ = system.linearise(state.positions, state.rotations, problem.actuation)
+    load = None if problem.load_tangent is None else problem.load_tangent(state)
+    if load is None:
+        stable = system.factor(tangent) is not None
+    else:
+        lower = system.dense(tangent)
+        load = np.asarray(load, dtype=float)
+        matrix = lower + np.tril(lower, -1).T + 0.5 * (load + load.T)
+        try:
+            np.linalg.cholesky(matrix)
+            stable = True
+        except np.linalg.LinAlgError:
+            stable = False
+    if stable:
+        return []
+    return ['the tangent stiffness is not positive definite at this equilibrium: it may be '
+            'unstable (a compression above the buckling load, lateral buckling under a large '
+            'end moment, a snap-through) and the structure need not take the returned shape']

@@ -9,14 +9,12 @@ the upper frame give C = J K^-1 J^T in the lower frame's axes (DESIGN §3-4).
 from dataclasses import dataclass, field
 import time
 
+from cbha_inverse.core.links import checked_compliance
 from cbha_inverse.fem.coupling import build_coupling
 from cbha_inverse.fem.elasticity import assemble_stiffness, mesh_volume
 from cbha_inverse.fem.mesh import nodes_on_plane, TetMesh
 import numpy as np
 import scipy.sparse.linalg as spla
-
-#: Largest accepted asymmetry of C, relative to sqrt(C_ii C_jj), before symmetrising.
-SYMMETRY_TOLERANCE = 1e-8
 
 
 @dataclass(frozen=True)
@@ -49,6 +47,9 @@ class CondensedSegment:
     warnings : tuple of str
         What the user should know about the result: volumetric locking of the element order
         at this Poisson ratio (:func:`locking_warnings`).
+    cavities : tuple of (str, (P, 3) ndarray, (T, 3) int ndarray)
+        The pressure cavities of the segment (name, surface points [m] in segment coordinates,
+        outward-oriented triangles); empty for a segment without cavities.
 
     """
 
@@ -64,73 +65,12 @@ class CondensedSegment:
     mesh_size: float
     timings: dict = field(default_factory=dict)
     warnings: tuple = ()
+    cavities: tuple = ()
 
     @property
     def stiffness(self):
         """Return the 6x6 stiffness K = C^-1."""
         return np.linalg.inv(self.compliance)
-
-
-def relative_asymmetry(matrix):
-    """
-    Return max |A_ij - A_ji| / sqrt(A_ii A_jj) of a matrix with positive diagonal.
-
-    Parameters
-    ----------
-    matrix : (n, n) ndarray
-        Matrix with mixed units per row/column (scaling by the diagonal removes them).
-
-    Returns
-    -------
-    float
-        Relative asymmetry.
-
-    """
-    diag = np.abs(np.diag(matrix))
-    scale = np.sqrt(np.outer(diag, diag))
-    return float(np.max(np.abs(matrix - matrix.T) / scale))
-
-
-def checked_symmetric(compliance):
-    """
-    Check that C is symmetric at round-off level and positive definite; return sym(C).
-
-    Parameters
-    ----------
-    compliance : (6, 6) ndarray
-        Raw condensed compliance.
-
-    Returns
-    -------
-    sym : (6, 6) ndarray
-        (C + C^T) / 2.
-    asymmetry : float
-        Relative asymmetry before symmetrising.
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        If the asymmetry exceeds :data:`SYMMETRY_TOLERANCE` or C is not positive definite.
-
-    """
-    if not np.all(np.isfinite(compliance)):
-        raise np.linalg.LinAlgError('condensed compliance contains NaN or inf')
-    asym = relative_asymmetry(compliance)
-    if asym > SYMMETRY_TOLERANCE:
-        raise np.linalg.LinAlgError(
-            f'condensed compliance asymmetric beyond round-off: {asym:.3e} > '
-            f'{SYMMETRY_TOLERANCE:.0e} (check the coupling and the mesh)')
-    sym = 0.5 * (compliance + compliance.T)
-    if np.any(np.diag(sym) <= 0.0):
-        raise np.linalg.LinAlgError('condensed compliance not positive definite '
-                                    '(non-positive diagonal term)')
-    d = 1.0 / np.sqrt(np.diag(sym))
-    eig = np.linalg.eigvalsh(sym * np.outer(d, d))
-    if eig[0] <= 0.0:
-        raise np.linalg.LinAlgError(
-            'condensed compliance not positive definite '
-            f'(smallest scaled eigenvalue {eig[0]:.3e})')
-    return sym, asym
 
 
 def factorize_spd(matrix):
@@ -228,7 +168,7 @@ def condense_mesh(mesh, youngs_modulus, poisson_ratio, *, lower_x, upper_x, segm
     stiffness = assemble_stiffness(mesh, youngs_modulus, poisson_ratio)
     t1 = time.perf_counter()
     raw, sub = frame_compliance(stiffness, coupling)
-    compliance, asym = checked_symmetric(raw)
+    compliance, asym = checked_compliance(raw, 'condensed compliance')
     mass = density * mesh_volume(mesh) + extra_mass if density else extra_mass
     t2 = time.perf_counter()
     timings = {'mesh': mesh_time, 'assembly': t1 - t0, **sub}
@@ -363,10 +303,11 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
     Returns
     -------
     CondensedSegment
-        Segment compliance at the upper vertebra frame; counts cover all tubes.
+        Segment compliance at the upper vertebra frame; counts cover all tubes; ``cavities``
+        holds one closed surface per tube.
 
     """
-    from cbha_inverse.fem.bellows import geometry_tube_centres
+    from cbha_inverse.fem.bellows import cavity_surface, geometry_tube_centres
     from cbha_inverse.fem.geometry import bellows_tube_mesh
     geom, mat = spec['geometry'], spec['material']
     mesh_size = float(_given(mesh_size, spec['mesh']['mesh_size']))
@@ -383,7 +324,7 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
     t1 = time.perf_counter()
     centres = geometry_tube_centres(geom)
     stiffness = sum(shift_stiffness(tube.stiffness, [0.0, -y_c, -z_c]) for y_c, z_c in centres)
-    compliance, asym = checked_symmetric(np.linalg.inv(stiffness))
+    compliance, asym = checked_compliance(np.linalg.inv(stiffness), 'condensed compliance')
     timings = dict(tube.timings)
     timings['total'] += time.perf_counter() - t1
     n_tubes = len(centres)
@@ -391,7 +332,9 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
                             n_tubes * tube.mass + geom.get('vertebra_mass', 0.0), order,
                             n_tubes * tube.n_nodes, n_tubes * tube.n_elements,
                             n_tubes * tube.n_dofs, max(asym, tube.asymmetry), mesh_size, timings,
-                            tube.warnings)
+                            tube.warnings,
+                            cavities=tuple((t['name'], *cavity_surface(geom, i))
+                                           for i, t in enumerate(geom['tubes'])))
 
 
 def condense_segment(mesh_or_geometry, youngs_modulus=None, poisson_ratio=None, *,

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import time
 
 from cbha_inverse.core.se3 import hat, so3_exp
-from cbha_inverse.fem.condensation import factorize_spd, frame_compliance
+from cbha_inverse.fem.condensation import frame_compliance
 from cbha_inverse.fem.coupling import build_coupling, coupling_matrix, RigidCoupling
 from cbha_inverse.fem.elasticity import (assemble_blocks, assemble_stiffness, element_dofs,
                                          lame_parameters, shape_gradients)
@@ -310,41 +310,3 @@ def solve_nonlinear(mesh, youngs_modulus, poisson_ratio, n_segments, length, tip
     rotations = np.concatenate([np.eye(3)[None], state[2]])
     return NonlinearResult(positions, rotations, converged, total_iter, done_steps, r_norm,
                            time.perf_counter() - t_start, message)
-
-
-def solve_linear(mesh, youngs_modulus, poisson_ratio, n_segments, length, tip_wrench):
-    """
-    Return the linear displacement (dx, dy, dz, rx, ry, rz) of every vertebra frame.
-
-    Parameters
-    ----------
-    mesh : TetMesh
-        Body mesh.
-    youngs_modulus : float  [Pa]
-        Young's modulus.
-    poisson_ratio : float
-        Poisson's ratio.
-    n_segments : int
-        Number of segments.
-    length : float  [m]
-        Segment length.
-    tip_wrench : (6,) array_like  [N, N*m]
-        Wrench at the last frame.
-
-    Returns
-    -------
-    displacements : (n, 6) ndarray
-        Frames 1..n.
-    seconds : float
-        Wall-clock time (assembly, factorisation, solve).
-
-    """
-    t0 = time.perf_counter()
-    coupling = stacked_coupling(mesh, n_segments, length)
-    stiffness = assemble_stiffness(mesh, youngs_modulus, poisson_ratio)
-    t_mat = coupling.transformation
-    rhs = np.zeros(coupling.n_reduced)
-    rhs[coupling.frame_dofs(-1)] = tip_wrench
-    z = factorize_spd(t_mat.T @ stiffness @ t_mat).solve(rhs)
-    out = np.array([z[coupling.frame_dofs(j)] for j in range(n_segments)])
-    return out, time.perf_counter() - t0

@@ -112,23 +112,3 @@ def nodes_on_plane(mesh, x_value, tolerance=None, axis=0):
         extent = float(np.ptp(coords, axis=0).max()) if len(coords) else 1.0
         tolerance = 1e-7 * max(extent, 1e-12)
     return used[np.abs(coords[:, axis] - x_value) <= tolerance]
-
-
-def tet_volumes(mesh):
-    """
-    Return the straight-sided (vertex) volumes of the elements.
-
-    Parameters
-    ----------
-    mesh : TetMesh
-        The mesh.
-
-    Returns
-    -------
-    (E,) ndarray  [m^3]
-        Signed volumes of the vertex tetrahedra (positive for gmsh's orientation).
-
-    """
-    p = mesh.points[mesh.tets[:, :4]]
-    edges = p[:, 1:] - p[:, :1]
-    return np.linalg.det(edges) / 6.0

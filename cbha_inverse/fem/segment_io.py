@@ -11,6 +11,7 @@ from pathlib import Path
 
 from cbha_inverse import __version__
 from cbha_inverse.config_files import read_yaml
+from cbha_inverse.core.links import checked_compliance
 from cbha_inverse.errors import ConfigError
 import numpy as np
 import yaml
@@ -277,12 +278,10 @@ def load_segment(path):
     if isinstance(mass, bool) or not isinstance(mass, (int, float)) or not mass >= 0.0:
         raise ConfigError(path, 'mass_kg', f'must be a number >= 0, got {mass!r}')
     mass = float(mass)
-    if not np.allclose(compliance, compliance.T, rtol=1e-12, atol=0.0):
-        raise ConfigError(path, 'compliance', 'is not symmetric')
-    scale = 1.0 / np.sqrt(np.abs(np.diag(compliance)))
-    if not np.all(np.isfinite(scale)) or np.linalg.eigvalsh(
-            compliance * np.outer(scale, scale))[0] <= 0.0:
-        raise ConfigError(path, 'compliance', 'is not positive definite')
+    try:
+        compliance, _ = checked_compliance(compliance, 'the matrix')
+    except np.linalg.LinAlgError as exc:
+        raise ConfigError(path, 'compliance', str(exc)) from None
     cavities = []
     for i, item in enumerate(data.get('cavities') or []):
         if not (isinstance(item, dict) and isinstance(item.get('name'), str)

@@ -21,12 +21,13 @@ import platform
 import sys
 import time
 
-from cbha_inverse.core import btd, btd_reference
-from cbha_inverse.core.assembly import assemble_tangent, blocks_to_dense
+from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.chain import ChainModel, rest_state
+from cbha_inverse.core.linalg import btd
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.se3 import so3_exp
 from cbha_inverse.core.statics import solve_static
+from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 import scipy
 from scipy.linalg import lapack
@@ -37,7 +38,7 @@ RHS_COUNTS = (6, 20)
 #: dense LAPACK is skipped above this many frames (a 6n x 6n matrix: 6000^2 doubles = 288 MB
 #: at n = 1000 and seconds per factorisation)
 DENSE_MAX_FRAMES = 200
-OUR_METHODS = ('compiled', 'hybrid', 'dense', 'banded', 'cyclic', 'block')
+OUR_METHODS = ('compiled', 'dense', 'banded')
 
 
 def time_calls(funcs, budget):
@@ -154,8 +155,10 @@ def bent_tangent(n_links, seed=0):
     rest_rot = so3_exp(rng.normal(scale=0.3 / np.sqrt(n_links), size=(n_links, 3)))
     model = ChainModel.from_compliances(straight.compliances, straight.rest_offsets,
                                         rest_rotations=rest_rot)
-    tangent = assemble_tangent(model, rest_state(model))
-    return tangent.diagonal, tangent.upper
+    system = EquilibriumSystem(model, ActuatorSet((), model.n_frames), np.zeros(6 * n_links))
+    state = rest_state(model)
+    tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
+    return system.blocks(tangent)
 
 
 def btd_table(sizes, rhs_counts, budget, out):
@@ -180,8 +183,8 @@ def btd_table(sizes, rhs_counts, budget, out):
     """
     rows = []
     head = (f"{'n':>6} {'k':>3} | {'LAPACK pb':>9} {'LAPACK po':>9} | {'compiled':>9} "
-            f"{'c.ratio':>7} | {'hybrid':>9} "
-            f"{'dense':>9} {'banded':>9} {'cyclic':>9} {'block':>9} | {'auto':>9} "
+            f"{'c.ratio':>7} | "
+            f"{'dense':>9} {'banded':>9} | {'auto':>9} "
             f"{'method':>8} {'ratio':>5} {'best':>5} {'r.conv':>6} | {'rel.err':>7}")
     print('BTD solve: factorisation + solve, times in microseconds; c.ratio = compiled / LAPACK '
           'banded (pb, on ready band storage); ratio = auto / pb; best = fastest of ours / pb; '
@@ -194,7 +197,7 @@ def btd_table(sizes, rhs_counts, budget, out):
         diag, upper = bent_tangent(n)
         band = btd.to_lower_banded(diag, upper)
         # dense matrix for LAPACK, built outside the timed region
-        dense = (np.asfortranarray(blocks_to_dense(diag, upper))
+        dense = (np.asfortranarray(btd.to_dense(diag, upper))
                  if n <= DENSE_MAX_FRAMES else None)
         rng = np.random.default_rng(n)
         for k in rhs_counts:
@@ -217,10 +220,10 @@ def btd_table(sizes, rhs_counts, budget, out):
             if dense is not None:
                 funcs['po'] = lapack_dense
             for method in OUR_METHODS:
-                if method not in ('dense', 'hybrid') or dense is not None:
+                if method != 'dense' or dense is not None:
                     funcs[method] = (lambda m=method: btd.factorize(diag, upper, m).solve(rhs))
             funcs['auto'] = lambda: btd.factorize(diag, upper).solve(rhs)
-            row = {'n': n, 'k': k, 'po': None, 'dense': None, 'hybrid': None}
+            row = {'n': n, 'k': k, 'po': None, 'dense': None}
             row.update(time_calls(funcs, budget))
             auto = btd.factorize(diag, upper)
             row['method'] = auto.method
@@ -232,17 +235,17 @@ def btd_table(sizes, rhs_counts, budget, out):
                 return f'{value * 1e6:9.1f}' if value is not None else f"{'skipped':>9}"
 
             print(f"{n:6d} {k:3d} | {fmt(row['pb'])} {fmt(row['po'])} | {fmt(row['compiled'])} "
-                  f"{row['compiled'] / row['pb']:7.2f} | {fmt(row['hybrid'])} "
-                  f"{fmt(row['dense'])} {fmt(row['banded'])} {fmt(row['cyclic'])} "
-                  f"{fmt(row['block'])} | {fmt(row['auto'])} {row['method']:>8} "
+                  f"{row['compiled'] / row['pb']:7.2f} | "
+                  f"{fmt(row['dense'])} {fmt(row['banded'])} "
+                  f"| {fmt(row['auto'])} {row['method']:>8} "
                   f"{row['auto'] / row['pb']:5.2f} "
                   f"{best / row['pb']:5.2f} {row['auto'] / row['pb+conv']:6.2f} | {err:7.1e}",
                   file=out)
             out.flush()
     print(f'dense LAPACK skipped above n = {DENSE_MAX_FRAMES} frames (6n x 6n dense matrix; '
           f'at n = 1000 it is 288 MB and seconds per factorisation).', file=out)
-    print(f"'auto' uses {', '.join(sorted({row['method'] for row in rows}))} at these sizes "
-          f'(BLAS single-threaded: {btd_reference.blas_single_threaded()}).', file=out)
+    print(f"'auto' uses {', '.join(sorted({row['method'] for row in rows}))} at these sizes.",
+          file=out)
     return rows
 
 
@@ -271,21 +274,23 @@ def static_report(budget, out):
     state = solve_static(model, tip_wrench=[0, 0, 2 * ei / length ** 2, 0, 0, 0],
                          gravity=[0, 0, -9.81], strict=True).state
     times = {}
-    tangent = assemble_tangent(model, state)
-    fac = btd.factorize(tangent.diagonal, tangent.upper)
+    system = EquilibriumSystem(model, ActuatorSet((), model.n_frames), np.zeros(6 * 16))
+    none = np.zeros(0)
+    diagonal, upper = system.blocks(system.linearise(state.positions, state.rotations, none)[0])
+    fac = btd.factorize(diagonal, upper)
     rhs6 = rng.normal(size=(96, 6))
     rhs20 = rng.normal(size=(96, 20))
     times.update(time_calls({
-        'assemble_tangent': lambda: assemble_tangent(model, state),
-        f'factorize ({fac.method})': lambda: btd.factorize(tangent.diagonal, tangent.upper),
+        'linearise (compiled)': lambda: system.linearise(state.positions, state.rotations, none),
+        f'factorize ({fac.method})': lambda: btd.factorize(diagonal, upper),
         'solve 6 RHS': lambda: fac.solve(rhs6),
         'solve 20 RHS': lambda: fac.solve(rhs20)}, budget))
     print('\nControl-tick pieces, 17-frame chain (16 links), microseconds:', file=out)
     for name, value in times.items():
         print(f'  {name:28s} {value * 1e6:9.1f}', file=out)
-    tick = (times['assemble_tangent'] + times[f'factorize ({fac.method})']
+    tick = (times['linearise (compiled)'] + times[f'factorize ({fac.method})']
             + times['solve 20 RHS'])
-    print(f"  {'tick (assemble+factor+20)':28s} {tick * 1e6:9.1f}", file=out)
+    print(f"  {'tick (linearise+factor+20)':28s} {tick * 1e6:9.1f}", file=out)
     print('\nStatic solves, 17-frame chain (16 hollow Timoshenko links, L = 0.5 m):', file=out)
     print(f"  {'load case':34s} {'time ms':>8} {'iter':>5} {'steps':>5} {'residual N':>11} "
           f"{'tip deflection m':>17}", file=out)

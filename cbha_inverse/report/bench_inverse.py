@@ -13,6 +13,8 @@ up to 5 ticks (the ticks in between only re-solve the QP of the linear model, so
 before the QP are ~0 and the median is theirs; the p99 is the linearisation tick). ``QP``
 compares the exact active-set solver (the default) with proxsuite. The last columns give this
 machine's goal (median / p99, ``ok`` when met), the paper's tick time and the ratio paper / ours.
+A second table times the static forward solve (:func:`cbha_inverse.core.statics.solve_static`,
+which the simulated plant runs every tick) per Newton iteration, in ticks of the same run.
 """
 
 import argparse
@@ -129,6 +131,88 @@ def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_st
     }
 
 
+def bench_forward(name, repeats=5, n_cases=6, seed=3):
+    """
+    Time the static forward solve of a scene per Newton iteration (the solver the plant runs).
+
+    Each case is an actuation drawn uniformly within 10-70 % of the bounds: a cold solve from the
+    rest shape, then a warm-started solve of a nearby actuation (+2 % of the range), as the
+    simulated plant does every tick. The cost per iteration is the best of ``repeats`` runs of
+    each solve, summed over the cases, divided by their Newton iterations (setup, line searches
+    and result included).
+
+    Parameters
+    ----------
+    name : str
+        Scene name.
+    repeats : int
+        Runs of every solve (the minimum time is kept).
+    n_cases : int
+        Actuations.
+    seed : int
+        Seed of the actuations.
+
+    Returns
+    -------
+    dict
+        ``per_iteration`` [s], ``iterations`` and ``seconds`` of the cold and warm solves.
+
+    """
+    scene = load_scene(name)
+    low, high = scene.lower_bounds, scene.upper_bounds
+    rng = np.random.default_rng(seed)
+    totals = {'cold': [0.0, 0], 'warm': [0.0, 0]}
+    for _ in range(n_cases):
+        actuation = low + (high - low) * rng.uniform(0.1, 0.7, low.size)
+        cold = scene.forward(actuation)
+        nearby = np.minimum(actuation + 0.02 * (high - low), high)
+        runs = {'cold': lambda a=actuation: scene.forward(a),
+                'warm': lambda a=nearby, s=cold.state: scene.forward(a, initial_state=s)}
+        for kind, run in runs.items():
+            best = np.inf
+            for _ in range(repeats):
+                started = time.perf_counter()
+                result = run()
+                best = min(best, time.perf_counter() - started)
+            if not result.converged:
+                raise RuntimeError(f'{name}: forward solve did not converge ({result.message})')
+            totals[kind][0] += best
+            totals[kind][1] += result.iterations
+    seconds = totals['cold'][0] + totals['warm'][0]
+    iterations = totals['cold'][1] + totals['warm'][1]
+    return {'scene': name, 'per_iteration': seconds / max(iterations, 1),
+            'iterations': {k: v[1] for k, v in totals.items()},
+            'seconds': {k: v[0] for k, v in totals.items()}}
+
+
+def format_forward(forward_rows, tick_medians):
+    """
+    Format the forward-solve costs beside the tick median of the same run.
+
+    Parameters
+    ----------
+    forward_rows : list of dict
+        From :func:`bench_forward`.
+    tick_medians : dict of str -> float
+        Tick median [s] per scene (active-set QP, linearising every tick).
+
+    Returns
+    -------
+    str
+
+    """
+    lines = ['', 'Forward (static) solve, one Newton iteration vs one control tick (same run; '
+             'goal <= 2 ticks):',
+             f"{'scene':16s} {'iter cold':>9s} {'iter warm':>9s} {'per iter':>9s} "
+             f"{'tick':>8s} {'ticks/iter':>10s}"]
+    for r in forward_rows:
+        tick = tick_medians[r['scene']]
+        lines.append(f"{r['scene']:16s} {r['iterations']['cold']:9d} "
+                     f"{r['iterations']['warm']:9d} {1e6 * r['per_iteration']:7.0f}us "
+                     f"{1e6 * tick:6.0f}us {r['per_iteration'] / tick:10.2f}")
+    return '\n'.join(lines)
+
+
 def format_table(rows):
     """
     Format benchmark rows as a plain-text table.
@@ -218,13 +302,21 @@ def main(argv=None):
                 rows.append(bench_scene(name, args.ticks, args.warmup, qp_solver,
                                         relinearize_every=every))
     print(format_table(rows))
+    tick_medians = {}
+    for name in args.scenes:
+        same = [r for r in rows if r['scene'] == name and r['qp_solver'] == 'active_set'
+                and r['relinearize_every'] == 1]
+        row = same[0] if same else bench_scene(name, args.ticks, args.warmup, 'active_set')
+        tick_medians[name] = row['median']['total']
+    forward = [bench_forward(name) for name in args.scenes]
+    print(format_forward(forward, tick_medians))
     print(f'goals on the shared 2-core machine: 6f/8c <= 100 us, 10f/16c <= 150 us, '
           f'CBHA <= 150 us median, p99 <= 500 us; one BLAS thread '
           f"(OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}); "
           f'({time.perf_counter() - started:.1f} s)')
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump(rows, f, indent=2)
+            json.dump({'ticks': rows, 'forward': forward}, f, indent=2)
     return 0
 
 

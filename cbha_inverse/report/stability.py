@@ -18,12 +18,13 @@ import sys
 import time
 import tracemalloc
 
-from cbha_inverse.core.actuation import ActuatorSet, CableGroup
-from cbha_inverse.core.assembly import assemble_tangent
-from cbha_inverse.core.btd import factorize
-from cbha_inverse.core.control import InverseSolver
+from cbha_inverse.core.actuation.actuators import ActuatorSet
+from cbha_inverse.core.actuation.cables import CableGroup
+from cbha_inverse.core.inverse.solver import InverseSolver
+from cbha_inverse.core.linalg.btd import factorize
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static
+from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.paths import config_path
 from cbha_inverse.report.references import (elastica_tip, linear_tip_displacement,
@@ -60,8 +61,9 @@ def _outcome(res):
 
 def _condition(model, state):
     """Return the 1-norm condition estimate of the tangent at a state (BTD Cholesky)."""
-    tangent = assemble_tangent(model, state)
-    return float(factorize(tangent.diagonal, tangent.upper).condition_estimate)
+    system = EquilibriumSystem(model, ActuatorSet((), model.n_frames), np.zeros(6 * model.n_links))
+    tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
+    return float(factorize(*system.blocks(tangent)).condition_estimate)
 
 
 def _small_tip_force(compliances, offsets, deflection):

@@ -6,10 +6,12 @@ and rejects malformed commands like a valve driver (wrong length, non-finite, ou
 ``[0, max_pressure]``: logged with throttling, counted, the last valid set-point stays). A valid
 command takes effect after the transport ``latency``; the valve pressures follow it with a
 first-order lag ``valve_time_constant`` (exact exponential step). Every tick at ``rate_hz`` the
-plant (:class:`cbha_inverse.core.plant.StaticPlant`: the scene loaded with a deliberate
+plant (:class:`cbha_inverse.robot.plant.StaticPlant`: the scene loaded with a deliberate
 ``stiffness_scale`` error and its own ``gravity``) is moved to the equilibrium of the current
 valve pressures by warm-started Newton steps, and the tip is published on ``tip/measured``
 (PointStamped, sensor data QoS) with Gaussian noise (seeded) and, noise-free, on ``tip/true``.
+Time (ticks, latency, valve lag, stamps) is the node clock: with ``use_sim_time`` the plant runs
+on ``/clock``.
 
 ``tip_output: stereo`` replaces ``tip/measured`` by rendered stereo cameras (the tip marker drawn
 into both cameras of ``camera_rig`` at ``camera_rate_hz``: ``stereo/{left,right}/image_raw`` and
@@ -25,9 +27,9 @@ import math
 import sys
 import time
 
-from cbha_inverse.core.plant import StaticPlant
-from cbha_inverse.core.robotino import ARM_VALVES
-from cbha_inverse.core.safety import check_command
+from cbha_inverse.robot.plant import StaticPlant
+from cbha_inverse.robot.robotino import ARM_VALVES
+from cbha_inverse.robot.safety import check_command
 from cbha_inverse.ros.conversions import command_array, point_stamped
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK, TimingStats, WARN
 from cbha_inverse.ros.params import declare_parameters, param, ParameterError
@@ -178,8 +180,11 @@ class CbhaSimNode(Node):
             return
         in_scene_order = np.empty(len(self.order))
         in_scene_order[self.order] = values
-        self.pending.append((time.monotonic() + self.params.latency, in_scene_order))
+        self.pending.append((self._node_seconds() + self.params.latency, in_scene_order))
         self.accepted += 1
+
+    def _node_seconds(self):
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_reset(self, request, response):
         """``~/reset``: plant at rest, valves vented, pending commands dropped."""
@@ -196,10 +201,11 @@ class CbhaSimNode(Node):
 
     def _tick(self):
         start = time.perf_counter()
-        now = time.monotonic()
+        now = self._node_seconds()
         while self.pending and self.pending[0][0] <= now:
             self.setpoint = self.pending.popleft()[1]
-        dt = 0.0 if self._last_tick is None else now - self._last_tick
+        # node clock (use_sim_time: /clock); a clock that jumps back (a looped bag) is a pause
+        dt = 0.0 if self._last_tick is None else max(now - self._last_tick, 0.0)
         self._last_tick = now
         tau = self.params.valve_time_constant
         blend = 1.0 if tau == 0.0 else -math.expm1(-dt / tau)

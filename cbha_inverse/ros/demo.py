@@ -1,15 +1,17 @@
 """
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
-For each run the demo starts ``cbha_sim``, ``inverse_solver`` and then ``trajectory`` as three
-separate processes (as ``ros2 run`` would, with the installed params files plus a per-run
-override file written into the output folder), records ``target``, ``tip/true`` and
-``/diagnostics`` in this process for one lap, stops the nodes with SIGINT and prints one
-summary line: tracking RMS and max error (tip of the plant vs target, moving part of the lap),
-the solver's tick time median / p99 and its target-to-command latency p99 (target callback
-entry to command published, measured in the node). It writes ``demo.png`` (target vs tip in the
-y-z plane) and ``summary.json``, and per run the params files used, the node logs and
-``recording.npz`` (stamped targets and tips).
+For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
+tip/true, tip/measured, pressure_command, /diagnostics), then ``cbha_sim``, ``inverse_solver`` and
+``trajectory`` as separate processes (as ``ros2 run`` would, with the installed params files plus
+a per-run override file written into the output folder), runs one lap, stops the nodes and the
+recorder with SIGINT and prints one summary line: tracking RMS and max error (tip of the plant vs
+target, moving part of the lap), computed from the run's bag by
+:func:`cbha_inverse.bag.evaluate.evaluate_bag` (what ``cbha_bag eval <bag> --start S --end E``
+prints, with the window stored in ``summary.json``), and the solver's tick time median / p99 and
+its target-to-command latency p99 (target callback entry to command published, measured in the
+node, from its diagnostics). It writes ``demo.png`` (target vs tip in the y-z plane) and
+``summary.json``, and per run the params files used, the node logs and the bag.
 
 Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
 centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
@@ -28,16 +30,18 @@ import argparse
 import json
 import os
 from pathlib import Path
+import shutil
 import signal
 import subprocess
 import sys
 import time
 
+from cbha_inverse.bag.evaluate import evaluate_bag
 from cbha_inverse.config_files import read_yaml
-from cbha_inverse.core.trajectory import make_trajectory
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.paths import config_path
-from cbha_inverse.report.tracking import plot_runs, tracking_errors
+from cbha_inverse.report.tracking import plot_runs
+from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.scene import load_scene
 import numpy as np
 import yaml
@@ -48,6 +52,7 @@ MODULES = {'cbha_sim': 'cbha_inverse.ros.cbha_sim_node',
            'trajectory': 'cbha_inverse.ros.trajectory_node',
            'stereo_tracker': 'cbha_inverse.ros.stereo_tracker_node'}
 NAMESPACE = '/cbha'
+RECORDED = ('target', 'tip/true', 'tip/measured', 'pressure_command', '/diagnostics')
 
 
 def parse_args(argv):
@@ -106,6 +111,20 @@ def _start(node, run_dir, overrides, env):
     process = subprocess.Popen(
         [sys.executable, '-m', MODULES[node], '--ros-args', '-r', f'__ns:={NAMESPACE}',
          '--params-file', str(config_path(f'{node}.yaml')), '--params-file', str(params)],
+        env=env, stdout=log, stderr=subprocess.STDOUT)
+    process.log = log
+    return process
+
+
+def _start_recorder(run_dir, env):
+    """Start ``cbha_bag record`` of the run's topics into ``run_dir/bag`` (replacing it)."""
+    bag = run_dir / 'bag'
+    if bag.exists():
+        shutil.rmtree(bag)
+    topics = [t if t.startswith('/') else f'{NAMESPACE}/{t}' for t in RECORDED]
+    log = open(run_dir / 'cbha_bag_record.log', 'w')
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'cbha_inverse.ros.bag_cli', 'record', '-o', str(bag), *topics],
         env=env, stdout=log, stderr=subprocess.STDOUT)
     process.log = log
     return process
@@ -207,6 +226,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     run_dir.mkdir(parents=True, exist_ok=True)
     recorder.clear()
     common = {'scene': args.scene, 'valve_names': list(valve_names)}
+    recorder_process = {'cbha_bag_record': _start_recorder(run_dir, env)}
     sim_extra, solver_extra, waited = {}, {}, ['cbha_sim', 'inverse_solver']
     if feedback == 'stereo':
         sim_extra, tracker_params = _stereo_overrides(args)
@@ -220,7 +240,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         **common, 'mode': mode, 'diagnostics_period': 0.5, **solver_extra}, env)
     try:
         # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
-        # clock at 0 until the solver and this recorder subscribe to its targets
+        # clock at 0 until the solver, this recorder and the bag recorder subscribe to it
         if not recorder.spin_until(lambda: all(
                 any(name.startswith(f'{node}:') for name in recorder.diagnostics)
                 for node in waited), 120.0):
@@ -229,7 +249,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         processes['trajectory'] = _start('trajectory', run_dir, {
             'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
             'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
-            'start_hold': args.start_hold, 'wait_for_subscribers': 2}, env)
+            'start_hold': args.start_hold, 'wait_for_subscribers': 3}, env)
         if not recorder.spin_until(lambda: any(t[0] >= launched for t in recorder.targets),
                                    60.0):
             raise RuntimeError(f'no target received, see the logs in {run_dir}')
@@ -241,12 +261,12 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
             'inverse_solver: control', ({}, 0.0))[1] > fresh, 2.0)
     finally:
         codes = _stop(processes)
-    targets = [t for t in recorder.targets if t[0] >= launched]
-    tips = recorder.tips
-    first = targets[0][0]
-    start, end = first + args.start_hold, first + trajectory.duration
-    errors = tracking_errors([t[0] for t in targets], [t[1:] for t in targets],
-                             [t[0] for t in tips], [t[1:] for t in tips], start, end)
+        codes.update(_stop(recorder_process))
+    evaluation = evaluate_bag(run_dir / 'bag', namespace=NAMESPACE, tip='true',
+                              start=args.start_hold, end=trajectory.duration)
+    if evaluation.tracking is None:
+        raise RuntimeError(f'no tip samples in the lap, see the logs in {run_dir}')
+    errors = evaluation.tracking
     control = recorder.diagnostics.get('inverse_solver: control', ({}, 0.0))[0]
     plant = recorder.diagnostics.get('cbha_sim: plant', ({}, 0.0))[0]
     tracking = recorder.diagnostics.get('stereo_tracker: tracking', ({}, 0.0))[0]
@@ -257,10 +277,6 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         except (KeyError, ValueError):
             return float('nan')
 
-    moving = [t[1:] for t in targets if start <= t[0] <= end]
-    tip_path = [t[1:] for t in tips if start <= t[0] <= end]
-    np.savez_compressed(run_dir / 'recording.npz', targets=np.array(targets), tips=np.array(tips),
-                        measured=np.array(recorder.measured), window=np.array([start, end]))
     stereo = {} if feedback != 'stereo' else {
         'stereo_detection_rate': number(tracking, 'detection_rate'),
         'stereo_processing_median_ms': number(tracking, 'processing_median_ms'),
@@ -279,8 +295,11 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
             'solver_status': {k[len('status.'):]: v for k, v in control.items()
                               if k.startswith('status.')},
             'plant_tick_median_ms': number(plant, 'tick_median_ms'),
-            'exit_codes': codes,
-            '_targets': moving, '_tips': tip_path}
+            'exit_codes': codes, 'bag': str(run_dir / 'bag'),
+            'eval_window_s': [args.start_hold, trajectory.duration],
+            'bag_latency_p99_ms': float(np.percentile(evaluation.latencies, 99) * 1e3)
+            if evaluation.latencies.size else float('nan'),
+            '_targets': evaluation.targets, '_tips': evaluation.tips}
 
 
 def main(argv=None):

@@ -2,7 +2,9 @@
 A small ``/diagnostics`` publisher (diagnostic_updater is not on PyPI).
 
 Each node registers one callback that returns its statuses; they are published about once per
-second as a ``diagnostic_msgs/DiagnosticArray`` with names ``"<node>: <task>"``.
+second as a ``diagnostic_msgs/DiagnosticArray`` with names ``"<node>: <task>"``. The period runs on
+the steady clock (health is reported even while a bag's ``/clock`` pauses); the stamp is the node
+clock's (``use_sim_time`` follows ``/clock``).
 """
 
 import collections
@@ -11,6 +13,7 @@ import math
 from cbha_inverse.ros.qos import DIAGNOSTICS_QOS
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
+from rclpy.clock import Clock, ClockType
 
 OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
@@ -70,7 +73,8 @@ class DiagnosticsPublisher:
         self._node = node
         self._collect = collect
         self.publisher = node.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self.timer = node.create_timer(period, self.publish)
+        self.timer = node.create_timer(period, self.publish,
+                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     def publish(self):
         """Collect the statuses and publish them once."""

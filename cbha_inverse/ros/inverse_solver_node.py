@@ -10,12 +10,15 @@ command meanwhile). With ``trigger: target`` a valid target is solved and its co
 inside the target callback (lowest target-to-command latency); the timer at ``rate_hz`` ticks the
 solver only when no target came during the last period, so a target sent once, or one that stops
 arriving, stays the set-point and the model keeps converging to it. What holds or vents
-(``stale_action``) is stale feedback in closed loop. Services: ``~/enable`` (std_srvs/SetBool:
-stop commanding, or resume) and ``~/reset`` (std_srvs/Trigger: model state and closed-loop
-correction back to rest; the set-point stays). Every input passes
-:mod:`cbha_inverse.core.safety` first; a rejected message is counted and logged (throttled) and
+(``stale_action``) is stale feedback in closed loop. That timer and the stamps follow the node
+clock (``use_sim_time``: ``/clock``, e.g. from ``cbha_bag play --clock``); the staleness watchdog
+(hold, vent, idle vent) runs on its own timer on the steady clock, so a paused or finished bag
+still makes the node hold or vent. Services: ``~/enable`` (std_srvs/SetBool: stop commanding, or
+resume) and ``~/reset`` (std_srvs/Trigger: model state and closed-loop correction back to rest;
+the set-point stays). Every input passes
+:mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
 the last valid command stays. Every command passes
-:func:`cbha_inverse.core.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
+:func:`cbha_inverse.robot.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
 """
 
 import bisect
@@ -25,9 +28,9 @@ import math
 import sys
 import time
 
-from cbha_inverse.core.control import TargetCorrector
-from cbha_inverse.core.robotino import ARM_VALVES
-from cbha_inverse.core.safety import (
+from cbha_inverse.core.inverse.solver import TargetCorrector
+from cbha_inverse.robot.robotino import ARM_VALVES
+from cbha_inverse.robot.safety import (
     bounded_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
 from cbha_inverse.ros.conversions import backbone_markers, command_message, point_array
 from cbha_inverse.ros.diagnostics import (
@@ -38,6 +41,7 @@ from cbha_inverse.ros.runner import run_node
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
@@ -154,6 +158,8 @@ class InverseSolverNode(Node):
         self.create_service(SetBool, '~/enable', self._on_enable)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)
+        self.watchdog_timer = self.create_timer(self.period, self._on_watchdog,
+                                                clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.marker_timer = self.create_timer(p.marker_period, self._publish_markers)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
@@ -275,13 +281,20 @@ class InverseSolverNode(Node):
                 logger.info('targets arrive again')
         return decision
 
+    def _node_seconds(self):
+        return self.get_clock().now().nanoseconds * 1e-9
+
     def _on_timer(self):
+        """Tick on the node clock: solve when no target was solved during the last period."""
+        if self._decide() == 'run' and (
+                self.params.trigger == 'timer'
+                or self._node_seconds() - self._last_solve >= 0.9 * self.period):
+            self._solve_and_publish()
+
+    def _on_watchdog(self):
+        """Tick on the steady clock: hold or vent on stale feedback, idle vent if configured."""
         decision = self._decide()
-        if decision == 'run':
-            if (self.params.trigger == 'timer'
-                    or time.monotonic() - self._last_solve >= 0.9 * self.period):
-                self._solve_and_publish()
-        elif decision == 'hold':
+        if decision == 'hold':
             self._publish(self.command)
         elif decision == 'vent' or (decision == 'waiting' and self.params.publish_idle):
             self._publish(self.vent_command)
@@ -328,7 +341,7 @@ class InverseSolverNode(Node):
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         for warning in result.warnings:
             self.get_logger().warning(warning, throttle_duration_sec=self.params.log_throttle)
-        self._last_solve = time.monotonic()
+        self._last_solve = self._node_seconds()
         self.ticks += 1
         try:
             command = bounded_command(result.actuation[self.order], self.lower, self.upper)

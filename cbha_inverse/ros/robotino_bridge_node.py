@@ -8,9 +8,9 @@ channels 0-5 in the vendor order, wrist 6-7) and publishes ``bha_readings``
 
 The bridge subscribes ``pressure_command`` (Float64MultiArray, gauge Pa in ``valve_names`` order,
 reliable) and forwards each valid command at once to ``/set_bha_pressures`` through
-:func:`cbha_inverse.core.robotino.robotino_bar_command` (wrist channels from ``wrist_bar``, cap
+:func:`cbha_inverse.robot.robotino.robotino_bar_command` (wrist channels from ``wrist_bar``, cap
 ``max_bar``). A command that is not finite, not of length ``len(valve_names)`` or outside
-``[0, max_pressure]`` is never forwarded (:func:`cbha_inverse.core.safety.check_command`; logged
+``[0, max_pressure]`` is never forwarded (:func:`cbha_inverse.robot.safety.check_command`; logged
 with throttling and counted). When no valid command arrived within ``command_timeout`` (steady
 clock), the bridge publishes at ``rate_hz`` either the last forwarded set-points (``hold``) or
 the vent set-points (``vent``: arm channels at ``vent_pressure``, wrist at 0), as the solver
@@ -19,7 +19,7 @@ does with stale feedback. As the solver, it publishes nothing before the first v
 ``rate_hz`` with ``publish_idle: true``.
 
 Each ``/bha_readings`` message is republished as ``pressure_measured`` (Float64MultiArray, Pa in
-``valve_names`` order, :func:`cbha_inverse.core.robotino.robotino_pressures`) and
+``valve_names`` order, :func:`cbha_inverse.robot.robotino.robotino_pressures`) and
 ``string_pots`` (sensor_msgs/JointState: the driver's stamp, one name per potentiometer, the raw
 values as positions). ``/diagnostics`` reports the command and reading rates, the reading age,
 the rejected commands and measured - commanded pressure per valve.
@@ -34,10 +34,10 @@ import math
 import sys
 import time
 
-from cbha_inverse.core.robotino import (
+from cbha_inverse.robot.robotino import (
     ARM_VALVES, CHANNELS, MAX_BAR, N_CHANNELS, PASCAL_PER_BAR, robotino_bar_command,
     robotino_pressures)
-from cbha_inverse.core.safety import check_command, StalenessWatch
+from cbha_inverse.robot.safety import check_command, StalenessWatch
 from cbha_inverse.ros.conversions import command_array, command_message
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK, WARN
 from cbha_inverse.ros.params import declare_parameters, param, ParameterError

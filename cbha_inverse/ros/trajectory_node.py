@@ -1,7 +1,7 @@
 """
 ``trajectory``: publish tip targets (PointStamped) along a circle, a square or a polyline.
 
-Thin node around :mod:`cbha_inverse.core.trajectory`. Topic ``target`` (relative: run it in the
+Thin node around :mod:`cbha_inverse.robot.trajectory`. Topic ``target`` (relative: run it in the
 ``/cbha`` namespace with ``--ros-args -r __ns:=/cbha``), RELIABLE depth 10, frame ``frame_id``
 (default ``cbha_base``), one message per timer tick at ``rate_hz``. Time runs on the node clock
 (so ``use_sim_time`` follows ``/clock``) from the first tick. Bad parameters stop the node at start
@@ -11,7 +11,7 @@ with a message that names the parameter and a non-zero exit code.
 from dataclasses import dataclass
 import sys
 
-from cbha_inverse.core.trajectory import make_trajectory, PLANES, SHAPES
+from cbha_inverse.robot.trajectory import make_trajectory, PLANES, SHAPES
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK
 from cbha_inverse.ros.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.qos import TARGET_QOS

@@ -30,65 +30,20 @@ Scenes shipped in ``config/scenes``: ``tendon_6f_8c`` and ``tendon_10f_16c`` (th
 trunks, Timoshenko beams and cables) and ``cbha`` (16 condensed bellows segments, 6 cavities).
 """
 
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from functools import cached_property
 from pathlib import Path
 
 from cbha_inverse.config_files import read_section
-from cbha_inverse.core.actuation import ActuatorSet, Cable, CableGroup
+from cbha_inverse.core.actuation.actuators import ActuatorSet
+from cbha_inverse.core.actuation.cables import Cable, CableGroup
+from cbha_inverse.core.actuation.effectors import PointEffectors
 from cbha_inverse.core.chain import ChainModel
-from cbha_inverse.core.control import InverseOptions, InverseSolver
-from cbha_inverse.core.effectors import PointEffectors
-from cbha_inverse.core.equilibrium import solve_equilibrium
+from cbha_inverse.core.inverse.solver import InverseOptions, InverseSolver
 from cbha_inverse.core.links import timoshenko_compliance
+from cbha_inverse.core.statics import solve_static
 from cbha_inverse.paths import config_path
 import numpy as np
-
-
-@dataclass(frozen=True)
-class ForwardResult:
-    """
-    Static equilibrium of a scene under a given actuation.
-
-    Attributes
-    ----------
-    positions : (n + 1, 3) ndarray  [m]
-        Frame origins (frame 0 = base).
-    quaternions : (n + 1, 4) ndarray
-        Frame orientations (x, y, z, w).
-    rotations : (n + 1, 3, 3) ndarray
-        Frame rotations.
-    effector_positions : (k, 3) ndarray  [m]
-        Effector points.
-    actuation : (m,) ndarray  [N or Pa]
-        The applied actuation.
-    converged : bool
-        Whether the static solve converged (check it: never silently ignore).
-    iterations : int
-        Newton iterations.
-    residual_norm : float
-        Final equilibrium residual.
-    message : str
-        The static solver's message.
-    state : cbha_inverse.core.chain.ChainState
-        The equilibrium state (e.g. to reset an inverse solver there).
-    warnings : tuple of str
-        What the user should know about the equilibrium (unstable, strained beyond the links'
-        range, round-off limited: :mod:`cbha_inverse.core.newton`).
-
-    """
-
-    positions: np.ndarray
-    quaternions: np.ndarray
-    rotations: np.ndarray
-    effector_positions: np.ndarray
-    actuation: np.ndarray
-    converged: bool
-    iterations: int
-    residual_norm: float
-    message: str
-    state: object
-    warnings: tuple = ()
 
 
 class Scene:
@@ -103,8 +58,8 @@ class Scene:
     description : str
     base_frame : str
     model : cbha_inverse.core.chain.ChainModel
-    actuators : cbha_inverse.core.actuation.ActuatorSet
-    effectors : cbha_inverse.core.effectors.PointEffectors
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
     gravity : (3,) ndarray or None  [m/s^2]
     actuator_names, effector_names : tuple of str
     lower_bounds, upper_bounds : (m,) ndarray  [N or Pa]
@@ -137,9 +92,9 @@ class Scene:
         """
         Solve the static equilibrium under an actuation (paper eq. 9).
 
-        Uses :func:`cbha_inverse.core.equilibrium.solve_equilibrium` (the package's Newton engine
-        with the actuators' load stiffness, line search, load stepping), the same linearisation
-        as the inverse solver.
+        Uses :func:`cbha_inverse.core.statics.solve_static` (the package's one static solver,
+        with the actuators' load stiffness, line search, load stepping), which evaluates the
+        same compiled kernels as the inverse solver.
 
         Parameters
         ----------
@@ -148,14 +103,15 @@ class Scene:
         initial_state : ChainState, optional
             Warm start.
         tolerance : float
-            Relative tolerance of the static solver (:mod:`cbha_inverse.core.newton`).
+            Relative tolerance of the static solver (:mod:`cbha_inverse.core.statics`).
         strict : bool
             Raise ``RuntimeError`` when the solve does not converge.
 
         Returns
         -------
-        ForwardResult
-            The equilibrium (``converged`` says whether it was reached).
+        cbha_inverse.core.statics.StaticResult
+            The equilibrium with its ``effector_positions`` and ``actuation`` (``converged``
+            says whether it was reached).
 
         """
         a = np.asarray(actuation, dtype=float).reshape(-1)
@@ -164,23 +120,12 @@ class Scene:
         if np.any(a < self.lower_bounds - 1e-9 * np.abs(self.upper_bounds)) or np.any(
                 a > self.upper_bounds * (1.0 + 1e-9)):
             raise ValueError('actuation outside the actuator bounds')
-        res = solve_equilibrium(self.model, self.actuators, a, self._external, initial_state,
-                                tolerance=tolerance)
+        res = solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
+                           actuation=a, effectors=self.effectors, initial_state=initial_state,
+                           tolerance=tolerance)
         if strict and not res.converged:
             raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
-        st = res.state
-        return ForwardResult(st.positions, st.quaternions, st.rotations,
-                             self.effectors.positions(st.positions, st.rotations), a,
-                             res.converged, res.iterations, res.residual_norm, res.message, st,
-                             res.warnings)
-
-    @cached_property
-    def _external(self):
-        """Gravity wrenches (6n,) on frames 1..n."""
-        external = np.zeros((self.model.n_links, 6))
-        if self.gravity is not None:
-            external[:, :3] = np.asarray(self.model.masses)[:, None] * self.gravity
-        return external.reshape(-1)
+        return res
 
     @cached_property
     def rest_effector_positions(self):
@@ -217,13 +162,13 @@ class Scene:
         Parameters
         ----------
         **options
-            Fields of :class:`cbha_inverse.core.control.InverseOptions` (``energy_weight``,
+            Fields of :class:`cbha_inverse.core.inverse.solver.InverseOptions` (``energy_weight``,
             ``proximal_weight``, ``rate_limit``, ``qp_solver``, ``newton_steps``, ...); the
             scene's ``solver`` section gives the defaults.
 
         Returns
         -------
-        cbha_inverse.core.control.InverseSolver
+        cbha_inverse.core.inverse.solver.InverseSolver
             Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult``.
 
         """

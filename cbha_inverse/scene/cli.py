@@ -12,7 +12,7 @@ import argparse
 import sys
 import time
 
-from cbha_inverse.core.actuation import CableGroup
+from cbha_inverse.core.actuation.cables import CableGroup
 from cbha_inverse.errors import ConfigError, report_config_error
 import numpy as np
 

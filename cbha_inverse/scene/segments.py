@@ -7,8 +7,8 @@ segment YAMLs through :func:`cbha_inverse.fem.segment_io.load_segment` (no gmsh)
 
 from pathlib import Path
 
-from cbha_inverse.core.cavity import Cavity, CavityGroup, CavityPart
-from cbha_inverse.core.cavity_linear import LinearCavityGroup
+from cbha_inverse.core.actuation.cavities import Cavity, CavityGroup, CavityPart
+from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 from cbha_inverse.core.chain import ChainModel
 import numpy as np
 
@@ -108,8 +108,9 @@ def cavity_group(items, sections, segments, n_frames, model='linear'):
     n_frames : int
         Number of frames (base included).
     model : str
-        ``'linear'`` (:class:`~cbha_inverse.core.cavity.LinearCavityGroup`, default) or ``'mesh'``
-        (:class:`~cbha_inverse.core.cavity.CavityGroup`).
+        ``'linear'`` (:class:`~cbha_inverse.core.actuation.condensed_cavities.LinearCavityGroup`,
+        default) or ``'mesh'``
+        (:class:`~cbha_inverse.core.actuation.cavities.CavityGroup`).
 
     Returns
     -------

@@ -1,0 +1,269 @@
+"""
+``cbha_bag eval``: tracking error, command statistics, saturation and latency from a bag alone.
+
+Reads ``<ns>/target`` and ``<ns>/tip/true`` (or ``tip/measured``) as geometry_msgs/PointStamped
+and ``<ns>/pressure_command`` as std_msgs/Float64MultiArray, decoded without rclpy. The tracking
+error is :func:`cbha_inverse.report.tracking.tracking_errors` on the header stamps (the same
+function and window as ``cbha_demo``). The target-to-command latency pairs each target with the
+first command the recorder received after it (and before the next target), on the bag's receive
+times: it includes the delivery of both messages to the recorder.
+"""
+
+from dataclasses import dataclass
+
+from cbha_inverse.bag.storage import BagError, deserialize, open_bag
+from cbha_inverse.report.tracking import plot_runs, tracking_errors
+import numpy as np
+
+POINT_TYPE = 'geometry_msgs/msg/PointStamped'
+COMMAND_TYPE = 'std_msgs/msg/Float64MultiArray'
+
+
+@dataclass(frozen=True)
+class CommandStatistics:
+    """
+    The commands of a bag.
+
+    Attributes
+    ----------
+    count : int
+        Commands recorded.
+    minimum, mean, maximum : (m,) ndarray  [Pa]
+        Per valve, in command order.
+    saturated_fraction : (m,) ndarray  [-]
+        Per valve, share of commands at 0 or at ``max_pressure`` (within 1 Pa).
+    any_saturated_fraction : float  [-]
+        Share of commands with at least one valve saturated.
+
+    """
+
+    count: int
+    minimum: np.ndarray
+    mean: np.ndarray
+    maximum: np.ndarray
+    saturated_fraction: np.ndarray
+    any_saturated_fraction: float
+
+
+@dataclass(frozen=True)
+class BagEvaluation:
+    """
+    What ``cbha_bag eval`` reports.
+
+    Attributes
+    ----------
+    tip_topic : str
+        The tip topic compared with the targets.
+    window : (2,) ndarray  [s]
+        Scored stamps ``[start, end]``.
+    tracking : cbha_inverse.report.tracking.TrackingErrors or None
+        Tip-to-target errors (None without tips or targets in the window).
+    targets, tips : (T, 3), (N, 3) ndarray  [m]
+        Target and tip positions whose stamps lie in the window (for the plot).
+    commands : CommandStatistics or None
+        None when the bag has no commands.
+    latencies : (L,) ndarray  [s]
+        Target-to-command delays (receive times).
+
+    """
+
+    tip_topic: str
+    window: np.ndarray
+    tracking: object
+    targets: np.ndarray
+    tips: np.ndarray
+    commands: object
+    latencies: np.ndarray
+
+
+def _points(bag, topic):
+    """Return (receive times [ns], stamps [s], points (N, 3) [m]) of a PointStamped topic."""
+    received, stamps, points = [], [], []
+    for _, timestamp, data in bag.messages([topic]):
+        message = deserialize(data, POINT_TYPE)
+        received.append(timestamp)
+        stamps.append(message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec)
+        points.append((message.point.x, message.point.y, message.point.z))
+    return (np.array(received, dtype=np.int64), np.array(stamps, dtype=float),
+            np.array(points, dtype=float).reshape(-1, 3))
+
+
+def command_statistics(commands, max_pressure):
+    """
+    Summarise commands.
+
+    Parameters
+    ----------
+    commands : (K, m) ndarray  [Pa]
+        The commands in order.
+    max_pressure : float  [Pa]
+        The upper bound used to count saturation.
+
+    Returns
+    -------
+    CommandStatistics
+        Per-valve minimum, mean, maximum and saturation.
+
+    """
+    saturated = (commands <= 1.0) | (commands >= max_pressure - 1.0)
+    return CommandStatistics(len(commands), commands.min(axis=0), commands.mean(axis=0),
+                             commands.max(axis=0), saturated.mean(axis=0),
+                             float(np.mean(np.any(saturated, axis=1))))
+
+
+def target_command_latencies(target_times, command_times):
+    """
+    Pair each target with the first command after it, before the next target.
+
+    Parameters
+    ----------
+    target_times : (T,) ndarray of int  [ns]
+        Receive times of the targets (increasing).
+    command_times : (K,) ndarray of int  [ns]
+        Receive times of the commands (increasing).
+
+    Returns
+    -------
+    (L,) ndarray  [s]
+        Delays of the paired targets.
+
+    """
+    if target_times.size == 0 or command_times.size == 0:
+        return np.zeros(0)
+    following = np.searchsorted(command_times, target_times, side='left')
+    valid = following < command_times.size
+    next_target = np.append(target_times[1:], np.iinfo(np.int64).max)
+    paired = valid.copy()
+    paired[valid] = command_times[following[valid]] < next_target[valid]
+    return (command_times[following[paired]] - target_times[paired]) * 1e-9
+
+
+def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
+                 max_pressure=150000.0):
+    """
+    Evaluate one recorded run.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The bag folder.
+    namespace : str
+        Namespace of the topics.
+    tip : {'auto', 'true', 'measured'}
+        Tip topic: ``tip/true`` (the plant's truth), ``tip/measured``, or ``auto`` (true if
+        recorded, else measured).
+    start : float  [s]
+        Scoring starts this long after the first target's stamp.
+    end : float, optional  [s]
+        Scoring ends this long after the first target's stamp (default: the last target).
+    max_pressure : float  [Pa]
+        Upper command bound, for the saturation count.
+
+    Returns
+    -------
+    BagEvaluation
+        The numbers.
+
+    Raises
+    ------
+    BagError
+        If the bag cannot be read or has no targets.
+
+    """
+    namespace = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    with open_bag(path) as bag:
+        names = {t.name: t.msgtype for t in bag.summary.topics}
+        target_topic = f'{namespace}/target'
+        if names.get(target_topic) != POINT_TYPE:
+            raise BagError(f'{path}: no {target_topic} ({POINT_TYPE}) in the bag')
+        if tip == 'auto':
+            tip = 'true' if f'{namespace}/tip/true' in names else 'measured'
+        tip_topic = f'{namespace}/tip/{tip}'
+        target_received, target_stamps, targets = _points(bag, target_topic)
+        if target_stamps.size == 0:
+            raise BagError(f'{path}: {target_topic} has no messages')
+        tip_stamps, tips = np.zeros(0), np.zeros((0, 3))
+        if names.get(tip_topic) == POINT_TYPE:
+            _, tip_stamps, tips = _points(bag, tip_topic)
+        command_topic = f'{namespace}/pressure_command'
+        command_times, commands = [], []
+        if names.get(command_topic) == COMMAND_TYPE:
+            for _, timestamp, data in bag.messages([command_topic]):
+                command_times.append(timestamp)
+                commands.append(np.asarray(deserialize(data, COMMAND_TYPE).data, dtype=float))
+    first = target_stamps[0]
+    window = np.array([first + start, first + end if end is not None else target_stamps[-1]])
+    try:
+        tracking = tracking_errors(target_stamps, targets, tip_stamps, tips, *window)
+    except ValueError:
+        tracking = None
+    statistics = None
+    if commands and len({c.size for c in commands}) == 1:
+        statistics = command_statistics(np.stack(commands), max_pressure)
+    in_window = (target_stamps >= window[0]) & (target_stamps <= window[1])
+    tip_in_window = (tip_stamps >= window[0]) & (tip_stamps <= window[1])
+    return BagEvaluation(tip_topic, window, tracking, targets[in_window], tips[tip_in_window],
+                         statistics, target_command_latencies(
+                             target_received, np.array(command_times, dtype=np.int64)))
+
+
+def format_evaluation(evaluation):
+    """
+    Return the report of :func:`evaluate_bag` as text lines (mm, kPa, ms).
+
+    Parameters
+    ----------
+    evaluation : BagEvaluation
+        The numbers.
+
+    Returns
+    -------
+    str
+        Several lines.
+
+    """
+    lines = []
+    tracking = evaluation.tracking
+    if tracking is None:
+        lines.append(f'tracking: no {evaluation.tip_topic} samples in the target window')
+    else:
+        lines.append(f'tracking ({evaluation.tip_topic}): RMS {tracking.rms * 1e3:.6f} mm, max '
+                     f'{tracking.maximum * 1e3:.6f} mm over {tracking.errors.size} samples')
+    commands = evaluation.commands
+    if commands is None:
+        lines.append('commands: none recorded')
+    else:
+        def kpa(values):
+            return ' '.join(f'{v * 1e-3:.1f}' for v in values)
+        lines += [f'commands: {commands.count}, per valve [kPa] min {kpa(commands.minimum)} | '
+                  f'mean {kpa(commands.mean)} | max {kpa(commands.maximum)}',
+                  f'saturation: {100 * commands.any_saturated_fraction:.1f} % of commands, per '
+                  'valve ' + ' '.join(f'{100 * v:.1f}' for v in commands.saturated_fraction)
+                  + ' %']
+    if evaluation.latencies.size:
+        latency = evaluation.latencies * 1e3
+        lines.append(f'target->command latency (receive times): median '
+                     f'{np.median(latency):.3f} ms, p99 {np.percentile(latency, 99):.3f} ms '
+                     f'over {latency.size} targets')
+    else:
+        lines.append('target->command latency: no target followed by a command')
+    return '\n'.join(lines)
+
+
+def plot_evaluation(evaluation, path, title):
+    """
+    Write the PNG of target vs tip in the y-z plane.
+
+    Parameters
+    ----------
+    evaluation : BagEvaluation
+        The numbers (needs tracking).
+    path : str or os.PathLike
+        Output PNG.
+    title : str
+        Panel title.
+
+    """
+    rms = evaluation.tracking.rms if evaluation.tracking is not None else float('nan')
+    plot_runs([{'title': title, 'targets': evaluation.targets, 'tips': evaluation.tips,
+                'rms': rms}], path)

@@ -1,0 +1,198 @@
+"""
+Compiled (numba) Cholesky factorisation and multi-RHS solve of symmetric band matrices.
+
+Storage is LAPACK's lower band layout in C order, ``band[c, r - c] = K[r, c]`` for
+``0 <= r - c <= kd`` (an (N, kd + 1) array: the Fortran (kd + 1, N) array of ``dpbtrf``). The
+factorisation is right-looking, as LAPACK's unblocked ``dpbtf2``: every innermost loop is an axpy
+over contiguous memory. For the small systems of a control tick (N ≤ ~100, kd ≤ ~20) it costs a few
+microseconds, less than the call overhead of the LAPACK wrappers. :func:`scatter_add` writes the
+assembled blocks into a band storage by a constant index.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def band_cholesky(band):
+    """
+    Factor a symmetric positive definite band matrix in place, ``K = L Lᵀ`` (as LAPACK dpbtf2).
+
+    Right-looking: each column of ``L`` is scaled, then the trailing block takes its rank-one
+    update; the innermost loop is an axpy over contiguous memory (no loop-carried dependency).
+    Half-bandwidth 11 (a block-tridiagonal frame chain) runs :func:`_cholesky_width12`, the same
+    arithmetic with constant trip counts (~1.7x faster, identical result).
+
+    Parameters
+    ----------
+    band : (N, kd + 1) ndarray
+        Lower band storage, ``band[c, r - c] = K[r, c]`` for ``0 <= r - c <= kd`` (C order: the
+        Fortran ``(kd + 1, N)`` layout of LAPACK; entries past the matrix end are ignored);
+        overwritten by ``L`` in the same layout.
+
+    Returns
+    -------
+    int
+        0 on success, else ``j + 1`` for the first column whose pivot is not positive (or not
+        finite); ``band`` is then partly overwritten.
+
+    """
+    if band.shape[1] == FRAME_BAND_WIDTH:
+        return _cholesky_width12(band)
+    return _cholesky_columns(band, 0)
+
+
+@numba.njit(cache=True)
+def _cholesky_columns(band, first):
+    """Factor columns ``first`` ... N - 1 of :func:`band_cholesky` (envelope-length loops)."""
+    size, width = band.shape
+    kd = width - 1
+    for j in range(first, size):
+        column = band[j]
+        pivot = column[0]
+        if not (pivot > 0.0 and math.isfinite(pivot)):
+            return j + 1
+        diagonal = math.sqrt(pivot)
+        column[0] = diagonal
+        below = min(kd, size - 1 - j)
+        inverse = 1.0 / diagonal
+        for a in range(1, below + 1):
+            column[a] *= inverse
+        for b in range(1, below + 1):
+            weight = column[b]
+            target = band[j + b]
+            for a in range(b, below + 1):
+                target[a - b] -= column[a] * weight
+    return 0
+
+
+@numba.njit(cache=True)
+def band_solve(factor, rhs):
+    """
+    Solve ``L Lᵀ X = rhs`` in place with a factor of :func:`band_cholesky`.
+
+    Parameters
+    ----------
+    factor : (N, kd + 1) ndarray
+        ``L`` in lower band storage.
+    rhs : (N, c) ndarray
+        Right-hand sides (C order), overwritten by ``X``.
+
+    """
+    size, width = factor.shape
+    kd = width - 1
+    n_rhs = rhs.shape[1]
+    for j in range(size):
+        inverse = 1.0 / factor[j, 0]
+        for col in range(n_rhs):
+            rhs[j, col] *= inverse
+        for a in range(1, min(kd, size - 1 - j) + 1):
+            weight = factor[j, a]
+            for col in range(n_rhs):
+                rhs[j + a, col] -= weight * rhs[j, col]
+    for j in range(size - 1, -1, -1):
+        for a in range(1, min(kd, size - 1 - j) + 1):
+            weight = factor[j, a]
+            for col in range(n_rhs):
+                rhs[j, col] -= weight * rhs[j + a, col]
+        inverse = 1.0 / factor[j, 0]
+        for col in range(n_rhs):
+            rhs[j, col] *= inverse
+
+
+#: band width 2b of the frame chain's block-tridiagonal matrices (b = 6), a compile-time constant
+#: of :func:`_cholesky_width12`
+FRAME_BAND_WIDTH = 12
+
+
+@numba.njit(cache=True)
+def _cholesky_width12(band):
+    """
+    :func:`band_cholesky` for ``kd + 1 = 12``, with constant trip counts away from the end.
+
+    The loops of a column that is at least 12 rows from the end run over the whole width (zeros
+    included): with a constant trip count LLVM unrolls and vectorises them, which measured ~1.5x
+    faster than the envelope-length loops at n = 6 ... 1000 blocks; the last 11 columns use
+    :func:`_cholesky_columns`.
+    """
+    size = band.shape[0]
+    full = max(size - FRAME_BAND_WIDTH + 1, 0)
+    for j in range(full):
+        column = band[j]
+        pivot = column[0]
+        if not (pivot > 0.0 and math.isfinite(pivot)):
+            return j + 1
+        diagonal = math.sqrt(pivot)
+        column[0] = diagonal
+        inverse = 1.0 / diagonal
+        for a in range(1, FRAME_BAND_WIDTH):
+            column[a] *= inverse
+        for b in range(1, FRAME_BAND_WIDTH):
+            weight = column[b]
+            target = band[j + b]
+            for a in range(b, FRAME_BAND_WIDTH):
+                target[a - b] -= column[a] * weight
+    # the last 11 columns: the envelope ends at the matrix end
+    return _cholesky_columns(band, full)
+
+
+@numba.njit(cache=True)
+def btd_band_cholesky(diagonal, upper):
+    """
+    Build the lower band of a symmetric block-tridiagonal matrix and factor it, ``K = L Lᵀ``.
+
+    The band (half-bandwidth ``kd = 2b - 1``) is written straight from the blocks: row
+    ``c = k b + i`` (block k, component i) holds ``D_k[i, i:]`` at offsets ``0 ... b - 1 - i``
+    and ``U_k[i, :]`` (block (k+1, k) is ``U_kᵀ``) at offsets ``b - i ... 2b - 1 - i``; its last
+    ``i`` slots are zero (Cholesky creates no fill there). Then it is factored in place by
+    :func:`band_cholesky` (constant trip counts for b = 6).
+
+    Parameters
+    ----------
+    diagonal : (n, b, b) ndarray
+        Diagonal blocks (C order; only their upper triangles are read).
+    upper : (n - 1, b, b) ndarray
+        Blocks (k, k+1) (C order).
+
+    Returns
+    -------
+    factor : (n b, 2b) ndarray
+        ``L`` in the lower band storage of :func:`band_cholesky`, ``factor[c, r - c] = L[r, c]``.
+    info : int
+        0 on success, else ``j + 1`` for the first column whose pivot is not positive (or not
+        finite); ``factor[j, 0]`` is then that pivot and ``factor`` is partly overwritten.
+
+    """
+    n, b = diagonal.shape[0], diagonal.shape[1]
+    band = np.zeros((n * b, 2 * b))
+    for k in range(n):
+        for i in range(b):
+            row = band[k * b + i]
+            for m in range(i, b):
+                row[m - i] = diagonal[k, i, m]
+            if k + 1 < n:
+                for m in range(b):
+                    row[b - i + m] = upper[k, i, m]
+    return band, band_cholesky(band)
+
+
+@numba.njit(cache=True)
+def scatter_add(index, values, weights, out):
+    """
+    Zero ``out`` and add ``weights * values`` at ``index`` (a compiled ``np.bincount``).
+
+    Parameters
+    ----------
+    index : (V,) int ndarray
+        Slot of every value in ``out``.
+    values, weights : (V,) ndarray
+        Values and their weights.
+    out : (S,) ndarray
+        Receives the sums.
+
+    """
+    out[:] = 0.0
+    for i in range(index.size):
+        out[index[i]] += weights[i] * values[i]

@@ -1,0 +1,156 @@
+"""
+Compiled cable terms of the equilibrium (DESIGN §5): columns of ``J_aᵀ``, loads, load stiffness.
+
+:func:`cable_pass` (numba) computes the cable columns, their loads, the span stiffness
+``C P Cᵀ`` (``P = λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the
+exact point moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``, for the routing data of
+:class:`cbha_inverse.core.actuation.cables.CableTerms`.
+"""
+
+import math
+
+from cbha_inverse.core._kernels.so3 import hat_into
+import numba
+import numpy as np
+
+# cable span blocks (see cable_pass): base matrix and sign of each 3-row block of C, and the
+# slot of the summed product B_x P B_y^T (x >= y; x, y = 0: I, 1: S, 2: T)
+_CABLE_BASE = np.array([0, 1, 0, 2])
+_CABLE_SIGN = np.array([1.0, 1.0, -1.0, -1.0])
+_CABLE_PRODUCT = np.array([[0, -1, -1], [1, 3, -1], [2, 4, 5]])
+
+
+@numba.njit(cache=True)
+def cable_pass(positions, rotations, actuation, frames, offsets, span_start, span_end,
+               span_owner, point_owner, columns, span_pair, point_slot, rhs, pair_values,
+               moment_values):
+    """
+    Add one cable group's columns and loads to ``rhs``; write its stiffness blocks.
+
+    The span blocks are symmetric; the point moment blocks are the exact (non-symmetric) load
+    stiffness, whose symmetric part the control tick keeps.
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    actuation : (m,) ndarray  [N]
+        All actuators (the tensions are at ``columns``).
+    frames : (P,) int ndarray
+        Frame of every routing point.
+    offsets : (P, 3) ndarray  [m]
+        Routing points in their frame's axes.
+    span_start, span_end : (S,) int ndarray
+        Points of every straight span (consecutive points of one cable).
+    span_owner, point_owner : (S,), (P,) int ndarray
+        Cable (0..m_c - 1) of every span and point.
+    columns : (m_c,) int ndarray
+        Actuator column of every cable.
+    span_pair : (S,) int ndarray
+        Frame-pair block that receives each span's stiffness.
+    point_slot : (P,) int ndarray
+        Moment block (one per frame used) that receives each point's moment stiffness.
+    rhs : (6n, m + 1) ndarray
+        Column 0 (residual) and the cables' ``J_aᵀ`` columns are added to.
+    pair_values : (n_pairs, 12, 12) ndarray
+        Receives the span blocks summed per frame pair.
+    moment_values : (n_slots, 3, 3) ndarray
+        Receives the point moment blocks summed per frame.
+
+    """
+    n_points = frames.size
+    n_spans = span_start.size
+    levers = np.empty((n_points, 3))
+    points = np.empty((n_points, 3))
+    for p in range(n_points):
+        rot = rotations[frames[p]]
+        for i in range(3):
+            levers[p, i] = rot[i, 0] * offsets[p, 0] + rot[i, 1] * offsets[p, 1] + rot[
+                i, 2] * offsets[p, 2]
+            points[p, i] = positions[frames[p], i] + levers[p, i]
+    units = np.empty((n_spans, 3))
+    lengths = np.empty(n_spans)
+    for s in range(n_spans):
+        for i in range(3):
+            units[s, i] = points[span_end[s], i] - points[span_start[s], i]
+        length = math.sqrt(units[s, 0] ** 2 + units[s, 1] ** 2 + units[s, 2] ** 2)
+        lengths[s] = length
+        for i in range(3):
+            units[s, i] /= length
+    # a span pulls its start point toward its end and the end point back (unit tension)
+    forces = np.zeros((n_points, 3))
+    for s in range(n_spans):
+        for i in range(3):
+            forces[span_start[s], i] += units[s, i]
+            forces[span_end[s], i] -= units[s, i]
+    moment_values[:, :, :] = 0.0
+    for p in range(n_points):
+        f, r = forces[p], levers[p]
+        tension = actuation[columns[point_owner[p]]]
+        if frames[p] > 0:
+            row = 6 * (frames[p] - 1)
+            col = 1 + columns[point_owner[p]]
+            wrench = (f[0], f[1], f[2], r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2],
+                      r[0] * f[1] - r[1] * f[0])
+            for i in range(6):
+                rhs[row + i, col] += wrench[i]
+                rhs[row + i, 0] += tension * wrench[i]
+        # A = sum r (t F)^T per frame; the block is tr(A) I - A
+        block = moment_values[point_slot[p]]
+        for i in range(3):
+            for j in range(3):
+                block[i, j] -= tension * r[i] * f[j]
+        trace = tension * (r[0] * f[0] + r[1] * f[1] + r[2] * f[2])
+        for i in range(3):
+            block[i, i] += trace
+    # C P C^T with C = [I; S; -I; -T] (S, T the hats of the start and end levers): block (i, j)
+    # is sign_i sign_j B_i P B_j^T with B = (I, S, I, T), sign = (1, 1, -1, -1); only the six
+    # products P, SP, TP, SPS^T, TPS^T, TPT^T are summed per frame pair, then expanded
+    n_pairs = pair_values.shape[0]
+    sums = np.zeros((n_pairs, 6, 3, 3))
+    proj = np.empty((3, 3))
+    s_hat = np.empty((3, 3))
+    t_hat = np.empty((3, 3))
+    sp = np.empty((3, 3))
+    tp = np.empty((3, 3))
+    for s in range(n_spans):
+        scale = actuation[columns[span_owner[s]]] / lengths[s]
+        u = units[s]
+        for i in range(3):
+            for j in range(3):
+                proj[i, j] = -scale * u[i] * u[j]
+            proj[i, i] += scale
+        hat_into(levers[span_start[s]], s_hat)
+        hat_into(levers[span_end[s]], t_hat)
+        for i in range(3):
+            for j in range(3):
+                sp[i, j] = s_hat[i, 0] * proj[0, j] + s_hat[i, 1] * proj[1, j] + s_hat[
+                    i, 2] * proj[2, j]
+                tp[i, j] = t_hat[i, 0] * proj[0, j] + t_hat[i, 1] * proj[1, j] + t_hat[
+                    i, 2] * proj[2, j]
+        acc = sums[span_pair[s]]
+        for i in range(3):
+            for j in range(3):
+                acc[0, i, j] += proj[i, j]
+                acc[1, i, j] += sp[i, j]
+                acc[2, i, j] += tp[i, j]
+                acc[3, i, j] += sp[i, 0] * s_hat[j, 0] + sp[i, 1] * s_hat[j, 1] + sp[
+                    i, 2] * s_hat[j, 2]
+                acc[4, i, j] += tp[i, 0] * s_hat[j, 0] + tp[i, 1] * s_hat[j, 1] + tp[
+                    i, 2] * s_hat[j, 2]
+                acc[5, i, j] += tp[i, 0] * t_hat[j, 0] + tp[i, 1] * t_hat[j, 1] + tp[
+                    i, 2] * t_hat[j, 2]
+    for pair in range(n_pairs):
+        out = pair_values[pair]
+        acc = sums[pair]
+        for bi in range(4):
+            for bj in range(4):
+                x, y = _CABLE_BASE[bi], _CABLE_BASE[bj]
+                sign = _CABLE_SIGN[bi] * _CABLE_SIGN[bj]
+                for i in range(3):
+                    for j in range(3):
+                        value = (acc[_CABLE_PRODUCT[x, y], i, j] if x >= y
+                                 else acc[_CABLE_PRODUCT[y, x], j, i])
+                        out[3 * bi + i, 3 * bj + j] = sign * value

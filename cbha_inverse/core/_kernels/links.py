@@ -1,0 +1,219 @@
+"""
+Compiled pass over the compliance links (numba): deformation, wrenches, tangent blocks.
+
+:func:`link_pass`, per link ``l`` (frames ``a = l``, ``b = l + 1``): the deformation ``δ``
+(DESIGN §3), the local b-side wrench ``L = [-s_f; -Jl⁻ᵀ(φ) s_r] + Σ_c p_c (G0_c + H_c δ)``
+(paper eq. 9 plus the condensed cavities of
+:mod:`cbha_inverse.core.actuation.condensed_cavities`) rotated to world axes and gathered onto
+the two frames (paper eq. 5-7), and the exact 12 x 12 world tangent ``Eᵀ R M Rᵀ E`` + the
+geometric terms of the rotated wrench, ``M = (Bᵀ K + Z(dJ) - H_p) B`` (paper eq. 8 plus the
+exact cavity load stiffness), or the material part alone. The one implementation of the link
+equations: the control tick, the static solver, the scenes' forward model and the plant all run
+it (through :class:`cbha_inverse.core.system.EquilibriumSystem`); the readable numpy version is
+a test oracle (``test/oracles/chain_forces.py``).
+"""
+
+import math
+
+from cbha_inverse.core._kernels.so3 import (_add_scaled_hat, hat_into, jl_coefficient,
+                                           left_jacobian_inverse_into, rotation_log)
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
+              cavity_wrench, cavity_stiffness, rhs, blocks, material):
+    """
+    Write every link's wrenches into ``rhs`` and its world tangent into ``blocks``.
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    stiffness : (n, 6, 6) ndarray  [N/m, N, N*m/rad]
+        Link stiffness ``K``.
+    rest_offsets : (n, 3) ndarray  [m]
+        ``d0``.
+    rest_rotations_t : (n, 3, 3) ndarray
+        ``Q0ᵀ``, or a (0, 3, 3) array when every ``Q0`` is the identity.
+    actuation : (m,) ndarray  [Pa, N]
+        ``λ`` (the cavity pressures enter the wrench and the load stiffness).
+    cavity_wrench : (n, c, 6) ndarray  [N/Pa, N*m/Pa]
+        ``G0`` of every condensed cavity part per link (``c = m`` with cavities, else 0).
+    cavity_stiffness : (n, c, 6, 6) ndarray
+        ``H`` of the same parts (derivative of the local wrench per unit pressure).
+    rhs : (6n, m + 1) ndarray
+        Zeroed here; receives the link wrenches (column 0) and, with cavities, ``J_aᵀ``
+        (columns ``1 + c``).
+    blocks : (n, 12, 12) ndarray
+        Receives the link tangents ``-d[w_a; w_b]/d[dq_a; dq_b]`` in world axes, rows and
+        columns (frame a, frame b): exact (not symmetric; material, geometric and cavity load
+        stiffness), or with ``material`` the material part ``Dᵀ Bᵀ K B D`` alone (paper eq. 8,
+        symmetric positive semi-definite whatever the loads).
+    material : bool
+        Write the material tangent instead of the exact one (the residual is the same).
+
+    """
+    n = stiffness.shape[0]
+    n_cav = cavity_wrench.shape[1]
+    kc = 1 + n_cav
+    rhs[:, :] = 0.0
+    rel = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    delta = np.empty(6)
+    stress = np.empty(6)
+    jinv = np.empty((3, 3))
+    a = np.empty((6, 6))
+    mat = np.empty((6, 6))
+    rotated = np.empty((6, 6))
+    local = np.empty((6, kc))
+    world = np.empty((6, kc))
+    diff = np.empty(3)
+    diff_hat = np.empty((3, 3))
+    f_hat = np.empty((3, 3))
+    m_hat = np.empty((3, 3))
+    for link in range(n):
+        ra = rotations[link]
+        rb = rotations[link + 1]
+        for i in range(3):
+            diff[i] = positions[link + 1, i] - positions[link, i]
+        for i in range(3):
+            for j in range(3):
+                rel[i, j] = ra[0, i] * rb[0, j] + ra[1, i] * rb[1, j] + ra[2, i] * rb[2, j]
+        if rest_rotations_t.shape[0] > 0:
+            q0t = rest_rotations_t[link]
+            tmp[:, :] = rel
+            for i in range(3):
+                for j in range(3):
+                    rel[i, j] = (tmp[i, 0] * q0t[0, j] + tmp[i, 1] * q0t[1, j]
+                                 + tmp[i, 2] * q0t[2, j])
+        for i in range(3):
+            delta[i] = (ra[0, i] * diff[0] + ra[1, i] * diff[1] + ra[2, i] * diff[2]
+                        - rest_offsets[link, i])
+        theta = rotation_log(rel, delta[3:])
+        phi = delta[3:]
+        t2 = theta * theta
+        c, dc = jl_coefficient(theta)
+        k = stiffness[link]
+        for i in range(6):
+            acc = 0.0
+            for j in range(6):
+                acc += k[i, j] * delta[j]
+            stress[i] = acc
+        left_jacobian_inverse_into(phi, theta, c, jinv)
+        # a = B^T K with B = diag(I, Jl^-1)
+        for j in range(6):
+            for i in range(3):
+                a[i, j] = k[i, j]
+                a[3 + i, j] = jinv[0, i] * k[3, j] + jinv[1, i] * k[4, j] + jinv[2, i] * k[5, j]
+        # local b-side wrench: column 0 total (-B^T K delta + sum_c p_c (G0_c + H_c delta)),
+        # columns 1.. per unit pressure
+        for i in range(6):
+            acc = 0.0
+            for j in range(6):
+                acc += a[i, j] * delta[j]
+            local[i, 0] = -acc
+        for cav in range(n_cav):
+            p = actuation[cav]
+            g0 = cavity_wrench[link, cav]
+            h = cavity_stiffness[link, cav]
+            for i in range(6):
+                acc = g0[i]
+                for j in range(6):
+                    acc += h[i, j] * delta[j]
+                local[i, 1 + cav] = acc
+                local[i, 0] += p * acc
+            # the exact tangent's cavity load stiffness: a -= p_c H_c
+            if p != 0.0 and not material:
+                for i in range(6):
+                    for j in range(6):
+                        a[i, j] -= p * h[i, j]
+        # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a)
+        for col in range(kc):
+            for part in range(2):
+                for i in range(3):
+                    world[3 * part + i, col] = (ra[i, 0] * local[3 * part, col]
+                                                + ra[i, 1] * local[3 * part + 1, col]
+                                                + ra[i, 2] * local[3 * part + 2, col])
+        row_b = 6 * link
+        row_a = 6 * (link - 1)
+        for col in range(kc):
+            for i in range(6):
+                rhs[row_b + i, col] += world[i, col]
+            if link > 0:
+                for i in range(6):
+                    rhs[row_a + i, col] -= world[i, col]
+                rhs[row_a + 3, col] -= diff[1] * world[2, col] - diff[2] * world[1, col]
+                rhs[row_a + 4, col] -= diff[2] * world[0, col] - diff[0] * world[2, col]
+                rhs[row_a + 5, col] -= diff[0] * world[1, col] - diff[1] * world[0, col]
+        if not material:
+            # a[3:, 3:] += d(Jl^-T s_r)/dphi
+            s_r = stress[3:]
+            ps = phi[0] * s_r[0] + phi[1] * s_r[1] + phi[2] * s_r[2]
+            for i in range(3):
+                left0 = dc * (phi[i] * ps - t2 * s_r[i]) - 2.0 * c * s_r[i]
+                left1 = c * phi[i]
+                for j in range(3):
+                    a[3 + i, 3 + j] += left0 * phi[j] + left1 * s_r[j]
+                a[3 + i, 3 + i] += c * ps
+            _add_scaled_hat(a[3:, 3:], s_r, -0.5)
+        # mat = a B
+        for i in range(6):
+            for j in range(3):
+                mat[i, j] = a[i, j]
+                mat[i, 3 + j] = a[i, 3] * jinv[0, j] + a[i, 4] * jinv[1, j] + a[i, 5] * jinv[2, j]
+        # D = d delta / d(q_a, q_b) = R^T E with R = diag(Ra, Ra) and E = [E_a, I],
+        # E_a = [-I, d^; 0, -I]: the world tangent is E^T (R mat R^T) E, blocks
+        # [E_a^T M E_a, E_a^T M; M E_a, M] for M = R mat R^T
+        hat_into(diff, diff_hat)
+        for p in range(2):
+            for q in range(2):
+                for i in range(3):
+                    for j in range(3):
+                        tmp[i, j] = (mat[3 * p + i, 3 * q] * ra[j, 0]
+                                     + mat[3 * p + i, 3 * q + 1] * ra[j, 1]
+                                     + mat[3 * p + i, 3 * q + 2] * ra[j, 2])
+                for i in range(3):
+                    for j in range(3):
+                        rotated[3 * p + i, 3 * q + j] = (
+                            ra[i, 0] * tmp[0, j] + ra[i, 1] * tmp[1, j] + ra[i, 2] * tmp[2, j])
+        out = blocks[link]
+        for i in range(6):
+            for j in range(6):
+                out[6 + i, 6 + j] = rotated[i, j]
+            for j in range(3):
+                # M E_a
+                out[6 + i, j] = -rotated[i, j]
+                out[6 + i, 3 + j] = (rotated[i, 0] * diff_hat[0, j]
+                                     + rotated[i, 1] * diff_hat[1, j]
+                                     + rotated[i, 2] * diff_hat[2, j] - rotated[i, 3 + j])
+        for j in range(6):
+            for i in range(3):
+                # E_a^T M and E_a^T (M E_a)
+                out[i, 6 + j] = -rotated[i, j]
+                out[3 + i, 6 + j] = -(diff_hat[i, 0] * rotated[0, j]
+                                      + diff_hat[i, 1] * rotated[1, j]
+                                      + diff_hat[i, 2] * rotated[2, j]) - rotated[3 + i, j]
+                out[i, j] = -out[6 + i, j]
+                out[3 + i, j] = -(diff_hat[i, 0] * out[6, j] + diff_hat[i, 1] * out[7, j]
+                                  + diff_hat[i, 2] * out[8, j]) - out[9 + i, j]
+        if material:
+            continue
+        # geometric terms of the b-side world wrench (F, M) = R_a L: turning frame a turns it
+        # (dF = -F^ dθ_a, dM = -M^ dθ_a) and the lever d = x_b - x_a of the a-side moment
+        # -M - d x F moves with x_a, x_b
+        hat_into(world[:3, 0], f_hat)
+        hat_into(world[3:, 0], m_hat)
+        for i in range(3):
+            for j in range(3):
+                out[i, 3 + j] -= f_hat[i, j]
+                out[3 + i, j] += f_hat[i, j]
+                out[3 + i, 6 + j] -= f_hat[i, j]
+                out[6 + i, 3 + j] += f_hat[i, j]
+                out[9 + i, 3 + j] += m_hat[i, j]
+                out[3 + i, 3 + j] -= m_hat[i, j] + (diff_hat[i, 0] * f_hat[0, j]
+                                                    + diff_hat[i, 1] * f_hat[1, j]
+                                                    + diff_hat[i, 2] * f_hat[2, j])

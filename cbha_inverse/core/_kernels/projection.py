@@ -1,0 +1,173 @@
+"""
+Compiled projection of a solved linearisation onto effectors and actuators (DESIGN §6 step 2).
+
+:func:`project_effectors` forms ``W_ea``, ``W_aa`` and the free effector positions from
+``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the actuation and remaining gap of a QP solution;
+:func:`target_status` checks the targets of a tick.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def project_effectors(solved, rhs, positions, rotations, effector_frames, effector_offsets,
+                      previous):
+    """
+    Project a solved tick onto the effectors and actuators (DESIGN §6 step 2).
+
+    With ``solved = K⁻¹ [r, J_aᵀ]`` and the effector Jacobian ``J_e`` (block ``[I, -r^]`` on
+    the effector's frame, ``r = R_f o``, :mod:`cbha_inverse.core.actuation.effectors`):
+    ``W_ea = J_e K⁻¹ J_aᵀ``, ``W_aa = J_a K⁻¹ J_aᵀ`` and the free effector positions
+    ``p_e + J_e K⁻¹ r``, returned relative to the previous actuation so that
+    ``δ_free = offset - target``.
+
+    Parameters
+    ----------
+    solved : (6n, m + 1) ndarray
+        ``K⁻¹ [r, J_aᵀ]``.
+    rhs : (6n, m + 1) ndarray
+        ``[r, J_aᵀ]``.
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    effector_frames : (k,) int ndarray
+        Frame of every effector (1..n).
+    effector_offsets : (k, 3) ndarray  [m]
+        Effector points in their frame's axes.
+    previous : (m,) ndarray
+        ``λ_prev``.
+
+    Returns
+    -------
+    w_ea : (3k, m) ndarray  [m/N, m/Pa]
+    w_aa : (m, m) ndarray
+    offset : (3k,) ndarray  [m]
+        ``p_e + J_e K⁻¹ r - W_ea λ_prev``.
+    residual_norm : float  [N, N*m]
+        ``|r|``.
+
+    """
+    size, width = solved.shape
+    m = width - 1
+    k = effector_frames.size
+    moved = np.empty((3 * k, width))
+    offset = np.empty(3 * k)
+    for e in range(k):
+        frame = effector_frames[e]
+        rot = rotations[frame]
+        lever = np.empty(3)
+        for i in range(3):
+            lever[i] = (rot[i, 0] * effector_offsets[e, 0] + rot[i, 1] * effector_offsets[e, 1]
+                        + rot[i, 2] * effector_offsets[e, 2])
+            offset[3 * e + i] = positions[frame, i] + lever[i]
+        base = 6 * (frame - 1)
+        for col in range(width):
+            rx, ry, rz = solved[base + 3, col], solved[base + 4, col], solved[base + 5, col]
+            # dp = dx + dθ x r
+            moved[3 * e, col] = solved[base, col] + ry * lever[2] - rz * lever[1]
+            moved[3 * e + 1, col] = solved[base + 1, col] + rz * lever[0] - rx * lever[2]
+            moved[3 * e + 2, col] = solved[base + 2, col] + rx * lever[1] - ry * lever[0]
+    w_ea = np.ascontiguousarray(moved[:, 1:])
+    for row in range(3 * k):
+        acc = offset[row] + moved[row, 0]
+        for j in range(m):
+            acc -= w_ea[row, j] * previous[j]
+        offset[row] = acc
+    w_aa = np.zeros((m, m))
+    residual = 0.0
+    for q in range(size):
+        residual += rhs[q, 0] * rhs[q, 0]
+        for i in range(m):
+            weight = rhs[q, 1 + i]
+            if weight != 0.0:
+                for j in range(m):
+                    w_aa[i, j] += weight * solved[q, 1 + j]
+    return w_ea, w_aa, offset, math.sqrt(residual)
+
+
+@numba.njit(cache=True)
+def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bounds):
+    """
+    Return the actuation of a QP solution and the linear model's remaining effector gap.
+
+    Parameters
+    ----------
+    w_ea : (3k, m) ndarray  [m/N, m/Pa]
+        Effector-actuator compliance.
+    delta_free : (3k,) ndarray  [m]
+        ``δ_e^free`` (free effector positions minus targets).
+    scale : (m,) ndarray
+        ``σ``: ``λ = σ x``.
+    x, x_previous : (m,) ndarray
+        QP solution and the previous actuation, dimensionless.
+    lower_bounds, upper_bounds : (m,) ndarray
+        Actuator bounds.
+
+    Returns
+    -------
+    actuation : (m,) ndarray  [N, Pa]
+        ``σ x`` clipped into the bounds.
+    gap : (3k,) ndarray  [m]
+        ``W_ea λ + δ_free`` (paper eq. 11: predicted effector minus target).
+    largest_gap : float  [m]
+        Largest effector distance ``max_e |gap_e|``.
+    largest_move : float
+        ``max |x - x_previous|`` (dimensionless actuation change).
+    finite : bool
+        Whether every ``x`` is finite (else the caller holds the actuation).
+
+    """
+    rows, m = w_ea.shape
+    actuation = np.empty(m)
+    largest_move = 0.0
+    finite = True
+    for j in range(m):
+        if not math.isfinite(x[j]):
+            finite = False
+        actuation[j] = min(max(scale[j] * x[j], lower_bounds[j]), upper_bounds[j])
+        largest_move = max(largest_move, abs(x[j] - x_previous[j]))
+    gap = np.empty(rows)
+    for r in range(rows):
+        acc = delta_free[r]
+        for j in range(m):
+            acc += w_ea[r, j] * actuation[j]
+        gap[r] = acc
+    largest = 0.0
+    for e in range(rows // 3):
+        largest = max(largest, gap[3 * e] ** 2 + gap[3 * e + 1] ** 2 + gap[3 * e + 2] ** 2)
+    return actuation, gap, math.sqrt(largest), largest_move, finite
+
+
+@numba.njit(cache=True)
+def target_status(targets, base, reach):
+    """
+    Check the effector targets of a tick: finite, and within reach of the chain.
+
+    Parameters
+    ----------
+    targets : (k, 3) ndarray  [m]
+        Effector targets.
+    base : (3,) ndarray  [m]
+        Base position.
+    reach : (k,) ndarray  [m]
+        Largest distance (max-abs component) an effector can be from the base.
+
+    Returns
+    -------
+    int
+        0: finite and within reach; 1: not finite; 2: finite but some target beyond reach.
+
+    """
+    status = 0
+    for e in range(targets.shape[0]):
+        for i in range(3):
+            value = targets[e, i]
+            if not math.isfinite(value):
+                return 1
+            if abs(value - base[i]) > reach[e]:
+                status = 2
+    return status

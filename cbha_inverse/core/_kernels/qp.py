@@ -1,0 +1,416 @@
+"""
+Compiled kernels of the actuation QP (paper eq. 13): its matrices, the active-set box-QP solver.
+
+The QP of a control tick is tiny (``m`` = 6..16 actuators) and solved every tick, so a numpy
+implementation spends its time in call overhead (dozens of 1-3 us calls) rather than arithmetic.
+These kernels hold the arithmetic of :func:`cbha_inverse.core.inverse.qp_problem.qp_matrices`,
+:func:`cbha_inverse.core.inverse.qp_problem.qp_problem`, :class:`cbha_inverse.core.inverse.qp.ActiveSetQP`,
+:func:`cbha_inverse.core.inverse.qp.polish` and :func:`cbha_inverse.core.inverse.qp.binding_bounds` as plain
+loops compiled by numba (``cache=True``: compiled once, later processes load the machine code
+from ``__pycache__``). The public functions there keep the documentation and the result types;
+the equations are cited in their docstrings. Small dense solves use the hand-written Cholesky
+factorisation of :func:`solve_free_block` (``m ≲ 30``: no LAPACK call overhead).
+"""
+
+import numba
+import numpy as np
+
+
+SOLVED = 0
+"""Status code of :func:`active_set_box_qp`: the KKT conditions hold."""
+MAX_ITERATIONS = 1
+"""Status code of :func:`active_set_box_qp`: the iteration limit was reached."""
+SINGULAR = 2
+"""Status code of :func:`active_set_box_qp`: a free block is not positive definite."""
+
+_BOUND_SLACK = 1e-13
+"""Box violation (dimensionless) tolerated before a free variable is made active (round-off)."""
+
+
+@numba.njit(cache=True)
+def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
+    """
+    Return the normalised Hessian parts of the actuation QP.
+
+    With ``W = W_ea diag(σ)``, ``T = Wᵀ W``, ``ν = trace(T) / m`` (1 if not positive),
+    ``E = diag(σ) W_aa diag(σ)`` and ``ν_E = trace(E) / m``::
+
+        tracking = T / ν,   weighted_w = W / ν,
+        hessian  = T / ν + ε_P I + ε_E (E + Eᵀ) / (2 ν_E)      (energy term only if ν_E, ε_E > 0)
+
+    Parameters
+    ----------
+    w_ea : (3k, m) ndarray of float64
+        Effector-actuator compliance ``W_ea``.
+    w_aa : (m, m) ndarray of float64
+        Actuator-actuator compliance ``W_aa``.
+    scale : (m,) ndarray of float64
+        ``σ``.
+    energy_weight, proximal_weight : float
+        ``ε_E``, ``ε_P`` (unit-free).
+
+    Returns
+    -------
+    hessian : (m, m) ndarray
+        Full normalised Hessian (exactly symmetric).
+    tracking : (m, m) ndarray
+        Normalised tracking Hessian ``T / ν`` (exactly symmetric).
+    weighted_w : (3k, m) ndarray
+        ``W / ν``.
+
+    """
+    rows, m = w_ea.shape
+    w = np.empty((rows, m))
+    for r in range(rows):
+        for j in range(m):
+            w[r, j] = w_ea[r, j] * scale[j]
+    # upper triangle of Wᵀ W, accumulated row by row of W (contiguous inner loop)
+    tracking = np.zeros((m, m))
+    for r in range(rows):
+        for i in range(m):
+            w_ri = w[r, i]
+            for j in range(i, m):
+                tracking[i, j] += w_ri * w[r, j]
+    norm = 0.0
+    for i in range(m):
+        norm += tracking[i, i]
+    norm /= m
+    if not norm > 0.0:
+        norm = 1.0
+    w /= norm
+    energy_norm = 0.0
+    for i in range(m):
+        energy_norm += w_aa[i, i] * scale[i] * scale[i]
+    energy_norm /= m
+    energy_factor = 0.0
+    if energy_norm > 0.0 and energy_weight > 0.0:
+        energy_factor = 0.5 * energy_weight / energy_norm
+    hessian = np.empty((m, m))
+    for i in range(m):
+        for j in range(i, m):
+            t = tracking[i, j] / norm
+            h = t + energy_factor * (w_aa[i, j] + w_aa[j, i]) * (scale[i] * scale[j])
+            tracking[i, j] = t
+            tracking[j, i] = t
+            hessian[i, j] = h
+            hessian[j, i] = h
+        hessian[i, i] += proximal_weight
+    return hessian, tracking, w
+
+
+@numba.njit(cache=True)
+def qp_vectors(weighted_w, proximal_weight, scale, delta_free, previous, lower_bounds,
+               upper_bounds, rate_limit):
+    """
+    Return the target-dependent vectors of one tick's QP.
+
+    ``x_prev = λ_prev / σ``, ``t = weighted_wᵀ δ_free``, ``g = t - ε_P x_prev`` and the box
+    ``[lb / σ, ub / σ]``, intersected with ``x_prev ± rate / σ`` when a rate limit is given.
+
+    Parameters
+    ----------
+    weighted_w : (3k, m) ndarray of float64
+        ``W_ea σ / ν`` from :func:`qp_hessians`.
+    proximal_weight : float
+        ``ε_P``.
+    scale : (m,) ndarray of float64
+        ``σ``.
+    delta_free : (3k,) ndarray of float64  [m]
+        ``δ_e^free``.
+    previous : (m,) ndarray of float64
+        ``λ_prev``.
+    lower_bounds, upper_bounds : (m,) ndarray of float64
+        Actuator bounds.
+    rate_limit : (m,) ndarray of float64 or None
+        Largest change per tick.
+
+    Returns
+    -------
+    (5, m) ndarray
+        Rows ``gradient, lower, upper, x_prev, tracking_gradient``: the QP's gradient and box,
+        ``x_prev`` and the tracking part ``t`` of the gradient (one array: a single allocation;
+        unpacking it gives the rows).
+
+    """
+    rows, m = weighted_w.shape
+    vectors = np.empty((5, m))
+    gradient, lower, upper, x_prev, tracking_gradient = (
+        vectors[0], vectors[1], vectors[2], vectors[3], vectors[4])
+    for j in range(m):
+        x_prev[j] = previous[j] / scale[j]
+        s = 0.0
+        for r in range(rows):
+            s += weighted_w[r, j] * delta_free[r]
+        tracking_gradient[j] = s
+        gradient[j] = s - proximal_weight * x_prev[j]
+        lower[j] = lower_bounds[j] / scale[j]
+        upper[j] = upper_bounds[j] / scale[j]
+        if rate_limit is not None:
+            step = rate_limit[j] / scale[j]
+            lower[j] = max(lower[j], x_prev[j] - step)
+            upper[j] = min(upper[j], x_prev[j] + step)
+    return vectors
+
+
+@numba.njit(cache=True)
+def solve_free_block(h, g, x, free):
+    """
+    Solve the stationarity equations of the free variables with the others fixed, in place.
+
+    ``H_ff x_f = -g_f - H_fb x_b`` by a Cholesky factorisation of ``H_ff`` (LAPACK ``dposv``'s
+    algorithm and failure test, without its call overhead for the small blocks of the QP).
+
+    Parameters
+    ----------
+    h : (m, m) ndarray of float64
+        Symmetric Hessian (only the free rows and columns are read).
+    g : (m,) ndarray of float64
+        Gradient.
+    x : (m,) ndarray of float64
+        Input: the fixed values ``x_b`` of the bound variables; output: ``x_f`` written.
+    free : (m,) ndarray of bool
+        The free variables.
+
+    Returns
+    -------
+    bool
+        Whether ``H_ff`` is positive definite and ``x_f`` finite (else ``x_f`` is undefined).
+
+    """
+    m = x.size
+    index = np.empty(m, dtype=np.int64)
+    n = 0
+    for i in range(m):
+        if free[i]:
+            index[n] = i
+            n += 1
+    a = np.empty((n, n))
+    y = np.empty(n)
+    for p in range(n):
+        i = index[p]
+        s = -g[i]
+        for j in range(m):
+            if not free[j]:
+                s -= h[i, j] * x[j]
+        y[p] = s
+        for q in range(n):
+            a[p, q] = h[i, index[q]]
+    # lower Cholesky factor a = L Lᵀ, column by column (L stored in the lower triangle)
+    for j in range(n):
+        d = a[j, j]
+        for k in range(j):
+            d -= a[j, k] * a[j, k]
+        if not d > 0.0:
+            return False
+        d = np.sqrt(d)
+        a[j, j] = d
+        for i in range(j + 1, n):
+            s = a[i, j]
+            for k in range(j):
+                s -= a[i, k] * a[j, k]
+            a[i, j] = s / d
+    for i in range(n):
+        s = y[i]
+        for k in range(i):
+            s -= a[i, k] * y[k]
+        y[i] = s / a[i, i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= a[k, i] * y[k]
+        y[i] = s / a[i, i]
+    for p in range(n):
+        if not np.isfinite(y[p]):
+            return False
+        x[index[p]] = y[p]
+    return True
+
+
+@numba.njit(cache=True)
+def _gradient_entry(h, g, x, i):
+    """Return ``(H x + g)_i``."""
+    s = g[i]
+    for j in range(x.size):
+        s += h[i, j] * x[j]
+    return s
+
+
+@numba.njit(cache=True)
+def active_set_box_qp(h, g, lower, upper, state, max_iterations):
+    """
+    Solve ``min ½ xᵀ H x + gᵀ x`` s.t. ``lower ≤ x ≤ upper`` by principal pivoting.
+
+    ``state`` holds -1 (at the lower bound), +1 (at the upper bound) or 0 (free) per variable.
+    Each iteration fixes the active variables at their bounds, solves the free ones
+    (:func:`solve_free_block`) and pivots the violators: free variables outside the box
+    (by more than 1e-13) become active at the violated bound, active ones whose multiplier has
+    the wrong sign (gradient beyond ``1e-12 (2 + max|g|)``) become free. All violators are
+    pivoted in iterations 1-3 (block pivoting), then only the first one (Murty's rule, finite
+    termination for positive definite ``H``). No violator is the KKT conditions.
+
+    Parameters
+    ----------
+    h : (m, m) ndarray of float64
+        Symmetric positive definite Hessian (normalised, ``|H| ~ 1``).
+    g : (m,) ndarray of float64
+        Gradient.
+    lower, upper : (m,) ndarray of float64
+        Box, ``lower ≤ upper``.
+    state : (m,) ndarray of int8
+        Warm start (active set of the previous solve); not modified.
+    max_iterations : int
+        Iteration limit.
+
+    Returns
+    -------
+    x : (m,) ndarray
+        The solution clipped into the box (undefined unless the status is :data:`SOLVED`).
+    status : int
+        :data:`SOLVED`, :data:`MAX_ITERATIONS` or :data:`SINGULAR`.
+    iterations : int
+        Iterations done.
+    state : (m,) ndarray of int8
+        The final active set.
+
+    """
+    m = g.size
+    state = state.copy()
+    x = np.empty(m)
+    free = np.empty(m, dtype=np.bool_)
+    pivot = np.empty(m, dtype=np.int8)
+    g_max = 0.0
+    for i in range(m):
+        g_max = max(g_max, abs(g[i]))
+    # the problem is normalised (|H| ~ 1): absolute tolerance on the multipliers
+    tolerance = 1e-12 * (2.0 + g_max)
+    for iteration in range(1, max_iterations + 1):
+        for i in range(m):
+            free[i] = state[i] == 0
+            x[i] = lower[i] if state[i] < 0 else upper[i]
+        if not solve_free_block(h, g, x, free):
+            return x, SINGULAR, iteration, state
+        # pivot[i]: the new state of a violating variable, 2 for none
+        first = -1
+        for i in range(m):
+            pivot[i] = 2
+            if free[i]:
+                if x[i] < lower[i] - _BOUND_SLACK:
+                    pivot[i] = -1
+                elif x[i] > upper[i] + _BOUND_SLACK:
+                    pivot[i] = 1
+            else:
+                grad = _gradient_entry(h, g, x, i)
+                if (state[i] < 0 and grad < -tolerance) or (state[i] > 0 and grad > tolerance):
+                    pivot[i] = 0
+            if first < 0 and pivot[i] != 2:
+                first = i
+        if first < 0:
+            for i in range(m):
+                x[i] = min(max(x[i], lower[i]), upper[i])
+            return x, SOLVED, iteration, state
+        if iteration > 3:
+            state[first] = pivot[first]
+        else:
+            for i in range(m):
+                if pivot[i] != 2:
+                    state[i] = pivot[i]
+    return x, MAX_ITERATIONS, max_iterations, state
+
+
+@numba.njit(cache=True)
+def polish_box_qp(h, g, lower, upper, x, tolerance):
+    """
+    Return the KKT point of the active set that an approximate box-QP solution suggests.
+
+    Variables within ``tolerance`` of a bound whose gradient ``H x + g`` pushes outward are fixed
+    there, the others solved from the stationarity equations (:func:`solve_free_block`). The
+    result is accepted if it lies in the box and the fixed variables' gradients keep their sign.
+
+    Parameters
+    ----------
+    h : (m, m) ndarray of float64
+        Symmetric positive definite Hessian.
+    g : (m,) ndarray of float64
+        Gradient.
+    lower, upper : (m,) ndarray of float64
+        Box.
+    x : (m,) ndarray of float64
+        Approximate solution inside the box.
+    tolerance : float
+        Distance to a bound below which a variable is tried as active.
+
+    Returns
+    -------
+    y : (m,) ndarray
+        The refined solution (undefined if not ``accepted``).
+    accepted : bool
+        Whether ``y`` was found and is the KKT point (else ``x`` stands).
+
+    """
+    m = x.size
+    y = x.copy()
+    at_bound = np.zeros(m, dtype=np.int8)
+    n_active = 0
+    for i in range(m):
+        near_lower = x[i] - lower[i] < tolerance
+        near_upper = upper[i] - x[i] < tolerance
+        if near_lower or near_upper:
+            grad = _gradient_entry(h, g, x, i)
+            if near_lower and grad > 0.0:
+                at_bound[i] = -1
+                y[i] = lower[i]
+            elif near_upper and grad < 0.0:
+                at_bound[i] = 1
+                y[i] = upper[i]
+            n_active += at_bound[i] != 0
+    if n_active == 0:
+        return y, False
+    free = at_bound == 0
+    if n_active < m and not solve_free_block(h, g, y, free):
+        return y, False
+    for i in range(m):
+        if not lower[i] <= y[i] <= upper[i]:
+            return y, False
+        if at_bound[i] != 0:
+            grad = _gradient_entry(h, g, y, i)
+            if (at_bound[i] < 0 and not grad >= 0.0) or (at_bound[i] > 0 and not grad <= 0.0):
+                return y, False
+    return y, True
+
+
+@numba.njit(cache=True)
+def bounds_binding(tracking_hessian, tracking_gradient, lower, upper, x, tolerance):
+    """
+    Return which variables sit on a bound that the tracking gradient pushes against.
+
+    ``x_i ≤ lower_i + tol`` and ``(T x + t)_i > tol``, or ``x_i ≥ upper_i - tol`` and
+    ``(T x + t)_i < -tol``.
+
+    Parameters
+    ----------
+    tracking_hessian : (m, m) ndarray of float64
+        ``T``.
+    tracking_gradient : (m,) ndarray of float64
+        ``t``.
+    lower, upper : (m,) ndarray of float64
+        Box.
+    x : (m,) ndarray of float64
+        Solution.
+    tolerance : float
+        Tolerance on the distance to the bound and on the gradient.
+
+    Returns
+    -------
+    (m,) ndarray of bool
+        The binding bounds.
+
+    """
+    m = x.size
+    binding = np.zeros(m, dtype=np.bool_)
+    for i in range(m):
+        near_lower = x[i] <= lower[i] + tolerance
+        near_upper = x[i] >= upper[i] - tolerance
+        if near_lower or near_upper:
+            grad = _gradient_entry(tracking_hessian, tracking_gradient, x, i)
+            binding[i] = (near_lower and grad > tolerance) or (near_upper and grad < -tolerance)
+    return binding

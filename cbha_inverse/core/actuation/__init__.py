@@ -1,0 +1,1 @@
+"""Actuation of the frame chain: cables, pressure cavities, effector points (DESIGN §5)."""

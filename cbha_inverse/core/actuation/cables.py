@@ -1,0 +1,166 @@
+"""
+Cables (tendons) of a frame chain: routing data and the tick's evaluator (DESIGN §5).
+
+A cable is routed through points fixed to frames; its force on each routing point is the sum of
+the unit vectors toward its neighbouring points (the last point pulls toward the previous one),
+mapped rigidly to the wrench of the point's frame: one column of ``J_aᵀ`` per cable (paper eq. 9),
+``-d(length)/dq`` without friction, ``λ ≥ 0`` the tension. :class:`CableGroup` indexes the
+routing of all cables; :class:`CableTerms` adds the assembly index of their load stiffness for
+the compiled :func:`cbha_inverse.core._kernels.cables.cable_pass` (the one implementation of the
+cable equations; the numpy version is a test oracle, ``test/oracles/actuation.py``).
+"""
+
+from dataclasses import dataclass
+
+from cbha_inverse.core._kernels.cables import cable_pass
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Cable:
+    """
+    One cable (tendon) routed through points fixed to frames.
+
+    Attributes
+    ----------
+    name : str
+        Actuator name.
+    frames : (P,) ndarray of int
+        Frame index of each routing point, in routing order from the actuator (base) end.
+    offsets : (P, 3) ndarray  [m]
+        Routing points in the axes of their frame, relative to its origin.
+    max_tension : float  [N]
+        Upper bound of the tension (``inf`` if unbounded).
+
+    """
+
+    name: str
+    frames: np.ndarray
+    offsets: np.ndarray
+    max_tension: float = np.inf
+
+    def __post_init__(self):
+        """Validate shapes."""
+        frames = np.asarray(self.frames, dtype=int).reshape(-1)
+        offsets = np.asarray(self.offsets, dtype=float).reshape(-1, 3)
+        if frames.size < 2 or offsets.shape[0] != frames.size:
+            raise ValueError(f'cable {self.name!r}: need >= 2 routing points with one offset each')
+        object.__setattr__(self, 'frames', frames)
+        object.__setattr__(self, 'offsets', offsets)
+
+
+class CableGroup:
+    """
+    All cables of a scene, evaluated together (DESIGN §5).
+
+    The force of a cable on a routing point is the sum of the unit vectors toward its neighbouring
+    routing points (the last point pulls toward the previous one); it is mapped rigidly to the
+    wrench of the point's frame. Without friction this is exactly ``-d(length)/dq``.
+
+    Parameters
+    ----------
+    cables : sequence of Cable
+        The cables, in column order.
+    n_frames : int
+        Number of frames of the chain (``n + 1``, base included).
+
+    """
+
+    def __init__(self, cables, n_frames):
+        """Index the routing points and the spans between them."""
+        self.cables = tuple(cables)
+        self.names = tuple(c.name for c in self.cables)
+        self.n_frames = int(n_frames)
+        m = len(self.cables)
+        frames, offsets, owner, starts = [], [], [], []
+        count = 0
+        for j, cable in enumerate(self.cables):
+            if cable.frames.min() < 0 or cable.frames.max() >= n_frames:
+                raise ValueError(f'cable {cable.name!r} names a frame outside 0..{n_frames - 1}')
+            p = cable.frames.size
+            frames.append(cable.frames)
+            offsets.append(cable.offsets)
+            owner.append(np.full(p, j))
+            starts.append(count + np.arange(p - 1))
+            count += p
+        self.frames = np.concatenate(frames)
+        self.offsets = np.concatenate(offsets)
+        owner = np.concatenate(owner)
+        self.segment_start = np.concatenate(starts)
+        self.segment_end = self.segment_start + 1
+        self.segment_owner = owner[self.segment_start]
+        self.point_owner = owner
+        self.upper_bounds = np.array([c.max_tension for c in self.cables], dtype=float)
+        self.lower_bounds = np.zeros(m)
+
+    @property
+    def n_actuators(self):
+        """Return the number of cables."""
+        return len(self.cables)
+
+
+class CableTerms:
+    """
+    The assembly index of one :class:`CableGroup` for the compiled cable pass.
+
+    Parameters
+    ----------
+    group : cbha_inverse.core.actuation.cables.CableGroup
+        The cables.
+    columns : sequence of int
+        Their columns in the actuator order.
+    n_frames : int
+        Number of frames (base included).
+
+    Attributes
+    ----------
+    pairs : list of (int, int)
+        Frame pairs ``(a, b)`` of the spans, one 12 x 12 stiffness block each.
+    moment_frames : list of int
+        Frames carrying routing points, one 3 x 3 moment block each.
+
+    """
+
+    def __init__(self, group, columns, n_frames):
+        """Precompute the routing and the block of every span and point."""
+        self.n_frames = int(n_frames)
+        self.columns = np.asarray(columns, dtype=np.int64)
+        self.frames = np.ascontiguousarray(group.frames, dtype=np.int64)
+        self.offsets = np.ascontiguousarray(group.offsets, dtype=float)
+        self.start = np.ascontiguousarray(group.segment_start, dtype=np.int64)
+        self.end = np.ascontiguousarray(group.segment_end, dtype=np.int64)
+        self.span_owner = np.ascontiguousarray(group.segment_owner, dtype=np.int64)
+        self.point_owner = np.ascontiguousarray(group.point_owner, dtype=np.int64)
+        pairs = {}
+        self.span_pair = np.array([
+            pairs.setdefault((int(self.frames[s]), int(self.frames[e])), len(pairs))
+            for s, e in zip(self.start, self.end)], dtype=np.int64)
+        self.pairs = list(pairs)
+        self.moment_frames = sorted({int(f) for f in self.frames})
+        slot = {f: i for i, f in enumerate(self.moment_frames)}
+        self.point_slot = np.array([slot[int(f)] for f in self.frames], dtype=np.int64)
+
+    def evaluate(self, positions, rotations, actuation, rhs, pair_values, moment_values):
+        """
+        Add the cable columns and loads to ``rhs``; write the stiffness blocks.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        actuation : (m,) ndarray  [N]
+            All actuators (the cable tensions are taken at :attr:`columns`).
+        rhs : (6n, m + 1) ndarray
+            C-contiguous; residual (column 0) and ``J_aᵀ`` (columns ``1 + j``), added to.
+        pair_values : (P * 144,) ndarray
+            Receives the span stiffness blocks summed per frame pair (12 x 12 each).
+        moment_values : (F * 9,) ndarray
+            Receives the point moment blocks summed per frame (3 x 3 each).
+
+        """
+        cable_pass(positions, rotations, actuation, self.frames, self.offsets, self.start,
+                   self.end, self.span_owner, self.point_owner, self.columns,
+                   self.span_pair, self.point_slot, rhs, pair_values.reshape(-1, 12, 12),
+                   moment_values.reshape(-1, 3, 3))

@@ -1,0 +1,132 @@
+"""
+Effectors: points fixed to frames whose positions the inverse model drives (paper §IV, ``J_e``).
+
+The paper puts an identity block on the rows of the last frame; here an effector is any point
+``p = x_f + R_f o`` on a mobile frame ``f`` (the tip, a mid vertebra, a gripper point), several
+at once. With retract increments ``dp = dx_f + dθ_f × r = dx_f - r × dθ_f`` where ``r = R_f o``,
+i.e. the ``J_e`` block of the effector is ``[I, -r^]`` on frame ``f``.
+"""
+
+from cbha_inverse.core.se3 import cross
+import numpy as np
+
+
+class PointEffectors:
+    """
+    Points on mobile frames.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Effector names (``k`` of them).
+    frames : (k,) array_like of int
+        Frame of each point (``1..n``; the base cannot be an effector).
+    offsets : (k, 3) array_like  [m]
+        Points in their frame's axes.
+    n_frames : int
+        Number of frames (base included).
+
+    """
+
+    def __init__(self, names, frames, offsets, n_frames):
+        """Validate and store the effector points."""
+        self.names = tuple(names)
+        self.frames = np.asarray(frames, dtype=int).reshape(-1)
+        self.offsets = np.asarray(offsets, dtype=float).reshape(-1, 3)
+        if not (len(self.names) == self.frames.size == self.offsets.shape[0]):
+            raise ValueError('effectors: names, frames and offsets must have the same length')
+        if self.frames.size == 0:
+            raise ValueError('effectors: at least one effector is needed')
+        if self.frames.min() < 1 or self.frames.max() >= n_frames:
+            raise ValueError(f'effector frames must lie in 1..{n_frames - 1} (the base is fixed)')
+        self.n_frames = int(n_frames)
+        self._dof = self.frames - 1
+        self._centred = not np.any(self.offsets)
+
+    @property
+    def n_effectors(self):
+        """Return the number of effector points ``k``."""
+        return self.frames.size
+
+    def levers(self, rotations):
+        """
+        Return ``r = R_f o`` for every effector.
+
+        Parameters
+        ----------
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+
+        Returns
+        -------
+        (k, 3) ndarray  [m]
+
+        """
+        return np.einsum('kij,kj->ki', rotations[self.frames], self.offsets)
+
+    def positions(self, positions, rotations):
+        """
+        Return the world positions of the effector points.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+
+        Returns
+        -------
+        (k, 3) ndarray  [m]
+
+        """
+        if self._centred:
+            return positions[self.frames]
+        return positions[self.frames] + self.levers(rotations)
+
+    def apply_jacobian(self, increments, levers):
+        """
+        Return ``J_e dq`` for one or many increment fields.
+
+        Parameters
+        ----------
+        increments : (n, 6) or (n, 6, c) ndarray
+            Increments of frames ``1..n`` (``dx``, world-axis ``dθ``), optionally ``c`` columns.
+        levers : (k, 3) ndarray  [m]
+            From :meth:`levers` at the linearisation state.
+
+        Returns
+        -------
+        (k, 3) or (k, 3, c) ndarray  [m]
+            Effector displacements.
+
+        """
+        inc = increments[self._dof]
+        if inc.ndim == 2:
+            return inc[:, :3] + cross(inc[:, 3:], levers)
+        d_theta = np.moveaxis(inc[:, 3:, :], 1, 2)
+        rot = cross(d_theta, levers[:, None, :])
+        return inc[:, :3, :] + np.moveaxis(rot, 2, 1)
+
+    def jacobian(self, rotations):
+        """
+        Return the dense ``J_e`` (for tests and reports; the solver uses :meth:`apply_jacobian`).
+
+        Parameters
+        ----------
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+
+        Returns
+        -------
+        (3k, 6n) ndarray
+            Rows of the effector coordinates, columns of the increments of frames ``1..n``.
+
+        """
+        n = self.n_frames - 1
+        jac = np.zeros((3 * self.n_effectors, 6 * n))
+        for e, (dof, r) in enumerate(zip(self._dof, self.levers(rotations))):
+            jac[3 * e:3 * e + 3, 6 * dof:6 * dof + 3] = np.eye(3)
+            jac[3 * e:3 * e + 3, 6 * dof + 3:6 * dof + 6] = -np.array(
+                [[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+        return jac

@@ -1,0 +1,469 @@
+"""
+The per-tick inverse-simulation controller (DESIGN §6, paper §IV).
+
+:class:`InverseSolver` holds the immutable model (chain, actuators, effectors, gravity) and a
+mutable tick state (frame poses, current actuation, QP warm start). One :meth:`InverseSolver.step`:
+
+1. linearise at the current state in one fused pass of the compiled kernels
+   (:class:`cbha_inverse.core.system.EquilibriumSystem`, the static solver's evaluation too):
+   tangent stiffness ``K`` (symmetric part of structure + load stiffness), actuator columns
+   ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
+2. factor ``K`` (compiled band Cholesky) and solve ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS pass,
+   giving ``W_ea``, ``W_aa`` and ``δ_e^free``
+   (:func:`cbha_inverse.core._kernels.projection.project_effectors`);
+3. solve the regularised box QP (proxsuite, warm-started, or the exact active-set solver; projected
+   Gauss-Seidel on request or as a fallback if proxsuite reports a failure);
+4. apply ``λ`` and update the state by the Newton step of the same factorization,
+   ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (no second solve), followed by ``newton_steps - 1``
+   further full Newton steps at fixed ``λ`` if requested (or, with ``relinearize_every > 1``,
+   keep the linear model for a few ticks; see :class:`InverseOptions`).
+
+The closed-loop :class:`~cbha_inverse.core.inverse.correction.TargetCorrector` lives in
+:mod:`cbha_inverse.core.inverse.correction` (re-exported here).
+
+Repeated ticks therefore run Newton's method on the coupled problem (equilibrium plus optimal
+actuation); at a fixed target the state converges to the static equilibrium of the returned
+actuation. Each step is limited to ``max_rotation_step`` radians per frame so a far target cannot
+throw the linearisation off.
+"""
+
+import math
+import time
+from typing import NamedTuple
+
+from cbha_inverse.core._kernels.projection import (project_effectors, target_status,
+                                                   tick_outcome)
+from cbha_inverse.core._kernels.retraction import apply_linear_step, retract_frames as _retract
+from cbha_inverse.core.chain import ChainState, rest_state
+from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, ActuationQP, binding_bounds,
+                                          projected_gauss_seidel)
+from cbha_inverse.core.inverse.qp_problem import qp_matrices, qp_problem
+from cbha_inverse.core.inverse.results import InverseOptions, TickResult
+from cbha_inverse.core.statics import external_wrenches
+from cbha_inverse.core.system import EquilibriumSystem
+import numpy as np
+
+# targets farther from the base than this many chain lengths are clamped onto that sphere
+_REACH_FACTOR = 2.0
+
+
+class _Linearization(NamedTuple):
+    """What a linearisation tick keeps for the linear ticks that follow it (paper eq. 11)."""
+
+    w_ea: np.ndarray
+    matrices: object
+    offset: np.ndarray            # p_e + J_e K⁻¹ r - W_ea λ_prev (so δ_free = offset - target)
+    free_step: np.ndarray         # K⁻¹ r
+    solved_actuators: np.ndarray  # K⁻¹ J_aᵀ
+    previous: np.ndarray          # λ_prev at the linearisation
+    residual_norm: float
+
+
+class _CholeskyFactor:
+    """A band Cholesky factor of the equilibrium system, with ``solve``."""
+
+    def __init__(self, factor):
+        """Keep the factor."""
+        self._factor = factor
+
+    def solve(self, rhs):
+        """Return ``K⁻¹ rhs`` (C order)."""
+        return EquilibriumSystem.solve(self._factor, rhs)
+
+
+class InverseSolver:
+    """
+    The per-tick controller of DESIGN §6 (pure numerics, no ROS).
+
+    Parameters
+    ----------
+    model : cbha_inverse.core.chain.ChainModel
+        The frame chain.
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
+        Its actuators (``m``).
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
+        Its effector points (``k``).
+    gravity : (3,) array_like or None  [m/s^2]
+        Gravity acting on the lumped masses.
+    options : InverseOptions, optional
+        Solver options.
+    scale : (m,) array_like, optional
+        Actuator scales ``σ`` (default: ``upper - lower``; an actuator with zero range is
+        fixed at its bound and scaled like the widest one, see :attr:`warnings`).
+
+    Attributes
+    ----------
+    warnings : tuple of str
+        What the user should know about the set-up (zero-range actuators); a node logs them.
+
+    Raises
+    ------
+    ValueError
+        If an actuator has no finite upper bound, a lower bound above its upper bound, or a
+        given ``scale`` is not positive and finite.
+
+    Notes
+    -----
+    Every tick is overflow-safe: each effector target farther from the base than
+    ``_REACH_FACTOR`` times the chain's length (plus the effector offset) is moved along the
+    line from the base to it onto that sphere (no point beyond it is reachable, so the QP gives
+    the same saturated answer), and a tick whose QP returns a non-finite actuation holds the
+    last actuation and forgets the QP warm start (status ``'rejected'``), so the next sane
+    target is tracked again without :meth:`reset`.
+
+    """
+
+    def __init__(self, model, actuators, effectors, gravity=None, options=None, scale=None):
+        """Precompute the constant parts and start from rest."""
+        self.model = model
+        self.actuators = actuators
+        self.effectors = effectors
+        self.options = options or InverseOptions()
+        self.lower_bounds = np.array(actuators.lower_bounds, dtype=float)
+        self.upper_bounds = np.array(actuators.upper_bounds, dtype=float)
+        if not np.all(np.isfinite(self.upper_bounds)):
+            raise ValueError('every actuator needs a finite upper bound')
+        self.actuator_names = tuple(actuators.names)
+        self.effector_names = tuple(effectors.names)
+        m = actuators.n_actuators
+        span = self.upper_bounds - self.lower_bounds
+        inverted = [name for name, width in zip(self.actuator_names, span) if not width >= 0.0]
+        if inverted:
+            raise ValueError(f'actuator {inverted[0]!r}: lower bound above the upper bound')
+        fixed = [name for name, width in zip(self.actuator_names, span) if width == 0.0]
+        self.warnings = tuple(f'actuator {name!r} has zero range: fixed at its bound'
+                              for name in fixed)
+        if scale is None:
+            # a zero-range actuator's x = λ/σ is fixed by its bounds whatever σ: any positive σ
+            self._scale = np.where(span > 0.0, span, span.max() if span.max() > 0.0 else 1.0)
+        else:
+            self._scale = np.array(scale, dtype=float)
+            if self._scale.shape != (m,) or not np.all(np.isfinite(self._scale)) or np.any(
+                    self._scale <= 0.0):
+                raise ValueError(f'scale must be {m} positive finite values')
+        # a plain C-order copy: one compiled signature of the QP kernels whatever was given
+        self._rate = (None if self.options.rate_limit is None
+                      else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
+                                                    (m,))))
+        self._external = external_wrenches(model, gravity=gravity).reshape(-1)
+        self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
+        self._active_set = ActiveSetQP(m)
+        self._tick = EquilibriumSystem(model, actuators, self._external)
+        self._m, self._k = m, effectors.n_effectors
+        step = self.options.max_rotation_step
+        self._max_rotation = math.inf if step is None else float(step)
+        self._effector_frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
+        self._effector_offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
+        # no effector can be farther from the base than this (overflow-safe targets)
+        self._base = np.array(model.base_position, dtype=float)
+        self._reach = _REACH_FACTOR * (model.length + np.linalg.norm(
+            self._effector_offsets, axis=1))
+        self.reset()
+
+    def reset(self, state=None, actuation=None):
+        """
+        Return to rest (or to a given state and actuation) and forget the warm start.
+
+        Parameters
+        ----------
+        state : cbha_inverse.core.chain.ChainState, optional
+            Start state (default: the rest shape; the first ticks then settle it under gravity).
+        actuation : (m,) array_like, optional
+            Start actuation (default: zero, clipped to the bounds).
+
+        """
+        state = rest_state(self.model) if state is None else state
+        self._positions = np.array(state.positions, dtype=float)
+        self._rotations = np.array(state.rotations, dtype=float)
+        a = np.zeros(len(self.actuator_names)) if actuation is None else actuation
+        self.actuation = np.clip(np.asarray(a, dtype=float), self.lower_bounds, self.upper_bounds)
+        self._qp.reset()
+        self._active_set.reset()
+        self._linearization = None
+        self._pending = None
+        self._age = 0
+        self._prepared = False
+
+    def warm_up(self):
+        """
+        Run two ticks toward the current effector positions, then restore state and actuation.
+
+        The first tick of a process compiles the numba kernels (or loads them from numba's
+        on-disk cache, ~0.3 s); a node calls this before its control loop starts so that no
+        control tick pays for it. The warm start of the QP is forgotten.
+        """
+        state, actuation = self.state, self.actuation.copy()
+        targets = self.effector_positions()
+        self.step(targets)
+        self.prepare()
+        self.step(targets)
+        self.reset(state, actuation)
+
+    def _current(self, in_place=False):
+        """Return the frames with the pending linear step applied (stored if ``in_place``)."""
+        if self._pending is None:
+            return self._positions, self._rotations
+        free_step, solved_a, previous = self._pending
+        positions, rotations = ((self._positions, self._rotations) if in_place
+                                else (self._positions.copy(), self._rotations.copy()))
+        apply_linear_step(positions, rotations, free_step, solved_a, self.actuation - previous,
+                          self._max_rotation)
+        return positions, rotations
+
+    def _materialise(self):
+        """Apply the pending linear step to the stored frames."""
+        if self._pending is not None:
+            self._current(in_place=True)
+            self._pending = None
+
+    @property
+    def state(self):
+        """Return a copy of the current model frames as a ``ChainState``."""
+        positions, rotations = self._current()
+        return ChainState(positions.copy(), rotations.copy())
+
+    def effector_positions(self):
+        """Return the effector positions (k, 3) of the current model state."""
+        return self.effectors.positions(*self._current())
+
+    def _factor(self, positions, rotations, actuation):
+        """
+        Factor a fallback tangent when the tick's symmetric one is not positive definite.
+
+        The normal case (:meth:`_linearise`) is the Cholesky factorization of structure +
+        symmetric load stiffness; when it fails:
+        1. band LU of the exact tangent, structure + load stiffness (non-symmetric; high
+           pressures), :meth:`~cbha_inverse.core.system.EquilibriumSystem.exact_system`;
+        2. band Cholesky of the material tangent alone (paper eq. 8; far from equilibrium),
+           :meth:`~cbha_inverse.core.system.EquilibriumSystem.material_system`.
+        The residual is exact in every case, so only the convergence rate changes.
+        """
+        tangent, _ = self._tick.exact_system(positions, rotations, actuation)
+        factor = self._tick.factor_exact(tangent)
+        if factor is not None:
+            return factor
+        tangent, _ = self._tick.material_system(positions, rotations, actuation)
+        factor = self._tick.factor(tangent)
+        return None if factor is None else _CholeskyFactor(factor)
+
+    def _held(self, status, started, qp_status='not_run', warnings=()):
+        """Return a tick result that keeps the actuation and the state."""
+        m = self.actuation.size
+        elapsed = time.perf_counter() - started
+        timings = {'assembly': 0.0, 'factor': 0.0, 'projection': 0.0, 'qp': 0.0, 'update': 0.0,
+                   'total': elapsed}
+        return TickResult(self.actuation.copy(), self.effector_positions(), status, qp_status, 0,
+                          np.zeros(m, dtype=bool), float('nan'), float('nan'), timings,
+                          tuple(warnings))
+
+    def _reachable(self, targets):
+        """
+        Return the targets moved onto the reach sphere when beyond it, and the warnings.
+
+        Parameters
+        ----------
+        targets : (k, 3) ndarray  [m]
+            Finite effector targets.
+
+        Returns
+        -------
+        targets : (k, 3) ndarray  [m]
+        warnings : tuple of str
+
+        """
+        away = targets - self._base
+        largest = np.abs(away).max(axis=1)
+        far = largest > self._reach
+        # direction without overflow: divide by the largest component before the norm
+        unit = away[far] / largest[far, None]
+        unit /= np.linalg.norm(unit, axis=1)[:, None]
+        clamped = targets.copy()
+        clamped[far] = self._base + self._reach[far, None] * unit
+        names = ', '.join(name for name, f in zip(self.effector_names, far) if f)
+        return clamped, (f'target of {names} is beyond any reach of the chain: clamped to '
+                         f'{self._reach[far].max():.3g} m from the base',)
+
+    def step(self, targets):
+        """
+        Run one control tick toward the effector targets.
+
+        Parameters
+        ----------
+        targets : (k, 3) array_like  [m]
+            Desired effector positions (world axes, effector order).
+
+        Returns
+        -------
+        TickResult
+            The new actuation, the updated effector positions, status and timings.
+
+        Raises
+        ------
+        ValueError
+            If ``targets`` does not have the shape (k, 3) (or (3,) for one effector): no other
+            shape, e.g. a transposed (3, k) array, is reinterpreted.
+
+        """
+        t_start = time.perf_counter()
+        targets = np.asarray(targets, dtype=float)
+        k = self._k
+        if targets.shape != (k, 3):
+            if k == 1 and targets.shape == (3,):
+                targets = targets.reshape(1, 3)
+            else:
+                raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
+        targets = np.ascontiguousarray(targets)
+        checked = target_status(targets, self._base, self._reach)
+        if checked == 1:
+            return self._held('rejected', t_start, warnings=('non-finite target rejected',))
+        targets, warnings = self._reachable(targets) if checked == 2 else (targets, ())
+        lin = self._linearization
+        prepared, self._prepared = self._prepared, False
+        fresh = lin is None or self._age >= self.options.relinearize_every
+        if fresh:
+            self._materialise()
+            previous = self.actuation
+            t_assembly, t_factor, lin = self._linearise(previous)
+            if lin is None:
+                self._linearization = None
+                return self._held('not_positive_definite', t_start)
+            self._linearization, self._age = lin, 1
+        else:
+            previous = self.actuation
+            t_assembly = t_factor = t_start
+            self._age = 1 if prepared else self._age + 1
+        delta_free = lin.offset - targets.reshape(-1)
+        t_projection = time.perf_counter()
+        problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
+                             self.upper_bounds, rate_limit=self._rate)
+        solution, status = self._solve_qp(problem, same_hessian=not (fresh or prepared))
+        actuation, gap, largest_gap, largest_move, finite = tick_outcome(
+            lin.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
+            self.upper_bounds)
+        if not finite:
+            # never a NaN actuation, never a poisoned warm start: hold, the next tick recovers
+            self._qp.reset()
+            self._active_set.reset()
+            return self._held('rejected', t_start, solution.status,
+                              warnings + ('QP returned a non-finite actuation: held',))
+        saturated = binding_bounds(problem, solution.x)
+        if status == 'solved' and saturated.any():
+            status = 'saturated'
+        if self._age < self.options.relinearize_every and largest_move > 0.02:
+            # the actuation moves fast: the next tick relinearises
+            self._age = self.options.relinearize_every
+        t_qp = time.perf_counter()
+        self.actuation = actuation
+        self._pending = (lin.free_step, lin.solved_actuators, lin.previous)
+        if self.options.relinearize_every == 1:
+            self._materialise()
+            for _ in range(self.options.newton_steps - 1):
+                if not self._newton_step(actuation):
+                    break
+            effector_positions = self.effectors.positions(self._positions, self._rotations)
+        else:
+            # between linearisations the tick is the linear model of paper eq. 11
+            effector_positions = targets + gap.reshape(-1, 3)
+        t_end = time.perf_counter()
+        timings = {'assembly': t_assembly - t_start, 'factor': t_factor - t_assembly,
+                   'projection': t_projection - t_factor, 'qp': t_qp - t_projection,
+                   'update': t_end - t_qp, 'total': t_end - t_start}
+        return TickResult(actuation, effector_positions, status, solution.status,
+                          solution.iterations, saturated, largest_gap, lin.residual_norm, timings,
+                          warnings)
+
+    def _solve_qp(self, problem, same_hessian):
+        """
+        Solve the tick's QP (DESIGN §6 step 3) with the selected solver and its fallbacks.
+
+        The active set falls back to proxsuite when it does not converge, proxsuite (status
+        checked) to projected Gauss-Seidel. Returns ``(solution, status)``, the status
+        ``'solved'`` or ``'qp_fallback'``.
+        """
+        status = 'solved'
+        qp_solver = self.options.qp_solver
+        if qp_solver == 'active_set':
+            solution = self._active_set.solve(problem)
+            if solution.ok:
+                return solution, status
+            # proxsuite (status checked) takes over; it has not seen this Hessian
+            qp_solver, same_hessian = 'proxsuite', False
+        if qp_solver == 'proxsuite':
+            solution = self._qp.solve(problem, same_hessian=same_hessian)
+            if not solution.ok:
+                status = 'qp_fallback'
+                solution = projected_gauss_seidel(problem)
+                solution = type(solution)(solution.x, self._qp_status_text(solution), 0, True)
+            return solution, status
+        return projected_gauss_seidel(problem), status
+
+    def prepare(self):
+        """
+        Linearise now for the next :meth:`step`, off the target-to-command path.
+
+        A node calls it right after publishing a command: the next ``step`` then only solves the
+        QP and applies it (DESIGN §6 steps 3-4), so the target-to-command latency excludes the
+        linearisation (steps 1-2). The state and actuation do not change in between, so the
+        result is exactly that of linearising inside the next step. Does nothing while the
+        current linearisation is still valid (``relinearize_every`` > 1).
+
+        Returns
+        -------
+        bool
+            False when no factorization of the tangent succeeds (the next step then holds).
+
+        """
+        if self._linearization is not None and self._age < self.options.relinearize_every:
+            return True
+        self._materialise()
+        _, _, lin = self._linearise(self.actuation)
+        self._linearization, self._age, self._prepared = lin, 0, lin is not None
+        return lin is not None
+
+    def _linearise(self, previous):
+        """
+        Linearise, factor and project at the stored state (DESIGN §6 steps 1-2).
+
+        Returns ``(t_assembly, t_factor, linearization)``; the linearisation is ``None`` when no
+        factorization of the tangent succeeds.
+        """
+        positions, rotations = self._positions, self._rotations
+        tangent, rhs = self._tick.linearise(positions, rotations, previous)
+        t_assembly = time.perf_counter()
+        factor = self._tick.factor(tangent)
+        t_factor = time.perf_counter()
+        if factor is not None:
+            solved = self._tick.solve(factor, rhs)
+        else:
+            factorization = self._factor(positions, rotations, previous)
+            t_factor = time.perf_counter()
+            if factorization is None:
+                return t_assembly, t_factor, None
+            # C order, as the main path: the compiled projection then needs no second signature
+            solved = np.ascontiguousarray(factorization.solve(rhs))
+        w_ea, w_aa, offset, residual_norm = project_effectors(
+            solved, rhs, positions, rotations, self._effector_frames, self._effector_offsets,
+            previous)
+        matrices = qp_matrices(w_ea, w_aa, self._scale,
+                               energy_weight=self.options.energy_weight,
+                               proximal_weight=self.options.proximal_weight)
+        lin = _Linearization(w_ea, matrices, offset, solved[:, 0], solved[:, 1:], previous,
+                             residual_norm)
+        return t_assembly, t_factor, lin
+
+    def _newton_step(self, actuation):
+        """Apply one full Newton step at fixed actuation; return whether it succeeded."""
+        tangent, rhs = self._tick.linearise(self._positions, self._rotations, actuation)
+        step = self._tick.factor_solve(tangent, rhs[:, :1])
+        if step is None:
+            return False
+        self._positions, self._rotations = _retract(self._positions, self._rotations,
+                                                    step.reshape(-1, 6),
+                                                    self.options.max_rotation_step)
+        return True
+
+    @staticmethod
+    def _qp_status_text(solution):
+        """Label the Gauss-Seidel fallback's status."""
+        return f'gauss_seidel_{solution.status}'

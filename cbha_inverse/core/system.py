@@ -1,0 +1,459 @@
+"""
+The compiled evaluation of the chain's equilibrium: residual, actuator columns and tangents.
+
+:class:`EquilibriumSystem` is the one evaluator of paper eq. 9,
+``r(q) = f(q) + f_ext + J_a(q)ᵀ λ``, behind the controller's tick
+(:class:`cbha_inverse.core.inverse.solver.InverseSolver`), the static solver
+(:func:`cbha_inverse.core.statics.solve_static`), the scenes' forward model and the simulated
+plant. With the compiled kernels of :mod:`cbha_inverse.core._kernels`:
+
+- one pass over the links gives the residual, the condensed cavities' columns and every link's
+  exact 12 x 12 world tangent (paper eq. 8 with the geometric part and the exact cavity load
+  stiffness), or its material part alone (:meth:`EquilibriumSystem.material_system`);
+- one pass per cable group gives its columns, loads and span / point stiffness blocks;
+- every block is added by a constant index into one of two band storages: the lower band of the
+  symmetric part (weights ½ on the mirrored entries, the control tick's Cholesky,
+  :meth:`EquilibriumSystem.linearise`), or the general band of the exact, non-symmetric tangent
+  (Newton's LU, :meth:`EquilibriumSystem.exact_system`), with the half-bandwidth of the scene
+  (cables that skip frames widen it).
+
+Skinned-mesh cavities (:class:`~cbha_inverse.core.actuation.cavities.CavityGroup`, the exact
+but slow cavity model) are evaluated through their own ``evaluate``; they couple every frame, so
+the band is then the full matrix.
+"""
+
+from cbha_inverse.core._kernels.band import band_cholesky, band_solve, scatter_add
+from cbha_inverse.core._kernels.links import link_pass
+from cbha_inverse.core.actuation.cables import CableGroup, CableTerms
+from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
+import numpy as np
+from scipy.linalg import lapack
+
+
+class EquilibriumSystem:
+    """
+    Preallocated compiled evaluator of the equilibrium of a chain and its actuators.
+
+    Parameters
+    ----------
+    model : cbha_inverse.core.chain.ChainModel
+        The chain.
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
+        The actuators (``m``).
+    external : (6n,) ndarray  [N, N*m]
+        Constant external wrenches on frames 1..n (gravity).
+
+    Attributes
+    ----------
+    kd : int
+        Half-bandwidth of the tangent (11 for a chain whose actuators act within a link).
+
+    """
+
+    def __init__(self, model, actuators, external):
+        """Precompute constants, buffers and the assembly index."""
+        n = model.n_links
+        m = actuators.n_actuators
+        self.n, self.m, self.size = n, m, 6 * n
+        self.stiffness = np.ascontiguousarray(model.stiffnesses, dtype=float)
+        self.rest_offsets = np.ascontiguousarray(model.rest_offsets, dtype=float)
+        q0 = np.asarray(model.rest_rotations, dtype=float)
+        identity = np.array_equal(q0, np.broadcast_to(np.eye(3), q0.shape))
+        self._q0t = (np.zeros((0, 3, 3)) if identity
+                     else np.ascontiguousarray(np.swapaxes(q0, 1, 2)))
+        self.external = np.asarray(external, dtype=float).reshape(-1)
+        position = {name: k for k, name in enumerate(actuators.names)}
+        self._cables, self._generic = [], []
+        g0 = np.zeros((n, m, 6))
+        hess = np.zeros((n, m, 6, 6))
+        has_cavities = False
+        for group in actuators.groups:
+            cols = [position[name] for name in group.names]
+            if isinstance(group, CableGroup):
+                self._cables.append(CableTerms(group, cols, model.n_frames))
+            elif isinstance(group, LinearCavityGroup):
+                if not _matches_links(group, model):
+                    raise ValueError(f'condensed cavities {group.names}: every part must lie on '
+                                     'one link and carry its rest offset and rotation')
+                for e in range(group.lower.size):
+                    col = cols[group.owner[e]]
+                    g0[group.lower[e], col] += group.g0[e]
+                    hess[group.lower[e], col] += group.hessian[e]
+                has_cavities = True
+            else:
+                self._generic.append((group, np.asarray(cols, dtype=int)))
+        self.has_cavities = has_cavities
+        # G0 and H of every actuator column per link (none without condensed cavities)
+        self._cavity_wrench = g0 if has_cavities else np.zeros((n, 0, 6))
+        self._cavity_stiffness = hess if has_cavities else np.zeros((n, 0, 6, 6))
+        self._rhs = np.zeros((6 * n, m + 1))
+        # values of the assembly: link blocks, cable pair blocks, cable point moments
+        rows, cols = [], []
+        f = np.arange(n)
+        i12 = np.arange(12)
+        link_dof = 6 * f[:, None] + i12[None, :] - 6          # frame a = l -> dof 6(l - 1)
+        rows.append(np.broadcast_to(link_dof[:, :, None], (n, 12, 12)).reshape(-1))
+        cols.append(np.broadcast_to(link_dof[:, None, :], (n, 12, 12)).reshape(-1))
+        slices = []
+        count = n * 144
+        for cab in self._cables:
+            i6 = np.arange(6)
+            for a, b in cab.pairs:
+                dof = np.concatenate([6 * (a - 1) + i6, 6 * (b - 1) + i6])
+                rows.append(np.repeat(dof, 12))
+                cols.append(np.tile(dof, 12))
+            i3 = np.arange(3)
+            for fr in cab.moment_frames:
+                dof = 6 * (fr - 1) + 3 + i3
+                rows.append(np.repeat(dof, 3))
+                cols.append(np.tile(dof, 3))
+            n_pair, n_mom = len(cab.pairs) * 144, len(cab.moment_frames) * 9
+            slices.append((slice(count, count + n_pair),
+                           slice(count + n_pair, count + n_pair + n_mom)))
+            count += n_pair + n_mom
+        rows, cols = np.concatenate(rows), np.concatenate(cols)
+        size = self.size
+        valid = (rows >= 0) & (cols >= 0)
+        lo, hi = np.minimum(rows, cols), np.maximum(rows, cols)
+        self._weights = np.where(rows == cols, 1.0, 0.5)
+        # lower band storage (entry (r, c) at [c, r - c] of a C-order (N, kd + 1) array, the
+        # Fortran (kd + 1, N) layout of LAPACK); base-frame entries go to a trash slot at the end
+        kd = size - 1 if self._generic else int((hi - lo)[valid].max())
+        self.kd = kd
+        self._index = np.where(valid, lo * (kd + 1) + hi - lo, size * (kd + 1))
+        self._band = np.zeros(size * (kd + 1) + 1)
+        # general band storage of the exact tangent for LAPACK's LU (dgbtrf, kl = ku = kd):
+        # entry (r, c) at [c, 2 kd + r - c] of a C-order (N, 3 kd + 1) array
+        width = 3 * kd + 1
+        self._exact_index = np.where(valid, cols * width + 2 * kd + rows - cols, size * width)
+        self._exact_band = np.zeros(size * width + 1)
+        self._ones = np.ones(rows.size)
+        r_full, c_full = np.meshgrid(np.arange(size), np.arange(size), indexing='ij')
+        inside_exact = np.abs(r_full - c_full).reshape(-1) <= kd
+        self._exact_dense_slots = np.flatnonzero(inside_exact)
+        self._exact_slots = (c_full * width + 2 * kd + r_full - c_full).reshape(-1)[inside_exact]
+        c, d = np.meshgrid(np.arange(size), np.arange(kd + 1), indexing='ij')
+        inside = (c + d < size).reshape(-1)
+        self._band_slots = np.flatnonzero(inside)
+        self._dense_slots = ((c + d) * size + c).reshape(-1)[inside]
+        self._values = np.zeros(count)
+        self._link_values = self._values[:n * 144].reshape(n, 12, 12)
+        self._cable_values = [(cab, self._values[p], self._values[q])
+                              for cab, (p, q) in zip(self._cables, slices)]
+
+    def evaluate(self, positions, rotations, actuation, material=False):
+        """
+        Run the compiled passes: residual, actuator columns and every tangent block.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        actuation : (m,) ndarray  [N, Pa]
+            ``λ`` (enters the residual and the load stiffness).
+        material : bool
+            Keep only the material tangent of the links (:meth:`material_system`).
+
+        Returns
+        -------
+        rhs : (6n, m + 1) ndarray
+            Column 0: the residual ``f(q) + f_ext + J_aᵀ λ``; columns 1..m:
+            ``J_aᵀ``. A buffer of this object (overwritten by the next call).
+
+        """
+        positions = np.ascontiguousarray(positions, dtype=float)
+        rotations = np.ascontiguousarray(rotations, dtype=float)
+        actuation = np.ascontiguousarray(actuation, dtype=float)
+        rhs = self._rhs
+        link_pass(positions, rotations, self.stiffness, self.rest_offsets, self._q0t, actuation,
+                  self._cavity_wrench, self._cavity_stiffness, rhs, self._link_values, material)
+        for cab, pair_values, moment_values in self._cable_values:
+            cab.evaluate(positions, rotations, actuation, rhs, pair_values, moment_values)
+            if material:
+                pair_values[:] = 0.0
+                moment_values[:] = 0.0
+        rhs[:, 0] += self.external
+        for group, cols in self._generic:
+            wrenches, _ = group.evaluate(positions, rotations, False)
+            jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
+            rhs[:, 1 + cols] = jat.T
+            rhs[:, 0] += actuation[cols] @ jat
+        return rhs
+
+    def linearise(self, positions, rotations, actuation):
+        """
+        Return the symmetric tangent (lower band) and the right-hand sides of a tick.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        actuation : (m,) ndarray
+            ``λ_prev`` (enters the residual and the load stiffness).
+
+        Returns
+        -------
+        tangent : (6n, kd + 1) ndarray
+            ``K`` (symmetric part of structure + load stiffness) in lower band storage,
+            ``tangent[c, r - c] = K[r, c]`` (``c <= r``), for :meth:`factor`;
+            :meth:`dense` converts it. A buffer of this object (overwritten by the next call).
+        rhs : (6n, m + 1) ndarray
+            As :meth:`evaluate`.
+
+        """
+        rhs = self.evaluate(positions, rotations, actuation)
+        return self._symmetric_band(), rhs
+
+    def material_system(self, positions, rotations, actuation):
+        """
+        Return the material tangent (lower band, SPD) and the right-hand sides.
+
+        The links' ``Dᵀ Bᵀ K B D`` alone (paper eq. 8): no geometric part, no load stiffness,
+        so it stays positive definite far from equilibrium (the fallback of a step whose
+        exact tangent is singular or indefinite). Arguments and results as :meth:`linearise`.
+
+        """
+        rhs = self.evaluate(positions, rotations, actuation, material=True)
+        return self._symmetric_band(), rhs
+
+    def exact_system(self, positions, rotations, actuation):
+        """
+        Return the exact tangent (general band) and the right-hand sides.
+
+        ``K = -d r / dq`` including the geometric part and the actuators' exact load stiffness
+        (not symmetric): Newton's tangent (quadratic convergence). Arguments as
+        :meth:`evaluate`.
+
+        Returns
+        -------
+        tangent : (6n, 3 kd + 1) ndarray
+            ``tangent[c, 2 kd + r - c] = K[r, c]`` for ``|r - c| <= kd``: the Fortran
+            ``(3 kd + 1, N)`` layout of LAPACK's ``dgbtrf`` (rows ``0 .. kd - 1`` of that layout
+            are its workspace), for :func:`factor_exact`; :meth:`dense_exact` converts it.
+            A buffer of this object.
+        rhs : (6n, m + 1) ndarray
+            As :meth:`evaluate`.
+
+        """
+        rhs = self.evaluate(positions, rotations, actuation)
+        return self.exact_tangent(), rhs
+
+    def exact_tangent(self):
+        """
+        Return the exact tangent of the last :meth:`evaluate` (see :meth:`exact_system`).
+
+        Returns
+        -------
+        (6n, 3 kd + 1) ndarray
+            General band storage, a buffer of this object.
+
+        """
+        scatter_add(self._exact_index, self._values, self._ones, self._exact_band)
+        return self._exact_band[:-1].reshape(self.size, 3 * self.kd + 1)
+
+    def _symmetric_band(self):
+        """Scatter the blocks of the last :meth:`evaluate` into the symmetric lower band."""
+        scatter_add(self._index, self._values, self._weights, self._band)
+        return self._band[:-1].reshape(self.size, self.kd + 1)
+
+    @staticmethod
+    def factor(tangent):
+        """
+        Factor the tangent of :meth:`linearise` in place (compiled band Cholesky).
+
+        Parameters
+        ----------
+        tangent : (6n, kd + 1) ndarray
+            From :meth:`linearise` (overwritten by the factor).
+
+        Returns
+        -------
+        (6n, kd + 1) ndarray or None
+            ``L`` in the same band storage, for :meth:`solve`; ``None`` if the tangent is not
+            positive definite.
+
+        """
+        return tangent if band_cholesky(tangent) == 0 else None
+
+    @staticmethod
+    def solve(factor, rhs):
+        """
+        Solve ``K X = rhs`` with a factor of :meth:`factor` (all columns in one pass).
+
+        Parameters
+        ----------
+        factor : (6n, kd + 1) ndarray
+            From :meth:`factor`.
+        rhs : (6n, c) ndarray
+            Right-hand sides (not modified).
+
+        Returns
+        -------
+        (6n, c) ndarray
+
+        """
+        solved = np.array(rhs, dtype=float, order='C')
+        band_solve(factor, solved)
+        return solved
+
+    def factor_solve(self, tangent, rhs):
+        """
+        Return ``K⁻¹ rhs`` (:meth:`factor` then :meth:`solve`), ``None`` if not positive definite.
+
+        Parameters
+        ----------
+        tangent : (6n, kd + 1) ndarray
+            From :meth:`linearise` (overwritten).
+        rhs : (6n, c) ndarray
+            Right-hand sides.
+
+        Returns
+        -------
+        (6n, c) ndarray or None
+
+        """
+        factor = self.factor(tangent)
+        return None if factor is None else self.solve(factor, rhs)
+
+    def dense_exact(self, tangent):
+        """
+        Return the general band storage of :meth:`exact_system` as a dense matrix.
+
+        Parameters
+        ----------
+        tangent : (6n, 3 kd + 1) ndarray
+            From :meth:`exact_system`.
+
+        Returns
+        -------
+        (6n, 6n) ndarray
+
+        """
+        out = np.zeros((self.size, self.size))
+        out.reshape(-1)[self._exact_dense_slots] = np.asarray(tangent).reshape(-1)[
+            self._exact_slots]
+        return out
+
+    def factor_exact(self, tangent):
+        """
+        Factor the tangent of :meth:`exact_system` in place (LAPACK band LU, ``dgbtrf``).
+
+        Parameters
+        ----------
+        tangent : (6n, 3 kd + 1) ndarray
+            From :meth:`exact_system` (overwritten by the factor).
+
+        Returns
+        -------
+        BandLU or None
+            ``None`` if the tangent is singular or not finite.
+
+        """
+        if not np.all(np.isfinite(tangent)):
+            return None
+        lu, pivots, info = lapack.dgbtrf(tangent.T, self.kd, self.kd, overwrite_ab=1)
+        return BandLU(lu, pivots, self.kd) if info == 0 else None
+
+    def blocks(self, tangent):
+        """
+        Return the lower band of :meth:`linearise` as block-tridiagonal blocks.
+
+        Parameters
+        ----------
+        tangent : (6n, 12) ndarray
+            From :meth:`linearise` of a chain whose actuators act within a link.
+
+        Returns
+        -------
+        diagonal : (n, 6, 6) ndarray
+            Diagonal blocks.
+        upper : (n - 1, 6, 6) ndarray
+            ``upper[i]`` = block (i, i + 1).
+
+        """
+        if self.kd != 11:
+            raise ValueError(f'the tangent is not block tridiagonal (half-bandwidth {self.kd})')
+        band = np.asarray(tangent).reshape(self.n, 6, 12)
+        a, b = np.meshgrid(np.arange(6), np.arange(6), indexing='ij')
+        low, high = np.minimum(a, b), np.maximum(a, b)
+        diagonal = band[:, low, high - low]
+        upper = band[:-1, a, 6 + b - a]
+        return diagonal, upper
+
+    def dense(self, tangent):
+        """
+        Return the band storage of :meth:`linearise` as a full lower-triangular matrix.
+
+        Parameters
+        ----------
+        tangent : (6n, kd + 1) ndarray
+            From :meth:`linearise`.
+
+        Returns
+        -------
+        (6n, 6n) ndarray
+            ``K`` on and below the diagonal, zero above.
+
+        """
+        out = np.zeros((self.size, self.size))
+        out.reshape(-1)[self._dense_slots] = np.asarray(tangent).reshape(-1)[self._band_slots]
+        return out
+
+
+class BandLU:
+    """
+    LU factor of a general band matrix (LAPACK ``dgbtrf``) with multi-RHS solves.
+
+    Parameters
+    ----------
+    lu : (3 kd + 1, N) ndarray
+        Factor in LAPACK's general band layout (Fortran order).
+    pivots : (N,) int ndarray
+        Row interchanges.
+    kd : int
+        Number of sub- and super-diagonals of the factored matrix.
+
+    """
+
+    method = 'band_lu'
+
+    def __init__(self, lu, pivots, kd):
+        """Keep the factor."""
+        self._lu, self._pivots, self._kd = lu, pivots, kd
+
+    def solve(self, rhs):
+        """
+        Solve ``K X = rhs``.
+
+        Parameters
+        ----------
+        rhs : (N,) or (N, c) ndarray
+            Right-hand sides.
+
+        Returns
+        -------
+        ndarray
+            Same shape as ``rhs`` (C order).
+
+        """
+        rhs = np.asarray(rhs, dtype=float)
+        columns = rhs.reshape(rhs.shape[0], -1)
+        x, info = lapack.dgbtrs(self._lu, self._kd, self._kd, columns, self._pivots)
+        if info != 0:
+            raise np.linalg.LinAlgError(f'dgbtrs failed (info {info})')
+        return np.ascontiguousarray(x).reshape(rhs.shape)
+
+
+def _matches_links(group, model):
+    """Whether every condensed cavity part has the rest geometry of its link."""
+    lower = group.lower
+    if lower.size == 0 or lower.min() < 0 or lower.max() >= model.n_links:
+        return False
+    return bool(np.allclose(group.rest_offset, np.asarray(model.rest_offsets)[lower],
+                            rtol=0.0, atol=1e-12)
+                and np.allclose(group.rest_rotation, np.asarray(model.rest_rotations)[lower],
+                                rtol=0.0, atol=1e-12))

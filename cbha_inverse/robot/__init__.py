@@ -1,0 +1,1 @@
+"""Node helpers without mechanics: simulated plant, safety checks, trajectories, Robotino I/O."""

@@ -1,0 +1,88 @@
+"""
+A quasi-static plant for simulation: warm-started solves of the chain equilibrium.
+
+The simulated robot (``cbha_sim``) must not share the controller's model: it is built from the
+same scene with a deliberate stiffness error and its own gravity (see
+:func:`cbha_inverse.scene.load_scene`), and every plant tick solves the static equilibrium
+(paper eq. 9) ``f(q) + f_ext + J_a(q)ᵀ λ = 0`` for the applied actuation ``λ`` with the package's
+one static solver (:func:`cbha_inverse.core.statics.solve_static`, the compiled kernels of the
+controller's tick): exact tangent including the actuators' load stiffness, line search, warm
+start from the previous equilibrium and, should that fail, load stepping from the rest shape.
+No ROS.
+"""
+
+from cbha_inverse.core.chain import rest_state
+from cbha_inverse.core.statics import solve_static
+
+
+class StaticPlant:
+    """
+    Quasi-static chain under actuation, solved by warm-started Newton iterations.
+
+    Parameters
+    ----------
+    scene : cbha_inverse.scene.Scene
+        The plant's scene (load it with the model error wanted, e.g. ``stiffness_scale=0.9``).
+    tolerance : float  [N, N*m]
+        Residual norm ``|r|_2`` at which an update stops.
+    max_iterations : int
+        Newton iterations per load step at most (the warm start is one; if it fails, load
+        stepping from rest takes over, at most ``max_load_steps`` steps).
+    max_rotation_step : float, optional  [rad]
+        Largest link rotation of a line search's first trial step; None (default): full Newton
+        steps, the line search and the material-tangent fallback keep far jumps robust (a
+        limit of 0.3 rad costs ~50 % more iterations on the CBHA's jumps from rest).
+    max_load_steps : int
+        Load steps of an update at most (warm start included).
+
+    """
+
+    def __init__(self, scene, tolerance=1e-8, max_iterations=20, max_rotation_step=None,
+                 max_load_steps=16):
+        """Start at the rest shape with zero actuation."""
+        self.model = scene.model
+        self.actuators = scene.actuators
+        self.effectors = scene.effectors
+        self.tolerance = float(tolerance)
+        self.max_iterations = int(max_iterations)
+        self.max_rotation_step = (None if max_rotation_step is None
+                                  else float(max_rotation_step))
+        self.max_load_steps = int(max_load_steps)
+        self.gravity = scene.gravity
+        self._state = rest_state(self.model)
+
+    def reset(self):
+        """Return to the rest shape (the next update starts from it)."""
+        self._state = rest_state(self.model)
+
+    def residual(self, actuation):
+        """Return the equilibrium residual ``r`` (6n,) at the current state."""
+        return self._solve(actuation, max_iterations=0, max_load_steps=1).residual.reshape(-1)
+
+    def _solve(self, actuation, max_iterations, max_load_steps):
+        """Solve from the current state (see :meth:`update`)."""
+        return solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
+                            actuation=actuation, effectors=self.effectors,
+                            initial_state=self._state, absolute_tolerance=self.tolerance,
+                            max_iterations=max_iterations, max_load_steps=max_load_steps,
+                            max_rotation_step=self.max_rotation_step, check_warnings=False)
+
+    def update(self, actuation):
+        """
+        Move the plant to the equilibrium of an actuation (warm start: the current state).
+
+        Parameters
+        ----------
+        actuation : (m,) array_like  [N or Pa]
+            Applied actuation in scene actuator order.
+
+        Returns
+        -------
+        cbha_inverse.core.statics.StaticResult
+            The state reached with its ``effector_positions`` (``converged`` False if the budget
+            did not suffice; the next update continues from it).
+
+        """
+        res = self._solve(actuation, self.max_iterations, self.max_load_steps)
+        self._state = res.state
+        return res

@@ -1,0 +1,153 @@
+"""
+Compile the numba kernels into numba's on-disk cache (run at install).
+
+The kernels (every module of :mod:`cbha_inverse.core._kernels`) are ``numba.njit(cache=True)``:
+the first process that calls them compiles them (~15 s on the 2-core development machine) and
+writes the machine code to ``__pycache__`` next to the sources (or to ``NUMBA_CACHE_DIR``); later
+processes load it (~0.25 s for a first tick). This module runs representative ticks and static
+solves on every scene and QP solver, and one solve of the compiled BTD backend
+(:mod:`cbha_inverse.core.linalg.btd`, the benchmark's), so that the compile happens once, at
+install, and never inside a timed test, the demo or a control loop.
+
+Usage: ``python -m cbha_inverse.warmup [--scenes NAME ...]``. Pure numerics, no rclpy.
+"""
+
+import argparse
+import sys
+import time
+
+from cbha_inverse.core.linalg import btd
+from cbha_inverse.paths import config_path
+from cbha_inverse.scene import load_scene
+import numpy as np
+
+SCENES = ('tendon_6f_8c', 'tendon_10f_16c', 'cbha')
+QP_SOLVERS = ('active_set', 'proxsuite', 'gauss_seidel')
+
+
+def option_sets(n_actuators, span):
+    """
+    Return the solver options the warm-up runs on a scene.
+
+    Every QP solver with the default options, then the other branches of the tick: a rate limit
+    (the QP bounds of ``qp_problem``), ``relinearize_every > 1`` (linear ticks, the pending
+    linear step) and ``newton_steps > 1`` (the full Newton steps at fixed actuation).
+
+    Parameters
+    ----------
+    n_actuators : int
+        Number of actuators ``m``.
+    span : (m,) ndarray  [N or Pa]
+        ``upper - lower`` of each actuator.
+
+    Returns
+    -------
+    list of dict
+        Keyword arguments of :meth:`cbha_inverse.scene.Scene.make_inverse_solver`.
+
+    """
+    options = [{'qp_solver': qp_solver} for qp_solver in QP_SOLVERS]
+    options.append({'rate_limit': tuple(0.05 * np.asarray(span, dtype=float)[:n_actuators]),
+                    'relinearize_every': 5, 'newton_steps': 2})
+    return options
+
+
+def warm_targets(center, radius, n_ticks=6):
+    """
+    Return a few targets on an arc around the last effector's centre, then a far one.
+
+    Effectors other than the last stay at their centre (as in
+    :func:`cbha_inverse.report.bench_inverse.circle_targets`). The far target saturates the
+    actuators, so the bound-handling kernels compile too.
+
+    Parameters
+    ----------
+    center : (k, 3) ndarray  [m]
+        Centre of the effectors (``scene.workspace_center``).
+    radius : float  [m]
+        Arc radius.
+    n_ticks : int
+        Number of targets on the arc.
+
+    Returns
+    -------
+    (n_ticks + 1, k, 3) ndarray  [m]
+
+    """
+    phase = np.linspace(0.0, 0.5 * np.pi, n_ticks)
+    targets = np.repeat(np.asarray(center, dtype=float)[None], n_ticks + 1, axis=0)
+    targets[:n_ticks, -1, 1] += radius * np.cos(phase)
+    targets[:n_ticks, -1, 2] += radius * np.sin(phase)
+    targets[n_ticks, -1] += [0.0, 1.0, -1.0]
+    return targets
+
+
+def warm_scene(name):
+    """
+    Run the warm-up ticks of one scene with every option set.
+
+    Parameters
+    ----------
+    name : str
+        Scene name (``config/scenes/<name>.yaml``).
+
+    Returns
+    -------
+    int
+        Number of ticks run.
+
+    """
+    scene = load_scene(name)
+    radius = 0.06 if name == 'cbha' else 0.01
+    targets = warm_targets(scene.workspace_center, radius)
+    # the static solver's kernels (forward model, plant): one solve at mid actuation
+    scene.forward(0.5 * (scene.lower_bounds + scene.upper_bounds))
+    ticks = 0
+    for options in option_sets(len(scene.actuator_names),
+                               scene.upper_bounds - scene.lower_bounds):
+        solver = scene.make_inverse_solver(**options)
+        solver.warm_up()
+        for target in targets:
+            solver.step(target)
+            solver.prepare()
+        ticks += 2 + len(targets)
+    return ticks
+
+
+def main(argv=None):
+    """
+    Compile (or load) every tick kernel by running representative ticks; print the time.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command-line arguments (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit status.
+
+    """
+    parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--scenes', nargs='+', default=list(SCENES), choices=SCENES,
+                        help='scenes to run (default: all)')
+    args = parser.parse_args(argv)
+    started = time.perf_counter()
+    # the compiled BTD backend (its inputs are normalised to one type, so one small solve
+    # compiles all it ever needs)
+    btd.solve(np.tile(np.eye(6), (2, 1, 1)), np.zeros((1, 6, 6)), np.ones(12))
+    ran = []
+    for name in args.scenes:
+        if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
+            print('warm-up: skipping cbha (the condensed CBHA segment is not generated yet)')
+            continue
+        warm_scene(name)
+        ran.append(name)
+    print(f'warm-up: numba tick kernels compiled or loaded from the cache in '
+          f'{time.perf_counter() - started:.1f} s ({", ".join(ran) or "no scene"})', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,304 @@
+"""
+Replay regression: the input bags under ``test/data/replay``, the replay pipeline, the goldens.
+
+Inputs (50 Hz, sim time from 1000 s; regenerate with ``python test/regen_goldens.py --inputs``):
+
+- ``circle_targets``: ``/cbha/target`` along the paper's circle (r 60 mm, 2.5 cm/s, y-z plane,
+  CBHA workspace centre) for 3 s, the first 0.5 s at the start point;
+- ``closed_loop_session``: the same targets and ``/cbha/tip/measured`` from a closed-loop session
+  run offline on the core (the model's solver with the integral correction against the plant 10 %
+  softer, 0.2 mm seeded noise); each measurement is stamped 10 ms after its target, and one
+  measurement of the rest shape comes first.
+
+A replay starts the installed ``inverse_solver`` (``use_sim_time``; ``rate_hz`` 1 so its timer
+never ticks between the 50 Hz targets: every command answers exactly one target, in order) and
+``cbha_bag record --use-sim-time /cbha/pressure_command``, then ``cbha_bag play --clock 100``.
+Where the OS allows, the player and, once its warm-up is done, every thread of the solver (its
+executor and its DDS receive threads) run with SCHED_RR priority 10: both sleep between messages,
+and other test suites on the shared cores must not delay a target past the next measurement (a
+reordering the closed loop would see).
+The recorded commands, without the leading vent commands and consecutive repeats (the watchdog's
+holds before the first and after the last target), are compared with the goldens.
+
+Tolerance: 1 Pa per valve. A replay computes the same floating-point operations in the same order
+(bit-identical on one machine); 1 Pa leaves room for another BLAS/CPU's rounding (relative 1e-15
+on ~1e5 Pa gives ~1e-10 Pa per operation) while staying 100x below the ~100 Pa resolution of the
+proportional valves, so any change of the maths or of the inputs' handling fails.
+
+One exception, closed loop only: a stall of the solver's process longer than the 10 ms between a
+measurement and the next target (a garbage collection, the shared 2-core machine) leaves both
+waiting, and the executor takes the target first. That measurement's integral increment then
+reaches one command late: the sum is the same from the next measurement on, so at most a few
+commands differ, by about one step of the command sequence (median step of the golden closed
+loop: 290 Pa). Seen twice in about 25 replays under load 10-12 (102 Pa and 370 Pa, 3 commands).
+:func:`compare` allows one such transient: at most ``TRANSIENT_COMMANDS`` consecutive commands
+within ``TRANSIENT_PA``; every other command within 1 Pa.
+"""
+
+import contextlib
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from cbha_inverse.bag.storage import BagWriter, deserialize, open_bag
+from cbha_inverse.core.inverse.correction import TargetCorrector
+from cbha_inverse.paths import config_path
+from cbha_inverse.robot.plant import StaticPlant
+from cbha_inverse.robot.trajectory import make_trajectory
+from cbha_inverse.ros.bag_bench import set_priority
+from cbha_inverse.scene import load_scene
+import numpy as np
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
+from rosbags.interfaces import QosTime
+from rosbags.typesys import get_typestore, Stores
+import yaml
+
+DATA = Path(__file__).resolve().parent / 'data' / 'replay'
+INPUTS = {'open': DATA / 'circle_targets', 'closed': DATA / 'closed_loop_session'}
+GOLDENS = DATA / 'goldens.npz'
+TOLERANCE_PA = 1.0
+TRANSIENT_COMMANDS = 5
+TRANSIENT_PA = 1000.0
+EPOCH_NS = 1000 * 10**9
+RATE = 50.0
+HOLD = 0.5
+DURATION = 3.0
+MEASUREMENT_DELAY_NS = 10_000_000
+BIN = Path(sys.executable).parent
+_NO_TIME = QosTime(0, 0)
+TARGET_QOS = Qos(QosHistory.KEEP_LAST, 10, QosReliability.RELIABLE, QosDurability.VOLATILE,
+                 _NO_TIME, _NO_TIME, QosLiveliness.AUTOMATIC, _NO_TIME, False)
+SENSOR_QOS = TARGET_QOS._replace(depth=5, reliability=QosReliability.BEST_EFFORT)
+
+
+def _point_bytes(typestore, stamp_ns, point):
+    types = typestore.types
+    sec, nanosec = divmod(stamp_ns, 10**9)
+    message = types['geometry_msgs/msg/PointStamped'](
+        header=types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec),
+            frame_id='cbha_base'),
+        point=types['geometry_msgs/msg/Point'](x=float(point[0]), y=float(point[1]),
+                                               z=float(point[2])))
+    return bytes(typestore.serialize_cdr(message, 'geometry_msgs/msg/PointStamped'))
+
+
+def circle_targets():
+    """Return the stamps [ns] and targets (N, 3) [m] of the input bags."""
+    scene = load_scene('cbha')
+    trajectory = make_trajectory('circle', center=scene.workspace_center[-1], radius=0.06,
+                                 plane='yz', speed=0.025, laps=1, start_hold=HOLD)
+    times = np.arange(int(DURATION * RATE)) / RATE
+    stamps = EPOCH_NS + np.round(times * 1e9).astype(np.int64)
+    return stamps, trajectory.sample(times).reshape(-1, 3)
+
+
+def write_inputs():
+    """Write both input bags (replacing them)."""
+    import shutil
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    stamps, targets = circle_targets()
+    for path in INPUTS.values():
+        if path.exists():
+            shutil.rmtree(path)
+    writer = BagWriter(INPUTS['open'])
+    writer.add_topic('/cbha/target', 'geometry_msgs/msg/PointStamped', [TARGET_QOS])
+    for stamp, target in zip(stamps, targets):
+        writer.write('/cbha/target', int(stamp), _point_bytes(typestore, int(stamp), target))
+    writer.close()
+    scene = load_scene('cbha')
+    solver = scene.make_inverse_solver()
+    solver.warm_up()
+    plant = StaticPlant(load_scene('cbha', stiffness_scale=0.9, gravity=(0.0, 0.0, -9.81)))
+    corrector = TargetCorrector(1, gain=0.1, max_correction=0.03)
+    rng = np.random.default_rng(0)
+    writer = BagWriter(INPUTS['closed'])
+    writer.add_topic('/cbha/target', 'geometry_msgs/msg/PointStamped', [TARGET_QOS])
+    writer.add_topic('/cbha/tip/measured', 'geometry_msgs/msg/PointStamped', [SENSOR_QOS])
+    rest = plant.update(np.zeros(len(scene.actuator_names))).effector_positions[-1]
+    first = int(stamps[0]) - MEASUREMENT_DELAY_NS
+    writer.write('/cbha/tip/measured', first, _point_bytes(typestore, first, rest))
+    for stamp, target in zip(stamps, targets):
+        stamp = int(stamp)
+        writer.write('/cbha/target', stamp, _point_bytes(typestore, stamp, target))
+        result = solver.step(corrector.update(target[None], None))
+        solver.prepare()
+        tip = plant.update(result.actuation).effector_positions[-1]
+        measured = tip + rng.normal(0.0, 2e-4, 3)
+        corrector.update(target[None], measured[None], saturated=result.status == 'saturated')
+        when = stamp + MEASUREMENT_DELAY_NS
+        writer.write('/cbha/tip/measured', when, _point_bytes(typestore, when, measured))
+    writer.close()
+
+
+def _real_time_priority():
+    """Run a sleeping child (the player) with SCHED_RR priority 10 where allowed."""
+    set_priority(10)
+
+
+def _real_time_threads(pid):
+    """Give every thread of a process (executor, DDS receive threads) SCHED_RR priority 10."""
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        with contextlib.suppress(OSError, ValueError):
+            os.sched_setscheduler(int(task.name), os.SCHED_RR, os.sched_param(10))
+
+
+def _environment():
+    env = dict(os.environ)
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+class _Lines:
+    """Collect a child's output lines in a thread."""
+
+    def __init__(self, process):
+        self.lines = []
+        self.thread = threading.Thread(target=self._read, args=(process,), daemon=True)
+        self.thread.start()
+
+    def _read(self, process):
+        for line in process.stdout:
+            self.lines.append(line.rstrip('\n'))
+
+    def wait_for(self, predicate, timeout):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if any(predicate(line) for line in list(self.lines)):
+                return True
+            time.sleep(0.05)
+        return any(predicate(line) for line in list(self.lines))
+
+
+def _start(command):
+    process = subprocess.Popen([str(c) for c in command], env=_environment(),
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return process, _Lines(process)
+
+
+def _stop(process):
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+    try:
+        return process.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        return process.wait()
+
+
+def _commands(bag):
+    with open_bag(bag) as reader:
+        return [np.asarray(deserialize(data, 'std_msgs/msg/Float64MultiArray').data, dtype=float)
+                for _, _, data in reader.messages()]
+
+
+def answers(commands):
+    """
+    Return the commands that answer targets: leading vent commands and repeats dropped.
+
+    Parameters
+    ----------
+    commands : list of (m,) ndarray  [Pa]
+        Recorded commands in order.
+
+    Returns
+    -------
+    (K, m) ndarray  [Pa]
+        The distinct consecutive commands after the first non-vent one.
+
+    """
+    kept = []
+    for command in commands:
+        if not kept and not np.any(command):
+            continue
+        if kept and np.array_equal(command, kept[-1]):
+            continue
+        kept.append(command)
+    return np.array(kept)
+
+
+def compare(commands, golden, mode):
+    """
+    Return why ``commands`` do not match ``golden`` ('' if they do), as the module docstring says.
+
+    Parameters
+    ----------
+    commands, golden : (K, m) ndarray  [Pa]
+        Replayed and golden commands.
+    mode : {'open', 'closed'}
+        Only the closed loop may show one reordering transient.
+
+    Returns
+    -------
+    str
+        Empty when they match, else what differs.
+
+    """
+    if commands.shape != golden.shape:
+        return f'{commands.shape[0]} commands, the goldens have {golden.shape[0]}'
+    deviation = np.abs(commands - golden).max(axis=1)
+    off = np.flatnonzero(deviation > TOLERANCE_PA)
+    if off.size == 0:
+        return ''
+    transient = (mode == 'closed' and off[-1] - off[0] < TRANSIENT_COMMANDS
+                 and deviation[off].max() <= TRANSIENT_PA)
+    return '' if transient else (f'commands {off.tolist()} differ by up to '
+                                 f'{deviation.max():.1f} Pa')
+
+
+def replay(mode, workdir):
+    """
+    Replay one input bag into the installed ``inverse_solver``; return the answered commands.
+
+    Parameters
+    ----------
+    mode : {'open', 'closed'}
+        Solver mode, and which input bag.
+    workdir : pathlib.Path
+        Fresh folder for the params override, the recorded bag and the logs.
+
+    Returns
+    -------
+    (K, m) ndarray  [Pa]
+        See :func:`answers`.
+
+    """
+    workdir.mkdir(parents=True, exist_ok=True)
+    override = workdir / 'override.yaml'
+    override.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+        'use_sim_time': True, 'mode': mode, 'rate_hz': 1.0}}}))
+    qos = workdir / 'qos.yaml'
+    qos.write_text(yaml.safe_dump({'/cbha/tip/measured': {'reliability': 'reliable'}}))
+    with open_bag(INPUTS[mode]) as bag:
+        targets = next(t.count for t in bag.summary.topics if t.name == '/cbha/target')
+    solver, solver_log = _start([
+        BIN / 'inverse_solver', '--ros-args', '-r', '__ns:=/cbha', '--params-file',
+        config_path('inverse_solver.yaml'), '--params-file', override])
+    recorder, recorder_log = _start([
+        BIN / 'cbha_bag', 'record', '--use-sim-time', '-o', workdir / 'commands',
+        '/cbha/pressure_command'])
+    try:
+        assert solver_log.wait_for(lambda line: 'warm-up' in line, 120.0), \
+            '\n'.join(solver_log.lines)
+        _real_time_threads(solver.pid)
+        assert recorder_log.wait_for(lambda line: 'Subscribed to topic' in line, 120.0), \
+            '\n'.join(solver_log.lines + recorder_log.lines)
+        player = subprocess.run(
+            [str(c) for c in (BIN / 'cbha_bag', 'play', INPUTS[mode], '--clock', 100,
+                              '--wait-for-subscribers', 60, '--delay', 0.5,
+                              '--qos-profile-overrides-path', qos)],
+            env=_environment(), capture_output=True, text=True, timeout=120,
+            preexec_fn=_real_time_priority)
+        assert player.returncode == 0, player.stderr
+        assert recorder_log.wait_for(lambda line: line.startswith('recording ') and int(
+            line.split()[1]) >= targets, 30.0), '\n'.join(recorder_log.lines)
+    finally:
+        codes = _stop(recorder), _stop(solver)
+    (workdir / 'inverse_solver.log').write_text('\n'.join(solver_log.lines))
+    assert codes == (0, 0), '\n'.join(solver_log.lines + recorder_log.lines)
+    return answers(_commands(workdir / 'commands'))

@@ -1,0 +1,85 @@
+"""The pure safety gate: point checks, driver-like command checks, bounded commands, staleness."""
+
+import math
+
+from cbha_inverse.robot.safety import (
+    bounded_command, check_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
+import numpy as np
+import pytest
+
+BOX = WorkspaceBox((-0.1, -0.2, -0.3), (0.5, 0.2, 0.3))
+
+
+@pytest.mark.parametrize('point, frame, reason', [
+    ((0.2, 0.0, 0.0), 'cbha_base', 'ok'),
+    ((0.5, 0.2, 0.3), 'cbha_base', 'ok'),
+    ((math.nan, 0.0, 0.0), 'cbha_base', 'non_finite'),
+    ((0.2, math.inf, 0.0), 'cbha_base', 'non_finite'),
+    ((0.2, 0.0, -math.inf), 'wrong', 'non_finite'),
+    ((0.2, 0.0, 0.0), 'world', 'wrong_frame'),
+    ((0.2, 0.0, 0.0), '', 'wrong_frame'),
+    ((1e300, 0.0, 0.0), 'cbha_base', 'outside_workspace'),
+    ((0.2, -0.21, 0.0), 'cbha_base', 'outside_workspace'),
+])
+def test_check_point(point, frame, reason):
+    check = check_point(point, frame, 'cbha_base', BOX)
+    assert check.reason == reason and check.ok == (reason == 'ok')
+    assert check.ok or check.detail
+
+
+@pytest.mark.parametrize('values, reason', [
+    ([0.0, 1e5, 1.5e5], 'ok'),
+    ([0.0, 1e5], 'wrong_length'),
+    ([0.0, 1e5, 1e5, 0.0], 'wrong_length'),
+    ([], 'wrong_length'),
+    ([0.0, math.nan, 0.0], 'non_finite'),
+    ([0.0, -math.inf, 0.0], 'non_finite'),
+    ([0.0, -1.0, 0.0], 'out_of_range'),
+    ([0.0, 1.5e5 + 1.0, 0.0], 'out_of_range'),
+    ([1e308, 0.0, 0.0], 'out_of_range'),
+])
+def test_check_command(values, reason):
+    assert check_command(values, 3, 1.5e5).reason == reason
+
+
+def test_bounded_command_clips_and_refuses_nan():
+    lower, upper = np.zeros(3), np.full(3, 1.5e5)
+    np.testing.assert_array_equal(bounded_command([-5.0, 2e5, 7.0], lower, upper),
+                                  [0.0, 1.5e5, 7.0])
+    for bad in ([math.nan, 0.0, 0.0], [math.inf, 0.0, 0.0], [0.0, 0.0]):
+        with pytest.raises(ValueError):
+            bounded_command(bad, lower, upper)
+    rng = np.random.default_rng(0)
+    values = rng.normal(0.0, 1e6, (1000, 3))
+    for row in values:
+        out = bounded_command(row, lower, upper)
+        assert np.all((out >= 0.0) & (out <= 1.5e5))
+
+
+def test_staleness_on_a_given_steady_clock():
+    watch = StalenessWatch(0.5)
+    assert watch.stale(100.0) and watch.age(100.0) == math.inf
+    watch.mark(100.0)
+    assert not watch.stale(100.5) and watch.stale(100.5001)
+    with pytest.raises(ValueError):
+        StalenessWatch(0.0)
+
+
+@pytest.mark.parametrize('feedback, closed, action, expected', [
+    (False, False, 'hold', 'run'),
+    (True, False, 'vent', 'run'),
+    (True, True, 'vent', 'vent'),
+    (True, True, 'hold', 'hold'),
+    (False, True, 'vent', 'run'),
+])
+def test_stale_action(feedback, closed, action, expected):
+    assert stale_action(feedback, closed, action) == expected
+
+
+def test_workspace_box_validation():
+    with pytest.raises(ValueError, match='below'):
+        WorkspaceBox((0.0, 0.0, 0.0), (1.0, 0.0, 1.0))
+    with pytest.raises(ValueError, match='finite'):
+        WorkspaceBox((0.0, 0.0, -math.inf), (1.0, 1.0, 1.0))
+    with pytest.raises(ValueError, match='3 components'):
+        WorkspaceBox((0.0, 0.0), (1.0, 1.0))
