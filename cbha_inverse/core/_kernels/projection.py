@@ -1,10 +1,10 @@
 """
 Compiled projection of a solved linearisation onto effectors and actuators (DESIGN §6 step 2).
 
-:func:`effector_points` is the one implementation of the effector points ``p = x_f + R_f o``
-and their levers ``r = R_f o``; :func:`project_effectors` forms ``W_ea``, ``W_aa`` and the free
-effector positions from ``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the actuation and remaining gap
-of a QP solution; :func:`target_status` checks the targets of a tick.
+:func:`effector_levers` and :func:`effector_points` are the one implementation of the effector
+levers ``r = R_f o`` and points ``p = x_f + R_f o``; :func:`project_effectors` forms ``W_ea``,
+``W_aa`` and the free effector positions from ``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the
+actuation and remaining gap of a QP solution; :func:`target_status` checks the targets of a tick.
 """
 
 import math
@@ -14,12 +14,42 @@ import numpy as np
 
 
 @numba.njit(cache=True)
+def effector_levers(rotations, effector_frames, effector_offsets):
+    """
+    Return the levers ``r = R_f o`` of effector points (paper §IV, ``J_e``).
+
+    The lever gives the ``[I, -r^]`` block of ``J_e`` on the effector's frame ``f``
+    (:mod:`cbha_inverse.core.actuation.effectors`).
+
+    Parameters
+    ----------
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (frame axes → world).
+    effector_frames : (k,) int ndarray
+        Frame of every effector (1..n).
+    effector_offsets : (k, 3) ndarray  [m]
+        Effector points in their frame's axes.
+
+    Returns
+    -------
+    (k, 3) ndarray  [m]
+        ``R_f o``.
+
+    """
+    k = effector_frames.size
+    levers = np.empty((k, 3))
+    for e in range(k):
+        rot = rotations[effector_frames[e]]
+        offset = effector_offsets[e]
+        for i in range(3):
+            levers[e, i] = rot[i, 0] * offset[0] + rot[i, 1] * offset[1] + rot[i, 2] * offset[2]
+    return levers
+
+
+@numba.njit(cache=True)
 def effector_points(positions, rotations, effector_frames, effector_offsets):
     """
-    Return the world positions of effector points and their levers (paper §IV, ``J_e``).
-
-    An effector is the point ``p = x_f + R_f o`` of frame ``f``; its lever ``r = R_f o`` gives
-    the ``[I, -r^]`` block of ``J_e`` (:mod:`cbha_inverse.core.actuation.effectors`).
+    Return the world positions ``p = x_f + R_f o`` of effector points.
 
     Parameters
     ----------
@@ -34,23 +64,15 @@ def effector_points(positions, rotations, effector_frames, effector_offsets):
 
     Returns
     -------
-    points : (k, 3) ndarray  [m]
-        ``x_f + R_f o``.
-    levers : (k, 3) ndarray  [m]
-        ``R_f o``.
+    (k, 3) ndarray  [m]
+        ``x_f + R_f o`` (the lever ``R_f o`` from :func:`effector_levers`).
 
     """
-    k = effector_frames.size
-    points = np.empty((k, 3))
-    levers = np.empty((k, 3))
-    for e in range(k):
-        frame = effector_frames[e]
-        rot = rotations[frame]
-        offset = effector_offsets[e]
+    points = effector_levers(rotations, effector_frames, effector_offsets)
+    for e in range(effector_frames.size):
         for i in range(3):
-            levers[e, i] = rot[i, 0] * offset[0] + rot[i, 1] * offset[1] + rot[i, 2] * offset[2]
-            points[e, i] = positions[frame, i] + levers[e, i]
-    return points, levers
+            points[e, i] += positions[effector_frames[e], i]
+    return points
 
 
 @numba.njit(cache=True)
@@ -97,7 +119,8 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
     k = effector_frames.size
     moved = np.empty((3 * k, width))
     offset = np.empty(3 * k)
-    points, levers = effector_points(positions, rotations, effector_frames, effector_offsets)
+    points = effector_points(positions, rotations, effector_frames, effector_offsets)
+    levers = effector_levers(rotations, effector_frames, effector_offsets)
     for e in range(k):
         lever = levers[e]
         for i in range(3):

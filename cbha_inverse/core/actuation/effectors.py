@@ -5,11 +5,11 @@ The paper puts an identity block on the rows of the last frame; here an effector
 ``p = x_f + R_f o`` on a mobile frame ``f`` (the tip, a mid vertebra, a gripper point), several
 at once. With retract increments ``dp = dx_f + dθ_f × r = dx_f - r × dθ_f`` where ``r = R_f o``,
 i.e. the ``J_e`` block of the effector is ``[I, -r^]`` on frame ``f``. The points and levers
-are computed by the compiled :func:`cbha_inverse.core._kernels.projection.effector_points`, the
-one the control tick's projection uses.
+are computed by the compiled kernels of :mod:`cbha_inverse.core._kernels.projection`
+(``effector_points``, ``effector_levers``), the ones the control tick's projection uses.
 """
 
-from cbha_inverse.core._kernels.projection import effector_points
+from cbha_inverse.core._kernels.projection import effector_levers, effector_points
 from cbha_inverse.core.se3 import cross
 import numpy as np
 
@@ -64,7 +64,8 @@ class PointEffectors:
         (k, 3) ndarray  [m]
 
         """
-        return self._points(np.zeros((self.n_frames, 3)), rotations)[1]
+        return effector_levers(np.ascontiguousarray(rotations, dtype=float), self.frames,
+                               self.offsets)
 
     def positions(self, positions, rotations):
         """
@@ -82,10 +83,6 @@ class PointEffectors:
         (k, 3) ndarray  [m]
 
         """
-        return self._points(positions, rotations)[0]
-
-    def _points(self, positions, rotations):
-        """Return ``(points, levers)`` of :func:`effector_points` (float64, contiguous)."""
         return effector_points(np.ascontiguousarray(positions, dtype=float),
                                np.ascontiguousarray(rotations, dtype=float), self.frames,
                                self.offsets)
