@@ -122,7 +122,7 @@ class BellowsGeometry:
     corrugation_amplitude: float
     corrugation_periods: int
     wall_thickness: float
-    tubes: tuple
+    tubes: tuple[Tube, ...]
     vertebra_mass: float = 0.0
 
     @property
@@ -187,7 +187,7 @@ class SegmentSpec:
     path: Path
     name: str
     kind: str
-    geometry: object
+    geometry: BellowsGeometry | CylinderGeometry
     material: Material
     mesh: MeshSettings
 
