@@ -42,6 +42,8 @@ CONSOLE_SCRIPTS = [
     'cbha_build_robotino_msgs = cbha_inverse.interfaces.robotino_msgs_build:main',
     'cbha_bag = cbha_inverse.ros.bag_cli:main',
     'cbha_bench_bag = cbha_inverse.ros.bag_bench:main',
+    'cbha_identify = cbha_inverse.identify.cli:main',
+    'cbha_identify_check = cbha_inverse.ros.identify_check:main',
 ]
 
 setup(

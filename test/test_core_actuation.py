@@ -143,6 +143,20 @@ def test_actuator_set_orders_columns_and_loads():
         ActuatorSet([cables], N_LINKS + 1, order=['a', 'b'])
 
 
+def test_effector_points_are_frame_origin_plus_rotated_offset():
+    """The points ``x_f + R_f o`` and levers ``R_f o``, against a product written by hand."""
+    rng = np.random.default_rng(17)
+    state = _deformed(rng, scale=0.4)
+    offsets = [[0.0, 0.01, 0.0], [0.02, 0.0, -0.01], [0.0, 0.0, 0.0]]
+    eff = PointEffectors(['mid', 'tip', 'centre'], [2, 4, 4], offsets, N_LINKS + 1)
+    by_hand = np.array([state.positions[f] + state.rotations[f] @ np.array(o)
+                        for f, o in zip([2, 4, 4], offsets)])
+    np.testing.assert_allclose(eff.positions(*_pose(state)), by_hand, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(eff.levers(state.rotations), by_hand - state.positions[[2, 4, 4]],
+                               rtol=0, atol=1e-15)
+    assert np.array_equal(eff.positions(*_pose(state))[2], state.positions[4])
+
+
 def test_effector_jacobian_matches_finite_differences():
     rng = np.random.default_rng(7)
     state = _deformed(rng)

@@ -11,6 +11,7 @@ from cbha_inverse.fem.geometry import bellows_tube_mesh
 from cbha_inverse.fem.mesh import TetMesh
 from cbha_inverse.fem.segment_io import (chain_from_segments, inputs_sha256, load_segment,
                                          write_segment)
+from cbha_inverse.fem.segment_spec import read_segment_spec
 from cbha_inverse.paths import config_path, meshes_path
 import numpy as np
 import pytest
@@ -23,7 +24,7 @@ GEOMETRY_YAML = meshes_path('cbha_segment.yaml')
 @pytest.fixture(scope='module')
 def spec():
     """Load the CBHA segment geometry YAML."""
-    return yaml.safe_load(GEOMETRY_YAML.read_text())
+    return read_segment_spec(GEOMETRY_YAML)
 
 
 @pytest.fixture(scope='module')
@@ -33,8 +34,8 @@ def segment():
 
 
 def test_cavity_surfaces_are_closed_outward_and_enclose_the_tube(spec):
-    g = spec['geometry']
-    xs = np.linspace(0.0, g['segment_length'], 4001)
+    g = spec.geometry
+    xs = np.linspace(0.0, g.segment_length, 4001)
     volume = np.trapezoid(np.pi * cavity_radius(xs, g) ** 2, xs)
     for tube in range(3):
         points, triangles = cavity_surface(g, tube)
@@ -43,7 +44,7 @@ def test_cavity_surfaces_are_closed_outward_and_enclose_the_tube(spec):
         assert len(directed) == len(edges)
         assert all((b, a) in directed for a, b in directed)
         assert enclosed_volume(points, triangles) == pytest.approx(volume, rel=0.01)
-        wrenches = cavity_frame_wrenches(points, triangles, g['segment_length'])
+        wrenches = cavity_frame_wrenches(points, triangles, g.segment_length)
         assert np.allclose(wrenches.sum(axis=0)[:3], 0.0, atol=1e-12)
 
 
@@ -53,9 +54,9 @@ def test_committed_segment_is_current_and_loads_without_gmsh(segment, spec):
                                                   meta['mesh_size'])
     c = segment.compliance
     assert np.array_equal(c, c.T) and np.linalg.eigvalsh(c)[0] > 0
-    assert np.allclose(segment.rest_offset, [spec['geometry']['segment_length'], 0, 0])
+    assert np.allclose(segment.rest_offset, [spec.geometry.segment_length, 0, 0])
     assert [cav.name for cav in segment.cavities] == ['over', 'right', 'left']
-    centres = geometry_tube_centres(spec['geometry'])
+    centres = geometry_tube_centres(spec.geometry)
     for cav, (y_c, z_c) in zip(segment.cavities, centres):
         assert np.allclose(cav.points[:, 1:].mean(axis=0), [y_c, z_c], atol=1e-4)
     code = ('import sys; from cbha_inverse.fem.segment_io import load_segment; '
@@ -65,8 +66,8 @@ def test_committed_segment_is_current_and_loads_without_gmsh(segment, spec):
 
 
 def test_pressure_in_one_tube_bends_a_section_plausibly(segment, spec):
-    points, triangles = cavity_surface(spec['geometry'], 0)
-    upper = cavity_frame_wrenches(points, triangles, spec['geometry']['segment_length'])[1]
+    points, triangles = cavity_surface(spec.geometry, 0)
+    upper = cavity_frame_wrenches(points, triangles, spec.geometry.segment_length)[1]
     angle = np.degrees(np.linalg.norm(8 * segment.compliance[3:, 3:] @ upper[3:]) * 150e3)
     print(f'150 kPa in one tube bends an 8-segment section by about {angle:.1f} deg (linear)')
     # derivation: the tube's net load is an axial force F along its own axis, which lies at the
@@ -82,19 +83,19 @@ def test_pressure_in_one_tube_bends_a_section_plausibly(segment, spec):
 
 
 def test_per_tube_condensation_equals_the_three_tube_mesh(spec):
-    g = spec['geometry']
+    g = spec.geometry
     tube = bellows_tube_mesh(g, mesh_size=0.001, order=1)
     n = tube.n_nodes
     points = np.vstack([tube.points + [0.0, y_c, z_c] for y_c, z_c in geometry_tube_centres(g)])
     union = TetMesh(points, np.vstack([tube.tets + k * n for k in range(3)]))
-    half = 0.5 * g['vertebra_thickness']
-    full = condense_mesh(union, 1.0e6, 0.4, lower_x=half, upper_x=g['segment_length'] - half,
-                         segment_length=g['segment_length'])
+    half = 0.5 * g.vertebra_thickness
+    full = condense_mesh(union, 1.0e6, 0.4, lower_x=half, upper_x=g.segment_length - half,
+                         segment_length=g.segment_length)
     fast = condense_bellows(spec, mesh_size=0.001, order=1, youngs_modulus=1.0e6)
     scale = np.sqrt(np.outer(np.diag(full.compliance), np.diag(full.compliance)))
     assert np.max(np.abs(fast.compliance - full.compliance) / scale) < 1e-8
     # the condensation also produces the tubes' cavity surfaces (what the CLI writes)
-    assert [name for name, _, _ in fast.cavities] == [t['name'] for t in g['tubes']]
+    assert [name for name, _, _ in fast.cavities] == [t.name for t in g.tubes]
     for i, (_, points, triangles) in enumerate(fast.cavities):
         expected_points, expected_triangles = cavity_surface(g, i)
         np.testing.assert_array_equal(points, expected_points)

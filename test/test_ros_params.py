@@ -55,6 +55,8 @@ def test_inverse_solver_rejects_bad_parameters(rclpy_context, override, match):
     (Parameter('gravity', value=[0.0, 9.81]), 'gravity'),
     (Parameter('stiffness_scale', value=-1.0), 'out of range'),
     (Parameter('valve_names', value=['x']), 'permutation'),
+    (Parameter('section_stiffness_scale', value=[0.9]), 'section_stiffness_scale'),
+    (Parameter('cavity_gain_scale', value=[1.0, -1.0]), 'cavity_gain_scale'),
 ])
 def test_cbha_sim_rejects_bad_parameters(rclpy_context, override, match):
     overrides = [p for p in _overrides(CbhaSimNode) if p.name != override.name]

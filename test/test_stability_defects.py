@@ -16,6 +16,7 @@ from cbha_inverse.core.inverse.solver import InverseSolver
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static, StaticConvergenceError
 from cbha_inverse.fem.condensation import condense_cylinder, condense_segment
+from cbha_inverse.fem.segment_spec import MeshSettings, read_segment_spec
 from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
@@ -211,12 +212,11 @@ def test_zero_range_actuator_is_fixed_at_its_bound(tendon_scene):
 
 def test_explicit_zero_poisson_ratio_is_honoured():
     """condense_segment(spec, poisson_ratio=0.0) uses 0.0, not the YAML's 0.3."""
-    spec = yaml.safe_load((PACKAGE / 'meshes' / 'cylinder_segment.yaml').read_text(
-        encoding='utf-8'))
-    spec['mesh'] = {'order': 1, 'mesh_size': 0.006}
+    spec = replace(read_segment_spec(PACKAGE / 'meshes' / 'cylinder_segment.yaml'),
+                   mesh=MeshSettings(mesh_size=0.006, order=1))
     zero = condense_segment(spec, poisson_ratio=0.0)
-    geom = spec['geometry']
-    direct = condense_cylinder(geom['length'], geom['outer_radius'], youngs_modulus=1.0e6,
+    geom = spec.geometry
+    direct = condense_cylinder(geom.length, geom.outer_radius, youngs_modulus=1.0e6,
                                poisson_ratio=0.0, mesh_size=0.006, order=1)
     yaml_nu = condense_segment(spec)
     np.testing.assert_allclose(zero.compliance, direct.compliance, rtol=1e-9)

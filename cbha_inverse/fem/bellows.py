@@ -55,12 +55,12 @@ def tube_centres(pitch_radius, angles_deg):
 
 def geometry_tube_centres(geometry):
     """
-    Return the (y, z) tube centres of a bellows segment geometry mapping.
+    Return the (y, z) tube centres of a bellows segment geometry.
 
     Parameters
     ----------
-    geometry : dict
-        ``geometry`` mapping of a bellows segment YAML.
+    geometry : cbha_inverse.fem.segment_spec.BellowsGeometry
+        Bellows segment geometry.
 
     Returns
     -------
@@ -68,7 +68,7 @@ def geometry_tube_centres(geometry):
         Tube centres.
 
     """
-    return tube_centres(geometry['tube_pitch_radius'], [t['angle_deg'] for t in geometry['tubes']])
+    return tube_centres(geometry.tube_pitch_radius, [t.angle_deg for t in geometry.tubes])
 
 
 def cavity_radius(x, geometry):
@@ -82,7 +82,7 @@ def cavity_radius(x, geometry):
     ----------
     x : ndarray  [m]
         Abscissa in [0, L].
-    geometry : dict
+    geometry : cbha_inverse.fem.segment_spec.BellowsGeometry
         Bellows segment geometry.
 
     Returns
@@ -92,11 +92,9 @@ def cavity_radius(x, geometry):
 
     """
     g = geometry
-    x0 = 0.5 * g['vertebra_thickness']
-    x1 = g['segment_length'] - x0
-    pitch = (x1 - x0) / g['corrugation_periods']
-    s = np.clip(np.asarray(x, dtype=float), x0, x1) - x0
-    return corrugation_profile(s, g['tube_mean_radius'], g['corrugation_amplitude'], pitch)
+    s = np.clip(np.asarray(x, dtype=float), g.wall_start, g.wall_end) - g.wall_start
+    return corrugation_profile(s, g.tube_mean_radius, g.corrugation_amplitude,
+                               g.corrugation_pitch)
 
 
 def cavity_surface(geometry, tube, n_around=36, n_along=25):
@@ -109,10 +107,10 @@ def cavity_surface(geometry, tube, n_around=36, n_along=25):
 
     Parameters
     ----------
-    geometry : dict
+    geometry : cbha_inverse.fem.segment_spec.BellowsGeometry
         Bellows segment geometry.
     tube : int
-        Tube index in ``geometry['tubes']``.
+        Tube index in ``geometry.tubes``.
     n_around : int
         Vertices around the circumference.
     n_along : int
@@ -127,11 +125,10 @@ def cavity_surface(geometry, tube, n_around=36, n_along=25):
 
     """
     y_c, z_c = geometry_tube_centres(geometry)[tube]
-    x0 = 0.5 * geometry['vertebra_thickness']
-    x1 = geometry['segment_length'] - x0
+    x0, x1 = geometry.wall_start, geometry.wall_end
     n_mid = max(2, n_along - 4)
     xs = np.unique(np.concatenate([np.linspace(0.0, x0, 3), np.linspace(x0, x1, n_mid),
-                                   np.linspace(x1, geometry['segment_length'], 3)]))
+                                   np.linspace(x1, geometry.segment_length, 3)]))
     phi = np.linspace(0.0, 2.0 * np.pi, n_around, endpoint=False)
     r = cavity_radius(xs, geometry)
     ring = np.stack([np.broadcast_to(xs[:, None], (len(xs), n_around)),

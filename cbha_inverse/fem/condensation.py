@@ -13,6 +13,7 @@ from cbha_inverse.core.links import checked_compliance
 from cbha_inverse.fem.coupling import build_coupling
 from cbha_inverse.fem.elasticity import assemble_stiffness, mesh_volume
 from cbha_inverse.fem.mesh import nodes_on_plane, TetMesh
+from cbha_inverse.fem.segment_spec import BellowsGeometry, CylinderGeometry
 import numpy as np
 import scipy.sparse.linalg as spla
 
@@ -291,8 +292,8 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
 
     Parameters
     ----------
-    spec : dict
-        Parsed geometry YAML (keys ``geometry``, ``material``, ``mesh``).
+    spec : cbha_inverse.fem.segment_spec.SegmentSpec
+        A bellows segment file (:func:`cbha_inverse.fem.segment_spec.read_segment_spec`).
     mesh_size : float, optional  [m]
         Override of ``mesh.mesh_size``.
     order : {1, 2}, optional
@@ -309,18 +310,16 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
     """
     from cbha_inverse.fem.bellows import cavity_surface, geometry_tube_centres
     from cbha_inverse.fem.geometry import bellows_tube_mesh
-    geom, mat = spec['geometry'], spec['material']
-    mesh_size = float(_given(mesh_size, spec['mesh']['mesh_size']))
-    order = int(_given(order, spec['mesh'].get('order', 2)))
+    geom, mat = spec.geometry, spec.material
+    mesh_size = float(_given(mesh_size, spec.mesh.mesh_size))
+    order = int(_given(order, spec.mesh.order))
     t0 = time.perf_counter()
     mesh = bellows_tube_mesh(geom, mesh_size=mesh_size, order=order)
     mesh_time = time.perf_counter() - t0
-    length = geom['segment_length']
-    half = 0.5 * geom['vertebra_thickness']
-    tube = condense_mesh(mesh, _given(youngs_modulus, mat['youngs_modulus']),
-                         _given(poisson_ratio, mat['poisson_ratio']), lower_x=half,
-                         upper_x=length - half, segment_length=length, density=mat['density'],
-                         mesh_size=mesh_size, mesh_time=mesh_time)
+    tube = condense_mesh(mesh, _given(youngs_modulus, mat.youngs_modulus),
+                         _given(poisson_ratio, mat.poisson_ratio), lower_x=geom.wall_start,
+                         upper_x=geom.wall_end, segment_length=geom.segment_length,
+                         density=mat.density, mesh_size=mesh_size, mesh_time=mesh_time)
     t1 = time.perf_counter()
     centres = geometry_tube_centres(geom)
     stiffness = sum(shift_stiffness(tube.stiffness, [0.0, -y_c, -z_c]) for y_c, z_c in centres)
@@ -329,12 +328,12 @@ def condense_bellows(spec, *, mesh_size=None, order=None, youngs_modulus=None,
     timings['total'] += time.perf_counter() - t1
     n_tubes = len(centres)
     return CondensedSegment(compliance, tube.rest_offset, tube.rest_rotation,
-                            n_tubes * tube.mass + geom.get('vertebra_mass', 0.0), order,
+                            n_tubes * tube.mass + geom.vertebra_mass, order,
                             n_tubes * tube.n_nodes, n_tubes * tube.n_elements,
                             n_tubes * tube.n_dofs, max(asym, tube.asymmetry), mesh_size, timings,
                             tube.warnings,
-                            cavities=tuple((t['name'], *cavity_surface(geom, i))
-                                           for i, t in enumerate(geom['tubes'])))
+                            cavities=tuple((t.name, *cavity_surface(geom, i))
+                                           for i, t in enumerate(geom.tubes)))
 
 
 def condense_segment(mesh_or_geometry, youngs_modulus=None, poisson_ratio=None, *,
@@ -345,9 +344,9 @@ def condense_segment(mesh_or_geometry, youngs_modulus=None, poisson_ratio=None, 
 
     Parameters
     ----------
-    mesh_or_geometry : TetMesh or dict
-        A mesh in segment coordinates, or a parsed geometry YAML (``meshes/*.yaml``; kind
-        ``bellows_segment`` or ``cylinder``).
+    mesh_or_geometry : TetMesh or cbha_inverse.fem.segment_spec.SegmentSpec
+        A mesh in segment coordinates, or a segment geometry file
+        (:func:`cbha_inverse.fem.segment_spec.read_segment_spec`; a bellows or a cylinder).
     youngs_modulus, poisson_ratio : float, optional
         Material (default: the YAML's ``material``; required for a mesh).
     mesh_size : float, optional  [m]
@@ -379,16 +378,16 @@ def condense_segment(mesh_or_geometry, youngs_modulus=None, poisson_ratio=None, 
                              density=density, extra_mass=extra_mass,
                              mesh_size=_given(mesh_size, float('nan')))
     spec = mesh_or_geometry
-    kind = spec.get('kind', 'bellows_segment')
-    if kind == 'bellows_segment':
+    if isinstance(spec.geometry, BellowsGeometry):
         return condense_bellows(spec, mesh_size=mesh_size, order=order,
                                 youngs_modulus=youngs_modulus, poisson_ratio=poisson_ratio)
-    if kind == 'cylinder':
-        geom, mat = spec['geometry'], spec['material']
+    if isinstance(spec.geometry, CylinderGeometry):
+        geom, mat = spec.geometry, spec.material
         return condense_cylinder(
-            geom['length'], geom['outer_radius'], geom.get('inner_radius', 0.0),
-            youngs_modulus=_given(youngs_modulus, mat['youngs_modulus']),
-            poisson_ratio=_given(poisson_ratio, mat['poisson_ratio']),
-            mesh_size=_given(mesh_size, spec['mesh']['mesh_size']),
-            order=_given(order, spec['mesh'].get('order', 2)), density=mat.get('density', 0.0))
-    raise ValueError(f'unknown segment kind {kind!r} (bellows_segment or cylinder)')
+            geom.length, geom.outer_radius, geom.inner_radius,
+            youngs_modulus=_given(youngs_modulus, mat.youngs_modulus),
+            poisson_ratio=_given(poisson_ratio, mat.poisson_ratio),
+            mesh_size=_given(mesh_size, spec.mesh.mesh_size),
+            order=_given(order, spec.mesh.order), density=mat.density)
+    raise TypeError(f'unknown segment geometry {type(spec.geometry).__name__} '
+                    '(BellowsGeometry or CylinderGeometry)')

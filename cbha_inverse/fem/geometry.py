@@ -171,8 +171,8 @@ def bellows_tube_mesh(geometry, *, mesh_size, order=2, circumferential_elements=
 
     Parameters
     ----------
-    geometry : dict
-        The ``geometry`` mapping of a bellows segment YAML (``meshes/cbha_segment.yaml``).
+    geometry : cbha_inverse.fem.segment_spec.BellowsGeometry
+        Bellows segment geometry (of ``meshes/cbha_segment.yaml``, say).
     mesh_size : float  [m]
         Element size in the wall profile.
     order : {1, 2}
@@ -195,12 +195,11 @@ def bellows_tube_mesh(geometry, *, mesh_size, order=2, circumferential_elements=
 
     """
     g = geometry
-    x0 = 0.5 * g['vertebra_thickness']
-    x1 = g['segment_length'] - 0.5 * g['vertebra_thickness']
-    pitch = (x1 - x0) / g['corrugation_periods']
-    s = np.linspace(0.0, x1 - x0, int(samples_per_pitch * g['corrugation_periods']) + 1)
-    r_in = corrugation_profile(s, g['tube_mean_radius'], g['corrugation_amplitude'], pitch)
-    r_out = r_in + g['wall_thickness']
+    x0, x1 = g.wall_start, g.wall_end
+    s = np.linspace(0.0, x1 - x0, int(samples_per_pitch * g.corrugation_periods) + 1)
+    r_in = corrugation_profile(s, g.tube_mean_radius, g.corrugation_amplitude,
+                               g.corrugation_pitch)
+    r_out = r_in + g.wall_thickness
     n_circ, n_thick = bellows_mesh_counts(g, mesh_size)
     n_circ = n_circ if circumferential_elements is None else circumferential_elements
     n_thick = n_thick if through_thickness is None else through_thickness
@@ -251,7 +250,7 @@ def bellows_mesh_counts(geometry, mesh_size):
 
     Parameters
     ----------
-    geometry : dict
+    geometry : cbha_inverse.fem.segment_spec.BellowsGeometry
         Bellows segment geometry.
     mesh_size : float  [m]
         Profile element size.
@@ -264,9 +263,9 @@ def bellows_mesh_counts(geometry, mesh_size):
         layers (wall / mesh_size rounded, at least 2).
 
     """
-    circ = 2.0 * np.pi * geometry['tube_mean_radius'] / (4.0 * mesh_size)
+    circ = 2.0 * np.pi * geometry.tube_mean_radius / (4.0 * mesh_size)
     n_circ = 3 * max(8, int(np.ceil(circ / 3.0)))
-    n_thick = max(2, int(round(geometry['wall_thickness'] / mesh_size)))
+    n_thick = max(2, int(round(geometry.wall_thickness / mesh_size)))
     return n_circ, n_thick
 
 

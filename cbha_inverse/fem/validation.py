@@ -153,8 +153,8 @@ def bellows_body(spec, n_segments, *, mesh_size=None, order=None):
 
     Parameters
     ----------
-    spec : dict
-        Bellows segment geometry YAML.
+    spec : cbha_inverse.fem.segment_spec.SegmentSpec
+        Bellows segment geometry file.
     n_segments : int
         Segments stacked.
     mesh_size : float, optional  [m]
@@ -174,10 +174,10 @@ def bellows_body(spec, n_segments, *, mesh_size=None, order=None):
     from cbha_inverse.fem.coupling import build_coupling
     from cbha_inverse.fem.geometry import bellows_tube_mesh
     from cbha_inverse.fem.mesh import nodes_on_plane, TetMesh
-    g = spec['geometry']
-    tube = bellows_tube_mesh(g, mesh_size=mesh_size or spec['mesh']['mesh_size'],
-                             order=order or spec['mesh'].get('order', 2))
-    length, half = g['segment_length'], 0.5 * g['vertebra_thickness']
+    g = spec.geometry
+    tube = bellows_tube_mesh(g, mesh_size=mesh_size or spec.mesh.mesh_size,
+                             order=order or spec.mesh.order)
+    length, half = g.segment_length, g.wall_start
     shifts = [(i * length, y_c, z_c) for i in range(n_segments)
               for y_c, z_c in geometry_tube_centres(g)]
     points = np.vstack([tube.points + s for s in shifts])
@@ -196,8 +196,8 @@ def bellows_chain_vs_full(spec, n_segments, *, mesh_size=None, order=None):
 
     Parameters
     ----------
-    spec : dict
-        Bellows segment geometry YAML.
+    spec : cbha_inverse.fem.segment_spec.SegmentSpec
+        Bellows segment geometry file.
     n_segments : int
         Segments stacked.
     mesh_size : float, optional  [m]
@@ -216,7 +216,7 @@ def bellows_chain_vs_full(spec, n_segments, *, mesh_size=None, order=None):
     from cbha_inverse.core.statics import solve_static
     from cbha_inverse.fem.condensation import condense_bellows, frame_compliance
     from cbha_inverse.fem.elasticity import assemble_stiffness
-    mat = spec['material']
+    mat = spec.material
     seg = condense_bellows(spec, mesh_size=mesh_size, order=order)
     model = chain_from_segments([seg] * n_segments)
     chain = chain_tip_compliance(model)
@@ -226,7 +226,7 @@ def bellows_chain_vs_full(spec, n_segments, *, mesh_size=None, order=None):
     chain_seconds = time.perf_counter() - t0
     mesh, coupling = bellows_body(spec, n_segments, mesh_size=mesh_size, order=order)
     t1 = time.perf_counter()
-    stiffness = assemble_stiffness(mesh, mat['youngs_modulus'], mat['poisson_ratio'])
+    stiffness = assemble_stiffness(mesh, mat.youngs_modulus, mat.poisson_ratio)
     full, _ = frame_compliance(stiffness, coupling, frame=-1)
     full_seconds = time.perf_counter() - t1
     return {'chain': chain, 'full': full, 'error': relative_diagonal_error(chain, full),

@@ -16,9 +16,9 @@ from pathlib import Path
 import sys
 import time
 
+from cbha_inverse.fem.segment_spec import read_segment_spec
 from cbha_inverse.paths import meshes_path
 import numpy as np
-import yaml
 
 E_MOD, NU = 1.0e6, 0.3
 
@@ -87,7 +87,7 @@ def bellows_table(quick):
 
     """
     from cbha_inverse.fem.condensation import condense_bellows
-    spec = yaml.safe_load(meshes_path('cbha_segment.yaml').read_text())
+    spec = read_segment_spec(meshes_path('cbha_segment.yaml'))
     sizes = [0.001, 0.0008] if quick else [0.001, 0.0008, 0.000625, 0.0005]
     ref_size = 0.000625 if quick else 0.00035
     reference = condense_bellows(spec, mesh_size=ref_size)
@@ -143,7 +143,7 @@ def chain_tables(quick):
                  'speed_up': big['full_seconds'] / big['chain_seconds'],
                  'full_newton_iterations': big['full'].iterations})
     if not quick:
-        spec = yaml.safe_load(meshes_path('cbha_segment.yaml').read_text())
+        spec = read_segment_spec(meshes_path('cbha_segment.yaml'))
         for n in (1, 2):
             out = bellows_chain_vs_full(spec, n)
             rows.append({'case': f'CBHA stack of {n} bellows segment(s), linear',

@@ -78,6 +78,36 @@ def tracking_errors(target_times, targets, tip_times, tips, start, end):
                           float(np.max(errors)))
 
 
+def cross_track_errors(path, tips):
+    """
+    Return the distance of each tip sample to a path polyline (timing ignored).
+
+    Parameters
+    ----------
+    path : (T, 3) array_like  [m]
+        The path's points in order (e.g. the targets of a lap), at least 2.
+    tips : (N, 3) array_like  [m]
+        Tip positions.
+
+    Returns
+    -------
+    (N,) ndarray  [m]
+        Distance of each tip to the nearest segment of the polyline.
+
+    """
+    path = np.asarray(path, dtype=float).reshape(-1, 3)
+    tips = np.asarray(tips, dtype=float).reshape(-1, 3)
+    if len(path) < 2:
+        raise ValueError('a path needs at least 2 points')
+    start, direction = path[:-1], np.diff(path, axis=0)
+    length2 = np.maximum(np.sum(direction ** 2, axis=1), 1e-300)
+    out = np.empty(len(tips))
+    for i, tip in enumerate(tips):
+        along = np.clip(np.sum((tip - start) * direction, axis=1) / length2, 0.0, 1.0)
+        out[i] = np.sqrt(np.min(np.sum((start + along[:, None] * direction - tip) ** 2, axis=1)))
+    return out
+
+
 def plot_runs(runs, path):
     """
     Plot target vs tip in the y-z plane, one panel per run, into a PNG.

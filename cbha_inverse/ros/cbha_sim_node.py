@@ -7,8 +7,10 @@ and rejects malformed commands like a valve driver (wrong length, non-finite, ou
 command takes effect after the transport ``latency``; the valve pressures follow it with a
 first-order lag ``valve_time_constant`` (exact exponential step). Every tick at ``rate_hz`` the
 plant (:class:`cbha_inverse.robot.plant.StaticPlant`: the scene loaded with a deliberate
-``stiffness_scale`` error and its own ``gravity``) is moved to the equilibrium of the current
-valve pressures by warm-started Newton steps, and the tip is published on ``tip/measured``
+``stiffness_scale`` error, per-section ``section_stiffness_scale`` and per-valve
+``cavity_gain_scale`` errors applied as a scene calibration, and its own ``gravity``) is moved
+to the equilibrium of the current valve pressures by warm-started Newton steps, and the tip is
+published on ``tip/measured``
 (PointStamped, sensor data QoS) with Gaussian noise (seeded) and, noise-free, on ``tip/true``.
 Time (ticks, latency, valve lag, stamps) is the node clock: with ``use_sim_time`` the plant runs
 on ``/clock``.
@@ -36,6 +38,7 @@ from cbha_inverse.ros.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.runner import run_node
 from cbha_inverse.scene import load_scene
+from cbha_inverse.scene.calibration import Calibration
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
@@ -52,6 +55,12 @@ class CbhaSimParams:
     scene: str = param('cbha.yaml', 'plant scene YAML: a file path, or a name in config/scenes')
     stiffness_scale: float = param(0.9, 'plant stiffness / nominal stiffness (model error) [-]',
                                    low=0.01, high=100.0)
+    section_stiffness_scale: tuple = param(
+        (1.0,), 'plant stiffness error per chain section, scene section order, on top of '
+        'stiffness_scale (one value: every section) [-]')
+    cavity_gain_scale: tuple = param(
+        (1.0,), 'plant effective-area error per cavity, valve_names order (one value: every '
+        'cavity) [-]')
     gravity: tuple = param((0.0, 0.0, -9.81), 'plant gravity in cbha_base [m/s^2]')
     valve_names: tuple = param(None, 'command order: a permutation of the scene actuators '
                                '(unset: the scene order; the CBHA scene order is the vendor '
@@ -85,6 +94,47 @@ class CbhaSimParams:
                                  low=0.0005, high=0.1)
 
 
+def plant_errors(section_names, valve_names, section_scales, gain_scales):
+    """
+    Turn the per-section and per-valve error parameters into a scene calibration.
+
+    Parameters
+    ----------
+    section_names : sequence of str
+        The scene's chain sections, in order.
+    valve_names : sequence of str
+        The command order.
+    section_scales : sequence of float  [-]
+        One stiffness factor per section, or one for all.
+    gain_scales : sequence of float  [-]
+        One effective-area factor per valve (cavity), or one for all.
+
+    Returns
+    -------
+    cbha_inverse.scene.calibration.Calibration
+        Only the factors that differ from 1 (a scene without sections or cavities accepts ones).
+
+    Raises
+    ------
+    ValueError
+        On a wrong count or a factor that is not finite and positive.
+
+    """
+    tables = []
+    for label, names, scales in (('section_stiffness_scale', section_names, section_scales),
+                                 ('cavity_gain_scale', valve_names, gain_scales)):
+        values = [float(v) for v in scales]
+        if len(values) == 1 and (names or values[0] == 1.0):
+            values = values * len(names)
+        if len(values) != len(names):
+            raise ValueError(f'{label} needs 1 or {len(names)} values ({list(names)}), got '
+                             f'{len(scales)}')
+        if not all(math.isfinite(v) and v > 0.0 for v in values):
+            raise ValueError(f'{label} must be finite and > 0, got {list(scales)}')
+        tables.append({n: v for n, v in zip(names, values) if v != 1.0})
+    return Calibration(*tables)
+
+
 class CbhaSimNode(Node):
     """
     The simulated robot: pressure command in, tip position out.
@@ -108,13 +158,16 @@ class CbhaSimNode(Node):
             p = self.params
             if len(p.gravity) != 3 or not all(math.isfinite(g) for g in p.gravity):
                 raise ValueError(f'gravity must be 3 finite numbers, got {list(p.gravity)}')
-            self.scene = load_scene(p.scene, stiffness_scale=p.stiffness_scale,
-                                    gravity=p.gravity)
-            names = self.scene.actuator_names
+            nominal = load_scene(p.scene)
+            names = nominal.actuator_names
             self.valve_names = names if p.valve_names is None else p.valve_names
             if sorted(self.valve_names) != sorted(names):
                 raise ValueError(f'valve_names {list(self.valve_names)} must be a permutation of '
                                  f'the scene actuators {list(names)}')
+            errors = plant_errors(nominal.section_names, self.valve_names,
+                                  p.section_stiffness_scale, p.cavity_gain_scale)
+            self.scene = load_scene(p.scene, stiffness_scale=p.stiffness_scale,
+                                    gravity=p.gravity, calibration=errors)
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
@@ -146,7 +199,9 @@ class CbhaSimNode(Node):
             self.cameras = self._start_cameras()
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
-            f'plant {self.scene.name} x{p.stiffness_scale:g} stiffness, gravity '
+            f'plant {self.scene.name} x{p.stiffness_scale:g} stiffness (sections '
+            f'{list(p.section_stiffness_scale)}, cavity gains {list(p.cavity_gain_scale)}), '
+            f'gravity '
             f'{list(p.gravity)}, valves {p.valve_time_constant * 1e3:g} ms, latency '
             f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm, {p.rate_hz:g} Hz')
 

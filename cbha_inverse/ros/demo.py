@@ -70,6 +70,15 @@ def parse_args(argv):
                         help='time at the start point before moving [s] (not scored)')
     parser.add_argument('--stiffness-scale', type=float, default=0.9,
                         help='plant stiffness / model stiffness')
+    parser.add_argument('--plant-section-scale', default='1.0',
+                        help='comma-separated plant stiffness error per scene section, on top '
+                        'of --stiffness-scale (cbha_sim section_stiffness_scale)')
+    parser.add_argument('--plant-gain-scale', default='1.0',
+                        help='comma-separated plant effective-area error per valve (cbha_sim '
+                        'cavity_gain_scale)')
+    parser.add_argument('--model-scene', default=None,
+                        help="inverse_solver's scene (default --scene), e.g. a cbha_identify "
+                        'result')
     parser.add_argument('--feedback', default='direct,stereo',
                         help='comma-separated: direct (tip/measured from the plant: every shape '
                         'and mode) and/or stereo (closed loop through rendered cameras and '
@@ -218,6 +227,11 @@ def _stereo_overrides(args):
     return sim, tracker
 
 
+def _floats(text):
+    """Parse comma-separated floats."""
+    return [float(v) for v in text.split(',')]
+
+
 def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, feedback='direct'):
     """Run one shape in one mode for one lap and return its summary dict."""
     speed = args.circle_speed if shape == 'circle' else args.square_speed
@@ -233,11 +247,14 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         solver_extra = {'loop_gain': args.stereo_loop_gain}
         waited.append('stereo_tracker')
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
-        **common, 'stiffness_scale': args.stiffness_scale, **sim_extra}, env)}
+        **common, 'stiffness_scale': args.stiffness_scale,
+        'section_stiffness_scale': _floats(args.plant_section_scale),
+        'cavity_gain_scale': _floats(args.plant_gain_scale), **sim_extra}, env)}
     if feedback == 'stereo':
         processes['stereo_tracker'] = _start('stereo_tracker', run_dir, tracker_params, env)
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
-        **common, 'mode': mode, 'diagnostics_period': 0.5, **solver_extra}, env)
+        **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
+        'diagnostics_period': 0.5, **solver_extra}, env)
     try:
         # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
         # clock at 0 until the solver, this recorder and the bag recorder subscribe to it

@@ -20,11 +20,15 @@ Scene YAML schema (SI units)::
       sections: [{name, segment: <path relative to the scene file>, count}]
     cables: [{name, angle_deg, radius, end_vertebra, max_tension}]       # routed base → end
     cavities: [{name, section, cavity: <segment cavity name>, max_pressure}]
-    cavity_model: linear | mesh          # core.cavity_linear / core.cavity (default linear)
+    cavity_model: linear | mesh          # core.actuation.condensed_cavities / .cavities
     actuator_order: [names]              # column order (default: cables, then cavities)
     effectors: [{name, frame: <int or 'tip'> or vertebra: <int>, offset: [x, y, z]}]
     workspace_center: [x, y, z] or {actuation_fraction: f}
     solver: {energy_weight, proximal_weight, rate_limit, relinearize_every, ...}  # defaults
+    calibration:                         # identified corrections (cbha_identify), optional
+      section_stiffness: {<section name>: factor}    # stiffness factor of a segments section
+      actuator_gain: {<cavity name>: factor}         # effective-area factor of a cavity
+      tip_payload_mass: kg                           # mass added at the last frame
 
 Scenes shipped in ``config/scenes``: ``tendon_6f_8c`` and ``tendon_10f_16c`` (the paper's Fig. 6
 trunks, Timoshenko beams and cables) and ``cbha`` (16 condensed bellows segments, 6 cavities).
@@ -43,6 +47,7 @@ from cbha_inverse.core.inverse.solver import InverseOptions, InverseSolver
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.paths import config_path
+from cbha_inverse.scene.calibration import Calibration, check_names, read_calibration
 import numpy as np
 
 
@@ -63,11 +68,18 @@ class Scene:
     gravity : (3,) ndarray or None  [m/s^2]
     actuator_names, effector_names : tuple of str
     lower_bounds, upper_bounds : (m,) ndarray  [N or Pa]
+    section_names : tuple of str
+        Chain sections of a ``segments`` chain, in chain order (empty for beams).
+    calibration : cbha_inverse.scene.calibration.Calibration
+        The corrections applied at load (the file's block and the caller's, combined).
+    path : pathlib.Path or None
+        The scene file.
 
     """
 
     def __init__(self, name, model, actuators, effectors, gravity, *, description='',
-                 base_frame='cbha_base', workspace=None, solver_defaults=None):
+                 base_frame='cbha_base', workspace=None, solver_defaults=None,
+                 section_names=(), calibration=None, path=None):
         """Store the parts (use :func:`load_scene`)."""
         self.name = name
         self.description = description
@@ -80,6 +92,9 @@ class Scene:
         self.effector_names = tuple(effectors.names)
         self.lower_bounds = np.array(actuators.lower_bounds, dtype=float)
         self.upper_bounds = np.array(actuators.upper_bounds, dtype=float)
+        self.section_names = tuple(section_names)
+        self.calibration = Calibration() if calibration is None else calibration
+        self.path = None if path is None else Path(path)
         self._workspace = workspace
         self._solver_defaults = dict(solver_defaults or {})
 
@@ -203,7 +218,7 @@ def resolve_scene_path(path):
     raise FileNotFoundError(f'no scene {path!s} (nor {named})')
 
 
-def load_scene(path, *, stiffness_scale=1.0, gravity=None):
+def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     """
     Load a scene YAML and build only what it names.
 
@@ -216,6 +231,9 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None):
         softer robot than the nominal one.
     gravity : (3,) array_like, optional  [m/s^2]
         Overrides the scene's gravity (``[0, 0, 0]`` disables it).
+    calibration : cbha_inverse.scene.calibration.Calibration, optional
+        Applied on top of the scene's own ``calibration`` block (factors multiply, masses add),
+        e.g. the deliberate errors of a simulated plant.
 
     Returns
     -------
@@ -234,15 +252,18 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None):
         raise ValueError('stiffness_scale must be positive')
     path = resolve_scene_path(path)
     spec = read_section(path)
+    calibrated = read_calibration(spec).combined(calibration)
     chain = spec.section('chain')
     kind = chain.text('type', choices=('beam_vertebrae', 'segments'))
     if kind == 'beam_vertebrae':
-        model = _beam_chain(chain, stiffness_scale)
+        model = _beam_chain(chain, stiffness_scale, calibrated.tip_payload_mass)
         vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
     else:
         from cbha_inverse.scene.segments import segment_chain
-        model, sections, parts = segment_chain(chain, path.parent, stiffness_scale)
+        model, sections, parts = segment_chain(chain, path.parent, stiffness_scale, calibrated)
         vertebra_frames = np.arange(model.n_frames)
+    check_names(spec, calibrated, sections,
+                [item.data.get('name') for item in spec.sections('cavities', [])])
     groups = []
     if spec.has('cables'):
         groups.append(CableGroup(_cables(spec.sections('cables'), vertebra_frames),
@@ -251,7 +272,8 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None):
         from cbha_inverse.scene.segments import cavity_group
         groups.append(cavity_group(spec.sections('cavities'), sections, parts, model.n_frames,
                                    spec.text('cavity_model', 'linear',
-                                             choices=('linear', 'mesh'))))
+                                             choices=('linear', 'mesh')),
+                                   calibrated.actuator_gain))
     if not groups:
         raise spec.error('cables', 'a scene needs cables or cavities (no actuator)')
     actuators = _actuator_set(spec, groups, model.n_frames)
@@ -263,7 +285,8 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None):
     return Scene(spec.text('name', path.stem), model, actuators, effectors, g,
                  description=spec.text('description', ''),
                  base_frame=spec.text('base_frame', 'cbha_base'),
-                 workspace=_workspace(spec), solver_defaults=_solver_defaults(spec))
+                 workspace=_workspace(spec), solver_defaults=_solver_defaults(spec),
+                 section_names=tuple(sections), calibration=calibrated, path=path)
 
 
 def _actuator_set(spec, groups, n_frames):
@@ -303,7 +326,7 @@ def _vertebra_frames(chain):
             * chain.integer('beams_per_interval', minimum=1))
 
 
-def _beam_chain(chain, stiffness_scale):
+def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
     """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene."""
     n_v = chain.integer('n_vertebrae', minimum=1)
     per = chain.integer('beams_per_interval', minimum=1)
@@ -319,6 +342,7 @@ def _beam_chain(chain, stiffness_scale):
     area = np.pi * (outer ** 2 - inner ** 2)
     masses = np.full(n, b.number('density', 0.0, minimum=0.0) * area * length)
     masses[per - 1::per] += chain.number('vertebra_mass', 0.0, minimum=0.0)
+    masses[-1] += tip_payload_mass
     offsets = np.tile([length, 0.0, 0.0], (n, 1))
     return ChainModel.from_compliances(np.broadcast_to(c / stiffness_scale, (n, 6, 6)), offsets,
                                        masses=masses)

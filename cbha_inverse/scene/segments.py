@@ -13,7 +13,7 @@ from cbha_inverse.core.chain import ChainModel
 import numpy as np
 
 
-def segment_chain(chain, base_dir, stiffness_scale=1.0):
+def segment_chain(chain, base_dir, stiffness_scale=1.0, calibration=None):
     """
     Build a chain of condensed segments in series.
 
@@ -26,6 +26,9 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0):
         Directory of the scene file.
     stiffness_scale : float
         Divides every compliance.
+    calibration : cbha_inverse.scene.calibration.Calibration, optional
+        Its ``section_stiffness`` factor of a section also divides that section's compliances;
+        its ``tip_payload_mass`` is added to the last frame.
 
     Returns
     -------
@@ -40,6 +43,7 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0):
     from cbha_inverse.fem.segment_io import load_segment
     compliances, offsets, rotations, masses = [], [], [], []
     sections, parts = {}, {}
+    factors = {} if calibration is None else calibration.section_stiffness
     items = chain.sections('sections')
     if not items:
         raise chain.error('sections', 'at least one section is needed')
@@ -50,13 +54,18 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0):
         segment = load_segment(segment_path)
         count = item.integer('count', minimum=1)
         name = item.text('name')
+        if name in sections:
+            raise item.error('name', f'section {name!r} named twice')
         sections[name] = (len(compliances), count)
         parts[name] = segment
+        scale = stiffness_scale * factors.get(name, 1.0)
         for _ in range(count):
-            compliances.append(np.asarray(segment.compliance, dtype=float) / stiffness_scale)
+            compliances.append(np.asarray(segment.compliance, dtype=float) / scale)
             offsets.append(np.asarray(segment.rest_offset, dtype=float))
             rotations.append(np.asarray(segment.rest_rotation, dtype=float))
             masses.append(float(segment.mass))
+    if calibration is not None:
+        masses[-1] += calibration.tip_payload_mass
     model = ChainModel.from_compliances(np.array(compliances), np.array(offsets),
                                         masses=np.array(masses),
                                         rest_rotations=np.array(rotations))
@@ -93,7 +102,7 @@ def cavity_surfaces(segment):
     return out
 
 
-def cavity_group(items, sections, segments, n_frames, model='linear'):
+def cavity_group(items, sections, segments, n_frames, model='linear', gains=None):
     """
     Build the pressure actuators: one per (section, cavity), summed over the section's segments.
 
@@ -111,6 +120,8 @@ def cavity_group(items, sections, segments, n_frames, model='linear'):
         ``'linear'`` (:class:`~cbha_inverse.core.actuation.condensed_cavities.LinearCavityGroup`,
         default) or ``'mesh'``
         (:class:`~cbha_inverse.core.actuation.cavities.CavityGroup`).
+    gains : dict of str to float, optional
+        Cavity name -> effective-area factor (``calibration.actuator_gain``; default 1).
 
     Returns
     -------
@@ -134,8 +145,9 @@ def cavity_group(items, sections, segments, n_frames, model='linear'):
         rotation = np.asarray(segment.rest_rotation, dtype=float)
         parts = tuple(CavityPart(points, triangles, first + s, offset, rotation)
                       for s in range(count))
-        cavities.append(Cavity(item.text('name'), parts,
-                               item.number('max_pressure', positive=True)))
+        name = item.text('name')
+        cavities.append(Cavity(name, parts, item.number('max_pressure', positive=True),
+                               (gains or {}).get(name, 1.0)))
     if model == 'linear':
         return LinearCavityGroup(cavities, n_frames)
     if model == 'mesh':

@@ -1,15 +1,78 @@
 """
 Compiled projection of a solved linearisation onto effectors and actuators (DESIGN §6 step 2).
 
-:func:`project_effectors` forms ``W_ea``, ``W_aa`` and the free effector positions from
-``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the actuation and remaining gap of a QP solution;
-:func:`target_status` checks the targets of a tick.
+:func:`effector_levers` and :func:`effector_points` are the one implementation of the effector
+levers ``r = R_f o`` and points ``p = x_f + R_f o``; :func:`project_effectors` forms ``W_ea``,
+``W_aa`` and the free effector positions from ``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the
+actuation and remaining gap of a QP solution; :func:`target_status` checks the targets of a tick.
 """
 
 import math
 
 import numba
 import numpy as np
+
+
+@numba.njit(cache=True)
+def effector_levers(rotations, effector_frames, effector_offsets):
+    """
+    Return the levers ``r = R_f o`` of effector points (paper §IV, ``J_e``).
+
+    The lever gives the ``[I, -r^]`` block of ``J_e`` on the effector's frame ``f``
+    (:mod:`cbha_inverse.core.actuation.effectors`).
+
+    Parameters
+    ----------
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (frame axes → world).
+    effector_frames : (k,) int ndarray
+        Frame of every effector (1..n).
+    effector_offsets : (k, 3) ndarray  [m]
+        Effector points in their frame's axes.
+
+    Returns
+    -------
+    (k, 3) ndarray  [m]
+        ``R_f o``.
+
+    """
+    k = effector_frames.size
+    levers = np.empty((k, 3))
+    for e in range(k):
+        rot = rotations[effector_frames[e]]
+        offset = effector_offsets[e]
+        for i in range(3):
+            levers[e, i] = rot[i, 0] * offset[0] + rot[i, 1] * offset[1] + rot[i, 2] * offset[2]
+    return levers
+
+
+@numba.njit(cache=True)
+def effector_points(positions, rotations, effector_frames, effector_offsets):
+    """
+    Return the world positions ``p = x_f + R_f o`` of effector points.
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (frame axes → world).
+    effector_frames : (k,) int ndarray
+        Frame of every effector (1..n).
+    effector_offsets : (k, 3) ndarray  [m]
+        Effector points in their frame's axes.
+
+    Returns
+    -------
+    (k, 3) ndarray  [m]
+        ``x_f + R_f o`` (the lever ``R_f o`` from :func:`effector_levers`).
+
+    """
+    points = effector_levers(rotations, effector_frames, effector_offsets)
+    for e in range(effector_frames.size):
+        for i in range(3):
+            points[e, i] += positions[effector_frames[e], i]
+    return points
 
 
 @numba.njit(cache=True)
@@ -56,15 +119,13 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
     k = effector_frames.size
     moved = np.empty((3 * k, width))
     offset = np.empty(3 * k)
+    points = effector_points(positions, rotations, effector_frames, effector_offsets)
+    levers = effector_levers(rotations, effector_frames, effector_offsets)
     for e in range(k):
-        frame = effector_frames[e]
-        rot = rotations[frame]
-        lever = np.empty(3)
+        lever = levers[e]
         for i in range(3):
-            lever[i] = (rot[i, 0] * effector_offsets[e, 0] + rot[i, 1] * effector_offsets[e, 1]
-                        + rot[i, 2] * effector_offsets[e, 2])
-            offset[3 * e + i] = positions[frame, i] + lever[i]
-        base = 6 * (frame - 1)
+            offset[3 * e + i] = points[e, i]
+        base = 6 * (effector_frames[e] - 1)
         for col in range(width):
             rx, ry, rz = solved[base + 3, col], solved[base + 4, col], solved[base + 5, col]
             # dp = dx + dθ x r

@@ -89,12 +89,16 @@ class Cavity:
         Its closed surfaces (caps shared by two segments cancel in the sum).
     max_pressure : float  [Pa]
         Upper bound (gauge).
+    gain : float  [-]
+        Effective-area factor: scales the wrenches per unit pressure and the work-conjugate
+        volume (a scene's ``calibration.actuator_gain``; 1 = the geometric cavity).
 
     """
 
     name: str
     parts: tuple
     max_pressure: float
+    gain: float = 1.0
 
 
 def skinning_weights(points, rest_offset):
@@ -156,6 +160,7 @@ class CavityGroup:
         self.names = tuple(c.name for c in self.cavities)
         self.n_frames = int(n_frames)
         m = len(self.cavities)
+        gains = np.array([c.gain for c in self.cavities], dtype=float)
         fa, la, lb, wb, tris, owner_v, owner_t = [], [], [], [], [], [], []
         count = 0
         for j, cavity in enumerate(self.cavities):
@@ -187,14 +192,16 @@ class CavityGroup:
         cols = np.repeat(np.arange(n_t), 3)
         self._vertex_triangle = sp.csr_matrix((np.full(rows.size, 1.0 / 6.0), (rows, cols)),
                                               shape=(n_v, n_t))
-        self._triangle_sum = sp.csr_matrix((np.ones(n_t), (owner_t, np.arange(n_t))),
+        self._triangle_sum = sp.csr_matrix((gains[owner_t], (owner_t, np.arange(n_t))),
                                            shape=(m, n_t))
         shape = (m * self.n_frames, n_v)
         cols_v = np.arange(n_v)
         self._scatter_a = sp.csr_matrix(
-            (self.weight_a, (owner_v * self.n_frames + self.frame_a, cols_v)), shape=shape)
+            (self.weight_a * gains[owner_v], (owner_v * self.n_frames + self.frame_a, cols_v)),
+            shape=shape)
         self._scatter_b = sp.csr_matrix(
-            (self.weight_b, (owner_v * self.n_frames + self.frame_b, cols_v)), shape=shape)
+            (self.weight_b * gains[owner_v], (owner_v * self.n_frames + self.frame_b, cols_v)),
+            shape=shape)
         self.upper_bounds = np.array([c.max_pressure for c in self.cavities], dtype=float)
         self.lower_bounds = np.zeros(m)
 

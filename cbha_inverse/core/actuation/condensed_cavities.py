@@ -52,11 +52,12 @@ class LinearCavityGroup:
                 g, h, vol = fits[key]
                 lower.append(part.lower)
                 owner.append(j)
-                g0.append(g)
-                hess.append(h)
+                # the cavity's gain (calibration) scales its wrench per Pa and its volume
+                g0.append(cavity.gain * g)
+                hess.append(cavity.gain * h)
                 d0.append(np.asarray(part.rest_offset, dtype=float))
                 q0.append(np.asarray(part.rest_rotation, dtype=float))
-                v0.append(vol)
+                v0.append(cavity.gain * vol)
         self.lower = np.array(lower, dtype=int)
         self.upper = self.lower + 1
         self.g0 = np.array(g0)

@@ -4,9 +4,12 @@ Effectors: points fixed to frames whose positions the inverse model drives (pape
 The paper puts an identity block on the rows of the last frame; here an effector is any point
 ``p = x_f + R_f o`` on a mobile frame ``f`` (the tip, a mid vertebra, a gripper point), several
 at once. With retract increments ``dp = dx_f + dθ_f × r = dx_f - r × dθ_f`` where ``r = R_f o``,
-i.e. the ``J_e`` block of the effector is ``[I, -r^]`` on frame ``f``.
+i.e. the ``J_e`` block of the effector is ``[I, -r^]`` on frame ``f``. The points and levers
+are computed by the compiled kernels of :mod:`cbha_inverse.core._kernels.projection`
+(``effector_points``, ``effector_levers``), the ones the control tick's projection uses.
 """
 
+from cbha_inverse.core._kernels.projection import effector_levers, effector_points
 from cbha_inverse.core.se3 import cross
 import numpy as np
 
@@ -31,8 +34,8 @@ class PointEffectors:
     def __init__(self, names, frames, offsets, n_frames):
         """Validate and store the effector points."""
         self.names = tuple(names)
-        self.frames = np.asarray(frames, dtype=int).reshape(-1)
-        self.offsets = np.asarray(offsets, dtype=float).reshape(-1, 3)
+        self.frames = np.ascontiguousarray(np.asarray(frames, dtype=np.int64).reshape(-1))
+        self.offsets = np.ascontiguousarray(np.asarray(offsets, dtype=float).reshape(-1, 3))
         if not (len(self.names) == self.frames.size == self.offsets.shape[0]):
             raise ValueError('effectors: names, frames and offsets must have the same length')
         if self.frames.size == 0:
@@ -41,7 +44,6 @@ class PointEffectors:
             raise ValueError(f'effector frames must lie in 1..{n_frames - 1} (the base is fixed)')
         self.n_frames = int(n_frames)
         self._dof = self.frames - 1
-        self._centred = not np.any(self.offsets)
 
     @property
     def n_effectors(self):
@@ -62,7 +64,8 @@ class PointEffectors:
         (k, 3) ndarray  [m]
 
         """
-        return np.einsum('kij,kj->ki', rotations[self.frames], self.offsets)
+        return effector_levers(np.ascontiguousarray(rotations, dtype=float), self.frames,
+                               self.offsets)
 
     def positions(self, positions, rotations):
         """
@@ -80,9 +83,9 @@ class PointEffectors:
         (k, 3) ndarray  [m]
 
         """
-        if self._centred:
-            return positions[self.frames]
-        return positions[self.frames] + self.levers(rotations)
+        return effector_points(np.ascontiguousarray(positions, dtype=float),
+                               np.ascontiguousarray(rotations, dtype=float), self.frames,
+                               self.offsets)
 
     def apply_jacobian(self, increments, levers):
         """

@@ -1,0 +1,187 @@
+"""
+``cbha_identify BAG [--scene SCENE] [--output DIR]``: a calibrated scene from one recorded session.
+
+Reads ``pressure_command`` and ``tip/measured`` from the bag, aligns them (link ``--latency``
+and valve ``--valve-time-constant``, by default the paper's 3 ms and 10 ms), keeps at most
+``--max-samples`` quasi-static samples and fits the scene's per-section stiffness and per-cavity
+gain factors (:func:`cbha_inverse.identify.fit.identify`). Writes ``DIR/<scene>_identified.yaml``
+(a complete scene file with the fitted ``calibration`` block: ``-p scene:=...``),
+``DIR/<scene>_identified_report.txt`` (factors with standard errors, correlation matrix, tip RMS
+before/after, identifiability warnings) and ``DIR/<scene>_identified.png`` (measured vs predicted
+tip, y-z plane, before and after). Exit status 0 on a valid fit, 1 when the data cannot give
+one (no tip measurements, too little excitation: nothing is written), 2 on a bad file.
+"""
+
+import argparse
+from pathlib import Path
+import sys
+import time
+
+from cbha_inverse.bag.storage import BagError
+from cbha_inverse.config_files import read_yaml
+from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.identify.fit import identify
+from cbha_inverse.identify.samples import IdentificationError, quasi_static_samples, read_session
+from cbha_inverse.scene import load_scene, resolve_scene_path
+import numpy as np
+import yaml
+
+PROGRAM = 'cbha_identify'
+
+
+def parse_args(argv):
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(prog=PROGRAM, description=__doc__.split('\n\n')[0])
+    parser.add_argument('bag', help='the recorded session (rosbag2 folder)')
+    parser.add_argument('--scene', default='cbha.yaml', help='nominal scene (path or name)')
+    parser.add_argument('--output', default='output/identify', help='output folder')
+    parser.add_argument('--namespace', default='/cbha', help='namespace of the topics')
+    parser.add_argument('--valve-names', default=None,
+                        help='comma-separated command order (default: the scene order)')
+    parser.add_argument('--latency', type=float, default=0.003,
+                        help='command -> valve delay [s]')
+    parser.add_argument('--valve-time-constant', type=float, default=0.01,
+                        help='first-order valve response [s]')
+    parser.add_argument('--settle-time', type=float, default=0.05,
+                        help='quasi-static: pressures steady over this time [s]')
+    parser.add_argument('--settle-tolerance', type=float, default=2000.0,
+                        help='quasi-static: largest pressure change over --settle-time [Pa]')
+    parser.add_argument('--max-samples', type=int, default=40,
+                        help='quasi-static samples fitted at most (evenly spread)')
+    return parser.parse_args(argv)
+
+
+def command_order(scene, valve_names):
+    """Return the scene column of each command entry (``valve_names`` comma-separated)."""
+    names = list(scene.actuator_names) if valve_names is None else valve_names.split(',')
+    if sorted(names) != sorted(scene.actuator_names):
+        raise ValueError(f'--valve-names {names} must be a permutation of the scene actuators '
+                         f'{list(scene.actuator_names)}')
+    return np.array([names.index(n) for n in scene.actuator_names])
+
+
+def identified_scene_data(scene_path, calibration):
+    """
+    Return the scene file's data with the calibration block replaced (segment paths absolute).
+
+    Parameters
+    ----------
+    scene_path : pathlib.Path
+        The nominal scene file.
+    calibration : cbha_inverse.scene.calibration.Calibration
+        The calibration to carry.
+
+    Returns
+    -------
+    dict
+        A complete scene, loadable from any folder.
+
+    """
+    data = read_yaml(scene_path)
+    for item in (data.get('chain') or {}).get('sections') or []:
+        if isinstance(item, dict) and isinstance(item.get('segment'), str):
+            item['segment'] = str((scene_path.parent / item['segment']).resolve())
+    data['calibration'] = calibration.as_yaml()
+    return data
+
+
+def format_report(result, samples, bag, scene_name):
+    """Return the text report of an identification."""
+    lines = [f'cbha_identify: {bag}, scene {scene_name}',
+             f'samples: {samples.recorded} tip measurements, {samples.quasi_static} quasi-static, '
+             f'{len(samples.tips)} fitted; {result.evaluations} forward evaluations',
+             f'tip RMS before {result.rms_before * 1e3:.3f} mm, after '
+             f'{result.rms_after * 1e3:.3f} mm (residual noise {result.noise * 1e3:.3f} mm per '
+             'axis)', '', 'fitted factors (on top of the scene calibration) +- standard error:']
+    lines += [f'  {n:32s} {v:.4f} +- {se:.4f}'
+              for n, v, se in zip(result.names, result.values, result.standard_errors)]
+    lines += ['', 'correlation matrix (rows/columns in the order above):']
+    lines += ['  ' + ' '.join(f'{c:+.2f}' for c in row) for row in result.correlation]
+    lines += ['', 'identifiability warnings:' if result.warnings else
+              'identifiability: every factor is separable from this data']
+    lines += [f'  {w}' for w in result.warnings]
+    return '\n'.join(lines) + '\n'
+
+
+def plot_fit(path, tips, before, after, title):
+    """Write the PNG: measured vs predicted tips in the y-z plane, nominal and identified."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    figure, axes = plt.subplots(1, 2, figsize=(10, 4.8), sharex=True, sharey=True)
+    for ax, predicted, label in ((axes[0], before, 'nominal scene'),
+                                 (axes[1], after, 'identified scene')):
+        ax.plot(tips[:, 1] * 1e3, tips[:, 2] * 1e3, 'k.', label='measured')
+        ax.plot(predicted[:, 1] * 1e3, predicted[:, 2] * 1e3, 'r+', label='predicted')
+        rms = np.sqrt(np.mean(np.sum((predicted - tips) ** 2, axis=1))) * 1e3
+        ax.set_title(f'{label}: RMS {rms:.2f} mm')
+        ax.set_xlabel('y [mm]')
+        ax.set_aspect('equal')
+        ax.legend()
+    axes[0].set_ylabel('z [mm]')
+    figure.suptitle(title)
+    figure.tight_layout()
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def main(argv=None):
+    """
+    Run ``cbha_identify``.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line without the program name (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        0 on a valid fit, 1 when the data cannot give one, 2 on a bad file or argument.
+
+    """
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    started = time.monotonic()
+    try:
+        scene_path = resolve_scene_path(args.scene)
+        scene = load_scene(scene_path)
+        order = command_order(scene, args.valve_names)
+        print(f'{PROGRAM}: reading {args.bag}', flush=True)
+        session = read_session(args.bag, args.namespace)
+        if session[1].shape[1] != len(order):
+            raise IdentificationError(f'{args.bag}: commands of {session[1].shape[1]} valves, '
+                                      f'the scene has {len(order)} actuators')
+        samples = quasi_static_samples(session, latency=args.latency,
+                                       valve_time_constant=args.valve_time_constant,
+                                       settle_time=args.settle_time,
+                                       settle_tolerance=args.settle_tolerance,
+                                       max_samples=args.max_samples)
+        print(f'{PROGRAM}: {samples.recorded} tip samples, {samples.quasi_static} quasi-static, '
+              f'fitting {len(samples.tips)} through scene {scene.name}', flush=True)
+        result = identify(scene_path, samples.pressures[:, order], samples.tips,
+                          progress=lambda line: print(line, flush=True))
+    except (ConfigError, FileNotFoundError, BagError) as exc:
+        return report_config_error(PROGRAM, exc)
+    except (IdentificationError, ValueError) as exc:
+        print(f'{PROGRAM}: error: {exc}', file=sys.stderr, flush=True)
+        return 1
+    output = Path(args.output)
+    output.mkdir(parents=True, exist_ok=True)
+    stem = f'{scene_path.stem}_identified'
+    scene_file = output / f'{stem}.yaml'
+    header = (f'# {scene_file.name}: written by {PROGRAM} from {args.bag} (nominal scene '
+              f'{scene_path}); see {stem}_report.txt\n')
+    scene_file.write_text(header + yaml.safe_dump(
+        identified_scene_data(scene_path, result.calibration), sort_keys=False))
+    report = format_report(result, samples, args.bag, scene.name)
+    (output / f'{stem}_report.txt').write_text(report)
+    plot_fit(output / f'{stem}.png', samples.tips, result.predicted_before,
+             result.predicted_after, f'{PROGRAM}: {Path(args.bag).name}')
+    print(report, end='')
+    print(f'{PROGRAM}: wrote {scene_file} (use -p scene:={scene_file.resolve()}), report and '
+          f'PNG in {time.monotonic() - started:.1f} s', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,122 @@
+"""
+``cbha_identify_check``: the identification check of issue 17, end to end on real DDS.
+
+1. ``cbha_demo`` runs the circle and the square open loop with the nominal model on a simulated
+   arm with errors the fit is not tuned to (default: sections x0.85 and x1.1, cavity gains
+   0.9-1.1, tip noise 0.2 mm), recording each lap;
+2. ``cbha_identify`` fits the scene to the recorded circle lap alone;
+3. ``cbha_demo`` runs the square (a different trajectory) open loop with the identified scene.
+
+Prints the square's tracking RMS (time-aligned, as ``cbha_demo``) and cross-track RMS (distance
+to the path, timing ignored) with the nominal and the identified scene, and each fitted factor
+against the truth in units of its reported standard error; writes ``summary.json``.
+"""
+
+import argparse
+import json
+from pathlib import Path
+import subprocess
+import sys
+import time
+
+from cbha_inverse.bag.evaluate import evaluate_bag
+from cbha_inverse.report.tracking import cross_track_errors
+import numpy as np
+
+
+def parse_args(argv):
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(prog='cbha_identify_check',
+                                     description=__doc__.split('\n\n')[0])
+    parser.add_argument('--output', default='output/identify_check', help='output folder')
+    parser.add_argument('--plant-section-scale', default='0.85,1.1',
+                        help='plant stiffness error per section (truth)')
+    parser.add_argument('--plant-gain-scale', default='0.9,1.05,1.1,0.95,1.08,0.92',
+                        help='plant effective-area error per valve (truth)')
+    return parser.parse_args(argv)
+
+
+def _run(command, log):
+    """Run a module of the package; return its exit code (output into ``log``)."""
+    with open(log, 'w') as stream:
+        return subprocess.call([sys.executable, '-m', *command], stdout=stream,
+                               stderr=subprocess.STDOUT)
+
+
+def square_errors(bag, window):
+    """Return (tracking RMS, cross-track RMS) [m] of a recorded open-loop lap."""
+    evaluation = evaluate_bag(bag, tip='true', start=window[0], end=window[1])
+    cross = cross_track_errors(evaluation.targets, evaluation.tips)
+    return evaluation.tracking.rms, float(np.sqrt(np.mean(cross ** 2)))
+
+
+def main(argv=None):
+    """
+    Run the check; return 0 when every step ran (the numbers are printed, not judged).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line without the program name (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit code (that of the first failing step).
+
+    """
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    output = Path(args.output)
+    output.mkdir(parents=True, exist_ok=True)
+    plant = ['--stiffness-scale', '1.0', '--plant-section-scale', args.plant_section_scale,
+             '--plant-gain-scale', args.plant_gain_scale, '--modes', 'open', '--feedback',
+             'direct']
+    demo = ['cbha_inverse.ros.demo']
+    started = time.monotonic()
+    steps = [
+        ('nominal runs', demo + ['--output', str(output / 'nominal'),
+                                 '--shapes', 'circle,square', *plant]),
+        ('identification', ['cbha_inverse.identify.cli',
+                            str(output / 'nominal' / 'circle_open' / 'bag'),
+                            '--output', str(output / 'identified')]),
+        ('identified run', demo + ['--output', str(output / 'identified_run'), '--shapes',
+                                   'square', '--model-scene',
+                                   str(output / 'identified' / 'cbha_identified.yaml'), *plant]),
+    ]
+    for label, command in steps:
+        print(f'cbha_identify_check: {label} ...', flush=True)
+        code = _run(command, output / f'{label.replace(" ", "_")}.log')
+        if code:
+            print(f'cbha_identify_check: {label} failed (exit {code}), see its log in {output}')
+            return code
+    rows = {}
+    for label, folder in (('nominal', 'nominal'), ('identified', 'identified_run')):
+        summary = json.loads((output / folder / 'summary.json').read_text())
+        run = next(r for r in summary['runs'] if r['shape'] == 'square')
+        rows[label] = square_errors(run['bag'], run['eval_window_s'])
+    truth = np.array([float(v) for v in args.plant_section_scale.split(',')]
+                     + [float(v) for v in args.plant_gain_scale.split(',')])
+    report = (output / 'identified' / 'cbha_identified_report.txt').read_text().splitlines()
+    fitted = [line.split() for line in report if line.startswith('  section_stiffness.')
+              or line.startswith('  actuator_gain.')]
+    print('open-loop square (plant with errors):')
+    for label, (rms, cross) in rows.items():
+        print(f'  {label:10s} scene: tracking RMS {rms * 1e3:6.2f} mm, cross-track RMS '
+              f'{cross * 1e3:6.2f} mm')
+    print('fitted factor vs truth (| fitted - truth | / standard error):')
+    for (name, value, _, error), true in zip(fitted, truth):
+        print(f'  {name:32s} {float(value):.4f} +- {float(error):.4f} truth {true:.4f}: '
+              f'{abs(float(value) - true) / float(error):.2f}')
+    (output / 'summary.json').write_text(json.dumps({
+        'square_open': {k: {'tracking_rms_m': v[0], 'cross_track_rms_m': v[1]}
+                        for k, v in rows.items()},
+        'fitted': {f[0]: {'value': float(f[1]), 'standard_error': float(f[3]), 'truth': t}
+                   for f, t in zip(fitted, truth)},
+        'wall_s': time.monotonic() - started}, indent=2))
+    print(f'cbha_identify_check: wrote {output / "summary.json"} '
+          f'({time.monotonic() - started:.0f} s)')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,136 @@
+"""cbha_identify: recovery of known plant errors, clear refusals of data that cannot give a fit."""
+
+from cbha_inverse.bag.storage import BagWriter
+from cbha_inverse.identify.cli import main
+from cbha_inverse.identify.fit import identify, parameter_names, TipPredictor
+from cbha_inverse.identify.samples import (IdentificationError, quasi_static_samples,
+                                           valve_pressures)
+from cbha_inverse.report.tracking import cross_track_errors
+from cbha_inverse.scene import load_scene
+import numpy as np
+import pytest
+from rosbags.typesys import get_typestore, Stores
+
+TRUTH = np.array([0.85, 1.1, 0.9, 1.05, 1.1, 0.95, 1.08, 0.92])
+NOISE = 2e-4
+
+
+@pytest.fixture(scope='module')
+def synthetic():
+    """Pressures spread over the box and the tips of a plant with known errors (+ noise)."""
+    rng = np.random.default_rng(3)
+    pressures = rng.uniform(0.0, 150e3, (24, 6))
+    names = parameter_names(load_scene('cbha'))
+    tips = TipPredictor('cbha', names, pressures)(TRUTH)
+    return pressures, tips + rng.normal(0.0, NOISE, tips.shape)
+
+
+def test_fit_recovers_known_errors_within_their_standard_errors(synthetic):
+    pressures, tips = synthetic
+    result = identify('cbha', pressures, tips, max_relative_error=1.0, max_correlation=1.0)
+    assert result.names[:2] == ('section_stiffness.inner', 'section_stiffness.outer')
+    assert np.all(np.abs(result.values - TRUTH) <= 3.0 * result.standard_errors)
+    assert result.rms_before > 10e-3
+    # the fitted model explains the data down to the noise (norm of 3 axes of NOISE)
+    assert result.rms_after < 1.5 * np.sqrt(3.0) * NOISE
+    np.testing.assert_allclose(np.diag(result.correlation), 1.0)
+    assert result.warnings == ()
+    assert result.calibration.section_stiffness['inner'] == pytest.approx(result.values[0])
+
+
+def test_valve_pressures_follow_delayed_first_order_lag():
+    times = np.array([0.0, 1.0])
+    commands = np.array([[100.0], [0.0]])
+    at = np.array([-0.5, 0.0, 0.003, 0.013, 1.003, 1.013])
+    out = valve_pressures(times, commands, at, 0.003, 0.01)[:, 0]
+    after_first = 100.0 * (1.0 - np.exp(-1.0 / 0.01))
+    np.testing.assert_allclose(out, [0.0, 0.0, 0.0, 100.0 * (1.0 - np.exp(-1.0)), after_first,
+                                     after_first * np.exp(-1.0)], atol=1e-9)
+
+
+def _write_bag(path, commands, tips=None, noise=0.0):
+    """Write a session: a command every 0.5 s, then 25 tips at 50 Hz (``tips[k]`` + noise)."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    array, point = (store.types['std_msgs/msg/Float64MultiArray'],
+                    store.types['geometry_msgs/msg/PointStamped'])
+    header, stamp = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
+    layout = store.types['std_msgs/msg/MultiArrayLayout']
+    vector = store.types['geometry_msgs/msg/Point']
+    rng = np.random.default_rng(0)
+    writer = BagWriter(path)
+    writer.add_topic('/cbha/pressure_command', 'std_msgs/msg/Float64MultiArray')
+    writer.add_topic('/cbha/tip/measured', 'geometry_msgs/msg/PointStamped')
+    for k, command in enumerate(commands):
+        t_ns = 10 ** 9 + k * 500_000_000
+        writer.write('/cbha/pressure_command', t_ns, store.serialize_cdr(
+            array(layout=layout(dim=[], data_offset=0), data=np.asarray(command, dtype=float)),
+            array.__msgtype__))
+        for j in range(0 if tips is None else 25):
+            sample_ns = t_ns + j * 20_000_000
+            tip = tips[k] + rng.normal(0.0, noise, 3)
+            message = point(header=header(stamp=stamp(sec=sample_ns // 10 ** 9,
+                                                      nanosec=sample_ns % 10 ** 9),
+                                          frame_id='cbha_base'),
+                            point=vector(x=tip[0], y=tip[1], z=tip[2]))
+            writer.write('/cbha/tip/measured', sample_ns,
+                         store.serialize_cdr(message, point.__msgtype__))
+    writer.close()
+
+
+def test_cbha_identify_writes_a_scene_that_reproduces_the_plant(tmp_path, capsys):
+    rng = np.random.default_rng(5)
+    commands = rng.uniform(0.0, 150e3, (12, 6))
+    names = parameter_names(load_scene('cbha'))
+    tips = TipPredictor('cbha', names, commands)(TRUTH)
+    _write_bag(tmp_path / 'bag', commands, tips, NOISE)
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'out'),
+                 '--max-samples', '24']) == 0
+    out = capsys.readouterr().out
+    assert 'evaluation 1: tip RMS' in out
+    assert 'standard error' in (tmp_path / 'out' / 'cbha_identified_report.txt').read_text()
+    assert (tmp_path / 'out' / 'cbha_identified.png').stat().st_size > 10_000
+    identified = load_scene(tmp_path / 'out' / 'cbha_identified.yaml')
+    probe = np.array([120e3, 10e3, 60e3, 30e3, 140e3, 0.0])
+    plant = TipPredictor('cbha', names, probe[None])(TRUTH)[0]
+    nominal = load_scene('cbha').forward(probe).effector_positions[-1]
+    predicted = identified.forward(probe).effector_positions[-1]
+    assert np.linalg.norm(nominal - plant) > 10e-3
+    assert np.linalg.norm(predicted - plant) < 1e-3
+
+
+def test_bag_without_tip_measurements_is_refused(tmp_path, capsys):
+    _write_bag(tmp_path / 'bag', np.zeros((3, 6)))
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'out')]) == 1
+    err = capsys.readouterr().err
+    assert 'no /cbha/tip/measured messages' in err
+    assert not (tmp_path / 'out').exists()
+
+
+def test_too_little_excitation_is_refused_not_presented_as_a_fit(tmp_path, capsys):
+    _write_bag(tmp_path / 'bag', np.full((20, 6), 50e3), np.full((20, 3), [0.2, 0.0, -0.1]))
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'out')]) == 1
+    err = capsys.readouterr().err
+    assert 'too little excitation' in err
+    assert not (tmp_path / 'out').exists()
+
+
+def test_quasi_static_selection_drops_samples_while_valves_move():
+    times = np.array([0.0, 1.0])
+    commands = np.array([[0.0], [100e3]])
+    tip_times = np.linspace(0.01, 1.99, 100)
+    session = (times, commands, tip_times, np.zeros((100, 3)))
+    samples = quasi_static_samples(session, max_samples=1000)
+    # after the step at 1.003 s the valve moves more than 2 kPa within 50 ms for ~0.09 s
+    moving = (tip_times > 1.003) & (tip_times < 1.003 + 0.05 + 0.01 * np.log(100e3 / 2000.0))
+    assert samples.quasi_static == 100 - moving.sum()
+    during_step = np.linspace(1.01, 1.04, 5)
+    with pytest.raises(IdentificationError, match='no quasi-static'):
+        quasi_static_samples((times, commands, during_step, np.zeros((5, 3))))
+
+
+def test_cross_track_error_is_the_distance_to_the_path_not_to_the_timed_target():
+    square = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0],
+                       [0.0, 0.0, 0.0]])
+    tips = np.array([[0.0, 0.5, -0.1], [0.3, 1.0, 0.5], [0.0, 1.2, 1.1], [0.0, 0.5, 0.5]])
+    np.testing.assert_allclose(cross_track_errors(square, tips),
+                               [0.1, 0.3, np.hypot(0.2, 0.1), 0.5])
