@@ -72,7 +72,7 @@ def test_pressure_in_one_tube_bends_a_section_plausibly(segment, spec):
     print(f'150 kPa in one tube bends an 8-segment section by about {angle:.1f} deg (linear)')
     # derivation: the tube's net load is an axial force F along its own axis, which lies at the
     # pitch radius d from the backbone, so the moment at the frame has the magnitude F d
-    pitch = spec['geometry']['tube_pitch_radius']
+    pitch = spec.geometry.tube_pitch_radius
     assert np.linalg.norm(upper[3:]) == pytest.approx(abs(upper[0]) * pitch, rel=1e-3)
     # source of the value: the effective modulus in meshes/cbha_segment.yaml is calibrated so
     # that this linear estimate is 63 deg (its material comment); 1 % covers the mesh
