@@ -44,27 +44,39 @@ def band_cholesky(band):
     return _cholesky_columns(band, 0)
 
 
+@numba.njit(cache=True, inline='always')
+def _factor_column(band, j, below):
+    """
+    Factor column ``j`` of :func:`band_cholesky` and update the trailing block; False on a bad pivot.
+
+    ``below`` is the number of rows under the diagonal that the column reaches. Inlined into its
+    callers, so a constant ``below`` gives loops of constant trip count.
+    """
+    column = band[j]
+    pivot = column[0]
+    if not (pivot > 0.0 and math.isfinite(pivot)):
+        return False
+    diagonal = math.sqrt(pivot)
+    column[0] = diagonal
+    inverse = 1.0 / diagonal
+    for a in range(1, below + 1):
+        column[a] *= inverse
+    for b in range(1, below + 1):
+        weight = column[b]
+        target = band[j + b]
+        for a in range(b, below + 1):
+            target[a - b] -= column[a] * weight
+    return True
+
+
 @numba.njit(cache=True)
 def _cholesky_columns(band, first):
     """Factor columns ``first`` ... N - 1 of :func:`band_cholesky` (envelope-length loops)."""
     size, width = band.shape
     kd = width - 1
     for j in range(first, size):
-        column = band[j]
-        pivot = column[0]
-        if not (pivot > 0.0 and math.isfinite(pivot)):
+        if not _factor_column(band, j, min(kd, size - 1 - j)):
             return j + 1
-        diagonal = math.sqrt(pivot)
-        column[0] = diagonal
-        below = min(kd, size - 1 - j)
-        inverse = 1.0 / diagonal
-        for a in range(1, below + 1):
-            column[a] *= inverse
-        for b in range(1, below + 1):
-            weight = column[b]
-            target = band[j + b]
-            for a in range(b, below + 1):
-                target[a - b] -= column[a] * weight
     return 0
 
 
@@ -120,20 +132,8 @@ def _cholesky_width12(band):
     size = band.shape[0]
     full = max(size - FRAME_BAND_WIDTH + 1, 0)
     for j in range(full):
-        column = band[j]
-        pivot = column[0]
-        if not (pivot > 0.0 and math.isfinite(pivot)):
+        if not _factor_column(band, j, FRAME_BAND_WIDTH - 1):
             return j + 1
-        diagonal = math.sqrt(pivot)
-        column[0] = diagonal
-        inverse = 1.0 / diagonal
-        for a in range(1, FRAME_BAND_WIDTH):
-            column[a] *= inverse
-        for b in range(1, FRAME_BAND_WIDTH):
-            weight = column[b]
-            target = band[j + b]
-            for a in range(b, FRAME_BAND_WIDTH):
-                target[a - b] -= column[a] * weight
     # the last 11 columns: the envelope ends at the matrix end
     return _cholesky_columns(band, full)
 
