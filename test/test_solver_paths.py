@@ -49,6 +49,18 @@ def test_newton_steps_bring_the_model_to_the_static_equilibrium(steps):
                                                - scene.rest_effector_positions).max()
 
 
+def test_a_caller_editing_the_result_does_not_change_the_solver():
+    """TickResult.actuation is the caller's copy: editing it leaves the next ticks unchanged."""
+    scene, target = _target()
+    edited, untouched = scene.make_inverse_solver(), scene.make_inverse_solver()
+    first = edited.step(target)
+    assert np.array_equal(first.actuation, untouched.step(target).actuation)
+    first.actuation[:] = np.nan
+    assert np.all(np.isfinite(edited.actuation))
+    for _ in range(3):
+        assert np.array_equal(edited.step(target).actuation, untouched.step(target).actuation)
+
+
 def test_proxsuite_failure_falls_back_to_gauss_seidel():
     """A proxsuite limited to one iteration fails: the tick reports qp_fallback, never NaN."""
     scene, target = _target()

@@ -369,7 +369,7 @@ class InverseSolver:
         timings = {'assembly': t_assembly - t_start, 'factor': t_factor - t_assembly,
                    'projection': t_projection - t_factor, 'qp': t_qp - t_projection,
                    'update': t_end - t_qp, 'total': t_end - t_start}
-        return TickResult(actuation, effector_positions, status, solution.status,
+        return TickResult(actuation.copy(), effector_positions, status, solution.status,
                           solution.iterations, saturated, largest_gap, lin.residual_norm, timings,
                           warnings)
 
