@@ -98,6 +98,8 @@ def broken_files(tmp_path_factory):
         'bad_params': '/**:\n  ros__parameters:\n    rate_hz: 100\n',
         'broken_params': '/**:\n  ros__parameters:\n    rate_hz: [1.0\n',
         'bad_section_params': '/**:\n  rate_hz: 100.0\n',
+        'no_model_camera': 'image_width: 640\nimage_height: 480\n',
+        'no_camera_rig': 'base_from_left: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]\n',
     }
     paths = {}
     for name, text in files.items():
@@ -122,6 +124,10 @@ NODE_CASES = [
     ('inverse_solver', ['-p', 'rate_hz:=100'],
      r"parameter 'rate_hz' must be of type double \(write floats"),
     ('inverse_solver', ['-p', 'scene:=no_such_scene'], r'no scene no_such_scene'),
+    ('stereo_tracker', ['-p', 'left_camera_info_file:={no_model_camera}'],
+     r'no_model_camera\.yaml: distortion_model: missing'),
+    ('cbha_sim', ['-p', 'tip_output:=stereo', '-p', 'camera_rig:={no_camera_rig}'],
+     r'no_camera_rig\.yaml: left_camera_info: missing'),
 ]
 
 

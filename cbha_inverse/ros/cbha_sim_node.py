@@ -215,7 +215,7 @@ class CbhaSimNode(Node):
             rig = load_rig(installed if installed.is_file() else p.camera_rig)
         except ValueError as exc:
             self.destroy_node()
-            raise ParameterError(f'{NODE_NAME}: {exc}') from None
+            raise ParameterError(str(exc)) from None
 
         def shape():
             result, stamp = self.last_result, self.last_stamp

@@ -21,6 +21,7 @@ import math
 import sys
 import time
 
+from cbha_inverse.errors import ConfigError
 from cbha_inverse.paths import config_path
 from cbha_inverse.ros.conversions import point_stamped
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK, TimingStats, WARN
@@ -153,9 +154,12 @@ class StereoTrackerNode(Node):
                     self.cameras[side] = (load_camera_yaml(path), f'file {path}')
             self.tracker = None
             self._rebuild_tracker()
-        except ValueError as exc:  # ConfigError (a camera file) included
+        except ConfigError:  # a camera file: its own one-line message names file and key
             self.destroy_node()
-            raise ParameterError(f'{NODE_NAME}: {exc}') from None
+            raise
+        except ValueError as exc:
+            self.destroy_node()
+            raise ParameterError(str(exc)) from None
         self.queues = {side: collections.deque() for side in SIDES}
         self.counts = collections.Counter()
         self.pairs = 0
