@@ -1,5 +1,6 @@
 """Helpers for the node tests over real DDS (bounded spinning, child processes)."""
 
+import contextlib
 import os
 from pathlib import Path
 import subprocess
@@ -25,6 +26,21 @@ def spin_until(executor, predicate, timeout):
             return True
         executor.spin_once(timeout_sec=0.02)
     return bool(predicate())
+
+
+@contextlib.contextmanager
+def spinning(context, *nodes):
+    """Yield one executor over ``nodes``; shut it down and destroy the nodes afterwards."""
+    from rclpy.executors import SingleThreadedExecutor
+    executor = SingleThreadedExecutor(context=context)
+    for node in nodes:
+        executor.add_node(node)
+    try:
+        yield executor
+    finally:
+        executor.shutdown()
+        for node in nodes:
+            node.destroy_node()
 
 
 def spin_for(executor, duration):

@@ -10,7 +10,6 @@ Node behaviours over real DDS that a planted bug would break unseen, each agains
 - the trajectory's period and speed to 2 %, measured on the message stamps.
 """
 
-import contextlib
 import math
 import time
 
@@ -22,10 +21,9 @@ from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from ros_helpers import spin_for, spin_until
+from ros_helpers import spin_for, spin_until, spinning
 from std_msgs.msg import Float64MultiArray
 
 CBHA = 'cbha'
@@ -45,19 +43,6 @@ def _shifted(names):
 def _node(node_class, context, **params):
     return node_class(context=context, namespace='/cbha', parameter_overrides=[
         Parameter(k, value=v) for k, v in params.items()])
-
-
-@contextlib.contextmanager
-def _spinning(context, *nodes):
-    executor = SingleThreadedExecutor(context=context)
-    for node in nodes:
-        executor.add_node(node)
-    try:
-        yield executor
-    finally:
-        executor.shutdown()
-        for node in nodes:
-            node.destroy_node()
 
 
 def _point(point, frame='cbha_base'):
@@ -92,7 +77,7 @@ def test_solver_commands_follow_a_permuted_valve_order(rclpy_context):
     commands = []
     client.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
                                COMMAND_QOS)
-    with _spinning(rclpy_context, solver, client) as executor:
+    with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
                           and client.count_publishers('/cbha/pressure_command') > 0, 10.0)
         spin_for(executor, 0.1)
@@ -130,7 +115,7 @@ def test_simulator_applies_each_pressure_to_the_named_tube(rclpy_context):
     tips = []
     client.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(
         (time.monotonic(), [m.point.x, m.point.y, m.point.z])), MEASURED_QOS)
-    with _spinning(rclpy_context, sim, client) as executor:
+    with spinning(rclpy_context, sim, client) as executor:
         assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0
                           and len(tips) > 0, 10.0)
         command_pub.publish(Float64MultiArray(data=[float(v) for v in command]))
@@ -170,7 +155,7 @@ def test_simulator_latency_and_first_order_valves_from_a_step(rclpy_context):
     tips = []
     client.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(
         (_stamp(m), [m.point.x, m.point.y, m.point.z])), MEASURED_QOS)
-    with _spinning(rclpy_context, sim, client) as executor:
+    with spinning(rclpy_context, sim, client) as executor:
         assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0
                           and len(tips) > 5, 10.0)
         sent = client.get_clock().now().nanoseconds * 1e-9
@@ -215,7 +200,7 @@ def test_stale_feedback_holds_the_last_solved_command_or_vents(rclpy_context, ac
     client.create_subscription(Float64MultiArray, 'pressure_command', lambda m: commands.append(
         (time.monotonic(), np.array(m.data))), COMMAND_QOS)
     center = np.array([0.117, 0.0, -0.005])
-    with _spinning(rclpy_context, solver, client) as executor:
+    with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
                           and measured_pub.get_subscription_count() > 0, 10.0)
         # running first (so that no idle command falls into the running phase)
@@ -269,7 +254,7 @@ def test_trajectory_period_and_speed_on_stamps(rclpy_context):
     listener = Node('listener', context=rclpy_context)
     received = []
     listener.create_subscription(PointStamped, '/cbha/target', received.append, TARGET_QOS)
-    with _spinning(rclpy_context, node, listener) as executor:
+    with spinning(rclpy_context, node, listener) as executor:
         assert spin_until(executor, lambda: len(received) >= 60, timeout=30.0)
     stamps = np.array([_stamp(m) for m in received])
     points = np.array([[m.point.x, m.point.y, m.point.z] for m in received])

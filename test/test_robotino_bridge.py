@@ -7,7 +7,6 @@ stand-in (``robotino_helpers.DriverStandIn``) takes ``/set_bha_pressures`` and p
 vendor channel table (notes/cbha.md), not computed with the mapping under test.
 """
 
-import contextlib
 import subprocess
 import sys
 import time
@@ -22,11 +21,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from robotino_helpers import DriverStandIn, robotino_child_env
-from ros_helpers import child_env, REPO_ROOT, spin_for, spin_until, start_node
+from ros_helpers import child_env, REPO_ROOT, spin_for, spin_until, spinning, start_node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -39,20 +37,6 @@ def _bridge(context, namespace='/cbha', **overrides):
     overrides.setdefault('command_timeout', 30.0)
     return RobotinoBridgeNode(context=context, namespace=namespace, parameter_overrides=[
         Parameter(k, value=v) for k, v in overrides.items()])
-
-
-@contextlib.contextmanager
-def _spinning(context, *nodes):
-    """Yield one executor over ``nodes``; shut it down and destroy the nodes afterwards."""
-    executor = SingleThreadedExecutor(context=context)
-    for node in nodes:
-        executor.add_node(node)
-    try:
-        yield executor
-    finally:
-        executor.shutdown()
-        for node in nodes:
-            node.destroy_node()
 
 
 def _client(context):
@@ -75,7 +59,7 @@ def test_commands_reach_all_eight_channels_in_bar_with_wrist_and_cap(rclpy_conte
                      max_bar=1.2)
     driver = DriverStandIn(rclpy_context)
     client, command_pub = _client(rclpy_context)
-    with _spinning(rclpy_context, bridge, driver, client) as executor:
+    with spinning(rclpy_context, bridge, driver, client) as executor:
         assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0
                           and bridge.driver_publisher.get_subscription_count() > 0, 10.0)
         # outer_left, inner_over, outer_over, inner_left, inner_right, outer_right [Pa]
@@ -99,7 +83,7 @@ def test_bad_commands_are_never_forwarded_and_are_counted(rclpy_context, robotin
                           [0, 0, 0, 0, 0, -np.inf]],
            'wrong_length': [[], [1e4] * 5, [1e4] * 7, [1e4] * 8],
            'out_of_range': [[-1.0, 0, 0, 0, 0, 0], [0, 0, 0, 1.5e5 + 1.0, 0, 0], [1e308] * 6]}
-    with _spinning(rclpy_context, bridge, driver, client) as executor:
+    with spinning(rclpy_context, bridge, driver, client) as executor:
         assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0
                           and bridge.driver_publisher.get_subscription_count() > 0, 10.0)
         command_pub.publish(_command(good[0]))
@@ -128,7 +112,7 @@ def test_stale_command_stream_vents_or_holds_within_the_timeout(rclpy_context, r
     driver = DriverStandIn(rclpy_context)
     client, command_pub = _client(rclpy_context)
     command = [1e4, 3e4, 5e4, 7e4, 9e4, 1.1e5]
-    with _spinning(rclpy_context, bridge, driver, client) as executor:
+    with spinning(rclpy_context, bridge, driver, client) as executor:
         assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0
                           and bridge.driver_publisher.get_subscription_count() > 0, 10.0)
         end = time.monotonic() + 0.4
@@ -159,7 +143,7 @@ def test_before_the_first_command_nothing_or_the_vent_set_points(rclpy_context, 
     bridge = _bridge(rclpy_context, command_timeout=0.05, rate_hz=100.0, vent_pressure=1e4,
                      publish_idle=publish_idle)
     driver = DriverStandIn(rclpy_context)
-    with _spinning(rclpy_context, bridge, driver) as executor:
+    with spinning(rclpy_context, bridge, driver) as executor:
         assert spin_until(executor, lambda: bridge.driver_publisher.get_subscription_count() > 0,
                           10.0)
         spin_for(executor, 0.3)
@@ -184,7 +168,7 @@ def test_readings_become_pressure_measured_in_pascal_and_string_pots(rclpy_conte
     client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 10)
     channel_bar = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]
     cablepull = [101.0, 102.0, 103.0, 195.0, 196.0, 197.0]
-    with _spinning(rclpy_context, bridge, driver, client) as executor:
+    with spinning(rclpy_context, bridge, driver, client) as executor:
         assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0
                           and driver.readings_publisher.get_subscription_count() > 0, 10.0)
         command_pub.publish(_command([5e4, 1e4, 4e4, 3e4, 2e4, 6e4]))
@@ -223,7 +207,7 @@ def test_bridge_process_from_the_params_file_with_the_built_messages(rclpy_conte
     driver = DriverStandIn(rclpy_context)
     client, command_pub = _client(rclpy_context)
     try:
-        with _spinning(rclpy_context, driver, client) as executor:
+        with spinning(rclpy_context, driver, client) as executor:
             assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0, 20.0)
             command_pub.publish(_command([1e4, 2e4, 3e4, 4e4, 5e4, 6e4]))
             assert spin_until(executor, lambda: driver.received, 5.0)
@@ -294,7 +278,7 @@ def _tracking_rms(context, through_bridge, duration=7.5, hold=1.5, settle=1.5, r
                                  TARGET_QOS)
     recorder.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(stamped(m)),
                                  MEASURED_QOS)
-    with _spinning(context, *nodes, recorder) as executor:
+    with spinning(context, *nodes, recorder) as executor:
         assert spin_until(executor, lambda: len(targets) > 0, 10.0)
         spin_for(executor, duration)
     errors = tracking_errors([t[0] for t in targets], [t[1:] for t in targets],

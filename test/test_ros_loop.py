@@ -7,7 +7,6 @@ The plant is the scene 10 % softer (``stiffness_scale`` 0.9), with valve lag (10
 latency (3 ms) and 0.2 mm measurement noise.
 """
 
-import contextlib
 import time
 
 from cbha_inverse.report.tracking import tracking_errors
@@ -19,10 +18,9 @@ from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from ros_helpers import spin_for, spin_until
+from ros_helpers import spin_for, spin_until, spinning
 from std_msgs.msg import Float64MultiArray
 
 SCENE = 'tendon_6f_8c'
@@ -46,20 +44,6 @@ def _sim(context, namespace='/cbha', **overrides):
               'max_pressure': MAX_TENSION, **overrides}
     return CbhaSimNode(context=context, namespace=namespace, parameter_overrides=[
         Parameter(k, value=v) for k, v in params.items()])
-
-
-@contextlib.contextmanager
-def _spinning(context, *nodes):
-    """Yield one executor over ``nodes``; shut it down and destroy the nodes afterwards."""
-    executor = SingleThreadedExecutor(context=context)
-    for node in nodes:
-        executor.add_node(node)
-    try:
-        yield executor
-    finally:
-        executor.shutdown()
-        for node in nodes:
-            node.destroy_node()
 
 
 def _command_client(context):
@@ -96,7 +80,7 @@ def _tracking_rms(context, mode, duration, hold=1.5, settle=1.0):
         (stamp(m), m.point.x, m.point.y, m.point.z)), TARGET_QOS)
     recorder.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(
         (stamp(m), m.point.x, m.point.y, m.point.z)), MEASURED_QOS)
-    with _spinning(context, trajectory, solver, sim, recorder) as executor:
+    with spinning(context, trajectory, solver, sim, recorder) as executor:
         assert spin_until(executor, lambda: len(targets) > 0, 10.0)
         spin_for(executor, duration)
     errors = tracking_errors([t[0] for t in targets], [t[1:] for t in targets],
@@ -189,7 +173,7 @@ def test_fuzzed_inputs_never_produce_bad_commands(rclpy_context):
                                lambda m: commands.append(np.array(m.data)), COMMAND_QOS)
     fuzzer.create_subscription(PointStamped, '/fuzz/tip/measured', lambda m: tips.append(
         (m.point.x, m.point.y, m.point.z)), MEASURED_QOS)
-    with _spinning(rclpy_context, solver, sim, fuzzer) as executor:
+    with spinning(rclpy_context, solver, sim, fuzzer) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
                           and command_pub.get_subscription_count() > 0
                           and measured_pub.get_subscription_count() > 0, 10.0)
@@ -229,7 +213,7 @@ def test_no_command_before_the_first_target(rclpy_context, publish_idle):
     solver = _solver(rclpy_context, max_pressure=MAX_TENSION, publish_idle=publish_idle,
                      vent_pressure=vent, rate_hz=100.0)
     client, target_pub, commands = _command_client(rclpy_context)
-    with _spinning(rclpy_context, solver, client) as executor:
+    with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
                           and solver.command_publisher.get_subscription_count() > 0, 10.0)
         spin_for(executor, 0.5)
@@ -257,7 +241,7 @@ def test_target_sent_once_is_solved_until_the_model_reaches_it(rclpy_context):
     def model_error():
         return float(np.linalg.norm(solver.solver.effector_positions()[0] - target))
 
-    with _spinning(rclpy_context, solver, client) as executor:
+    with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
         target_pub.publish(_point(*target))
         sent = time.monotonic()
@@ -281,7 +265,7 @@ def test_stale_feedback_in_closed_loop_vents_within_timeout(rclpy_context):
                      rate_hz=100.0)
     client, target_pub, commands = _command_client(rclpy_context)
     measured_pub = client.create_publisher(PointStamped, 'tip/measured', MEASURED_QOS)
-    with _spinning(rclpy_context, solver, client) as executor:
+    with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
                           and measured_pub.get_subscription_count() > 0, 10.0)
         last_measured = None
@@ -309,7 +293,7 @@ def test_solver_publishes_backbone_markers_and_diagnostics(rclpy_context):
     markers, diagnostics = [], []
     client.create_subscription(MarkerArray, 'backbone', markers.append, 1)
     client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 10)
-    with _spinning(rclpy_context, solver, client) as executor:
+    with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
         target_pub.publish(_point(*CENTER))
         target_pub.publish(_point(float('nan'), 0.0, 0.0))

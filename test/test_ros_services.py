@@ -5,7 +5,6 @@ The services of the nodes over real DDS, and what diagnostics report about them.
 ``cbha_sim``: ``~/reset``.
 """
 
-import contextlib
 import time
 
 from cbha_inverse.ros.cbha_sim_node import CbhaSimNode
@@ -15,10 +14,9 @@ from cbha_inverse.scene import load_scene
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 import numpy as np
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from ros_helpers import spin_for, spin_until
+from ros_helpers import spin_for, spin_until, spinning
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
@@ -27,19 +25,6 @@ MAX_TENSION = 10.0
 RATE = 100.0
 FIRST_TARGET = (0.117, 0.004, -0.008)
 SECOND_TARGET = (0.117, -0.006, -0.002)
-
-
-@contextlib.contextmanager
-def _spinning(context, *nodes):
-    executor = SingleThreadedExecutor(context=context)
-    for node in nodes:
-        executor.add_node(node)
-    try:
-        yield executor
-    finally:
-        executor.shutdown()
-        for node in nodes:
-            node.destroy_node()
 
 
 def _point(xyz):
@@ -75,7 +60,7 @@ def test_enable_stops_and_resumes_and_reset_restarts_from_rest(rclpy_context):
     client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 50)
     enable = client.create_client(SetBool, 'inverse_solver/enable')
     reset = client.create_client(Trigger, 'inverse_solver/reset')
-    with _spinning(rclpy_context, solver, client) as executor:
+    with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: enable.service_is_ready() and reset.service_is_ready()
                           and target_pub.get_subscription_count() > 0
                           and solver.command_publisher.get_subscription_count() > 0, 10.0)
@@ -130,7 +115,7 @@ def test_sim_reset_returns_the_plant_to_rest(rclpy_context):
         np.zeros(len(names))).effector_positions[-1]
     pulled = np.zeros(len(names))
     pulled[0] = 0.5 * MAX_TENSION
-    with _spinning(rclpy_context, sim, client) as executor:
+    with spinning(rclpy_context, sim, client) as executor:
         assert spin_until(executor, lambda: reset.service_is_ready()
                           and command_pub.get_subscription_count() > 0 and tips, 10.0)
         command_pub.publish(Float64MultiArray(data=pulled.tolist()))
