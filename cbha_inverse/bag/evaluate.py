@@ -76,8 +76,27 @@ class BagEvaluation:
     latencies: np.ndarray
 
 
-def _points(bag, topic):
-    """Return (receive times [ns], stamps [s], points (N, 3) [m]) of a PointStamped topic."""
+def point_series(bag, topic):
+    """
+    Return the messages of a PointStamped topic of an open bag.
+
+    Parameters
+    ----------
+    bag : cbha_inverse.bag.storage.BagReader
+        An open bag (:func:`cbha_inverse.bag.storage.open_bag`).
+    topic : str
+        A geometry_msgs/PointStamped topic.
+
+    Returns
+    -------
+    received : (N,) int64 ndarray  [ns]
+        Receive (log) times.
+    stamps : (N,) ndarray  [s]
+        Header stamps.
+    points : (N, 3) ndarray  [m]
+        The points.
+
+    """
     received, stamps, points = [], [], []
     for _, timestamp, data in bag.messages([topic]):
         message = deserialize(data, POINT_TYPE)
@@ -86,6 +105,32 @@ def _points(bag, topic):
         points.append((message.point.x, message.point.y, message.point.z))
     return (np.array(received, dtype=np.int64), np.array(stamps, dtype=float),
             np.array(points, dtype=float).reshape(-1, 3))
+
+
+def command_series(bag, topic):
+    """
+    Return the messages of a Float64MultiArray command topic of an open bag.
+
+    Parameters
+    ----------
+    bag : cbha_inverse.bag.storage.BagReader
+        An open bag.
+    topic : str
+        A std_msgs/Float64MultiArray topic (e.g. ``/cbha/pressure_command``).
+
+    Returns
+    -------
+    received : (K,) int64 ndarray  [ns]
+        Receive (log) times.
+    commands : list of (m,) ndarray  [Pa]
+        The commands as recorded (their lengths are not checked here).
+
+    """
+    received, commands = [], []
+    for _, timestamp, data in bag.messages([topic]):
+        received.append(timestamp)
+        commands.append(np.asarray(deserialize(data, COMMAND_TYPE).data, dtype=float))
+    return np.array(received, dtype=np.int64), commands
 
 
 def command_statistics(commands, max_pressure):
@@ -179,18 +224,16 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
         if tip == 'auto':
             tip = 'true' if f'{namespace}/tip/true' in names else 'measured'
         tip_topic = f'{namespace}/tip/{tip}'
-        target_received, target_stamps, targets = _points(bag, target_topic)
+        target_received, target_stamps, targets = point_series(bag, target_topic)
         if target_stamps.size == 0:
             raise BagError(f'{path}: {target_topic} has no messages')
         tip_stamps, tips = np.zeros(0), np.zeros((0, 3))
         if names.get(tip_topic) == POINT_TYPE:
-            _, tip_stamps, tips = _points(bag, tip_topic)
+            _, tip_stamps, tips = point_series(bag, tip_topic)
         command_topic = f'{namespace}/pressure_command'
-        command_times, commands = [], []
+        command_times, commands = np.zeros(0, dtype=np.int64), []
         if names.get(command_topic) == COMMAND_TYPE:
-            for _, timestamp, data in bag.messages([command_topic]):
-                command_times.append(timestamp)
-                commands.append(np.asarray(deserialize(data, COMMAND_TYPE).data, dtype=float))
+            command_times, commands = command_series(bag, command_topic)
     first = target_stamps[0]
     window = np.array([first + start, first + end if end is not None else target_stamps[-1]])
     try:
@@ -203,8 +246,7 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
     in_window = (target_stamps >= window[0]) & (target_stamps <= window[1])
     tip_in_window = (tip_stamps >= window[0]) & (tip_stamps <= window[1])
     return BagEvaluation(tip_topic, window, tracking, targets[in_window], tips[tip_in_window],
-                         statistics, target_command_latencies(
-                             target_received, np.array(command_times, dtype=np.int64)))
+                         statistics, target_command_latencies(target_received, command_times))
 
 
 def format_evaluation(evaluation):

@@ -13,8 +13,8 @@ the arm then sits at the equilibrium the forward model predicts.
 from dataclasses import dataclass
 import math
 
-from cbha_inverse.bag.evaluate import COMMAND_TYPE, POINT_TYPE
-from cbha_inverse.bag.storage import deserialize, open_bag
+from cbha_inverse.bag.evaluate import command_series, point_series
+from cbha_inverse.bag.storage import open_bag
 import numpy as np
 
 
@@ -81,26 +81,18 @@ def read_session(path, namespace='/cbha'):
     """
     prefix = namespace.rstrip('/')
     command_topic, tip_topic = f'{prefix}/pressure_command', f'{prefix}/tip/measured'
-    command_times, commands, tip_times, tips = [], [], [], []
     with open_bag(path) as bag:
-        for topic, timestamp, data in bag.messages([command_topic, tip_topic]):
-            if topic == command_topic:
-                command_times.append(timestamp * 1e-9)
-                commands.append(list(deserialize(data, COMMAND_TYPE).data))
-            else:
-                point = deserialize(data, POINT_TYPE).point
-                tip_times.append(timestamp * 1e-9)
-                tips.append((point.x, point.y, point.z))
+        command_received, commands = command_series(bag, command_topic)
+        tip_received, _, tips = point_series(bag, tip_topic)
     if not commands:
         raise IdentificationError(f'{path}: no {command_topic} messages: record the valve '
                                   'commands (cbha_bag record ... pressure_command)')
-    if not tips:
+    if tips.size == 0:
         raise IdentificationError(f'{path}: no {tip_topic} messages: the tip must be measured '
                                   '(a tracker or the simulated plant) while recording')
     if len({len(c) for c in commands}) != 1:
         raise IdentificationError(f'{path}: {command_topic} messages of different lengths')
-    return (np.array(command_times), np.array(commands, dtype=float), np.array(tip_times),
-            np.array(tips, dtype=float))
+    return command_received * 1e-9, np.array(commands, dtype=float), tip_received * 1e-9, tips
 
 
 def valve_pressures(command_times, commands, times, latency, valve_time_constant):
