@@ -203,8 +203,8 @@ def test_offset_scene_is_the_nominal_one_under_turned_gravity_then_moved(tmp_pat
     p, rot = _pose(POSITION, RPY)
     nominal = load_scene(write(tmp_path, 'plain'), gravity=rot.T @ scene.gravity)
     actuation = PRESSURES if name == 'cbha' else _tensions(scene)
-    moved, reference = scene.forward(actuation, strict=True), nominal.forward(actuation,
-                                                                               strict=True)
+    moved = scene.forward(actuation, strict=True)
+    reference = nominal.forward(actuation, strict=True)
     np.testing.assert_allclose(moved.effector_positions, reference.effector_positions @ rot.T + p,
                                rtol=0, atol=1e-9)
     np.testing.assert_allclose(moved.positions, reference.positions @ rot.T + p, rtol=0,
@@ -219,9 +219,11 @@ def test_offset_scene_is_the_nominal_one_under_turned_gravity_then_moved(tmp_pat
 
 def test_inverse_solver_and_workspace_centre_follow_the_offset(tmp_path):
     """
-    The tick tracks targets in base_frame: the offset scene's actuation toward ``T(target)``
-    equals the nominal one's toward ``target`` (under turned gravity), with the reach sphere
-    around the moved base (the offset lies outside the one around the origin).
+    The tick tracks targets in base_frame, around the moved base.
+
+    The offset scene's actuation toward ``T(target)`` equals the nominal one's toward
+    ``target`` (under turned gravity); the reach sphere is centred on the moved base (the offset
+    lies outside the one around the origin, so a sphere there would clamp the targets).
     """
     block = {'base_offset': {'position': list(POSITION), 'rpy': list(RPY)}}
     scene = load_scene(_tendon_file(tmp_path, calibration=block))

@@ -150,7 +150,6 @@ class ChainModel:
         return cls(_frozen(comp), _frozen(stiff), _frozen(offsets), _frozen(rots),
                    _frozen(mass), _frozen(base_x), _frozen(base_r))
 
-
     def transformed(self, position, rotation):
         """
         Return this chain moved rigidly: its base pose premultiplied by ``(position, rotation)``.

@@ -1,6 +1,5 @@
 """
-Rotation helpers on SO(3), batched over arrays: hat/vee, exp/log, quaternions, roll-pitch-yaw,
-``Jl⁻¹``.
+Rotation helpers on SO(3), batched over arrays: hat/vee, exp/log, quaternions, rpy, ``Jl⁻¹``.
 
 Conventions (DESIGN §2): rotation vectors are axis * angle [rad]; quaternions are (x, y, z, w)
 with ``w >= 0``; every function is batched over leading axes (``(..., 3)`` vectors,

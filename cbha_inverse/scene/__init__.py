@@ -161,10 +161,10 @@ class Scene:
         (k, 3) suggested centre of target trajectories [m].
 
         From the scene's ``workspace_center``: explicit coordinates (tip effector, moved with
-        the calibration's base offset; other effectors at rest), or ``{actuation_fraction: f}`` = the effectors at the uniform
-        actuation ``lower + f (upper - lower)``. Without it: the rest effector positions. For the
-        CBHA this is the tip at mid pressure in every tube, around which the paper's 60 mm circle
-        in the y-z plane is reachable.
+        the calibration's base offset; other effectors at rest), or ``{actuation_fraction: f}``
+        = the effectors at the uniform actuation ``lower + f (upper - lower)``. Without it: the
+        rest effector positions. For the CBHA this is the tip at mid pressure in every tube,
+        around which the paper's 60 mm circle in the y-z plane is reachable.
         """
         spec = self._workspace
         if spec is None:
