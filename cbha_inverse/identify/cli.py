@@ -107,20 +107,19 @@ def format_report(result, samples, bag, scene_name):
              f'{len(samples.tips)} fitted; {result.evaluations} forward evaluations',
              f'tip RMS before {result.rms_before * 1e3:.3f} mm, after '
              f'{result.rms_after * 1e3:.3f} mm (residual noise {result.noise * 1e3:.3f} mm per '
-             'axis)', '', 'fitted factors (on top of the scene calibration) +- standard error:']
+             'axis)', '', 'fitted values (factors on top of the scene calibration; base '
+             'position [m], latency [s]) +- standard error (prior standard deviation):']
     lines += [f'  {n:32s} {v:.4f} +- {se:.4f}'
-              for n, v, se in zip(result.names, result.values, result.standard_errors)]
-    prior = ('none (plain least squares)' if result.prior_sigma is None else
-             f'each log factor ~ N(0, {result.prior_sigma:g}^2) around the nominal scene')
-    lines += ['', f'prior: {prior}',
-              'principal combinations of the log factors (columns in the order above, least '
+              + (f'   (prior {p:g})' if np.isfinite(p) else '   (no prior)')
+              for n, v, se, p in zip(result.names, result.values, result.standard_errors,
+                                     result.prior_sigmas)]
+    lines += ['', 'prior: each log factor and offset ~ N(0, prior^2) around the nominal scene',
+              'principal combinations of the fit coordinates over their prior (log factors, '
+              'base position / 10 mm, latency / 5 ms; columns in the order above, least '
               'determined first): standard error, data share of the information:']
-    relative = result.standard_errors / result.values
-    covariance = result.correlation * np.outer(relative, relative)
-    lines += ['  ' + ' '.join(f'{c:+.2f}' for c in direction)
-              + f'   +- {np.sqrt(max(direction @ covariance @ direction, 0.0)):.4f}'
-              + f', data {share:.0%}'
-              for direction, share in zip(result.directions.T, result.data_share)]
+    lines += ['  ' + ' '.join(f'{c:+.2f}' for c in direction) + f'   +- {error:.4f}, data '
+              f'{share:.0%}' for direction, share, error in
+              zip(result.directions.T, result.data_share, result.direction_errors)]
     lines += ['', 'correlation matrix (rows/columns in the order above):']
     lines += ['  ' + ' '.join(f'{c:+.2f}' for c in row) for row in result.correlation]
     lines += ['', 'identifiability warnings:' if result.warnings else

@@ -1,19 +1,25 @@
 """
 Fit a scene's calibration to quasi-static samples through its forward model.
 
-Parameters ``θ`` are the logarithms of the calibration factors (per section stiffness, per
-cavity gain: positive by construction, relative steps). For each ``θ`` the scene is loaded with
-that calibration (:func:`cbha_inverse.scene.load_scene`, the one builder) and every sample's tip
-is predicted by ``scene.forward`` (warm-started from the previous prediction of that sample).
+The fitted parameters are named (:func:`parameter_names`): per-section stiffness and
+per-cavity gain factors, optionally the position of the chain's base in ``base_frame``
+(``base_position.x|y|z``: a tracker registration error) and the command -> valve ``latency``
+(when the sample pressures are given as a function of it). The fit works in coordinates
+``θ`` of similar size: the logarithm of each factor (positive by construction, relative
+steps), the base position in steps of :data:`POSITION_STEP` and the latency in steps of
+:data:`LATENCY_STEP` from its starting value. For each ``θ`` the scene is loaded with that
+calibration (:func:`cbha_inverse.scene.load_scene`, the one builder) and every sample's tip is
+predicted by ``scene.forward`` (warm-started from the previous prediction of that sample).
 ``scipy.optimize.least_squares`` minimises the robust (``soft_l1``) sum of squared tip errors
-with finite-difference Jacobians, plus a Gaussian prior on ``θ`` (each factor within ``×/÷
-exp(prior_sigma)`` of the nominal scene at one standard deviation: the nominal model is a
-model of this arm), so that what the data cannot see stays at the nominal value instead of
+with finite-difference Jacobians, plus a Gaussian prior on ``θ`` around the nominal scene
+(each factor within ``×/÷ exp(prior_sigma)`` at one standard deviation: the nominal model is
+a model of this arm), so that what the data cannot see stays at the nominal value instead of
 drifting along a flat valley of the cost. Standard errors come from the posterior covariance
-``σ² (JᵀJ + σ²/σₚ² I)⁻¹`` at the solution (``σ`` from the residuals; without a prior
-``σ² (JᵀJ)⁻¹``). A parameter whose relative standard error exceeds ``max_relative_error``, one
-that the prior rather than the data determines, and a group of parameters correlated beyond
-``max_correlation`` (only their combination is seen), are reported as warnings.
+``σ² (JᵀJ + σ² Σₚ⁻¹)⁻¹`` at the solution (``σ`` from the residuals; without a prior
+``σ² (JᵀJ)⁺``). A parameter whose relative standard error exceeds ``max_relative_error``, a
+combination that the prior rather than the data determines, and a group of parameters
+correlated beyond ``max_correlation`` (only their combination is seen), are reported as
+warnings.
 """
 
 from dataclasses import dataclass
@@ -24,6 +30,13 @@ from cbha_inverse.scene.calibration import Calibration
 import numpy as np
 from scipy.optimize import least_squares
 
+FACTOR_KINDS = ('section_stiffness', 'actuator_gain')
+POSITION_STEP = 0.01
+"""Base position per fit coordinate [m]."""
+LATENCY_STEP = 0.005
+"""Latency per fit coordinate [s]."""
+_AXES = 'xyz'
+
 
 @dataclass(frozen=True)
 class Identification:
@@ -33,10 +46,11 @@ class Identification:
     Attributes
     ----------
     names : tuple of str
-        Parameter names (``section_stiffness.<section>``, ``actuator_gain.<cavity>``).
-    values : (p,) ndarray  [-]
-        Fitted factors (on top of the scene's own calibration).
-    standard_errors : (p,) ndarray  [-]
+        Parameter names (:func:`parameter_names`).
+    values : (p,) ndarray  [-, m or s]
+        Fitted values: factors (on top of the scene's own calibration), base position [m],
+        latency [s].
+    standard_errors : (p,) ndarray  [-, m or s]
         Their standard errors.
     correlation : (p, p) ndarray  [-]
         Correlation matrix of the estimates.
@@ -52,15 +66,16 @@ class Identification:
         Forward-model evaluations of the whole sample set.
     calibration : cbha_inverse.scene.calibration.Calibration
         The scene's calibration with the fit applied (what the identified scene carries).
-    prior_sigma : float or None  [-]
-        The prior's standard deviation on each log factor (None: no prior).
+    prior_sigmas : (p,) ndarray  [-, m or s]
+        The prior's standard deviation of each parameter (``inf``: no prior).
     directions : (p, p) ndarray  [-]
-        Columns: the principal combinations of the log factors (eigenvectors of the data's
-        information ``JᵀJ / σ²``), the least determined first.
+        Columns: the principal combinations of the fit coordinates ``θ`` scaled by their prior
+        (eigenvectors of the data's information), the least determined first.
     data_share : (p,) ndarray  [-]
-        Share of the information along each direction that comes from the data,
-        ``λ σₚ² / (1 + λ σₚ²)`` for the information eigenvalue ``λ`` (1: the data alone, 0: the
-        prior alone; without a prior, ones).
+        Share of the information along each direction that comes from the data (1: the data
+        alone, 0: the prior alone; ones without a prior).
+    direction_errors : (p,) ndarray  [-]
+        Posterior standard error along each direction (in the scaled coordinates).
 
     """
 
@@ -76,31 +91,96 @@ class Identification:
     warnings: tuple
     evaluations: int
     calibration: Calibration
-    prior_sigma: object
+    prior_sigmas: np.ndarray
     directions: np.ndarray
     data_share: np.ndarray
+    direction_errors: np.ndarray
+
+    def value(self, name):
+        """Return the fitted value of a named parameter."""
+        return float(self.values[self.names.index(name)])
 
 
-def parameter_names(scene):
-    """Return the fitted parameters of a scene: its sections' stiffness, its cavities' gains."""
+def parameter_names(scene, *, base_position=False, latency=False):
+    """
+    Return the fitted parameters of a scene.
+
+    Parameters
+    ----------
+    scene : cbha_inverse.scene.Scene
+        The nominal scene.
+    base_position : bool
+        Add ``base_position.x|y|z`` (the chain base in ``base_frame``).
+    latency : bool
+        Add ``latency`` (command -> valve delay).
+
+    Returns
+    -------
+    tuple of str
+        ``section_stiffness.<section>`` per chain section, ``actuator_gain.<cavity>`` per
+        cavity, then the optional ones.
+
+    """
     cavities = [name for group in scene.actuators.groups
                 if hasattr(group, 'cavities') for name in group.names]
     return (tuple(f'section_stiffness.{s}' for s in scene.section_names)
-            + tuple(f'actuator_gain.{c}' for c in cavities))
+            + tuple(f'actuator_gain.{c}' for c in cavities)
+            + (tuple(f'base_position.{a}' for a in _AXES) if base_position else ())
+            + (('latency',) if latency else ()))
 
 
-def calibration_of(names, factors):
-    """Return the :class:`Calibration` of named factors."""
-    tables = {'section_stiffness': {}, 'actuator_gain': {}}
-    for name, value in zip(names, factors):
-        kind, item = name.split('.', 1)
-        tables[kind][item] = float(value)
-    return Calibration(tables['section_stiffness'], tables['actuator_gain'])
+def _is_factor(name):
+    """Whether a parameter is a positive factor (fitted in log space)."""
+    return name.split('.', 1)[0] in FACTOR_KINDS
+
+
+def _steps(names):
+    """Return the size of one fit coordinate per parameter (0 for the log factors)."""
+    return np.array([0.0 if _is_factor(n) else POSITION_STEP if n.startswith('base_position.')
+                     else LATENCY_STEP for n in names])
+
+
+def values_of(names, theta, start_latency=0.0):
+    """
+    Return the parameter values of fit coordinates ``θ``.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Parameter names.
+    theta : (p,) array_like  [-]
+        Fit coordinates.
+    start_latency : float  [s]
+        The latency at ``θ = 0``.
+
+    Returns
+    -------
+    (p,) ndarray  [-, m or s]
+
+    """
+    theta = np.asarray(theta, dtype=float)
+    steps = _steps(names)
+    offset = np.array([start_latency if n == 'latency' else 0.0 for n in names])
+    return np.where(steps == 0.0, np.exp(theta), offset + steps * theta)
+
+
+def calibration_of(names, values):
+    """Return the :class:`Calibration` of named values (the latency is not part of it)."""
+    tables = {kind: {} for kind in FACTOR_KINDS}
+    position = [0.0, 0.0, 0.0]
+    for name, value in zip(names, values):
+        kind, _, item = name.partition('.')
+        if kind in tables:
+            tables[kind][item] = float(value)
+        elif kind == 'base_position':
+            position[_AXES.index(item)] = float(value)
+    return Calibration(tables['section_stiffness'], tables['actuator_gain'],
+                       base_position=tuple(position))
 
 
 class TipPredictor:
     """
-    Predicted tips of the samples for calibration factors (the fit's model).
+    Predicted tips of the samples for parameter values (the fit's model).
 
     Parameters
     ----------
@@ -108,26 +188,30 @@ class TipPredictor:
         The nominal scene.
     names : sequence of str
         Parameter names (:func:`parameter_names`).
-    pressures : (N, m) ndarray  [Pa]
-        Sample pressures in the scene's actuator order.
-    progress : callable, optional
-        Called with a line of text after each evaluation.
+    pressures : (N, m) ndarray or callable  [Pa]
+        Sample pressures in the scene's actuator order, or a function of the latency [s]
+        returning them (required when ``names`` has ``latency``).
 
     """
 
-    def __init__(self, scene_path, names, pressures, progress=None):
+    def __init__(self, scene_path, names, pressures):
         self.scene_path = scene_path
         self.names = tuple(names)
-        self.pressures = np.asarray(pressures, dtype=float)
-        self.progress = progress
+        self.pressures = pressures if callable(pressures) else np.asarray(pressures, float)
+        if 'latency' in self.names and not callable(pressures):
+            raise ValueError('fitting the latency needs the pressures as a function of it')
         self.evaluations = 0
-        self._states = [None] * len(self.pressures)
+        self._states = None
 
-    def __call__(self, factors):
-        """Return the (N, 3) predicted tips [m] for the factors (p,)."""
-        scene = load_scene(self.scene_path, calibration=calibration_of(self.names, factors))
-        tips = np.empty((len(self.pressures), 3))
-        for i, pressure in enumerate(self.pressures):
+    def __call__(self, values):
+        """Return the (N, 3) predicted tips [m] for the parameter values (p,)."""
+        pressures = (self.pressures(values[self.names.index('latency')])
+                     if callable(self.pressures) else self.pressures)
+        scene = load_scene(self.scene_path, calibration=calibration_of(self.names, values))
+        if self._states is None:
+            self._states = [None] * len(pressures)
+        tips = np.empty((len(pressures), 3))
+        for i, pressure in enumerate(pressures):
             result = scene.forward(np.clip(pressure, scene.lower_bounds, scene.upper_bounds),
                                    initial_state=self._states[i])
             if not result.converged:
@@ -135,34 +219,46 @@ class TipPredictor:
                                                scene.upper_bounds))
             if not result.converged:
                 raise IdentificationError(f'the forward model does not converge at sample {i} '
-                                          f'for factors {np.round(factors, 4).tolist()}')
+                                          f'for {dict(zip(self.names, np.round(values, 4)))}')
             self._states[i] = result.state
             tips[i] = result.effector_positions[-1]
         self.evaluations += 1
         return tips
 
 
-def identify(scene_path, pressures, tips, *, prior_sigma=0.5, max_relative_error=0.1,
-             max_correlation=0.98, noise_scale=0.5e-3, progress=None, max_evaluations=40):
+def identify(scene_path, pressures, tips, *, prior_sigma=0.5, base_position=False,
+             base_position_sigma=0.01, latency=None, latency_sigma=0.01,
+             max_relative_error=0.1, max_correlation=0.98, noise_scale=0.5e-3, progress=None,
+             max_evaluations=40):
     """
-    Fit per-section stiffness and per-cavity gain factors to measured tips.
+    Fit per-section stiffness and per-cavity gain factors (and optionally more) to measured tips.
 
     Parameters
     ----------
     scene_path : str or os.PathLike
         The nominal scene (its own calibration, if any, is the starting point).
-    pressures : (N, m) ndarray  [Pa]
-        Valve pressures of the samples, in the scene's actuator order.
+    pressures : (N, m) ndarray or callable  [Pa]
+        Valve pressures of the samples, in the scene's actuator order; or, to fit the latency,
+        a function of the latency [s] returning them.
     tips : (N, 3) ndarray  [m]
         Measured tips.
     prior_sigma : float or None  [-]
         Standard deviation of the Gaussian prior on each log factor (0.5: the arm within a
         factor ``exp(0.5) = 1.65`` of the nominal scene at one standard deviation). ``None``:
         no prior (plain least squares; directions the data does not see then drift).
+    base_position : bool
+        Also fit the chain base's position in ``base_frame`` (a registration error of the
+        tracker).
+    base_position_sigma : float or None  [m]
+        Prior standard deviation of each base coordinate (None: no prior).
+    latency : float or None  [s]
+        Starting value of the latency, fitted when given (``pressures`` must then be callable).
+    latency_sigma : float or None  [s]
+        Prior standard deviation of the latency around its starting value (None: no prior).
     max_relative_error : float  [-]
         A factor with a larger relative standard error is flagged.
     max_correlation : float  [-]
-        Factors correlated beyond this are flagged as a group.
+        Parameters correlated beyond this are flagged as a group.
     noise_scale : float  [m]
         Residual size beyond which the ``soft_l1`` loss down-weights a sample (outliers); also
         the first guess of the measurement noise that weighs the prior.
@@ -178,29 +274,45 @@ def identify(scene_path, pressures, tips, *, prior_sigma=0.5, max_relative_error
     Raises
     ------
     IdentificationError
-        With fewer samples than parameters, or when the data does not determine every
-        parameter (a zero or rank-deficient Jacobian: too little excitation; the prior does not
-        hide that).
+        With fewer samples than parameters, or when the data does not determine every factor
+        (a zero or rank-deficient Jacobian: too little excitation; the prior does not hide
+        that).
     ValueError
-        On a ``prior_sigma`` that is not finite and positive.
+        On a prior standard deviation that is not finite and positive, or a latency without
+        callable pressures.
 
     """
-    if prior_sigma is not None and not (np.isfinite(prior_sigma) and prior_sigma > 0.0):
-        raise ValueError(f'prior_sigma must be finite and > 0 (or None), got {prior_sigma}')
+    for label, value in (('prior_sigma', prior_sigma), ('base_position_sigma',
+                                                        base_position_sigma),
+                         ('latency_sigma', latency_sigma)):
+        if value is not None and not (np.isfinite(value) and value > 0.0):
+            raise ValueError(f'{label} must be finite and > 0 (or None), got {value}')
+    if latency is not None and not (np.isfinite(latency) and latency >= 0.0):
+        raise ValueError(f'latency must be finite and >= 0, got {latency}')
     nominal = load_scene(scene_path)
-    names = parameter_names(nominal)
-    pressures = np.asarray(pressures, dtype=float)
+    names = parameter_names(nominal, base_position=base_position,
+                            latency=latency is not None)
     tips = np.asarray(tips, dtype=float)
-    if not names:
+    if not any(_is_factor(n) for n in names):
         raise IdentificationError(f'scene {nominal.name}: nothing to identify (no sections or '
                                   'cavities)')
     if len(tips) < len(names):
         raise IdentificationError(f'{len(tips)} quasi-static samples for {len(names)} '
                                   'parameters: record a longer session')
+    steps = _steps(names)
+    fd_steps = np.array([1e-3 if n == 'latency' else 1e-4 for n in names])
+    sigma_of = {'base_position': base_position_sigma, 'latency': latency_sigma}
+    prior = np.array([(prior_sigma if _is_factor(n) else sigma_of[n.split('.')[0]]) or np.inf
+                      for n in names], dtype=float)
+    prior = np.where(steps == 0.0, prior, prior / np.where(steps == 0.0, 1.0, steps))
+    start_latency = 0.0 if latency is None else float(latency)
     predict = TipPredictor(scene_path, names, pressures)
 
+    def model(theta):
+        return predict(values_of(names, theta, start_latency))
+
     def data_residuals(theta):
-        error = predict(np.exp(theta)) - tips
+        error = model(theta) - tips
         if progress is not None:
             progress(f'  evaluation {predict.evaluations}: tip RMS '
                      f'{_rms(error) * 1e3:.3f} mm')
@@ -209,29 +321,34 @@ def identify(scene_path, pressures, tips, *, prior_sigma=0.5, max_relative_error
     theta = np.zeros(len(names))
     start = data_residuals(theta)
     before = start.reshape(-1, 3) + tips
-    _check_excitation(names, _jacobian(predict, theta, tips, start))
+    checked = np.array([_is_factor(n) or not np.isfinite(p) for n, p in zip(names, prior)])
+    _check_excitation(names, _jacobian(model, theta, tips, start, fd_steps), checked)
     # the prior weighs like sigma_noise / prior_sigma against a tip residual; the noise is
     # known only after a fit: guess, fit, and refit once if the residuals say otherwise
     noise_weight, converged = noise_scale, True
     for _ in range(3):
-        weight = 0.0 if prior_sigma is None else noise_weight / prior_sigma
+        weight = noise_weight / prior
         solution = least_squares(
             lambda t: np.concatenate([data_residuals(t), weight * t]), theta, loss='soft_l1',
-            f_scale=noise_scale, diff_step=1e-4, x_scale=0.1, max_nfev=max_evaluations)
+            f_scale=noise_scale, diff_step=fd_steps, x_scale=0.1, max_nfev=max_evaluations)
         theta, converged = solution.x, solution.status > 0
         fun = solution.fun[:tips.size]
         sigma = float(np.sqrt(np.sum(fun ** 2) / max(tips.size - len(names), 1)))
-        if prior_sigma is None or abs(sigma / noise_weight - 1.0) < 0.25:
+        if not np.any(np.isfinite(prior)) or abs(sigma / noise_weight - 1.0) < 0.25:
             break
         noise_weight = sigma
-    jacobian = _jacobian(predict, theta, tips, fun)
-    _check_excitation(names, jacobian)
-    covariance = _posterior_covariance(jacobian, sigma, prior_sigma)
+    jacobian = _jacobian(model, theta, tips, fun, fd_steps)
+    _check_excitation(names, jacobian, checked)
+    covariance = _posterior_covariance(jacobian, sigma, prior)
     se_theta = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     correlation = covariance / np.outer(se_theta, se_theta)
-    directions, data_share = _principal_directions(jacobian, sigma, prior_sigma)
-    values = np.exp(theta)
-    standard_errors = values * se_theta
+    directions, data_share = _principal_directions(jacobian, sigma, prior)
+    scaling = np.where(np.isfinite(prior), prior, 1.0)
+    scaled_covariance = covariance / np.outer(scaling, scaling)
+    direction_errors = np.sqrt(np.maximum(np.einsum('ik,ij,jk->k', directions,
+                                                    scaled_covariance, directions), 0.0))
+    values = values_of(names, theta, start_latency)
+    standard_errors = np.where(steps == 0.0, values * se_theta, steps * se_theta)
     warnings = [] if converged else [
         f'the solver stopped at its budget of {max_evaluations} evaluations before converging']
     warnings += _identifiability_warnings(names, values, standard_errors, correlation,
@@ -239,15 +356,16 @@ def identify(scene_path, pressures, tips, *, prior_sigma=0.5, max_relative_error
                                           max_correlation)
     after = fun.reshape(-1, 3) + tips
     fitted = calibration_of(names, values)
+    prior_sigmas = np.where(steps == 0.0, prior, prior * steps)
     return Identification(names, values, standard_errors, correlation, _rms(before - tips),
                           _rms(after - tips), before, after, sigma, tuple(warnings),
                           predict.evaluations, nominal.calibration.combined(fitted),
-                          prior_sigma, directions, data_share)
+                          prior_sigmas, directions, data_share, direction_errors)
 
 
-def _posterior_covariance(jacobian, sigma, prior_sigma):
+def _posterior_covariance(jacobian, sigma, prior):
     """
-    Return the covariance of ``θ``: ``σ² (JᵀJ + σ²/σₚ² I)⁻¹`` (``σ² (JᵀJ)⁺`` without prior).
+    Return the covariance of ``θ``: ``σ² (JᵀJ + σ² diag(σₚ)⁻²)⁻¹`` (``σ² (JᵀJ)⁺`` without prior).
 
     Parameters
     ----------
@@ -255,8 +373,8 @@ def _posterior_covariance(jacobian, sigma, prior_sigma):
         Unweighted Jacobian of the tip residuals in ``θ``.
     sigma : float  [m]
         Residual standard deviation per axis.
-    prior_sigma : float or None  [-]
-        The prior's standard deviation on each ``θ``.
+    prior : (p,) ndarray  [-]
+        The prior's standard deviation of each ``θ`` (``inf``: none).
 
     Returns
     -------
@@ -264,16 +382,20 @@ def _posterior_covariance(jacobian, sigma, prior_sigma):
 
     """
     scale = np.linalg.norm(jacobian, axis=0)
+    scale = np.where(scale > 0.0, scale, 1.0)
     normal = (jacobian / scale).T @ (jacobian / scale)
-    if prior_sigma is None:
-        return np.linalg.pinv(normal) / np.outer(scale, scale) * sigma ** 2
-    normal += np.diag((sigma / prior_sigma) ** 2 / scale ** 2)
-    return np.linalg.inv(normal) / np.outer(scale, scale) * sigma ** 2
+    normal += np.diag((sigma / prior) ** 2 / scale ** 2)
+    return np.linalg.pinv(normal) / np.outer(scale, scale) * sigma ** 2
 
 
-def _principal_directions(jacobian, sigma, prior_sigma):
+def _principal_directions(jacobian, sigma, prior):
     """
-    Return the principal combinations of the log factors and the data's share along each.
+    Return the principal combinations of ``θ`` (scaled by the prior) and the data's share.
+
+    In coordinates ``θ / σₚ`` (``σₚ = 1`` where there is no prior) the prior's information is
+    the identity on the parameters that have one; the eigenvectors ``v`` of the data's
+    information ``S JᵀJ S / σ²`` (``S = diag(σₚ)``, eigenvalue ``λ``) get the data share
+    ``λ / (λ + vᵀ D v)``, ``D`` marking the parameters with a prior.
 
     Parameters
     ----------
@@ -281,23 +403,24 @@ def _principal_directions(jacobian, sigma, prior_sigma):
         Unweighted Jacobian of the tip residuals in ``θ``.
     sigma : float  [m]
         Residual standard deviation per axis.
-    prior_sigma : float or None  [-]
-        The prior's standard deviation on each ``θ``.
+    prior : (p,) ndarray  [-]
+        The prior's standard deviation of each ``θ`` (``inf``: none).
 
     Returns
     -------
     directions : (p, p) ndarray  [-]
-        Unit eigenvectors (columns) of the information ``JᵀJ / σ²``, the smallest first.
+        Unit eigenvectors (columns), the least determined (smallest share) first.
     data_share : (p,) ndarray  [-]
-        ``λ σₚ² / (1 + λ σₚ²)`` per direction (ones without a prior).
 
     """
-    information, directions = np.linalg.eigh(jacobian.T @ jacobian / sigma ** 2)
+    has_prior = np.isfinite(prior)
+    scaled = jacobian * np.where(has_prior, prior, 1.0)
+    information, directions = np.linalg.eigh(scaled.T @ scaled / sigma ** 2)
     information = np.maximum(information, 0.0)
-    if prior_sigma is None:
-        return directions, np.ones(len(information))
-    ratio = information * prior_sigma ** 2
-    return directions, ratio / (1.0 + ratio)
+    penalty = (directions ** 2 * has_prior[:, None]).sum(axis=0)
+    share = np.where(penalty > 0.0, information / (information + penalty), 1.0)
+    order = np.argsort(share, kind='stable')
+    return directions[:, order], share[order]
 
 
 def _identifiability_warnings(names, values, standard_errors, correlation, directions,
@@ -307,18 +430,18 @@ def _identifiability_warnings(names, values, standard_errors, correlation, direc
 
     A factor is flagged when its relative standard error exceeds ``max_relative_error``; a
     principal combination whose information comes less than half from the data is named (the
-    prior, i.e. the nominal scene, sets it); factors linked by correlations beyond
+    prior, i.e. the nominal scene, sets it); parameters linked by correlations beyond
     ``max_correlation`` form one group (connected components), reported once.
     """
     warnings = []
     for n, v, se in zip(names, values, standard_errors):
-        if se > max_relative_error * v:
+        if _is_factor(n) and se > max_relative_error * v:
             warnings.append(f'{n} = {v:.4f} +- {se:.4f}: loosely determined (relative '
                             f'standard error {se / v:.0%} > {max_relative_error:.0%})')
     for share, direction in zip(data_share, directions.T):
         if share < 0.5:
-            terms = ' '.join(f'{c:+.2f} log {n}' for c, n in zip(direction, names)
-                             if abs(c) > 0.1)
+            terms = ' '.join(f'{c:+.2f} {"log " if _is_factor(n) else ""}{n}'
+                             for c, n in zip(direction, names) if abs(c) > 0.1)
             warnings.append(f'the combination {terms} is set mostly by the prior (the nominal '
                             f'scene): the data carries {share:.0%} of its information')
     linked = np.abs(correlation) > max_correlation
@@ -337,9 +460,20 @@ def _identifiability_warnings(names, values, standard_errors, correlation, direc
     return warnings
 
 
-def _check_excitation(names, jacobian, rank_tolerance=1e-6):
+def _check_excitation(names, jacobian, checked, rank_tolerance=1e-6):
     """
-    Refuse data that cannot determine every parameter (a zero or rank-deficient Jacobian).
+    Refuse data that cannot determine the checked parameters (zero or rank-deficient Jacobian).
+
+    Parameters
+    ----------
+    names : sequence of str
+        Parameter names.
+    jacobian : (n, p) ndarray  [m]
+        Tip residual Jacobian in ``θ``.
+    checked : (p,) bool ndarray
+        The parameters the data must determine (the factors, and any without a prior).
+    rank_tolerance : float  [-]
+        Smallest singular value of the column-normalised Jacobian, relative to the largest.
 
     Raises
     ------
@@ -347,10 +481,12 @@ def _check_excitation(names, jacobian, rank_tolerance=1e-6):
         Naming the parameters the data does not see, or those of the undetermined combination.
 
     """
+    names = [n for n, c in zip(names, checked) if c]
+    jacobian = jacobian[:, checked]
     scale = np.linalg.norm(jacobian, axis=0)
     dead = [n for n, s in zip(names, scale) if not s > 1e-12]
-    hint = ('; record a circle plus a pure extension (every tube pressurised alike, held a '
-            'few seconds at a few levels)')
+    hint = ('; record a circle plus poses held a few seconds (see the README: what excitation '
+            'makes the parameters identifiable)')
     if dead:
         raise IdentificationError('too little excitation: the data does not depend on '
                                   f'{", ".join(dead)}{hint}')
@@ -363,18 +499,19 @@ def _check_excitation(names, jacobian, rank_tolerance=1e-6):
                                   f'{len(names)}){hint}')
 
 
-def _jacobian(predict, theta, tips, residual, step=1e-4):
+def _jacobian(model, theta, tips, residual, steps=None):
     """
     Return the forward-difference Jacobian of the plain tip residuals in ``θ``.
 
     ``least_squares`` returns the Jacobian weighted by the robust loss; the standard errors
     need the unweighted one.
     """
+    steps = np.full(len(theta), 1e-4) if steps is None else steps
     columns = []
     for k in range(len(theta)):
         shifted = np.array(theta, dtype=float)
-        shifted[k] += step
-        columns.append(((predict(np.exp(shifted)) - tips).reshape(-1) - residual) / step)
+        shifted[k] += steps[k]
+        columns.append(((model(shifted) - tips).reshape(-1) - residual) / steps[k])
     return np.stack(columns, axis=1)
 
 
