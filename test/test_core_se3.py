@@ -36,6 +36,24 @@ def test_exp_log_against_scipy():
     np.testing.assert_allclose(back[far], v[far], atol=1e-14, rtol=1e-12)
 
 
+def test_rpy_against_scipy_and_back_through_gimbal_lock():
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` is scipy's extrinsic 'xyz'; the inverse gives the angles."""
+    rng = np.random.default_rng(4)
+    rpy = rng.uniform(-np.pi, np.pi, (60, 3))
+    rpy[:, 1] = rng.uniform(-0.5 * np.pi, 0.5 * np.pi, 60)
+    rot = se3.so3_from_rpy(rpy)
+    np.testing.assert_allclose(rot, Rotation.from_euler('xyz', rpy).as_matrix(), atol=1e-15)
+    np.testing.assert_allclose(se3.rpy_from_so3(rot), rpy, atol=1e-13)
+    assert se3.so3_from_rpy(rpy.reshape(3, 20, 3)).shape == (3, 20, 3, 3)
+    # at pitch +-pi/2 only yaw -+ roll is defined: roll 0, the matrix is reproduced
+    locked = np.array([[0.3, 0.5 * np.pi, -0.7], [0.3, -0.5 * np.pi, -0.7],
+                       [0.3, 0.5 * np.pi - 1e-10, -0.7]])
+    back = se3.rpy_from_so3(se3.so3_from_rpy(locked))
+    np.testing.assert_array_equal(back[:, 0], 0.0)
+    np.testing.assert_allclose(se3.so3_from_rpy(back), se3.so3_from_rpy(locked), atol=1e-9)
+    np.testing.assert_allclose(back[:2, 2], [-1.0, -0.4], atol=1e-14)
+
+
 def test_log_at_pi():
     """A rotation by exactly pi returns angle pi about the right axis (sign free)."""
     axis = np.array([1.0, 2.0, -2.0]) / 3.0

@@ -35,6 +35,28 @@ def test_chaining_reproduces_whole_beam_compliance():
     np.testing.assert_allclose(flex_base, ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
 
 
+def test_transformed_chain_premultiplies_the_base_pose():
+    """``transformed(p, R)``: rest frames ``x -> R x + p``, ``R_i -> R R_i``; links unchanged."""
+    lengths = np.array([0.05, 0.03, 0.07])
+    comps = [links.timoshenko_compliance(h, E_MOD, NU, R_OUT, R_IN) for h in lengths]
+    model = chain.ChainModel.from_compliances(
+        comps, [[h, 0.01, 0.0] for h in lengths], rest_rotations=se3.so3_exp(
+            [[0.0, 0.1, 0.2], [0.3, 0.0, -0.1], [0.0, 0.0, 0.4]]),
+        base_position=[0.1, -0.2, 0.05], base_rotation=se3.so3_exp([0.4, -0.3, 0.2]))
+    p, rot = np.array([0.3, 0.7, -0.4]), se3.so3_exp([-0.9, 0.5, 1.3])
+    moved = model.transformed(p, rot)
+    before, after = chain.rest_state(model), chain.rest_state(moved)
+    np.testing.assert_allclose(after.positions, before.positions @ rot.T + p, rtol=0,
+                               atol=1e-15)
+    np.testing.assert_allclose(after.rotations, rot @ before.rotations, rtol=0, atol=1e-15)
+    for name in ('compliances', 'rest_offsets', 'rest_rotations', 'masses'):
+        np.testing.assert_array_equal(getattr(moved, name), getattr(model, name))
+    with pytest.raises(ValueError, match='proper rotation'):
+        model.transformed(p, np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(ValueError, match='position must be finite'):
+        model.transformed([0.0, np.nan, 0.0], rot)
+
+
 def test_small_tip_load_is_linear_and_at_rest_nothing_moves():
     """Zero load: rest shape in 0 iterations; tiny tip wrench: displacement = C w (1e-6)."""
     lengths = np.full(8, 0.05)

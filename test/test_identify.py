@@ -6,10 +6,11 @@ from cbha_inverse.identify.fit import identify, parameter_names, TipPredictor
 from cbha_inverse.identify.samples import (IdentificationError, quasi_static_samples,
                                            valve_pressures)
 from cbha_inverse.report.tracking import cross_track_errors
-from cbha_inverse.scene import load_scene
+from cbha_inverse.scene import load_scene, resolve_scene_path
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
+import yaml
 
 TRUTH = np.array([0.85, 1.1, 0.9, 1.05, 1.1, 0.95, 1.08, 0.92])
 NOISE = 2e-4
@@ -36,6 +37,62 @@ def test_fit_recovers_known_errors_within_their_standard_errors(synthetic):
     np.testing.assert_allclose(np.diag(result.correlation), 1.0)
     assert result.warnings == ()
     assert result.calibration.section_stiffness['inner'] == pytest.approx(result.values[0])
+
+
+@pytest.fixture(scope='module')
+def short_arm(tmp_path_factory):
+    """Return the CBHA scene with 3 segments per section, its sample pressures and tips."""
+    # the outer section's weight is too small to separate its stiffness from its gains (its
+    # absolute scale is unseen), and fits are fast
+    source = resolve_scene_path('cbha')
+    data = yaml.safe_load(source.read_text())
+    for section in data['chain']['sections']:
+        section['segment'] = str((source.parent / section['segment']).resolve())
+        section['count'] = 3
+    path = tmp_path_factory.mktemp('scene') / 'short_arm.yaml'
+    path.write_text(yaml.safe_dump(data))
+    rng = np.random.default_rng(7)
+    pressures = rng.uniform(0.0, 150e3, (16, 6))
+    tips = TipPredictor(path, parameter_names(load_scene(path)), pressures)(TRUTH)
+    return path, pressures, tips
+
+
+def test_what_the_data_cannot_see_stays_at_the_prior_and_is_flagged(short_arm):
+    path, pressures, clean = short_arm
+    tips = clean + np.random.default_rng(8).normal(0.0, NOISE, clean.shape)
+    free = identify(path, pressures, tips, prior_sigma=None)
+    fit = identify(path, pressures, tips, prior_sigma=0.5)
+    error = np.log(fit.values / TRUTH) / (fit.standard_errors / fit.values)
+    assert np.all(np.abs(error) < 2.0)
+    # without the prior the unseen direction drifts far from the truth (factor > 2)
+    assert np.max(np.abs(np.log(free.values / TRUTH))) > np.log(2.0)
+    # the least determined combination: the outer stiffness and gains together, mostly prior
+    weakest = fit.directions[:, 0]
+    assert fit.data_share[0] < 0.5
+    assert np.all(np.abs(np.abs(weakest[[1, 5, 6, 7]]) - 0.5) < 0.05)
+    assert any('set mostly by the prior' in w and 'section_stiffness.outer' in w
+               for w in fit.warnings)
+    # both fits explain the data alike: only the prior tells them apart
+    assert fit.rms_after == pytest.approx(free.rms_after, rel=0.05)
+
+
+def test_reported_standard_errors_match_the_scatter_of_repeated_fits(short_arm):
+    # Monte Carlo: along each combination the data determines, the fitted error over the
+    # reported standard error is N(0, 1) over noise draws (too small or too large SEs fail)
+    path, pressures, clean = short_arm
+    rng = np.random.default_rng(9)
+    z = []
+    for _ in range(6):
+        fit = identify(path, pressures, clean + rng.normal(0.0, NOISE, clean.shape))
+        relative = fit.standard_errors / fit.values
+        covariance = fit.correlation * np.outer(relative, relative)
+        for direction, share in zip(fit.directions.T, fit.data_share):
+            if share > 0.95:
+                z.append(direction @ np.log(fit.values / TRUTH)
+                         / np.sqrt(direction @ covariance @ direction))
+    z = np.array(z)
+    assert len(z) >= 30
+    assert 0.7 < np.sqrt(np.mean(z ** 2)) < 1.4
 
 
 def test_valve_pressures_follow_delayed_first_order_lag():

@@ -150,6 +150,40 @@ class ChainModel:
         return cls(_frozen(comp), _frozen(stiff), _frozen(offsets), _frozen(rots),
                    _frozen(mass), _frozen(base_x), _frozen(base_r))
 
+    def transformed(self, position, rotation):
+        """
+        Return this chain moved rigidly: its base pose premultiplied by ``(position, rotation)``.
+
+        ``T_w_b' = T_w_o T_w_b`` with ``T_w_o = (rotation, position)``: the new base sits at
+        ``rotation @ base_position + position`` with axes ``rotation @ base_rotation``. Links,
+        masses and every frame relative to the base are unchanged, so frames, routing points and
+        effector points (all fixed in frame axes) move with it; world-axis loads such as gravity
+        do not turn with it.
+
+        Parameters
+        ----------
+        position : (3,) array_like  [m]
+            Translation of the rigid motion (world axes).
+        rotation : (3, 3) array_like
+            Its rotation (a proper rotation matrix).
+
+        Returns
+        -------
+        ChainModel
+
+        Raises
+        ------
+        ValueError
+            On a non-finite position or a rotation that is not a proper rotation.
+
+        """
+        p = checked_array(position, (3,), 'position')
+        r = checked_array(rotation, (3, 3), 'rotation')
+        _check_rotations(r[None], 'rotation')
+        return ChainModel(self.compliances, self.stiffnesses, self.rest_offsets,
+                          self.rest_rotations, self.masses,
+                          _frozen(r @ self.base_position + p), _frozen(r @ self.base_rotation))
+
 
 def _check_rotations(rots, name):
     """Raise ValueError unless every (3, 3) matrix is a proper rotation."""

@@ -1,5 +1,5 @@
 """
-Rotation helpers on SO(3), batched over arrays: hat/vee, exp/log, quaternions, ``Jl⁻¹``.
+Rotation helpers on SO(3), batched over arrays: hat/vee, exp/log, quaternions, rpy, ``Jl⁻¹``.
 
 Conventions (DESIGN §2): rotation vectors are axis * angle [rad]; quaternions are (x, y, z, w)
 with ``w >= 0``; every function is batched over leading axes (``(..., 3)`` vectors,
@@ -146,6 +146,64 @@ def matrix_from_quat(quat):
         np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
         np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
     ], axis=-2)
+
+
+def so3_from_rpy(rpy):
+    """
+    Rotation matrix of roll, pitch, yaw angles (URDF / ROS convention).
+
+    ``R = Rz(yaw) Ry(pitch) Rx(roll)``: roll about x, then pitch about y, then yaw about z, all
+    about the fixed axes of the parent frame (as a URDF ``origin rpy`` or tf2's ``setRPY``).
+
+    Parameters
+    ----------
+    rpy : (..., 3) array_like  [rad]
+        (roll, pitch, yaw).
+
+    Returns
+    -------
+    (..., 3, 3) ndarray
+
+    """
+    flat, batch = _flat(rpy, (3,))
+    cr, cp, cy = np.cos(flat).T
+    sr, sp, sy = np.sin(flat).T
+    rot = np.stack([
+        np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
+        np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
+        np.stack([-sp, cp * sr, cp * cr], -1),
+    ], axis=-2)
+    return rot.reshape(batch + (3, 3))
+
+
+def rpy_from_so3(rot):
+    """
+    Return the roll, pitch, yaw angles of rotation matrices (inverse of :func:`so3_from_rpy`).
+
+    Pitch lies in [-pi/2, pi/2], roll and yaw in (-pi, pi]. At pitch = +-pi/2 (gimbal lock, where
+    only yaw -+ roll is defined) roll is set to 0; ``so3_from_rpy`` of the result is ``rot``
+    whatever the pitch.
+
+    Parameters
+    ----------
+    rot : (..., 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    (..., 3) ndarray  [rad]
+        (roll, pitch, yaw).
+
+    """
+    flat, batch = _flat(rot, (3, 3))
+    cos_pitch = np.hypot(flat[:, 0, 0], flat[:, 1, 0])
+    pitch = np.arctan2(-flat[:, 2, 0], cos_pitch)
+    # below sqrt(eps) the roll read from (R21, R22) ~ cos(pitch) is noise: fold it into yaw
+    locked = cos_pitch < 1e-8
+    roll = np.where(locked, 0.0, np.arctan2(flat[:, 2, 1], flat[:, 2, 2]))
+    yaw = np.where(locked, np.arctan2(-flat[:, 0, 1], flat[:, 1, 1]),
+                   np.arctan2(flat[:, 1, 0], flat[:, 0, 0]))
+    return np.stack([roll, pitch, yaw], axis=-1).reshape(batch + (3,))
 
 
 def so3_log(rot):

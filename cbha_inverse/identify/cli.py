@@ -4,11 +4,13 @@
 Reads ``pressure_command`` and ``tip/measured`` from the bag, aligns them (link ``--latency``
 and valve ``--valve-time-constant``, by default the paper's 3 ms and 10 ms), keeps at most
 ``--max-samples`` quasi-static samples and fits the scene's per-section stiffness and per-cavity
-gain factors (:func:`cbha_inverse.identify.fit.identify`). Writes ``DIR/<scene>_identified.yaml``
-(a complete scene file with the fitted ``calibration`` block: ``-p scene:=...``),
-``DIR/<scene>_identified_report.txt`` (factors with standard errors, correlation matrix, tip RMS
-before/after, identifiability warnings) and ``DIR/<scene>_identified.png`` (measured vs predicted
-tip, y-z plane, before and after). Exit status 0 on a valid fit, 1 when the data cannot give
+gain factors (:func:`cbha_inverse.identify.fit.identify`; a Gaussian prior around the nominal
+scene, ``--prior-sigma``, keeps what the data cannot see at the nominal value). Writes
+``DIR/<scene>_identified.yaml`` (a complete scene file with the fitted ``calibration`` block:
+``-p scene:=...``), ``DIR/<scene>_identified_report.txt`` (factors with standard errors, the
+least determined combinations, correlation matrix, tip RMS before/after, identifiability
+warnings) and ``DIR/<scene>_identified.png`` (measured vs predicted tip, y-z plane, before and
+after). Exit status 0 on a valid fit, 1 when the data cannot give
 one (no tip measurements, too little excitation: nothing is written), 2 on a bad file.
 """
 
@@ -47,13 +49,26 @@ def parse_args(argv):
                         help='quasi-static: pressures steady over this time [s]')
     parser.add_argument('--settle-tolerance', type=float, default=2000.0,
                         help='quasi-static: largest pressure change over --settle-time [Pa]')
-    parser.add_argument('--max-samples', type=int, default=40,
+    parser.add_argument('--max-samples', type=int, default=80,
                         help='quasi-static samples fitted at most (evenly spread)')
+    parser.add_argument('--prior-sigma', type=_prior_sigma, default=0.5,
+                        help='prior standard deviation of each log factor around the nominal '
+                        'scene (0.5: within a factor 1.65 at one sigma); "none": no prior')
     parser.add_argument('--pressure-source', choices=PRESSURE_SOURCES, default='auto',
                         help='acting pressures: measured (pressure_measured), commanded '
                         '(pressure_command through --latency and the valve lag), auto: '
                         'measured when recorded')
     return parser.parse_args(argv)
+
+
+def _prior_sigma(text):
+    """Parse ``--prior-sigma``: a finite positive number, or ``none``."""
+    if text.strip().lower() == 'none':
+        return None
+    value = float(text)
+    if not (np.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f'must be a finite number > 0 or none, got {text}')
+    return value
 
 
 def command_order(scene, valve_names):
@@ -103,6 +118,17 @@ def format_report(result, samples, bag, scene_name):
              'axis)', '', 'fitted factors (on top of the scene calibration) +- standard error:']
     lines += [f'  {n:32s} {v:.4f} +- {se:.4f}'
               for n, v, se in zip(result.names, result.values, result.standard_errors)]
+    prior = ('none (plain least squares)' if result.prior_sigma is None else
+             f'each log factor ~ N(0, {result.prior_sigma:g}^2) around the nominal scene')
+    lines += ['', f'prior: {prior}',
+              'principal combinations of the log factors (columns in the order above, least '
+              'determined first): standard error, data share of the information:']
+    relative = result.standard_errors / result.values
+    covariance = result.correlation * np.outer(relative, relative)
+    lines += ['  ' + ' '.join(f'{c:+.2f}' for c in direction)
+              + f'   +- {np.sqrt(max(direction @ covariance @ direction, 0.0)):.4f}'
+              + f', data {share:.0%}'
+              for direction, share in zip(result.directions.T, result.data_share)]
     lines += ['', 'correlation matrix (rows/columns in the order above):']
     lines += ['  ' + ' '.join(f'{c:+.2f}' for c in row) for row in result.correlation]
     lines += ['', 'identifiability warnings:' if result.warnings else
@@ -168,6 +194,7 @@ def main(argv=None):
         print(f'{PROGRAM}: {samples.recorded} tip samples, {samples.quasi_static} quasi-static, '
               f'fitting {len(samples.tips)} through scene {scene.name}', flush=True)
         result = identify(scene_path, samples.pressures[:, order], samples.tips,
+                          prior_sigma=args.prior_sigma,
                           progress=lambda line: print(line, flush=True))
     except (ConfigError, FileNotFoundError, BagError) as exc:
         return report_config_error(PROGRAM, exc)

@@ -6,9 +6,14 @@ cavity gain: positive by construction, relative steps). For each ``θ`` the scen
 that calibration (:func:`cbha_inverse.scene.load_scene`, the one builder) and every sample's tip
 is predicted by ``scene.forward`` (warm-started from the previous prediction of that sample).
 ``scipy.optimize.least_squares`` minimises the robust (``soft_l1``) sum of squared tip errors
-with finite-difference Jacobians. Standard errors come from ``σ² (JᵀJ)⁻¹`` at the solution (``σ``
-from the residuals); a parameter whose relative standard error exceeds ``max_relative_error``,
-or a pair correlated beyond ``max_correlation``, is reported as not separable from the data.
+with finite-difference Jacobians, plus a Gaussian prior on ``θ`` (each factor within ``×/÷
+exp(prior_sigma)`` of the nominal scene at one standard deviation: the nominal model is a
+model of this arm), so that what the data cannot see stays at the nominal value instead of
+drifting along a flat valley of the cost. Standard errors come from the posterior covariance
+``σ² (JᵀJ + σ²/σₚ² I)⁻¹`` at the solution (``σ`` from the residuals; without a prior
+``σ² (JᵀJ)⁻¹``). A parameter whose relative standard error exceeds ``max_relative_error``, one
+that the prior rather than the data determines, and a group of parameters correlated beyond
+``max_correlation`` (only their combination is seen), are reported as warnings.
 """
 
 from dataclasses import dataclass
@@ -47,6 +52,15 @@ class Identification:
         Forward-model evaluations of the whole sample set.
     calibration : cbha_inverse.scene.calibration.Calibration
         The scene's calibration with the fit applied (what the identified scene carries).
+    prior_sigma : float or None  [-]
+        The prior's standard deviation on each log factor (None: no prior).
+    directions : (p, p) ndarray  [-]
+        Columns: the principal combinations of the log factors (eigenvectors of the data's
+        information ``JᵀJ / σ²``), the least determined first.
+    data_share : (p,) ndarray  [-]
+        Share of the information along each direction that comes from the data,
+        ``λ σₚ² / (1 + λ σₚ²)`` for the information eigenvalue ``λ`` (1: the data alone, 0: the
+        prior alone; without a prior, ones).
 
     """
 
@@ -62,6 +76,9 @@ class Identification:
     warnings: tuple
     evaluations: int
     calibration: Calibration
+    prior_sigma: object
+    directions: np.ndarray
+    data_share: np.ndarray
 
 
 def parameter_names(scene):
@@ -125,8 +142,8 @@ class TipPredictor:
         return tips
 
 
-def identify(scene_path, pressures, tips, *, max_relative_error=0.1, max_correlation=0.98,
-             noise_scale=0.5e-3, progress=None, max_evaluations=40):
+def identify(scene_path, pressures, tips, *, prior_sigma=0.5, max_relative_error=0.1,
+             max_correlation=0.98, noise_scale=0.5e-3, progress=None, max_evaluations=40):
     """
     Fit per-section stiffness and per-cavity gain factors to measured tips.
 
@@ -138,16 +155,21 @@ def identify(scene_path, pressures, tips, *, max_relative_error=0.1, max_correla
         Valve pressures of the samples, in the scene's actuator order.
     tips : (N, 3) ndarray  [m]
         Measured tips.
+    prior_sigma : float or None  [-]
+        Standard deviation of the Gaussian prior on each log factor (0.5: the arm within a
+        factor ``exp(0.5) = 1.65`` of the nominal scene at one standard deviation). ``None``:
+        no prior (plain least squares; directions the data does not see then drift).
     max_relative_error : float  [-]
         A factor with a larger relative standard error is flagged.
     max_correlation : float  [-]
-        Two factors correlated beyond this are flagged.
+        Factors correlated beyond this are flagged as a group.
     noise_scale : float  [m]
-        Residual size beyond which the ``soft_l1`` loss down-weights a sample (outliers).
+        Residual size beyond which the ``soft_l1`` loss down-weights a sample (outliers); also
+        the first guess of the measurement noise that weighs the prior.
     progress : callable, optional
         Receives a line of text per evaluation.
     max_evaluations : int
-        Budget of the least-squares solver (function evaluations).
+        Budget of each least-squares pass (function evaluations, Jacobians not counted).
 
     Returns
     -------
@@ -157,9 +179,14 @@ def identify(scene_path, pressures, tips, *, max_relative_error=0.1, max_correla
     ------
     IdentificationError
         With fewer samples than parameters, or when the data does not determine every
-        parameter (a zero or rank-deficient Jacobian: too little excitation).
+        parameter (a zero or rank-deficient Jacobian: too little excitation; the prior does not
+        hide that).
+    ValueError
+        On a ``prior_sigma`` that is not finite and positive.
 
     """
+    if prior_sigma is not None and not (np.isfinite(prior_sigma) and prior_sigma > 0.0):
+        raise ValueError(f'prior_sigma must be finite and > 0 (or None), got {prior_sigma}')
     nominal = load_scene(scene_path)
     names = parameter_names(nominal)
     pressures = np.asarray(pressures, dtype=float)
@@ -172,48 +199,142 @@ def identify(scene_path, pressures, tips, *, max_relative_error=0.1, max_correla
                                   'parameters: record a longer session')
     predict = TipPredictor(scene_path, names, pressures)
 
-    def residuals(theta):
-        predicted = predict(np.exp(theta))
-        error = predicted - tips
+    def data_residuals(theta):
+        error = predict(np.exp(theta)) - tips
         if progress is not None:
             progress(f'  evaluation {predict.evaluations}: tip RMS '
                      f'{_rms(error) * 1e3:.3f} mm')
         return error.reshape(-1)
 
-    start = residuals(np.zeros(len(names)))
+    theta = np.zeros(len(names))
+    start = data_residuals(theta)
     before = start.reshape(-1, 3) + tips
-    _check_excitation(names, _jacobian(predict, np.zeros(len(names)), tips, start))
-    solution = least_squares(residuals, np.zeros(len(names)), loss='soft_l1',
-                             f_scale=noise_scale, diff_step=1e-4, x_scale=0.1,
-                             max_nfev=max_evaluations)
-    jacobian = _jacobian(predict, solution.x, tips, solution.fun)
+    _check_excitation(names, _jacobian(predict, theta, tips, start))
+    # the prior weighs like sigma_noise / prior_sigma against a tip residual; the noise is
+    # known only after a fit: guess, fit, and refit once if the residuals say otherwise
+    noise_weight, converged = noise_scale, True
+    for _ in range(3):
+        weight = 0.0 if prior_sigma is None else noise_weight / prior_sigma
+        solution = least_squares(
+            lambda t: np.concatenate([data_residuals(t), weight * t]), theta, loss='soft_l1',
+            f_scale=noise_scale, diff_step=1e-4, x_scale=0.1, max_nfev=max_evaluations)
+        theta, converged = solution.x, solution.status > 0
+        fun = solution.fun[:tips.size]
+        sigma = float(np.sqrt(np.sum(fun ** 2) / max(tips.size - len(names), 1)))
+        if prior_sigma is None or abs(sigma / noise_weight - 1.0) < 0.25:
+            break
+        noise_weight = sigma
+    jacobian = _jacobian(predict, theta, tips, fun)
     _check_excitation(names, jacobian)
-    scale = np.linalg.norm(jacobian, axis=0)
-    after = solution.fun.reshape(-1, 3) + tips
-    dof = max(solution.fun.size - len(names), 1)
-    sigma = float(np.sqrt(np.sum(solution.fun ** 2) / dof))
-    normal = (jacobian / scale).T @ (jacobian / scale)
-    covariance = np.linalg.pinv(normal) / np.outer(scale, scale) * sigma ** 2
+    covariance = _posterior_covariance(jacobian, sigma, prior_sigma)
     se_theta = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     correlation = covariance / np.outer(se_theta, se_theta)
-    values = np.exp(solution.x)
+    directions, data_share = _principal_directions(jacobian, sigma, prior_sigma)
+    values = np.exp(theta)
     standard_errors = values * se_theta
-    warnings = [] if solution.status > 0 else [
+    warnings = [] if converged else [
         f'the solver stopped at its budget of {max_evaluations} evaluations before converging']
-    for n, v, se in zip(names, values, standard_errors):
-        if se > max_relative_error * v:
-            warnings.append(f'{n} = {v:.4f} +- {se:.4f}: not separable from this data '
-                            f'(relative standard error {se / v:.0%} > '
-                            f'{max_relative_error:.0%})')
-    for i in range(len(names)):
-        for j in range(i + 1, len(names)):
-            if abs(correlation[i, j]) > max_correlation:
-                warnings.append(f'{names[i]} and {names[j]} correlated {correlation[i, j]:+.3f}:'
-                                ' the data constrains only a combination of them')
+    warnings += _identifiability_warnings(names, values, standard_errors, correlation,
+                                          directions, data_share, max_relative_error,
+                                          max_correlation)
+    after = fun.reshape(-1, 3) + tips
     fitted = calibration_of(names, values)
     return Identification(names, values, standard_errors, correlation, _rms(before - tips),
                           _rms(after - tips), before, after, sigma, tuple(warnings),
-                          predict.evaluations, nominal.calibration.combined(fitted))
+                          predict.evaluations, nominal.calibration.combined(fitted),
+                          prior_sigma, directions, data_share)
+
+
+def _posterior_covariance(jacobian, sigma, prior_sigma):
+    """
+    Return the covariance of ``θ``: ``σ² (JᵀJ + σ²/σₚ² I)⁻¹`` (``σ² (JᵀJ)⁺`` without prior).
+
+    Parameters
+    ----------
+    jacobian : (n, p) ndarray  [m]
+        Unweighted Jacobian of the tip residuals in ``θ``.
+    sigma : float  [m]
+        Residual standard deviation per axis.
+    prior_sigma : float or None  [-]
+        The prior's standard deviation on each ``θ``.
+
+    Returns
+    -------
+    (p, p) ndarray  [-]
+
+    """
+    scale = np.linalg.norm(jacobian, axis=0)
+    normal = (jacobian / scale).T @ (jacobian / scale)
+    if prior_sigma is None:
+        return np.linalg.pinv(normal) / np.outer(scale, scale) * sigma ** 2
+    normal += np.diag((sigma / prior_sigma) ** 2 / scale ** 2)
+    return np.linalg.inv(normal) / np.outer(scale, scale) * sigma ** 2
+
+
+def _principal_directions(jacobian, sigma, prior_sigma):
+    """
+    Return the principal combinations of the log factors and the data's share along each.
+
+    Parameters
+    ----------
+    jacobian : (n, p) ndarray  [m]
+        Unweighted Jacobian of the tip residuals in ``θ``.
+    sigma : float  [m]
+        Residual standard deviation per axis.
+    prior_sigma : float or None  [-]
+        The prior's standard deviation on each ``θ``.
+
+    Returns
+    -------
+    directions : (p, p) ndarray  [-]
+        Unit eigenvectors (columns) of the information ``JᵀJ / σ²``, the smallest first.
+    data_share : (p,) ndarray  [-]
+        ``λ σₚ² / (1 + λ σₚ²)`` per direction (ones without a prior).
+
+    """
+    information, directions = np.linalg.eigh(jacobian.T @ jacobian / sigma ** 2)
+    information = np.maximum(information, 0.0)
+    if prior_sigma is None:
+        return directions, np.ones(len(information))
+    ratio = information * prior_sigma ** 2
+    return directions, ratio / (1.0 + ratio)
+
+
+def _identifiability_warnings(names, values, standard_errors, correlation, directions,
+                              data_share, max_relative_error, max_correlation):
+    """
+    Return the warnings: loose factors, combinations the prior sets, correlated groups.
+
+    A factor is flagged when its relative standard error exceeds ``max_relative_error``; a
+    principal combination whose information comes less than half from the data is named (the
+    prior, i.e. the nominal scene, sets it); factors linked by correlations beyond
+    ``max_correlation`` form one group (connected components), reported once.
+    """
+    warnings = []
+    for n, v, se in zip(names, values, standard_errors):
+        if se > max_relative_error * v:
+            warnings.append(f'{n} = {v:.4f} +- {se:.4f}: loosely determined (relative '
+                            f'standard error {se / v:.0%} > {max_relative_error:.0%})')
+    for share, direction in zip(data_share, directions.T):
+        if share < 0.5:
+            terms = ' '.join(f'{c:+.2f} log {n}' for c, n in zip(direction, names)
+                             if abs(c) > 0.1)
+            warnings.append(f'the combination {terms} is set mostly by the prior (the nominal '
+                            f'scene): the data carries {share:.0%} of its information')
+    linked = np.abs(correlation) > max_correlation
+    group_of = list(range(len(names)))
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if linked[i, j]:
+                old, new = group_of[j], group_of[i]
+                group_of = [new if g == old else g for g in group_of]
+    for g in sorted(set(group_of)):
+        members = [n for n, k in zip(names, group_of) if k == g]
+        if len(members) > 1:
+            warnings.append(f'{", ".join(members)}: correlated beyond {max_correlation} (their '
+                            'combination is seen, not each one: e.g. the gains relative to the '
+                            'stiffness)')
+    return warnings
 
 
 def _check_excitation(names, jacobian, rank_tolerance=1e-6):

@@ -9,8 +9,8 @@ Scene YAML schema (SI units)::
 
     name: str
     description: str
-    base_frame: str                      # TF name of frame 0 (default cbha_base)
-    gravity: [gx, gy, gz] or null        # m/s^2, world axes (+x along the backbone at rest)
+    base_frame: str                      # TF name of the world (default cbha_base)
+    gravity: [gx, gy, gz] or null        # m/s^2, base_frame axes (+x along the backbone at rest)
     chain:                               # one of two types
       type: beam_vertebrae               # Timoshenko beams, vertebrae every `beams_per_interval`
       n_vertebrae, beams_per_interval, interval_length, vertebra_mass, backbone: {youngs_modulus,
@@ -27,8 +27,13 @@ Scene YAML schema (SI units)::
     solver: {energy_weight, proximal_weight, rate_limit, relinearize_every, ...}  # defaults
     calibration:                         # identified corrections (cbha_identify), optional
       section_stiffness: {<section name>: factor}    # stiffness factor of a segments section
-      actuator_gain: {<cavity name>: factor}         # effective-area factor of a cavity
+      actuator_gain: {<actuator name>: factor}       # cavity effective area, cable force/N
       tip_payload_mass: kg                           # mass added at the last frame
+      base_offset: {position: [x, y, z], rpy: [r, p, y]}  # chain base in base_frame, m / rad
+
+Frame 0 of the chain (the base) sits at the origin of ``base_frame``, or at
+``calibration.base_offset`` when given: every frame, routing and effector point moves with it,
+as does an explicit ``workspace_center``; gravity and targets stay in ``base_frame`` axes.
 
 Scenes shipped in ``config/scenes``: ``tendon_6f_8c`` and ``tendon_10f_16c`` (the paper's Fig. 6
 trunks, Timoshenko beams and cables) and ``cbha`` (16 condensed bellows segments, 6 cavities).
@@ -66,12 +71,14 @@ class Scene:
     actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
     effectors : cbha_inverse.core.actuation.effectors.PointEffectors
     gravity : (3,) ndarray or None  [m/s^2]
+        In ``base_frame`` axes (the world of the solvers).
     actuator_names, effector_names : tuple of str
     lower_bounds, upper_bounds : (m,) ndarray  [N or Pa]
     section_names : tuple of str
         Chain sections of a ``segments`` chain, in chain order (empty for beams).
     calibration : cbha_inverse.scene.calibration.Calibration
-        The corrections applied at load (the file's block and the caller's, combined).
+        The corrections applied at load (the file's block and the caller's, combined; its base
+        offset is ``model.base_position`` / ``model.base_rotation``).
     path : pathlib.Path or None
         The scene file.
 
@@ -153,11 +160,11 @@ class Scene:
         """
         (k, 3) suggested centre of target trajectories [m].
 
-        From the scene's ``workspace_center``: explicit coordinates (tip effector; other
-        effectors at rest), or ``{actuation_fraction: f}`` = the effectors at the uniform
-        actuation ``lower + f (upper - lower)``. Without it: the rest effector positions. For the
-        CBHA this is the tip at mid pressure in every tube, around which the paper's 60 mm circle
-        in the y-z plane is reachable.
+        From the scene's ``workspace_center``: explicit coordinates (tip effector, moved with
+        the calibration's base offset; other effectors at rest), or ``{actuation_fraction: f}``
+        = the effectors at the uniform actuation ``lower + f (upper - lower)``. Without it: the
+        rest effector positions. For the CBHA this is the tip at mid pressure in every tube,
+        around which the paper's 60 mm circle in the y-z plane is reachable.
         """
         spec = self._workspace
         if spec is None:
@@ -232,8 +239,9 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     gravity : (3,) array_like, optional  [m/s^2]
         Overrides the scene's gravity (``[0, 0, 0]`` disables it).
     calibration : cbha_inverse.scene.calibration.Calibration, optional
-        Applied on top of the scene's own ``calibration`` block (factors multiply, masses add),
-        e.g. the deliberate errors of a simulated plant.
+        Applied on top of the scene's own ``calibration`` block (factors multiply, masses add,
+        base offsets compose, see :meth:`Calibration.combined`), e.g. the deliberate errors of a
+        simulated plant.
 
     Returns
     -------
@@ -262,12 +270,15 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
         from cbha_inverse.scene.segments import segment_chain
         model, sections, parts = segment_chain(chain, path.parent, stiffness_scale, calibrated)
         vertebra_frames = np.arange(model.n_frames)
+    base_position, base_rotation = calibrated.base_pose()
+    model = model.transformed(base_position, base_rotation)
     check_names(spec, calibrated, sections,
-                [item.data.get('name') for item in spec.sections('cavities', [])])
+                [item.data.get('name') for key in ('cavities', 'cables')
+                 for item in spec.sections(key, []) if isinstance(item.data.get('name'), str)])
     groups = []
     if spec.has('cables'):
-        groups.append(CableGroup(_cables(spec.sections('cables'), vertebra_frames),
-                                 model.n_frames))
+        groups.append(CableGroup(_cables(spec.sections('cables'), vertebra_frames,
+                                         calibrated.actuator_gain), model.n_frames))
     if spec.has('cavities'):
         from cbha_inverse.scene.segments import cavity_group
         groups.append(cavity_group(spec.sections('cavities'), sections, parts, model.n_frames,
@@ -282,10 +293,13 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
         raise spec.error('effectors', 'at least one effector is needed')
     effectors = _effectors(effector_items, model, vertebra_frames)
     g = spec.vector('gravity', 3, (0.0, 0.0, -9.81)) if gravity is None else gravity
+    workspace = _workspace(spec)
+    if isinstance(workspace, tuple):
+        workspace = tuple(base_rotation @ np.asarray(workspace) + base_position)
     return Scene(spec.text('name', path.stem), model, actuators, effectors, g,
                  description=spec.text('description', ''),
                  base_frame=spec.text('base_frame', 'cbha_base'),
-                 workspace=_workspace(spec), solver_defaults=_solver_defaults(spec),
+                 workspace=workspace, solver_defaults=_solver_defaults(spec),
                  section_names=tuple(sections), calibration=calibrated, path=path)
 
 
@@ -348,7 +362,7 @@ def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
                                        masses=masses)
 
 
-def _cables(items, vertebra_frames):
+def _cables(items, vertebra_frames, gains=None):
     """Route each cable from the base through every vertebra up to its end vertebra."""
     cables = []
     for item in items:
@@ -359,8 +373,10 @@ def _cables(items, vertebra_frames):
             raise item.error('end_vertebra', f'{end} outside 1..{len(vertebra_frames) - 1}')
         frames = vertebra_frames[:end + 1]
         offset = np.array([0.0, radius * np.cos(angle), radius * np.sin(angle)])
-        cables.append(Cable(item.text('name'), frames, np.tile(offset, (len(frames), 1)),
-                            item.number('max_tension', positive=True)))
+        name = item.text('name')
+        cables.append(Cable(name, frames, np.tile(offset, (len(frames), 1)),
+                            item.number('max_tension', positive=True),
+                            (gains or {}).get(name, 1.0)))
     return cables
 
 

@@ -65,6 +65,7 @@ class CableOracle:
         self.n_frames = group.n_frames
         self.n_actuators = group.n_actuators
         self.frames, self.offsets = group.frames, group.offsets
+        self.gains = np.asarray(group.gains, dtype=float)
         self.segment_start, self.segment_end = group.segment_start, group.segment_end
         self._segment_owner, self._point_owner = group.segment_owner, group.point_owner
         m, owner = group.n_actuators, group.point_owner
@@ -146,16 +147,16 @@ class CableOracle:
         Returns
         -------
         wrenches : (m, n + 1, 6) ndarray  [N, N*m per N]
-            Frame wrenches per unit tension (columns of ``J_aᵀ``).
+            Frame wrenches per unit tension (columns of ``J_aᵀ``, times each cable's gain).
         displacements : (m,) ndarray  [m]
-            ``-length``: the cable shortening up to a constant (``δ_a``).
+            ``-gain * length``: the cable shortening up to a constant (``δ_a``).
 
         """
         levers, units, span_lengths = self._spans(positions, rotations)
         forces = self._point_force @ units
         wrenches = self._scatter @ point_wrenches(levers, forces)
-        return (wrenches.reshape(self.n_actuators, self.n_frames, 6),
-                -(self._length_sum @ span_lengths))
+        return (self.gains[:, None, None] * wrenches.reshape(self.n_actuators, self.n_frames, 6),
+                -self.gains * (self._length_sum @ span_lengths))
 
     def load_tangent(self, positions, rotations, tensions, symmetric=True):
         """
@@ -190,6 +191,7 @@ class CableOracle:
         """
         levers, units, lengths = self._spans(positions, rotations)
         start, end = self.segment_start, self.segment_end
+        tensions = self.gains * tensions      # the tension along the routing
         scale = tensions[self._segment_owner] / lengths
         proj = -scale[:, None, None] * units[:, :, None] * units[:, None, :]
         proj[:, 0, 0] += scale

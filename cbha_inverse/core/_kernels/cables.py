@@ -2,9 +2,10 @@
 Compiled cable terms of the equilibrium (DESIGN §5): columns of ``J_aᵀ``, loads, load stiffness.
 
 :func:`cable_pass` (numba) computes the cable columns, their loads, the span stiffness
-``C P Cᵀ`` (``P = λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the
+``C P Cᵀ`` (``P = g λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the
 exact point moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``, for the routing data of
-:class:`cbha_inverse.core.actuation.cables.CableTerms`.
+:class:`cbha_inverse.core.actuation.cables.CableTerms`. A cable's gain ``g`` (calibration; 1 for
+the ideal cable) scales its force per unit tension ``F``: column, load and load stiffness alike.
 """
 
 import math
@@ -21,7 +22,7 @@ _CABLE_PRODUCT = np.array([[0, -1, -1], [1, 3, -1], [2, 4, 5]])
 
 
 @numba.njit(cache=True)
-def cable_pass(positions, rotations, actuation, frames, offsets, span_start, span_end,
+def cable_pass(positions, rotations, actuation, gains, frames, offsets, span_start, span_end,
                span_owner, point_owner, columns, span_pair, point_slot, rhs, pair_values,
                moment_values):
     """
@@ -38,6 +39,9 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
         Frame rotations.
     actuation : (m,) ndarray  [N]
         All actuators (the tensions are at ``columns``).
+    gains : (m_c,) ndarray  [-]
+        Factor of every cable on its force per unit tension (its column, load and load
+        stiffness; a scene's ``calibration.actuator_gain``, 1 = the ideal cable).
     frames : (P,) int ndarray
         Frame of every routing point.
     offsets : (P, 3) ndarray  [m]
@@ -79,12 +83,14 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
         lengths[s] = length
         for i in range(3):
             units[s, i] /= length
-    # a span pulls its start point toward its end and the end point back (unit tension)
+    # a span pulls its start point toward its end and the end point back (unit tension, times
+    # the cable's gain)
     forces = np.zeros((n_points, 3))
     for s in range(n_spans):
+        gain = gains[span_owner[s]]
         for i in range(3):
-            forces[span_start[s], i] += units[s, i]
-            forces[span_end[s], i] -= units[s, i]
+            forces[span_start[s], i] += gain * units[s, i]
+            forces[span_end[s], i] -= gain * units[s, i]
     moment_values[:, :, :] = 0.0
     for p in range(n_points):
         f, r = forces[p], levers[p]
@@ -116,7 +122,7 @@ def cable_pass(positions, rotations, actuation, frames, offsets, span_start, spa
     sp = np.empty((3, 3))
     tp = np.empty((3, 3))
     for s in range(n_spans):
-        scale = actuation[columns[span_owner[s]]] / lengths[s]
+        scale = gains[span_owner[s]] * actuation[columns[span_owner[s]]] / lengths[s]
         u = units[s]
         for i in range(3):
             for j in range(3):

@@ -31,6 +31,10 @@ class Cable:
         Routing points in the axes of their frame, relative to its origin.
     max_tension : float  [N]
         Upper bound of the tension (``inf`` if unbounded).
+    gain : float  [-]
+        Factor on the cable's force per unit tension (its column of ``J_aᵀ``, its load and its
+        load stiffness): the tension acting along the routing is ``gain`` times the commanded
+        one (a scene's ``calibration.actuator_gain``; 1 = the ideal cable).
 
     """
 
@@ -38,13 +42,16 @@ class Cable:
     frames: np.ndarray
     offsets: np.ndarray
     max_tension: float = np.inf
+    gain: float = 1.0
 
     def __post_init__(self):
-        """Validate shapes."""
+        """Validate shapes and the gain."""
         frames = np.asarray(self.frames, dtype=int).reshape(-1)
         offsets = np.asarray(self.offsets, dtype=float).reshape(-1, 3)
         if frames.size < 2 or offsets.shape[0] != frames.size:
             raise ValueError(f'cable {self.name!r}: need >= 2 routing points with one offset each')
+        if not (np.isfinite(self.gain) and self.gain > 0.0):
+            raise ValueError(f'cable {self.name!r}: gain must be finite and > 0, got {self.gain}')
         object.__setattr__(self, 'frames', frames)
         object.__setattr__(self, 'offsets', offsets)
 
@@ -54,8 +61,9 @@ class CableGroup:
     All cables of a scene, evaluated together (DESIGN §5).
 
     The force of a cable on a routing point is the sum of the unit vectors toward its neighbouring
-    routing points (the last point pulls toward the previous one); it is mapped rigidly to the
-    wrench of the point's frame. Without friction this is exactly ``-d(length)/dq``.
+    routing points (the last point pulls toward the previous one), times the cable's gain; it is
+    mapped rigidly to the wrench of the point's frame. Without friction this is exactly
+    ``-gain d(length)/dq``.
 
     Parameters
     ----------
@@ -92,6 +100,7 @@ class CableGroup:
         self.point_owner = owner
         self.upper_bounds = np.array([c.max_tension for c in self.cables], dtype=float)
         self.lower_bounds = np.zeros(m)
+        self.gains = np.array([c.gain for c in self.cables], dtype=float)
 
     @property
     def n_actuators(self):
@@ -131,6 +140,7 @@ class CableTerms:
         self.end = np.ascontiguousarray(group.segment_end, dtype=np.int64)
         self.span_owner = np.ascontiguousarray(group.segment_owner, dtype=np.int64)
         self.point_owner = np.ascontiguousarray(group.point_owner, dtype=np.int64)
+        self.gains = np.ascontiguousarray(group.gains, dtype=float)
         pairs = {}
         self.span_pair = np.array([
             pairs.setdefault((int(self.frames[s]), int(self.frames[e])), len(pairs))
@@ -160,7 +170,7 @@ class CableTerms:
             Receives the point moment blocks summed per frame (3 x 3 each).
 
         """
-        cable_pass(positions, rotations, actuation, self.frames, self.offsets, self.start,
-                   self.end, self.span_owner, self.point_owner, self.columns,
+        cable_pass(positions, rotations, actuation, self.gains, self.frames, self.offsets,
+                   self.start, self.end, self.span_owner, self.point_owner, self.columns,
                    self.span_pair, self.point_slot, rhs, pair_values.reshape(-1, 12, 12),
                    moment_values.reshape(-1, 3, 3))
