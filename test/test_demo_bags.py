@@ -3,7 +3,8 @@
 
 A short demo (one small circle, open loop: ~15 s) runs as ``make demo`` runs it; the bag is then
 evaluated by the ``cbha_bag eval`` command with the window the demo stored, and read by the
-independent ``mcap`` + ``mcap-ros2-support`` reader.
+independent ``mcap`` + ``mcap-ros2-support`` reader (every recorded topic, the plant's valve
+pressures among them).
 """
 
 import json
@@ -13,6 +14,7 @@ import sys
 
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
 import pytest
 from ros_helpers import child_env, REPO_ROOT
 
@@ -47,6 +49,11 @@ def test_demo_bag_eval_gives_the_printed_rms(tmp_path):
             for _, channel, _, message in reader.iter_decoded_messages():
                 topics.setdefault(channel.topic, []).append(message)
     assert set(topics) == {'/cbha/target', '/cbha/tip/true', '/cbha/tip/measured',
-                           '/cbha/pressure_command', '/diagnostics'}
+                           '/cbha/pressure_command', '/cbha/pressure_measured', '/diagnostics'}
     assert all(len(message.data) == 6 for message in topics['/cbha/pressure_command'])
+    # the plant's valve pressures (noise-free by default): within the commands' range
+    commanded = np.array([message.data for message in topics['/cbha/pressure_command']])
+    measured = np.array([message.data for message in topics['/cbha/pressure_measured']])
+    assert measured.shape[1] == 6 and len(measured) > 100
+    assert np.all(measured >= 0.0) and np.all(measured <= commanded.max(axis=0) + 1e-6)
     assert topics['/cbha/target'][0].header.frame_id == 'cbha_base'

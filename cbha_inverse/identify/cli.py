@@ -23,7 +23,8 @@ from cbha_inverse.bag.storage import BagError
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.identify.fit import identify
-from cbha_inverse.identify.samples import IdentificationError, quasi_static_samples, read_session
+from cbha_inverse.identify.samples import (IdentificationError, PRESSURE_SOURCES,
+                                           quasi_static_samples, read_session)
 from cbha_inverse.scene import load_scene, resolve_scene_path
 import numpy as np
 import yaml
@@ -53,6 +54,10 @@ def parse_args(argv):
     parser.add_argument('--prior-sigma', type=_prior_sigma, default=0.5,
                         help='prior standard deviation of each log factor around the nominal '
                         'scene (0.5: within a factor 1.65 at one sigma); "none": no prior')
+    parser.add_argument('--pressure-source', choices=PRESSURE_SOURCES, default='auto',
+                        help='acting pressures: measured (pressure_measured), commanded '
+                        '(pressure_command through --latency and the valve lag), auto: '
+                        'measured when recorded')
     return parser.parse_args(argv)
 
 
@@ -105,6 +110,9 @@ def format_report(result, samples, bag, scene_name):
     lines = [f'cbha_identify: {bag}, scene {scene_name}',
              f'samples: {samples.recorded} tip measurements, {samples.quasi_static} quasi-static, '
              f'{len(samples.tips)} fitted; {result.evaluations} forward evaluations',
+             f'pressures: {samples.pressure_source}' + (
+                 f' ({samples.measured_dropped} invalid pressure_measured messages dropped)'
+                 if samples.measured_dropped else ''),
              f'tip RMS before {result.rms_before * 1e3:.3f} mm, after '
              f'{result.rms_after * 1e3:.3f} mm (residual noise {result.noise * 1e3:.3f} mm per '
              'axis)', '', 'fitted values (factors on top of the scene calibration; base '
@@ -180,7 +188,8 @@ def main(argv=None):
                                        valve_time_constant=args.valve_time_constant,
                                        settle_time=args.settle_time,
                                        settle_tolerance=args.settle_tolerance,
-                                       max_samples=args.max_samples)
+                                       max_samples=args.max_samples,
+                                       pressure_source=args.pressure_source)
         print(f'{PROGRAM}: {samples.recorded} tip samples, {samples.quasi_static} quasi-static, '
               f'fitting {len(samples.tips)} through scene {scene.name}', flush=True)
         result = identify(scene_path, samples.pressures[:, order], samples.tips,

@@ -2,20 +2,41 @@
 Aligned quasi-static samples (valve pressures, measured tip) from a recorded session.
 
 The bag holds ``pressure_command`` (std_msgs/Float64MultiArray, gauge Pa in ``valve_names``
-order) and ``tip/measured`` (geometry_msgs/PointStamped), both on the recorder's receive clock.
-The pressure that acts on the arm at a tip sample is the command history delayed by the link
-``latency`` and passed through the valves' first-order lag ``valve_time_constant`` (the
-``cbha_sim`` valve model; exact for piecewise-constant commands). A sample is quasi-static when
-that pressure has changed by at most ``settle_tolerance`` over the preceding ``settle_time``:
-the arm then sits at the equilibrium the forward model predicts.
+order) and ``tip/measured`` (geometry_msgs/PointStamped), both on the recorder's receive clock,
+and, when the valves report them, ``pressure_measured`` (Float64MultiArray, Pa, the same order:
+``robotino_bridge`` from the driver's readings, ``cbha_sim`` from its simulated valves).
+
+The pressure that acts on the arm at a tip sample comes from one of two sources:
+
+- ``measured``: the measured series, linearly interpolated in receive time at the tip's receive
+  time plus ``measured_latency`` (how much later than the tip a measurement of the same instant
+  reaches the recorder; 0 by default). A tip sample is used only if the series covers its whole
+  settle window (below) with measurements at most ``settle_time`` apart (``settle_time`` 0: no
+  gap limit): across a longer gap nothing says the pressure was steady;
+- ``commanded``: the command history delayed by the link ``latency`` and passed through the
+  valves' first-order lag ``valve_time_constant`` (the ``cbha_sim`` valve model,
+  :mod:`cbha_inverse.robot.valves`; exact for piecewise-constant commands).
+
+``auto`` (the default) takes the measured series when the bag has one. A sample is quasi-static
+when the acting pressure (from the same source) has changed by at most ``settle_tolerance`` over
+the preceding ``settle_time``: the arm then sits at the equilibrium the forward model predicts.
+
+Measured messages that cannot be a reading of the valves (another length than the commands, a
+non-finite entry) are dropped and counted (:attr:`Session.measured_dropped`, reported by
+``cbha_identify``): one glitch of a sensor does not void a session, and a series with no valid
+message at all is refused when it is to be used.
 """
 
 from dataclasses import dataclass
 import math
+from typing import NamedTuple
 
 from cbha_inverse.bag.evaluate import command_series, point_series
 from cbha_inverse.bag.storage import open_bag
+from cbha_inverse.robot.valves import first_order_step
 import numpy as np
+
+PRESSURE_SOURCES = ('auto', 'measured', 'commanded')
 
 
 class IdentificationError(ValueError):
@@ -39,6 +60,11 @@ class Samples:
         Tip samples in the bag (before selection).
     quasi_static : int
         Of which quasi-static (before subsampling).
+    pressure_source : str
+        Where ``pressures`` come from: ``'measured'`` (the measured valve pressures) or
+        ``'commanded'`` (delayed commands through the valve lag).
+    measured_dropped : int
+        Measured-pressure messages dropped as invalid (wrong length, non-finite).
 
     """
 
@@ -47,11 +73,48 @@ class Samples:
     tips: np.ndarray
     recorded: int
     quasi_static: int
+    pressure_source: str = 'commanded'
+    measured_dropped: int = 0
+
+
+class Session(NamedTuple):
+    """
+    The time series of one recorded session, on the recorder's receive clock.
+
+    A plain tuple of the first four fields is accepted wherever a session is (no measured
+    pressures).
+
+    Attributes
+    ----------
+    command_times : (K,) ndarray  [s]
+        Receive times of the commands.
+    commands : (K, m) ndarray  [Pa]
+        The commands, in command order.
+    tip_times : (N,) ndarray  [s]
+        Receive times of the measured tips.
+    tips : (N, 3) ndarray  [m]
+        The measured tips.
+    measured_times : (M,) ndarray or None  [s]
+        Receive times of the valid measured pressures, increasing (None: none recorded).
+    measured : (M, m) ndarray or None  [Pa]
+        The valid measured pressures, in command order.
+    measured_dropped : int
+        Measured messages dropped (wrong length or non-finite entries).
+
+    """
+
+    command_times: np.ndarray
+    commands: np.ndarray
+    tip_times: np.ndarray
+    tips: np.ndarray
+    measured_times: np.ndarray = None
+    measured: np.ndarray = None
+    measured_dropped: int = 0
 
 
 def read_session(path, namespace='/cbha'):
     """
-    Read the commands and the measured tips of a bag.
+    Read the commands, the measured tips and, if recorded, the measured pressures of a bag.
 
     Parameters
     ----------
@@ -62,14 +125,10 @@ def read_session(path, namespace='/cbha'):
 
     Returns
     -------
-    command_times : (K,) ndarray  [s]
-        Receive times of the commands.
-    commands : (K, m) ndarray  [Pa]
-        The commands, in command order.
-    tip_times : (N,) ndarray  [s]
-        Receive times of the measured tips (same clock).
-    tips : (N, 3) ndarray  [m]
-        The measured tips.
+    Session
+        ``measured_times`` / ``measured`` are None when the bag has no
+        ``<namespace>/pressure_measured`` messages; messages of another length than the
+        commands or with non-finite entries are dropped and counted.
 
     Raises
     ------
@@ -84,6 +143,7 @@ def read_session(path, namespace='/cbha'):
     with open_bag(path) as bag:
         command_received, commands = command_series(bag, command_topic)
         tip_received, _, tips = point_series(bag, tip_topic)
+        measured_received, measured = command_series(bag, f'{prefix}/pressure_measured')
     if not commands:
         raise IdentificationError(f'{path}: no {command_topic} messages: record the valve '
                                   'commands (cbha_bag record ... pressure_command)')
@@ -92,7 +152,59 @@ def read_session(path, namespace='/cbha'):
                                   '(a tracker or the simulated plant) while recording')
     if len({len(c) for c in commands}) != 1:
         raise IdentificationError(f'{path}: {command_topic} messages of different lengths')
-    return command_received * 1e-9, np.array(commands, dtype=float), tip_received * 1e-9, tips
+    session = Session(command_received * 1e-9, np.array(commands, dtype=float),
+                      tip_received * 1e-9, tips)
+    if not measured:
+        return session
+    size = len(commands[0])
+    valid = np.array([len(p) == size and bool(np.all(np.isfinite(p))) for p in measured])
+    order = np.argsort(measured_received[valid], kind='stable')
+    rows = np.array([p for p, ok in zip(measured, valid) if ok], dtype=float).reshape(-1, size)
+    return session._replace(measured_times=measured_received[valid][order] * 1e-9,
+                            measured=rows[order], measured_dropped=int(np.sum(~valid)))
+
+
+def interpolate_pressures(measured_times, measured, times, max_gap=math.inf):
+    """
+    Interpolate a measured pressure series linearly in time.
+
+    Parameters
+    ----------
+    measured_times : (M,) ndarray  [s]
+        Times of the measurements, increasing (M >= 1).
+    measured : (M, m) ndarray  [Pa]
+        The measured pressures.
+    times : (N,) ndarray  [s]
+        Where to evaluate.
+    max_gap : float  [s]
+        A time between two measurements further apart than this is not covered.
+
+    Returns
+    -------
+    values : (N, m) ndarray  [Pa]
+        The interpolated pressures (the nearest end of the series where not covered).
+    covered : (N,) bool ndarray
+        Whether each time lies within the series (ends included) and either on a measurement
+        or between two measurements at most ``max_gap`` apart.
+
+    """
+    measured_times = np.asarray(measured_times, dtype=float)
+    measured = np.asarray(measured, dtype=float).reshape(len(measured_times), -1)
+    times = np.asarray(times, dtype=float)
+    if len(measured_times) == 1:
+        covered = times == measured_times[0]
+        return np.repeat(measured, len(times), axis=0), covered
+    # interval [t_i, t_i+1] holding each time; its end for the last measurement
+    i = np.clip(np.searchsorted(measured_times, times, side='right') - 1, 0,
+                len(measured_times) - 2)
+    start, gap = measured_times[i], measured_times[i + 1] - measured_times[i]
+    weight = np.clip(np.divide(times - start, gap, out=np.ones_like(times), where=gap > 0.0),
+                     0.0, 1.0)
+    values = measured[i] + weight[:, None] * (measured[i + 1] - measured[i])
+    on_sample = (times == start) | (times == measured_times[i + 1])
+    covered = ((times >= measured_times[0]) & (times <= measured_times[-1])
+               & ((gap <= max_gap) | on_sample))
+    return values, covered
 
 
 def valve_pressures(command_times, commands, times, latency, valve_time_constant):
@@ -123,40 +235,34 @@ def valve_pressures(command_times, commands, times, latency, valve_time_constant
     previous = np.zeros(commands.shape[1])
     for k in range(len(arrive)):
         if k:
-            previous = _relax(previous, commands[k - 1], arrive[k] - arrive[k - 1],
-                              valve_time_constant)
+            previous = first_order_step(previous, commands[k - 1], arrive[k] - arrive[k - 1],
+                                        valve_time_constant)
         state[k] = previous
     times = np.asarray(times, dtype=float)
     index = np.searchsorted(arrive, times, side='right') - 1
     out = np.zeros((len(times), commands.shape[1]))
     after = index >= 0
     k = index[after]
-    out[after] = _relax(state[k], commands[k], (times[after] - arrive[k])[:, None],
-                        valve_time_constant)
+    out[after] = first_order_step(state[k], commands[k], (times[after] - arrive[k])[:, None],
+                                  valve_time_constant)
     return out
 
 
-def _relax(pressure, setpoint, elapsed, time_constant):
-    """First-order step: the pressure after ``elapsed`` seconds toward ``setpoint``."""
-    if time_constant == 0.0:
-        return np.broadcast_to(setpoint, np.broadcast(pressure, setpoint).shape).copy()
-    return setpoint + (pressure - setpoint) * np.exp(-np.asarray(elapsed) / time_constant)
-
-
 def quasi_static_samples(session, *, latency=0.003, valve_time_constant=0.01, settle_time=0.05,
-                         settle_tolerance=2000.0, max_samples=60):
+                         settle_tolerance=2000.0, max_samples=60, pressure_source='auto',
+                         measured_latency=0.0):
     """
     Align a session in time and keep evenly spread quasi-static samples.
 
     Parameters
     ----------
-    session : tuple
-        What :func:`read_session` returns.
+    session : Session or tuple
+        What :func:`read_session` returns (or its first four fields).
     latency : float  [s]
         Command -> valve delay (link latency; the recorder sees commands and tips with similar
-        delivery delays).
+        delivery delays). Commanded source only.
     valve_time_constant : float  [s]
-        First-order valve response.
+        First-order valve response. Commanded source only.
     settle_time : float  [s]
         A sample is quasi-static if its pressures moved at most ``settle_tolerance`` in this
         time before it.
@@ -164,6 +270,12 @@ def quasi_static_samples(session, *, latency=0.003, valve_time_constant=0.01, se
         See ``settle_time``.
     max_samples : int
         At most this many samples, evenly spread in time (they bound the fit's run time).
+    pressure_source : {'auto', 'measured', 'commanded'}
+        Where the acting pressures come from (module docstring); ``auto``: the measured series
+        when the session has one.
+    measured_latency : float  [s]
+        How much later than a tip sample the measurement of the valve pressures at the same
+        instant is received (sensor path); measured source only.
 
     Returns
     -------
@@ -172,26 +284,57 @@ def quasi_static_samples(session, *, latency=0.003, valve_time_constant=0.01, se
     Raises
     ------
     IdentificationError
-        If no tip sample is quasi-static.
+        If no tip sample is quasi-static, or the measured source is asked for (or, with
+        ``auto``, recorded) but no valid measured pressure is available.
+    ValueError
+        On a negative or non-finite time or tolerance, or an unknown ``pressure_source``.
 
     """
-    command_times, commands, tip_times, tips = session
+    session = Session(*session)
+    command_times, commands, tip_times, tips = session[:4]
     if not all(math.isfinite(v) and v >= 0.0 for v in (latency, valve_time_constant,
-                                                       settle_time, settle_tolerance)):
-        raise ValueError('latency, valve_time_constant, settle_time and settle_tolerance must '
-                         'be finite and >= 0')
-    keep = np.all(np.isfinite(tips), axis=1) & (tip_times > command_times[0] + latency)
-    now = valve_pressures(command_times, commands, tip_times, latency, valve_time_constant)
-    checks = [valve_pressures(command_times, commands, tip_times - settle_time * f, latency,
-                              valve_time_constant) for f in (0.25, 0.5, 0.75, 1.0)]
-    moved = np.max([np.abs(now - c).max(axis=1) for c in checks], axis=0)
+                                                       settle_time, settle_tolerance,
+                                                       measured_latency)):
+        raise ValueError('latency, valve_time_constant, settle_time, settle_tolerance and '
+                         'measured_latency must be finite and >= 0')
+    if pressure_source not in PRESSURE_SOURCES:
+        raise ValueError(f'pressure_source must be one of {PRESSURE_SOURCES}, got '
+                         f'{pressure_source!r}')
+    recorded = session.measured_times is not None
+    source = ('measured' if pressure_source == 'measured' or (pressure_source == 'auto'
+                                                              and recorded) else 'commanded')
+    lookback = [settle_time * f for f in (0.0, 0.25, 0.5, 0.75, 1.0)]
+    keep = np.all(np.isfinite(tips), axis=1)
+    if source == 'measured':
+        if not recorded or len(session.measured_times) == 0:
+            why = ('not recorded' if not recorded else f'all {session.measured_dropped} messages '
+                   f'dropped: not {commands.shape[1]} finite values')
+            raise IdentificationError(f'no valid measured valve pressures (pressure_measured '
+                                      f'{why}): record them, or use the commanded pressures '
+                                      '(--pressure-source commanded)')
+        at = tip_times + measured_latency
+        max_gap = settle_time if settle_time > 0.0 else math.inf
+        series = [interpolate_pressures(session.measured_times, session.measured, at - back,
+                                        max_gap) for back in lookback]
+        for _, covered in series:
+            keep &= covered
+        pressures = [values for values, _ in series]
+    else:
+        keep &= tip_times > command_times[0] + latency
+        pressures = [valve_pressures(command_times, commands, tip_times - back, latency,
+                                     valve_time_constant) for back in lookback]
+    now = pressures[0]
+    moved = np.max([np.abs(now - c).max(axis=1) for c in pressures[1:]], axis=0)
     keep &= moved <= settle_tolerance
     chosen = np.flatnonzero(keep)
     if chosen.size == 0:
-        raise IdentificationError('no quasi-static tip sample (the pressures never settle '
-                                  f'within {settle_tolerance:g} Pa over {settle_time:g} s): '
-                                  'move slower or hold poses while recording')
+        gaps = (f', or the measured pressures leave gaps over {settle_time:g} s around the tip '
+                'samples' if source == 'measured' else '')
+        raise IdentificationError(f'no quasi-static tip sample ({source} pressures): the '
+                                  f'pressures never settle within {settle_tolerance:g} Pa over '
+                                  f'{settle_time:g} s{gaps}: move slower or hold poses while '
+                                  'recording')
     if chosen.size > max_samples:
         chosen = chosen[np.round(np.linspace(0, chosen.size - 1, max_samples)).astype(int)]
     return Samples(tip_times[chosen] - command_times[0], now[chosen], tips[chosen],
-                   len(tip_times), int(keep.sum()))
+                   len(tip_times), int(keep.sum()), source, session.measured_dropped)

@@ -5,13 +5,20 @@ Subscribes ``pressure_command`` (Float64MultiArray, gauge Pa in ``valve_names`` 
 and rejects malformed commands like a valve driver (wrong length, non-finite, outside
 ``[0, max_pressure]``: logged with throttling, counted, the last valid set-point stays). A valid
 command takes effect after the transport ``latency``; the valve pressures follow it with a
-first-order lag ``valve_time_constant`` (exact exponential step). Every tick at ``rate_hz`` the
-plant (:class:`cbha_inverse.robot.plant.StaticPlant`: the scene loaded with a deliberate
-``stiffness_scale`` error, per-section ``section_stiffness_scale`` and per-valve
-``cavity_gain_scale`` errors applied as a scene calibration, and its own ``gravity``) is moved
-to the equilibrium of the current valve pressures by warm-started Newton steps, and the tip is
-published on ``tip/measured``
-(PointStamped, sensor data QoS) with Gaussian noise (seeded) and, noise-free, on ``tip/true``.
+first-order lag ``valve_time_constant`` (:class:`cbha_inverse.robot.valves.ValveLine`: exact for
+piecewise-constant commands, whatever the tick times). Every tick at ``rate_hz``:
+
+- the valve pressures are published on ``pressure_measured`` (Float64MultiArray, Pa in
+  ``valve_names`` order, sensor data QoS: what ``robotino_bridge`` publishes from the real
+  driver's readings), with Gaussian noise ``pressure_noise_std`` per valve (default 0; seeded
+  from ``seed`` as a stream of its own, so the tip noise of a seed does not change with it);
+- the plant (:class:`cbha_inverse.robot.plant.StaticPlant`: the scene loaded with a deliberate
+  ``stiffness_scale`` error, per-section ``section_stiffness_scale`` and per-valve
+  ``cavity_gain_scale`` errors applied as a scene calibration, and its own ``gravity``) is moved
+  to the equilibrium of those valve pressures (noise-free) by warm-started Newton steps;
+- the tip is published on ``tip/measured`` (PointStamped, sensor data QoS) with Gaussian noise
+  ``noise_std`` (seeded) and, noise-free, on ``tip/true``.
+
 Time (ticks, latency, valve lag, stamps) is the node clock: with ``use_sim_time`` the plant runs
 on ``/clock``.
 
@@ -23,7 +30,6 @@ publishes both. OpenCV is imported only then.
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 """
 
-import collections
 from dataclasses import dataclass
 import math
 import sys
@@ -32,7 +38,8 @@ import time
 from cbha_inverse.robot.plant import StaticPlant
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import check_command
-from cbha_inverse.ros.conversions import command_array, point_stamped
+from cbha_inverse.robot.valves import ValveLine
+from cbha_inverse.ros.conversions import command_array, command_message, point_stamped
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK, TimingStats, WARN
 from cbha_inverse.ros.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.qos import COMMAND_QOS, MEASURED_QOS
@@ -76,7 +83,10 @@ class CbhaSimParams:
                            low=1.0, high=2000.0)
     noise_std: float = param(0.0002, 'standard deviation of the tip measurement noise per axis '
                              '[m]', low=0.0, high=0.1)
-    seed: int = param(0, 'seed of the measurement noise', low=0, high=2 ** 31 - 1)
+    pressure_noise_std: float = param(0.0, 'standard deviation of the noise on '
+                                      'pressure_measured per valve [Pa]', low=0.0, high=1.0e6)
+    seed: int = param(0, 'seed of the measurement noise (tip and pressures: separate streams)',
+                      low=0, high=2 ** 31 - 1)
     tolerance: float = param(1e-6, 'static equilibrium residual tolerance [N, N*m]',
                              low=1e-14, high=1.0)
     max_iterations: int = param(20, 'Newton iterations per plant update at most', low=1,
@@ -175,9 +185,9 @@ class CbhaSimNode(Node):
         self.plant = StaticPlant(self.scene, tolerance=p.tolerance,
                                  max_iterations=p.max_iterations)
         self.rng = np.random.default_rng(p.seed)
-        self.setpoint = np.zeros(len(names))
-        self.pressures = np.zeros(len(names))
-        self.pending = collections.deque()
+        # an independent child stream: the tip noise sequence of a seed stays what it was
+        self.pressure_rng = np.random.default_rng(np.random.SeedSequence(p.seed, spawn_key=(1,)))
+        self.valves = ValveLine(len(names), p.latency, p.valve_time_constant)
         self.rejected = {}
         self.accepted = 0
         self.last_result = None
@@ -186,10 +196,11 @@ class CbhaSimNode(Node):
         self.failures = 0
         self.resets = 0
         self.tick_times = TimingStats()
-        self._last_tick = None
         self.measured_publisher = self.create_publisher(PointStamped, 'tip/measured',
                                                         MEASURED_QOS)
         self.truth_publisher = self.create_publisher(PointStamped, 'tip/true', MEASURED_QOS)
+        self.pressure_publisher = self.create_publisher(Float64MultiArray, 'pressure_measured',
+                                                        MEASURED_QOS)
         self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
                                  COMMAND_QOS)
         self.create_service(Trigger, '~/reset', self._on_reset)
@@ -203,7 +214,8 @@ class CbhaSimNode(Node):
             f'{list(p.section_stiffness_scale)}, cavity gains {list(p.cavity_gain_scale)}), '
             f'gravity '
             f'{list(p.gravity)}, valves {p.valve_time_constant * 1e3:g} ms, latency '
-            f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm, {p.rate_hz:g} Hz')
+            f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm and '
+            f'{p.pressure_noise_std:g} Pa, {p.rate_hz:g} Hz')
 
     def _start_cameras(self):
         from cbha_inverse.paths import config_path
@@ -235,8 +247,13 @@ class CbhaSimNode(Node):
             return
         in_scene_order = np.empty(len(self.order))
         in_scene_order[self.order] = values
-        self.pending.append((self._node_seconds() + self.params.latency, in_scene_order))
+        self.valves.send(self._node_seconds(), in_scene_order)
         self.accepted += 1
+
+    @property
+    def pressures(self):
+        """(m,) ndarray [Pa]: the valve pressures of the last tick, scene actuator order."""
+        return self.valves.pressures
 
     def _node_seconds(self):
         return self.get_clock().now().nanoseconds * 1e-9
@@ -244,9 +261,7 @@ class CbhaSimNode(Node):
     def _on_reset(self, request, response):
         """``~/reset``: plant at rest, valves vented, pending commands dropped."""
         self.plant.reset()
-        self.setpoint = np.zeros_like(self.setpoint)
-        self.pressures = np.zeros_like(self.pressures)
-        self.pending.clear()
+        self.valves.reset()
         self.last_result = None
         self.resets += 1
         response.success = True
@@ -256,17 +271,13 @@ class CbhaSimNode(Node):
 
     def _tick(self):
         start = time.perf_counter()
-        now = self._node_seconds()
-        while self.pending and self.pending[0][0] <= now:
-            self.setpoint = self.pending.popleft()[1]
         # node clock (use_sim_time: /clock); a clock that jumps back (a looped bag) is a pause
-        dt = 0.0 if self._last_tick is None else max(now - self._last_tick, 0.0)
-        self._last_tick = now
-        tau = self.params.valve_time_constant
-        blend = 1.0 if tau == 0.0 else -math.expm1(-dt / tau)
-        self.pressures = self.pressures + blend * (self.setpoint - self.pressures)
+        pressures = self.valves.advance(self._node_seconds())
+        measured = pressures[self.order] + self.pressure_rng.normal(
+            0.0, self.params.pressure_noise_std, len(self.order))
+        self.pressure_publisher.publish(command_message(measured, self.valve_names))
         try:
-            result = self.plant.update(self.pressures)
+            result = self.plant.update(pressures)
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.failures += 1
             self.get_logger().error(f'plant update failed, state kept: {exc!r}',

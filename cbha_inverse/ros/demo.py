@@ -2,11 +2,11 @@
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
 For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
-tip/true, tip/measured, pressure_command, /diagnostics), then ``cbha_sim``, ``inverse_solver`` and
-``trajectory`` as separate processes (as ``ros2 run`` would, with the installed params files plus
-a per-run override file written into the output folder), runs one lap, stops the nodes and the
-recorder with SIGINT and prints one summary line: tracking RMS and max error (tip of the plant vs
-target, moving part of the lap), computed from the run's bag by
+tip/true, tip/measured, pressure_command, pressure_measured, /diagnostics), then ``cbha_sim``,
+``inverse_solver`` and ``trajectory`` as separate processes (as ``ros2 run`` would, with the
+installed params files plus a per-run override file written into the output folder), runs one
+lap, stops the nodes and the recorder with SIGINT and prints one summary line: tracking RMS and
+max error (tip of the plant vs target, moving part of the lap), computed from the run's bag by
 :func:`cbha_inverse.bag.evaluate.evaluate_bag` (what ``cbha_bag eval <bag> --start S --end E``
 prints, with the window stored in ``summary.json``), and the solver's tick time median / p99 and
 its target-to-command latency p99 (target callback entry to command published, measured in the
@@ -52,7 +52,8 @@ MODULES = {'cbha_sim': 'cbha_inverse.ros.cbha_sim_node',
            'trajectory': 'cbha_inverse.ros.trajectory_node',
            'stereo_tracker': 'cbha_inverse.ros.stereo_tracker_node'}
 NAMESPACE = '/cbha'
-RECORDED = ('target', 'tip/true', 'tip/measured', 'pressure_command', '/diagnostics')
+RECORDED = ('target', 'tip/true', 'tip/measured', 'pressure_command', 'pressure_measured',
+            '/diagnostics')
 
 
 def parse_args(argv):
