@@ -57,6 +57,29 @@ def test_transformed_chain_premultiplies_the_base_pose():
         model.transformed([0.0, np.nan, 0.0], rot)
 
 
+def test_warm_start_from_another_base_is_moved_onto_the_model_base():
+    """A solution on one base warm-starts the same chain on a moved base: same as cold."""
+    lengths = np.full(6, 0.05)
+    model = _beam_chain(lengths)
+    gravity = [0.0, 0.0, -9.81]
+    wrench = np.array([0.0, 0.3, -0.2, 0.0, 0.01, 0.0])
+    old = statics.solve_static(model, tip_wrench=wrench, gravity=gravity)
+    moved = model.transformed([1e-6, -2e-3, 0.5], se3.so3_exp([0.0, 0.0, 0.3]))
+    cold = statics.solve_static(moved, tip_wrench=wrench, gravity=gravity)
+    warm = statics.solve_static(moved, tip_wrench=wrench, gravity=gravity,
+                                initial_state=old.state)
+    assert cold.converged and warm.converged
+    np.testing.assert_array_equal(warm.positions[0], moved.base_position)
+    np.testing.assert_allclose(warm.positions, cold.positions, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(warm.rotations, cold.rotations, rtol=0, atol=1e-9)
+    # a one-micrometre shift is seen too (not lost in the tolerance of a converged warm start)
+    nudged = model.transformed([1e-6, 0.0, 0.0], np.eye(3))
+    again = statics.solve_static(nudged, tip_wrench=wrench, gravity=gravity,
+                                 initial_state=old.state)
+    np.testing.assert_allclose(again.positions - old.positions, [[1e-6, 0.0, 0.0]] * 7,
+                               rtol=0, atol=1e-12)
+
+
 def test_small_tip_load_is_linear_and_at_rest_nothing_moves():
     """Zero load: rest shape in 0 iterations; tiny tip wrench: displacement = C w (1e-6)."""
     lengths = np.full(8, 0.05)

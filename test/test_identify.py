@@ -191,3 +191,70 @@ def test_cross_track_error_is_the_distance_to_the_path_not_to_the_timed_target()
     tips = np.array([[0.0, 0.5, -0.1], [0.3, 1.0, 0.5], [0.0, 1.2, 1.1], [0.0, 0.5, 0.5]])
     np.testing.assert_allclose(cross_track_errors(square, tips),
                                [0.1, 0.3, np.hypot(0.2, 0.1), 0.5])
+
+
+def test_base_position_offset_is_fitted_with_the_factors(synthetic):
+    pressures, tips = synthetic
+    offset = np.array([2e-3, -3e-3, 1e-3])
+    fit = identify('cbha', pressures, tips + offset, base_position=True)
+    assert fit.names[-3:] == ('base_position.x', 'base_position.y', 'base_position.z')
+    assert np.all(np.abs(fit.values[-3:] - offset) <= 3.0 * fit.standard_errors[-3:])
+    assert np.all(fit.standard_errors[-3:] < 0.5e-3)
+    assert np.all(np.abs(fit.values[:8] - TRUTH) <= 3.0 * fit.standard_errors[:8])
+    assert fit.calibration.base_position == pytest.approx(tuple(fit.values[-3:]))
+    assert fit.rms_after < 1.5 * np.sqrt(3.0) * NOISE
+
+
+def _write_swept_bag(path, latency, noise):
+    """Write slow sinusoidal commands (100 Hz, 12 s) and the tips (50 Hz) of the TRUTH plant."""
+    # the plant sees the commands behind a link of `latency` and the 10 ms valves
+    store = get_typestore(Stores.ROS2_JAZZY)
+    array, point = (store.types['std_msgs/msg/Float64MultiArray'],
+                    store.types['geometry_msgs/msg/PointStamped'])
+    header, stamp = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
+    layout = store.types['std_msgs/msg/MultiArrayLayout']
+    vector = store.types['geometry_msgs/msg/Point']
+    command_times = 1.0 + np.arange(1200) * 0.01
+    frequency = np.array([0.05, 0.07, 0.09, 0.06, 0.08, 0.1])
+    phase = np.arange(6) * 1.1
+    commands = 75e3 + 50e3 * np.sin(2 * np.pi * frequency * (command_times[:, None] - 1.0)
+                                    + phase)
+    tip_times = 1.5 + np.arange(500) * 0.02
+    acting = valve_pressures(command_times, commands, tip_times, latency, 0.01)
+    names = parameter_names(load_scene('cbha'))
+    tips = TipPredictor('cbha', names, acting)(TRUTH)
+    measured = tips + np.random.default_rng(4).normal(0.0, noise, tips.shape)
+    writer = BagWriter(path)
+    writer.add_topic('/cbha/pressure_command', 'std_msgs/msg/Float64MultiArray')
+    writer.add_topic('/cbha/tip/measured', 'geometry_msgs/msg/PointStamped')
+    events = [(t, 0, c) for t, c in zip(command_times, commands)]
+    events += [(t, 1, p) for t, p in zip(tip_times, measured)]
+    for t, kind, value in sorted(events, key=lambda e: (e[0], e[1])):
+        t_ns = int(round(t * 1e9))
+        if kind == 0:
+            writer.write('/cbha/pressure_command', t_ns, store.serialize_cdr(
+                array(layout=layout(dim=[], data_offset=0), data=value), array.__msgtype__))
+        else:
+            message = point(header=header(stamp=stamp(sec=t_ns // 10 ** 9,
+                                                      nanosec=t_ns % 10 ** 9),
+                                          frame_id='cbha_base'),
+                            point=vector(x=value[0], y=value[1], z=value[2]))
+            writer.write('/cbha/tip/measured', t_ns,
+                         store.serialize_cdr(message, point.__msgtype__))
+    writer.close()
+
+
+def test_cbha_identify_estimates_the_link_latency_it_was_not_given(tmp_path, capsys):
+    _write_swept_bag(tmp_path / 'bag', latency=0.030, noise=5e-5)
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'out'), '--latency',
+                 '0.003', '--fit-latency', '--pressure-source', 'commanded']) == 0
+    report = (tmp_path / 'out' / 'cbha_identified_report.txt').read_text()
+    row = next(line.split() for line in report.splitlines()
+               if line.strip().startswith('latency '))
+    latency, error = float(row[1]), float(row[3])
+    assert abs(latency - 0.030) <= 3.0 * error
+    assert error < 2e-3
+    identified = load_scene(tmp_path / 'out' / 'cbha_identified.yaml')
+    probe = np.array([120e3, 10e3, 60e3, 30e3, 140e3, 0.0])
+    plant = TipPredictor('cbha', parameter_names(identified), probe[None])(TRUTH)[0]
+    assert np.linalg.norm(identified.forward(probe).effector_positions[-1] - plant) < 0.5e-3

@@ -499,7 +499,9 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         slowly and stalls under large follower loads.
     initial_state : ChainState, optional
         Warm start (e.g. the previous solution): Newton on the full load from it; if that
-        fails, load stepping from the rest shape (the default start).
+        fails, load stepping from the rest shape (the default start). A state whose frame 0 is
+        not at the model's base (a solution of the same chain on another base, e.g. another
+        calibrated base offset) is first moved rigidly onto it: frame 0 is never solved for.
     tolerance : float
         Relative residual tolerance (module docstring).
     absolute_tolerance : float, optional  [N, N*m]
@@ -541,6 +543,7 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
     if initial_state is not None:
         checked_array(initial_state.positions, (model.n_frames, 3), 'initial_state.positions')
         checked_array(initial_state.rotations, (model.n_frames, 3, 3), 'initial_state.rotations')
+        initial_state = _on_base(initial_state, model)
         steps = 1
         ok, point, total, why = _newton(problem, initial_state, 1.0, max_iterations)
         if ok:
@@ -586,6 +589,21 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
     if strict and not result.converged:
         raise StaticConvergenceError(result)
     return result
+
+
+def _on_base(state, model):
+    """
+    Return ``state`` moved rigidly so that its frame 0 is the model's base pose.
+
+    With ``D = T_base T_0⁻¹`` (``T_0``: the state's frame 0), every frame becomes ``D T_i``: the
+    shape is kept, the base matches. A state already on the base is returned as is.
+    """
+    if (np.array_equal(state.positions[0], model.base_position)
+            and np.array_equal(state.rotations[0], model.base_rotation)):
+        return state
+    turn = model.base_rotation @ state.rotations[0].T
+    positions = (state.positions - state.positions[0]) @ turn.T + model.base_position
+    return ChainState(positions, turn @ state.rotations)
 
 
 def _result_warnings(problem, point):

@@ -1,20 +1,26 @@
 """
 ``cbha_identify BAG [--scene SCENE] [--output DIR]``: a calibrated scene from one recorded session.
 
-Reads ``pressure_command`` and ``tip/measured`` from the bag, aligns them (link ``--latency``
-and valve ``--valve-time-constant``, by default the paper's 3 ms and 10 ms), keeps at most
-``--max-samples`` quasi-static samples and fits the scene's per-section stiffness and per-cavity
-gain factors (:func:`cbha_inverse.identify.fit.identify`; a Gaussian prior around the nominal
-scene, ``--prior-sigma``, keeps what the data cannot see at the nominal value). Writes
+Reads ``tip/measured`` and the acting valve pressures from the bag: ``pressure_measured`` when
+recorded (``--pressure-source``), else ``pressure_command`` aligned through the link
+``--latency`` and the valves' ``--valve-time-constant`` (by default the paper's 3 ms and
+10 ms; ``--fit-latency`` estimates the delay instead of taking it as given). Keeps at most
+``--max-samples`` quasi-static samples and fits the scene's per-section stiffness and
+per-cavity gain factors, optionally the base position (``--fit-base-position``)
+(:func:`cbha_inverse.identify.fit.identify`; a Gaussian prior around the nominal scene,
+``--prior-sigma``, keeps what the data cannot see at the nominal value). Writes
 ``DIR/<scene>_identified.yaml`` (a complete scene file with the fitted ``calibration`` block:
-``-p scene:=...``), ``DIR/<scene>_identified_report.txt`` (factors with standard errors, the
+``-p scene:=...``), ``DIR/<scene>_identified_report.txt`` (values with standard errors, the
 least determined combinations, correlation matrix, tip RMS before/after, identifiability
 warnings) and ``DIR/<scene>_identified.png`` (measured vs predicted tip, y-z plane, before and
-after). Exit status 0 on a valid fit, 1 when the data cannot give
-one (no tip measurements, too little excitation: nothing is written), 2 on a bad file.
+after), and the same numbers as ``DIR/<scene>_identified.json``. Exit status 0 on a valid fit,
+1 when the data cannot give one (no tip measurements, too little excitation: nothing is
+written), 2 on a bad file.
 """
 
 import argparse
+import functools
+import json
 from pathlib import Path
 import sys
 import time
@@ -23,8 +29,9 @@ from cbha_inverse.bag.storage import BagError
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.identify.fit import identify
-from cbha_inverse.identify.samples import (IdentificationError, PRESSURE_SOURCES,
-                                           quasi_static_samples, read_session)
+from cbha_inverse.identify.samples import (acting_pressures, IdentificationError,
+                                           PRESSURE_SOURCES, quasi_static_samples,
+                                           read_session)
 from cbha_inverse.scene import load_scene, resolve_scene_path
 import numpy as np
 import yaml
@@ -58,6 +65,19 @@ def parse_args(argv):
                         help='acting pressures: measured (pressure_measured), commanded '
                         '(pressure_command through --latency and the valve lag), auto: '
                         'measured when recorded')
+    parser.add_argument('--measured-latency', type=float, default=0.0,
+                        help='measured source: how much later than a tip a measurement of the '
+                        'same instant is received [s]')
+    parser.add_argument('--fit-latency', action='store_true',
+                        help='also estimate the delay of the pressure source (--latency, or '
+                        '--measured-latency), starting at the given value')
+    parser.add_argument('--latency-sigma', type=_prior_sigma, default=0.01,
+                        help='prior standard deviation of the fitted delay [s] ("none")')
+    parser.add_argument('--fit-base-position', action='store_true',
+                        help="also fit the chain base's position in base_frame (a tracker "
+                        'registration error)')
+    parser.add_argument('--base-position-sigma', type=_prior_sigma, default=0.01,
+                        help='prior standard deviation of each base coordinate [m] ("none")')
     return parser.parse_args(argv)
 
 
@@ -136,6 +156,31 @@ def format_report(result, samples, bag, scene_name):
     return '\n'.join(lines) + '\n'
 
 
+def _delayed_pressures(session, samples, order, valve_time_constant, delay):
+    """Return the samples' acting pressures (scene order) for another delay of their source."""
+    return acting_pressures(session, samples.receive_times, samples.pressure_source, delay,
+                            valve_time_constant)[0][:, order]
+
+
+def result_data(result, samples):
+    """Return the identification as plain data (the ``DIR/<scene>_identified.json`` file)."""
+    return {
+        'parameters': {n: {'value': float(v), 'standard_error': float(se),
+                           'prior_sigma': float(p) if np.isfinite(p) else None}
+                       for n, v, se, p in zip(result.names, result.values,
+                                              result.standard_errors, result.prior_sigmas)},
+        'correlation': np.round(result.correlation, 6).tolist(),
+        'directions': np.round(result.directions, 6).tolist(),
+        'data_share': np.round(result.data_share, 6).tolist(),
+        'direction_errors': np.round(result.direction_errors, 8).tolist(),
+        'tip_rms_before_m': result.rms_before, 'tip_rms_after_m': result.rms_after,
+        'noise_m': result.noise, 'warnings': list(result.warnings),
+        'evaluations': result.evaluations,
+        'samples': {'recorded': samples.recorded, 'quasi_static': samples.quasi_static,
+                    'fitted': len(samples.tips), 'pressure_source': samples.pressure_source,
+                    'measured_dropped': samples.measured_dropped}}
+
+
 def plot_fit(path, tips, before, after, title):
     """Write the PNG: measured vs predicted tips in the y-z plane, nominal and identified."""
     import matplotlib
@@ -189,11 +234,19 @@ def main(argv=None):
                                        settle_time=args.settle_time,
                                        settle_tolerance=args.settle_tolerance,
                                        max_samples=args.max_samples,
-                                       pressure_source=args.pressure_source)
+                                       pressure_source=args.pressure_source,
+                                       measured_latency=args.measured_latency)
         print(f'{PROGRAM}: {samples.recorded} tip samples, {samples.quasi_static} quasi-static, '
               f'fitting {len(samples.tips)} through scene {scene.name}', flush=True)
-        result = identify(scene_path, samples.pressures[:, order], samples.tips,
-                          prior_sigma=args.prior_sigma,
+        pressures = samples.pressures[:, order]
+        if args.fit_latency:
+            pressures = functools.partial(_delayed_pressures, session, samples, order,
+                                          args.valve_time_constant)
+        result = identify(scene_path, pressures, samples.tips, prior_sigma=args.prior_sigma,
+                          base_position=args.fit_base_position,
+                          base_position_sigma=args.base_position_sigma,
+                          latency=samples.delay if args.fit_latency else None,
+                          latency_sigma=args.latency_sigma,
                           progress=lambda line: print(line, flush=True))
     except (ConfigError, FileNotFoundError, BagError) as exc:
         return report_config_error(PROGRAM, exc)
@@ -210,6 +263,7 @@ def main(argv=None):
         identified_scene_data(scene_path, result.calibration), sort_keys=False))
     report = format_report(result, samples, args.bag, scene.name)
     (output / f'{stem}_report.txt').write_text(report)
+    (output / f'{stem}.json').write_text(json.dumps(result_data(result, samples), indent=1))
     plot_fit(output / f'{stem}.png', samples.tips, result.predicted_before,
              result.predicted_after, f'{PROGRAM}: {Path(args.bag).name}')
     print(report, end='')

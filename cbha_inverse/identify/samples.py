@@ -65,6 +65,11 @@ class Samples:
         ``'commanded'`` (delayed commands through the valve lag).
     measured_dropped : int
         Measured-pressure messages dropped as invalid (wrong length, non-finite).
+    receive_times : (N,) ndarray  [s]
+        Receive time of each tip sample on the recorder's clock (for
+        :func:`acting_pressures` at another delay).
+    delay : float  [s]
+        The delay the pressures were aligned with (``latency`` or ``measured_latency``).
 
     """
 
@@ -75,6 +80,8 @@ class Samples:
     quasi_static: int
     pressure_source: str = 'commanded'
     measured_dropped: int = 0
+    receive_times: np.ndarray = None
+    delay: float = 0.0
 
 
 class Session(NamedTuple):
@@ -248,6 +255,43 @@ def valve_pressures(command_times, commands, times, latency, valve_time_constant
     return out
 
 
+def acting_pressures(session, times, source, delay, valve_time_constant=0.01,
+                     max_gap=math.inf):
+    """
+    Return the valve pressures acting on the arm at given (tip receive) times.
+
+    Parameters
+    ----------
+    session : Session
+        What :func:`read_session` returns.
+    times : (N,) ndarray  [s]
+        Receive times (the recorder's clock).
+    source : {'measured', 'commanded'}
+        ``measured``: the measured series interpolated at ``times + delay``; ``commanded``: the
+        commands delayed by ``delay`` through the first-order valves.
+    delay : float  [s]
+        ``measured_latency`` or the command ``latency`` (module docstring); any sign (a fit
+        may try either).
+    valve_time_constant : float  [s]
+        First-order valve response (commanded source).
+    max_gap : float  [s]
+        Measured source: a time between two measurements further apart is not covered.
+
+    Returns
+    -------
+    pressures : (N, m) ndarray  [Pa]
+    covered : (N,) bool ndarray
+        Whether the source defines each pressure (always true for the commands).
+
+    """
+    times = np.asarray(times, dtype=float)
+    if source == 'measured':
+        return interpolate_pressures(session.measured_times, session.measured, times + delay,
+                                     max_gap)
+    return (valve_pressures(session.command_times, session.commands, times, delay,
+                            valve_time_constant), np.ones(len(times), dtype=bool))
+
+
 def quasi_static_samples(session, *, latency=0.003, valve_time_constant=0.01, settle_time=0.05,
                          settle_tolerance=2000.0, max_samples=60, pressure_source='auto',
                          measured_latency=0.0):
@@ -312,17 +356,16 @@ def quasi_static_samples(session, *, latency=0.003, valve_time_constant=0.01, se
             raise IdentificationError(f'no valid measured valve pressures (pressure_measured '
                                       f'{why}): record them, or use the commanded pressures '
                                       '(--pressure-source commanded)')
-        at = tip_times + measured_latency
-        max_gap = settle_time if settle_time > 0.0 else math.inf
-        series = [interpolate_pressures(session.measured_times, session.measured, at - back,
-                                        max_gap) for back in lookback]
-        for _, covered in series:
-            keep &= covered
-        pressures = [values for values, _ in series]
+        delay = measured_latency
     else:
         keep &= tip_times > command_times[0] + latency
-        pressures = [valve_pressures(command_times, commands, tip_times - back, latency,
-                                     valve_time_constant) for back in lookback]
+        delay = latency
+    max_gap = settle_time if settle_time > 0.0 else math.inf
+    series = [acting_pressures(session, tip_times - back, source, delay, valve_time_constant,
+                               max_gap) for back in lookback]
+    for _, covered in series:
+        keep &= covered
+    pressures = [values for values, _ in series]
     now = pressures[0]
     moved = np.max([np.abs(now - c).max(axis=1) for c in pressures[1:]], axis=0)
     keep &= moved <= settle_tolerance
@@ -337,4 +380,5 @@ def quasi_static_samples(session, *, latency=0.003, valve_time_constant=0.01, se
     if chosen.size > max_samples:
         chosen = chosen[np.round(np.linspace(0, chosen.size - 1, max_samples)).astype(int)]
     return Samples(tip_times[chosen] - command_times[0], now[chosen], tips[chosen],
-                   len(tip_times), int(keep.sum()), source, session.measured_dropped)
+                   len(tip_times), int(keep.sum()), source, session.measured_dropped,
+                   tip_times[chosen], delay)

@@ -77,6 +77,8 @@ def parse_args(argv):
     parser.add_argument('--plant-gain-scale', default='1.0',
                         help='comma-separated plant effective-area error per valve (cbha_sim '
                         'cavity_gain_scale)')
+    parser.add_argument('--plant-seed', type=int, default=0,
+                        help='seed of the plant measurement noise (cbha_sim seed)')
     parser.add_argument('--model-scene', default=None,
                         help="inverse_solver's scene (default --scene), e.g. a cbha_identify "
                         'result')
@@ -250,7 +252,8 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
         **common, 'stiffness_scale': args.stiffness_scale,
         'section_stiffness_scale': _floats(args.plant_section_scale),
-        'cavity_gain_scale': _floats(args.plant_gain_scale), **sim_extra}, env)}
+        'cavity_gain_scale': _floats(args.plant_gain_scale), 'seed': args.plant_seed,
+        **sim_extra}, env)}
     if feedback == 'stereo':
         processes['stereo_tracker'] = _start('stereo_tracker', run_dir, tracker_params, env)
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {

@@ -21,6 +21,7 @@ import time
 
 from cbha_inverse.bag.evaluate import evaluate_bag
 from cbha_inverse.report.tracking import cross_track_errors
+from cbha_inverse.robot.robotino import ARM_VALVES
 import numpy as np
 
 
@@ -33,6 +34,9 @@ def parse_args(argv):
                         help='plant stiffness error per section (truth)')
     parser.add_argument('--plant-gain-scale', default='0.9,1.05,1.1,0.95,1.08,0.92',
                         help='plant effective-area error per valve (truth)')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the plant noise')
+    parser.add_argument('--identify-args', default='',
+                        help='extra cbha_identify arguments (one string, e.g. "--fit-latency")')
     return parser.parse_args(argv)
 
 
@@ -69,8 +73,8 @@ def main(argv=None):
     output = Path(args.output)
     output.mkdir(parents=True, exist_ok=True)
     plant = ['--stiffness-scale', '1.0', '--plant-section-scale', args.plant_section_scale,
-             '--plant-gain-scale', args.plant_gain_scale, '--modes', 'open', '--feedback',
-             'direct']
+             '--plant-gain-scale', args.plant_gain_scale, '--plant-seed', str(args.seed),
+             '--modes', 'open', '--feedback', 'direct']
     demo = ['cbha_inverse.ros.demo']
     started = time.monotonic()
     steps = [
@@ -78,7 +82,8 @@ def main(argv=None):
                                  '--shapes', 'circle,square', *plant]),
         ('identification', ['cbha_inverse.identify.cli',
                             str(output / 'nominal' / 'circle_open' / 'bag'),
-                            '--output', str(output / 'identified')]),
+                            '--output', str(output / 'identified'),
+                            *args.identify_args.split()]),
         ('identified run', demo + ['--output', str(output / 'identified_run'), '--shapes',
                                    'square', '--model-scene',
                                    str(output / 'identified' / 'cbha_identified.yaml'), *plant]),
@@ -94,24 +99,35 @@ def main(argv=None):
         summary = json.loads((output / folder / 'summary.json').read_text())
         run = next(r for r in summary['runs'] if r['shape'] == 'square')
         rows[label] = square_errors(run['bag'], run['eval_window_s'])
-    truth = np.array([float(v) for v in args.plant_section_scale.split(',')]
-                     + [float(v) for v in args.plant_gain_scale.split(',')])
-    report = (output / 'identified' / 'cbha_identified_report.txt').read_text().splitlines()
-    fitted = [line.split() for line in report if line.startswith('  section_stiffness.')
-              or line.startswith('  actuator_gain.')]
+    truth = dict(zip(
+        [f'section_stiffness.{n}' for n in ('inner', 'outer')]
+        + [f'actuator_gain.{n}' for n in ARM_VALVES],
+        [float(v) for v in args.plant_section_scale.split(',')]
+        + [float(v) for v in args.plant_gain_scale.split(',')]))
+    result = json.loads((output / 'identified' / 'cbha_identified.json').read_text())
+    fitted = {n: p for n, p in result['parameters'].items() if n in truth}
     print('open-loop square (plant with errors):')
     for label, (rms, cross) in rows.items():
         print(f'  {label:10s} scene: tracking RMS {rms * 1e3:6.2f} mm, cross-track RMS '
               f'{cross * 1e3:6.2f} mm')
-    print('fitted factor vs truth (| fitted - truth | / standard error):')
-    for (name, value, _, error), true in zip(fitted, truth):
-        print(f'  {name:32s} {float(value):.4f} +- {float(error):.4f} truth {true:.4f}: '
-              f'{abs(float(value) - true) / float(error):.2f}')
+    print(f'fitted factor vs truth (| fitted - truth | / standard error), '
+          f'{result["samples"]["pressure_source"]} pressures:')
+    scores = {}
+    for name, p in fitted.items():
+        scores[name] = abs(p['value'] - truth[name]) / p['standard_error']
+        print(f'  {name:32s} {p["value"]:.4f} +- {p["standard_error"]:.4f} truth '
+              f'{truth[name]:.4f}: {scores[name]:.2f}')
+    for name, p in result['parameters'].items():
+        if name not in truth:
+            print(f'  {name:32s} {p["value"]:.5f} +- {p["standard_error"]:.5f}')
+    print(f'  within 1 standard error: {sum(z <= 1.0 for z in scores.values())} of '
+          f'{len(scores)}, within 2: {sum(z <= 2.0 for z in scores.values())}; largest '
+          f'{max(scores.values()):.2f}')
     (output / 'summary.json').write_text(json.dumps({
         'square_open': {k: {'tracking_rms_m': v[0], 'cross_track_rms_m': v[1]}
                         for k, v in rows.items()},
-        'fitted': {f[0]: {'value': float(f[1]), 'standard_error': float(f[3]), 'truth': t}
-                   for f, t in zip(fitted, truth)},
+        'fitted': {n: {**p, 'truth': truth[n], 'error_over_standard_error': scores[n]}
+                   for n, p in fitted.items()},
         'wall_s': time.monotonic() - started}, indent=2))
     print(f'cbha_identify_check: wrote {output / "summary.json"} '
           f'({time.monotonic() - started:.0f} s)')
