@@ -27,6 +27,7 @@ CONSOLE_SCRIPTS = [
     'inverse_solver = cbha_inverse.ros.inverse_solver_node:main',
     'cbha_sim = cbha_inverse.ros.cbha_sim_node:main',
     'stereo_tracker = cbha_inverse.ros.stereo_tracker_node:main',
+    'cbha_excite = cbha_inverse.ros.excite_node:main',
     # commands
     'cbha_demo = cbha_inverse.ros.demo:main',
     'condense_segment = cbha_inverse.fem.cli:main',

@@ -24,6 +24,12 @@ with ``--stereo-loop-gain`` (0.2 per frame at 30 frames/s = 6 /s, below the 10 /
 feedback (0.1 x 100 Hz): a frame interval, the image transport and the tracking add ~50-70 ms of
 delay, and 10 /s rang after the start jump on the loaded 2-core machine). Its line is printed
 beside the direct-feedback runs.
+
+``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``outer_bends``, ``extension``,
+``all``, ... or a YAML file of holds) adds, after the trajectory runs, an excitation run for
+identification: ``cbha_sim`` (the same plant) and ``cbha_excite`` alone (no solver, no
+trajectory), recorded (pressure_command, pressure_measured, tip/measured, tip/true) into
+``<output>/excite_<program>/bag`` and listed in ``summary.json`` under ``excitation``.
 """
 
 import argparse
@@ -37,10 +43,12 @@ import sys
 import time
 
 from cbha_inverse.bag.evaluate import evaluate_bag
+from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.paths import config_path
 from cbha_inverse.report.tracking import plot_runs
+from cbha_inverse.robot.excitation import make_program
 from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -50,10 +58,12 @@ NODES = ('cbha_sim', 'inverse_solver', 'trajectory')
 MODULES = {'cbha_sim': 'cbha_inverse.ros.cbha_sim_node',
            'inverse_solver': 'cbha_inverse.ros.inverse_solver_node',
            'trajectory': 'cbha_inverse.ros.trajectory_node',
-           'stereo_tracker': 'cbha_inverse.ros.stereo_tracker_node'}
+           'stereo_tracker': 'cbha_inverse.ros.stereo_tracker_node',
+           'cbha_excite': 'cbha_inverse.ros.excite_node'}
 NAMESPACE = '/cbha'
 RECORDED = ('target', 'tip/true', 'tip/measured', 'pressure_command', 'pressure_measured',
             '/diagnostics')
+EXCITE_RECORDED = ('pressure_command', 'pressure_measured', 'tip/measured', 'tip/true')
 
 
 def parse_args(argv):
@@ -92,6 +102,15 @@ def parse_args(argv):
     parser.add_argument('--camera-rate', type=float, default=30.0, help='stereo frames/s')
     parser.add_argument('--stereo-loop-gain', type=float, default=0.2,
                         help='inverse_solver loop_gain of the stereo runs (per measurement)')
+    parser.add_argument('--excite', default=None, metavar='PROGRAM',
+                        help='after the trajectory runs, record an excitation run for '
+                        'cbha_identify: cbha_sim + cbha_excite with this program (bends, '
+                        'outer_bends, extension, all, ... or a YAML file of holds) into '
+                        '<output>/excite_<program>/bag')
+    parser.add_argument('--excite-hold-time', type=float, default=3.0,
+                        help='cbha_excite hold_time [s]')
+    parser.add_argument('--excite-ramp-time', type=float, default=1.0,
+                        help='cbha_excite ramp_time [s]')
     parser.add_argument('--domain', type=int, default=None,
                         help='ROS_DOMAIN_ID for the run (default: the environment, else a free '
                         'one from domain_coordinator)')
@@ -128,12 +147,12 @@ def _start(node, run_dir, overrides, env):
     return process
 
 
-def _start_recorder(run_dir, env):
+def _start_recorder(run_dir, env, recorded=RECORDED):
     """Start ``cbha_bag record`` of the run's topics into ``run_dir/bag`` (replacing it)."""
     bag = run_dir / 'bag'
     if bag.exists():
         shutil.rmtree(bag)
-    topics = [t if t.startswith('/') else f'{NAMESPACE}/{t}' for t in RECORDED]
+    topics = [t if t.startswith('/') else f'{NAMESPACE}/{t}' for t in recorded]
     log = open(run_dir / 'cbha_bag_record.log', 'w')
     process = subprocess.Popen(
         [sys.executable, '-m', 'cbha_inverse.ros.bag_cli', 'record', '-o', str(bag), *topics],
@@ -235,6 +254,72 @@ def _floats(text):
     return [float(v) for v in text.split(',')]
 
 
+def _sim_overrides(args, valve_names):
+    """Return the ``cbha_sim`` parameters of the demo's plant."""
+    return {'scene': args.scene, 'valve_names': list(valve_names),
+            'stiffness_scale': args.stiffness_scale,
+            'section_stiffness_scale': _floats(args.plant_section_scale),
+            'cavity_gain_scale': _floats(args.plant_gain_scale), 'seed': args.plant_seed}
+
+
+def excite_run_name(program):
+    """Return the folder name of the excitation run of ``program`` (a YAML file: its stem)."""
+    return f'excite_{Path(program).stem}'
+
+
+def run_excitation(recorder, run_dir, args, program, valve_names, env):
+    """
+    Run ``cbha_excite`` on the simulated plant, recorded; return its summary dict.
+
+    Parameters
+    ----------
+    recorder : Recorder
+        The demo's in-process subscriber (it tells when the plant is up).
+    run_dir : pathlib.Path
+        The run's folder (params, logs, ``bag``).
+    args : argparse.Namespace
+        The demo's options (plant, ``--excite``, hold and ramp times).
+    program : cbha_inverse.robot.excitation.ExcitationProgram
+        The program ``cbha_excite`` will run (its duration bounds the wait).
+    valve_names : sequence of str
+        Command order.
+    env : dict
+        The children's environment.
+
+    Returns
+    -------
+    dict
+        Program, holds, duration, exit codes, the bag and its message count per topic.
+
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    recorder.clear()
+    recorder_process = {'cbha_bag_record': _start_recorder(run_dir, env, EXCITE_RECORDED)}
+    processes = {'cbha_sim': _start('cbha_sim', run_dir, _sim_overrides(args, valve_names), env)}
+    try:
+        if not recorder.spin_until(lambda: any(
+                name.startswith('cbha_sim:') for name in recorder.diagnostics), 120.0):
+            raise RuntimeError(f'cbha_sim did not start, see the logs in {run_dir}')
+        # the program starts once the plant and the bag recorder subscribe to its commands
+        processes['cbha_excite'] = _start('cbha_excite', run_dir, {
+            'scene': args.scene, 'valve_names': list(valve_names), 'program': args.excite,
+            'hold_time': args.excite_hold_time, 'ramp_time': args.excite_ramp_time,
+            'wait_for_subscribers': 2}, env)
+        excite = processes['cbha_excite']
+        if not recorder.spin_until(lambda: excite.poll() is not None, program.duration + 120.0):
+            raise RuntimeError(f'cbha_excite did not finish, see the logs in {run_dir}')
+        time.sleep(0.3)     # the plant's response to the last command reaches the bag
+    finally:
+        codes = _stop(processes)
+        codes.update(_stop(recorder_process))
+    with open_bag(run_dir / 'bag') as bag:
+        counts = {topic.name: topic.count for topic in bag.summary.topics}
+    return {'program': args.excite, 'holds': program.n_holds,
+            'hold_time_s': program.hold_time, 'ramp_time_s': program.ramp_time,
+            'duration_s': program.duration, 'exit_codes': codes, 'bag': str(run_dir / 'bag'),
+            'messages': counts}
+
+
 def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, feedback='direct'):
     """Run one shape in one mode for one lap and return its summary dict."""
     speed = args.circle_speed if shape == 'circle' else args.square_speed
@@ -250,10 +335,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         solver_extra = {'loop_gain': args.stereo_loop_gain}
         waited.append('stereo_tracker')
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
-        **common, 'stiffness_scale': args.stiffness_scale,
-        'section_stiffness_scale': _floats(args.plant_section_scale),
-        'cavity_gain_scale': _floats(args.plant_gain_scale), 'seed': args.plant_seed,
-        **sim_extra}, env)}
+        **_sim_overrides(args, valve_names), **sim_extra}, env)}
     if feedback == 'stereo':
         processes['stereo_tracker'] = _start('stereo_tracker', run_dir, tracker_params, env)
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
@@ -351,6 +433,15 @@ def main(argv=None):
     valve_names = configured.get('/**', {}).get('ros__parameters', {}).get('valve_names')
     if valve_names is None or sorted(valve_names) != sorted(scene.actuator_names):
         valve_names = list(scene.actuator_names)
+    excitation = None
+    if args.excite is not None:
+        try:       # the program cbha_excite will run, checked before any node starts
+            excitation = make_program(
+                scene, args.excite, hold_time=args.excite_hold_time,
+                ramp_time=args.excite_ramp_time, max_pressure=read_yaml(config_path(
+                    'cbha_excite.yaml'))['/**']['ros__parameters']['max_pressure'])
+        except ValueError as exc:      # ConfigError included
+            return report_config_error('cbha_demo', exc)
     domain = args.domain
     reservation = None
     if domain is None and 'ROS_DOMAIN_ID' not in os.environ:
@@ -397,6 +488,13 @@ def main(argv=None):
                       f"{result['stereo_detection_rate']:.3f}, tracker median "
                       f"{result['stereo_processing_median_ms']:.2f} ms, p99 "
                       f"{result['stereo_processing_p99_ms']:.2f} ms per pair", flush=True)
+        if excitation is not None:
+            excited = run_excitation(recorder, output / excite_run_name(args.excite), args,
+                                     excitation, valve_names, env)
+            print(f"excite {args.excite}: {excited['holds']} holds, "
+                  f"{excited['duration_s']:.1f} s, "
+                  f"{excited['messages'].get(f'{NAMESPACE}/tip/measured', 0)} tip samples, "
+                  f"exit codes {excited['exit_codes']}; bag {excited['bag']}", flush=True)
     finally:
         recorder.close()
         rclpy.try_shutdown(context=context)
@@ -410,10 +508,13 @@ def main(argv=None):
     summary = {'scene': scene.name, 'center_m': [float(v) for v in center],
                'stiffness_scale': args.stiffness_scale, 'wall_time_s': time.monotonic() - wall,
                'runs': [{k: v for k, v in r.items() if not k.startswith('_')} for r in results]}
+    if excitation is not None:
+        summary['excitation'] = excited
     (output / 'summary.json').write_text(json.dumps(summary, indent=2))
     print(f"wrote {output / 'demo.png'} and {output / 'summary.json'} "
           f"({summary['wall_time_s']:.0f} s)")
-    clean = all(code == 0 for r in results for code in r['exit_codes'].values())
+    clean = all(code == 0 for r in results + ([excited] if excitation is not None else [])
+                for code in r['exit_codes'].values())
     return 0 if clean else 1
 
 

@@ -7,6 +7,10 @@
 2. ``cbha_identify`` fits the scene to the recorded circle lap alone;
 3. ``cbha_demo`` runs the square (a different trajectory) open loop with the identified scene.
 
+``--excite PROGRAM`` adds an excitation run to step 1 (``cbha_demo --excite``: ``cbha_excite``
+on the same plant, recorded) and gives ``cbha_identify`` both bags, the circle lap and the
+excitation (their samples pooled).
+
 Prints the square's tracking RMS (time-aligned, as ``cbha_demo``) and cross-track RMS (distance
 to the path, timing ignored) with the nominal and the identified scene, and each fitted factor
 against the truth in units of its reported standard error; writes ``summary.json``.
@@ -35,6 +39,9 @@ def parse_args(argv):
     parser.add_argument('--plant-gain-scale', default='0.9,1.05,1.1,0.95,1.08,0.92',
                         help='plant effective-area error per valve (truth)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the plant noise')
+    parser.add_argument('--excite', default=None, metavar='PROGRAM',
+                        help='also record this cbha_excite program on the plant (cbha_demo '
+                        '--excite, e.g. bends) and identify from the circle lap and it')
     parser.add_argument('--identify-args', default='',
                         help='extra cbha_identify arguments (one string, e.g. "--fit-latency")')
     return parser.parse_args(argv)
@@ -45,6 +52,30 @@ def _run(command, log):
     with open(log, 'w') as stream:
         return subprocess.call([sys.executable, '-m', *command], stdout=stream,
                                stderr=subprocess.STDOUT)
+
+
+def identification_bags(nominal, excite):
+    """
+    Return the bags ``cbha_identify`` fits.
+
+    Parameters
+    ----------
+    nominal : pathlib.Path
+        The output folder of the nominal ``cbha_demo`` run.
+    excite : str or None
+        The ``--excite`` program, if one was recorded.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The circle lap's bag, then the excitation run's (from the demo's ``summary.json``).
+
+    """
+    bags = [nominal / 'circle_open' / 'bag']
+    if excite is not None:
+        summary = json.loads((nominal / 'summary.json').read_text())
+        bags.append(Path(summary['excitation']['bag']))
+    return bags
 
 
 def square_errors(bag, window):
@@ -76,21 +107,23 @@ def main(argv=None):
              '--plant-gain-scale', args.plant_gain_scale, '--plant-seed', str(args.seed),
              '--modes', 'open', '--feedback', 'direct']
     demo = ['cbha_inverse.ros.demo']
+    excite = [] if args.excite is None else ['--excite', args.excite]
     started = time.monotonic()
+
     steps = [
-        ('nominal runs', demo + ['--output', str(output / 'nominal'),
-                                 '--shapes', 'circle,square', *plant]),
-        ('identification', ['cbha_inverse.identify.cli',
-                            str(output / 'nominal' / 'circle_open' / 'bag'),
-                            '--output', str(output / 'identified'),
-                            *args.identify_args.split()]),
-        ('identified run', demo + ['--output', str(output / 'identified_run'), '--shapes',
-                                   'square', '--model-scene',
-                                   str(output / 'identified' / 'cbha_identified.yaml'), *plant]),
+        ('nominal runs', lambda: demo + ['--output', str(output / 'nominal'),
+                                         '--shapes', 'circle,square', *plant, *excite]),
+        ('identification', lambda: [
+            'cbha_inverse.identify.cli',
+            *(str(b) for b in identification_bags(output / 'nominal', args.excite)),
+            '--output', str(output / 'identified'), *args.identify_args.split()]),
+        ('identified run', lambda: demo + [
+            '--output', str(output / 'identified_run'), '--shapes', 'square', '--model-scene',
+            str(output / 'identified' / 'cbha_identified.yaml'), *plant]),
     ]
     for label, command in steps:
         print(f'cbha_identify_check: {label} ...', flush=True)
-        code = _run(command, output / f'{label.replace(" ", "_")}.log')
+        code = _run(command(), output / f'{label.replace(" ", "_")}.log')
         if code:
             print(f'cbha_identify_check: {label} failed (exit {code}), see its log in {output}')
             return code
@@ -128,6 +161,8 @@ def main(argv=None):
                         for k, v in rows.items()},
         'fitted': {n: {**p, 'truth': truth[n], 'error_over_standard_error': scores[n]}
                    for n, p in fitted.items()},
+        'excite': args.excite,
+        'identified_from': [str(b) for b in identification_bags(output / 'nominal', args.excite)],
         'wall_s': time.monotonic() - started}, indent=2))
     print(f'cbha_identify_check: wrote {output / "summary.json"} '
           f'({time.monotonic() - started:.0f} s)')

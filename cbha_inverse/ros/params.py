@@ -19,7 +19,8 @@ from rclpy.parameter import Parameter
 
 # ROS type names of the Python defaults, for messages and --help
 _TYPE_NAMES = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
-_UNSET_TYPES = {'string_array': Parameter.Type.STRING_ARRAY}
+_UNSET_TYPES = {'string_array': Parameter.Type.STRING_ARRAY,
+                'double_array': Parameter.Type.DOUBLE_ARRAY}
 
 
 class ParameterError(ValueError):
@@ -47,7 +48,7 @@ def param(default, description, *, low=None, high=None, choices=None, ros_name=N
     ros_name : str, optional
         Parameter name when it differs from the field name (e.g. dotted names).
     unset_type : str, optional
-        ROS type of a parameter without default: ``'string_array'``.
+        ROS type of a parameter without default: ``'string_array'`` or ``'double_array'``.
 
     Returns
     -------

@@ -13,6 +13,9 @@ from cbha_inverse.ros.params import check_params_files, parameter_help, Paramete
 import rclpy
 from rclpy.executors import ExternalShutdownException
 
+INTERRUPTED_EXIT = 1
+"""Exit status of a node that ends by itself (``done``) when SIGINT/SIGTERM stopped it first."""
+
 
 def node_help(node_name, node_class, params_class):
     """
@@ -57,6 +60,8 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
     ----------
     node_class : callable
         ``node_class() -> rclpy.node.Node``; raises ``ParameterError`` on invalid parameters.
+        A node that ends by itself (``cbha_excite``) has a ``done`` attribute, an
+        ``rclpy.task.Future`` whose result is the exit code: it is spun until that completes.
     node_name : str
         Node name (``--help`` and error lines).
     argv : list of str, optional
@@ -69,7 +74,8 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
     int
         0 after SIGINT/SIGTERM or ``--help``, 2 on a bad params file, invalid parameters,
         an unusable scene or a message package that a node imports at start and cannot
-        find (``ModuleNotFoundError``).
+        find (``ModuleNotFoundError``). A node with ``done``: its result, or
+        :data:`INTERRUPTED_EXIT` (1) after SIGINT/SIGTERM before it was done.
 
     """
     argv = list(sys.argv if argv is None else argv)
@@ -82,10 +88,14 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
     except ConfigError as exc:
         return report_config_error(node_name, exc)
     rclpy.init(args=argv)
-    node = None
+    node = done = None
     try:
         node = node_class()
-        rclpy.spin(node)
+        done = getattr(node, 'done', None)
+        if done is None:
+            rclpy.spin(node)
+        else:
+            rclpy.spin_until_future_complete(node, done)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RuntimeError:
@@ -100,4 +110,6 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    if done is None:
+        return 0
+    return int(done.result()) if done.done() else INTERRUPTED_EXIT

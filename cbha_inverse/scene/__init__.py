@@ -76,6 +76,9 @@ class Scene:
     lower_bounds, upper_bounds : (m,) ndarray  [N or Pa]
     section_names : tuple of str
         Chain sections of a ``segments`` chain, in chain order (empty for beams).
+    actuator_sections : tuple of (str or None)
+        The chain section of each actuator, scene actuator order: a cavity's ``section``, None
+        for a cable.
     calibration : cbha_inverse.scene.calibration.Calibration
         The corrections applied at load (the file's block and the caller's, combined; its base
         offset is ``model.base_position`` / ``model.base_rotation``).
@@ -86,7 +89,7 @@ class Scene:
 
     def __init__(self, name, model, actuators, effectors, gravity, *, description='',
                  base_frame='cbha_base', workspace=None, solver_defaults=None,
-                 section_names=(), calibration=None, path=None):
+                 section_names=(), actuator_sections=None, calibration=None, path=None):
         """Store the parts (use :func:`load_scene`)."""
         self.name = name
         self.description = description
@@ -100,6 +103,10 @@ class Scene:
         self.lower_bounds = np.array(actuators.lower_bounds, dtype=float)
         self.upper_bounds = np.array(actuators.upper_bounds, dtype=float)
         self.section_names = tuple(section_names)
+        self.actuator_sections = (tuple(actuator_sections) if actuator_sections is not None
+                                  else (None,) * len(self.actuator_names))
+        if len(self.actuator_sections) != len(self.actuator_names):
+            raise ValueError('actuator_sections needs one entry per actuator')
         self.calibration = Calibration() if calibration is None else calibration
         self.path = None if path is None else Path(path)
         self._workspace = workspace
@@ -288,6 +295,8 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     if not groups:
         raise spec.error('cables', 'a scene needs cables or cavities (no actuator)')
     actuators = _actuator_set(spec, groups, model.n_frames)
+    section_of = {item.data.get('name'): item.data.get('section')
+                  for item in spec.sections('cavities', [])}
     effector_items = spec.sections('effectors')
     if not effector_items:
         raise spec.error('effectors', 'at least one effector is needed')
@@ -300,7 +309,9 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
                  description=spec.text('description', ''),
                  base_frame=spec.text('base_frame', 'cbha_base'),
                  workspace=workspace, solver_defaults=_solver_defaults(spec),
-                 section_names=tuple(sections), calibration=calibrated, path=path)
+                 section_names=tuple(sections),
+                 actuator_sections=tuple(section_of.get(n) for n in actuators.names),
+                 calibration=calibrated, path=path)
 
 
 def _actuator_set(spec, groups, n_frames):
