@@ -19,7 +19,7 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = 'cbha_inverse'
 NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim', 'stereo_tracker',
-                    'robotino_bridge')
+                    'robotino_bridge', 'cbha_excite')
 COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo', 'cbha_launch',
                        'cbha_scene', 'stereo_calibrate', 'cbha_build_robotino_msgs',
                        'cbha_bag')
