@@ -1,5 +1,7 @@
 """cbha_identify: recovery of known plant errors, clear refusals of data that cannot give a fit."""
 
+import json
+
 from cbha_inverse.bag.storage import BagWriter
 from cbha_inverse.identify.cli import main
 from cbha_inverse.identify.fit import identify, parameter_names, TipPredictor
@@ -153,6 +155,29 @@ def test_cbha_identify_writes_a_scene_that_reproduces_the_plant(tmp_path, capsys
     predicted = identified.forward(probe).effector_positions[-1]
     assert np.linalg.norm(nominal - plant) > 10e-3
     assert np.linalg.norm(predicted - plant) < 1e-3
+
+
+def test_samples_of_several_bags_are_pooled_into_one_fit(tmp_path, capsys):
+    rng = np.random.default_rng(6)
+    commands = rng.uniform(0.0, 150e3, (12, 6))
+    names = parameter_names(load_scene('cbha'))
+    _write_bag(tmp_path / 'lap', commands, TipPredictor('cbha', names, commands)(TRUTH), NOISE)
+    held = np.full((4, 6), 50e3)
+    _write_bag(tmp_path / 'hold', held, TipPredictor('cbha', names, held)(TRUTH), NOISE)
+    # the held pose alone cannot give a fit; with the lap it adds its samples
+    assert main([str(tmp_path / 'hold'), '--output', str(tmp_path / 'alone')]) == 1
+    assert 'too little excitation' in capsys.readouterr().err
+    assert main([str(tmp_path / 'lap'), str(tmp_path / 'hold'), '--output',
+                 str(tmp_path / 'out'), '--max-samples', '1000']) == 0
+    result = json.loads((tmp_path / 'out' / 'cbha_identified.json').read_text())
+    counts = [int(line.split(' quasi-static')[0].split()[-1])
+              for line in capsys.readouterr().out.splitlines() if 'quasi-static (' in line]
+    assert len(counts) == 2 and min(counts) > 0
+    assert result['samples']['fitted'] == result['samples']['quasi_static'] == sum(counts)
+    assert result['samples']['recorded'] == (12 + 4) * 25
+    for name, truth in zip(names, TRUTH):
+        fitted = result['parameters'][name]
+        assert abs(fitted['value'] - truth) <= 3.0 * fitted['standard_error']
 
 
 def test_bag_without_tip_measurements_is_refused(tmp_path, capsys):
