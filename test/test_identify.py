@@ -168,12 +168,13 @@ def test_samples_of_several_bags_are_pooled_into_one_fit(tmp_path, capsys):
     assert main([str(tmp_path / 'hold'), '--output', str(tmp_path / 'alone')]) == 1
     assert 'too little excitation' in capsys.readouterr().err
     assert main([str(tmp_path / 'lap'), str(tmp_path / 'hold'), '--output',
-                 str(tmp_path / 'out'), '--max-samples', '1000']) == 0
+                 str(tmp_path / 'out'), '--max-samples', '40']) == 0
     result = json.loads((tmp_path / 'out' / 'cbha_identified.json').read_text())
     counts = [int(line.split(' quasi-static')[0].split()[-1])
               for line in capsys.readouterr().out.splitlines() if 'quasi-static (' in line]
     assert len(counts) == 2 and min(counts) > 0
-    assert result['samples']['fitted'] == result['samples']['quasi_static'] == sum(counts)
+    assert result['samples']['quasi_static'] == sum(counts)
+    assert result['samples']['fitted'] == 40
     assert result['samples']['recorded'] == (12 + 4) * 25
     for name, truth in zip(names, TRUTH):
         fitted = result['parameters'][name]

@@ -356,7 +356,7 @@ def identify(scene_path, pressures, tips, *, prior_sigma=0.5, base_position=Fals
                                           max_correlation)
     after = fun.reshape(-1, 3) + tips
     fitted = calibration_of(names, values)
-    prior_sigmas = np.where(steps == 0.0, prior, prior * steps)
+    prior_sigmas = prior * np.where(steps == 0.0, 1.0, steps)
     return Identification(names, values, standard_errors, correlation, _rms(before - tips),
                           _rms(after - tips), before, after, sigma, tuple(warnings),
                           predict.evaluations, nominal.calibration.combined(fitted),
