@@ -97,6 +97,22 @@ def test_reported_standard_errors_match_the_scatter_of_repeated_fits(short_arm):
     assert 0.7 < np.sqrt(np.mean(z ** 2)) < 1.4
 
 
+def test_bad_shapes_and_values_are_refused_at_the_door(synthetic):
+    pressures, tips = synthetic
+    with pytest.raises(ValueError, match=r'tips must be a finite \(N, 3\)'):
+        identify('cbha', pressures, tips[:, :2])
+    with pytest.raises(ValueError, match=r'tips must be a finite'):
+        identify('cbha', pressures, np.where(tips > 0.1, np.nan, tips))
+    with pytest.raises(ValueError, match=r'pressures must be a finite \(24, 6\) array'):
+        identify('cbha', pressures[:, :5], tips)
+    with pytest.raises(ValueError, match=r'pressures must be a finite \(24, 6\) array'):
+        identify('cbha', pressures[:20], tips)
+    with pytest.raises(ValueError, match='prior_sigma must be finite and > 0'):
+        identify('cbha', pressures, tips, prior_sigma=0.0)
+    with pytest.raises(ValueError, match='needs the pressures as a function'):
+        identify('cbha', pressures, tips, latency=0.003)
+
+
 def test_valve_pressures_follow_delayed_first_order_lag():
     times = np.array([0.0, 1.0])
     commands = np.array([[100.0], [0.0]])
