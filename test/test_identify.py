@@ -1,5 +1,7 @@
 """cbha_identify: recovery of known plant errors, clear refusals of data that cannot give a fit."""
 
+import json
+
 from cbha_inverse.bag.storage import BagWriter
 from cbha_inverse.identify.cli import main
 from cbha_inverse.identify.fit import identify, parameter_names, TipPredictor
@@ -95,6 +97,22 @@ def test_reported_standard_errors_match_the_scatter_of_repeated_fits(short_arm):
     assert 0.7 < np.sqrt(np.mean(z ** 2)) < 1.4
 
 
+def test_bad_shapes_and_values_are_refused_at_the_door(synthetic):
+    pressures, tips = synthetic
+    with pytest.raises(ValueError, match=r'tips must be a finite \(N, 3\)'):
+        identify('cbha', pressures, tips[:, :2])
+    with pytest.raises(ValueError, match=r'tips must be a finite'):
+        identify('cbha', pressures, np.where(tips > 0.1, np.nan, tips))
+    with pytest.raises(ValueError, match=r'pressures must be a finite \(24, 6\) array'):
+        identify('cbha', pressures[:, :5], tips)
+    with pytest.raises(ValueError, match=r'pressures must be a finite \(24, 6\) array'):
+        identify('cbha', pressures[:20], tips)
+    with pytest.raises(ValueError, match='prior_sigma must be finite and > 0'):
+        identify('cbha', pressures, tips, prior_sigma=0.0)
+    with pytest.raises(ValueError, match='needs the pressures as a function'):
+        identify('cbha', pressures, tips, latency=0.003)
+
+
 def test_valve_pressures_follow_delayed_first_order_lag():
     times = np.array([0.0, 1.0])
     commands = np.array([[100.0], [0.0]])
@@ -105,33 +123,44 @@ def test_valve_pressures_follow_delayed_first_order_lag():
                                      after_first * np.exp(-1.0)], atol=1e-9)
 
 
-def _write_bag(path, commands, tips=None, noise=0.0):
-    """Write a session: a command every 0.5 s, then 25 tips at 50 Hz (``tips[k]`` + noise)."""
+def _write_session(path, command_times, commands, tip_times=(), tips=()):
+    """Write ``pressure_command`` and ``tip/measured`` messages at their times [s] to a bag."""
     store = get_typestore(Stores.ROS2_JAZZY)
     array, point = (store.types['std_msgs/msg/Float64MultiArray'],
                     store.types['geometry_msgs/msg/PointStamped'])
     header, stamp = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
     layout = store.types['std_msgs/msg/MultiArrayLayout']
     vector = store.types['geometry_msgs/msg/Point']
-    rng = np.random.default_rng(0)
     writer = BagWriter(path)
     writer.add_topic('/cbha/pressure_command', 'std_msgs/msg/Float64MultiArray')
     writer.add_topic('/cbha/tip/measured', 'geometry_msgs/msg/PointStamped')
-    for k, command in enumerate(commands):
-        t_ns = 10 ** 9 + k * 500_000_000
-        writer.write('/cbha/pressure_command', t_ns, store.serialize_cdr(
-            array(layout=layout(dim=[], data_offset=0), data=np.asarray(command, dtype=float)),
-            array.__msgtype__))
-        for j in range(0 if tips is None else 25):
-            sample_ns = t_ns + j * 20_000_000
-            tip = tips[k] + rng.normal(0.0, noise, 3)
-            message = point(header=header(stamp=stamp(sec=sample_ns // 10 ** 9,
-                                                      nanosec=sample_ns % 10 ** 9),
+    events = [(t, 0, c) for t, c in zip(command_times, commands)]
+    events += [(t, 1, p) for t, p in zip(tip_times, tips)]
+    for t, kind, value in sorted(events, key=lambda e: (e[0], e[1])):
+        t_ns = int(round(t * 1e9))
+        if kind == 0:
+            writer.write('/cbha/pressure_command', t_ns, store.serialize_cdr(
+                array(layout=layout(dim=[], data_offset=0), data=np.asarray(value, float)),
+                array.__msgtype__))
+        else:
+            message = point(header=header(stamp=stamp(sec=t_ns // 10 ** 9,
+                                                      nanosec=t_ns % 10 ** 9),
                                           frame_id='cbha_base'),
-                            point=vector(x=tip[0], y=tip[1], z=tip[2]))
-            writer.write('/cbha/tip/measured', sample_ns,
+                            point=vector(x=value[0], y=value[1], z=value[2]))
+            writer.write('/cbha/tip/measured', t_ns,
                          store.serialize_cdr(message, point.__msgtype__))
     writer.close()
+
+
+def _write_bag(path, commands, tips=None, noise=0.0):
+    """Write a session: a command every 0.5 s, then 25 tips at 50 Hz (``tips[k]`` + noise)."""
+    command_times = 1.0 + 0.5 * np.arange(len(commands))
+    if tips is None:
+        return _write_session(path, command_times, commands)
+    tip_times = (command_times[:, None] + 0.02 * np.arange(25)).reshape(-1)
+    measured = np.repeat(tips, 25, axis=0)
+    measured = measured + np.random.default_rng(0).normal(0.0, noise, measured.shape)
+    return _write_session(path, command_times, commands, tip_times, measured)
 
 
 def test_cbha_identify_writes_a_scene_that_reproduces_the_plant(tmp_path, capsys):
@@ -153,6 +182,30 @@ def test_cbha_identify_writes_a_scene_that_reproduces_the_plant(tmp_path, capsys
     predicted = identified.forward(probe).effector_positions[-1]
     assert np.linalg.norm(nominal - plant) > 10e-3
     assert np.linalg.norm(predicted - plant) < 1e-3
+
+
+def test_samples_of_several_bags_are_pooled_into_one_fit(tmp_path, capsys):
+    rng = np.random.default_rng(6)
+    commands = rng.uniform(0.0, 150e3, (12, 6))
+    names = parameter_names(load_scene('cbha'))
+    _write_bag(tmp_path / 'lap', commands, TipPredictor('cbha', names, commands)(TRUTH), NOISE)
+    held = np.full((4, 6), 50e3)
+    _write_bag(tmp_path / 'hold', held, TipPredictor('cbha', names, held)(TRUTH), NOISE)
+    # the held pose alone cannot give a fit; with the lap it adds its samples
+    assert main([str(tmp_path / 'hold'), '--output', str(tmp_path / 'alone')]) == 1
+    assert 'too little excitation' in capsys.readouterr().err
+    assert main([str(tmp_path / 'lap'), str(tmp_path / 'hold'), '--output',
+                 str(tmp_path / 'out'), '--max-samples', '40']) == 0
+    result = json.loads((tmp_path / 'out' / 'cbha_identified.json').read_text())
+    counts = [int(line.split(' quasi-static')[0].split()[-1])
+              for line in capsys.readouterr().out.splitlines() if 'quasi-static (' in line]
+    assert len(counts) == 2 and min(counts) > 0
+    assert result['samples']['quasi_static'] == sum(counts)
+    assert result['samples']['fitted'] == 40
+    assert result['samples']['recorded'] == (12 + 4) * 25
+    for name, truth in zip(names, TRUTH):
+        fitted = result['parameters'][name]
+        assert abs(fitted['value'] - truth) <= 3.0 * fitted['standard_error']
 
 
 def test_bag_without_tip_measurements_is_refused(tmp_path, capsys):
@@ -208,12 +261,6 @@ def test_base_position_offset_is_fitted_with_the_factors(synthetic):
 def _write_swept_bag(path, latency, noise):
     """Write slow sinusoidal commands (100 Hz, 12 s) and the tips (50 Hz) of the TRUTH plant."""
     # the plant sees the commands behind a link of `latency` and the 10 ms valves
-    store = get_typestore(Stores.ROS2_JAZZY)
-    array, point = (store.types['std_msgs/msg/Float64MultiArray'],
-                    store.types['geometry_msgs/msg/PointStamped'])
-    header, stamp = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
-    layout = store.types['std_msgs/msg/MultiArrayLayout']
-    vector = store.types['geometry_msgs/msg/Point']
     command_times = 1.0 + np.arange(1200) * 0.01
     frequency = np.array([0.05, 0.07, 0.09, 0.06, 0.08, 0.1])
     phase = np.arange(6) * 1.1
@@ -221,27 +268,9 @@ def _write_swept_bag(path, latency, noise):
                                     + phase)
     tip_times = 1.5 + np.arange(500) * 0.02
     acting = valve_pressures(command_times, commands, tip_times, latency, 0.01)
-    names = parameter_names(load_scene('cbha'))
-    tips = TipPredictor('cbha', names, acting)(TRUTH)
+    tips = TipPredictor('cbha', parameter_names(load_scene('cbha')), acting)(TRUTH)
     measured = tips + np.random.default_rng(4).normal(0.0, noise, tips.shape)
-    writer = BagWriter(path)
-    writer.add_topic('/cbha/pressure_command', 'std_msgs/msg/Float64MultiArray')
-    writer.add_topic('/cbha/tip/measured', 'geometry_msgs/msg/PointStamped')
-    events = [(t, 0, c) for t, c in zip(command_times, commands)]
-    events += [(t, 1, p) for t, p in zip(tip_times, measured)]
-    for t, kind, value in sorted(events, key=lambda e: (e[0], e[1])):
-        t_ns = int(round(t * 1e9))
-        if kind == 0:
-            writer.write('/cbha/pressure_command', t_ns, store.serialize_cdr(
-                array(layout=layout(dim=[], data_offset=0), data=value), array.__msgtype__))
-        else:
-            message = point(header=header(stamp=stamp(sec=t_ns // 10 ** 9,
-                                                      nanosec=t_ns % 10 ** 9),
-                                          frame_id='cbha_base'),
-                            point=vector(x=value[0], y=value[1], z=value[2]))
-            writer.write('/cbha/tip/measured', t_ns,
-                         store.serialize_cdr(message, point.__msgtype__))
-    writer.close()
+    _write_session(path, command_times, commands, tip_times, measured)
 
 
 def test_cbha_identify_estimates_the_link_latency_it_was_not_given(tmp_path, capsys):

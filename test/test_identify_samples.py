@@ -259,3 +259,34 @@ def test_cbha_identify_fits_the_measured_pressures_and_names_them(tmp_path, caps
                  '--pressure-source', 'measured']) == 1
     assert 'pressure_measured not recorded' in capsys.readouterr().err
     assert not (tmp_path / 'out2').exists()
+
+
+def test_pooled_samples_keep_each_session_and_its_pressures_at_another_delay():
+    from cbha_inverse.identify.cli import _delayed_pressures
+    from cbha_inverse.identify.samples import acting_pressures, pooled_samples, Session
+    sessions, parts = [], []
+    for k, level in enumerate((40e3, 90e3)):
+        command_times = 10.0 * k + np.arange(0.0, 2.0, 0.5)
+        commands = level + 10e3 * np.arange(4)[:, None] * np.ones((1, 2))
+        tip_times = 10.0 * k + np.arange(0.01, 2.0, 0.02)
+        session = Session(command_times, commands, tip_times, np.zeros((tip_times.size, 3)))
+        sessions.append(session)
+        parts.append(quasi_static_samples(session, max_samples=10 ** 6, latency=LATENCY,
+                                          valve_time_constant=TAU))
+    pooled = pooled_samples(parts, 30)
+    assert len(pooled.tips) == 30
+    assert pooled.quasi_static == parts[0].quasi_static + parts[1].quasi_static
+    assert pooled.pressure_source == 'commanded' and pooled.delay == LATENCY
+    # evenly spread over the pool, in session order: both sessions, first then second
+    assert np.all(np.diff(pooled.part) >= 0) and set(pooled.part) == {0, 1}
+    order = np.array([1, 0])
+    for delay in (LATENCY, 0.02):
+        got = _delayed_pressures(sessions, pooled, order, TAU, delay)
+        for k, session in enumerate(sessions):
+            mine = pooled.part == k
+            expected = acting_pressures(session, pooled.receive_times[mine], 'commanded',
+                                        delay, TAU)[0][:, order]
+            np.testing.assert_array_equal(got[mine], expected)
+    # at the alignment delay the pooled pressures are the samples' own
+    np.testing.assert_array_equal(_delayed_pressures(sessions, pooled, np.arange(2), TAU,
+                                                     LATENCY), pooled.pressures)

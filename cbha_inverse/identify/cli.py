@@ -1,5 +1,5 @@
 """
-``cbha_identify BAG [--scene SCENE] [--output DIR]``: a calibrated scene from one recorded session.
+``cbha_identify BAG [BAG ...] [--scene SCENE] [--output DIR]``: a calibrated scene from a session.
 
 Reads ``tip/measured`` and the acting valve pressures from the bag: ``pressure_measured`` when
 recorded (``--pressure-source``), else ``pressure_command`` aligned through the link
@@ -30,8 +30,8 @@ from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.identify.fit import identify
 from cbha_inverse.identify.samples import (acting_pressures, IdentificationError,
-                                           PRESSURE_SOURCES, quasi_static_samples,
-                                           read_session)
+                                           pooled_samples, PRESSURE_SOURCES,
+                                           quasi_static_samples, read_session)
 from cbha_inverse.scene import load_scene, resolve_scene_path
 import numpy as np
 import yaml
@@ -42,7 +42,9 @@ PROGRAM = 'cbha_identify'
 def parse_args(argv):
     """Parse the command line."""
     parser = argparse.ArgumentParser(prog=PROGRAM, description=__doc__.split('\n\n')[0])
-    parser.add_argument('bag', help='the recorded session (rosbag2 folder)')
+    parser.add_argument('bags', nargs='+', metavar='BAG',
+                        help='the recorded session(s) (rosbag2 folders; the samples of several '
+                        'are pooled, e.g. a lap and an excitation program)')
     parser.add_argument('--scene', default='cbha.yaml', help='nominal scene (path or name)')
     parser.add_argument('--output', default='output/identify', help='output folder')
     parser.add_argument('--namespace', default='/cbha', help='namespace of the topics')
@@ -156,10 +158,14 @@ def format_report(result, samples, bag, scene_name):
     return '\n'.join(lines) + '\n'
 
 
-def _delayed_pressures(session, samples, order, valve_time_constant, delay):
+def _delayed_pressures(sessions, samples, order, valve_time_constant, delay):
     """Return the samples' acting pressures (scene order) for another delay of their source."""
-    return acting_pressures(session, samples.receive_times, samples.pressure_source, delay,
-                            valve_time_constant)[0][:, order]
+    out = np.empty_like(samples.pressures)
+    for k, session in enumerate(sessions):
+        mine = samples.part == k
+        out[mine] = acting_pressures(session, samples.receive_times[mine],
+                                     samples.pressure_source, delay, valve_time_constant)[0]
+    return out[:, order]
 
 
 def result_data(result, samples):
@@ -224,23 +230,35 @@ def main(argv=None):
         scene_path = resolve_scene_path(args.scene)
         scene = load_scene(scene_path)
         order = command_order(scene, args.valve_names)
-        print(f'{PROGRAM}: reading {args.bag}', flush=True)
-        session = read_session(args.bag, args.namespace)
-        if session[1].shape[1] != len(order):
-            raise IdentificationError(f'{args.bag}: commands of {session[1].shape[1]} valves, '
-                                      f'the scene has {len(order)} actuators')
-        samples = quasi_static_samples(session, latency=args.latency,
-                                       valve_time_constant=args.valve_time_constant,
-                                       settle_time=args.settle_time,
-                                       settle_tolerance=args.settle_tolerance,
-                                       max_samples=args.max_samples,
-                                       pressure_source=args.pressure_source,
-                                       measured_latency=args.measured_latency)
-        print(f'{PROGRAM}: {samples.recorded} tip samples, {samples.quasi_static} quasi-static, '
-              f'fitting {len(samples.tips)} through scene {scene.name}', flush=True)
+        sessions, parts = [], []
+        for bag in args.bags:
+            print(f'{PROGRAM}: reading {bag}', flush=True)
+            session = read_session(bag, args.namespace)
+            if session[1].shape[1] != len(order):
+                raise IdentificationError(f'{bag}: commands of {session[1].shape[1]} valves, '
+                                          f'the scene has {len(order)} actuators')
+            sessions.append(session)
+            try:
+                parts.append(quasi_static_samples(
+                    session, latency=args.latency, valve_time_constant=args.valve_time_constant,
+                    settle_time=args.settle_time, settle_tolerance=args.settle_tolerance,
+                    max_samples=sys.maxsize, pressure_source=args.pressure_source,
+                    measured_latency=args.measured_latency))
+            except IdentificationError as exc:
+                raise IdentificationError(f'{bag}: {exc}') from None
+            print(f'{PROGRAM}: {bag}: {parts[-1].recorded} tip samples, '
+                  f'{parts[-1].quasi_static} quasi-static ({parts[-1].pressure_source} '
+                  'pressures)', flush=True)
+        samples = pooled_samples(parts, args.max_samples)
+        print(f'{PROGRAM}: fitting {len(samples.tips)} samples through scene {scene.name}',
+              flush=True)
         pressures = samples.pressures[:, order]
         if args.fit_latency:
-            pressures = functools.partial(_delayed_pressures, session, samples, order,
+            if samples.pressure_source == 'mixed':
+                raise IdentificationError('--fit-latency needs one pressure source in every bag '
+                                          '(some have pressure_measured, some not): choose one '
+                                          'with --pressure-source')
+            pressures = functools.partial(_delayed_pressures, sessions, samples, order,
                                           args.valve_time_constant)
         result = identify(scene_path, pressures, samples.tips, prior_sigma=args.prior_sigma,
                           base_position=args.fit_base_position,
@@ -257,15 +275,16 @@ def main(argv=None):
     output.mkdir(parents=True, exist_ok=True)
     stem = f'{scene_path.stem}_identified'
     scene_file = output / f'{stem}.yaml'
-    header = (f'# {scene_file.name}: written by {PROGRAM} from {args.bag} (nominal scene '
-              f'{scene_path}); see {stem}_report.txt\n')
+    header = (f'# {scene_file.name}: written by {PROGRAM} from {", ".join(args.bags)} '
+              f'(nominal scene {scene_path}); see {stem}_report.txt\n')
     scene_file.write_text(header + yaml.safe_dump(
         identified_scene_data(scene_path, result.calibration), sort_keys=False))
-    report = format_report(result, samples, args.bag, scene.name)
+    report = format_report(result, samples, ', '.join(args.bags), scene.name)
     (output / f'{stem}_report.txt').write_text(report)
     (output / f'{stem}.json').write_text(json.dumps(result_data(result, samples), indent=1))
     plot_fit(output / f'{stem}.png', samples.tips, result.predicted_before,
-             result.predicted_after, f'{PROGRAM}: {Path(args.bag).name}')
+             result.predicted_after,
+             f'{PROGRAM}: {", ".join(Path(b).name for b in args.bags)}')
     print(report, end='')
     print(f'{PROGRAM}: wrote {scene_file} (use -p scene:={scene_file.resolve()}), report and '
           f'PNG in {time.monotonic() - started:.1f} s', flush=True)

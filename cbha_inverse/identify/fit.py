@@ -205,8 +205,11 @@ class TipPredictor:
 
     def __call__(self, values):
         """Return the (N, 3) predicted tips [m] for the parameter values (p,)."""
-        pressures = (self.pressures(values[self.names.index('latency')])
+        pressures = (np.asarray(self.pressures(values[self.names.index('latency')]), float)
                      if callable(self.pressures) else self.pressures)
+        if pressures.ndim != 2 or not np.all(np.isfinite(pressures)):
+            raise ValueError(f'the sample pressures must be a finite (N, m) array, got shape '
+                             f'{pressures.shape}')
         scene = load_scene(self.scene_path, calibration=calibration_of(self.names, values))
         if self._states is None:
             self._states = [None] * len(pressures)
@@ -278,8 +281,8 @@ def identify(scene_path, pressures, tips, *, prior_sigma=0.5, base_position=Fals
         (a zero or rank-deficient Jacobian: too little excitation; the prior does not hide
         that).
     ValueError
-        On a prior standard deviation that is not finite and positive, or a latency without
-        callable pressures.
+        On tips or pressures of the wrong shape or not finite, a prior standard deviation that
+        is not finite and positive, or a latency without callable pressures.
 
     """
     for label, value in (('prior_sigma', prior_sigma), ('base_position_sigma',
@@ -293,6 +296,14 @@ def identify(scene_path, pressures, tips, *, prior_sigma=0.5, base_position=Fals
     names = parameter_names(nominal, base_position=base_position,
                             latency=latency is not None)
     tips = np.asarray(tips, dtype=float)
+    if tips.ndim != 2 or tips.shape[1] != 3 or not np.all(np.isfinite(tips)):
+        raise ValueError(f'tips must be a finite (N, 3) array, got shape {tips.shape}')
+    if not callable(pressures):
+        pressures = np.asarray(pressures, dtype=float)
+        width = len(nominal.actuator_names)
+        if pressures.shape != (len(tips), width) or not np.all(np.isfinite(pressures)):
+            raise ValueError(f'pressures must be a finite ({len(tips)}, {width}) array (one row '
+                             f'per tip, scene actuator order), got shape {pressures.shape}')
     if not any(_is_factor(n) for n in names):
         raise IdentificationError(f'scene {nominal.name}: nothing to identify (no sections or '
                                   'cavities)')
@@ -356,7 +367,7 @@ def identify(scene_path, pressures, tips, *, prior_sigma=0.5, base_position=Fals
                                           max_correlation)
     after = fun.reshape(-1, 3) + tips
     fitted = calibration_of(names, values)
-    prior_sigmas = np.where(steps == 0.0, prior, prior * steps)
+    prior_sigmas = prior * np.where(steps == 0.0, 1.0, steps)
     return Identification(names, values, standard_errors, correlation, _rms(before - tips),
                           _rms(after - tips), before, after, sigma, tuple(warnings),
                           predict.evaluations, nominal.calibration.combined(fitted),

@@ -70,6 +70,8 @@ class Samples:
         :func:`acting_pressures` at another delay).
     delay : float  [s]
         The delay the pressures were aligned with (``latency`` or ``measured_latency``).
+    part : (N,) int ndarray
+        Session of each sample (:func:`pooled_samples`; zeros for one session).
 
     """
 
@@ -82,6 +84,7 @@ class Samples:
     measured_dropped: int = 0
     receive_times: np.ndarray = None
     delay: float = 0.0
+    part: np.ndarray = None
 
 
 class Session(NamedTuple):
@@ -381,4 +384,40 @@ def quasi_static_samples(session, *, latency=0.003, valve_time_constant=0.01, se
         chosen = chosen[np.round(np.linspace(0, chosen.size - 1, max_samples)).astype(int)]
     return Samples(tip_times[chosen] - command_times[0], now[chosen], tips[chosen],
                    len(tip_times), int(keep.sum()), source, session.measured_dropped,
-                   tip_times[chosen], delay)
+                   tip_times[chosen], delay, np.zeros(chosen.size, dtype=int))
+
+
+def pooled_samples(parts, max_samples):
+    """
+    Pool the samples of several sessions (a lap, an excitation program) into one set.
+
+    Parameters
+    ----------
+    parts : sequence of Samples
+        The samples of each session (:func:`quasi_static_samples`), in order.
+    max_samples : int
+        At most this many samples, evenly spread over the pooled set (in session order).
+
+    Returns
+    -------
+    Samples
+        ``part`` tells each sample's session; ``pressure_source`` and ``delay`` are the common
+        ones (``'mixed'`` and NaN when the sessions differ); counts are summed.
+
+    """
+    if not parts:
+        raise ValueError('no sessions to pool')
+    part = np.concatenate([np.full(len(p.tips), k) for k, p in enumerate(parts)])
+    chosen = np.arange(part.size)
+    if part.size > max_samples:
+        chosen = np.round(np.linspace(0, part.size - 1, max_samples)).astype(int)
+    sources = {p.pressure_source for p in parts}
+    delays = {p.delay for p in parts}
+    return Samples(np.concatenate([p.times for p in parts])[chosen],
+                   np.concatenate([p.pressures for p in parts])[chosen],
+                   np.concatenate([p.tips for p in parts])[chosen],
+                   sum(p.recorded for p in parts), sum(p.quasi_static for p in parts),
+                   sources.pop() if len(sources) == 1 else 'mixed',
+                   sum(p.measured_dropped for p in parts),
+                   np.concatenate([p.receive_times for p in parts])[chosen],
+                   delays.pop() if len(delays) == 1 else math.nan, part[chosen])
