@@ -152,3 +152,20 @@ def test_runs_to_the_end_and_refuses_to_fight_a_controller(rclpy_context, tmp_pa
     assert len(outputs['unknown'].strip().splitlines()) == 1, outputs['unknown']
     assert f'{broken}: holds[0][5]: 1e+06 is outside the bounds [0, 150000] of outer_left' \
         in outputs['broken'], outputs['broken']
+
+
+@pytest.mark.parametrize('overrides, match', [
+    ({'start_pressure': [75e3] * 5}, 'start_pressure needs 6 values'),
+    ({'end_pressure': [75e3] * 5 + [2e5]}, 'end_pressure: 200000 Pa for outer_left is outside '
+     r'\[0, 150000\] Pa'),
+    ({'start_pressure': [75e3] * 6, 'max_pressure': 50e3}, 'start_pressure: 75000 Pa for '
+     r'inner_over is outside \[0, 50000\]'),
+    ({'valve_names': ['a', 'b']}, 'must be a permutation'),
+    ({'scene': 'tendon_6f_8c'}, "unknown excitation program 'bends'"),
+    ({'scene': 'no_such_scene'}, 'no scene no_such_scene'),
+])
+def test_invalid_parameters_stop_the_node(rclpy_context, overrides, match):
+    from cbha_inverse.ros.params import ParameterError
+    with pytest.raises(ParameterError, match=match):
+        ExciteNode(context=rclpy_context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in overrides.items()])
