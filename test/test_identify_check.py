@@ -1,52 +1,47 @@
 """
 ``cbha_identify_check`` wiring: ``--excite`` reaches the demo, and cbha_identify gets both bags.
 
-The steps are replaced by a recorder of their command lines (the real run takes minutes and is
-the lead's end-to-end check); the nominal step writes the ``summary.json`` the demo writes, the
-identified run then fails on purpose so that the check stops before it reads results.
+The steps' command lines are built by :func:`check_steps` (the real run takes minutes and is
+the lead's end-to-end check); the nominal run's ``summary.json`` is written here as the demo
+writes it.
 """
 
 import json
 
-from cbha_inverse.ros import identify_check
+from cbha_inverse.ros.identify_check import check_steps, parse_args
 
 
-def _fake_steps(monkeypatch, tmp_path, excite_bag):
-    commands = []
-
-    def run(command, log):
-        commands.append(list(command))
-        if len(commands) == 1:          # the nominal demo run writes its summary
-            nominal = tmp_path / 'nominal'
-            nominal.mkdir(parents=True, exist_ok=True)
-            summary = {'runs': []}
-            if '--excite' in command:
-                summary['excitation'] = {'bag': str(excite_bag)}
-            (nominal / 'summary.json').write_text(json.dumps(summary))
-        return 3 if len(commands) == 3 else 0
-
-    monkeypatch.setattr(identify_check, '_run', run)
-    return commands
+def _commands(tmp_path, argv, excite_bag=None):
+    steps = check_steps(parse_args(['--output', str(tmp_path), *argv]), tmp_path)
+    labels = [label for label, _ in steps]
+    assert labels == ['nominal runs', 'identification', 'identified run']
+    nominal = steps[0][1]()
+    summary = {'runs': []}
+    if excite_bag is not None:
+        summary['excitation'] = {'bag': str(excite_bag)}
+    (tmp_path / 'nominal').mkdir()
+    (tmp_path / 'nominal' / 'summary.json').write_text(json.dumps(summary))
+    return nominal, steps[1][1](), steps[2][1]()
 
 
-def test_excite_is_recorded_and_identified_with_the_lap(monkeypatch, tmp_path):
+def test_excite_is_recorded_and_identified_with_the_lap(tmp_path):
     excite_bag = tmp_path / 'nominal' / 'excite_bends' / 'bag'
-    commands = _fake_steps(monkeypatch, tmp_path, excite_bag)
-    assert identify_check.main(['--output', str(tmp_path), '--excite', 'bends',
-                                '--identify-args=--fit-latency']) == 3
-    nominal, identification, identified = commands
+    nominal, identification, identified = _commands(
+        tmp_path, ['--excite', 'bends', '--identify-args=--fit-latency', '--seed', '7'],
+        excite_bag)
     assert nominal[nominal.index('--excite') + 1] == 'bends'
+    assert nominal[nominal.index('--plant-seed') + 1] == '7'
     assert '--excite' not in identified
     assert identification == ['cbha_inverse.identify.cli',
                               str(tmp_path / 'nominal' / 'circle_open' / 'bag'), str(excite_bag),
                               '--output', str(tmp_path / 'identified'), '--fit-latency']
+    assert identified[identified.index('--model-scene') + 1] == str(
+        tmp_path / 'identified' / 'cbha_identified.yaml')
 
 
-def test_without_excite_the_lap_alone(monkeypatch, tmp_path):
-    commands = _fake_steps(monkeypatch, tmp_path, None)
-    assert identify_check.main(['--output', str(tmp_path)]) == 3
-    nominal, identification, _ = commands
+def test_without_excite_the_lap_alone(tmp_path):
+    nominal, identification, _ = _commands(tmp_path, [])
     assert '--excite' not in nominal
-    assert identification[:2] == ['cbha_inverse.identify.cli',
-                                  str(tmp_path / 'nominal' / 'circle_open' / 'bag')]
-    assert identification[2] == '--output'
+    assert identification == ['cbha_inverse.identify.cli',
+                              str(tmp_path / 'nominal' / 'circle_open' / 'bag'),
+                              '--output', str(tmp_path / 'identified')]

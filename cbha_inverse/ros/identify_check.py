@@ -78,6 +78,43 @@ def identification_bags(nominal, excite):
     return bags
 
 
+def check_steps(args, output):
+    """
+    Return the check's three steps: (label, function returning the module command line).
+
+    The identification's command is built when it runs: the excitation bag is named by the
+    nominal run's ``summary.json``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    output : pathlib.Path
+        The check's output folder.
+
+    Returns
+    -------
+    list of (str, callable)
+
+    """
+    plant = ['--stiffness-scale', '1.0', '--plant-section-scale', args.plant_section_scale,
+             '--plant-gain-scale', args.plant_gain_scale, '--plant-seed', str(args.seed),
+             '--modes', 'open', '--feedback', 'direct']
+    demo = ['cbha_inverse.ros.demo']
+    excite = [] if args.excite is None else ['--excite', args.excite]
+    return [
+        ('nominal runs', lambda: demo + ['--output', str(output / 'nominal'),
+                                         '--shapes', 'circle,square', *plant, *excite]),
+        ('identification', lambda: [
+            'cbha_inverse.identify.cli',
+            *(str(b) for b in identification_bags(output / 'nominal', args.excite)),
+            '--output', str(output / 'identified'), *args.identify_args.split()]),
+        ('identified run', lambda: demo + [
+            '--output', str(output / 'identified_run'), '--shapes', 'square', '--model-scene',
+            str(output / 'identified' / 'cbha_identified.yaml'), *plant]),
+    ]
+
+
 def square_errors(bag, window):
     """Return (tracking RMS, cross-track RMS) [m] of a recorded open-loop lap."""
     evaluation = evaluate_bag(bag, tip='true', start=window[0], end=window[1])
@@ -103,24 +140,8 @@ def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
     output = Path(args.output)
     output.mkdir(parents=True, exist_ok=True)
-    plant = ['--stiffness-scale', '1.0', '--plant-section-scale', args.plant_section_scale,
-             '--plant-gain-scale', args.plant_gain_scale, '--plant-seed', str(args.seed),
-             '--modes', 'open', '--feedback', 'direct']
-    demo = ['cbha_inverse.ros.demo']
-    excite = [] if args.excite is None else ['--excite', args.excite]
     started = time.monotonic()
-
-    steps = [
-        ('nominal runs', lambda: demo + ['--output', str(output / 'nominal'),
-                                         '--shapes', 'circle,square', *plant, *excite]),
-        ('identification', lambda: [
-            'cbha_inverse.identify.cli',
-            *(str(b) for b in identification_bags(output / 'nominal', args.excite)),
-            '--output', str(output / 'identified'), *args.identify_args.split()]),
-        ('identified run', lambda: demo + [
-            '--output', str(output / 'identified_run'), '--shapes', 'square', '--model-scene',
-            str(output / 'identified' / 'cbha_identified.yaml'), *plant]),
-    ]
+    steps = check_steps(args, output)
     for label, command in steps:
         print(f'cbha_identify_check: {label} ...', flush=True)
         code = _run(command(), output / f'{label.replace(" ", "_")}.log')
