@@ -34,6 +34,7 @@ from cbha_inverse.ros.runner import run_node
 from cbha_inverse.scene import load_scene
 import numpy as np
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray
@@ -49,6 +50,8 @@ PHASES = ('discovery', 'waiting', 'ready', 'running', 'done', 'refused')
 UNKNOWN, UNKNOWN_NAMESPACE = '_NODE_NAME_UNKNOWN_', '_NODE_NAMESPACE_UNKNOWN_'
 NAME_WAIT = 1.0
 """Longest wait [s] for the name of another publisher before refusing without it."""
+END_ACK_TIMEOUT = 1.0
+"""Longest wait [s] for the subscribers to acknowledge the end command before exiting."""
 
 
 @dataclass(frozen=True)
@@ -269,8 +272,13 @@ class ExciteNode(Node):
             self.get_logger().info(f'hold {hold + 1} of {self.program.n_holds} '
                                    f'({self.program.labels[hold]}): [{kpa}] kPa')
         if finished:
+            # the end command must reach the valves before the process exits (reliable QoS:
+            # wait for the subscribers' acknowledgements, bounded)
+            acked = self.publisher.wait_for_all_acked(Duration(seconds=END_ACK_TIMEOUT))
             self.get_logger().info(f'program done: {self.published} commands over '
-                                   f'{elapsed:.2f} s; the end actuation stays')
+                                   f'{elapsed:.2f} s; the end actuation stays'
+                                   + ('' if acked else ' (the last command was not '
+                                      f'acknowledged within {END_ACK_TIMEOUT:g} s)'))
             self._finish(0)
 
     def _statuses(self):
