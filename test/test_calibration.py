@@ -365,3 +365,9 @@ def test_plant_errors_map_the_sim_parameters_by_name():
         plant_errors((), valves, (0.9,), (1.0,))
     with pytest.raises(ValueError, match='cavity_gain_scale must be finite'):
         plant_errors(('inner',), valves, (1.0,), (0.0, 1.0))
+    shifted = plant_errors((), valves, (1.0,), (1.0,), (0.002, -0.001, 0.0))
+    assert shifted == Calibration(base_position=(0.002, -0.001, 0.0))
+    with pytest.raises(ValueError, match='base_offset must be 3 finite numbers'):
+        plant_errors((), valves, (1.0,), (1.0,), (0.0, np.inf, 0.0))
+    with pytest.raises(ValueError, match='base_offset must be 3 finite numbers'):
+        plant_errors((), valves, (1.0,), (1.0,), (0.0, 0.0))

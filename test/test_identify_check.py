@@ -45,3 +45,11 @@ def test_without_excite_the_lap_alone(tmp_path):
     assert identification == ['cbha_inverse.identify.cli',
                               str(tmp_path / 'nominal' / 'circle_open' / 'bag'),
                               '--output', str(tmp_path / 'identified')]
+
+
+def test_a_plant_base_offset_is_applied_and_fitted(tmp_path):
+    nominal, identification, identified = _commands(
+        tmp_path, ['--plant-base-offset', '0.002,-0.003,0.001'])
+    for command in (nominal, identified):
+        assert command[command.index('--plant-base-offset') + 1] == '0.002,-0.003,0.001'
+    assert '--fit-base-position' in identification

@@ -14,7 +14,8 @@ piecewise-constant commands, whatever the tick times). Every tick at ``rate_hz``
   from ``seed`` as a stream of its own, so the tip noise of a seed does not change with it);
 - the plant (:class:`cbha_inverse.robot.plant.StaticPlant`: the scene loaded with a deliberate
   ``stiffness_scale`` error, per-section ``section_stiffness_scale`` and per-valve
-  ``cavity_gain_scale`` errors applied as a scene calibration, and its own ``gravity``) is moved
+  ``cavity_gain_scale`` errors and a ``base_offset`` applied as a scene calibration, and its
+  own ``gravity``) is moved
   to the equilibrium of those valve pressures (noise-free) by warm-started Newton steps;
 - the tip is published on ``tip/measured`` (PointStamped, sensor data QoS) with Gaussian noise
   ``noise_std`` (seeded) and, noise-free, on ``tip/true``.
@@ -68,6 +69,8 @@ class CbhaSimParams:
     cavity_gain_scale: tuple = param(
         (1.0,), 'plant effective-area error per cavity, valve_names order (one value: every '
         'cavity) [-]')
+    base_offset: tuple = param((0.0, 0.0, 0.0), 'plant base position error in cbha_base (the '
+                               'tracker registration error the tips are measured with) [m]')
     gravity: tuple = param((0.0, 0.0, -9.81), 'plant gravity in cbha_base [m/s^2]')
     valve_names: tuple = param(None, 'command order: a permutation of the scene actuators '
                                '(unset: the scene order; the CBHA scene order is the vendor '
@@ -104,7 +107,8 @@ class CbhaSimParams:
                                  low=0.0005, high=0.1)
 
 
-def plant_errors(section_names, valve_names, section_scales, gain_scales):
+def plant_errors(section_names, valve_names, section_scales, gain_scales,
+                 base_offset=(0.0, 0.0, 0.0)):
     """
     Turn the per-section and per-valve error parameters into a scene calibration.
 
@@ -118,6 +122,8 @@ def plant_errors(section_names, valve_names, section_scales, gain_scales):
         One stiffness factor per section, or one for all.
     gain_scales : sequence of float  [-]
         One effective-area factor per valve (cavity), or one for all.
+    base_offset : (3,) sequence of float  [m]
+        Position of the plant's chain base in ``base_frame``.
 
     Returns
     -------
@@ -127,7 +133,8 @@ def plant_errors(section_names, valve_names, section_scales, gain_scales):
     Raises
     ------
     ValueError
-        On a wrong count or a factor that is not finite and positive.
+        On a wrong count, a factor that is not finite and positive, or an offset that is not 3
+        finite numbers.
 
     """
     tables = []
@@ -142,7 +149,10 @@ def plant_errors(section_names, valve_names, section_scales, gain_scales):
         if not all(math.isfinite(v) and v > 0.0 for v in values):
             raise ValueError(f'{label} must be finite and > 0, got {list(scales)}')
         tables.append({n: v for n, v in zip(names, values) if v != 1.0})
-    return Calibration(*tables)
+    offset = [float(v) for v in base_offset]
+    if len(offset) != 3 or not all(math.isfinite(v) for v in offset):
+        raise ValueError(f'base_offset must be 3 finite numbers [m], got {list(base_offset)}')
+    return Calibration(*tables, base_position=tuple(offset))
 
 
 class CbhaSimNode(Node):
@@ -175,7 +185,7 @@ class CbhaSimNode(Node):
                 raise ValueError(f'valve_names {list(self.valve_names)} must be a permutation of '
                                  f'the scene actuators {list(names)}')
             errors = plant_errors(nominal.section_names, self.valve_names,
-                                  p.section_stiffness_scale, p.cavity_gain_scale)
+                                  p.section_stiffness_scale, p.cavity_gain_scale, p.base_offset)
             self.scene = load_scene(p.scene, stiffness_scale=p.stiffness_scale,
                                     gravity=p.gravity, calibration=errors)
         except (ValueError, FileNotFoundError, KeyError) as exc:

@@ -87,6 +87,9 @@ def parse_args(argv):
     parser.add_argument('--plant-gain-scale', default='1.0',
                         help='comma-separated plant effective-area error per valve (cbha_sim '
                         'cavity_gain_scale)')
+    parser.add_argument('--plant-base-offset', default='0,0,0',
+                        help='comma-separated plant base position in cbha_base [m] (a tracker '
+                        'registration error; cbha_sim base_offset)')
     parser.add_argument('--plant-seed', type=int, default=0,
                         help='seed of the plant measurement noise (cbha_sim seed)')
     parser.add_argument('--model-scene', default=None,
@@ -259,7 +262,8 @@ def _sim_overrides(args, valve_names):
     return {'scene': args.scene, 'valve_names': list(valve_names),
             'stiffness_scale': args.stiffness_scale,
             'section_stiffness_scale': _floats(args.plant_section_scale),
-            'cavity_gain_scale': _floats(args.plant_gain_scale), 'seed': args.plant_seed}
+            'cavity_gain_scale': _floats(args.plant_gain_scale),
+            'base_offset': _floats(args.plant_base_offset), 'seed': args.plant_seed}
 
 
 def excite_run_name(program):

@@ -38,6 +38,9 @@ def parse_args(argv):
                         help='plant stiffness error per section (truth)')
     parser.add_argument('--plant-gain-scale', default='0.9,1.05,1.1,0.95,1.08,0.92',
                         help='plant effective-area error per valve (truth)')
+    parser.add_argument('--plant-base-offset', default=None,
+                        help='plant base position error x,y,z [m] (truth; cbha_identify then '
+                        'fits the base position too)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the plant noise')
     parser.add_argument('--excite', default=None, metavar='PROGRAM',
                         help='also record this cbha_excite program on the plant (cbha_demo '
@@ -100,6 +103,10 @@ def check_steps(args, output):
     plant = ['--stiffness-scale', '1.0', '--plant-section-scale', args.plant_section_scale,
              '--plant-gain-scale', args.plant_gain_scale, '--plant-seed', str(args.seed),
              '--modes', 'open', '--feedback', 'direct']
+    fit_base = []
+    if args.plant_base_offset is not None:
+        plant += ['--plant-base-offset', args.plant_base_offset]
+        fit_base = ['--fit-base-position']
     demo = ['cbha_inverse.ros.demo']
     excite = [] if args.excite is None else ['--excite', args.excite]
     return [
@@ -108,7 +115,7 @@ def check_steps(args, output):
         ('identification', lambda: [
             'cbha_inverse.identify.cli',
             *(str(b) for b in identification_bags(output / 'nominal', args.excite)),
-            '--output', str(output / 'identified'), *args.identify_args.split()]),
+            '--output', str(output / 'identified'), *fit_base, *args.identify_args.split()]),
         ('identified run', lambda: demo + [
             '--output', str(output / 'identified_run'), '--shapes', 'square', '--model-scene',
             str(output / 'identified' / 'cbha_identified.yaml'), *plant]),
@@ -158,6 +165,9 @@ def main(argv=None):
         + [f'actuator_gain.{n}' for n in ARM_VALVES],
         [float(v) for v in args.plant_section_scale.split(',')]
         + [float(v) for v in args.plant_gain_scale.split(',')]))
+    if args.plant_base_offset is not None:
+        truth.update(zip(('base_position.x', 'base_position.y', 'base_position.z'),
+                         (float(v) for v in args.plant_base_offset.split(','))))
     result = json.loads((output / 'identified' / 'cbha_identified.json').read_text())
     fitted = {n: p for n, p in result['parameters'].items() if n in truth}
     print('open-loop square (plant with errors):')
@@ -169,7 +179,7 @@ def main(argv=None):
     scores = {}
     for name, p in fitted.items():
         scores[name] = abs(p['value'] - truth[name]) / p['standard_error']
-        print(f'  {name:32s} {p["value"]:.4f} +- {p["standard_error"]:.4f} truth '
+        print(f'  {name:32s} {p["value"]:.5f} +- {p["standard_error"]:.5f} truth '
               f'{truth[name]:.4f}: {scores[name]:.2f}')
     for name, p in result['parameters'].items():
         if name not in truth:
