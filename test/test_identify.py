@@ -287,3 +287,20 @@ def test_cbha_identify_estimates_the_link_latency_it_was_not_given(tmp_path, cap
     probe = np.array([120e3, 10e3, 60e3, 30e3, 140e3, 0.0])
     plant = TipPredictor('cbha', parameter_names(identified), probe[None])(TRUTH)[0]
     assert np.linalg.norm(identified.forward(probe).effector_positions[-1] - plant) < 0.5e-3
+
+
+def test_cable_gains_of_a_tendon_trunk_are_recovered():
+    """A beam trunk has no sections: its cables' gains are the parameters (tension in N)."""
+    scene = load_scene('tendon_6f_8c')
+    names = parameter_names(scene)
+    assert names == tuple(f'actuator_gain.{a}' for a in scene.actuator_names)
+    truth = np.array([0.9, 1.1, 1.05, 0.95, 1.08, 0.92, 1.0, 1.12])
+    rng = np.random.default_rng(12)
+    tensions = rng.uniform(0.0, 1.0, (20, 8)) * scene.upper_bounds
+    clean = TipPredictor('tendon_6f_8c', names, tensions)(truth)
+    fit = identify('tendon_6f_8c', tensions, clean + rng.normal(0.0, 1e-4, clean.shape))
+    assert fit.rms_before > 5 * fit.rms_after
+    assert np.all(np.abs(fit.values - truth) <= 3.0 * fit.standard_errors)
+    assert np.all(fit.standard_errors < 0.05)
+    assert fit.calibration.actuator_gain == pytest.approx(dict(zip(scene.actuator_names,
+                                                                   fit.values)))

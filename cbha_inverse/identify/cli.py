@@ -6,9 +6,9 @@ recorded (``--pressure-source``), else ``pressure_command`` aligned through the 
 ``--latency`` and the valves' ``--valve-time-constant`` (by default the paper's 3 ms and
 10 ms; ``--fit-latency`` estimates the delay instead of taking it as given). Keeps at most
 ``--max-samples`` quasi-static samples and fits the scene's per-section stiffness and
-per-cavity gain factors, optionally the base position (``--fit-base-position``)
-(:func:`cbha_inverse.identify.fit.identify`; a Gaussian prior around the nominal scene,
-``--prior-sigma``, keeps what the data cannot see at the nominal value). Writes
+per-actuator (cavity or cable) gain factors, optionally the base position
+(``--fit-base-position``) (:func:`cbha_inverse.identify.fit.identify`; a Gaussian prior around
+the nominal scene, ``--prior-sigma``, keeps what the data cannot see at the nominal value). Writes
 ``DIR/<scene>_identified.yaml`` (a complete scene file with the fitted ``calibration`` block:
 ``-p scene:=...``), ``DIR/<scene>_identified_report.txt`` (values with standard errors, the
 least determined combinations, correlation matrix, tip RMS before/after, identifiability

@@ -2,11 +2,11 @@
 Fit a scene's calibration to quasi-static samples through its forward model.
 
 The fitted parameters are named (:func:`parameter_names`): per-section stiffness and
-per-cavity gain factors, optionally the position of the chain's base in ``base_frame``
-(``base_position.x|y|z``: a tracker registration error) and the command -> valve ``latency``
-(when the sample pressures are given as a function of it). The fit works in coordinates
-``θ`` of similar size: the logarithm of each factor (positive by construction, relative
-steps), the base position in steps of :data:`POSITION_STEP` and the latency in steps of
+per-actuator (cavity or cable) gain factors, optionally the position of the chain's base in
+``base_frame`` (``base_position.x|y|z``: a tracker registration error) and the command ->
+valve ``latency`` (when the sample pressures are given as a function of it). The fit works in
+coordinates ``θ`` of similar size: the logarithm of each factor (positive by construction,
+relative steps), the base position in steps of :data:`POSITION_STEP` and the latency in steps of
 :data:`LATENCY_STEP` from its starting value. For each ``θ`` the scene is loaded with that
 calibration (:func:`cbha_inverse.scene.load_scene`, the one builder) and every sample's tip is
 predicted by ``scene.forward`` (warm-started from the previous prediction of that sample).
@@ -117,14 +117,13 @@ def parameter_names(scene, *, base_position=False, latency=False):
     Returns
     -------
     tuple of str
-        ``section_stiffness.<section>`` per chain section, ``actuator_gain.<cavity>`` per
-        cavity, then the optional ones.
+        ``section_stiffness.<section>`` per chain section, ``actuator_gain.<actuator>`` per
+        actuator (a cavity's effective area, a cable's force per newton), then the optional
+        ones.
 
     """
-    cavities = [name for group in scene.actuators.groups
-                if hasattr(group, 'cavities') for name in group.names]
     return (tuple(f'section_stiffness.{s}' for s in scene.section_names)
-            + tuple(f'actuator_gain.{c}' for c in cavities)
+            + tuple(f'actuator_gain.{a}' for a in scene.actuator_names)
             + (tuple(f'base_position.{a}' for a in _AXES) if base_position else ())
             + (('latency',) if latency else ()))
 
@@ -234,7 +233,7 @@ def identify(scene_path, pressures, tips, *, prior_sigma=0.5, base_position=Fals
              max_relative_error=0.1, max_correlation=0.98, noise_scale=0.5e-3, progress=None,
              max_evaluations=40):
     """
-    Fit per-section stiffness and per-cavity gain factors (and optionally more) to measured tips.
+    Fit per-section stiffness and per-actuator gain factors (and optionally more) to measured tips.
 
     Parameters
     ----------

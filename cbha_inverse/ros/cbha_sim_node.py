@@ -221,8 +221,8 @@ class CbhaSimNode(Node):
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
             f'plant {self.scene.name} x{p.stiffness_scale:g} stiffness (sections '
-            f'{list(p.section_stiffness_scale)}, cavity gains {list(p.cavity_gain_scale)}), '
-            f'gravity '
+            f'{list(p.section_stiffness_scale)}, cavity gains {list(p.cavity_gain_scale)}, '
+            f'base offset {[v * 1e3 for v in p.base_offset]} mm), gravity '
             f'{list(p.gravity)}, valves {p.valve_time_constant * 1e3:g} ms, latency '
             f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm and '
             f'{p.pressure_noise_std:g} Pa, {p.rate_hz:g} Hz')
