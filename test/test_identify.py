@@ -278,9 +278,11 @@ def test_cbha_identify_estimates_the_link_latency_it_was_not_given(tmp_path, cap
     assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'out'), '--latency',
                  '0.003', '--fit-latency', '--pressure-source', 'commanded']) == 0
     report = (tmp_path / 'out' / 'cbha_identified_report.txt').read_text()
-    row = next(line.split() for line in report.splitlines()
-               if line.strip().startswith('latency '))
-    latency, error = float(row[1]), float(row[3])
+    assert any(line.split()[:1] == ['latency'] and line.split()[2:3] == ['ms']
+               for line in report.splitlines())
+    fitted = json.loads((tmp_path / 'out' / 'cbha_identified.json').read_text())
+    latency = fitted['parameters']['latency']['value']
+    error = fitted['parameters']['latency']['standard_error']
     assert abs(latency - 0.030) <= 3.0 * error
     assert error < 2e-3
     identified = load_scene(tmp_path / 'out' / 'cbha_identified.yaml')

@@ -137,10 +137,9 @@ def format_report(result, samples, bag, scene_name):
                  if samples.measured_dropped else ''),
              f'tip RMS before {result.rms_before * 1e3:.3f} mm, after '
              f'{result.rms_after * 1e3:.3f} mm (residual noise {result.noise * 1e3:.3f} mm per '
-             'axis)', '', 'fitted values (factors on top of the scene calibration; base '
-             'position [m], latency [s]) +- standard error (prior standard deviation):']
-    lines += [f'  {n:32s} {v:.4f} +- {se:.4f}'
-              + (f'   (prior {p:g})' if np.isfinite(p) else '   (no prior)')
+             'axis)', '', 'fitted values (factors on top of the scene calibration) +- '
+             'standard error (prior standard deviation):']
+    lines += [f'  {n:32s} {_value_text(n, v, se, p)}'
               for n, v, se, p in zip(result.names, result.values, result.standard_errors,
                                      result.prior_sigmas)]
     lines += ['', 'prior: each log factor and offset ~ N(0, prior^2) around the nominal scene',
@@ -156,6 +155,14 @@ def format_report(result, samples, bag, scene_name):
               'identifiability: every factor is separable from this data']
     lines += [f'  {w}' for w in result.warnings]
     return '\n'.join(lines) + '\n'
+
+
+def _value_text(name, value, error, prior):
+    """Return a fitted value with its error and prior: factors bare, offsets in mm, delays in ms."""
+    scale, unit, digits = ((1e3, ' mm', 3) if name.startswith('base_position.') else
+                           (1e3, ' ms', 2) if name == 'latency' else (1.0, '', 4))
+    prior = f'(prior {prior * scale:g}{unit})' if np.isfinite(prior) else '(no prior)'
+    return (f'{value * scale:.{digits}f}{unit} +- {error * scale:.{digits}f}{unit}   {prior}')
 
 
 def _delayed_pressures(sessions, samples, order, valve_time_constant, delay):
