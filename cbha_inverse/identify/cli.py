@@ -158,7 +158,7 @@ def format_report(result, samples, bag, scene_name):
 
 
 def _value_text(name, value, error, prior):
-    """Return a fitted value with its error and prior: factors bare, offsets in mm, delays in ms."""
+    """Return a fitted value, its error and prior: factors bare, offsets in mm, delays in ms."""
     scale, unit, digits = ((1e3, ' mm', 3) if name.startswith('base_position.') else
                            (1e3, ' ms', 2) if name == 'latency' else (1.0, '', 4))
     prior = f'(prior {prior * scale:g}{unit})' if np.isfinite(prior) else '(no prior)'
