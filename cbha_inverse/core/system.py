@@ -128,10 +128,7 @@ class EquilibriumSystem:
         self._exact_index = np.where(valid, cols * width + 2 * kd + rows - cols, size * width)
         self._exact_band = np.zeros(size * width + 1)
         self._ones = np.ones(rows.size)
-        r_full, c_full = np.meshgrid(np.arange(size), np.arange(size), indexing='ij')
-        inside_exact = np.abs(r_full - c_full).reshape(-1) <= kd
-        self._exact_dense_slots = np.flatnonzero(inside_exact)
-        self._exact_slots = (c_full * width + 2 * kd + r_full - c_full).reshape(-1)[inside_exact]
+        self._exact_map = None            # dense <-> general band slots, on first use
         c, d = np.meshgrid(np.arange(size), np.arange(kd + 1), indexing='ij')
         inside = (c + d < size).reshape(-1)
         self._band_slots = np.flatnonzero(inside)
@@ -333,9 +330,18 @@ class EquilibriumSystem:
         (6n, 6n) ndarray
 
         """
+        if self._exact_map is None:
+            # entries (r, c), |r - c| <= kd: dense slot r N + c, band slot c (3 kd + 1) + 2 kd
+            # + r - c; O(N kd) index arrays (a dense grid would be O(N^2) at every build)
+            kd, size = self.kd, self.size
+            c, offset = np.meshgrid(np.arange(size), np.arange(-kd, kd + 1), indexing='ij')
+            r = c + offset
+            inside = (r >= 0) & (r < size)
+            self._exact_map = ((r * size + c)[inside],
+                               (c * (3 * kd + 1) + 2 * kd + offset)[inside])
+        dense_slots, band_slots = self._exact_map
         out = np.zeros((self.size, self.size))
-        out.reshape(-1)[self._exact_dense_slots] = np.asarray(tangent).reshape(-1)[
-            self._exact_slots]
+        out.reshape(-1)[dense_slots] = np.asarray(tangent).reshape(-1)[band_slots]
         return out
 
     def factor_exact(self, tangent):
