@@ -3,7 +3,8 @@
 import math
 
 from cbha_inverse.robot.safety import (
-    bounded_command, check_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
+    bounded_command, check_command, check_point, stale_action, StalenessWatch, valve_order,
+    WorkspaceBox)
 import numpy as np
 import pytest
 
@@ -83,3 +84,16 @@ def test_workspace_box_validation():
         WorkspaceBox((0.0, 0.0, -math.inf), (1.0, 1.0, 1.0))
     with pytest.raises(ValueError, match='3 components'):
         WorkspaceBox((0.0, 0.0), (1.0, 1.0))
+
+
+def test_valve_order_maps_each_command_entry_to_its_scene_actuator():
+    names = ('inner_over', 'inner_right', 'outer_over')
+    assert valve_order(names) == (names, pytest.approx([0, 1, 2]))
+    valves, order = valve_order(names, ['outer_over', 'inner_over', 'inner_right'])
+    assert valves == ('outer_over', 'inner_over', 'inner_right')
+    scene_vector = np.array([10.0, 20.0, 30.0])
+    np.testing.assert_array_equal(scene_vector[order], [30.0, 10.0, 20.0])
+    for wrong in (['inner_over', 'inner_right'], ['inner_over', 'inner_over', 'outer_over'],
+                  ['a', 'b', 'c']):
+        with pytest.raises(ValueError, match='must be a permutation of the scene actuators'):
+            valve_order(names, wrong)

@@ -5,6 +5,8 @@ The nodes call these functions on every message and before every publication:
 
 - :func:`check_point` accepts a target or a measured point only if it is finite, in the expected
   frame and inside the configured workspace box;
+- :func:`valve_order` checks a node's ``valve_names`` (the command order) against the scene's
+  actuators once, at start;
 - :func:`check_command` is what a real valve driver does with an incoming command (exact length,
   finite, within ``[0, p_max]``);
 - :func:`bounded_command` is the last gate before a command is published: it never lets a NaN
@@ -114,6 +116,39 @@ def check_point(point, frame_id, expected_frame, box):
                      f'point {[float(f"{v:.6g}") for v in point]} outside the workspace box '
                      f'{list(box.lower)}..{list(box.upper)}')
     return ACCEPTED
+
+
+def valve_order(actuator_names, valve_names=None):
+    """
+    Return a node's command order and the scene actuator of each command entry.
+
+    Parameters
+    ----------
+    actuator_names : sequence of str
+        The scene's actuators, in scene order.
+    valve_names : sequence of str, optional
+        The command order (a node's ``valve_names``); None: the scene order.
+
+    Returns
+    -------
+    valve_names : tuple of str
+        The command order.
+    order : (m,) int ndarray
+        ``order[k]``: the scene index of command entry ``k`` (scene vector ``x`` as a command:
+        ``x[order]``).
+
+    Raises
+    ------
+    ValueError
+        Unless ``valve_names`` is a permutation of the actuators.
+
+    """
+    names = tuple(actuator_names)
+    valves = names if valve_names is None else tuple(valve_names)
+    if sorted(valves) != sorted(names):
+        raise ValueError(f'valve_names {list(valves)} must be a permutation of the scene '
+                         f'actuators {list(names)}')
+    return valves, np.array([names.index(name) for name in valves], dtype=int)
 
 
 def check_command(values, n_valves, max_pressure):

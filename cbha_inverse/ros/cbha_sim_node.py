@@ -38,7 +38,7 @@ import time
 
 from cbha_inverse.robot.plant import StaticPlant
 from cbha_inverse.robot.robotino import ARM_VALVES
-from cbha_inverse.robot.safety import check_command
+from cbha_inverse.robot.safety import check_command, valve_order
 from cbha_inverse.robot.valves import ValveLine
 from cbha_inverse.ros.conversions import command_array, command_message, point_stamped
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, make_status, OK, TimingStats, WARN
@@ -179,11 +179,7 @@ class CbhaSimNode(Node):
             if len(p.gravity) != 3 or not all(math.isfinite(g) for g in p.gravity):
                 raise ValueError(f'gravity must be 3 finite numbers, got {list(p.gravity)}')
             nominal = load_scene(p.scene)
-            names = nominal.actuator_names
-            self.valve_names = names if p.valve_names is None else p.valve_names
-            if sorted(self.valve_names) != sorted(names):
-                raise ValueError(f'valve_names {list(self.valve_names)} must be a permutation of '
-                                 f'the scene actuators {list(names)}')
+            self.valve_names, self.order = valve_order(nominal.actuator_names, p.valve_names)
             errors = plant_errors(nominal.section_names, self.valve_names,
                                   p.section_stiffness_scale, p.cavity_gain_scale, p.base_offset)
             self.scene = load_scene(p.scene, stiffness_scale=p.stiffness_scale,
@@ -191,13 +187,12 @@ class CbhaSimNode(Node):
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
-        self.order = np.array([names.index(name) for name in self.valve_names])
         self.plant = StaticPlant(self.scene, tolerance=p.tolerance,
                                  max_iterations=p.max_iterations)
         self.rng = np.random.default_rng(p.seed)
         # an independent child stream: the tip noise sequence of a seed stays what it was
         self.pressure_rng = np.random.default_rng(np.random.SeedSequence(p.seed, spawn_key=(1,)))
-        self.valves = ValveLine(len(names), p.latency, p.valve_time_constant)
+        self.valves = ValveLine(len(self.valve_names), p.latency, p.valve_time_constant)
         self.rejected = {}
         self.accepted = 0
         self.last_result = None

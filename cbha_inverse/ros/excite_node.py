@@ -25,7 +25,7 @@ from cbha_inverse.errors import ConfigError
 from cbha_inverse.robot.excitation import (
     DEFAULT_HOLD_TIME, DEFAULT_RAMP_TIME, driver_bounds, make_program)
 from cbha_inverse.robot.robotino import ARM_VALVES
-from cbha_inverse.robot.safety import check_command
+from cbha_inverse.robot.safety import check_command, valve_order
 from cbha_inverse.ros.conversions import command_message
 from cbha_inverse.ros.diagnostics import DiagnosticsPublisher, ERROR, make_status, OK
 from cbha_inverse.ros.params import declare_parameters, param, ParameterError
@@ -127,12 +127,7 @@ class ExciteNode(Node):
             self.params = declare_parameters(self, ExciteParams)
             p = self.params
             scene = load_scene(p.scene)
-            names = scene.actuator_names
-            self.valve_names = names if p.valve_names is None else p.valve_names
-            if sorted(self.valve_names) != sorted(names):
-                raise ValueError(f'valve_names {list(self.valve_names)} must be a permutation of '
-                                 f'the scene actuators {list(names)}')
-            self.order = np.array([names.index(name) for name in self.valve_names])
+            self.valve_names, self.order = valve_order(scene.actuator_names, p.valve_names)
             lower, upper = driver_bounds(scene, p.max_pressure)
             self.program = make_program(
                 scene, p.program, hold_time=p.hold_time, ramp_time=p.ramp_time,

@@ -31,7 +31,7 @@ import time
 from cbha_inverse.core.inverse.solver import TargetCorrector
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
-    bounded_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
+    bounded_command, check_point, stale_action, StalenessWatch, valve_order, WorkspaceBox)
 from cbha_inverse.ros.conversions import backbone_markers, command_message, point_array
 from cbha_inverse.ros.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
@@ -174,17 +174,12 @@ class InverseSolverNode(Node):
         if len(self.scene.effector_names) != 1:
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
-        names = self.scene.actuator_names
-        self.valve_names = names if p.valve_names is None else p.valve_names
-        if sorted(self.valve_names) != sorted(names):
-            raise ValueError(f'valve_names {list(self.valve_names)} must be a permutation of the '
-                             f'scene actuators {list(names)}')
-        self.order = np.array([names.index(name) for name in self.valve_names])
+        self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
         self.lower = np.maximum(self.scene.lower_bounds[self.order], 0.0)
         self.upper = np.minimum(self.scene.upper_bounds[self.order], p.max_pressure)
         if np.any(self.lower > self.upper):
             raise ValueError('max_pressure is below a lower actuator bound of the scene')
-        self.vent_command = bounded_command(np.full(len(names), p.vent_pressure),
+        self.vent_command = bounded_command(np.full(len(self.valve_names), p.vent_pressure),
                                             self.lower, self.upper)
         self.box = WorkspaceBox(p.workspace_min, p.workspace_max)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
