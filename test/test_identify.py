@@ -306,3 +306,15 @@ def test_cable_gains_of_a_tendon_trunk_are_recovered():
     assert np.all(fit.standard_errors < 0.05)
     assert fit.calibration.actuator_gain == pytest.approx(dict(zip(scene.actuator_names,
                                                                    fit.values)))
+
+
+def test_valve_names_map_the_recorded_commands_to_the_scene_order():
+    from cbha_inverse.identify.cli import command_order
+    scene = load_scene('cbha')
+    valves = ['outer_left', 'inner_over', 'inner_right', 'inner_left', 'outer_over', 'outer_right']
+    commands = np.array([[float(scene.actuator_names.index(v)) for v in valves]])
+    np.testing.assert_array_equal(commands[:, command_order(scene, ','.join(valves))],
+                                  [np.arange(6.0)])
+    np.testing.assert_array_equal(command_order(scene, None), np.arange(6))
+    with pytest.raises(ValueError, match='must be a permutation'):
+        command_order(scene, 'inner_over,outer_over')

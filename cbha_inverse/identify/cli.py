@@ -32,6 +32,7 @@ from cbha_inverse.identify.fit import identify
 from cbha_inverse.identify.samples import (acting_pressures, IdentificationError,
                                            pooled_samples, PRESSURE_SOURCES,
                                            quasi_static_samples, read_session)
+from cbha_inverse.robot.safety import valve_order
 from cbha_inverse.scene import load_scene, resolve_scene_path
 import numpy as np
 import yaml
@@ -94,12 +95,15 @@ def _prior_sigma(text):
 
 
 def command_order(scene, valve_names):
-    """Return the scene column of each command entry (``valve_names`` comma-separated)."""
-    names = list(scene.actuator_names) if valve_names is None else valve_names.split(',')
-    if sorted(names) != sorted(scene.actuator_names):
-        raise ValueError(f'--valve-names {names} must be a permutation of the scene actuators '
-                         f'{list(scene.actuator_names)}')
-    return np.array([names.index(n) for n in scene.actuator_names])
+    """
+    Return, per scene actuator, its entry in the recorded commands (``commands[:, order]``).
+
+    ``valve_names`` is the comma-separated command order (None: the scene order); a wrong one
+    raises ``ValueError`` (:func:`cbha_inverse.robot.safety.valve_order`).
+    """
+    names = None if valve_names is None else valve_names.split(',')
+    _, scene_index = valve_order(scene.actuator_names, names)
+    return np.argsort(scene_index)
 
 
 def identified_scene_data(scene_path, calibration):
