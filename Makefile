@@ -14,7 +14,7 @@ INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
 EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
-KERNEL_TESTS ?= test/test_core_kernels_qp.py test/test_core_kernels.py test/test_core_linalg_btd.py
+KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py test/core/test_core_linalg_btd.py
 COVERAGE_ARGS ?= --cov=cbha_inverse --cov-report=term:skip-covered
 comma := ,
 space := $(subst ,, )
@@ -27,7 +27,7 @@ export OMP_NUM_THREADS ?= 1
 .PHONY: demo test venv install lint bench report constraints clean cover-kernels mutate
 
 demo: install
-	$(VPY) -m cbha_inverse.ros.demo --output $(DEMO_OUT)
+	$(VPY) -m cbha_inverse.experiments.demo --output $(DEMO_OUT)
 
 # Coverage of every run (child processes included: coverage's patch = subprocess, setup.cfg),
 # then the total of the non-compiled code (the numba kernels run as machine code, not Python:
@@ -41,7 +41,7 @@ test: install
 # (the test of numba's compiled signatures has nothing to check without the JIT).
 cover-kernels: install
 	NUMBA_DISABLE_JIT=1 $(VPY) -m pytest $(KERNEL_TESTS) -q --cov=cbha_inverse --cov-report= \
-	  --deselect test/test_core_linalg_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
+	  --deselect test/core/test_core_linalg_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
 	  $(PYTEST_ARGS)
 	$(VPY) -m coverage report --include='$(subst $(space),$(comma),$(KERNEL_SOURCES))'
 
@@ -80,7 +80,7 @@ $(EXPORTS_STAMP): $(PINS_STAMP)
 	@touch $@
 
 lint: install
-	$(VPY) -m pytest test/test_flake8.py test/test_pep257.py -q
+	$(VPY) -m pytest test/lint/test_flake8.py test/lint/test_pep257.py -q
 
 bench: install
 	$(VPY) -m cbha_inverse.report.cli bench

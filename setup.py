@@ -23,28 +23,28 @@ def tree_data_files(top):
 
 CONSOLE_SCRIPTS = [
     # nodes (node name = executable name = config/<name>.yaml)
-    'trajectory = cbha_inverse.ros.trajectory_node:main',
-    'inverse_solver = cbha_inverse.ros.inverse_solver_node:main',
-    'cbha_sim = cbha_inverse.ros.cbha_sim_node:main',
-    'stereo_tracker = cbha_inverse.ros.stereo_tracker_node:main',
-    'cbha_excite = cbha_inverse.ros.excite_node:main',
+    'trajectory = cbha_inverse.ros.nodes.trajectory:main',
+    'inverse_solver = cbha_inverse.ros.nodes.inverse_solver:main',
+    'cbha_sim = cbha_inverse.ros.nodes.cbha_sim:main',
+    'stereo_tracker = cbha_inverse.ros.nodes.stereo_tracker:main',
+    'cbha_excite = cbha_inverse.ros.nodes.cbha_excite:main',
     # commands
-    'cbha_demo = cbha_inverse.ros.demo:main',
+    'cbha_demo = cbha_inverse.experiments.demo:main',
     'condense_segment = cbha_inverse.fem.cli:main',
     'cbha_report = cbha_inverse.report.cli:main',
     'cbha_bench_core = cbha_inverse.report.bench_core:main',
     'cbha_bench_inverse = cbha_inverse.report.bench_inverse:main',
     'cbha_fem_report = cbha_inverse.report.fem_report:main',
-    'cbha_launch = cbha_inverse.launcher:main',
+    'cbha_launch = cbha_inverse.ros.launch.launcher:main',
     'cbha_scene = cbha_inverse.scene.cli:main',
     'stereo_calibrate = cbha_inverse.vision.calibrate_cli:main',
     'cbha_bench_stereo = cbha_inverse.report.bench_stereo:main',
-    'robotino_bridge = cbha_inverse.ros.robotino_bridge_node:main',
+    'robotino_bridge = cbha_inverse.ros.nodes.robotino_bridge:main',
     'cbha_build_robotino_msgs = cbha_inverse.interfaces.robotino_msgs_build:main',
-    'cbha_bag = cbha_inverse.ros.bag_cli:main',
-    'cbha_bench_bag = cbha_inverse.ros.bag_bench:main',
+    'cbha_bag = cbha_inverse.ros.bag.cli:main',
+    'cbha_bench_bag = cbha_inverse.report.bench_bag:main',
     'cbha_identify = cbha_inverse.identify.cli:main',
-    'cbha_identify_check = cbha_inverse.ros.identify_check:main',
+    'cbha_identify_check = cbha_inverse.experiments.identify_check:main',
 ]
 
 setup(

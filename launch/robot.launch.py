@@ -3,11 +3,11 @@ A real arm: inverse_solver + robotino_bridge (+ stereo_tracker with feedback:=st
 
 ``ros2 launch cbha_inverse robot.launch.py [name:=value ...]``; ``ros2 launch cbha_inverse
 robot.launch.py --show-args`` lists the arguments. The composition is the table
-``cbha_inverse.compositions.COMPOSITIONS['robot']``, which ``cbha_launch robot`` runs without the
+``cbha_inverse.ros.launch.compositions.COMPOSITIONS['robot']``, which ``cbha_launch robot`` runs without the
 ``launch`` package: both start the same nodes with the same params files and overrides.
 """
 
-from cbha_inverse.compositions import COMPOSITIONS, resolve
+from cbha_inverse.ros.launch.compositions import COMPOSITIONS, resolve
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration

@@ -3,11 +3,11 @@ Simulation: trajectory + inverse_solver + cbha_sim (+ stereo_tracker with feedba
 
 ``ros2 launch cbha_inverse sim.launch.py [name:=value ...]``; ``ros2 launch cbha_inverse
 sim.launch.py --show-args`` lists the arguments. The composition is the table
-``cbha_inverse.compositions.COMPOSITIONS['sim']``, which ``cbha_launch sim`` runs without the
+``cbha_inverse.ros.launch.compositions.COMPOSITIONS['sim']``, which ``cbha_launch sim`` runs without the
 ``launch`` package: both start the same nodes with the same params files and overrides.
 """
 
-from cbha_inverse.compositions import COMPOSITIONS, resolve
+from cbha_inverse.ros.launch.compositions import COMPOSITIONS, resolve
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration

@@ -47,10 +47,10 @@ import time
 from cbha_inverse.bag.storage import BagWriter, deserialize, open_bag
 from cbha_inverse.core.inverse.correction import TargetCorrector
 from cbha_inverse.paths import config_path
-from cbha_inverse.robot.plant import StaticPlant
+from cbha_inverse.report.bench_bag import set_priority
 from cbha_inverse.robot.trajectory import make_trajectory
-from cbha_inverse.ros.bag_bench import set_priority
 from cbha_inverse.scene import load_scene
+from cbha_inverse.sim.plant import StaticPlant
 import numpy as np
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime

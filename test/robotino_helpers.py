@@ -22,8 +22,8 @@ import time
 from cbha_inverse.interfaces.robotino_msgs_build import (
     build_robotino_msgs, interface_environment)
 from cbha_inverse.robot.robotino import ARM_VALVES, N_CHANNELS, PASCAL_PER_BAR
-from cbha_inverse.ros.conversions import command_message
-from cbha_inverse.ros.qos import COMMAND_QOS, DRIVER_SET_POINTS_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.conversions import command_message
+from cbha_inverse.ros.common.qos import COMMAND_QOS, DRIVER_SET_POINTS_QOS, MEASURED_QOS
 import numpy as np
 from rclpy.node import Node
 from ros_helpers import child_env

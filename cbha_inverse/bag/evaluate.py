@@ -3,7 +3,7 @@
 
 Reads ``<ns>/target`` and ``<ns>/tip/true`` (or ``tip/measured``) as geometry_msgs/PointStamped
 and ``<ns>/pressure_command`` as std_msgs/Float64MultiArray, decoded without rclpy. The tracking
-error is :func:`cbha_inverse.report.tracking.tracking_errors` on the header stamps (the same
+error is :func:`cbha_inverse.metrics.tracking_errors` on the header stamps (the same
 function and window as ``cbha_demo``). The target-to-command latency pairs each target with the
 first command the recorder received after it (and before the next target), on the bag's receive
 times: it includes the delivery of both messages to the recorder.
@@ -12,7 +12,7 @@ times: it includes the delivery of both messages to the recorder.
 from dataclasses import dataclass
 
 from cbha_inverse.bag.storage import BagError, deserialize, open_bag
-from cbha_inverse.report.tracking import plot_runs, tracking_errors
+from cbha_inverse.metrics import plot_runs, tracking_errors
 import numpy as np
 
 POINT_TYPE = 'geometry_msgs/msg/PointStamped'
@@ -56,7 +56,7 @@ class BagEvaluation:
         The tip topic compared with the targets.
     window : (2,) ndarray  [s]
         Scored stamps ``[start, end]``.
-    tracking : cbha_inverse.report.tracking.TrackingErrors or None
+    tracking : cbha_inverse.metrics.TrackingErrors or None
         Tip-to-target errors (None without tips or targets in the window).
     targets, tips : (T, 3), (N, 3) ndarray  [m]
         Target and tip positions whose stamps lie in the window (for the plot).

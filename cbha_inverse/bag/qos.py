@@ -1,7 +1,7 @@
 """
 QoS profiles as rosbag2 stores them (``offered_qos_profiles``) and ``ros2 bag play`` adapts them.
 
-Pure data (``rosbags.interfaces.Qos``); :mod:`cbha_inverse.ros.bag_qos` converts to and from
+Pure data (``rosbags.interfaces.Qos``); :mod:`cbha_inverse.ros.bag.qos` converts to and from
 rclpy. The override file of ``--qos-profile-overrides-path`` has rosbag2's format: a map from
 topic name to a profile whose keys are ``history``, ``depth``, ``reliability``, ``durability``,
 ``deadline``, ``lifespan``, ``liveliness``, ``liveliness_lease_duration`` (``{sec, nsec}``) and

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core.links import checked_compliance
-from cbha_inverse.core.se3 import quat_from_matrix
+from cbha_inverse.core.so3 import quat_from_matrix
 import numpy as np
 
 

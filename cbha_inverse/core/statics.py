@@ -3,7 +3,7 @@ Quasi-static equilibrium of a frame chain under loads and actuation (paper eq. 9
 
 :func:`solve_static` is the package's one solver of eq. 9, behind the scenes' forward model
 (:meth:`cbha_inverse.scene.Scene.forward`) and the simulated plant
-(:class:`cbha_inverse.robot.plant.StaticPlant`). It solves, for the poses of frames 1..n,
+(:class:`cbha_inverse.sim.plant.StaticPlant`). It solves, for the poses of frames 1..n,
 
     r(q) = f(q) + lam (f_dead + J_a(q)ᵀ λ + f_load(q)) = 0
 

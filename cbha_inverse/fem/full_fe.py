@@ -11,7 +11,7 @@ Lagrangian St Venant-Kirchhoff with the rigid constraints enforced exactly for f
 from dataclasses import dataclass
 import time
 
-from cbha_inverse.core.se3 import hat, so3_exp
+from cbha_inverse.core.so3 import hat, so3_exp
 from cbha_inverse.fem.condensation import frame_compliance
 from cbha_inverse.fem.coupling import build_coupling, coupling_matrix, RigidCoupling
 from cbha_inverse.fem.elasticity import (assemble_blocks, assemble_stiffness, element_dofs,

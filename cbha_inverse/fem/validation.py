@@ -121,7 +121,7 @@ def large_bending(n_segments=8, length=0.01, radius=0.0025, *, youngs_modulus=1e
         'full' (NonlinearResult), 'chain' (StaticResult).
 
     """
-    from cbha_inverse.core.se3 import so3_log
+    from cbha_inverse.core.so3 import so3_log
     from cbha_inverse.core.statics import solve_static
     seg = condense_cylinder(length, radius, youngs_modulus=youngs_modulus,
                             poisson_ratio=poisson_ratio, mesh_size=mesh_size)

@@ -15,7 +15,7 @@ The pressure that acts on the arm at a tip sample comes from one of two sources:
   gap limit): across a longer gap nothing says the pressure was steady;
 - ``commanded``: the command history delayed by the link ``latency`` and passed through the
   valves' first-order lag ``valve_time_constant`` (the ``cbha_sim`` valve model,
-  :mod:`cbha_inverse.robot.valves`; exact for piecewise-constant commands).
+  :mod:`cbha_inverse.sim.valves`; exact for piecewise-constant commands).
 
 ``auto`` (the default) takes the measured series when the bag has one. A sample is quasi-static
 when the acting pressure (from the same source) has changed by at most ``settle_tolerance`` over
@@ -33,7 +33,7 @@ from typing import NamedTuple
 
 from cbha_inverse.bag.evaluate import command_series, point_series
 from cbha_inverse.bag.storage import open_bag
-from cbha_inverse.robot.valves import first_order_step
+from cbha_inverse.sim.valves import first_order_step
 import numpy as np
 
 PRESSURE_SOURCES = ('auto', 'measured', 'commanded')

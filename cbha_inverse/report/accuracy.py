@@ -12,7 +12,7 @@ Every error is measured against a reference nobody tuned:
 (d) the CBHA inverse tick along the paper's circle: Newton steps per tick, ``relinearize_every``
     and the QP solver; effector error = the converged static equilibrium of the commanded
     pressures (``scene.forward``) minus the target, against the tick time;
-(e) closed-loop tracking RMS on the simulated CBHA (:class:`cbha_inverse.robot.plant.StaticPlant`,
+(e) closed-loop tracking RMS on the simulated CBHA (:class:`cbha_inverse.sim.plant.StaticPlant`,
     10 % softer than the model, gravity) against the per-tick compute time, for several tick
     rates and relinearisation intervals.
 
@@ -161,7 +161,7 @@ def tick_rows(quick):
 def closed_loop_rows(quick):
     """Return the rows of (e): closed-loop tracking RMS vs the per-tick compute time."""
     from cbha_inverse.core.inverse.correction import TargetCorrector
-    from cbha_inverse.robot.plant import StaticPlant
+    from cbha_inverse.sim.plant import StaticPlant
     from cbha_inverse.scene import load_scene
     model_scene = load_scene('cbha')
     plant_scene = load_scene('cbha', stiffness_scale=0.9)

@@ -25,7 +25,7 @@ from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.chain import ChainModel, rest_state
 from cbha_inverse.core.linalg import btd
 from cbha_inverse.core.links import timoshenko_compliance
-from cbha_inverse.core.se3 import so3_exp
+from cbha_inverse.core.so3 import so3_exp
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np

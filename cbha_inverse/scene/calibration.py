@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import math
 
 from cbha_inverse.config_files import Section
-from cbha_inverse.core.se3 import rpy_from_so3, so3_from_rpy
+from cbha_inverse.core.so3 import rpy_from_so3, so3_from_rpy
 import numpy as np
 
 _ZERO = (0.0, 0.0, 0.0)

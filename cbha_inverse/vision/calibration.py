@@ -14,7 +14,7 @@ known rig (tilted up to ~35 deg, the whole pattern in both images).
 from dataclasses import dataclass
 from pathlib import Path
 
-from cbha_inverse.core.se3 import so3_exp
+from cbha_inverse.core.so3 import so3_exp
 from cbha_inverse.vision.camera import camera_model
 from cbha_inverse.vision.render import CameraRenderer, render_checkerboard, RenderSettings
 from cbha_inverse.vision.rig import StereoRig

@@ -16,7 +16,7 @@ The rig file (``config/cameras/rig.yaml``) names the two camera_info YAMLs and h
 from dataclasses import dataclass
 from pathlib import Path
 
-from cbha_inverse.core.se3 import matrix_from_quat, quat_from_matrix
+from cbha_inverse.core.so3 import matrix_from_quat, quat_from_matrix
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.vision.camera import camera_model, load_camera_yaml, save_camera_yaml
 import numpy as np

@@ -18,7 +18,7 @@ from cbha_inverse.core.actuation.cables import CableGroup
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 import numpy as np
 from oracles.chain_forces import link_deformation
-from oracles.se3 import hat, so3_left_jacobian_inverse, so3_log
+from oracles.so3 import hat, so3_left_jacobian_inverse, so3_log
 import scipy.sparse as sp
 
 

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from oracles.se3 import (_jl_inv_coefficient, _jl_inv_from_hat, hat,
+from oracles.so3 import (_jl_inv_coefficient, _jl_inv_from_hat, hat,
                          so3_left_jacobian_inverse_transpose_derivative, so3_log, so3_log_angle)
 
 

@@ -2,7 +2,7 @@
 Compiled SO(3) maps: exponential, logarithm, quaternion, ``Jl⁻¹`` and ``hat`` (DESIGN §2-3).
 
 The scalar (per-rotation) forms are called inside every kernel; the ``*_batch`` forms loop them
-over arrays for :mod:`cbha_inverse.core.se3`, the package's batched SO(3) API, so each map has
+over arrays for :mod:`cbha_inverse.core.so3`, the package's batched SO(3) API, so each map has
 this one implementation. Rotation vectors are axis * angle [rad], quaternions (x, y, z, w) with
 ``w >= 0``; increments act on the left in world axes, so ``Jl`` is the *left* Jacobian.
 """

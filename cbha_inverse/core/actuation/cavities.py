@@ -21,7 +21,7 @@ Two evaluators share this geometry:
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.se3 import cross
+from cbha_inverse.core.so3 import cross
 import numpy as np
 import scipy.sparse as sp
 

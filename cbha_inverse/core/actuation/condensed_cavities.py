@@ -14,7 +14,7 @@ geometry of its link); the numpy version is a test oracle (``test/oracles/actuat
 """
 
 from cbha_inverse.core.actuation.cavities import Cavity, CavityGroup, CavityPart
-from cbha_inverse.core.se3 import so3_exp
+from cbha_inverse.core.so3 import so3_exp
 import numpy as np
 
 

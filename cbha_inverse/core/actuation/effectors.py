@@ -10,7 +10,7 @@ are computed by the compiled kernels of :mod:`cbha_inverse.core._kernels.project
 """
 
 from cbha_inverse.core._kernels.projection import effector_levers, effector_points
-from cbha_inverse.core.se3 import cross
+from cbha_inverse.core.so3 import cross
 import numpy as np
 
 

@@ -1,0 +1,1 @@
+"""End-to-end experiments on the simulated arm: ``cbha_demo`` and ``cbha_identify_check``."""

@@ -1,0 +1,526 @@
+"""
+``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
+
+For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
+tip/true, tip/measured, pressure_command, pressure_measured, /diagnostics), then ``cbha_sim``,
+``inverse_solver`` and ``trajectory`` as separate processes (as ``ros2 run`` would, with the
+installed params files plus a per-run override file written into the output folder), runs one
+lap, stops the nodes and the recorder with SIGINT and prints one summary line: tracking RMS and
+max error (tip of the plant vs target, moving part of the lap), computed from the run's bag by
+:func:`cbha_inverse.bag.evaluate.evaluate_bag` (what ``cbha_bag eval <bag> --start S --end E``
+prints, with the window stored in ``summary.json``), and the solver's tick time median / p99 and
+its target-to-command latency p99 (target callback entry to command published, measured in the
+node, from its diagnostics). It writes ``demo.png`` (target vs tip in the y-z plane) and
+``summary.json``, and per run the params files used, the node logs and the bag.
+
+Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
+centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
+
+``--feedback stereo`` adds the closed loop through the cameras: ``cbha_sim`` renders its tip
+marker into the rig ``--stereo-rig`` (default ``config/cameras/demo_rig.yaml``: the default rig at
+640x512, f = 700 px, so that ``make demo`` stays under two minutes) at ``--camera-rate`` frames/s,
+``stereo_tracker`` measures the tip from the images, and ``inverse_solver`` closes the loop on it
+with ``--stereo-loop-gain`` (0.2 per frame at 30 frames/s = 6 /s, below the 10 /s of direct
+feedback (0.1 x 100 Hz): a frame interval, the image transport and the tracking add ~50-70 ms of
+delay, and 10 /s rang after the start jump on the loaded 2-core machine). Its line is printed
+beside the direct-feedback runs.
+
+``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``outer_bends``, ``extension``,
+``all``, ... or a YAML file of holds) adds, after the trajectory runs, an excitation run for
+identification: ``cbha_sim`` (the same plant) and ``cbha_excite`` alone (no solver, no
+trajectory), recorded (pressure_command, pressure_measured, tip/measured, tip/true) into
+``<output>/excite_<program>/bag`` and listed in ``summary.json`` under ``excitation``.
+"""
+
+import argparse
+import json
+import os
+from pathlib import Path
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+from cbha_inverse.bag.evaluate import evaluate_bag
+from cbha_inverse.bag.storage import open_bag
+from cbha_inverse.config_files import read_yaml
+from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.identify.excitation import make_program
+from cbha_inverse.metrics import plot_runs
+from cbha_inverse.paths import config_path
+from cbha_inverse.robot.trajectory import make_trajectory
+from cbha_inverse.scene import load_scene
+import numpy as np
+import yaml
+
+NODES = ('cbha_sim', 'inverse_solver', 'trajectory')
+MODULES = {'cbha_sim': 'cbha_inverse.ros.nodes.cbha_sim',
+           'inverse_solver': 'cbha_inverse.ros.nodes.inverse_solver',
+           'trajectory': 'cbha_inverse.ros.nodes.trajectory',
+           'stereo_tracker': 'cbha_inverse.ros.nodes.stereo_tracker',
+           'cbha_excite': 'cbha_inverse.ros.nodes.cbha_excite'}
+NAMESPACE = '/cbha'
+RECORDED = ('target', 'tip/true', 'tip/measured', 'pressure_command', 'pressure_measured',
+            '/diagnostics')
+EXCITE_RECORDED = ('pressure_command', 'pressure_measured', 'tip/measured', 'tip/true')
+
+
+def parse_args(argv):
+    """Parse the command line."""
+    parser = argparse.ArgumentParser(prog='cbha_demo', description=__doc__.split('\n\n')[0])
+    parser.add_argument('--output', default='output/demo', help='output folder')
+    parser.add_argument('--scene', default='cbha.yaml', help='scene of model and plant')
+    parser.add_argument('--shapes', default='circle,square', help='comma-separated shapes')
+    parser.add_argument('--modes', default='open,closed', help='comma-separated modes')
+    parser.add_argument('--radius', type=float, default=0.06, help='circle radius [m]')
+    parser.add_argument('--side', type=float, default=0.08, help='square side [m]')
+    parser.add_argument('--circle-speed', type=float, default=0.025, help='[m/s]')
+    parser.add_argument('--square-speed', type=float, default=0.031, help='[m/s]')
+    parser.add_argument('--start-hold', type=float, default=1.5,
+                        help='time at the start point before moving [s] (not scored)')
+    parser.add_argument('--stiffness-scale', type=float, default=0.9,
+                        help='plant stiffness / model stiffness')
+    parser.add_argument('--plant-section-scale', default='1.0',
+                        help='comma-separated plant stiffness error per scene section, on top '
+                        'of --stiffness-scale (cbha_sim section_stiffness_scale)')
+    parser.add_argument('--plant-gain-scale', default='1.0',
+                        help='comma-separated plant effective-area error per valve (cbha_sim '
+                        'cavity_gain_scale)')
+    parser.add_argument('--plant-base-offset', default='0,0,0',
+                        help='comma-separated plant base position in cbha_base [m] (a tracker '
+                        'registration error; cbha_sim base_offset)')
+    parser.add_argument('--plant-seed', type=int, default=0,
+                        help='seed of the plant measurement noise (cbha_sim seed)')
+    parser.add_argument('--model-scene', default=None,
+                        help="inverse_solver's scene (default --scene), e.g. a cbha_identify "
+                        'result')
+    parser.add_argument('--feedback', default='direct,stereo',
+                        help='comma-separated: direct (tip/measured from the plant: every shape '
+                        'and mode) and/or stereo (closed loop through rendered cameras and '
+                        'stereo_tracker, for --stereo-shapes)')
+    parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
+    parser.add_argument('--stereo-rig', default='cameras/demo_rig.yaml',
+                        help='rig of the stereo runs (path, or relative to config/)')
+    parser.add_argument('--camera-rate', type=float, default=30.0, help='stereo frames/s')
+    parser.add_argument('--stereo-loop-gain', type=float, default=0.2,
+                        help='inverse_solver loop_gain of the stereo runs (per measurement)')
+    parser.add_argument('--excite', default=None, metavar='PROGRAM',
+                        help='after the trajectory runs, record an excitation run for '
+                        'cbha_identify: cbha_sim + cbha_excite with this program (bends, '
+                        'outer_bends, extension, all, ... or a YAML file of holds) into '
+                        '<output>/excite_<program>/bag')
+    parser.add_argument('--excite-hold-time', type=float, default=3.0,
+                        help='cbha_excite hold_time [s]')
+    parser.add_argument('--excite-ramp-time', type=float, default=1.0,
+                        help='cbha_excite ramp_time [s]')
+    parser.add_argument('--domain', type=int, default=None,
+                        help='ROS_DOMAIN_ID for the run (default: the environment, else a free '
+                        'one from domain_coordinator)')
+    return parser.parse_args(argv)
+
+
+def _environment(domain):
+    """Return the children's environment: isolated DDS, no wheel bootstrap flag."""
+    env = dict(os.environ)
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    if domain is not None:
+        env['ROS_DOMAIN_ID'] = str(domain)
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+def _write_params(path, values):
+    """Write a ``--params-file`` YAML for all nodes."""
+    path.write_text(yaml.safe_dump({'/**': {'ros__parameters': values}}, sort_keys=False))
+    return path
+
+
+def _start(node, run_dir, overrides, env):
+    """Start one node process with its installed params file and the run's overrides."""
+    params = _write_params(run_dir / f'{node}.yaml', overrides)
+    log = open(run_dir / f'{node}.log', 'w')
+    process = subprocess.Popen(
+        [sys.executable, '-m', MODULES[node], '--ros-args', '-r', f'__ns:={NAMESPACE}',
+         '--params-file', str(config_path(f'{node}.yaml')), '--params-file', str(params)],
+        env=env, stdout=log, stderr=subprocess.STDOUT)
+    process.log = log
+    return process
+
+
+def _start_recorder(run_dir, env, recorded=RECORDED):
+    """Start ``cbha_bag record`` of the run's topics into ``run_dir/bag`` (replacing it)."""
+    bag = run_dir / 'bag'
+    if bag.exists():
+        shutil.rmtree(bag)
+    topics = [t if t.startswith('/') else f'{NAMESPACE}/{t}' for t in recorded]
+    log = open(run_dir / 'cbha_bag_record.log', 'w')
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'cbha_inverse.ros.bag.cli', 'record', '-o', str(bag), *topics],
+        env=env, stdout=log, stderr=subprocess.STDOUT)
+    process.log = log
+    return process
+
+
+def _stop(processes):
+    """SIGINT every process, then wait; return the exit codes."""
+    for process in processes.values():
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+    codes = {}
+    for name, process in processes.items():
+        try:
+            codes[name] = process.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            codes[name] = process.wait()
+        process.log.close()
+    return codes
+
+
+class Recorder:
+    """Subscribe to target, tip/true, tip/measured and /diagnostics (one node in this process)."""
+
+    def __init__(self, context):
+        from cbha_inverse.ros.common.qos import DIAGNOSTICS_QOS, MEASURED_QOS, TARGET_QOS
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PointStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        self.node = Node('cbha_demo_recorder', context=context, namespace=NAMESPACE)
+        self.targets, self.tips, self.measured, self.diagnostics = [], [], [], {}
+        self.node.create_subscription(PointStamped, 'target', self._point(self.targets),
+                                      TARGET_QOS)
+        self.node.create_subscription(PointStamped, 'tip/true', self._point(self.tips),
+                                      MEASURED_QOS)
+        self.node.create_subscription(PointStamped, 'tip/measured', self._point(self.measured),
+                                      MEASURED_QOS)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
+                                      DIAGNOSTICS_QOS)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+
+    @staticmethod
+    def _point(store):
+        def callback(message):
+            stamp = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+            store.append((stamp, message.point.x, message.point.y, message.point.z))
+        return callback
+
+    def _on_diagnostics(self, message):
+        for status in message.status:
+            self.diagnostics[status.name] = ({v.key: v.value for v in status.values},
+                                             time.monotonic())
+
+    def spin_until(self, predicate, timeout):
+        """Spin until ``predicate()`` or ``timeout`` seconds; return the predicate."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and not predicate():
+            self.executor.spin_once(timeout_sec=0.05)
+        return predicate()
+
+    def clear(self):
+        """Forget what was recorded."""
+        self.targets.clear()
+        self.tips.clear()
+        self.measured.clear()
+        self.diagnostics.clear()
+
+    def close(self):
+        """Destroy the node."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+def _stereo_overrides(args):
+    """Return the cbha_sim and stereo_tracker overrides of a run through the cameras."""
+    from cbha_inverse.vision.rig import load_rig
+    rig_path = config_path(args.stereo_rig)
+    rig_path = rig_path if rig_path.is_file() else Path(args.stereo_rig)
+    rig = load_rig(rig_path)
+    with open(rig_path) as stream:
+        names = yaml.safe_load(stream)
+    sim = {'tip_output': 'stereo', 'camera_rig': str(rig_path),
+           'camera_rate_hz': args.camera_rate}
+    tracker = {'left_camera_info_file': str(rig_path.parent / names['left_camera_info']),
+               'right_camera_info_file': str(rig_path.parent / names['right_camera_info']),
+               'base_from_left': [float(v) for v in rig.base_from_left],
+               'diagnostics_period': 0.5}
+    return sim, tracker
+
+
+def _floats(text):
+    """Parse comma-separated floats."""
+    return [float(v) for v in text.split(',')]
+
+
+def _sim_overrides(args, valve_names):
+    """Return the ``cbha_sim`` parameters of the demo's plant."""
+    return {'scene': args.scene, 'valve_names': list(valve_names),
+            'stiffness_scale': args.stiffness_scale,
+            'section_stiffness_scale': _floats(args.plant_section_scale),
+            'cavity_gain_scale': _floats(args.plant_gain_scale),
+            'base_offset': _floats(args.plant_base_offset), 'seed': args.plant_seed}
+
+
+def excite_run_name(program):
+    """Return the folder name of the excitation run of ``program`` (a YAML file: its stem)."""
+    return f'excite_{Path(program).stem}'
+
+
+def run_excitation(recorder, run_dir, args, program, valve_names, env):
+    """
+    Run ``cbha_excite`` on the simulated plant, recorded; return its summary dict.
+
+    Parameters
+    ----------
+    recorder : Recorder
+        The demo's in-process subscriber (it tells when the plant is up).
+    run_dir : pathlib.Path
+        The run's folder (params, logs, ``bag``).
+    args : argparse.Namespace
+        The demo's options (plant, ``--excite``, hold and ramp times).
+    program : cbha_inverse.identify.excitation.ExcitationProgram
+        The program ``cbha_excite`` will run (its duration bounds the wait).
+    valve_names : sequence of str
+        Command order.
+    env : dict
+        The children's environment.
+
+    Returns
+    -------
+    dict
+        Program, holds, duration, exit codes, the bag and its message count per topic.
+
+    """
+    run_dir.mkdir(parents=True, exist_ok=True)
+    recorder.clear()
+    recorder_process = {'cbha_bag_record': _start_recorder(run_dir, env, EXCITE_RECORDED)}
+    processes = {'cbha_sim': _start('cbha_sim', run_dir, _sim_overrides(args, valve_names), env)}
+    try:
+        if not recorder.spin_until(lambda: any(
+                name.startswith('cbha_sim:') for name in recorder.diagnostics), 120.0):
+            raise RuntimeError(f'cbha_sim did not start, see the logs in {run_dir}')
+        # the program starts once the plant and the bag recorder subscribe to its commands
+        processes['cbha_excite'] = _start('cbha_excite', run_dir, {
+            'scene': args.scene, 'valve_names': list(valve_names), 'program': args.excite,
+            'hold_time': args.excite_hold_time, 'ramp_time': args.excite_ramp_time,
+            'wait_for_subscribers': 2}, env)
+        excite = processes['cbha_excite']
+        if not recorder.spin_until(lambda: excite.poll() is not None, program.duration + 120.0):
+            raise RuntimeError(f'cbha_excite did not finish, see the logs in {run_dir}')
+        time.sleep(0.3)     # the plant's response to the last command reaches the bag
+    finally:
+        codes = _stop(processes)
+        codes.update(_stop(recorder_process))
+    with open_bag(run_dir / 'bag') as bag:
+        counts = {topic.name: topic.count for topic in bag.summary.topics}
+    return {'program': args.excite, 'holds': program.n_holds,
+            'hold_time_s': program.hold_time, 'ramp_time_s': program.ramp_time,
+            'duration_s': program.duration, 'exit_codes': codes, 'bag': str(run_dir / 'bag'),
+            'messages': counts}
+
+
+def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, feedback='direct'):
+    """Run one shape in one mode for one lap and return its summary dict."""
+    speed = args.circle_speed if shape == 'circle' else args.square_speed
+    trajectory = make_trajectory(shape, center=center, radius=args.radius, side=args.side,
+                                 plane='yz', speed=speed, laps=1, start_hold=args.start_hold)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    recorder.clear()
+    common = {'scene': args.scene, 'valve_names': list(valve_names)}
+    recorder_process = {'cbha_bag_record': _start_recorder(run_dir, env)}
+    sim_extra, solver_extra, waited = {}, {}, ['cbha_sim', 'inverse_solver']
+    if feedback == 'stereo':
+        sim_extra, tracker_params = _stereo_overrides(args)
+        solver_extra = {'loop_gain': args.stereo_loop_gain}
+        waited.append('stereo_tracker')
+    processes = {'cbha_sim': _start('cbha_sim', run_dir, {
+        **_sim_overrides(args, valve_names), **sim_extra}, env)}
+    if feedback == 'stereo':
+        processes['stereo_tracker'] = _start('stereo_tracker', run_dir, tracker_params, env)
+    processes['inverse_solver'] = _start('inverse_solver', run_dir, {
+        **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
+        'diagnostics_period': 0.5, **solver_extra}, env)
+    try:
+        # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
+        # clock at 0 until the solver, this recorder and the bag recorder subscribe to it
+        if not recorder.spin_until(lambda: all(
+                any(name.startswith(f'{node}:') for name in recorder.diagnostics)
+                for node in waited), 120.0):
+            raise RuntimeError(f'nodes did not start, see the logs in {run_dir}')
+        launched = time.time()  # targets stamped earlier are late messages of a previous run
+        processes['trajectory'] = _start('trajectory', run_dir, {
+            'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
+            'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
+            'start_hold': args.start_hold, 'wait_for_subscribers': 3}, env)
+        if not recorder.spin_until(lambda: any(t[0] >= launched for t in recorder.targets),
+                                   60.0):
+            raise RuntimeError(f'no target received, see the logs in {run_dir}')
+        started = time.monotonic()
+        recorder.spin_until(lambda: time.monotonic() - started > trajectory.duration + 0.3,
+                            trajectory.duration + 10.0)
+        fresh = time.monotonic()
+        recorder.spin_until(lambda: recorder.diagnostics.get(
+            'inverse_solver: control', ({}, 0.0))[1] > fresh, 2.0)
+    finally:
+        codes = _stop(processes)
+        codes.update(_stop(recorder_process))
+    evaluation = evaluate_bag(run_dir / 'bag', namespace=NAMESPACE, tip='true',
+                              start=args.start_hold, end=trajectory.duration)
+    if evaluation.tracking is None:
+        raise RuntimeError(f'no tip samples in the lap, see the logs in {run_dir}')
+    errors = evaluation.tracking
+    control = recorder.diagnostics.get('inverse_solver: control', ({}, 0.0))[0]
+    plant = recorder.diagnostics.get('cbha_sim: plant', ({}, 0.0))[0]
+    tracking = recorder.diagnostics.get('stereo_tracker: tracking', ({}, 0.0))[0]
+
+    def number(values, key):
+        try:
+            return float(values[key])
+        except (KeyError, ValueError):
+            return float('nan')
+
+    stereo = {} if feedback != 'stereo' else {
+        'stereo_detection_rate': number(tracking, 'detection_rate'),
+        'stereo_processing_median_ms': number(tracking, 'processing_median_ms'),
+        'stereo_processing_p99_ms': number(tracking, 'processing_p99_ms'),
+        'stereo_input_rate_hz': number(tracking, 'input_rate_hz'),
+        'stereo_rejected': number(tracking, 'rejected_total')}
+    return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo,
+            'speed_m_s': speed, 'lap_s': trajectory.lap_time,
+            'rms_mm': errors.rms * 1e3, 'max_mm': errors.maximum * 1e3,
+            'samples': int(errors.errors.size),
+            'tick_median_ms': number(control, 'tick_median_ms'),
+            'tick_p99_ms': number(control, 'tick_p99_ms'),
+            'latency_median_ms': number(control, 'latency_median_ms'),
+            'latency_p99_ms': number(control, 'latency_p99_ms'),
+            'solver_ticks': number(control, 'ticks'),
+            'solver_status': {k[len('status.'):]: v for k, v in control.items()
+                              if k.startswith('status.')},
+            'plant_tick_median_ms': number(plant, 'tick_median_ms'),
+            'exit_codes': codes, 'bag': str(run_dir / 'bag'),
+            'eval_window_s': [args.start_hold, trajectory.duration],
+            'bag_latency_p99_ms': float(np.percentile(evaluation.latencies, 99) * 1e3)
+            if evaluation.latencies.size else float('nan'),
+            '_targets': evaluation.targets, '_tips': evaluation.tips}
+
+
+def main(argv=None):
+    """
+    Run the demo; return 0 when every run completed and every node exited cleanly.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line without the program name (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit code.
+
+    """
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    wall = time.monotonic()
+    output = Path(args.output)
+    output.mkdir(parents=True, exist_ok=True)
+    try:
+        scene = load_scene(args.scene)
+        configured = read_yaml(config_path('inverse_solver.yaml'))
+    except (ConfigError, FileNotFoundError) as exc:
+        return report_config_error('cbha_demo', exc)
+    center = scene.workspace_center[-1]
+    valve_names = configured.get('/**', {}).get('ros__parameters', {}).get('valve_names')
+    if valve_names is None or sorted(valve_names) != sorted(scene.actuator_names):
+        valve_names = list(scene.actuator_names)
+    excitation = None
+    if args.excite is not None:
+        try:       # the program cbha_excite will run, checked before any node starts
+            excitation = make_program(
+                scene, args.excite, hold_time=args.excite_hold_time,
+                ramp_time=args.excite_ramp_time, max_pressure=read_yaml(config_path(
+                    'cbha_excite.yaml'))['/**']['ros__parameters']['max_pressure'])
+        except ValueError as exc:      # ConfigError included
+            return report_config_error('cbha_demo', exc)
+    domain = args.domain
+    reservation = None
+    if domain is None and 'ROS_DOMAIN_ID' not in os.environ:
+        try:
+            from domain_coordinator import domain_id
+            reservation = domain_id()
+            domain = reservation.__enter__()
+        except ImportError:
+            domain = None
+    env = _environment(domain)
+    os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE',
+                                           'FASTDDS_BUILTIN_TRANSPORTS')})
+    if domain is not None:
+        os.environ['ROS_DOMAIN_ID'] = str(domain)
+    used_domain = env.get('ROS_DOMAIN_ID') or '0 (unset: the default)'
+    print(f'cbha_demo: scene {scene.name}, centre {[round(float(v), 4) for v in center]} m, '
+          f'plant stiffness x{args.stiffness_scale:g}, ROS_DOMAIN_ID {used_domain}, '
+          f'output {output}', flush=True)
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    recorder = Recorder(context)
+    results = []
+    feedbacks = args.feedback.split(',')
+    runs = [(shape, mode, 'direct') for shape in args.shapes.split(',')
+            for mode in args.modes.split(',') if 'direct' in feedbacks]
+    runs += [(shape, 'closed', 'stereo') for shape in args.stereo_shapes.split(',')
+             if 'stereo' in feedbacks]
+    try:
+        for shape, mode, feedback in runs:
+            name = f'{shape}_{mode}' + ('_stereo' if feedback == 'stereo' else '')
+            result = run_once(recorder, output / name, shape, mode, args, center, valve_names,
+                              env, feedback)
+            results.append(result)
+            label = mode if feedback == 'direct' else 'stereo'
+            print(f"{shape:6s} {label:6s}: RMS {result['rms_mm']:6.3f} mm, max "
+                  f"{result['max_mm']:6.3f} mm | tick median {result['tick_median_ms']:.3f}"
+                  f" ms, p99 {result['tick_p99_ms']:.3f} ms | target->command latency "
+                  f"p99 {result['latency_p99_ms']:.3f} ms", flush=True)
+            if feedback == 'stereo':
+                print(f"{'':6s} {'':6s}  closed loop through the cameras ({args.camera_rate:g}"
+                      f' frames/s, {args.stereo_rig}): detection rate '
+                      f"{result['stereo_detection_rate']:.3f}, tracker median "
+                      f"{result['stereo_processing_median_ms']:.2f} ms, p99 "
+                      f"{result['stereo_processing_p99_ms']:.2f} ms per pair", flush=True)
+        if excitation is not None:
+            excited = run_excitation(recorder, output / excite_run_name(args.excite), args,
+                                     excitation, valve_names, env)
+            print(f"excite {args.excite}: {excited['holds']} holds, "
+                  f"{excited['duration_s']:.1f} s, "
+                  f"{excited['messages'].get(f'{NAMESPACE}/tip/measured', 0)} tip samples, "
+                  f"exit codes {excited['exit_codes']}; bag {excited['bag']}", flush=True)
+    finally:
+        recorder.close()
+        rclpy.try_shutdown(context=context)
+        if reservation is not None:
+            reservation.__exit__(None, None, None)
+    plot_runs([{'title': f"{r['shape']} {r['mode']} loop"
+                + (' (stereo cameras)' if r['feedback'] == 'stereo' else ''),
+                'targets': r['_targets'],
+                'tips': r['_tips'], 'rms': r['rms_mm'] * 1e-3} for r in results],
+              output / 'demo.png')
+    summary = {'scene': scene.name, 'center_m': [float(v) for v in center],
+               'stiffness_scale': args.stiffness_scale, 'wall_time_s': time.monotonic() - wall,
+               'runs': [{k: v for k, v in r.items() if not k.startswith('_')} for r in results]}
+    if excitation is not None:
+        summary['excitation'] = excited
+    (output / 'summary.json').write_text(json.dumps(summary, indent=2))
+    print(f"wrote {output / 'demo.png'} and {output / 'summary.json'} "
+          f"({summary['wall_time_s']:.0f} s)")
+    clean = all(code == 0 for r in results + ([excited] if excitation is not None else [])
+                for code in r['exit_codes'].values())
+    return 0 if clean else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,165 @@
+"""
+``cbha_bag record``: subscribe raw (no deserialisation) and write a rosbag2 bag (v9 + MCAP).
+
+A topic is subscribed as soon as the graph shows it with a publisher (polled every 0.1 s on the
+steady clock), with the profile that reaches every publisher (reliable only if all are, see
+:func:`cbha_inverse.bag.qos.adapt_offered`) and a deep history; the publishers' offered profiles
+go into the metadata. Each message is written in its callback with the receive time of the node
+clock (``--use-sim-time``: ``/clock``), so SIGINT or SIGTERM loses nothing that was received: the
+spin loop ends and the bag is closed (``metadata.yaml`` written).
+"""
+
+import signal
+import sys
+import time
+
+from cbha_inverse.bag.qos import adapt_offered
+from cbha_inverse.bag.storage import BagError, BagWriter, knows_type
+from cbha_inverse.errors import report_config_error
+from cbha_inverse.ros.bag.qos import message_class, qos_from_rclpy, qos_to_rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+RECORD_DEPTH = 1000
+"""History depth of the recorder's subscriptions (a slow disk must not drop reliable samples)."""
+
+
+def absolute(topic):
+    """Return a topic name resolved against the root namespace (``target`` -> ``/target``)."""
+    return topic if topic.startswith('/') else '/' + topic
+
+
+class BagRecorder:
+    """
+    One rclpy node that records topics into a :class:`cbha_inverse.bag.storage.BagWriter`.
+
+    Parameters
+    ----------
+    context : rclpy.Context
+        Initialised context.
+    writer : cbha_inverse.bag.storage.BagWriter
+        The open bag.
+    topics : sequence of str
+        Topics to record (ignored with ``all_topics``).
+    all_topics : bool
+        Record every topic that appears (hidden topics excluded).
+    use_sim_time : bool
+        Time stamps from ``/clock`` instead of the system clock.
+    progress : file-like, optional
+        Where the progress line goes once a second (default stderr).
+
+    """
+
+    def __init__(self, context, writer, topics=(), all_topics=False, use_sim_time=False,
+                 progress=None):
+        self.node = Node('cbha_bag_record', context=context, start_parameter_services=False,
+                         parameter_overrides=[Parameter('use_sim_time', value=use_sim_time)])
+        self.writer = writer
+        self.wanted = {absolute(t) for t in topics}
+        self.all_topics = all_topics
+        self.progress = sys.stderr if progress is None else progress
+        self.subscriptions = {}
+        self.skipped = set()
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.node.create_timer(0.1, self.discover, clock=steady)
+        self.node.create_timer(1.0, self.report, clock=steady)
+        self.discover()
+
+    def discover(self):
+        """Subscribe to every wanted topic that now has a publisher."""
+        for name, types in self.node.get_topic_names_and_types():
+            if name in self.subscriptions or name in self.skipped:
+                continue
+            if not (name in self.wanted or (self.all_topics and '/_' not in name)):
+                continue
+            publishers = self.node.get_publishers_info_by_topic(name)
+            if not publishers:
+                continue
+            msgtype = types[0]
+            try:
+                if len(types) > 1 or not knows_type(msgtype):
+                    raise ValueError(f'type {", ".join(types)} is not recordable')
+                message_type = message_class(msgtype)
+            except ValueError as exc:
+                self.skipped.add(name)
+                self._say(f'not recording {name}: {exc}')
+                continue
+            offered = [qos_from_rclpy(info.qos_profile) for info in publishers]
+            subscribe_qos = qos_to_rclpy(adapt_offered(offered)._replace(depth=RECORD_DEPTH))
+            self.writer.add_topic(name, msgtype, offered)
+            self.subscriptions[name] = self.node.create_subscription(
+                message_type, name, self._writer_for(name), subscribe_qos, raw=True)
+            self._say(f"Subscribed to topic '{name}'")
+
+    def _writer_for(self, name):
+        def callback(data):
+            self.writer.write(name, self.node.get_clock().now().nanoseconds, data)
+        return callback
+
+    def _say(self, text):
+        print(text, file=self.progress, flush=True)
+
+    def report(self):
+        """Print the progress line: messages recorded per topic."""
+        counts = ', '.join(f'{name} {count}' for name, count in self.writer.counts.items())
+        self._say(f'recording {sum(self.writer.counts.values())} messages: {counts or "-"}')
+
+    def destroy(self):
+        """Destroy the node."""
+        self.node.destroy_node()
+
+
+def record(args):
+    """
+    Run ``cbha_bag record`` until ``--duration``, SIGINT or SIGTERM; return the exit code.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``output``, ``topics``, ``all``, ``duration``, ``max_bag_size``, ``max_bag_duration``,
+        ``use_sim_time``.
+
+    Returns
+    -------
+    int
+        0 once the bag is closed, 2 on bad arguments.
+
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    if not args.topics and not args.all:
+        return report_config_error('cbha_bag record', 'give topics or -a')
+    output = args.output or time.strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
+    try:
+        writer = BagWriter(output, max_bag_size=args.max_bag_size,
+                           max_bag_duration=int(args.max_bag_duration * 1e9))
+    except (BagError, OSError) as exc:
+        return report_config_error('cbha_bag record', exc)
+    # SIGINT/SIGTERM only set a flag: a signal never interrupts a write half-way, the loop
+    # notices it within 0.1 s and the bag is closed below
+    stop = []
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, lambda *_: stop.append(True))
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    recorder = executor = None
+    try:
+        recorder = BagRecorder(rclpy.get_default_context(), writer, args.topics, args.all,
+                               args.use_sim_time)
+        executor = SingleThreadedExecutor()
+        executor.add_node(recorder.node)
+        deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
+        while not stop and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=min(0.1, max(deadline - time.monotonic(), 0.0)))
+    finally:
+        path = writer.close()
+        if recorder is not None:
+            recorder.report()
+            recorder.destroy()
+        if executor is not None:
+            executor.shutdown()
+        rclpy.try_shutdown()
+    print(f'wrote {path} ({sum(writer.counts.values())} messages)', file=sys.stderr)
+    return 0

@@ -1,0 +1,1 @@
+"""What the nodes share: parameters, the runner, diagnostics, QoS, message conversions, images."""

@@ -1,0 +1,243 @@
+"""
+``cbha_launch sim|robot [name:=value ...]``: the launch files' compositions, without ``launch``.
+
+Starts every node of :data:`cbha_inverse.ros.launch.compositions.COMPOSITIONS` ``[name]`` as a
+process (``python -m cbha_inverse.ros.nodes.<node> --ros-args -r __ns:=<namespace>
+--params-file <file> --params-file <overrides>``), prefixes each output line with
+``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits for them. All nodes are required: when one exits by itself,
+the others are stopped. Exit status: 0 when every node stopped cleanly after the signal, else the
+first non-zero status of a node; 2 on a bad argument or params file (one line on stderr).
+``--dry-run`` prints the command lines instead.
+"""
+
+import argparse
+import os
+from pathlib import Path
+import shlex
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+from cbha_inverse.config_files import read_yaml
+from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.ros.launch.compositions import ArgumentError, COMPOSITIONS, node_module, resolve
+import yaml
+
+PROGRAM = 'cbha_launch'
+STOP_TIMEOUT = 15.0
+
+
+def _parser():
+    epilog = []
+    for composition in COMPOSITIONS.values():
+        epilog.append(f'{composition.name}: {composition.description}')
+        for argument in composition.all_arguments():
+            default = argument.default or '(installed file)'
+            choices = f" [{'|'.join(argument.choices)}]" if argument.choices else ''
+            epilog.append(f'  {argument.name}:={default}{choices}  {argument.description}')
+    parser = argparse.ArgumentParser(
+        prog=PROGRAM, formatter_class=argparse.RawDescriptionHelpFormatter,
+        description='Start a composition of cbha_inverse nodes (as launch/<name>.launch.py).',
+        epilog='\n'.join(epilog))
+    parser.add_argument('composition', choices=sorted(COMPOSITIONS))
+    parser.add_argument('arguments', nargs='*', metavar='name:=value')
+    parser.add_argument('--dry-run', action='store_true', help='print the commands, start none')
+    return parser
+
+
+def parse_assignments(items):
+    """
+    Parse ``name:=value`` arguments.
+
+    Parameters
+    ----------
+    items : list of str
+        The arguments.
+
+    Returns
+    -------
+    dict
+        ``name -> value``.
+
+    Raises
+    ------
+    ArgumentError
+        If an item is not of the form ``name:=value``.
+
+    """
+    values = {}
+    for item in items:
+        name, sep, value = item.partition(':=')
+        if not sep or not name:
+            raise ArgumentError(f'{item!r} is not name:=value')
+        values[name] = value
+    return values
+
+
+def command_lines(processes, overrides_dir):
+    """
+    Return the command line of each node and write its overrides params file.
+
+    Parameters
+    ----------
+    processes : list of cbha_inverse.ros.launch.compositions.NodeProcess
+        The resolved composition.
+    overrides_dir : pathlib.Path
+        Where the overrides params files are written.
+
+    Returns
+    -------
+    list of (str, list of str)
+        ``(executable, argv)`` per node.
+
+    Raises
+    ------
+    cbha_inverse.errors.ConfigError
+        If a params file is missing or not valid YAML.
+
+    """
+    lines = []
+    for process in processes:
+        for params in process.params_files:
+            read_yaml(params)
+        argv = [sys.executable, '-m', node_module(process.executable), '--ros-args',
+                '-r', f'__ns:={process.namespace}', '-r', f'__node:={process.executable}']
+        for params in process.params_files:
+            argv += ['--params-file', params]
+        if process.parameters:
+            overrides = Path(overrides_dir) / f'{process.executable}.yaml'
+            overrides.write_text(yaml.safe_dump(
+                {'/**': {'ros__parameters': process.parameters}}, sort_keys=False))
+            argv += ['--params-file', str(overrides)]
+        lines.append((process.executable, argv))
+    return lines
+
+
+def _child_environment():
+    """Return the nodes' environment (the rclpy wheels re-bootstrap in each child)."""
+    env = dict(os.environ)
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+def _relay(name, stream, out, lock):
+    """Copy a child's output line by line, prefixed with its node name."""
+    for line in stream:
+        with lock:
+            out.write(f'[{name}] {line}')
+            out.flush()
+
+
+def supervise(lines, out=None):
+    """
+    Run the node processes until a signal or until one of them exits; stop all of them.
+
+    Parameters
+    ----------
+    lines : list of (str, list of str)
+        From :func:`command_lines`.
+    out : file-like, optional
+        Where the prefixed output goes (default ``sys.stdout``).
+
+    Returns
+    -------
+    int
+        0 if every node stopped cleanly after SIGINT/SIGTERM, else the first non-zero status.
+
+    """
+    out = sys.stdout if out is None else out
+    stop = threading.Event()
+    previous = {sig: signal.signal(sig, lambda *_: stop.set())
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    lock = threading.Lock()
+    children, relays = [], []
+    try:
+        for name, argv in lines:
+            # own session: a Ctrl-C in the terminal reaches the nodes once, through us
+            child = subprocess.Popen(argv, env=_child_environment(), stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, start_new_session=True)
+            children.append((name, child))
+            relay = threading.Thread(target=_relay, args=(name, child.stdout, out, lock),
+                                     daemon=True)
+            relay.start()
+            relays.append(relay)
+        first_exit = None
+        while not stop.is_set() and first_exit is None:
+            first_exit = next(((name, child.returncode) for name, child in children
+                               if child.poll() is not None), None)
+            stop.wait(0.1)
+        if first_exit is not None:
+            with lock:
+                out.write(f'[{PROGRAM}] {first_exit[0]} exited with status {first_exit[1]}: '
+                          'stopping the others\n')
+        statuses = _stop_all(children)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    for relay in relays:
+        relay.join(timeout=5.0)
+    failed = [(name, code) for name, code in statuses if code != 0]
+    with lock:
+        out.write(f'[{PROGRAM}] exit statuses: '
+                  + ', '.join(f'{name} {code}' for name, code in statuses) + '\n')
+        out.flush()
+    if first_exit is not None and first_exit[1] != 0:
+        return first_exit[1]
+    return failed[0][1] if failed else 0
+
+
+def _stop_all(children):
+    """SIGINT every running child, wait (SIGKILL after a timeout); return (name, status)."""
+    for _, child in children:
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + STOP_TIMEOUT
+    statuses = []
+    for name, child in children:
+        try:
+            code = child.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            child.kill()
+            code = child.wait()
+        statuses.append((name, code))
+    return statuses
+
+
+def main(argv=None):
+    """
+    Run the ``cbha_launch`` command.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        See the module docstring.
+
+    """
+    args = _parser().parse_intermixed_args(argv)
+    composition = COMPOSITIONS[args.composition]
+    with tempfile.TemporaryDirectory(prefix='cbha_launch_') as overrides_dir:
+        try:
+            processes = resolve(composition, parse_assignments(args.arguments))
+            lines = command_lines(processes, overrides_dir)
+        except (ArgumentError, ConfigError) as exc:
+            return report_config_error(PROGRAM, exc)
+        if args.dry_run:
+            for name, argv_line in lines:
+                print(f'{name}: {shlex.join(argv_line)}')
+            return 0
+        print(f'[{PROGRAM}] {composition.name}: ' + ', '.join(
+            f'{p.executable} ({p.namespace})' for p in processes), flush=True)
+        return supervise(lines)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

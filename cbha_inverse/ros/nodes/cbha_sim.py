@@ -1,0 +1,340 @@
+"""
+``cbha_sim``: a simulated CBHA for hardware-free runs (the plant of closed-loop runs and tests).
+
+Subscribes ``pressure_command`` (Float64MultiArray, gauge Pa in ``valve_names`` order, reliable)
+and rejects malformed commands like a valve driver (wrong length, non-finite, outside
+``[0, max_pressure]``: logged with throttling, counted, the last valid set-point stays). A valid
+command takes effect after the transport ``latency``; the valve pressures follow it with a
+first-order lag ``valve_time_constant`` (:class:`cbha_inverse.sim.valves.ValveLine`: exact for
+piecewise-constant commands, whatever the tick times). Every tick at ``rate_hz``:
+
+- the valve pressures are published on ``pressure_measured`` (Float64MultiArray, Pa in
+  ``valve_names`` order, sensor data QoS: what ``robotino_bridge`` publishes from the real
+  driver's readings), with Gaussian noise ``pressure_noise_std`` per valve (default 0; seeded
+  from ``seed`` as a stream of its own, so the tip noise of a seed does not change with it);
+- the plant (:class:`cbha_inverse.sim.plant.StaticPlant`: the scene loaded with a deliberate
+  ``stiffness_scale`` error, per-section ``section_stiffness_scale`` and per-valve
+  ``cavity_gain_scale`` errors and a ``base_offset`` applied as a scene calibration, and its
+  own ``gravity``) is moved
+  to the equilibrium of those valve pressures (noise-free) by warm-started Newton steps;
+- the tip is published on ``tip/measured`` (PointStamped, sensor data QoS) with Gaussian noise
+  ``noise_std`` (seeded) and, noise-free, on ``tip/true``.
+
+Time (ticks, latency, valve lag, stamps) is the node clock: with ``use_sim_time`` the plant runs
+on ``/clock``.
+
+``tip_output: stereo`` replaces ``tip/measured`` by rendered stereo cameras (the tip marker drawn
+into both cameras of ``camera_rig`` at ``camera_rate_hz``: ``stereo/{left,right}/image_raw`` and
+``camera_info``, see :mod:`cbha_inverse.ros.common.sim_cameras`) for ``stereo_tracker``; ``both``
+publishes both. OpenCV is imported only then.
+
+Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
+"""
+
+from dataclasses import dataclass
+import math
+import sys
+import time
+
+from cbha_inverse.robot.robotino import ARM_VALVES
+from cbha_inverse.robot.safety import check_command, valve_order
+from cbha_inverse.ros.common.conversions import command_array, command_message, point_stamped
+from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_status, OK,
+                                                 TimingStats, WARN)
+from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
+from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.scene import load_scene
+from cbha_inverse.scene.calibration import Calibration
+from cbha_inverse.sim.plant import StaticPlant
+from cbha_inverse.sim.valves import ValveLine
+from geometry_msgs.msg import PointStamped
+import numpy as np
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+NODE_NAME = 'cbha_sim'
+
+
+@dataclass(frozen=True)
+class CbhaSimParams:
+    """Parameters of the ``cbha_sim`` node."""
+
+    scene: str = param('cbha.yaml', 'plant scene YAML: a file path, or a name in config/scenes')
+    stiffness_scale: float = param(0.9, 'plant stiffness / nominal stiffness (model error) [-]',
+                                   low=0.01, high=100.0)
+    section_stiffness_scale: tuple = param(
+        (1.0,), 'plant stiffness error per chain section, scene section order, on top of '
+        'stiffness_scale (one value: every section) [-]')
+    cavity_gain_scale: tuple = param(
+        (1.0,), 'plant effective-area error per cavity, valve_names order (one value: every '
+        'cavity) [-]')
+    base_offset: tuple = param((0.0, 0.0, 0.0), 'plant base position error in cbha_base (the '
+                               'tracker registration error the tips are measured with) [m]')
+    gravity: tuple = param((0.0, 0.0, -9.81), 'plant gravity in cbha_base [m/s^2]')
+    valve_names: tuple = param(None, 'command order: a permutation of the scene actuators '
+                               '(unset: the scene order; the CBHA scene order is the vendor '
+                               f'channels 0-5, {", ".join(ARM_VALVES)})',
+                               unset_type='string_array')
+    max_pressure: float = param(150000.0, 'driver limit [Pa]: commands above are rejected',
+                                low=0.0, high=1.0e7)
+    valve_time_constant: float = param(0.01, 'first-order valve response [s] (paper: 10 ms)',
+                                       low=0.0, high=10.0)
+    latency: float = param(0.003, 'transport latency command -> valves [s] (paper: 3 ms)',
+                           low=0.0, high=10.0)
+    rate_hz: float = param(100.0, 'plant update and tip publication rate [Hz]',
+                           low=1.0, high=2000.0)
+    noise_std: float = param(0.0002, 'standard deviation of the tip measurement noise per axis '
+                             '[m]', low=0.0, high=0.1)
+    pressure_noise_std: float = param(0.0, 'standard deviation of the noise on '
+                                      'pressure_measured per valve [Pa]', low=0.0, high=1.0e6)
+    seed: int = param(0, 'seed of the measurement noise (tip and pressures: separate streams)',
+                      low=0, high=2 ** 31 - 1)
+    tolerance: float = param(1e-6, 'static equilibrium residual tolerance [N, N*m]',
+                             low=1e-14, high=1.0)
+    max_iterations: int = param(20, 'Newton iterations per plant update at most', low=1,
+                                high=1000)
+    frame_id: str = param('cbha_base', 'frame_id of the published tip')
+    diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
+    log_throttle: float = param(1.0, 'least time between two logs of rejected commands [s]',
+                                low=0.0, high=3600.0)
+    tip_output: str = param('point', 'tip feedback: tip/measured points, rendered stereo '
+                            'images, or both', choices=('point', 'stereo', 'both'))
+    camera_rig: str = param('cameras/rig.yaml', 'stereo output: rig file (a path, or relative '
+                            'to config/)')
+    camera_rate_hz: float = param(30.0, 'stereo output: frame rate [Hz]', low=0.1, high=1000.0)
+    marker_radius: float = param(0.006, 'stereo output: radius of the tip sphere [m]',
+                                 low=0.0005, high=0.1)
+
+
+def plant_errors(section_names, valve_names, section_scales, gain_scales,
+                 base_offset=(0.0, 0.0, 0.0)):
+    """
+    Turn the per-section and per-valve error parameters into a scene calibration.
+
+    Parameters
+    ----------
+    section_names : sequence of str
+        The scene's chain sections, in order.
+    valve_names : sequence of str
+        The command order.
+    section_scales : sequence of float  [-]
+        One stiffness factor per section, or one for all.
+    gain_scales : sequence of float  [-]
+        One effective-area factor per valve (cavity), or one for all.
+    base_offset : (3,) sequence of float  [m]
+        Position of the plant's chain base in ``base_frame``.
+
+    Returns
+    -------
+    cbha_inverse.scene.calibration.Calibration
+        Only the factors that differ from 1 (a scene without sections or cavities accepts ones).
+
+    Raises
+    ------
+    ValueError
+        On a wrong count, a factor that is not finite and positive, or an offset that is not 3
+        finite numbers.
+
+    """
+    tables = []
+    for label, names, scales in (('section_stiffness_scale', section_names, section_scales),
+                                 ('cavity_gain_scale', valve_names, gain_scales)):
+        values = [float(v) for v in scales]
+        if len(values) == 1 and (names or values[0] == 1.0):
+            values = values * len(names)
+        if len(values) != len(names):
+            raise ValueError(f'{label} needs 1 or {len(names)} values ({list(names)}), got '
+                             f'{len(scales)}')
+        if not all(math.isfinite(v) and v > 0.0 for v in values):
+            raise ValueError(f'{label} must be finite and > 0, got {list(scales)}')
+        tables.append({n: v for n, v in zip(names, values) if v != 1.0})
+    offset = [float(v) for v in base_offset]
+    if len(offset) != 3 or not all(math.isfinite(v) for v in offset):
+        raise ValueError(f'base_offset must be 3 finite numbers [m], got {list(base_offset)}')
+    return Calibration(*tables, base_position=tuple(offset))
+
+
+class CbhaSimNode(Node):
+    """
+    The simulated robot: pressure command in, tip position out.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node``.
+
+    Raises
+    ------
+    ParameterError
+        On invalid parameters or a scene that does not fit them.
+
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        try:
+            self.params = declare_parameters(self, CbhaSimParams)
+            p = self.params
+            if len(p.gravity) != 3 or not all(math.isfinite(g) for g in p.gravity):
+                raise ValueError(f'gravity must be 3 finite numbers, got {list(p.gravity)}')
+            nominal = load_scene(p.scene)
+            self.valve_names, self.order = valve_order(nominal.actuator_names, p.valve_names)
+            errors = plant_errors(nominal.section_names, self.valve_names,
+                                  p.section_stiffness_scale, p.cavity_gain_scale, p.base_offset)
+            self.scene = load_scene(p.scene, stiffness_scale=p.stiffness_scale,
+                                    gravity=p.gravity, calibration=errors)
+        except (ValueError, FileNotFoundError, KeyError) as exc:
+            self.destroy_node()
+            raise ParameterError(str(exc)) from None
+        self.plant = StaticPlant(self.scene, tolerance=p.tolerance,
+                                 max_iterations=p.max_iterations)
+        self.rng = np.random.default_rng(p.seed)
+        # an independent child stream: the tip noise sequence of a seed stays what it was
+        self.pressure_rng = np.random.default_rng(np.random.SeedSequence(p.seed, spawn_key=(1,)))
+        self.valves = ValveLine(len(self.valve_names), p.latency, p.valve_time_constant)
+        self.rejected = {}
+        self.accepted = 0
+        self.last_result = None
+        self.last_stamp = None
+        self.not_converged = 0
+        self.failures = 0
+        self.resets = 0
+        self.tick_times = TimingStats()
+        self.measured_publisher = self.create_publisher(PointStamped, 'tip/measured',
+                                                        MEASURED_QOS)
+        self.truth_publisher = self.create_publisher(PointStamped, 'tip/true', MEASURED_QOS)
+        self.pressure_publisher = self.create_publisher(Float64MultiArray, 'pressure_measured',
+                                                        MEASURED_QOS)
+        self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
+                                 COMMAND_QOS)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
+        self.cameras = None
+        if p.tip_output != 'point':
+            self.cameras = self._start_cameras()
+        self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
+        self.get_logger().info(
+            f'plant {self.scene.name} x{p.stiffness_scale:g} stiffness (sections '
+            f'{list(p.section_stiffness_scale)}, cavity gains {list(p.cavity_gain_scale)}, '
+            f'base offset {[v * 1e3 for v in p.base_offset]} mm), gravity '
+            f'{list(p.gravity)}, valves {p.valve_time_constant * 1e3:g} ms, latency '
+            f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm and '
+            f'{p.pressure_noise_std:g} Pa, {p.rate_hz:g} Hz')
+
+    def _start_cameras(self):
+        from cbha_inverse.paths import config_path
+        from cbha_inverse.ros.common.sim_cameras import SimulatedCameras
+        from cbha_inverse.vision.rig import load_rig
+        p = self.params
+        installed = config_path(p.camera_rig)
+        try:
+            rig = load_rig(installed if installed.is_file() else p.camera_rig)
+        except ValueError as exc:
+            self.destroy_node()
+            raise ParameterError(str(exc)) from None
+
+        def shape():
+            result, stamp = self.last_result, self.last_stamp
+            if result is None:
+                return None
+            return result.effector_positions[-1], result.positions, stamp
+
+        return SimulatedCameras(self, rig, p.camera_rate_hz, p.marker_radius, p.seed, shape)
+
+    def _on_command(self, message):
+        values = command_array(message)
+        check = check_command(values, len(self.order), self.params.max_pressure)
+        if not check.ok:
+            self.rejected[check.reason] = self.rejected.get(check.reason, 0) + 1
+            self.get_logger().warn(f'rejected pressure_command: {check.detail}',
+                                   throttle_duration_sec=self.params.log_throttle)
+            return
+        in_scene_order = np.empty(len(self.order))
+        in_scene_order[self.order] = values
+        self.valves.send(self._node_seconds(), in_scene_order)
+        self.accepted += 1
+
+    @property
+    def pressures(self):
+        """(m,) ndarray [Pa]: the valve pressures of the last tick, scene actuator order."""
+        return self.valves.pressures
+
+    def _node_seconds(self):
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_reset(self, request, response):
+        """``~/reset``: plant at rest, valves vented, pending commands dropped."""
+        self.plant.reset()
+        self.valves.reset()
+        self.last_result = None
+        self.resets += 1
+        response.success = True
+        response.message = 'plant at rest, valves at 0 Pa'
+        self.get_logger().info(response.message)
+        return response
+
+    def _tick(self):
+        start = time.perf_counter()
+        # node clock (use_sim_time: /clock); a clock that jumps back (a looped bag) is a pause
+        pressures = self.valves.advance(self._node_seconds())
+        measured = pressures[self.order] + self.pressure_rng.normal(
+            0.0, self.params.pressure_noise_std, len(self.order))
+        self.pressure_publisher.publish(command_message(measured, self.valve_names))
+        try:
+            result = self.plant.update(pressures)
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            self.failures += 1
+            self.get_logger().error(f'plant update failed, state kept: {exc!r}',
+                                    throttle_duration_sec=self.params.log_throttle)
+            return
+        stamp = self.get_clock().now().to_msg()
+        self.last_result, self.last_stamp = result, stamp
+        self.not_converged += not result.converged
+        tip = result.effector_positions[-1]
+        noisy = tip + self.rng.normal(0.0, self.params.noise_std, 3)
+        if self.params.tip_output != 'stereo':
+            self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
+        self.truth_publisher.publish(point_stamped(tip, stamp, self.params.frame_id))
+        self.tick_times.add(time.perf_counter() - start)
+
+    def _statuses(self):
+        result = self.last_result
+        total = sum(self.rejected.values())
+        values = {'accepted_commands': self.accepted, 'rejected_total': total,
+                  'resets': self.resets,
+                  **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
+                  'valve_pressures_pa': ' '.join(f'{v:.0f}' for v in self.pressures[self.order]),
+                  'newton_iterations': result.iterations if result else 0,
+                  'residual_norm': result.residual_norm if result else math.nan,
+                  'not_converged_updates': self.not_converged, 'failed_updates': self.failures,
+                  **self.tick_times.summary('tick'),
+                  'camera_frames': self.cameras.frames if self.cameras else 0}
+        level = WARN if total or (result is not None and not result.converged) else OK
+        message = (f'{total} rejected commands' if total else
+                   'plant not converged' if level == WARN else 'ok')
+        return [make_status(NODE_NAME, 'plant', level, message, values)]
+
+
+def main(argv=None):
+    """
+    Run the ``cbha_sim`` node until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line (default ``sys.argv``), e.g. ``['cbha_sim', '--ros-args',
+        '--params-file', 'config/cbha_sim.yaml', '-r', '__ns:=/cbha']``.
+
+    Returns
+    -------
+    int
+        0 on a clean shutdown, 2 on invalid parameters.
+
+    """
+    return run_node(CbhaSimNode, NODE_NAME, argv, params_class=CbhaSimParams)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

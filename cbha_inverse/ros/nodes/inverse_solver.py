@@ -1,0 +1,432 @@
+"""
+``inverse_solver``: the controller node (DESIGN sections 6 and 7).
+
+Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/measured``
+(PointStamped, sensor data); publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order =
+``valve_names``, reliable), ``/diagnostics`` (~1 Hz) and ``backbone`` (MarkerArray).
+
+Nothing is published before the first valid target (``publish_idle: true`` publishes the vent
+command meanwhile). With ``trigger: target`` a valid target is solved and its command published
+inside the target callback (lowest target-to-command latency); the timer at ``rate_hz`` ticks the
+solver only when no target came during the last period, so a target sent once, or one that stops
+arriving, stays the set-point and the model keeps converging to it. What holds or vents
+(``stale_action``) is stale feedback in closed loop. That timer and the stamps follow the node
+clock (``use_sim_time``: ``/clock``, e.g. from ``cbha_bag play --clock``); the staleness watchdog
+(hold, vent, idle vent) runs on its own timer on the steady clock, so a paused or finished bag
+still makes the node hold or vent. Services: ``~/enable`` (std_srvs/SetBool: stop commanding, or
+resume) and ``~/reset`` (std_srvs/Trigger: model state and closed-loop correction back to rest;
+the set-point stays). Every input passes
+:mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
+the last valid command stays. Every command passes
+:func:`cbha_inverse.robot.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
+"""
+
+import bisect
+import collections
+from dataclasses import dataclass
+import math
+import sys
+import time
+
+from cbha_inverse.core.inverse.solver import TargetCorrector
+from cbha_inverse.robot.robotino import ARM_VALVES
+from cbha_inverse.robot.safety import (
+    bounded_command, check_point, stale_action, StalenessWatch, valve_order, WorkspaceBox)
+from cbha_inverse.ros.common.conversions import backbone_markers, command_message, point_array
+from cbha_inverse.ros.common.diagnostics import (
+    DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
+from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
+from cbha_inverse.ros.common.qos import COMMAND_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.scene import load_scene
+from geometry_msgs.msg import PointStamped
+import numpy as np
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
+
+NODE_NAME = 'inverse_solver'
+
+
+@dataclass(frozen=True)
+class InverseSolverParams:
+    """Parameters of the ``inverse_solver`` node."""
+
+    scene: str = param('cbha.yaml', 'scene YAML: a file path, or a name in config/scenes')
+    rate_hz: float = param(100.0, 'control tick rate [Hz]', low=1.0, high=2000.0)
+    trigger: str = param('target', 'target: solve when a target arrives (and on the timer when '
+                         'none came for a period); timer: solve on the timer only',
+                         choices=('target', 'timer'))
+    mode: str = param('open', 'open: model only (the paper); closed: integral correction from '
+                      'tip/measured', choices=('open', 'closed'))
+    valve_names: tuple = param(None, 'command order: a permutation of the scene actuators '
+                               '(unset: the scene order; the CBHA scene order is the vendor '
+                               f'channels 0-5, {", ".join(ARM_VALVES)})',
+                               unset_type='string_array')
+    max_pressure: float = param(150000.0, 'p_max [Pa] ceiling of every command (1.5 bar)',
+                                low=0.0, high=1.0e7)
+    target_timeout: float = param(0.5, 'a target older than this is reported stale [s] '
+                                  '(steady clock; it stays the set-point, the model keeps '
+                                  'converging to it)', low=0.001, high=3600.0)
+    feedback_timeout: float = param(0.5, 'closed loop: measurement older than this is stale [s]',
+                                    low=0.001, high=3600.0)
+    stale_action: str = param('hold', 'closed loop, on stale feedback: hold the last command '
+                              'or vent', choices=('hold', 'vent'))
+    publish_idle: bool = param(False, 'before the first valid target, publish the vent command '
+                               'at rate_hz (false: publish nothing until a target arrives)')
+    vent_pressure: float = param(0.0, 'safe pressure commanded when venting [Pa]',
+                                 low=0.0, high=1.0e7)
+    frame_id: str = param('cbha_base', 'the only accepted frame_id of target and tip/measured')
+    workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
+                                 'and measurements outside are rejected')
+    workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]')
+    loop_gain: float = param(0.1, 'closed loop: integral gain per measurement [-]',
+                             low=0.0, high=1.0)
+    max_correction: float = param(0.03, 'closed loop: largest target correction [m]',
+                                  low=0.0, high=1.0)
+    newton_steps: int = param(1, 'Newton steps of the model per tick', low=1, high=20)
+    relinearize_every: int = param(1, 'ticks between linearisations (1 = every tick, the paper; '
+                                   'N > 1 re-solves the QP of the last linear model in between)',
+                                   low=1, high=1000)
+    qp_solver: str = param('active_set', 'QP of each tick: active_set (exact KKT solution of '
+                           'the small box QP, proxsuite takes over if it does not converge), '
+                           'proxsuite (dense, warm-started) or gauss_seidel (the paper)',
+                           choices=('active_set', 'proxsuite', 'gauss_seidel'))
+    marker_period: float = param(0.1, 'period of the backbone markers [s]', low=0.01, high=60.0)
+    diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
+    log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
+                                low=0.0, high=3600.0)
+
+
+def _stamp_ns(message):
+    """Return a header stamp in integer nanoseconds."""
+    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+
+
+class InverseSolverNode(Node):
+    """
+    The controller: target (+ measurement) in, pressure command out.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node`` (``context``, ``namespace``, ``parameter_overrides``).
+
+    Raises
+    ------
+    ParameterError
+        On invalid parameters or a scene that does not fit them (the node is destroyed first).
+
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        try:
+            self.params = declare_parameters(self, InverseSolverParams)
+            self._setup_model()
+        except (ValueError, FileNotFoundError, KeyError) as exc:
+            self.destroy_node()
+            raise ParameterError(str(exc)) from None
+        p = self.params
+        self.period = 1.0 / p.rate_hz
+        self.target = None
+        self.target_history = collections.deque(maxlen=256)
+        self.target_error = math.nan
+        self.measured = None
+        self.target_watch = StalenessWatch(p.target_timeout)
+        self.feedback_watch = StalenessWatch(p.feedback_timeout)
+        self.command = self.vent_command.copy()
+        self.decision = 'waiting'
+        self.enabled = True
+        self.resets = 0
+        self.target_stale = False
+        self.last_result = None
+        self._last_solve = -math.inf
+        self.rejected = {}
+        self.published = 0
+        self.ticks = 0
+        self.statuses = {}
+        self.tick_times = TimingStats()
+        self.latencies = TimingStats()
+        self.command_publisher = self.create_publisher(
+            Float64MultiArray, 'pressure_command', COMMAND_QOS)
+        self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
+        self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
+        self.create_subscription(PointStamped, 'tip/measured', self._on_measured, MEASURED_QOS)
+        self.create_service(SetBool, '~/enable', self._on_enable)
+        self.create_service(Trigger, '~/reset', self._on_reset)
+        self.timer = self.create_timer(self.period, self._on_timer)
+        self.watchdog_timer = self.create_timer(self.period, self._on_watchdog,
+                                                clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.marker_timer = self.create_timer(p.marker_period, self._publish_markers)
+        self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
+        self.get_logger().info(
+            f'scene {self.scene.name}: {len(self.valve_names)} valves {list(self.valve_names)}, '
+            f'p_max {self.upper.max():g}, {p.mode} loop, trigger {p.trigger} at {p.rate_hz:g} Hz,'
+            f' stale -> {p.stale_action}; {self.command_publisher.topic_name}')
+
+    def _setup_model(self):
+        """Load the scene, build the solver and the command order and bounds."""
+        p = self.params
+        self.scene = load_scene(p.scene)
+        if len(self.scene.effector_names) != 1:
+            raise ValueError(f'scene {self.scene.name} has effectors '
+                             f'{list(self.scene.effector_names)}; this node drives exactly one')
+        self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
+        self.lower = np.maximum(self.scene.lower_bounds[self.order], 0.0)
+        self.upper = np.minimum(self.scene.upper_bounds[self.order], p.max_pressure)
+        if np.any(self.lower > self.upper):
+            raise ValueError('max_pressure is below a lower actuator bound of the scene')
+        self.vent_command = bounded_command(np.full(len(self.valve_names), p.vent_pressure),
+                                            self.lower, self.upper)
+        self.box = WorkspaceBox(p.workspace_min, p.workspace_max)
+        self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
+                                                     relinearize_every=p.relinearize_every,
+                                                     qp_solver=p.qp_solver)
+        # compile the numba kernels (or load them from the cache) before any tick is timed
+        started = time.perf_counter()
+        self.solver.warm_up()
+        self.get_logger().info(f'solver warm-up (numba kernels) took '
+                               f'{time.perf_counter() - started:.2f} s')
+        for warning in self.solver.warnings:
+            self.get_logger().warning(f'scene {self.scene.name}: {warning}')
+        self.corrector = TargetCorrector(1, gain=p.loop_gain if p.mode == 'closed' else 0.0,
+                                         max_correction=p.max_correction)
+
+    # inputs ---------------------------------------------------------------------------------
+    def _reject(self, topic, check):
+        key = f'{topic}.{check.reason}'
+        self.rejected[key] = self.rejected.get(key, 0) + 1
+        self.get_logger().warn(f'rejected {topic}: {check.detail} (total {self.rejected[key]})',
+                               throttle_duration_sec=self.params.log_throttle)
+
+    def _on_target(self, message):
+        received = time.perf_counter()
+        point = point_array(message)
+        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
+        if not check.ok:
+            self._reject('target', check)
+            return
+        self.target = point
+        self.target_history.append((_stamp_ns(message), point))
+        self.target_watch.mark(time.monotonic())
+        if self.params.trigger == 'target' and self._decide() == 'run':
+            self.latencies.add(self._solve_and_publish() - received)
+
+    def _on_measured(self, message):
+        point = point_array(message)
+        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
+        if not check.ok:
+            self._reject('tip/measured', check)
+            return
+        self.measured = point
+        self.feedback_watch.mark(time.monotonic())
+        if self.params.mode == 'closed' and self.target is not None and self.enabled:
+            saturated = self.last_result is not None and self.last_result.status == 'saturated'
+            reference = self._target_at(_stamp_ns(message))
+            self.corrector.update(reference[None], point[None], saturated=saturated)
+            self.target_error = float(np.linalg.norm(reference - point))
+
+    def _target_at(self, stamp_ns):
+        """
+        Return the target that was current at a measurement's stamp.
+
+        Comparing a measurement with the target of its own time keeps delivery delays and bursts
+        of measurements out of the integral; without a target history covering the stamp (e.g.
+        unstamped or differently clocked measurements) the current target is used.
+        """
+        history = self.target_history
+        if not history or stamp_ns < history[0][0] or stamp_ns > history[-1][0]:
+            return self.target
+        index = bisect.bisect_right(self._history_stamps(), stamp_ns) - 1
+        return history[max(index, 0)][1]
+
+    def _history_stamps(self):
+        return [stamp for stamp, _ in self.target_history]
+
+    # control --------------------------------------------------------------------------------
+    def _decide(self):
+        """Return this tick's decision: disabled, waiting, run, hold or vent (logged on change)."""
+        now = time.monotonic()
+        if not self.enabled:
+            decision = 'disabled'
+        elif self.target is None:
+            decision = 'waiting'
+        else:
+            decision = stale_action(self.feedback_watch.stale(now), self.params.mode == 'closed',
+                                    self.params.stale_action)
+        logger = self.get_logger()
+        if decision != self.decision:
+            # rclpy refuses two severities from one call site: one call per severity
+            if decision in ('hold', 'vent'):
+                logger.warn(f'{self.decision} -> {decision}: no tip/measured for '
+                            f'{self.feedback_watch.age(now):.2f} s')
+            else:
+                logger.info(f'{self.decision} -> {decision}')
+            self.decision = decision
+        target_stale = self.target is not None and self.target_watch.stale(now)
+        if target_stale != self.target_stale:
+            self.target_stale = target_stale
+            if target_stale:
+                logger.warn(f'no target for {self.target_watch.age(now):.2f} s: the last one '
+                            'stays the set-point')
+            else:
+                logger.info('targets arrive again')
+        return decision
+
+    def _node_seconds(self):
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_timer(self):
+        """Tick on the node clock: solve when no target was solved during the last period."""
+        if self._decide() == 'run' and (
+                self.params.trigger == 'timer'
+                or self._node_seconds() - self._last_solve >= 0.9 * self.period):
+            self._solve_and_publish()
+
+    def _on_watchdog(self):
+        """Tick on the steady clock: hold or vent on stale feedback, idle vent if configured."""
+        decision = self._decide()
+        if decision == 'hold':
+            self._publish(self.command)
+        elif decision == 'vent' or (decision == 'waiting' and self.params.publish_idle):
+            self._publish(self.vent_command)
+
+    def _on_enable(self, request, response):
+        """``~/enable``: false stops commanding (no solve, no publication), true resumes."""
+        self.enabled = bool(request.data)
+        self._decide()
+        response.success = True
+        response.message = ('enabled: commanding' if self.enabled
+                            else 'disabled: not commanding until ~/enable true')
+        if self.enabled:
+            self.get_logger().info(response.message)
+        else:
+            self.get_logger().warn(response.message)
+        return response
+
+    def _on_reset(self, request, response):
+        """``~/reset``: model state and closed-loop correction back to rest."""
+        self.solver.reset()
+        self.corrector.reset()
+        self.last_result = None
+        self.target_error = math.nan
+        self._last_solve = -math.inf
+        self.resets += 1
+        response.success = True
+        response.message = ('model and correction at rest; the next command starts from rest'
+                            + ('' if self.target is None else ' toward the current target'))
+        self.get_logger().info(response.message)
+        return response
+
+    def _solve_and_publish(self):
+        """Tick the solver, publish the command, prepare the next tick; return the publish time."""
+        start = time.perf_counter()
+        goal = self.corrector.update(self.target[None], None)
+        try:
+            result = self.solver.step(goal)
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            # a numerical failure must not kill the controller: hold, count, report ERROR
+            self._count_failure('solver failed, holding the last command', exc)
+            self._publish(self.command)
+            return time.perf_counter()
+        self.last_result = result
+        self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
+        for warning in result.warnings:
+            self.get_logger().warning(warning, throttle_duration_sec=self.params.log_throttle)
+        self._last_solve = self._node_seconds()
+        self.ticks += 1
+        try:
+            command = bounded_command(result.actuation[self.order], self.lower, self.upper)
+        except ValueError as exc:
+            self.rejected['solver.non_finite'] = self.rejected.get('solver.non_finite', 0) + 1
+            self.get_logger().error(f'solver output rejected, holding: {exc}',
+                                    throttle_duration_sec=self.params.log_throttle)
+            command = self.command
+        self._publish(command)
+        published = time.perf_counter()
+        # linearise for the next tick now, off the target -> command path (DESIGN §6 steps 1-2)
+        try:
+            self.solver.prepare()
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            self._count_failure('linearisation failed (the next tick retries)', exc)
+        self.tick_times.add(time.perf_counter() - start)
+        return published
+
+    def _count_failure(self, what, exc):
+        self.statuses['exception'] = self.statuses.get('exception', 0) + 1
+        self.get_logger().error(f'{what}: {exc!r}', throttle_duration_sec=self.params.log_throttle)
+
+    def _publish(self, command):
+        command = bounded_command(command, self.lower, self.upper)
+        self.command = command
+        self.command_publisher.publish(command_message(command, self.valve_names))
+        self.published += 1
+
+    # outputs --------------------------------------------------------------------------------
+    def _publish_markers(self):
+        self.marker_publisher.publish(backbone_markers(
+            self.solver.state.positions, self.target, self.get_clock().now().to_msg(),
+            self.params.frame_id))
+
+    def _statuses(self):
+        now = time.monotonic()
+        result = self.last_result
+        values = {'mode': self.params.mode, 'decision': self.decision, 'enabled': self.enabled,
+                  'resets': self.resets, 'target_stale': self.target_stale, 'ticks': self.ticks,
+                  'published': self.published, 'last_status': result.status if result else '',
+                  'qp_status': result.qp_status if result else '',
+                  'residual_norm': result.residual_norm if result else math.nan,
+                  'predicted_error_mm': 1e3 * result.predicted_error if result else math.nan,
+                  'saturated': ','.join(np.asarray(self.scene.actuator_names)[
+                      result.saturated].tolist()) if result else '',
+                  'target_age_s': self.target_watch.age(now),
+                  'feedback_age_s': self.feedback_watch.age(now),
+                  'correction_mm': 1e3 * float(np.linalg.norm(self.corrector.correction)),
+                  'measured_error_mm': 1e3 * self.target_error,
+                  'command_pa': ' '.join(f'{v:.0f}' for v in self.command),
+                  **self.tick_times.summary('tick'), **self.latencies.summary('latency'),
+                  **{f'status.{k}': v for k, v in sorted(self.statuses.items())}}
+        if result is not None and result.status == 'not_positive_definite':
+            level, message = ERROR, 'model tangent not positive definite: holding'
+        elif self.decision in ('hold', 'vent'):
+            level, message = WARN, f'stale feedback: {self.decision}'
+        elif self.decision == 'disabled':
+            level, message = OK, 'disabled (~/enable false): not commanding'
+        elif self.decision == 'waiting':
+            level, message = OK, 'waiting for a target'
+        elif self.target_stale:
+            level, message = OK, 'no recent target: converging to the last one'
+        else:
+            level, message = OK, f'running ({result.status if result else "no tick yet"})'
+        total = sum(self.rejected.values())
+        inputs = make_status(NODE_NAME, 'inputs', WARN if total else OK,
+                             f'{total} rejected messages' if total else 'all inputs valid',
+                             {'rejected_total': total, **{f'rejected.{k}': v for k, v
+                                                          in sorted(self.rejected.items())}})
+        return [make_status(NODE_NAME, 'control', level, message, values), inputs]
+
+
+def main(argv=None):
+    """
+    Run the ``inverse_solver`` node until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line (default ``sys.argv``), e.g. ``['inverse_solver', '--ros-args',
+        '--params-file', 'config/inverse_solver.yaml', '-r', '__ns:=/cbha']``.
+
+    Returns
+    -------
+    int
+        0 on a clean shutdown, 2 on invalid parameters.
+
+    """
+    return run_node(InverseSolverNode, NODE_NAME, argv, params_class=InverseSolverParams)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

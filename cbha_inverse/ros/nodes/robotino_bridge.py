@@ -1,0 +1,343 @@
+"""
+``robotino_bridge``: our pressure command to the Robotino ROS 2 driver's CBHA messages and back.
+
+On a real CBHA the valves are driven by the Robotino driver (``robotino_node``), which subscribes
+``set_bha_pressures`` (``robotino_msgs/msg/SetBHAPressures``: exactly 8 set-points in bar, arm
+channels 0-5 in the vendor order, wrist 6-7) and publishes ``bha_readings``
+(``robotino_msgs/msg/BHAReadings``: stamp, pressures in bar, the six string potentiometers).
+
+The bridge subscribes ``pressure_command`` (Float64MultiArray, gauge Pa in ``valve_names`` order,
+reliable) and forwards each valid command at once to ``/set_bha_pressures`` through
+:func:`cbha_inverse.robot.robotino.robotino_bar_command` (wrist channels from ``wrist_bar``, cap
+``max_bar``). A command that is not finite, not of length ``len(valve_names)`` or outside
+``[0, max_pressure]`` is never forwarded (:func:`cbha_inverse.robot.safety.check_command`; logged
+with throttling and counted). When no valid command arrived within ``command_timeout`` (steady
+clock), the bridge publishes at ``rate_hz`` either the last forwarded set-points (``hold``) or
+the vent set-points (``vent``: arm channels at ``vent_pressure``, wrist at 0), as the solver
+does with stale feedback. As the solver, it publishes nothing before the first valid command
+(another publisher of ``/set_bha_pressures`` is not overridden), or the vent set-points at
+``rate_hz`` with ``publish_idle: true``.
+
+Each ``/bha_readings`` message is republished as ``pressure_measured`` (Float64MultiArray, Pa in
+``valve_names`` order, :func:`cbha_inverse.robot.robotino.robotino_pressures`) and
+``string_pots`` (sensor_msgs/JointState: the driver's stamp, one name per potentiometer, the raw
+values as positions). ``/diagnostics`` reports the command and reading rates, the reading age,
+the rejected commands and measured - commanded pressure per valve.
+
+``robotino_msgs`` is imported when the node starts, not when this module is imported; when it is
+missing the node stops with one line saying how to get it.
+"""
+
+from dataclasses import dataclass
+import importlib
+import math
+import sys
+import time
+
+from cbha_inverse.robot.robotino import (
+    ARM_VALVES, CHANNELS, MAX_BAR, N_CHANNELS, PASCAL_PER_BAR, robotino_bar_command,
+    robotino_pressures)
+from cbha_inverse.robot.safety import check_command, StalenessWatch
+from cbha_inverse.ros.common.conversions import command_array, command_message
+from cbha_inverse.ros.common.diagnostics import DiagnosticsPublisher, make_status, OK, WARN
+from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
+from cbha_inverse.ros.common.qos import (
+    COMMAND_QOS, DRIVER_READINGS_QOS, DRIVER_SET_POINTS_QOS, MEASURED_QOS)
+from cbha_inverse.ros.common.runner import run_node
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+NODE_NAME = 'robotino_bridge'
+
+MISSING_MESSAGES = (
+    "robotino_msgs is not importable ({error}): build the Robotino driver's robotino_msgs, or "
+    "this package's copy with `cbha_build_robotino_msgs --workspace WS`, then source "
+    'WS/install/setup.sh before starting robotino_bridge')
+"""The one line printed when the driver's message package is missing."""
+
+STRING_POTS = tuple(f'string_pot_{name}' for name in ARM_VALVES)
+"""Default names of the six string potentiometers (one per arm bellows, channel order)."""
+
+
+@dataclass(frozen=True)
+class RobotinoBridgeParams:
+    """Parameters of the ``robotino_bridge`` node."""
+
+    valve_names: tuple = param(ARM_VALVES, 'order of pressure_command and pressure_measured: '
+                               'valve names of the vendor channels (inner_over ... outer_left, '
+                               'wrist_horizontal, wrist_vertical)')
+    max_pressure: float = param(150000.0, 'largest forwarded command [Pa]: commands above are '
+                                'rejected (at most 1.5 bar)', low=0.0,
+                                high=MAX_BAR * PASCAL_PER_BAR)
+    max_bar: float = param(MAX_BAR, 'cap of every set-point sent to the driver [bar]',
+                           low=0.0, high=MAX_BAR)
+    wrist_bar: tuple = param((0.0, 0.0), 'set-points of the wrist channels 6 and 7 [bar] when '
+                             'valve_names does not command them')
+    command_timeout: float = param(0.5, 'pressure_command older than this is stale [s] (steady '
+                                   'clock)', low=0.001, high=3600.0)
+    stale_action: str = param('vent', 'on a stale command stream: hold the last set-points or '
+                              'vent', choices=('hold', 'vent'))
+    vent_pressure: float = param(0.0, 'arm pressure commanded when venting [Pa]', low=0.0,
+                                 high=MAX_BAR * PASCAL_PER_BAR)
+    reading_timeout: float = param(0.5, 'bha_readings older than this are reported stale in '
+                                   'diagnostics [s]', low=0.001, high=3600.0)
+    publish_idle: bool = param(False, 'before the first valid command, publish the vent '
+                               'set-points at rate_hz (false: publish nothing until a command '
+                               'arrives)')
+    rate_hz: float = param(50.0, 'watchdog rate, and publication rate of hold/vent set-points '
+                           '[Hz]', low=1.0, high=1000.0)
+    driver_command_topic: str = param('/set_bha_pressures', "topic of the driver's "
+                                      'SetBHAPressures')
+    driver_readings_topic: str = param('/bha_readings', "topic of the driver's BHAReadings")
+    string_pot_names: tuple = param(STRING_POTS, 'names of the string potentiometers, in the '
+                                    'order of BHAReadings.cablepull')
+    frame_id: str = param('cbha_base', 'frame_id of string_pots')
+    diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
+    log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
+                                low=0.0, high=3600.0)
+
+    def __post_init__(self):
+        """Check the valve names and the wrist set-points against the driver's channels."""
+        names = tuple(self.valve_names)
+        if not names or len(names) > N_CHANNELS:
+            raise ValueError(f'valve_names must name 1..{N_CHANNELS} channels, got {list(names)}')
+        robotino_bar_command(np.zeros(len(names)), names, self.max_bar, self.wrist_bar)
+        if not all(math.isfinite(v) and 0.0 <= v <= self.max_bar for v in self.wrist_bar):
+            raise ValueError(f'wrist_bar must be 2 values in [0, max_bar = {self.max_bar:g}] bar,'
+                             f' got {list(self.wrist_bar)}')
+        if self.vent_pressure > self.max_pressure:
+            raise ValueError(f'vent_pressure {self.vent_pressure:g} Pa is above max_pressure '
+                             f'{self.max_pressure:g} Pa')
+
+
+def import_robotino_msgs():
+    """
+    Import the driver's message classes.
+
+    Returns
+    -------
+    SetBHAPressures, BHAReadings : type
+        The message classes of ``robotino_msgs.msg``.
+
+    Raises
+    ------
+    ModuleNotFoundError
+        With :data:`MISSING_MESSAGES` as its one-line message.
+
+    """
+    try:
+        module = importlib.import_module('robotino_msgs.msg')
+        return module.SetBHAPressures, module.BHAReadings
+    except (ImportError, AttributeError) as exc:
+        raise ModuleNotFoundError(MISSING_MESSAGES.format(error=exc)) from None
+
+
+class RateMeter:
+    """
+    Messages per second between two diagnostics reports.
+
+    Parameters
+    ----------
+    now : float  [s]
+        Steady time of the start.
+
+    """
+
+    def __init__(self, now):
+        self.count = 0
+        self._since = now
+        self._count_then = 0
+
+    def add(self):
+        """Count one message."""
+        self.count += 1
+
+    def rate(self, now):
+        """Return the messages per second since the last call [Hz] and restart the window."""
+        elapsed = now - self._since
+        rate = (self.count - self._count_then) / elapsed if elapsed > 0.0 else math.nan
+        self._since, self._count_then = now, self.count
+        return rate
+
+
+class RobotinoBridgeNode(Node):
+    """
+    The bridge between ``pressure_command`` (Pa) and the Robotino driver's messages (bar).
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node`` (``context``, ``namespace``, ``parameter_overrides``,
+        ``cli_args``).
+
+    Raises
+    ------
+    ParameterError
+        On invalid parameters (the node is destroyed first).
+    ModuleNotFoundError
+        When ``robotino_msgs`` cannot be imported (one-line message; node destroyed first).
+
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        try:
+            self.params = declare_parameters(self, RobotinoBridgeParams)
+            self.set_pressures_type, readings_type = import_robotino_msgs()
+        except (ParameterError, ModuleNotFoundError):
+            self.destroy_node()
+            raise
+        p = self.params
+        self.channels = np.array([CHANNELS[name] for name in p.valve_names])
+        self.vent_bar = robotino_bar_command(np.full(len(p.valve_names), p.vent_pressure),
+                                             p.valve_names, p.max_bar, (0.0, 0.0))
+        self.set_points = self.vent_bar.copy()
+        self.sent = None
+        self.measured = None
+        self.decision = 'waiting'
+        self.rejected = {}
+        self.forwarded = 0
+        self.stale_published = 0
+        self.readings = 0
+        now = time.monotonic()
+        self.command_watch = StalenessWatch(p.command_timeout)
+        self.reading_watch = StalenessWatch(p.reading_timeout)
+        self.command_rate = RateMeter(now)
+        self.reading_rate = RateMeter(now)
+        self.driver_publisher = self.create_publisher(
+            self.set_pressures_type, p.driver_command_topic, DRIVER_SET_POINTS_QOS)
+        self.measured_publisher = self.create_publisher(
+            Float64MultiArray, 'pressure_measured', MEASURED_QOS)
+        self.pots_publisher = self.create_publisher(JointState, 'string_pots', MEASURED_QOS)
+        self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
+                                 COMMAND_QOS)
+        self.create_subscription(readings_type, p.driver_readings_topic, self._on_readings,
+                                 DRIVER_READINGS_QOS)
+        self.timer = self.create_timer(1.0 / p.rate_hz, self._on_timer)
+        self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
+        self.get_logger().info(
+            f'{list(p.valve_names)} Pa -> {self.driver_publisher.topic_name} channels '
+            f'{self.channels.tolist()} bar (cap {p.max_bar:g}, wrist {list(p.wrist_bar)}); '
+            f'stale after {p.command_timeout:g} s -> {p.stale_action}')
+
+    # commands -------------------------------------------------------------------------------
+    def _reject(self, key, detail):
+        self.rejected[key] = self.rejected.get(key, 0) + 1
+        self.get_logger().warn(f'rejected {detail} (total {self.rejected[key]})',
+                               throttle_duration_sec=self.params.log_throttle)
+
+    def _on_command(self, message):
+        values = command_array(message)
+        p = self.params
+        check = check_command(values, len(p.valve_names), p.max_pressure)
+        if not check.ok:
+            self._reject(check.reason, f'pressure_command: {check.detail}')
+            return
+        self.command_rate.add()
+        self.command_watch.mark(time.monotonic())
+        self.set_points = robotino_bar_command(values, p.valve_names, p.max_bar, p.wrist_bar)
+        self._set_decision('run')
+        self._send(self.set_points)
+        self.forwarded += 1
+
+    def _on_timer(self):
+        if not self.command_watch.stale(time.monotonic()):
+            return
+        if self.decision == 'waiting':
+            if self.params.publish_idle:
+                self._send(self.vent_bar)
+            return
+        action = self.params.stale_action
+        self._set_decision(action)
+        self._send(self.set_points if action == 'hold' else self.vent_bar)
+        self.stale_published += 1
+
+    def _set_decision(self, decision):
+        if decision != self.decision:
+            self.get_logger().info(f'{self.decision} -> {decision}')
+            self.decision = decision
+
+    def _send(self, bar):
+        bar = np.asarray(bar, dtype=float)
+        assert bar.shape == (N_CHANNELS,) and np.all(np.isfinite(bar))
+        assert np.all(bar >= 0.0) and np.all(bar <= self.params.max_bar)
+        self.driver_publisher.publish(self.set_pressures_type(pressures=bar.tolist()))
+        self.sent = bar
+
+    # readings -------------------------------------------------------------------------------
+    def _on_readings(self, message):
+        p = self.params
+        try:
+            pascal = robotino_pressures(message.pressures, p.valve_names)
+        except ValueError as exc:
+            self._reject('readings.wrong_length', f'bha_readings: {exc}')
+            return
+        if not np.all(np.isfinite(pascal)):
+            self._reject('readings.non_finite', 'bha_readings: non-finite pressure')
+            return
+        self.reading_rate.add()
+        self.reading_watch.mark(time.monotonic())
+        self.readings += 1
+        self.measured = pascal
+        self.measured_publisher.publish(command_message(pascal, p.valve_names))
+        pots = JointState()
+        pots.header.stamp = message.stamp
+        pots.header.frame_id = p.frame_id
+        raw = [float(v) for v in message.cablepull]
+        pots.name = [p.string_pot_names[i] if i < len(p.string_pot_names) else f'string_pot_{i}'
+                     for i in range(len(raw))]
+        pots.position = raw
+        self.pots_publisher.publish(pots)
+
+    # diagnostics ----------------------------------------------------------------------------
+    def _statuses(self):
+        now = time.monotonic()
+        p = self.params
+        total = sum(self.rejected.values())
+        values = {'decision': self.decision, 'forwarded_commands': self.forwarded,
+                  'stale_set_points_published': self.stale_published,
+                  'command_rate_hz': self.command_rate.rate(now),
+                  'command_age_s': self.command_watch.age(now),
+                  'readings': self.readings, 'reading_rate_hz': self.reading_rate.rate(now),
+                  'reading_age_s': self.reading_watch.age(now), 'rejected_total': total,
+                  **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
+                  'sent_bar': ' '.join(f'{v:.3f}' for v in self.sent) if self.sent is not None
+                  else ''}
+        if self.sent is not None and self.measured is not None:
+            commanded = self.sent[self.channels] * PASCAL_PER_BAR
+            for name, error in zip(p.valve_names, self.measured - commanded):
+                values[f'measured_minus_commanded_pa.{name}'] = float(error)
+        if self.decision in ('hold', 'vent'):
+            level, message = WARN, f'command stream stale: {self.decision}'
+        elif self.reading_watch.stale(now):
+            level, message = WARN, 'no recent bha_readings from the driver'
+        elif total:
+            level, message = WARN, f'{total} rejected messages'
+        else:
+            level, message = OK, 'forwarding' if self.decision == 'run' else 'waiting'
+        return [make_status(NODE_NAME, 'driver', level, message, values)]
+
+
+def main(argv=None):
+    """
+    Run the ``robotino_bridge`` node until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line (default ``sys.argv``), e.g. ``['robotino_bridge', '--ros-args',
+        '--params-file', 'config/robotino_bridge.yaml', '-r', '__ns:=/cbha']``.
+
+    Returns
+    -------
+    int
+        0 on a clean shutdown, 2 on invalid parameters or a missing ``robotino_msgs``.
+
+    """
+    return run_node(RobotinoBridgeNode, NODE_NAME, argv, params_class=RobotinoBridgeParams)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

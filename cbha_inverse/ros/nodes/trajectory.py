@@ -1,0 +1,139 @@
+"""
+``trajectory``: publish tip targets (PointStamped) along a circle, a square or a polyline.
+
+Thin node around :mod:`cbha_inverse.robot.trajectory`. Topic ``target`` (relative: run it in the
+``/cbha`` namespace with ``--ros-args -r __ns:=/cbha``), RELIABLE depth 10, frame ``frame_id``
+(default ``cbha_base``), one message per timer tick at ``rate_hz``. Time runs on the node clock
+(so ``use_sim_time`` follows ``/clock``) from the first tick. Bad parameters stop the node at start
+with a message that names the parameter and a non-zero exit code.
+"""
+
+from dataclasses import dataclass
+import sys
+
+from cbha_inverse.robot.trajectory import make_trajectory, PLANES, SHAPES
+from cbha_inverse.ros.common.diagnostics import DiagnosticsPublisher, make_status, OK
+from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
+from cbha_inverse.ros.common.qos import TARGET_QOS
+from cbha_inverse.ros.common.runner import run_node
+from geometry_msgs.msg import PointStamped
+from rclpy.node import Node
+
+NODE_NAME = 'trajectory'
+
+
+@dataclass(frozen=True)
+class TrajectoryParams:
+    """Parameters of the ``trajectory`` node (defaults: the paper's circle, section V)."""
+
+    shape: str = param('circle', 'path shape', choices=SHAPES)
+    center: tuple = param((0.2308, 0.0, -0.0292),
+                          'circle/square centre [m] in frame_id, 3 numbers (x, y, z); default: '
+                          'the CBHA scene workspace centre (tip at mid pressure)')
+    radius: float = param(0.06, 'circle radius [m] (paper: 0.06)', low=0.0, high=10.0)
+    side: float = param(0.08, 'square side [m] (paper: 0.08)', low=0.0, high=10.0)
+    plane: str = param('yz', 'plane of circle/square: first axis, second axis (paper: yz)',
+                       choices=PLANES)
+    speed: float = param(0.025, 'speed along the path [m/s] (paper: 0.025 circle, 0.031 '
+                         'square)', low=0.0, high=10.0)
+    waypoints: tuple = param((0.2308, 0.0, -0.0292, 0.2308, 0.03, -0.0292, 0.2308, 0.03, 0.0008),
+                             'waypoints [m] as a flat list x0, y0, z0, x1, ... (shape waypoints)')
+    loop: bool = param(False, 'waypoints: return to the first waypoint and repeat')
+    laps: int = param(0, 'laps to run, then hold the end point (0 = forever)', low=0, high=100000)
+    start_hold: float = param(0.0, 'time at the start point before moving [s]',
+                              low=0.0, high=3600.0)
+    rate_hz: float = param(100.0, 'publication rate [Hz]', low=0.1, high=2000.0)
+    frame_id: str = param('cbha_base', 'frame_id of the published targets')
+    wait_for_subscribers: int = param(0, 'publish nothing (and keep the clock at 0) until this '
+                                      'many subscriptions match target', low=0, high=1000)
+
+
+class TrajectoryNode(Node):
+    """
+    Publish the targets of one trajectory at a fixed rate.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node`` (e.g. ``context``, ``namespace``, ``parameter_overrides``).
+
+    Raises
+    ------
+    ParameterError
+        If a parameter is invalid (the node is destroyed before raising).
+
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        try:
+            self.params = declare_parameters(self, TrajectoryParams)
+            p = self.params
+            self.trajectory = make_trajectory(
+                p.shape, center=p.center, radius=p.radius, side=p.side, plane=p.plane,
+                speed=p.speed, waypoints=p.waypoints, loop=p.loop, laps=p.laps,
+                start_hold=p.start_hold)
+        except ValueError as exc:
+            self.destroy_node()
+            raise ParameterError(f'invalid parameters: {exc}') from None
+        self.publisher = self.create_publisher(PointStamped, 'target', TARGET_QOS)
+        self._start = None
+        self.published = 0
+        self.timer = self.create_timer(1.0 / self.params.rate_hz, self._tick)
+        self.diagnostics = DiagnosticsPublisher(self, self._statuses)
+        self.get_logger().info(
+            f'{self.params.shape}: length {self.trajectory.length:.4f} m at '
+            f'{self.trajectory.speed:.4f} m/s, lap {self.trajectory.lap_time:.2f} s, '
+            f'{self.params.rate_hz:g} Hz on {self.publisher.topic_name} '
+            f'(frame {self.params.frame_id})')
+
+    def elapsed(self):
+        """Return the time since the first tick [s] (node clock), 0 before it."""
+        now = self.get_clock().now()
+        if self._start is None:
+            self._start = now
+        return (now - self._start).nanoseconds * 1e-9
+
+    def _tick(self):
+        if self._start is None and (self.publisher.get_subscription_count()
+                                    < self.params.wait_for_subscribers):
+            return
+        elapsed = self.elapsed()
+        point = self.trajectory.sample(elapsed)[0]
+        message = PointStamped()
+        message.header.stamp = self.get_clock().now().to_msg()
+        message.header.frame_id = self.params.frame_id
+        message.point.x, message.point.y, message.point.z = (float(v) for v in point)
+        self.publisher.publish(message)
+        self.published += 1
+
+    def _statuses(self):
+        elapsed = 0.0 if self._start is None else self.elapsed()
+        done = self.trajectory.finished(elapsed)
+        return [make_status(NODE_NAME, 'path', OK, 'finished, holding end point' if done
+                            else 'running', {'shape': self.params.shape,
+                                             'published': self.published,
+                                             'elapsed_s': elapsed})]
+
+
+def main(argv=None):
+    """
+    Run the ``trajectory`` node until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line (default ``sys.argv``), e.g. ``['trajectory', '--ros-args',
+        '--params-file', 'config/trajectory.yaml', '-r', '__ns:=/cbha']``.
+
+    Returns
+    -------
+    int
+        0 on a clean shutdown, 2 on invalid parameters.
+
+    """
+    return run_node(TrajectoryNode, NODE_NAME, argv, params_class=TrajectoryParams)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,184 @@
+"""Kernels (Jl⁻¹, log/exp, retraction, band Cholesky), band LU and the solver's fallbacks."""
+
+from cbha_inverse.core._kernels.band import band_cholesky, band_solve
+from cbha_inverse.core._kernels.retraction import retract_frames
+from cbha_inverse.core._kernels.so3 import jl_coefficient, rotation_exp, rotation_log
+from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
+from cbha_inverse.core.inverse import solver as control
+from cbha_inverse.core.links import timoshenko_compliance
+from cbha_inverse.scene import load_scene
+import numpy as np
+from oracles.actuation import oracle
+from oracles.chain_forces import assemble_tangent, blocks_to_dense, material_tangent
+from oracles.so3 import _jl_inv_coefficient, so3_exp, so3_log
+import pytest
+
+
+def jl_coefficients(theta):
+    return np.array([jl_coefficient(t) for t in theta]).T
+
+
+def exp_rotations(rotvec):
+    out = np.empty((len(rotvec), 3, 3))
+    for v, rot in zip(rotvec, out):
+        rotation_exp(v, rot)
+    return out
+
+
+def _chain(n):
+    c = timoshenko_compliance(0.02, 2e7, 0.45, 0.006)
+    return ChainModel.from_compliances(np.broadcast_to(c, (n, 6, 6)),
+                                       np.tile([0.02, 0, 0], (n, 1)))
+
+
+def test_jl_coefficients_are_continuous_at_the_switch():
+    theta = np.array([0.5 - 1e-12, 0.5])
+    c, dc = jl_coefficients(theta)
+    assert c[0] == pytest.approx(c[1], rel=1e-11)
+    assert dc[0] == pytest.approx(dc[1], rel=1e-8)
+    c0, _ = jl_coefficients(np.array([0.0]))
+    assert c0[0] == pytest.approx(1.0 / 12.0)
+
+
+def test_jl_coefficients_match_se3():
+    theta = np.concatenate([[0.0, 1e-9], np.linspace(1e-3, 3.1, 200)])
+    c, dc = jl_coefficients(theta)
+    c_ref, dc_ref = _jl_inv_coefficient(theta)
+    np.testing.assert_allclose(c, c_ref, rtol=1e-13)
+    np.testing.assert_allclose(dc, dc_ref, rtol=1e-10)
+
+
+@pytest.mark.parametrize('angle', [0.0, 1e-10, 0.3, 2.0, 2.4, 2.5, 3.0, np.pi - 1e-9])
+def test_rotation_log_inverts_exp_up_to_pi(angle):
+    rng = np.random.default_rng(11)
+    axes = rng.standard_normal((20, 3))
+    vectors = axes / np.linalg.norm(axes, axis=1, keepdims=True) * angle
+    out = np.empty(3)
+    for v, rot in zip(vectors, so3_exp(vectors)):
+        theta = rotation_log(rot, out)
+        np.testing.assert_allclose(out, v, atol=1e-12)
+        np.testing.assert_allclose(out, so3_log(rot), atol=1e-12)
+        assert theta == pytest.approx(angle, abs=1e-12)
+
+
+@pytest.mark.parametrize('size, kd', [(1, 0), (12, 11), (36, 17), (96, 11), (20, 19)])
+def test_band_cholesky_equals_dense_solve(size, kd):
+    rng = np.random.default_rng(size + kd)
+    a = rng.standard_normal((size, size))
+    r, c = np.indices((size, size))
+    a = np.where(np.abs(r - c) <= kd, a @ a.T + size * np.eye(size), 0.0)
+    band = np.zeros((size, kd + 1))
+    for d in range(kd + 1):
+        band[:size - d, d] = np.diagonal(a, -d)
+    assert band_cholesky(band) == 0
+    lower = np.zeros((size, size))
+    for d in range(kd + 1):
+        lower += np.diag(band[:size - d, d], -d)
+    np.testing.assert_allclose(lower, np.linalg.cholesky(a), atol=1e-12 * size)
+    rhs = rng.standard_normal((size, 5))
+    solved = rhs.copy()
+    band_solve(band, solved)
+    np.testing.assert_allclose(solved, np.linalg.solve(a, rhs), atol=1e-11)
+
+
+def test_band_cholesky_reports_the_first_bad_pivot():
+    a = np.diag([2.0, 3.0, -1.0, 4.0])
+    band = np.zeros((4, 2))
+    band[:, 0] = np.diag(a)
+    assert band_cholesky(band) == 3
+    band[:, 0] = [1.0, np.nan, 1.0, 1.0]
+    assert band_cholesky(band) == 2
+
+
+def test_retract_frames_and_exp_match_reference():
+    rng = np.random.default_rng(3)
+    model = _chain(5)
+    state = retract(rest_state(model), 0.2 * rng.standard_normal((5, 6)))
+    inc = np.concatenate([rng.standard_normal((5, 3)), [[0, 0, 0], [1e-9, 0, 0]]
+                          + list(rng.standard_normal((3, 3)))], axis=1)
+    pos, rot = retract_frames(state.positions, state.rotations, inc)
+    ref = retract(state, inc)
+    np.testing.assert_allclose(pos, ref.positions, atol=1e-15)
+    np.testing.assert_allclose(rot, ref.rotations, atol=1e-14)
+    v = rng.standard_normal((4, 3))
+    np.testing.assert_allclose(exp_rotations(v), so3_exp(v), atol=1e-14)
+
+
+def test_band_lu_solves_the_exact_tangent_and_detects_singular():
+    """LAPACK band LU of the exact (non-symmetric) tangent: solves; a zero column is refused."""
+    scene = load_scene('tendon_6f_8c')
+    model, n, m = scene.model, scene.model.n_links, len(scene.actuator_names)
+    rng = np.random.default_rng(4)
+    state = retract(rest_state(model), 0.05 * rng.standard_normal((n, 6)))
+    actuation = scene.upper_bounds * rng.uniform(0.2, 0.7, m)
+    system = control.EquilibriumSystem(model, scene.actuators, np.zeros(6 * n))
+    tangent, _ = system.exact_system(state.positions, state.rotations, actuation)
+    dense = system.dense_exact(tangent)
+    assert np.abs(dense - dense.T).max() > 1e-3 * np.abs(dense).max()   # not symmetric
+    rhs = rng.standard_normal((6 * n, 3))
+    np.testing.assert_allclose(dense @ system.factor_exact(tangent).solve(rhs), rhs, atol=1e-9)
+    tangent, _ = system.exact_system(state.positions, state.rotations, actuation)
+    tangent[7] = 0.0    # column 7 of the matrix (general band storage, C order)
+    assert system.factor_exact(tangent) is None
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkeypatch):
+    """LU of the exact structure + load tangent; BTD Cholesky of the material one if LU fails."""
+    scene = load_scene(name)
+    model, n, m = scene.model, scene.model.n_links, len(scene.actuator_names)
+    rng = np.random.default_rng(8)
+    state = retract(rest_state(model), np.concatenate(
+        [0.002 * rng.standard_normal((n, 3)), 0.2 * rng.standard_normal((n, 3))], axis=1))
+    positions, rotations = state.positions, state.rotations
+    actuation = scene.upper_bounds * rng.uniform(0.2, 0.7, m)
+    rhs = rng.standard_normal((6 * n, m + 1))
+    solver = scene.make_inverse_solver()
+    exact = (assemble_tangent(model, ChainState(positions, rotations)).to_dense(exact=True)
+             + oracle(scene.actuators).load_tangent(positions, rotations, actuation,
+                                                    symmetric=False))
+    factor = solver._factor(positions, rotations, actuation)
+    assert factor.method == 'band_lu'
+    np.testing.assert_allclose(exact @ factor.solve(rhs), rhs, atol=1e-9)
+
+    def singular(self, tangent):
+        return None
+
+    monkeypatch.setattr(control.EquilibriumSystem, 'factor_exact', singular)
+    material = blocks_to_dense(*material_tangent(model, ChainState(positions, rotations)))
+    factor = solver._factor(positions, rotations, actuation)
+    np.testing.assert_allclose(material @ factor.solve(rhs), rhs, atol=1e-9)
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+def test_ticks_through_the_fallback_factorization_still_reach_the_target(name, monkeypatch):
+    """The tick's Cholesky refused every time: the LU fallback path still converges (0.1 mm)."""
+    scene = load_scene(name)
+    rng = np.random.default_rng(21)
+    m = len(scene.actuator_names)
+    actuation = scene.lower_bounds + (scene.upper_bounds - scene.lower_bounds) * rng.uniform(
+        0.0, 0.5, m)
+    target = scene.forward(actuation, strict=True).effector_positions
+    solver = scene.make_inverse_solver()
+    calls = []
+    monkeypatch.setattr(solver._tick, 'factor', lambda tangent: calls.append(1))
+    for _ in range(30):
+        out = solver.step(target)
+        assert out.status in ('solved', 'saturated')
+    assert len(calls) == 30
+    reached = scene.forward(out.actuation, initial_state=solver.state, strict=True)
+    assert np.linalg.norm(reached.effector_positions - target, axis=1).max() < 1e-4
+
+
+def test_a_tick_without_any_factorization_holds_the_actuation(monkeypatch):
+    scene = load_scene('tendon_6f_8c')
+    solver = scene.make_inverse_solver()
+    first = solver.step(scene.workspace_center + 0.002)
+    state = solver.state
+    monkeypatch.setattr(solver._tick, 'factor', lambda tangent: None)
+    monkeypatch.setattr(solver, '_factor', lambda positions, rotations, actuation: None)
+    held = solver.step(scene.workspace_center - 0.002)
+    assert held.status == 'not_positive_definite'
+    np.testing.assert_array_equal(held.actuation, first.actuation)
+    np.testing.assert_array_equal(solver.state.positions, state.positions)
+    assert np.isfinite(held.effector_positions).all()

@@ -1,0 +1,142 @@
+"""Tests of the compliance links: Timoshenko closed form, rigid motion, equilibrium, FD tangent."""
+
+from cbha_inverse.core import links, so3
+import numpy as np
+from oracles import chain_forces
+import pytest
+
+
+def _virtual_work_compliance(length, e_mod, nu, r_o, r_i, kappa):
+    """Compliance by the unit-load method: C = int S^T D^-1 S ds (3-point Gauss, exact here)."""
+    area = np.pi * (r_o ** 2 - r_i ** 2)
+    inertia = np.pi * (r_o ** 4 - r_i ** 4) / 4.0
+    g_mod = e_mod / (2 * (1 + nu))
+    d_inv = np.diag([1 / (e_mod * area), 1 / (kappa * g_mod * area), 1 / (kappa * g_mod * area),
+                     1 / (g_mod * 2 * inertia), 1 / (e_mod * inertia), 1 / (e_mod * inertia)])
+    nodes, weights = np.polynomial.legendre.leggauss(3)
+    comp = np.zeros((6, 6))
+    for xi, wgt in zip(nodes, weights):
+        s = 0.5 * length * (xi + 1)
+        sec = np.eye(6)
+        sec[3:, :3] = so3.hat([length - s, 0.0, 0.0])   # moment of the tip force about s
+        comp += 0.5 * length * wgt * sec.T @ d_inv @ sec
+    return comp
+
+
+@pytest.mark.parametrize('r_i', [0.0, 0.006])
+def test_timoshenko_against_unit_load_method(r_i):
+    """The closed form equals the unit-load (virtual work) integral for solid and hollow."""
+    args = (0.12, 2.0e9, 0.35, 0.01, r_i)
+    kappa = links.cowper_shear_coefficient(0.35, 0.01, r_i)
+    ref = _virtual_work_compliance(*args, kappa)
+    np.testing.assert_allclose(links.timoshenko_compliance(*args), ref, rtol=1e-13,
+                               atol=1e-13 * np.abs(ref).max())
+
+
+def test_cowper_limits():
+    """Cowper: solid 6(1+nu)/(7+6nu); thin-walled tube limit 2(1+nu)/(4+3nu)."""
+    nu = 0.3
+    assert links.cowper_shear_coefficient(nu, 1.0) == pytest.approx(6 * 1.3 / (7 + 1.8))
+    assert links.cowper_shear_coefficient(nu, 1.0, 1.0 - 1e-9) == pytest.approx(
+        2 * 1.3 / (4 + 0.9), rel=1e-8)
+
+
+def _random_link(rng, twist=0.6, stretch=0.01):
+    """Return a random deformed link: stiffness, rest transform and two frame poses."""
+    comp = links.timoshenko_compliance(0.05, 1e7, 0.4, 0.01, 0.004)
+    m = rng.normal(size=(6, 6)) * 0.2
+    stiff = np.linalg.inv(comp)
+    scale = np.sqrt(np.diag(stiff))
+    stiff = stiff + (m @ m.T) * np.outer(scale, scale)   # generic full SPD coupling
+    d0 = np.array([0.05, 0.003, -0.002])
+    q0 = so3.so3_exp(rng.normal(size=3) * 0.2)
+    x_a = rng.normal(size=3) * 0.1
+    r_a = so3.so3_exp(rng.normal(size=3) * 2.0)
+    x_b = x_a + r_a @ d0 + stretch * rng.normal(size=3)
+    r_b = so3.so3_exp(twist * rng.normal(size=3)) @ r_a @ q0
+    return stiff, d0, q0, x_a, r_a, x_b, r_b
+
+
+def test_rigid_motion_gives_zero_wrench_and_covariance():
+    """At rest any rigid motion gives zero wrench; a deformed link's wrenches move with it."""
+    rng = np.random.default_rng(5)
+    stiff, d0, q0, x_a, r_a, _, _ = _random_link(rng)
+    x_b, r_b = x_a + r_a @ d0, r_a @ q0
+    w_a, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    assert np.abs(w_a).max() < 1e-9 and np.abs(w_b).max() < 1e-9
+    stiff, d0, q0, x_a, r_a, x_b, r_b = _random_link(rng)
+    w_a, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    rot, shift = so3.so3_exp([0.4, -1.2, 2.0]), np.array([0.3, -0.1, 2.0])
+    v_a, v_b = chain_forces.link_wrenches(stiff, d0, q0, rot @ x_a + shift, rot @ r_a,
+                                          rot @ x_b + shift, rot @ r_b)
+    for w, v in ((w_a, v_a), (w_b, v_b)):
+        np.testing.assert_allclose(v[:3], rot @ w[:3], atol=1e-9 * np.abs(w).max())
+        np.testing.assert_allclose(v[3:], rot @ w[3:], atol=1e-9 * np.abs(w).max())
+
+
+def test_wrenches_in_equilibrium_and_linear_response():
+    """Sum of forces and of moments about a common point vanish; small strain gives -K delta."""
+    rng = np.random.default_rng(6)
+    for _ in range(5):
+        stiff, d0, q0, x_a, r_a, x_b, r_b = _random_link(rng)
+        w_a, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+        scale = np.abs(w_b).max()
+        np.testing.assert_allclose(w_a[:3] + w_b[:3], 0.0, atol=1e-12 * scale)
+        point = rng.normal(size=3)
+        moment = (w_a[3:] + np.cross(x_a - point, w_a[:3])
+                  + w_b[3:] + np.cross(x_b - point, w_b[:3]))
+        np.testing.assert_allclose(moment, 0.0, atol=1e-12 * scale)
+    stiff, d0, q0, x_a, r_a, _, _ = _random_link(rng)
+    delta = 1e-7 * rng.normal(size=6)
+    x_b = x_a + r_a @ (d0 + delta[:3])
+    r_b = r_a @ so3.so3_exp(delta[3:]) @ q0
+    _, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    local = np.concatenate([r_a.T @ w_b[:3], r_a.T @ w_b[3:]])
+    np.testing.assert_allclose(local, -stiff @ delta, rtol=1e-6, atol=1e-6 * np.abs(
+        stiff @ delta).max())
+
+
+@pytest.mark.parametrize('seed,twist', [(7, 0.0), (8, 0.05), (9, 0.6), (10, 1.5), (11, 2.5)])
+def test_tangent_matches_central_differences(seed, twist):
+    """The exact 12x12 tangent equals central differences with retract-style perturbations."""
+    rng = np.random.default_rng(seed)
+    stiff, d0, q0, x_a, r_a, x_b, r_b = _random_link(rng, twist=twist)
+
+    def wrenches(dq):
+        pose = (x_a + dq[:3], so3.so3_exp(dq[3:6]) @ r_a, x_b + dq[6:9],
+                so3.so3_exp(dq[9:]) @ r_b)
+        return np.concatenate(chain_forces.link_wrenches(stiff, d0, q0, *pose))
+
+    tangent = chain_forces.link_tangent(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    h = 1e-6
+    fd = np.stack([-(wrenches(h * e) - wrenches(-h * e)) / (2 * h) for e in np.eye(12)], -1)
+    assert np.abs(tangent - fd).max() <= 1e-6 * np.abs(fd).max()
+    np.testing.assert_allclose(tangent[:6, 6:], tangent[6:, :6].T, atol=1e-12 * np.abs(
+        tangent).max())
+    # rotational diagonal blocks: antisymmetric part hat(m)/2, m the link moment on the frame
+    w_a, w_b = chain_forces.link_wrenches(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    for k, w in ((3, w_a), (9, w_b)):
+        block = tangent[k:k + 3, k:k + 3]
+        np.testing.assert_allclose(block - block.T, so3.hat(w[3:]),
+                                   atol=1e-9 * np.abs(tangent).max())
+
+
+def test_batched_matches_single():
+    """Batched evaluation equals one-by-one evaluation."""
+    rng = np.random.default_rng(12)
+    items = [_random_link(rng) for _ in range(4)]
+    stacked = [np.stack(col) for col in zip(*items)]
+    t_batch = chain_forces.link_tangent(*stacked)
+    for k, item in enumerate(items):
+        np.testing.assert_allclose(t_batch[k], chain_forces.link_tangent(*item), rtol=1e-13,
+                                   atol=1e-13 * np.abs(t_batch[k]).max())
+
+
+def test_deformation_is_the_wrenches_delta():
+    """``link_deformation`` gives the delta whose ``K delta`` the link terms carry."""
+    stiff, d0, q0, x_a, r_a, x_b, r_b = _random_link(np.random.default_rng(11))
+    delta = chain_forces.link_deformation(d0, q0, x_a, r_a, x_b, r_b)
+    np.testing.assert_allclose(delta[:3], r_a.T @ (x_b - x_a) - d0, rtol=1e-13, atol=1e-16)
+    np.testing.assert_allclose(so3.so3_exp(delta[3:]), r_a.T @ r_b @ q0.T, atol=1e-13)
+    terms = chain_forces.link_terms(stiff, d0, q0, x_a, r_a, x_b, r_b)
+    np.testing.assert_allclose(terms.stress, stiff @ delta, rtol=1e-12)

@@ -1,0 +1,181 @@
+"""
+The compositions of ``launch/*.launch.py`` and ``cbha_launch``.
+
+They name only what exists, and ``cbha_launch sim`` runs the nodes over real DDS and stops them
+all on SIGINT.
+
+``launch`` and ``launch_ros`` are not installable here: the launch files are checked as Python
+source (syntax, imports, the composition they read), and ``cbha_launch`` runs the same table.
+"""
+
+import ast
+from dataclasses import fields, is_dataclass
+import importlib
+from itertools import product
+import re
+import signal
+import subprocess
+import sys
+import time
+
+from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
+from cbha_inverse.ros.launch.compositions import COMPOSITIONS, node_module, resolve
+from geometry_msgs.msg import PointStamped
+import pytest
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from ros_helpers import child_env, REPO_ROOT, spin_until
+from std_msgs.msg import Float64MultiArray
+import yaml
+
+SCRIPTS = dict(re.findall(r"'(\w+) = ([\w.]+):main'", (REPO_ROOT / 'setup.py').read_text()))
+# the names of the Jazzy launch API the launch files may use
+LAUNCH_API = {'launch': {'LaunchDescription'},
+              'launch.actions': {'DeclareLaunchArgument', 'OpaqueFunction'},
+              'launch.substitutions': {'LaunchConfiguration'},
+              'launch_ros.actions': {'Node'},
+              'cbha_inverse.ros.launch.compositions': {'COMPOSITIONS', 'resolve'}}
+
+
+def _variants(composition):
+    """Yield every combination of the composition's arguments that have choices."""
+    choices = [(a.name, a.choices) for a in composition.arguments if a.choices]
+    for values in product(*(c for _, c in choices)):
+        yield dict(zip((name for name, _ in choices), values))
+
+
+def _declared_parameters(executable):
+    module = importlib.import_module(node_module(executable))
+    params = [v for k, v in vars(module).items() if k.endswith('Params') and is_dataclass(v)
+              and v.__module__ == module.__name__]
+    assert len(params) == 1, f'{executable}: {len(params)} *Params dataclasses'
+    return {spec.metadata.get('ros_name') or spec.name for spec in fields(params[0])}
+
+
+@pytest.mark.parametrize('name', sorted(COMPOSITIONS))
+def test_every_executable_params_file_and_parameter_of_a_composition_exists(name):
+    composition = COMPOSITIONS[name]
+    named = {node.executable for node in composition.nodes}
+    started = set()
+    for values in _variants(composition):
+        for process in resolve(composition, values):
+            started.add(process.executable)
+            assert SCRIPTS.get(process.executable) == node_module(process.executable), (
+                f'{process.executable}: no console script {node_module(process.executable)}:main')
+            for params in process.params_files:
+                with open(params, encoding='utf-8') as f:
+                    assert '/**' in yaml.safe_load(f), params
+            unknown = set(process.parameters) - _declared_parameters(process.executable)
+            assert not unknown, f'{process.executable} has no parameters {unknown}'
+    assert started == named, f'never started: {named - started}'
+
+
+@pytest.mark.parametrize('name', sorted(COMPOSITIONS))
+def test_launch_file_reads_its_composition_and_names_only_the_launch_api(name):
+    path = REPO_ROOT / 'launch' / f'{name}.launch.py'
+    tree = ast.parse(path.read_text(), str(path))
+    imported = {}
+    for statement in tree.body:
+        if isinstance(statement, ast.ImportFrom):
+            imported.setdefault(statement.module, set()).update(a.name for a in statement.names)
+        assert not isinstance(statement, ast.Import), f'{path}: import statement'
+    for module, names in imported.items():
+        assert module in LAUNCH_API and names <= LAUNCH_API[module], (module, names)
+    reads = [node for node in ast.walk(tree) if isinstance(node, ast.Subscript)
+             and isinstance(node.value, ast.Name) and node.value.id == 'COMPOSITIONS']
+    assert [ast.literal_eval(node.slice) for node in reads] == [name]
+    assert any(isinstance(node, ast.FunctionDef) and node.name == 'generate_launch_description'
+               for node in tree.body)
+
+
+def test_bad_arguments_exit_2_with_one_line():
+    for args, message in ((['sim', 'bogus:=1'], "unknown argument 'bogus'"),
+                          (['sim', 'mode:=half'], 'mode:=half is not one of open|closed'),
+                          (['sim', 'inverse_solver_params:=/nonexistent.yaml'],
+                           '/nonexistent.yaml: file: no such file')):
+        result = subprocess.run([sys.executable, '-m', 'cbha_inverse.ros.launch.launcher', *args],
+                                env=child_env(), capture_output=True, text=True, timeout=60)
+        assert result.returncode == 2, result
+        assert result.stderr.strip() == f'cbha_launch: error: {message}' or (
+            result.stderr.count('\n') == 1 and message in result.stderr), result.stderr
+
+
+def _launch(*args):
+    return subprocess.Popen([sys.executable, '-m', 'cbha_inverse.ros.launch.launcher', 'sim',
+                             *args],
+                            env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+
+
+@pytest.fixture
+def tendon_trajectory(tmp_path):
+    """Write a trajectory params file for the tendon trunk (a 10 mm circle in reach)."""
+    params = tmp_path / 'trajectory.yaml'
+    text = (REPO_ROOT / 'config' / 'trajectory.yaml').read_text()
+    params.write_text(text.replace('center: [0.2308, 0.0, -0.0292]', 'center: [0.117, 0.0, '
+                                   '-0.005]').replace('radius: 0.06', 'radius: 0.01'))
+    return params
+
+
+def test_cbha_launch_sim_runs_the_nodes_and_stops_them_all_on_sigint(rclpy_context,
+                                                                     tendon_trajectory):
+    listener = Node('launch_listener', context=rclpy_context, namespace='/cbha')
+    commands, tips = [], []
+    listener.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
+                                 COMMAND_QOS)
+    listener.create_subscription(PointStamped, 'tip/measured', tips.append, MEASURED_QOS)
+    executor = SingleThreadedExecutor(context=rclpy_context)
+    executor.add_node(listener)
+    process = _launch('scene:=tendon_6f_8c', f'trajectory_params:={tendon_trajectory}')
+    try:
+        running = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
+                             or process.poll() is not None, 60.0)
+        alive = process.poll() is None
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+        executor.shutdown()
+        listener.destroy_node()
+    assert running and alive, f'{len(commands)} commands, {len(tips)} tips:\n{output}'
+    for node in ('trajectory', 'inverse_solver', 'cbha_sim'):
+        assert re.search(rf'^\[{node}\] \[INFO\]', output, re.MULTILINE), f'no {node}:\n{output}'
+    assert 'exit statuses: trajectory 0, inverse_solver 0, cbha_sim 0' in output, output
+    assert process.returncode == 0, output
+    assert 'Traceback' not in output, output
+    # the composition's overrides reached the nodes: closed loop on the tendon scene
+    assert all(len(c.data) == 8 for c in commands)
+
+
+def test_cbha_launch_stops_every_node_when_one_fails(tmp_path):
+    params = tmp_path / 'inverse_solver.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    rate_hz: 100\n')
+    process = _launch('scene:=tendon_6f_8c', f'inverse_solver_params:={params}')
+    start = time.monotonic()
+    output, _ = process.communicate(timeout=60)
+    assert process.returncode == 2, output
+    assert 'inverse_solver exited with status 2: stopping the others' in output
+    assert re.search(r'exit statuses: trajectory 0, inverse_solver 2, cbha_sim 0', output), output
+    assert time.monotonic() - start < 45.0
+
+
+def test_rviz_view_shows_what_the_nodes_publish_with_matching_qos():
+    from cbha_inverse.ros.nodes.inverse_solver import InverseSolverParams
+    from cbha_inverse.ros.common.qos import MARKER_QOS, TARGET_QOS
+    from rclpy.qos import ReliabilityPolicy
+
+    view = yaml.safe_load((REPO_ROOT / 'rviz' / 'cbha.rviz').read_text())
+    manager = view['Visualization Manager']
+    assert manager['Global Options']['Fixed Frame'] == InverseSolverParams().frame_id
+    published = {'/cbha/backbone': ('rviz_default_plugins/MarkerArray', MARKER_QOS),
+                 '/cbha/tip/measured': ('rviz_default_plugins/PointStamped', MEASURED_QOS),
+                 '/cbha/target': ('rviz_default_plugins/PointStamped', TARGET_QOS)}
+    shown = {d['Topic']['Value']: d for d in manager['Displays'] if 'Topic' in d}
+    assert set(shown) == set(published)
+    for topic, (display_class, qos) in published.items():
+        assert shown[topic]['Class'] == display_class
+        reliable = qos.reliability == ReliabilityPolicy.RELIABLE
+        assert shown[topic]['Topic']['Reliability Policy'] == (
+            'Reliable' if reliable else 'Best Effort'), topic
