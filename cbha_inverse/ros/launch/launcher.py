@@ -2,11 +2,11 @@
 ``cbha_launch sim|robot [name:=value ...]``: the launch files' compositions, without ``launch``.
 
 Starts every node of :data:`cbha_inverse.ros.launch.compositions.COMPOSITIONS` ``[name]`` as a
-process (``python -m cbha_inverse.ros.nodes.<node> --ros-args -r __ns:=<namespace>
---params-file <file> --params-file <overrides>``), prefixes each output line with
-``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits for them. All nodes are required: when one exits by itself,
-the others are stopped. Exit status: 0 when every node stopped cleanly after the signal, else the
-first non-zero status of a node; 2 on a bad argument or params file (one line on stderr).
+process (``python -m cbha_inverse.ros.nodes.<node> --ros-args -r __ns:=<namespace> --params-file
+<file> --params-file <overrides>``), prefixes each output line with ``[<node>]``, and on SIGINT or
+SIGTERM sends SIGINT to every node and waits for them. All nodes are required: when one exits by
+itself, the others are stopped. Exit status: 0 when every node stopped cleanly after the signal,
+else the first non-zero status of a node; 2 on a bad argument or params file (one line on stderr).
 ``--dry-run`` prints the command lines instead.
 """
 
