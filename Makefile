@@ -24,22 +24,22 @@ PYTEST_ARGS ?=
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test venv install lint bench report constraints clean cover-kernels mutate
+.PHONY: demo test help venv install lint bench report constraints clean cover-kernels mutate
 
-demo: install
+demo: install  ## the closed-loop CBHA scene in simulation: tracking error and timing (~2 min)
 	$(VPY) -m cbha_inverse.experiments.demo --output $(DEMO_OUT)
 
 # Coverage of every run (child processes included: coverage's patch = subprocess, setup.cfg),
 # then the total of the non-compiled code (the numba kernels run as machine code, not Python:
 # make cover-kernels measures them with the JIT off).
-test: install
+test: install  ## the whole test suite with coverage (~8-10 min on 2 cores)
 	$(VPY) -m pytest test -q -rs $(COVERAGE_ARGS) $(PYTEST_ARGS)
 	@$(VPY) -m coverage report --omit='$(subst $(space),$(comma),$(KERNEL_SOURCES))' \
 	  | tail -n 1 | sed 's/^TOTAL/non-compiled code (kernels omitted): TOTAL/'
 
 # The kernel tests with NUMBA_DISABLE_JIT=1: the compiled code runs as Python and is measured
 # (the test of numba's compiled signatures has nothing to check without the JIT).
-cover-kernels: install
+cover-kernels: install  ## coverage of the numba kernels, their tests with the JIT off (~20 s)
 	NUMBA_DISABLE_JIT=1 $(VPY) -m pytest $(KERNEL_TESTS) -q --cov=cbha_inverse --cov-report= \
 	  --deselect test/core/test_core_linalg_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
 	  $(PYTEST_ARGS)
@@ -47,14 +47,18 @@ cover-kernels: install
 
 # Mutation testing (not in CI: ~20-30 min on 2 cores) of the modules a wrong line hurts most;
 # the modules and their tests are the [mutmut] section of setup.cfg. Survivors: mutmut results.
-mutate: install
+mutate: install  ## mutation testing of the safety-critical modules (~20-30 min, not in CI)
 	rm -rf mutants
 	nice -n 10 $(VPY) -m mutmut run --max-children 2 || true
 	$(VPY) -m mutmut results
 
-venv: $(PINS_STAMP)
+# `make help`: the targets, one line each (the `## ` comment after a target's name).
+help:  ## list the targets
+	@awk 'BEGIN {FS = ":.*## "} /^[a-z-]+:.*## / {printf "  make %-14s %s\n", $$1, $$2}' $(MAKEFILE_LIST)
 
-install: $(INSTALL_STAMP) $(KERNELS_STAMP) $(EXPORTS_STAMP)
+venv: $(PINS_STAMP)  ## the virtual environment .venv from the pins
+
+install: $(INSTALL_STAMP) $(KERNELS_STAMP) $(EXPORTS_STAMP)  ## venv + editable install + compiled kernels
 
 $(PINS_STAMP): requirements.txt requirements-dev.txt constraints.txt
 	@if [ -z "$(PYTHON)" ]; then \
@@ -79,24 +83,24 @@ $(EXPORTS_STAMP): $(PINS_STAMP)
 	$(VPY) -m cbha_inverse.interfaces.rosidl_exports $(VENV)
 	@touch $@
 
-lint: install
-	$(VPY) -m pytest test/lint/test_flake8.py test/lint/test_pep257.py -q
+lint: install  ## ament_flake8, ament_pep257 and the layout checks (test/lint)
+	$(VPY) -m pytest test/lint -q
 
-bench: install
+bench: install  ## BTD and inverse-tick benchmarks
 	$(VPY) -m cbha_inverse.report.cli bench
 
-report: install
+report: install  ## every report (benchmarks, stability, accuracy, FEM) into output/
 	$(VPY) -m cbha_inverse.report.cli all
 
 # Replay regression goldens (test/replay.py): replays test/data/replay/* and rewrites goldens.npz.
 .PHONY: goldens
-goldens: install
+goldens: install  ## regenerate the replay regression goldens
 	$(VPY) test/regen_goldens.py
 
 # Re-pin the transitive dependencies after changing requirements*.txt.
-constraints: $(PINS_STAMP)
+constraints: $(PINS_STAMP)  ## re-pin the transitive dependencies
 	( echo '# Transitive pins: pip freeze of a venv made from requirements-dev.txt. Regenerate: make constraints'; \
 	  $(VPY) -m pip freeze --disable-pip-version-check | grep -vE '^(-e|cbha|# Editable)' ) > constraints.txt
 
-clean:
+clean:  ## remove the venv and every build and output folder
 	rm -rf $(VENV) build install log output .pytest_cache *.egg-info mutants .coverage*
