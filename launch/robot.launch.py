@@ -3,8 +3,9 @@ A real arm: inverse_solver + robotino_bridge (+ stereo_tracker with feedback:=st
 
 ``ros2 launch cbha_inverse robot.launch.py [name:=value ...]``; ``ros2 launch cbha_inverse
 robot.launch.py --show-args`` lists the arguments. The composition is the table
-``cbha_inverse.ros.launch.compositions.COMPOSITIONS['robot']``, which ``cbha_launch robot`` runs without the
-``launch`` package: both start the same nodes with the same params files and overrides.
+``cbha_inverse.ros.launch.compositions.COMPOSITIONS['robot']``, which ``cbha_launch robot`` runs
+without the ``launch`` package: both start the same nodes with the same params files and
+overrides (docs/nodes.md).
 """
 
 from cbha_inverse.ros.launch.compositions import COMPOSITIONS, resolve

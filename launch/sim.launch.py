@@ -3,8 +3,9 @@ Simulation: trajectory + inverse_solver + cbha_sim (+ stereo_tracker with feedba
 
 ``ros2 launch cbha_inverse sim.launch.py [name:=value ...]``; ``ros2 launch cbha_inverse
 sim.launch.py --show-args`` lists the arguments. The composition is the table
-``cbha_inverse.ros.launch.compositions.COMPOSITIONS['sim']``, which ``cbha_launch sim`` runs without the
-``launch`` package: both start the same nodes with the same params files and overrides.
+``cbha_inverse.ros.launch.compositions.COMPOSITIONS['sim']``, which ``cbha_launch sim`` runs
+without the ``launch`` package: both start the same nodes with the same params files and
+overrides (docs/nodes.md).
 """
 
 from cbha_inverse.ros.launch.compositions import COMPOSITIONS, resolve

@@ -1,10 +1,10 @@
 """
 The own-robot guide (docs/own-robot.md) runs as written.
 
-The test copies ``docs/own_robot/`` to a temporary folder, checks that the YAML shown in the guide
-is the files' content, and runs the guide's commands there: ``condense_segment`` (real gmsh and
-FEM), ``cbha_scene check`` and ``cbha_launch sim``, the last over real DDS until the controller
-commands the simulated rod, then SIGINT.
+The test copies the guide's example, ``docs/examples/rod_robot/``, to a temporary folder, checks
+that the YAML shown in the guide is the files' content, and runs the guide's commands there:
+``condense_segment`` (real gmsh and FEM), ``cbha_scene check`` and ``cbha_launch sim``, the last
+over real DDS until the controller commands the simulated rod, then SIGINT.
 """
 
 import re
@@ -24,7 +24,7 @@ from ros_helpers import child_env, REPO_ROOT, spin_until
 from std_msgs.msg import Float64MultiArray
 
 GUIDE = REPO_ROOT / 'docs' / 'own-robot.md'
-EXAMPLE = REPO_ROOT / 'docs' / 'own_robot'
+EXAMPLE = REPO_ROOT / 'docs' / 'examples' / 'rod_robot'
 SCRIPTS = dict(re.findall(r"'(\w+) = ([\w.]+):main'", (REPO_ROOT / 'setup.py').read_text()))
 
 
@@ -51,7 +51,7 @@ def _run(command, cwd, **kwargs):
 def test_guide_shows_the_example_files():
     shown = {block.splitlines()[0]: block for block in _blocks('yaml')}
     for path in sorted(EXAMPLE.iterdir()):
-        key = f'# docs/own_robot/{path.name}: '
+        key = f'# docs/examples/rod_robot/{path.name}: '
         block = next((b for first, b in shown.items() if first.startswith(key)), None)
         assert block is not None, f'the guide does not show {path.name}'
         assert block == path.read_text(), f'the guide shows another {path.name}'
