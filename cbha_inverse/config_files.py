@@ -93,25 +93,25 @@ def parse_yaml(text, path, *, expect=dict):
 
 def read_yaml(path, *, expect=dict):
     """
-    Parse a YAML file (:func:`read_text`, then :func:`parse_yaml`).
+    Parse a YAML file: :func:`parse_yaml` of :func:`read_text`.
 
     Parameters
     ----------
     path : str or os.PathLike
         The file.
     expect : type
-        Required type of the top-level value (``dict`` by default).
+        Required type of the top-level value (see :func:`parse_yaml`).
 
     Returns
     -------
     object
-        The parsed document.
+        The parsed document, of type ``expect``.
 
     Raises
     ------
     ConfigError
-        If the file is missing or unreadable, is not valid YAML (key ``line N``) or its top level
-        is not an ``expect``.
+        If the file is missing or unreadable (key ``file``), not valid YAML (key ``line N``) or
+        of another top-level type (key ``top level``).
 
     """
     return parse_yaml(read_text(path), path, expect=expect)
