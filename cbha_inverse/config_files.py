@@ -1,11 +1,12 @@
 """
 Read the package's YAML files so that every mistake becomes one :class:`ConfigError`.
 
-:func:`read_yaml` turns a missing file, an unreadable one, a YAML syntax error (with its line)
-or a wrong top-level type into ``ConfigError(path, key, problem)``; :class:`Section` reads typed
-keys from a parsed mapping and names the dotted key of whatever is missing or wrong
-(``chain.sections[1].count: must be an integer, got str 'eight'``). Scene, segment, geometry and
-params files all go through here.
+:func:`read_yaml` (:func:`read_text` then :func:`parse_yaml`) turns a missing file, an unreadable
+one, a YAML syntax error (with its line) or a wrong top-level type into
+``ConfigError(path, key, problem)``; :class:`Section` reads typed keys from a parsed mapping and
+names the dotted key of whatever is missing or wrong (``chain.sections[1].count: must be an
+integer, got str 'eight'``). Scene, segment, geometry, params, camera and rig files all go
+through here.
 """
 
 import math
@@ -23,14 +24,45 @@ _KIND_NAMES = {dict: 'mapping of keys', list: 'list'}
 _SAFE_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
 
 
-def read_yaml(path, *, expect=dict):
+def read_text(path):
     """
-    Parse a YAML file.
+    Read a configuration file as text.
 
     Parameters
     ----------
     path : str or os.PathLike
         The file.
+
+    Returns
+    -------
+    str
+        Its contents (UTF-8).
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing or unreadable (key ``file``).
+
+    """
+    path = Path(path)
+    try:
+        return path.read_text(encoding='utf-8')
+    except FileNotFoundError:
+        raise ConfigError(path, 'file', 'no such file') from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(path, 'file', f'cannot be read ({exc})') from None
+
+
+def parse_yaml(text, path, *, expect=dict):
+    """
+    Parse the YAML text of a configuration file.
+
+    Parameters
+    ----------
+    text : str
+        The YAML document.
+    path : str or os.PathLike
+        The file it comes from (named in errors).
     expect : type
         Required type of the top-level value (``dict`` by default).
 
@@ -42,17 +74,9 @@ def read_yaml(path, *, expect=dict):
     Raises
     ------
     ConfigError
-        If the file is missing or unreadable, is not valid YAML (key ``line N``) or its top level
-        is not an ``expect``.
+        If the text is not valid YAML (key ``line N``) or its top level is not an ``expect``.
 
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding='utf-8')
-    except FileNotFoundError:
-        raise ConfigError(path, 'file', 'no such file') from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(path, 'file', f'cannot be read ({exc})') from None
     try:
         data = yaml.load(text, Loader=_SAFE_LOADER)
     except yaml.YAMLError as exc:
@@ -65,6 +89,32 @@ def read_yaml(path, *, expect=dict):
         raise ConfigError(path, 'top level', f'must be a {_KIND_NAMES.get(expect, expect)}, got '
                           f'{_describe(data)}')
     return data
+
+
+def read_yaml(path, *, expect=dict):
+    """
+    Parse a YAML file: :func:`parse_yaml` of :func:`read_text`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    expect : type
+        Required type of the top-level value (see :func:`parse_yaml`).
+
+    Returns
+    -------
+    object
+        The parsed document, of type ``expect``.
+
+    Raises
+    ------
+    ConfigError
+        If the file is missing or unreadable (key ``file``), not valid YAML (key ``line N``) or
+        of another top-level type (key ``top level``).
+
+    """
+    return parse_yaml(read_text(path), path, expect=expect)
 
 
 def _describe(value):

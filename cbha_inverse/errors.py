@@ -33,19 +33,49 @@ class ConfigError(ValueError):
 CONFIG_ERROR_EXIT = 2
 
 
-def report_config_error(program, error, stream=None):
+def report_error(program, error, status, stream=None):
     """
-    Print a configuration error as one line on stderr and return the exit status.
+    Print the error that stops a command or node as one line on stderr and return its status.
 
-    The one place where commands and nodes turn a :class:`ConfigError` (or a parameter error)
-    into what the user sees: ``<program>: error: <file>: <key>: <problem>``, no traceback.
+    The one place where commands and nodes turn an exception into what the user sees:
+    ``<program>: error: <message>``, no traceback.
 
     Parameters
     ----------
     program : str
         The command or node name.
-    error : Exception
+    error : Exception or str
         The error; its message is printed on one line (newlines become ``; ``).
+    status : int
+        The exit status to return.
+    stream : file-like, optional
+        Where to print (default ``sys.stderr``).
+
+    Returns
+    -------
+    int
+        ``status``.
+
+    """
+    import sys
+    text = '; '.join(line.strip() for line in str(error).splitlines() if line.strip())
+    print(f'{program}: error: {text}', file=sys.stderr if stream is None else stream, flush=True)
+    return status
+
+
+def report_config_error(program, error, stream=None):
+    """
+    Print a configuration error as one line on stderr and return :data:`CONFIG_ERROR_EXIT`.
+
+    A :class:`ConfigError` (or a parameter or input error) prints
+    ``<program>: error: <file>: <key>: <problem>`` (:func:`report_error`).
+
+    Parameters
+    ----------
+    program : str
+        The command or node name.
+    error : Exception or str
+        The error.
     stream : file-like, optional
         Where to print (default ``sys.stderr``).
 
@@ -55,7 +85,4 @@ def report_config_error(program, error, stream=None):
         :data:`CONFIG_ERROR_EXIT` (2).
 
     """
-    import sys
-    text = '; '.join(line.strip() for line in str(error).splitlines() if line.strip())
-    print(f'{program}: error: {text}', file=sys.stderr if stream is None else stream, flush=True)
-    return CONFIG_ERROR_EXIT
+    return report_error(program, error, CONFIG_ERROR_EXIT, stream)

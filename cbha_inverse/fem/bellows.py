@@ -1,7 +1,7 @@
 """
 Bellows segment geometry in plain numpy: corrugation profile, tube placement, cavity surfaces.
 
-No gmsh here: the cavity surfaces (DESIGN §5) and the tube placement are needed at run time by
+No gmsh here: the cavity surfaces (docs/design.md) and the tube placement are needed at run time by
 the loader and the pressure actuators. Segment coordinates: axis +x, lower vertebra frame at the
 origin, upper frame at (L, 0, 0), metres.
 """
@@ -178,7 +178,7 @@ def cavity_frame_wrenches(points, triangles, segment_length):
     """
     Return the wrenches per unit pressure that a cavity applies to its two segment frames.
 
-    DESIGN §5: each vertex receives the outward normal times one third of the adjacent triangle
+    Each vertex receives the outward normal times one third of the adjacent triangle
     areas; the vertex forces are skinned linearly along the axis between the lower frame (x = 0)
     and the upper frame (x = L) and summed into wrenches at the frame origins.
 

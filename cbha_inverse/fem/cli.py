@@ -2,12 +2,13 @@
 Console script ``condense_segment``: geometry YAML -> condensed segment YAML (+ cavity surfaces).
 
 Usage: ``condense_segment [GEOMETRY] [--output FILE | --output-dir DIR] [--order 2]
-[--mesh-size 0.0005] [--force]``. The segment YAML ``<name>.yaml`` (and its cavity surfaces) goes
-to ``--output`` or ``--output-dir``, else next to the geometry file; never into the package's own
-data (the default geometry ``meshes/cbha_segment.yaml`` of an install): for those, into the
-current directory. Same inputs (sha256 of the geometry file, the mesh parameters and the package
-version) reuse the existing file, which is said on stdout. A broken geometry file prints one line
-naming the file and the key, exit code 2.
+[--mesh-size 0.0005] [--force]``. The segment YAML ``<name>.yaml``, named after the geometry's
+``name:`` field (the file stem for a ``.geo`` file), and its cavity surfaces go to ``--output`` or
+``--output-dir``, else next to the geometry file; never into the package's own data (the default
+geometry ``meshes/cbha_segment_geometry.yaml``, ``name: cbha_segment``, of an install): for
+those, into the current directory. Same inputs (sha256 of the geometry file, the mesh
+parameters and the package version) reuse the existing file, which is said on stdout. A broken
+geometry file prints one line naming the file and the key, exit code 2.
 """
 
 import argparse
@@ -16,8 +17,8 @@ import sys
 
 from cbha_inverse import __version__
 from cbha_inverse.errors import ConfigError, report_config_error
-from cbha_inverse.fem.segment_spec import read_segment_spec
-from cbha_inverse.paths import meshes_path, share_dir
+from cbha_inverse.fem.segment_spec import cbha_geometry_path, read_segment_spec
+from cbha_inverse.paths import share_dir
 import numpy as np
 
 PROGRAM = 'condense_segment'
@@ -26,9 +27,12 @@ PROGRAM = 'condense_segment'
 def _parser():
     parser = argparse.ArgumentParser(
         prog='condense_segment',
-        description='Condense a volumetric FE segment onto its two vertebra frames (6x6 C).')
+        description='Condense a volumetric FE segment onto its two vertebra frames (6x6 C).',
+        epilog='<name> is the name: field of a geometry YAML (the file stem of a .geo file); '
+               'a geometry of the package itself is condensed into the current directory.')
     parser.add_argument('geometry', nargs='?', default=None,
-                        help='geometry YAML (default: meshes/cbha_segment.yaml)')
+                        help='geometry YAML or .geo file (default: '
+                             'meshes/cbha_segment_geometry.yaml, which gives cbha_segment.yaml)')
     output = parser.add_mutually_exclusive_group()
     output.add_argument('--output', default=None,
                         help='segment YAML to write (default: <name>.yaml next to the geometry)')
@@ -248,7 +252,7 @@ def main(argv=None):
 
     """
     args = _parser().parse_args(argv)
-    geometry = Path(args.geometry) if args.geometry else meshes_path('cbha_segment.yaml')
+    geometry = Path(args.geometry) if args.geometry else cbha_geometry_path()
     try:
         if geometry.suffix == '.geo':
             if not geometry.is_file():

@@ -1,9 +1,10 @@
 """
-Condensation of a volumetric FE segment onto its two vertebra frames (paper §III, eq. 1-3).
+Condensation of a volumetric FE segment onto its two vertebra frames.
 
-The nodes on the lower face are clamped (lower frame fixed), the nodes on the upper face follow
-the upper frame rigidly, the reduced stiffness T^T K T is factorised once and the 6 unit loads at
-the upper frame give C = J K^-1 J^T in the lower frame's axes (DESIGN §3-4).
+Section III, eqs. (1)-(3) of Bosman et al. 2015: the nodes on the lower face are clamped (lower
+frame fixed), the nodes on the upper face follow the upper frame rigidly, the reduced stiffness
+T^T K T is factorised once and the 6 unit loads at the upper frame give C = J K^-1 J^T in the
+lower frame's axes (eqs. (2)-(3); docs/design.md).
 """
 
 from dataclasses import dataclass, field

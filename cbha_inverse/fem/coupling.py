@@ -1,5 +1,5 @@
 """
-Rigid coupling of FE node sets to 6-DoF frames by elimination (DESIGN §4 step 4).
+Rigid coupling of FE node sets to 6-DoF frames by elimination.
 
 Each node k of a coupled set follows its frame f rigidly (small rotations):
 u_k = u_f + theta_f x (p_k - x_f). The full displacement vector is written u = T z with the

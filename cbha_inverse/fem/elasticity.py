@@ -3,7 +3,7 @@ Isoparametric P1 / P2 tetrahedra: shape functions, quadrature and vectorised lin
 
 Every element quantity is computed for all elements at once with ``numpy.einsum`` (one short
 Python loop over the few quadrature points, none over elements) and assembled in one
-``scipy.sparse.coo_matrix`` per chunk of elements (DESIGN §4 step 3).
+``scipy.sparse.coo_matrix`` per chunk of elements.
 """
 
 import numpy as np

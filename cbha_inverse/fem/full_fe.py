@@ -5,7 +5,7 @@ The body is one tetrahedral mesh of n stacked segments along +x; the nodes on th
 are clamped and the nodes on each interface plane x = i L (i = 1..n) follow a rigid vertebra
 frame i. Linear elasticity gives the tip compliance; the geometrically nonlinear model is total
 Lagrangian St Venant-Kirchhoff with the rigid constraints enforced exactly for finite rotations
-(u_k = d_f + (R_f - I) r_k), solved by Newton with load stepping (DESIGN §4 step 7).
+(u_k = d_f + (R_f - I) r_k), solved by Newton with load stepping.
 """
 
 from dataclasses import dataclass

@@ -172,7 +172,7 @@ def bellows_tube_mesh(geometry, *, mesh_size, order=2, circumferential_elements=
     Parameters
     ----------
     geometry : cbha_inverse.fem.segment_spec.BellowsGeometry
-        Bellows segment geometry (of ``meshes/cbha_segment.yaml``, say).
+        Bellows segment geometry (of ``meshes/cbha_segment_geometry.yaml``, say).
     mesh_size : float  [m]
         Element size in the wall profile.
     order : {1, 2}

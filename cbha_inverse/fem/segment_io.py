@@ -300,7 +300,7 @@ def load_segment(path):
 
 def chain_from_segments(segments, base_position=None, base_rotation=None):
     """
-    Build a ``ChainModel`` from condensed segments (a chain of compliance links, DESIGN §3).
+    Build a ``ChainModel`` from condensed segments (a chain of compliance links).
 
     Parameters
     ----------

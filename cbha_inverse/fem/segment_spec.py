@@ -1,5 +1,5 @@
 """
-Typed segment geometry files (``meshes/*.yaml``), read and validated in one place.
+Typed segment geometry files (``meshes/*_geometry.yaml``), read and validated in one place.
 
 A geometry YAML (``name``, ``kind``, ``geometry``, ``material``, ``mesh``) becomes a frozen
 :class:`SegmentSpec` whose ``geometry`` is a :class:`BellowsGeometry` (``kind:
@@ -9,12 +9,17 @@ checked there, and a bad file raises ``ConfigError(path, key, problem)``. The me
 cavity surfaces, the condensation, the ``condense_segment`` command and the reports take the
 typed objects. The segment cache hashes the file's bytes
 (:func:`cbha_inverse.fem.segment_io.inputs_sha256`), not these objects.
+
+The package's CBHA geometry is ``meshes/cbha_segment_geometry.yaml``
+(:func:`cbha_geometry_path`); its condensed segment, named after the ``name:`` field, is
+``config/segments/cbha_segment.yaml``.
 """
 
 from dataclasses import dataclass
 from pathlib import Path
 
 from cbha_inverse.config_files import read_section
+from cbha_inverse.paths import meshes_path
 
 KINDS = ('bellows_segment', 'cylinder')
 
@@ -192,6 +197,19 @@ class SegmentSpec:
     mesh: MeshSettings
 
 
+def cbha_geometry_path():
+    """
+    Return the package's CBHA segment geometry file (the default of ``condense_segment``).
+
+    Returns
+    -------
+    pathlib.Path
+        ``meshes/cbha_segment_geometry.yaml`` of the source checkout or the install.
+
+    """
+    return meshes_path('cbha_segment_geometry.yaml')
+
+
 def read_segment_spec(path):
     """
     Read and validate a segment geometry YAML.
@@ -199,8 +217,8 @@ def read_segment_spec(path):
     Parameters
     ----------
     path : str or os.PathLike
-        The geometry YAML (``meshes/*.yaml`` format: ``name``, ``kind``, ``geometry``,
-        ``material``, ``mesh``).
+        The geometry YAML (``meshes/*_geometry.yaml`` format: ``name``, ``kind``,
+        ``geometry``, ``material``, ``mesh``).
 
     Returns
     -------

@@ -1,4 +1,10 @@
-"""Chain-versus-full-FE comparisons shared by the tests and the FEM report (DESIGN §4 step 7)."""
+"""
+Condensation checks shared by the tests and the reports.
+
+The mesh study of a condensed cylinder against a finer mesh, and the chain of condensed
+segments against the full FE of the whole body with the same rigid vertebrae, linear and under
+large bending (the paper reports < 0.72 % between the two; docs/stability-and-accuracy.md).
+"""
 
 import time
 
@@ -47,6 +53,48 @@ def relative_diagonal_error(test, reference):
 
     """
     return np.abs(np.diag(test) / np.diag(reference) - 1.0)
+
+
+#: Element size of the P2 reference of :func:`cylinder_mesh_study`, over the smallest size studied
+REFERENCE_REFINEMENT = 0.6
+
+
+def cylinder_mesh_study(length, radius, mesh_sizes, *, youngs_modulus, poisson_ratio):
+    """
+    Condense a solid cylinder at P1 and P2 for each mesh size, against a finer P2 reference.
+
+    The reference is P2 at :data:`REFERENCE_REFINEMENT` times the smallest of ``mesh_sizes``.
+
+    Parameters
+    ----------
+    length, radius : float  [m]
+        Segment length and cylinder radius.
+    mesh_sizes : sequence of float  [m]
+        Element sizes studied.
+    youngs_modulus : float  [Pa]
+        Young's modulus.
+    poisson_ratio : float
+        Poisson's ratio.
+
+    Returns
+    -------
+    reference : CondensedSegment
+        The P2 reference.
+    cases : list of (int, float, CondensedSegment, (6,) ndarray)
+        ``(order, mesh_size, segment, relative_diagonal_error(segment, reference))``, P1 then
+        P2, each over ``mesh_sizes`` in their order.
+
+    """
+    material = {'youngs_modulus': youngs_modulus, 'poisson_ratio': poisson_ratio}
+    reference = condense_cylinder(
+        length, radius, mesh_size=REFERENCE_REFINEMENT * min(mesh_sizes), **material)
+    cases = []
+    for order in (1, 2):
+        for size in mesh_sizes:
+            segment = condense_cylinder(length, radius, mesh_size=size, order=order, **material)
+            cases.append((order, size, segment,
+                          relative_diagonal_error(segment.compliance, reference.compliance)))
+    return reference, cases
 
 
 def linear_chain_vs_full(n_segments, length, radius, *, youngs_modulus, poisson_ratio,

@@ -27,7 +27,7 @@ import time
 
 from cbha_inverse.bag.storage import BagError
 from cbha_inverse.config_files import read_yaml
-from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.errors import ConfigError, report_config_error, report_error
 from cbha_inverse.identify.fit import identify
 from cbha_inverse.identify.samples import (acting_pressures, IdentificationError,
                                            pooled_samples, PRESSURE_SOURCES,
@@ -280,8 +280,7 @@ def main(argv=None):
     except (ConfigError, FileNotFoundError, BagError) as exc:
         return report_config_error(PROGRAM, exc)
     except (IdentificationError, ValueError) as exc:
-        print(f'{PROGRAM}: error: {exc}', file=sys.stderr, flush=True)
-        return 1
+        return report_error(PROGRAM, exc, 1)
     output = Path(args.output)
     output.mkdir(parents=True, exist_ok=True)
     stem = f'{scene_path.stem}_identified'

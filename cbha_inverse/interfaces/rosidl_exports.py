@@ -23,6 +23,8 @@ import re
 import sys
 import sysconfig
 
+from cbha_inverse.errors import report_config_error
+
 EXPORT_GLOB = 'share/*/cmake/*Export.cmake'
 """Where the exported CMake targets of installed ROS packages live under a prefix."""
 
@@ -194,8 +196,7 @@ def main(argv=None):
                         help='install prefix of the ROS wheels (default: %(default)s)')
     args = parser.parse_args(argv)
     if not Path(args.prefix).is_dir():
-        print(f'{args.prefix}: not a folder', file=sys.stderr)
-        return 2
+        return report_config_error('rosidl_exports', f'{args.prefix}: not a folder')
     result = repair_exports(args.prefix)
     print(f'rosidl exports under {args.prefix}: {result.scanned} scanned, '
           f"{len(result.rewritten)} rewritten to this interpreter's include folders"

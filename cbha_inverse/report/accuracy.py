@@ -1,5 +1,5 @@
 """
-``cbha_report accuracy``: error against run time for each model choice (DESIGN §9).
+``cbha_report accuracy``: error against run time for each model choice.
 
 Every error is measured against a reference nobody tuned:
 
@@ -18,6 +18,8 @@ Every error is measured against a reference nobody tuned:
 
 Writes ``accuracy.md``, ``accuracy.json`` and ``accuracy.png`` (one Pareto panel per part, each
 naming its reference and the machine) to ``--output`` (default ``output/report``).
+
+The results and how to read them: docs/stability-and-accuracy.md.
 """
 
 import argparse
@@ -103,20 +105,13 @@ def body_rows(quick):
 
 def mesh_rows(quick):
     """Return the rows of (c): P1 / P2 and mesh size of a cylinder vs the finest P2 mesh."""
-    from cbha_inverse.fem.condensation import condense_cylinder
+    from cbha_inverse.fem.validation import cylinder_mesh_study, REFERENCE_REFINEMENT
     sizes = (0.012, 0.009, 0.006) if quick else (0.012, 0.009, 0.006, 0.004)
-    finest = condense_cylinder(0.1, 0.01, youngs_modulus=E_MOD, poisson_ratio=NU,
-                               mesh_size=0.6 * sizes[-1])
-    rows = []
-    for order in (1, 2):
-        for size in sizes:
-            seg = condense_cylinder(0.1, 0.01, youngs_modulus=E_MOD, poisson_ratio=NU,
-                                    mesh_size=size, order=order)
-            error = np.abs(np.diag(seg.compliance) / np.diag(finest.compliance) - 1.0).max()
-            rows.append({'part': 'c', 'order': order, 'mesh_size': size, 'error': float(error),
-                         'seconds': seg.timings['total'], 'nodes': seg.n_nodes,
-                         'reference_mesh_size': 0.6 * sizes[-1]})
-    return rows
+    _, cases = cylinder_mesh_study(0.1, 0.01, sizes, youngs_modulus=E_MOD, poisson_ratio=NU)
+    return [{'part': 'c', 'order': order, 'mesh_size': size, 'error': float(error.max()),
+             'seconds': seg.timings['total'], 'nodes': seg.n_nodes,
+             'reference_mesh_size': REFERENCE_REFINEMENT * min(sizes)}
+            for order, size, seg, error in cases]
 
 
 def tick_rows(quick):
@@ -205,6 +200,33 @@ def _machine():
     return f'{platform.node()}, {platform.machine()}, Python {platform.python_version()}'
 
 
+def _pareto_lines(ax, rows, group, groups, x, y, label, annotation):
+    """
+    Draw one log-log line of ``rows`` per group, each point annotated.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The panel.
+    rows : list of dict
+        The rows of one part.
+    group : str
+        Key whose value selects a line.
+    groups : iterable
+        The values of ``group`` drawn, in the legend's order.
+    x, y : callable
+        Row -> the point's coordinates.
+    label, annotation : callable
+        Group value -> the line's legend label; row -> the text beside its point.
+
+    """
+    for value in groups:
+        sel = [r for r in rows if r[group] == value]
+        ax.loglog([x(r) for r in sel], [y(r) for r in sel], 'o-', label=label(value))
+        for r in sel:
+            ax.annotate(annotation(r), (x(r), y(r)), fontsize=7)
+
+
 def _figure(rows, path):
     """Draw one Pareto panel per part (error against run time) and the headline."""
     import matplotlib
@@ -214,33 +236,22 @@ def _figure(rows, path):
     fig, grid = plt.subplots(2, 3, figsize=(17, 10))
     axes = grid.ravel()
     part = [r for r in rows if r['part'] == 'a']
-    for alpha in sorted({r['alpha'] for r in part}):
-        sel = [r for r in part if r['alpha'] == alpha]
-        axes[0].loglog([r['seconds'] for r in sel], [r['error'] for r in sel], 'o-',
-                       label=f'PL^2/EI = {alpha:g}')
-        for r in sel:
-            axes[0].annotate(str(r['links']), (r['seconds'], r['error']), fontsize=7)
+    _pareto_lines(axes[0], part, 'alpha', sorted({r['alpha'] for r in part}),
+                  lambda r: r['seconds'], lambda r: r['error'],
+                  lambda alpha: f'PL^2/EI = {alpha:g}', lambda r: str(r['links']))
     axes[0].axhline(5e-3, color='k', lw=0.7, ls='--')
     axes[0].set(xlabel='static solve [s]', ylabel='tip error / tip displacement',
                 title='(a) beam links vs exact elastica')
     part = [r for r in rows if r['part'] == 'b']
-    for case in dict.fromkeys(r['case'] for r in part):
-        sel = [r for r in part if r['case'] == case]
-        axes[1].loglog([r['seconds'] for r in sel], [max(r['error'], 1e-6) for r in sel], 'o-',
-                       label=case)
-        for r in sel:
-            axes[1].annotate(r['model'], (r['seconds'], max(r['error'], 1e-6)), fontsize=7)
+    _pareto_lines(axes[1], part, 'case', dict.fromkeys(r['case'] for r in part),
+                  lambda r: r['seconds'], lambda r: max(r['error'], 1e-6),
+                  str, lambda r: r['model'])
     axes[1].set(xlabel='solve [s]',
                 ylabel='vs full FE: max diag compliance (linear), tip / displacement (SVK)',
                 title='(b) reference: full FE of the body (drawn at 1e-6)')
-    part = [r for r in rows if r['part'] == 'c']
-    for order in (1, 2):
-        sel = [r for r in part if r['order'] == order]
-        axes[2].loglog([r['seconds'] for r in sel], [r['error'] for r in sel], 'o-',
-                       label=f'P{order}')
-        for r in sel:
-            axes[2].annotate(f"{1e3 * r['mesh_size']:g} mm", (r['seconds'], r['error']),
-                             fontsize=7)
+    _pareto_lines(axes[2], [r for r in rows if r['part'] == 'c'], 'order', (1, 2),
+                  lambda r: r['seconds'], lambda r: r['error'],
+                  lambda order: f'P{order}', lambda r: f"{1e3 * r['mesh_size']:g} mm")
     axes[2].set(xlabel='condensation [s]', ylabel='max diag compliance error',
                 title='(c) cylinder L/R = 10, reference: finest P2 mesh')
     part = [r for r in rows if r['part'] == 'd']
@@ -250,22 +261,15 @@ def _figure(rows, path):
                          (r['tick_median_us'], r['error_rms_mm']), fontsize=7)
     axes[3].set(xlabel='tick median [us]', ylabel='RMS |static tip - target| [mm]',
                 title='(d) CBHA tick, 60 mm circle; reference: converged statics')
-    part = [r for r in rows if r['part'] == 'e']
-    for relinearize in (1, 5):
-        sel = [r for r in part if r['relinearize_every'] == relinearize]
-        axes[4].loglog([r['compute_fraction'] for r in sel], [r['rms_mm'] for r in sel], 'o-',
-                       label=f'relinearize_every {relinearize}')
-        for r in sel:
-            axes[4].annotate(f"{r['rate_hz']:g} Hz", (r['compute_fraction'], r['rms_mm']),
-                             fontsize=7)
+    _pareto_lines(axes[4], [r for r in rows if r['part'] == 'e'], 'relinearize_every', (1, 5),
+                  lambda r: r['compute_fraction'], lambda r: r['rms_mm'],
+                  lambda every: f'relinearize_every {every}', lambda r: f"{r['rate_hz']:g} Hz")
     axes[4].set(xlabel='compute budget: tick median x rate [fraction of one core]',
                 ylabel='tracking RMS |plant tip - target| [mm]',
                 title='(e) closed loop on the simulated CBHA (plant 10 % softer)')
     axes[5].axis('off')
-    axes[5].text(0.0, 1.0, '\n'.join(f'{key}: {value:.3g}' if isinstance(value, float)
-                                     else f'{key}: {value}'
-                                     for key, value in headline(rows).items()),
-                 va='top', fontsize=8, family='monospace', transform=axes[5].transAxes)
+    axes[5].text(0.0, 1.0, '\n'.join(_headline_lines(rows, digits=3)), va='top', fontsize=8,
+                 family='monospace', transform=axes[5].transAxes)
     for ax in axes[:5]:
         ax.grid(True, which='both', lw=0.3)
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
@@ -278,13 +282,21 @@ def _figure(rows, path):
     plt.close(fig)
 
 
+def _cell(value, digits=4):
+    """Return a table or headline value as text (floats to ``digits`` significant digits)."""
+    return f'{value:.{digits}g}' if isinstance(value, float) else str(value)
+
+
 def _table(rows, keys):
     """Return the lines of a Markdown table of ``keys`` over ``rows``."""
-    def cell(value):
-        return f'{value:.4g}' if isinstance(value, float) else str(value)
     lines = ['| ' + ' | '.join(keys) + ' |', '|' + '---|' * len(keys)]
-    lines += ['| ' + ' | '.join(cell(r[k]) for k in keys) + ' |' for r in rows]
+    lines += ['| ' + ' | '.join(_cell(r[k]) for k in keys) + ' |' for r in rows]
     return lines
+
+
+def _headline_lines(rows, digits=4):
+    """Return the headline of a run as ``key: value`` lines."""
+    return [f'{key}: {_cell(value, digits)}' for key, value in headline(rows).items()]
 
 
 def headline(rows):
@@ -329,8 +341,7 @@ def write_report(rows, out_dir, elapsed, quick):
                     ['rate_hz', 'relinearize_every', 'tick_median_us', 'compute_fraction',
                      'rms_mm', 'max_mm'])
     lines += ['', '## Headline', '']
-    lines += [f'- {key}: {value:.4g}' if isinstance(value, float) else f'- {key}: {value}'
-              for key, value in headline(rows).items()]
+    lines += [f'- {line}' for line in _headline_lines(rows)]
     (out_dir / 'accuracy.md').write_text('\n'.join(lines) + '\n', encoding='utf-8')
     (out_dir / 'accuracy.json').write_text(json.dumps(
         {'quick': quick, 'elapsed_s': elapsed, 'machine': _machine(), 'rows': rows,
@@ -365,8 +376,7 @@ def main(argv=None):
         print(f'{part.__name__}: {time.perf_counter() - part_started:.1f} s', flush=True)
     elapsed = time.perf_counter() - started
     write_report(rows, Path(args.output), elapsed, args.quick)
-    for key, value in headline(rows).items():
-        print(f'{key}: {value:.4g}' if isinstance(value, float) else f'{key}: {value}')
+    print('\n'.join(_headline_lines(rows)))
     print(f'{elapsed:.1f} s; written to {args.output}/accuracy.md')
     return 0
 

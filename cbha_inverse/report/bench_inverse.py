@@ -8,11 +8,12 @@ the tick time (median and 99th percentile over the measured ticks) and its media
 stiffness; factor = LAPACK Cholesky; W = the multi-RHS solve and the projection to W_ea, W_aa,
 δ_free and the QP matrices; QP = the box QP with its checks; update = Newton step and effector
 positions) beside the figures reported in the paper (SOFA, 2.66 GHz Core i7, 2015). ``lin`` is the
-``relinearize_every`` option: 1 linearises at every tick (DESIGN §6); 5 keeps a linearisation for
-up to 5 ticks (the ticks in between only re-solve the QP of the linear model, so their phases
-before the QP are ~0 and the median is theirs; the p99 is the linearisation tick). ``QP``
-compares the exact active-set solver (the default) with proxsuite. The last columns give this
-machine's goal (median / p99, ``ok`` when met), the paper's tick time and the ratio paper / ours.
+``relinearize_every`` option: 1 linearises at every tick (as the paper does); 5 keeps a
+linearisation for up to 5 ticks (the ticks in between only re-solve the QP of the linear model,
+so their phases before the QP are ~0 and the median is theirs; the p99 is the linearisation
+tick). ``QP`` compares the exact active-set solver (the default) with proxsuite. The last
+columns give this machine's goal (median / p99, ``ok`` when met), the paper's tick time and the
+ratio paper / ours.
 A second table times the static forward solve (:func:`cbha_inverse.core.statics.solve_static`,
 which the simulated plant runs every tick) per Newton iteration, in ticks of the same run.
 """
@@ -85,7 +86,7 @@ def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_st
     newton_steps : int
         Newton steps per tick.
     relinearize_every : int
-        Ticks between linearisations (1 = every tick, DESIGN §6).
+        Ticks between linearisations (1 = every tick, as in the paper).
 
     Returns
     -------

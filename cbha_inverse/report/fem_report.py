@@ -1,5 +1,5 @@
 """
-Console script ``cbha_fem_report``: condensation accuracy and run time (DESIGN §4 step 7, §9).
+Console script ``cbha_fem_report``: condensation accuracy and run time.
 
 Tables (Markdown on stdout, CSV and a PNG plot with ``--output-dir``):
 
@@ -9,6 +9,8 @@ Tables (Markdown on stdout, CSV and a PNG plot with ``--output-dir``):
 3. chain of 4 condensed 20 mm cylinders against the linear full FE of the 80 mm body;
 4. large bending: chain (core.solve_static) against the nonlinear St Venant-Kirchhoff body;
 5. CBHA stacks: chain against the full linear FE of n stacked bellows segments, speed-up.
+
+The results and how to read them: docs/stability-and-accuracy.md.
 """
 
 import argparse
@@ -16,15 +18,15 @@ from pathlib import Path
 import sys
 import time
 
-from cbha_inverse.fem.segment_spec import read_segment_spec
-from cbha_inverse.paths import meshes_path
+from cbha_inverse.fem.segment_spec import cbha_geometry_path, read_segment_spec
+from cbha_inverse.fem.validation import relative_diagonal_error
 import numpy as np
 
 E_MOD, NU = 1.0e6, 0.3
 
 
 def _row(label, order, size, compliance, reference, seconds, extra=None):
-    err = np.abs(np.diag(compliance) / np.diag(reference) - 1.0)
+    err = relative_diagonal_error(compliance, reference)
     row = {'case': label, 'order': order, 'mesh_size_mm': round(size * 1e3, 3),
            'max_diag_error_pct': float(100 * err.max()), 'seconds': float(seconds)}
     row.update(extra or {})
@@ -48,19 +50,15 @@ def cylinder_table(quick):
     """
     from cbha_inverse.core.links import timoshenko_compliance
     from cbha_inverse.fem.condensation import condense_cylinder
+    from cbha_inverse.fem.validation import cylinder_mesh_study
     sizes = [0.006, 0.004] if quick else [0.008, 0.006, 0.004, 0.003]
-    finest = condense_cylinder(0.1, 0.01, youngs_modulus=E_MOD, poisson_ratio=NU,
-                               mesh_size=0.6 * sizes[-1])
     beam = timoshenko_compliance(0.1, E_MOD, NU, 0.01)
     rows = []
-    for order in (1, 2):
-        for size in sizes:
-            seg = condense_cylinder(0.1, 0.01, youngs_modulus=E_MOD, poisson_ratio=NU,
-                                    mesh_size=size, order=order)
-            err_fe = np.abs(np.diag(seg.compliance) / np.diag(finest.compliance) - 1).max()
-            rows.append(_row('slender L/R=10 vs Timoshenko', order, size, seg.compliance, beam,
-                             seg.timings['total'],
-                             {'vs_finest_P2_pct': float(100 * err_fe), 'nodes': seg.n_nodes}))
+    _, cases = cylinder_mesh_study(0.1, 0.01, sizes, youngs_modulus=E_MOD, poisson_ratio=NU)
+    for order, size, seg, err_fe in cases:
+        rows.append(_row('slender L/R=10 vs Timoshenko', order, size, seg.compliance, beam,
+                         seg.timings['total'],
+                         {'vs_finest_P2_pct': float(100 * err_fe.max()), 'nodes': seg.n_nodes}))
     stubby = condense_cylinder(0.02, 0.01, youngs_modulus=E_MOD, poisson_ratio=NU,
                                mesh_size=0.003)
     ratio = np.diag(stubby.compliance) / np.diag(timoshenko_compliance(0.02, E_MOD, NU, 0.01))
@@ -87,7 +85,7 @@ def bellows_table(quick):
 
     """
     from cbha_inverse.fem.condensation import condense_bellows
-    spec = read_segment_spec(meshes_path('cbha_segment.yaml'))
+    spec = read_segment_spec(cbha_geometry_path())
     sizes = [0.001, 0.0008] if quick else [0.001, 0.0008, 0.000625, 0.0005]
     ref_size = 0.000625 if quick else 0.00035
     reference = condense_bellows(spec, mesh_size=ref_size)
@@ -143,7 +141,7 @@ def chain_tables(quick):
                  'speed_up': big['full_seconds'] / big['chain_seconds'],
                  'full_newton_iterations': big['full'].iterations})
     if not quick:
-        spec = read_segment_spec(meshes_path('cbha_segment.yaml'))
+        spec = read_segment_spec(cbha_geometry_path())
         for n in (1, 2):
             out = bellows_chain_vs_full(spec, n)
             rows.append({'case': f'CBHA stack of {n} bellows segment(s), linear',

@@ -1,5 +1,5 @@
 """
-``cbha_report stability``: numerical stability on stiff and extreme cases (DESIGN §9).
+``cbha_report stability``: numerical stability on stiff and extreme cases.
 
 One row per case: what is checked (residual, condition or reference, no NaN, bounds), the
 answer against an independent reference (:mod:`cbha_inverse.report.references`, closed forms,
@@ -7,6 +7,8 @@ FEM of the same body), pass/fail and the message the user gets. A case passes wh
 is right, or when the user is told (a warning, a refusal, a non-converged result with its
 message): no case may return success with a wrong answer. Writes ``stability.md``,
 ``stability.json`` and ``stability.png`` to ``--output`` (default ``output/report``).
+
+The results and how to read them: docs/stability-and-accuracy.md.
 """
 
 import argparse

@@ -22,7 +22,8 @@ import argparse
 from pathlib import Path
 import sys
 
-from cbha_inverse.errors import ConfigError
+from cbha_inverse.config_files import read_yaml
+from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.paths import config_path
 import numpy as np
 import yaml
@@ -67,13 +68,7 @@ def _register(args):
     if args.rig is None:
         raise ValueError('--register needs --rig (the rig file to update)')
     path = Path(args.register)
-    try:
-        document = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ConfigError(path, 'file', f'cannot read: {exc.strerror or exc}') from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(path, 'yaml', f'not valid YAML: {exc}') from None
-    points = document.get('points') if isinstance(document, dict) else None
+    points = read_yaml(path).get('points')
     if not isinstance(points, list):
         raise ConfigError(path, 'points', 'missing: a list of {left: [x, y, z], base: [x, y, z]}')
     try:
@@ -84,7 +79,7 @@ def _register(args):
         raise ConfigError(path, 'points', f'{exc}') from None
     load_rig(args.rig)
     rig_path = Path(args.rig)
-    rig_document = yaml.safe_load(rig_path.read_text())
+    rig_document = read_yaml(rig_path)
     rig_document['base_from_left'] = [round(float(v), 9) for v in pose]
     rig_path.write_text(yaml.safe_dump(rig_document, sort_keys=False, default_flow_style=None))
     print(f'base_from_left {[round(float(v), 6) for v in pose]} from {len(p_left)} points, '
@@ -151,8 +146,7 @@ def main(argv=None):
     try:
         return _register(args) if args.register else _calibrate(args)
     except (ConfigError, ValueError, FileNotFoundError) as exc:
-        print(f'stereo_calibrate: {exc}', file=sys.stderr)
-        return 2
+        return report_config_error('stereo_calibrate', exc)
 
 
 if __name__ == '__main__':

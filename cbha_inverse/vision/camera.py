@@ -17,6 +17,7 @@ files written by the ROS ``camera_calibration`` tool load unchanged. No OpenCV h
 from dataclasses import dataclass
 from pathlib import Path
 
+from cbha_inverse.config_files import parse_yaml, read_text
 from cbha_inverse.errors import ConfigError
 import numpy as np
 import yaml
@@ -251,14 +252,7 @@ def camera_from_yaml(text, path='<string>'):
         ``<file>: <key>: <problem>`` for unreadable YAML, a missing key or a bad value.
 
     """
-    try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, 'problem_mark', None)
-        where = f'line {mark.line + 1}' if mark is not None else 'yaml'
-        raise ConfigError(path, where, f'not valid YAML: {getattr(exc, "problem", exc)}') from None
-    if not isinstance(document, dict):
-        raise ConfigError(path, 'document', 'must be a mapping of camera_info keys')
+    document = parse_yaml(text, path)
     for key in ('image_width', 'image_height', 'distortion_model'):
         if key not in document:
             raise ConfigError(path, key, 'missing')
@@ -296,8 +290,4 @@ def load_camera_yaml(path):
         If the file cannot be read or is not a valid camera description.
 
     """
-    try:
-        text = Path(path).read_text()
-    except OSError as exc:
-        raise ConfigError(path, 'file', f'cannot read: {exc.strerror or exc}') from None
-    return camera_from_yaml(text, path)
+    return camera_from_yaml(read_text(path), path)

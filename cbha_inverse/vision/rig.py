@@ -16,6 +16,7 @@ The rig file (``config/cameras/rig.yaml``) names the two camera_info YAMLs and h
 from dataclasses import dataclass
 from pathlib import Path
 
+from cbha_inverse.config_files import read_yaml
 from cbha_inverse.core.so3 import matrix_from_quat, quat_from_matrix
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.vision.camera import camera_model, load_camera_yaml, save_camera_yaml
@@ -225,14 +226,7 @@ def load_rig(path):
 
     """
     path = Path(path)
-    try:
-        document = yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise ConfigError(path, 'file', f'cannot read: {exc.strerror or exc}') from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(path, 'yaml', f'not valid YAML: {exc}') from None
-    if not isinstance(document, dict):
-        raise ConfigError(path, 'document', 'must be a mapping')
+    document = read_yaml(path)
     cameras = []
     for key in ('left_camera_info', 'right_camera_info'):
         if not isinstance(document.get(key), str):

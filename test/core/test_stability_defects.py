@@ -212,7 +212,7 @@ def test_zero_range_actuator_is_fixed_at_its_bound(tendon_scene):
 
 def test_explicit_zero_poisson_ratio_is_honoured():
     """condense_segment(spec, poisson_ratio=0.0) uses 0.0, not the YAML's 0.3."""
-    spec = replace(read_segment_spec(PACKAGE / 'meshes' / 'cylinder_segment.yaml'),
+    spec = replace(read_segment_spec(PACKAGE / 'test' / 'data' / 'cylinder_segment_geometry.yaml'),
                    mesh=MeshSettings(mesh_size=0.006, order=1))
     zero = condense_segment(spec, poisson_ratio=0.0)
     geom = spec.geometry
@@ -253,7 +253,7 @@ def test_condensation_refuses_a_non_finite_modulus():
 def test_condense_segment_command_prints_the_locking_warning(tmp_path, capsys):
     """The console script tells the user, not only the returned object."""
     from cbha_inverse.fem.cli import main as condense_main
-    spec = yaml.safe_load((PACKAGE / 'meshes' / 'cylinder_segment.yaml').read_text(
+    spec = yaml.safe_load((PACKAGE / 'test' / 'data' / 'cylinder_segment_geometry.yaml').read_text(
         encoding='utf-8'))
     spec['material']['poisson_ratio'] = 0.49
     spec['mesh'] = {'order': 1, 'mesh_size': 0.006}

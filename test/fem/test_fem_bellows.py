@@ -1,5 +1,6 @@
 """CBHA bellows segment: cavities, committed YAML, tube placement, mesh convergence, CLI."""
 
+from pathlib import Path
 import subprocess
 import sys
 
@@ -18,7 +19,8 @@ import pytest
 import yaml
 
 SEGMENT_YAML = config_path('segments', 'cbha_segment.yaml')
-GEOMETRY_YAML = meshes_path('cbha_segment.yaml')
+GEOMETRY_YAML = meshes_path('cbha_segment_geometry.yaml')
+CYLINDER_YAML = Path(__file__).resolve().parents[1] / 'data' / 'cylinder_segment_geometry.yaml'
 
 
 @pytest.fixture(scope='module')
@@ -74,9 +76,9 @@ def test_pressure_in_one_tube_bends_a_section_plausibly(segment, spec):
     # pitch radius d from the backbone, so the moment at the frame has the magnitude F d
     pitch = spec.geometry.tube_pitch_radius
     assert np.linalg.norm(upper[3:]) == pytest.approx(abs(upper[0]) * pitch, rel=1e-3)
-    # source of the value: the effective modulus in meshes/cbha_segment.yaml is calibrated so
-    # that this linear estimate is 63 deg (its material comment); 1 % covers the mesh
-    # convergence of the committed P2 segment (< 0.5 %, the mesh convergence test below)
+    # source of the value: the effective modulus in meshes/cbha_segment_geometry.yaml is
+    # calibrated so that this linear estimate is 63 deg (its material comment); 1 % covers the
+    # mesh convergence of the committed P2 segment (< 0.5 %, the mesh convergence test below)
     assert angle == pytest.approx(63.0, rel=0.01)
     model = chain_from_segments([segment] * 8)
     assert model.n_links == 8 and np.isclose(model.masses.sum(), 8 * segment.mass)
@@ -112,7 +114,7 @@ def test_mesh_convergence_of_the_default_segment(segment, spec):
 
 
 def test_cli_writes_then_reuses_the_cached_segment(tmp_path, capsys):
-    geometry = meshes_path('cylinder_segment.yaml')
+    geometry = CYLINDER_YAML
     args = [str(geometry), '--output-dir', str(tmp_path), '--mesh-size', '0.006']
     assert main(args) == 0
     first = capsys.readouterr().out

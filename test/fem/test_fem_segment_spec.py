@@ -1,5 +1,7 @@
 """Typed segment geometry files: the YAML's values, defaults, and one error line per bad key."""
 
+from pathlib import Path
+
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.fem.segment_spec import (BellowsGeometry, CylinderGeometry, read_segment_spec,
                                            Tube)
@@ -7,11 +9,15 @@ from cbha_inverse.paths import meshes_path
 import pytest
 import yaml
 
+TEST_DATA = Path(__file__).resolve().parents[1] / 'data'
+GEOMETRIES = {'cbha': meshes_path('cbha_segment_geometry.yaml'),
+              'cylinder': TEST_DATA / 'cylinder_segment_geometry.yaml'}
 
-@pytest.mark.parametrize('name', ['cbha_segment.yaml', 'cylinder_segment.yaml'])
+
+@pytest.mark.parametrize('name', sorted(GEOMETRIES))
 def test_spec_holds_exactly_the_values_of_the_file(name):
-    raw = yaml.safe_load(meshes_path(name).read_text())
-    spec = read_segment_spec(meshes_path(name))
+    raw = yaml.safe_load(GEOMETRIES[name].read_text())
+    spec = read_segment_spec(GEOMETRIES[name])
     assert (spec.name, spec.kind) == (raw['name'], raw['kind'])
     assert spec.material.as_dict() == raw['material']
     assert (spec.mesh.mesh_size, spec.mesh.order) == (raw['mesh']['mesh_size'],
@@ -32,7 +38,7 @@ def test_spec_holds_exactly_the_values_of_the_file(name):
 
 
 def test_optional_keys_take_their_documented_defaults(tmp_path):
-    text = meshes_path('cbha_segment.yaml').read_text()
+    text = GEOMETRIES['cbha'].read_text()
     stripped = '\n'.join(line for line in text.splitlines()
                          if not line.strip().startswith(('vertebra_mass:', 'order:',
                                                          'density:')))
@@ -52,7 +58,7 @@ def test_optional_keys_take_their_documented_defaults(tmp_path):
     ('order: 2', 'order: 3', r'mesh\.order: must be 1 or 2, got 3'),
 ])
 def test_a_bad_bellows_file_names_the_file_and_the_key(tmp_path, old, new, message):
-    text = meshes_path('cbha_segment.yaml').read_text()
+    text = GEOMETRIES['cbha'].read_text()
     assert old in text
     path = tmp_path / 'geometry.yaml'
     path.write_text(text.replace(old, new))

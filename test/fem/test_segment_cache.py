@@ -10,6 +10,7 @@ it must have (linear elasticity: doubling E halves C exactly up to round-off).
 
 import hashlib
 import json
+from pathlib import Path
 
 from cbha_inverse import __version__
 from cbha_inverse.fem.cli import main
@@ -19,6 +20,7 @@ import numpy as np
 import pytest
 import yaml
 
+CYLINDER_YAML = Path(__file__).resolve().parents[1] / 'data' / 'cylinder_segment_geometry.yaml'
 MESH = ['--mesh-size', '0.006', '--order', '1']
 
 
@@ -37,8 +39,8 @@ def _run(capsys, *args):
 @pytest.fixture
 def cylinder(tmp_path):
     """Return a private copy of the cylinder geometry YAML and the segment path it gives."""
-    geometry = tmp_path / 'cylinder_segment.yaml'
-    geometry.write_bytes(meshes_path('cylinder_segment.yaml').read_bytes())
+    geometry = tmp_path / 'cylinder_segment_geometry.yaml'
+    geometry.write_bytes(CYLINDER_YAML.read_bytes())
     return geometry, tmp_path / 'out' / 'cylinder_segment.yaml'
 
 
@@ -108,8 +110,8 @@ def test_geo_material_and_length_enter_the_hash(tmp_path, capsys):
 
 def test_bellows_segment_writes_its_cavities_and_needs_them_cached(tmp_path, capsys):
     """The CBHA bellows path: cavity surfaces beside the YAML; a missing one forces a rerun."""
-    args = [meshes_path('cbha_segment.yaml'), '--output-dir', tmp_path, '--mesh-size', '0.004',
-            '--order', '1']
+    args = [meshes_path('cbha_segment_geometry.yaml'), '--output-dir', tmp_path,
+            '--mesh-size', '0.004', '--order', '1']
     first = _run(capsys, *args)
     assert 'condensed P1' in first and first.count('cavity ') == 3
     segment = load_segment(tmp_path / 'cbha_segment.yaml')

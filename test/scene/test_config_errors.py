@@ -23,6 +23,7 @@ from cbha_inverse.scene import load_scene
 import pytest
 from ros_helpers import child_env, REPO_ROOT
 
+CYLINDER_YAML = Path(__file__).resolve().parents[1] / 'data' / 'cylinder_segment_geometry.yaml'
 SCRIPT = re.compile(r"'(\w+) = (cbha_inverse\.ros\.nodes\.\w+):main'")
 NODES = dict(SCRIPT.findall((REPO_ROOT / 'setup.py').read_text()))
 
@@ -181,7 +182,7 @@ def test_a_broken_segment_file_is_named_by_the_scene_that_reads_it(tmp_path):
 ])
 def test_condense_segment_exits_2_with_one_line(tmp_path, capsys, edit, key):
     geometry = tmp_path / 'geometry.yaml'
-    geometry.write_text(edit(meshes_path('cylinder_segment.yaml').read_text()))
+    geometry.write_text(edit(CYLINDER_YAML.read_text()))
     assert condense_main([str(geometry)]) == 2
     line = _one_line(capsys.readouterr().err)
     assert re.match(rf'condense_segment: error: {re.escape(str(geometry))}: {key}', line), line
@@ -189,7 +190,7 @@ def test_condense_segment_exits_2_with_one_line(tmp_path, capsys, edit, key):
 
 def test_condense_segment_writes_next_to_its_input_or_to_output(tmp_path, capsys, monkeypatch):
     geometry = tmp_path / 'geometry.yaml'
-    shutil.copy(meshes_path('cylinder_segment.yaml'), geometry)
+    shutil.copy(CYLINDER_YAML, geometry)
     coarse = ['--mesh-size', '0.01', '--order', '1']
     assert condense_main([str(geometry), *coarse]) == 0
     assert (tmp_path / 'cylinder_segment.yaml').is_file()
@@ -200,11 +201,13 @@ def test_condense_segment_writes_next_to_its_input_or_to_output(tmp_path, capsys
     shutil.copy(geometry, same_name)
     assert condense_main([str(same_name), *coarse]) == 2
     assert 'would overwrite the geometry file' in capsys.readouterr().err
-    # the package's own geometry (the install tree of a colcon build): into the working folder
+    # the package's own geometry (the install tree of a colcon build): into the working folder,
+    # named after its name: field (cbha_segment_geometry.yaml -> cbha_segment.yaml)
     work = tmp_path / 'work'
     work.mkdir()
     monkeypatch.chdir(work)
     before = sorted(Path(meshes_path()).iterdir())
-    assert condense_main([str(meshes_path('cylinder_segment.yaml')), *coarse]) == 0
-    assert (work / 'cylinder_segment.yaml').is_file()
+    assert condense_main([str(meshes_path('cbha_segment_geometry.yaml')), '--mesh-size', '0.004',
+                          '--order', '1']) == 0
+    assert (work / 'cbha_segment.yaml').is_file()
     assert sorted(Path(meshes_path()).iterdir()) == before

@@ -73,10 +73,11 @@ def test_register_writes_base_from_left(calibrated, tmp_path, capsys):
 @pytest.mark.parametrize('arguments, message', [
     (['{tmp}', '--pattern', '9by6'], '--pattern must look like 9x6'),
     (['{tmp}'], 'no left_*.png / right_*.png pairs'),
-    (['--register', '{tmp}/absent.yaml', '--rig', '{tmp}/rig.yaml'], 'cannot read'),
+    (['--register', '{tmp}/absent.yaml', '--rig', '{tmp}/rig.yaml'], 'no such file'),
 ])
 def test_bad_input_exits_2_with_one_line(tmp_path, capsys, arguments, message):
     """A bad pattern, an empty folder or a missing file: exit code 2 and one line on stderr."""
     assert main([a.format(tmp=tmp_path) for a in arguments]) == 2
     error = capsys.readouterr().err
+    assert error.startswith('stereo_calibrate: error: '), error
     assert message in error and error.count('\n') == 1, error

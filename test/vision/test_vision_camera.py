@@ -92,7 +92,7 @@ def test_broken_camera_file_names_file_and_key(tmp_path, edit, key):
 
 def test_missing_camera_file_is_a_config_error(tmp_path):
     """A camera file that does not exist is reported, not a traceback."""
-    with pytest.raises(ConfigError, match='cannot read'):
+    with pytest.raises(ConfigError, match='file: no such file'):
         load_camera_yaml(tmp_path / 'absent.yaml')
 
 
