@@ -1,4 +1,9 @@
-"""Helpers for the node tests over real DDS (bounded spinning, child processes)."""
+"""
+Helpers for the node tests over real DDS: nodes, messages, bounded spinning, child processes.
+
+rclpy and the message packages are imported inside the functions, so that importing this module
+costs nothing for the tests that do not use them.
+"""
 
 import contextlib
 import os
@@ -8,6 +13,81 @@ import sys
 import time
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def make_node(node_class, context, namespace='/cbha', **params):
+    """
+    Create a node of ``node_class`` in ``context`` with ``params`` as parameter overrides.
+
+    Parameters
+    ----------
+    node_class : type
+        An ``rclpy.node.Node`` subclass taking ``context``, ``namespace`` and
+        ``parameter_overrides`` (every node of the package does).
+    context : rclpy.Context
+        The test's context (the ``rclpy_context`` fixture).
+    namespace : str
+        Node namespace.
+    **params
+        Parameter name -> value.
+
+    Returns
+    -------
+    rclpy.node.Node
+        The node.
+
+    """
+    from rclpy.parameter import Parameter
+    return node_class(context=context, namespace=namespace, parameter_overrides=[
+        Parameter(name, value=value) for name, value in params.items()])
+
+
+def target_point(point, frame_id='cbha_base'):
+    """Return a ``PointStamped`` at ``point`` (3,) [m] in ``frame_id``, stamp 0."""
+    from geometry_msgs.msg import PointStamped
+    message = PointStamped()
+    message.header.frame_id = frame_id
+    message.point.x, message.point.y, message.point.z = (float(v) for v in point)
+    return message
+
+
+def stamp_seconds(message):
+    """Return the ``header.stamp`` of a stamped message in seconds."""
+    return message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+
+
+def sim_plant_scene(scene):
+    """Return the scene as ``cbha_sim`` builds its plant by default (stiffness error, gravity)."""
+    from cbha_inverse.ros.nodes.cbha_sim import CbhaSimParams
+    from cbha_inverse.scene import load_scene
+    return load_scene(scene, stiffness_scale=CbhaSimParams.stiffness_scale,
+                      gravity=CbhaSimParams.gravity)
+
+
+def loop_lag_error(rate_hz):
+    """
+    Return the tracking error [m] that the closed loop's lag alone gives on the default path.
+
+    No feedback of the inverse solver's structure removes the loop lag: ``cbha_sim``'s valve time
+    constant and transport latency (its defaults) plus one plant tick and one control tick at
+    ``rate_hz``. At the trajectory's default speed (the paper's circle, 2.5 cm/s) the target
+    runs ``speed * lag`` ahead of the tip (1.3 mm at 50 Hz).
+
+    Parameters
+    ----------
+    rate_hz : float  [Hz]
+        Rate of the plant and of the solver.
+
+    Returns
+    -------
+    float  [m]
+        ``speed * lag``.
+
+    """
+    from cbha_inverse.ros.nodes.cbha_sim import CbhaSimParams
+    from cbha_inverse.ros.nodes.trajectory import TrajectoryParams
+    lag = CbhaSimParams.valve_time_constant + CbhaSimParams.latency + 2.0 / rate_hz
+    return TrajectoryParams.speed * lag
 
 
 def spin_until(executor, predicate, timeout):
