@@ -80,7 +80,7 @@ $(EXPORTS_STAMP): $(PINS_STAMP)
 	@touch $@
 
 lint: install
-	$(VPY) -m pytest test/lint/test_flake8.py test/lint/test_pep257.py -q
+	$(VPY) -m pytest test/lint -q
 
 bench: install
 	$(VPY) -m cbha_inverse.report.cli bench

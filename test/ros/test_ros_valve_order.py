@@ -16,8 +16,7 @@ from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
-from ros_helpers import (
-    make_node, sim_plant_scene, spin_for, spin_until, spinning, target_point)
+from ros_helpers import make_node, sim_plant_scene, spin_for, spin_until, spinning, target_point
 from std_msgs.msg import Float64MultiArray
 
 CBHA = 'cbha'
