@@ -4,11 +4,12 @@ Replay regression: the input bags under ``test/data/replay``, the replay pipelin
 Inputs (50 Hz, sim time from 1000 s; regenerate with ``python test/regen_goldens.py --inputs``):
 
 - ``circle_targets``: ``/cbha/target`` along the paper's circle (r 60 mm, 2.5 cm/s, y-z plane,
-  CBHA workspace centre) for 3 s, the first 0.5 s at the start point;
+  CBHA workspace centre: ``config/trajectory.yaml``) for 3 s, the first 0.5 s at the start point;
 - ``closed_loop_session``: the same targets and ``/cbha/tip/measured`` from a closed-loop session
-  run offline on the core (the model's solver with the integral correction against the plant 10 %
-  softer, 0.2 mm seeded noise); each measurement is stamped 10 ms after its target, and one
-  measurement of the rest shape comes first.
+  run offline on the core as the shipped params files set it up (the model's solver with the
+  integral correction of ``config/inverse_solver.yaml`` against the plant of
+  ``config/cbha_sim.yaml``: 10 % softer, 0.2 mm of measurement noise, seeded); each measurement is
+  stamped 10 ms after its target, and one measurement of the rest shape comes first.
 
 A replay starts the installed ``inverse_solver`` (``use_sim_time``; ``rate_hz`` 1 so its timer
 never ticks between the 50 Hz targets: every command answers exactly one target, in order) and
@@ -68,6 +69,8 @@ RATE = 50.0
 HOLD = 0.5
 DURATION = 3.0
 MEASUREMENT_DELAY_NS = 10_000_000
+REAL_TIME_PRIORITY = 10
+"""SCHED_RR priority of the player and the solver: above the time-shared tests, low in 1-99."""
 BIN = Path(sys.executable).parent
 _NO_TIME = QosTime(0, 0)
 TARGET_QOS = Qos(QosHistory.KEEP_LAST, 10, QosReliability.RELIABLE, QosDurability.VOLATILE,
@@ -87,11 +90,19 @@ def _point_bytes(typestore, stamp_ns, point):
     return bytes(typestore.serialize_cdr(message, 'geometry_msgs/msg/PointStamped'))
 
 
+def shipped_parameters(node):
+    """Return the parameters of a node's shipped params file ``config/<node>.yaml``."""
+    with open(config_path(f'{node}.yaml'), encoding='utf-8') as stream:
+        return yaml.safe_load(stream)['/**']['ros__parameters']
+
+
 def circle_targets():
     """Return the stamps [ns] and targets (N, 3) [m] of the input bags."""
     scene = load_scene('cbha')
-    trajectory = make_trajectory('circle', center=scene.workspace_center[-1], radius=0.06,
-                                 plane='yz', speed=0.025, laps=1, start_hold=HOLD)
+    path = shipped_parameters('trajectory')
+    trajectory = make_trajectory(path['shape'], center=scene.workspace_center[-1],
+                                 radius=path['radius'], plane=path['plane'], speed=path['speed'],
+                                 laps=1, start_hold=HOLD)
     times = np.arange(int(DURATION * RATE)) / RATE
     stamps = EPOCH_NS + np.round(times * 1e9).astype(np.int64)
     return stamps, trajectory.sample(times).reshape(-1, 3)
@@ -113,8 +124,11 @@ def write_inputs():
     scene = load_scene('cbha')
     solver = scene.make_inverse_solver()
     solver.warm_up()
-    plant = StaticPlant(load_scene('cbha', stiffness_scale=0.9, gravity=(0.0, 0.0, -9.81)))
-    corrector = TargetCorrector(1, gain=0.1, max_correction=0.03)
+    sim, control = shipped_parameters('cbha_sim'), shipped_parameters('inverse_solver')
+    plant = StaticPlant(load_scene('cbha', stiffness_scale=sim['stiffness_scale'],
+                                   gravity=tuple(sim['gravity'])))
+    corrector = TargetCorrector(1, gain=control['loop_gain'],
+                                max_correction=control['max_correction'])
     rng = np.random.default_rng(0)
     writer = BagWriter(INPUTS['closed'])
     writer.add_topic('/cbha/target', 'geometry_msgs/msg/PointStamped', [TARGET_QOS])
@@ -128,7 +142,7 @@ def write_inputs():
         result = solver.step(corrector.update(target[None], None))
         solver.prepare()
         tip = plant.update(result.actuation).effector_positions[-1]
-        measured = tip + rng.normal(0.0, 2e-4, 3)
+        measured = tip + rng.normal(0.0, sim['noise_std'], 3)
         corrector.update(target[None], measured[None], saturated=result.status == 'saturated')
         when = stamp + MEASUREMENT_DELAY_NS
         writer.write('/cbha/tip/measured', when, _point_bytes(typestore, when, measured))
@@ -136,15 +150,16 @@ def write_inputs():
 
 
 def _real_time_priority():
-    """Run a sleeping child (the player) with SCHED_RR priority 10 where allowed."""
-    set_priority(10)
+    """Run a sleeping child (the player) with SCHED_RR priority where the OS allows it."""
+    set_priority(REAL_TIME_PRIORITY)
 
 
 def _real_time_threads(pid):
-    """Give every thread of a process (executor, DDS receive threads) SCHED_RR priority 10."""
+    """Give every thread of a process (executor, DDS receive threads) SCHED_RR priority."""
     for task in Path(f'/proc/{pid}/task').iterdir():
         with contextlib.suppress(OSError, ValueError):
-            os.sched_setscheduler(int(task.name), os.SCHED_RR, os.sched_param(10))
+            os.sched_setscheduler(int(task.name), os.SCHED_RR,
+                                  os.sched_param(REAL_TIME_PRIORITY))
 
 
 def _environment():

@@ -1,4 +1,9 @@
-"""Helpers for the node tests over real DDS (bounded spinning, child processes)."""
+"""
+Helpers for the node tests over real DDS: nodes, messages, bounded spinning, child processes.
+
+rclpy and the message packages are imported inside the functions, so that importing this module
+costs nothing for the tests that do not use them.
+"""
 
 import contextlib
 import os
@@ -8,6 +13,130 @@ import sys
 import time
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def make_node(node_class, context, namespace='/cbha', **params):
+    """
+    Create a node of ``node_class`` in ``context`` with ``params`` as parameter overrides.
+
+    Parameters
+    ----------
+    node_class : type
+        An ``rclpy.node.Node`` subclass taking ``context``, ``namespace`` and
+        ``parameter_overrides`` (every node of the package does).
+    context : rclpy.Context
+        The test's context (the ``rclpy_context`` fixture).
+    namespace : str
+        Node namespace.
+    **params
+        Parameter name -> value.
+
+    Returns
+    -------
+    rclpy.node.Node
+        The node.
+
+    """
+    from rclpy.parameter import Parameter
+    return node_class(context=context, namespace=namespace, parameter_overrides=[
+        Parameter(name, value=value) for name, value in params.items()])
+
+
+def target_point(point, frame_id='cbha_base'):
+    """Return a ``PointStamped`` at ``point`` (3,) [m] in ``frame_id``, stamp 0."""
+    from geometry_msgs.msg import PointStamped
+    message = PointStamped()
+    message.header.frame_id = frame_id
+    message.point.x, message.point.y, message.point.z = (float(v) for v in point)
+    return message
+
+
+def stamp_seconds(message):
+    """Return the ``header.stamp`` of a stamped message in seconds."""
+    return message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+
+
+def sim_plant_scene(scene):
+    """Return the scene as ``cbha_sim`` builds its plant by default (stiffness error, gravity)."""
+    from cbha_inverse.ros.nodes.cbha_sim import CbhaSimParams
+    from cbha_inverse.scene import load_scene
+    return load_scene(scene, stiffness_scale=CbhaSimParams.stiffness_scale,
+                      gravity=CbhaSimParams.gravity)
+
+
+def loop_lag_error(rate_hz):
+    """
+    Return the tracking error [m] that the closed loop's lag alone gives on the default path.
+
+    No feedback of the inverse solver's structure removes the loop lag: ``cbha_sim``'s valve time
+    constant and transport latency (its defaults) plus one plant tick and one control tick at
+    ``rate_hz``. At the trajectory's default speed (the paper's circle, 2.5 cm/s) the target
+    runs ``speed * lag`` ahead of the tip (1.3 mm at 50 Hz).
+
+    Parameters
+    ----------
+    rate_hz : float  [Hz]
+        Rate of the plant and of the solver.
+
+    Returns
+    -------
+    float  [m]
+        ``speed * lag``.
+
+    """
+    from cbha_inverse.ros.nodes.cbha_sim import CbhaSimParams
+    from cbha_inverse.ros.nodes.trajectory import TrajectoryParams
+    lag = CbhaSimParams.valve_time_constant + CbhaSimParams.latency + 2.0 / rate_hz
+    return TrajectoryParams.speed * lag
+
+
+def record_tracking(context, nodes, duration, hold, settle, rate_hz):
+    """
+    Spin ``nodes`` of a closed loop in ``/cbha``; return its tip errors against the targets.
+
+    A recorder takes ``target`` and ``tip/true``; once the first target arrives the loop runs
+    ``duration`` seconds, and the errors are scored from ``hold + settle`` seconds after the first
+    target to the last one (:func:`cbha_inverse.metrics.tracking_errors`).
+
+    Parameters
+    ----------
+    context : rclpy.Context
+        The test's context.
+    nodes : list of rclpy.node.Node
+        The loop (a trajectory, a solver, a plant, ...); destroyed afterwards.
+    duration, hold, settle : float  [s]
+        Run time after the first target, the trajectory's ``start_hold``, the settling time.
+    rate_hz : float  [Hz]
+        Rate of the plant: at least half of its tips in the scored window must arrive.
+
+    Returns
+    -------
+    TrackingErrors
+        ``rms``, ``maximum`` and the ``errors`` [m].
+
+    """
+    from cbha_inverse.metrics import tracking_errors
+    from cbha_inverse.ros.common.qos import MEASURED_QOS, TARGET_QOS
+    from geometry_msgs.msg import PointStamped
+    from rclpy.node import Node
+    recorder = Node('recorder', context=context, namespace='/cbha')
+    targets, tips = [], []
+
+    def stamped(message):
+        return (stamp_seconds(message), message.point.x, message.point.y, message.point.z)
+
+    recorder.create_subscription(PointStamped, 'target', lambda m: targets.append(stamped(m)),
+                                 TARGET_QOS)
+    recorder.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(stamped(m)),
+                                 MEASURED_QOS)
+    with spinning(context, *nodes, recorder) as executor:
+        assert spin_until(executor, lambda: len(targets) > 0, 10.0)
+        spin_for(executor, duration)
+    errors = tracking_errors([t[0] for t in targets], [t[1:] for t in targets],
+                             [t[0] for t in tips], [t[1:] for t in tips],
+                             targets[0][0] + hold + settle, targets[-1][0])
+    assert errors.errors.size > 0.5 * rate_hz * (duration - hold - settle), 'too few tip samples'
+    return errors
 
 
 def spin_until(executor, predicate, timeout):
@@ -61,6 +190,42 @@ def child_env():
     env = dict(os.environ)
     env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
     env['PYTHONPATH'] = os.pathsep.join(p for p in [str(REPO_ROOT), env.get('PYTHONPATH')] if p)
+    env['PYTHONUNBUFFERED'] = '1'
+    return env
+
+
+def colcon_build(work):
+    """
+    Build the package with colcon into the folder ``work``; return the install base.
+
+    Returns
+    -------
+    pathlib.Path
+        ``work / 'install'`` (the package prefix is ``<install base>/cbha_inverse``).
+
+    """
+    colcon = Path(sys.executable).with_name('colcon')
+    assert colcon.exists(), 'colcon is not installed in this environment (requirements-dev.txt)'
+    result = subprocess.run(
+        [str(colcon), '--log-base', str(work / 'log'), 'build', '--paths', str(REPO_ROOT),
+         '--build-base', str(work / 'build'), '--install-base', str(work / 'install')],
+        cwd=work, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, f'colcon build failed:\n{result.stdout}\n{result.stderr}'
+    return work / 'install'
+
+
+def install_env(prefix):
+    """
+    Return the environment ``install/setup.sh`` gives, for a child of the installed package.
+
+    The package's site-packages and ``prefix`` go first on ``PYTHONPATH`` and
+    ``AMENT_PREFIX_PATH``; the wheels' bootstrap flag is dropped as in :func:`child_env`.
+    """
+    env = dict(os.environ)
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    site = prefix / 'lib' / f'python{sys.version_info.major}.{sys.version_info.minor}'
+    env['PYTHONPATH'] = os.pathsep.join([str(site / 'site-packages'), env.get('PYTHONPATH', '')])
+    env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), env.get('AMENT_PREFIX_PATH', '')])
     env['PYTHONUNBUFFERED'] = '1'
     return env
 

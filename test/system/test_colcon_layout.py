@@ -15,8 +15,8 @@ import sys
 import time
 
 import pytest
+from ros_helpers import colcon_build, install_env, REPO_ROOT
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = 'cbha_inverse'
 NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim', 'stereo_tracker',
                     'robotino_bridge', 'cbha_excite')
@@ -25,31 +25,11 @@ COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo', 'cbha_lau
                        'cbha_bag')
 
 
-def _child_env(prefix):
-    """Return the environment install/setup.sh would give, minus the wheels' bootstrap flag."""
-    env = dict(os.environ)
-    # The rclpy wheels re-exec Python with their LD_LIBRARY_PATH once; a child that inherits the
-    # flag without the matching library path cannot import rclpy (notes/ros2-on-pypi.md).
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    site = prefix / 'lib' / f'python{sys.version_info.major}.{sys.version_info.minor}'
-    env['PYTHONPATH'] = os.pathsep.join([str(site / 'site-packages'), env.get('PYTHONPATH', '')])
-    env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), env.get('AMENT_PREFIX_PATH', '')])
-    env['PYTHONUNBUFFERED'] = '1'
-    return env
-
-
 @pytest.fixture(scope='module')
 def colcon_install(tmp_path_factory):
     """Build the package with colcon into a temporary workspace; return the install base."""
-    colcon = Path(sys.executable).with_name('colcon')
-    assert colcon.exists(), 'colcon is not installed in this environment (requirements-dev.txt)'
     work = tmp_path_factory.mktemp('colcon')
-    result = subprocess.run(
-        [str(colcon), '--log-base', str(work / 'log'), 'build', '--paths', str(REPO_ROOT),
-         '--build-base', str(work / 'build'), '--install-base', str(work / 'install')],
-        cwd=work, capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, f'colcon build failed:\n{result.stdout}\n{result.stderr}'
-    yield work / 'install'
+    yield colcon_build(work)
     shutil.rmtree(work, ignore_errors=True)
 
 
@@ -77,7 +57,7 @@ def test_installed_package_finds_its_share_dir(colcon_install):
     prefix = colcon_install / PACKAGE
     code = ('import cbha_inverse, cbha_inverse.paths as p; '
             'print(cbha_inverse.__file__); print(p.config_path())')
-    out = subprocess.run([sys.executable, '-c', code], env=_child_env(prefix), cwd=prefix,
+    out = subprocess.run([sys.executable, '-c', code], env=install_env(prefix), cwd=prefix,
                          capture_output=True, text=True, timeout=60, check=True).stdout.split()
     assert Path(out[0]).is_relative_to(prefix), f'imported {out[0]} instead of the install'
     assert Path(out[1]) == prefix / 'share' / PACKAGE / 'config'
@@ -102,7 +82,7 @@ def test_ros2_run_trajectory_publishes_targets(colcon_install, rclpy_context, mo
     executor.add_node(node)
     process = subprocess.Popen(
         [str(executable), '--ros-args', '--params-file', str(params)],
-        env=_child_env(prefix), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        env=install_env(prefix), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 30.0
         while len(received) < 5 and time.monotonic() < deadline and process.poll() is None:
@@ -121,7 +101,7 @@ def test_installed_cbha_launch_uses_the_installed_params_files(colcon_install):
     """``cbha_launch`` of the install resolves every params file in the install's share dir."""
     prefix = colcon_install / PACKAGE
     result = subprocess.run([str(prefix / 'lib' / PACKAGE / 'cbha_launch'), 'sim', '--dry-run'],
-                            env=_child_env(prefix), cwd=prefix, capture_output=True, text=True,
+                            env=install_env(prefix), cwd=prefix, capture_output=True, text=True,
                             timeout=60)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()

@@ -68,6 +68,7 @@ def test_demo_excite_records_the_program_on_the_plant(tmp_path):
     hold (10 ms valves, 0.3 s holds) and its tip moves between the three outer bends.
     """
     from cbha_inverse.identify.excitation import make_program
+    from cbha_inverse.ros.nodes.cbha_excite import ExciteParams
     from cbha_inverse.scene import load_scene
     output = tmp_path / 'demo'
     demo = subprocess.run(
@@ -99,7 +100,7 @@ def test_demo_excite_records_the_program_on_the_plant(tmp_path):
     measured = np.array([m.data for m in topics['/cbha/pressure_measured']])
     np.testing.assert_array_equal(commands[0], program.start)
     np.testing.assert_array_equal(commands[-1], program.end)
-    assert np.all(commands >= 0.0) and np.all(commands <= 150e3)
+    assert np.all(commands >= 0.0) and np.all(commands <= ExciteParams.max_pressure)
     # each tip sample with the valve pressures last received before it
     tip = np.array([[m.point.x, m.point.y, m.point.z] for m in topics['/cbha/tip/true']])
     latest = np.searchsorted(log_times['/cbha/pressure_measured'], log_times['/cbha/tip/true'],

@@ -16,12 +16,11 @@ from pathlib import Path
 import re
 import shutil
 import subprocess
-import sys
 
 import pytest
+from ros_helpers import colcon_build, install_env, REPO_ROOT
 import yaml
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 PACKAGE = 'cbha_inverse'
 
 
@@ -35,30 +34,14 @@ def _console_scripts():
     raise AssertionError('setup.py has no CONSOLE_SCRIPTS list')
 
 
-def _child_env(prefix):
-    """Return the environment install/setup.sh would give, minus the wheels' bootstrap flag."""
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    site = prefix / 'lib' / f'python{sys.version_info.major}.{sys.version_info.minor}'
-    env['PYTHONPATH'] = os.pathsep.join([str(site / 'site-packages'), env.get('PYTHONPATH', '')])
-    env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), env.get('AMENT_PREFIX_PATH', '')])
-    env['PYTHONUNBUFFERED'] = '1'
-    return env
-
-
 @pytest.fixture(scope='module')
 def installed_prefix(tmp_path_factory):
     """Build the package with colcon; yield the package prefix found through the ament index."""
     from ament_index_python.packages import get_package_prefix
-    colcon = Path(sys.executable).with_name('colcon')
     work = tmp_path_factory.mktemp('colcon_executables')
-    result = subprocess.run(
-        [str(colcon), '--log-base', str(work / 'log'), 'build', '--paths', str(REPO_ROOT),
-         '--build-base', str(work / 'build'), '--install-base', str(work / 'install')],
-        cwd=work, capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, f'colcon build failed:\n{result.stdout}\n{result.stderr}'
+    install = colcon_build(work)
     previous = os.environ.get('AMENT_PREFIX_PATH')
-    os.environ['AMENT_PREFIX_PATH'] = str(work / 'install' / PACKAGE)
+    os.environ['AMENT_PREFIX_PATH'] = str(install / PACKAGE)
     try:
         prefix = Path(get_package_prefix(PACKAGE))
     finally:
@@ -87,7 +70,7 @@ def test_every_installed_executable_starts(installed_prefix):
     config = installed_prefix / 'share' / PACKAGE / 'config'
     nodes = [name for name in names if (config / f'{name}.yaml').is_file()]
     assert {'trajectory', 'inverse_solver', 'cbha_sim'} <= set(nodes)
-    env = _child_env(installed_prefix)
+    env = install_env(installed_prefix)
     helps = _run_all(executables, env, installed_prefix, {name: ['--help'] for name in names})
     below_range = {}
     for name, (code, output) in helps.items():

@@ -7,9 +7,10 @@ goldens`` (``python test/regen_goldens.py``). Each mode is replayed three times:
 match the goldens, and so one another.
 """
 
+from cbha_inverse.ros.nodes.inverse_solver import InverseSolverParams
 import numpy as np
 import pytest
-from replay import compare, GOLDENS, INPUTS, replay, TOLERANCE_PA
+from replay import compare, DURATION, GOLDENS, INPUTS, RATE, replay, TOLERANCE_PA
 
 
 @pytest.mark.parametrize('mode', ['open', 'closed'])
@@ -18,8 +19,10 @@ def test_three_replays_match_the_goldens(mode, tmp_path):
     goldens = np.load(GOLDENS)
     golden = goldens[mode]
     assert float(goldens['tolerance_pa']) == TOLERANCE_PA
-    assert golden.shape == (150, 6)
-    assert np.all((golden >= 0.0) & (golden <= 150000.0)) and np.all(golden.max(axis=1) > 0)
+    # one command per target, within the solver's command ceiling
+    assert golden.shape == (int(DURATION * RATE), 6)
+    assert np.all((golden >= 0.0) & (golden <= InverseSolverParams.max_pressure))
+    assert np.all(golden.max(axis=1) > 0)
     replays = [replay(mode, tmp_path / f'replay_{i}') for i in range(3)]
     deviations = [float(np.max(np.abs(r - golden))) if r.shape == golden.shape else np.inf
                   for r in replays]

@@ -9,9 +9,8 @@ latency (3 ms) and 0.2 mm measurement noise.
 
 import time
 
-from cbha_inverse.metrics import tracking_errors
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS, TARGET_QOS
-from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
+from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode, CbhaSimParams
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
 from cbha_inverse.ros.nodes.trajectory import TrajectoryNode
 from cbha_inverse.scene import load_scene
@@ -19,14 +18,17 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
 from rclpy.node import Node
-from rclpy.parameter import Parameter
-from ros_helpers import spin_for, spin_until, spinning
+from ros_helpers import (
+    loop_lag_error, make_node, record_tracking, spin_for, spin_until, spinning, target_point)
 from std_msgs.msg import Float64MultiArray
 
 SCENE = 'tendon_6f_8c'
 MAX_TENSION = 10.0
+"""The tendon trunk's cable tension ceiling [N] (its scene's upper bounds), as max_pressure."""
 CENTER = (0.117, 0.0, -0.005)
+"""A tip position well in the tendon trunk's reach (near its workspace centre) [m]."""
 RATE = 50.0
+"""Rate of trajectory, solver and plant in the closed loop [Hz]."""
 
 
 def _names():
@@ -35,15 +37,13 @@ def _names():
 
 def _solver(context, namespace='/cbha', **overrides):
     params = {'scene': SCENE, 'valve_names': _names(), 'rate_hz': RATE, **overrides}
-    return InverseSolverNode(context=context, namespace=namespace, parameter_overrides=[
-        Parameter(k, value=v) for k, v in params.items()])
+    return make_node(InverseSolverNode, context, namespace, **params)
 
 
 def _sim(context, namespace='/cbha', **overrides):
     params = {'scene': SCENE, 'valve_names': _names(), 'rate_hz': RATE,
               'max_pressure': MAX_TENSION, **overrides}
-    return CbhaSimNode(context=context, namespace=namespace, parameter_overrides=[
-        Parameter(k, value=v) for k, v in params.items()])
+    return make_node(CbhaSimNode, context, namespace, **params)
 
 
 def _command_client(context):
@@ -65,28 +65,11 @@ def _tracking_rms(context, mode, duration, hold=1.5, settle=1.0):
     scene = load_scene('cbha')
     center = scene.workspace_center[-1]
     names = list(scene.actuator_names)
-    trajectory = TrajectoryNode(context=context, namespace='/cbha', parameter_overrides=[
-        Parameter('center', value=[float(v) for v in center]), Parameter('rate_hz', value=RATE),
-        Parameter('start_hold', value=hold), Parameter('wait_for_subscribers', value=2)])
+    trajectory = make_node(TrajectoryNode, context, center=[float(v) for v in center],
+                           rate_hz=RATE, start_hold=hold, wait_for_subscribers=2)
     solver = _solver(context, scene='cbha', valve_names=names, mode=mode, loop_gain=0.1)
-    sim = _sim(context, scene='cbha', valve_names=names, max_pressure=150000.0)
-    recorder = Node('recorder', context=context, namespace='/cbha')
-    targets, tips = [], []
-
-    def stamp(msg):
-        return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-
-    recorder.create_subscription(PointStamped, 'target', lambda m: targets.append(
-        (stamp(m), m.point.x, m.point.y, m.point.z)), TARGET_QOS)
-    recorder.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(
-        (stamp(m), m.point.x, m.point.y, m.point.z)), MEASURED_QOS)
-    with spinning(context, trajectory, solver, sim, recorder) as executor:
-        assert spin_until(executor, lambda: len(targets) > 0, 10.0)
-        spin_for(executor, duration)
-    errors = tracking_errors([t[0] for t in targets], [t[1:] for t in targets],
-                             [t[0] for t in tips], [t[1:] for t in tips],
-                             targets[0][0] + hold + settle, targets[-1][0])
-    assert errors.errors.size > 0.5 * RATE * (duration - hold - settle), 'too few tip samples'
+    sim = _sim(context, scene='cbha', valve_names=names, max_pressure=CbhaSimParams.max_pressure)
+    errors = record_tracking(context, [trajectory, solver, sim], duration, hold, settle, RATE)
     return errors.rms, errors.maximum
 
 
@@ -102,21 +85,13 @@ def test_closed_loop_tracks_circle_segment_below_bound(rclpy_context):
     the loop must compensate the model error completely and not add to the lag (measured here
     ~0.7 mm; the demo at 100 Hz in separate processes gives ~0.5 mm).
     """
-    lag = 0.010 + 0.003 + 2.0 / RATE
-    bound = 0.025 * lag
+    bound = loop_lag_error(RATE)
     closed_rms, closed_max = _tracking_rms(rclpy_context, 'closed', 7.5, settle=1.5)
     open_rms, _ = _tracking_rms(rclpy_context, 'open', 7.5, settle=1.5)
     print(f'closed loop RMS {closed_rms * 1e3:.3f} mm (max {closed_max * 1e3:.3f}), '
           f'open loop RMS {open_rms * 1e3:.3f} mm, bound {bound * 1e3:.3f} mm')
     assert closed_rms < bound
     assert open_rms > 3.0 * closed_rms
-
-
-def _point(x, y, z, frame='cbha_base'):
-    message = PointStamped()
-    message.header.frame_id = frame
-    message.point.x, message.point.y, message.point.z = float(x), float(y), float(z)
-    return message
 
 
 def _bad_points(rng, count):
@@ -126,12 +101,12 @@ def _bad_points(rng, count):
         point = list(CENTER)
         kind = i % 4
         if kind == 3:
-            yield _point(*point, frame=['', 'world', 'cbha_base ', 'map'][rng.integers(4)])
+            yield target_point(point, frame_id=['', 'world', 'cbha_base ', 'map'][rng.integers(4)])
             continue
         point[rng.integers(3)] = bad[rng.integers(len(bad))]
         if kind == 2:
             point = [bad[rng.integers(len(bad))] for _ in range(3)]
-        yield _point(*point, frame='cbha_base')
+        yield target_point(point)
 
 
 def _bad_commands(rng, count, n_valves):
@@ -184,14 +159,14 @@ def test_fuzzed_inputs_never_produce_bad_commands(rclpy_context):
             measured_pub.publish(measured)
             command_pub.publish(command)
             if i % 20 == 0:
-                target_pub.publish(_point(CENTER[0], 0.005 * np.cos(i), 0.005 * np.sin(i)))
+                target_pub.publish(target_point((CENTER[0], 0.005 * np.cos(i), 0.005 * np.sin(i))))
             if i % 5 == 4:  # pace: reliable KEEP_LAST(10) would drop a burst
                 spin_until(executor, lambda: _count(solver, 'target.') > i
                            and sum(sim.rejected.values()) > i, 2.0)
         spin_until(executor, lambda: sum(sim.rejected.values()) >= count, 20.0)
         spin_for(executor, 0.3)
         published_during_fuzz = len(commands)
-        target_pub.publish(_point(*CENTER))
+        target_pub.publish(target_point(CENTER))
         assert spin_until(executor, lambda: len(commands) > published_during_fuzz + 2, 5.0)
     rejected_targets = _count(solver, 'target.')
     rejected_measured = _count(solver, 'tip/measured.')
@@ -218,7 +193,7 @@ def test_no_command_before_the_first_target(rclpy_context, publish_idle):
                           and solver.command_publisher.get_subscription_count() > 0, 10.0)
         spin_for(executor, 0.5)
         before_target = list(commands)
-        target_pub.publish(_point(*CENTER))
+        target_pub.publish(target_point(CENTER))
         assert spin_until(executor, lambda: solver.ticks > 0
                           and len(commands) > len(before_target), 5.0)
     assert solver.decision == 'run'
@@ -243,7 +218,7 @@ def test_target_sent_once_is_solved_until_the_model_reaches_it(rclpy_context):
 
     with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
-        target_pub.publish(_point(*target))
+        target_pub.publish(target_point(target))
         sent = time.monotonic()
         assert spin_until(executor, lambda: time.monotonic() > sent + 2.0 * timeout
                           and model_error() <= 1e-4, 10.0), f'model error {model_error()} m'
@@ -271,9 +246,9 @@ def test_stale_feedback_in_closed_loop_vents_within_timeout(rclpy_context):
         last_measured = None
         start = time.monotonic()
         while time.monotonic() < start + 1.0:
-            target_pub.publish(_point(CENTER[0], 0.005, 0.0))
+            target_pub.publish(target_point((CENTER[0], 0.005, 0.0)))
             if time.monotonic() < start + 0.5:
-                measured_pub.publish(_point(*CENTER))
+                measured_pub.publish(target_point(CENTER))
                 last_measured = time.monotonic()
             spin_for(executor, 0.01)
     assert solver.decision == 'vent'
@@ -295,8 +270,8 @@ def test_solver_publishes_backbone_markers_and_diagnostics(rclpy_context):
     client.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 10)
     with spinning(rclpy_context, solver, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
-        target_pub.publish(_point(*CENTER))
-        target_pub.publish(_point(float('nan'), 0.0, 0.0))
+        target_pub.publish(target_point(CENTER))
+        target_pub.publish(target_point((float('nan'), 0.0, 0.0)))
         assert spin_until(executor, lambda: solver.ticks > 0 and markers and any(
             s.name == 'inverse_solver: inputs' and any(
                 v.key == 'rejected.target.non_finite' for v in s.values)

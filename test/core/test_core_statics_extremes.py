@@ -1,29 +1,20 @@
 """
-Defects found on stiff and extreme cases (issue 11), each checked through the public API.
+Statics and the chain model on stiff, slender, non-finite and over-loaded cases.
 
-References are independent of the Newton engine: the linear flexibility of a serial chain
+The references are independent of the Newton engine: the linear flexibility of a serial chain
 (wrench transported to each link, ``C_j`` applied, displacement carried to the tip), the
-Timoshenko closed form of the whole beam, Euler's buckling load, and reachability.
+Timoshenko closed form of the whole beam and Euler's buckling load. Stiffness ratios up to 1e9,
+2000 links, compression past buckling and 20 % strain are solved and flagged; NaN and inf are
+refused where they enter (loads, the chain model, the link compliance).
 """
 
-from dataclasses import replace
-from pathlib import Path
-
-from cbha_inverse.core.actuation.actuators import ActuatorSet
-from cbha_inverse.core.actuation.cables import CableGroup
 from cbha_inverse.core.chain import ChainModel
-from cbha_inverse.core.inverse.solver import InverseSolver
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.statics import solve_static, StaticConvergenceError
-from cbha_inverse.fem.condensation import condense_cylinder, condense_segment
-from cbha_inverse.fem.segment_spec import MeshSettings, read_segment_spec
-from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
-import yaml
 
 E_MOD, NU, RADIUS = 2.0e9, 0.3, 0.005
-PACKAGE = Path(__file__).resolve().parents[2]
 
 
 def _straight_chain(n_links, length, stiffness_factors=None):
@@ -160,104 +151,11 @@ def test_strict_solve_raises_when_not_converged():
                      max_load_steps=2, strict=True)
 
 
-@pytest.fixture(scope='module')
-def tendon_scene():
-    """Load the paper's 6-frame, 8-tendon trunk."""
-    return load_scene('tendon_6f_8c')
-
-
-def test_huge_target_saturates_and_the_next_target_is_tracked(tendon_scene):
-    """1e308 on each axis: finite actuation within bounds; a sane target afterwards is reached."""
-    solver = tendon_scene.make_inverse_solver()
-    for _ in range(3):
-        out = solver.step([[1e308, 1e308, 1e308]])
-        assert np.all(np.isfinite(out.actuation))
-        assert np.all(out.actuation >= solver.lower_bounds)
-        assert np.all(out.actuation <= solver.upper_bounds)
-        assert out.status == 'saturated' and out.warnings
-    target = tendon_scene.forward(np.full(8, 2.0)).effector_positions
-    for _ in range(30):
-        out = solver.step(target)
-    assert out.status == 'solved'
-    assert np.linalg.norm(out.effector_positions - target) < 1e-6
-
-
-def test_transposed_targets_are_refused():
-    """A (3, k) array is not silently reinterpreted as (k, 3)."""
-    scene = load_scene('tendon_10f_16c')
-    solver = scene.make_inverse_solver()
-    targets = scene.rest_effector_positions
-    assert solver.step(targets).status in ('solved', 'saturated')
-    with pytest.raises(ValueError, match=r'\(2, 3\)'):
-        solver.step(targets.T)
-    with pytest.raises(ValueError, match=r'\(2, 3\)'):
-        solver.step(targets.reshape(-1))
-
-
-def test_zero_range_actuator_is_fixed_at_its_bound(tendon_scene):
-    """A cable of zero range: the solver starts, names it, keeps it at 0, drives the rest."""
-    scene = tendon_scene
-    cables = list(scene.actuators.groups[0].cables)
-    cables[1] = replace(cables[1], max_tension=0.0)
-    actuators = ActuatorSet([CableGroup(cables, scene.model.n_frames)], scene.model.n_frames)
-    solver = InverseSolver(scene.model, actuators, scene.effectors, gravity=scene.gravity)
-    solver.warm_up()
-    assert any('tip_90' in text and 'zero range' in text for text in solver.warnings)
-    target = scene.forward(np.array([3.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 2.0])).effector_positions
-    for _ in range(30):
-        out = solver.step(target)
-    assert np.all(np.isfinite(out.actuation)) and out.actuation[1] == 0.0
-    assert np.linalg.norm(out.effector_positions - target) < 1e-6
-
-
-def test_explicit_zero_poisson_ratio_is_honoured():
-    """condense_segment(spec, poisson_ratio=0.0) uses 0.0, not the YAML's 0.3."""
-    spec = replace(read_segment_spec(PACKAGE / 'test' / 'data' / 'cylinder_segment_geometry.yaml'),
-                   mesh=MeshSettings(mesh_size=0.006, order=1))
-    zero = condense_segment(spec, poisson_ratio=0.0)
-    geom = spec.geometry
-    direct = condense_cylinder(geom.length, geom.outer_radius, youngs_modulus=1.0e6,
-                               poisson_ratio=0.0, mesh_size=0.006, order=1)
-    yaml_nu = condense_segment(spec)
-    np.testing.assert_allclose(zero.compliance, direct.compliance, rtol=1e-9)
-    # torsion ~ (1 + nu): the YAML's nu = 0.3 gives a visibly larger torsion compliance
-    assert yaml_nu.compliance[3, 3] > 1.1 * zero.compliance[3, 3]
-
-
-def test_near_incompressible_p1_warns():
-    """P1 at nu = 0.49 locks: the segment says so; at nu = 0.4 it does not."""
-    common = {'youngs_modulus': 1.0e6, 'mesh_size': 0.006, 'order': 1}
-    locked = condense_cylinder(0.02, 0.01, poisson_ratio=0.49, **common)
-    fine = condense_cylinder(0.02, 0.01, poisson_ratio=0.4, **common)
-    assert any('lock' in text for text in locked.warnings)
-    assert fine.warnings == ()
-
-
 @pytest.mark.parametrize('args', [
     (np.nan, 1e9, 0.3, 0.01), (0.1, np.inf, 0.3, 0.01), (0.1, 1e9, np.nan, 0.01),
     (0.1, 1e9, 0.3, np.inf),
 ])
 def test_timoshenko_compliance_refuses_non_finite_arguments(args):
-    """A NaN length or an infinite modulus used to give a NaN or zero compliance."""
+    """A NaN length or an infinite modulus is refused, not turned into a NaN or zero compliance."""
     with pytest.raises(ValueError, match='finite'):
         timoshenko_compliance(*args)
-
-
-def test_condensation_refuses_a_non_finite_modulus():
-    """A NaN Young's modulus used to fail deep in the sparse factorization."""
-    with pytest.raises(ValueError, match='finite'):
-        condense_cylinder(0.02, 0.01, youngs_modulus=np.nan, poisson_ratio=0.3,
-                          mesh_size=0.006, order=1)
-
-
-def test_condense_segment_command_prints_the_locking_warning(tmp_path, capsys):
-    """The console script tells the user, not only the returned object."""
-    from cbha_inverse.fem.cli import main as condense_main
-    spec = yaml.safe_load((PACKAGE / 'test' / 'data' / 'cylinder_segment_geometry.yaml').read_text(
-        encoding='utf-8'))
-    spec['material']['poisson_ratio'] = 0.49
-    spec['mesh'] = {'order': 1, 'mesh_size': 0.006}
-    geometry = tmp_path / 'locked.yaml'
-    geometry.write_text(yaml.safe_dump(spec), encoding='utf-8')
-    assert condense_main([str(geometry), '--output', str(tmp_path / 'segment.yaml')]) == 0
-    assert 'warning: P1 tetrahedra lock at nu = 0.49' in capsys.readouterr().out

@@ -1,0 +1,90 @@
+"""
+``inverse_solver`` when the tip measurements stop: hold and vent told apart by value.
+
+In closed loop, with the targets still moving, the measurements stop; once they are
+``feedback_timeout`` old, ``hold`` must repeat the command solved last (not the vent value, not an
+older command) and ``vent`` must publish the vent value, which no solved command equals.
+"""
+
+import time
+
+from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
+from cbha_inverse.scene import load_scene
+from geometry_msgs.msg import PointStamped
+import numpy as np
+import pytest
+from rclpy.node import Node
+from ros_helpers import make_node, spin_for, spin_until, spinning, target_point
+from std_msgs.msg import Float64MultiArray
+
+TENDON = 'tendon_6f_8c'
+TENDON_CENTER = (0.117, 0.0, -0.005)
+"""A tip position well in the tendon trunk's reach (near its workspace centre) [m]."""
+
+
+@pytest.mark.parametrize('action', ['hold', 'vent'])
+def test_stale_feedback_holds_the_last_solved_command_or_vents(rclpy_context, action):
+    """
+    Closed loop, measurements stop: hold = exactly the last command solved, vent = the vent value.
+
+    Targets keep moving all along; the measurements stop at ``last_measured``. Until the feedback
+    is ``timeout`` old the solver follows the targets (the commands change every tick); after
+    that, hold must repeat one of the commands of the last ticks before that moment (not the
+    vent value, not an older command), and vent must publish the vent value, which no solved
+    command equals.
+    """
+    timeout, vent, max_tension, rate = 0.2, 1.0, 10.0, 100.0
+    tick = 1.0 / rate
+    # windows around stale_at, the moment the feedback turns stale: the decision shows within 5
+    # ticks after it; the running phase ends 6 ticks before it, and the held command was solved
+    # between then and 3 ticks after it (the tick that notices the staleness may come late)
+    decided_after, running_until, noticed_by = 5 * tick, 6 * tick, 3 * tick
+    names = list(load_scene(TENDON).actuator_names)
+    solver = make_node(InverseSolverNode, rclpy_context, scene=TENDON, valve_names=names,
+                       rate_hz=rate, max_pressure=max_tension, mode='closed',
+                       feedback_timeout=timeout, stale_action=action, vent_pressure=vent)
+    client = Node('client', context=rclpy_context, namespace='/cbha')
+    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    measured_pub = client.create_publisher(PointStamped, 'tip/measured', MEASURED_QOS)
+    commands = []
+    client.create_subscription(Float64MultiArray, 'pressure_command', lambda m: commands.append(
+        (time.monotonic(), np.array(m.data))), COMMAND_QOS)
+    center = np.array(TENDON_CENTER)
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
+                          and measured_pub.get_subscription_count() > 0, 10.0)
+        # running first (so that no idle command falls into the running phase)
+        measured_pub.publish(target_point(center))
+        target_pub.publish(target_point(center + [0.0, 0.01, 0.0]))
+        assert spin_until(executor, lambda: solver.ticks > 0, 10.0)
+        first_target = time.monotonic()
+        last_measured = None
+        i = 0
+        while time.monotonic() < first_target + 1.0:
+            target_pub.publish(target_point(center + [0.0, 0.01 * np.cos(0.1 * i),
+                                                      0.01 * np.sin(0.1 * i)]))
+            if time.monotonic() < first_target + 0.5:
+                measured_pub.publish(target_point(center))
+                last_measured = time.monotonic()
+            i += 1
+            spin_for(executor, tick)
+    assert solver.decision == action
+    stale_at = last_measured + timeout
+    settled = [c for t, c in commands if t > stale_at + decided_after]
+    assert len(settled) > 10
+    for command in settled:
+        np.testing.assert_array_equal(command, settled[0])
+    running = [c for t, c in commands if first_target < t <= stale_at - running_until]
+    assert running and not any(np.allclose(c, vent) for c in running)
+    if action == 'vent':
+        np.testing.assert_array_equal(settled[0], np.full(len(names), vent))
+        return
+    held = settled[0]
+    assert not np.allclose(held, vent)
+    at_last_measured = [c for t, c in commands if t <= last_measured][-1]
+    assert not np.array_equal(held, at_last_measured)
+    last_ticks = [c for t, c in commands if stale_at - running_until < t <= stale_at + noticed_by]
+    assert any(np.array_equal(held, c) for c in last_ticks), 'held value was not solved last'
+    # and the solver was still moving then: the running commands are not all equal
+    assert len({c.tobytes() for c in running}) > 1
