@@ -8,7 +8,7 @@ the tick time (median and 99th percentile over the measured ticks) and its media
 stiffness; factor = LAPACK Cholesky; W = the multi-RHS solve and the projection to W_ea, W_aa,
 δ_free and the QP matrices; QP = the box QP with its checks; update = Newton step and effector
 positions) beside the figures reported in the paper (SOFA, 2.66 GHz Core i7, 2015). ``lin`` is the
-``relinearize_every`` option: 1 linearises at every tick (DESIGN §6); 5 keeps a linearisation for
+``relinearize_every`` option: 1 linearises at every tick (the paper); 5 keeps a linearisation for
 up to 5 ticks (the ticks in between only re-solve the QP of the linear model, so their phases
 before the QP are ~0 and the median is theirs; the p99 is the linearisation tick). ``QP``
 compares the exact active-set solver (the default) with proxsuite. The last columns give this
@@ -23,6 +23,7 @@ import os
 import sys
 import time
 
+from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -85,7 +86,7 @@ def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_st
     newton_steps : int
         Newton steps per tick.
     relinearize_every : int
-        Ticks between linearisations (1 = every tick, DESIGN §6).
+        Ticks between linearisations (1 = every tick, as the paper).
 
     Returns
     -------
@@ -279,7 +280,7 @@ def main(argv=None):
     parser.add_argument('--ticks', type=int, default=2000)
     parser.add_argument('--warmup', type=int, default=100)
     parser.add_argument('--qp-solvers', nargs='+', default=['proxsuite', 'active_set'],
-                        choices=['proxsuite', 'active_set', 'gauss_seidel'],
+                        choices=QP_SOLVERS,
                         help='QP solvers to compare (default: proxsuite and the exact active set)')
     parser.add_argument('--gauss-seidel', action='store_true',
                         help='also run the projected Gauss-Seidel QP for comparison')

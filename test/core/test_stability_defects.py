@@ -1,5 +1,5 @@
 """
-Defects found on stiff and extreme cases (issue 11), each checked through the public API.
+Stiff and extreme cases of the static solver, each checked through the public API.
 
 References are independent of the Newton engine: the linear flexibility of a serial chain
 (wrench transported to each link, ``C_j`` applied, displacement carried to the tip), the
