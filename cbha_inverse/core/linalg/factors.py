@@ -48,6 +48,8 @@ class TangentFactor:
 
         """
         rhs = np.asarray(rhs, dtype=float)
+        if rhs.ndim == 2:
+            return self._solve(rhs)
         return self._solve(rhs.reshape(rhs.shape[0], -1)).reshape(rhs.shape)
 
     def _solve(self, columns):
@@ -74,10 +76,11 @@ class BandCholesky(TangentFactor):
         """Keep the factor."""
         self._factor = factor
 
-    def _solve(self, columns):
-        """Solve ``L Lᵀ X = columns`` (compiled forward and back substitution)."""
-        solved = np.array(columns, order='C')
-        band_solve(self._factor, solved)
+    def solve(self, rhs):
+        """Solve ``K X = rhs`` as :meth:`TangentFactor.solve` (the tick's path: one copy)."""
+        solved = np.array(rhs, dtype=float, order='C')
+        band_solve(self._factor, solved if solved.ndim == 2
+                   else solved.reshape(solved.shape[0], -1))
         return solved
 
 
