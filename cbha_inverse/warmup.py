@@ -16,13 +16,13 @@ import argparse
 import sys
 import time
 
+from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.linalg import btd
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
 
 SCENES = ('tendon_6f_8c', 'tendon_10f_16c', 'cbha')
-QP_SOLVERS = ('active_set', 'proxsuite', 'gauss_seidel')
 
 
 def option_sets(n_actuators, span):
@@ -30,8 +30,9 @@ def option_sets(n_actuators, span):
     Return the solver options the warm-up runs on a scene.
 
     Every QP solver with the default options, then the other branches of the tick: a rate limit
-    (the QP bounds of ``qp_problem``), ``relinearize_every > 1`` (linear ticks, the pending
-    linear step) and ``newton_steps > 1`` (the full Newton steps at fixed actuation).
+    (the QP bounds of :func:`cbha_inverse.core.inverse.qp.qp_problem`), linear ticks and the
+    pending linear step (``relinearize_every > 1``) and the full Newton steps at fixed actuation
+    (``newton_steps > 1``).
 
     Parameters
     ----------

@@ -2,7 +2,7 @@
 Chain of 6-DoF frames joined by compliance links: immutable model and separate state.
 
 Frames i = 0..n; frame 0 is the fixed base; link i (0-based, i = 0..n-1) joins frame i to frame
-i+1 (DESIGN §3, paper §III). The model never changes after it is built; what changes during a
+i+1 (paper Sec. III). The model never changes after it is built; what changes during a
 solve lives in a :class:`ChainState` (pinocchio's Model/Data split).
 """
 
@@ -55,7 +55,7 @@ class ChainModel:
     Attributes
     ----------
     compliances : (n, 6, 6) ndarray  [m/N, 1/N, rad/(N*m)]
-        Compliance of link i (frame i clamped, loads at frame i+1, frame-i axes; DESIGN §3).
+        Compliance of link i (frame i clamped, loads at frame i+1, frame-i axes; paper eq. 2-4).
     stiffnesses : (n, 6, 6) ndarray
         Their inverses (symmetrised).
     rest_offsets : (n, 3) ndarray  [m]
@@ -238,6 +238,40 @@ def rest_state(model):
         pos[i + 1] = pos[i] + rot[i] @ model.rest_offsets[i]
         rot[i + 1] = rot[i] @ model.rest_rotations[i]
     return ChainState(pos, rot)
+
+
+def external_wrenches(model, tip_wrench=None, frame_wrenches=None, gravity=None):
+    """
+    Dead external wrenches on frames 1..n (world axes, at the frame origins).
+
+    The one place where gravity becomes frame wrenches (the controller, the statics, the
+    scenes and the plant all call it).
+
+    Parameters
+    ----------
+    model : ChainModel
+        The chain (masses are lumped at frames 1..n).
+    tip_wrench : (6,) array_like, optional  [N, N*m]
+        Added at the last frame.
+    frame_wrenches : (n, 6) array_like, optional  [N, N*m]
+        Wrench on each of frames 1..n.
+    gravity : (3,) array_like, optional  [m/s^2]
+        Acceleration of gravity; force ``m_i g`` on frame i.
+
+    Returns
+    -------
+    (n, 6) ndarray  [N, N*m]
+
+    """
+    n = model.n_links
+    ext = np.zeros((n, 6))
+    if frame_wrenches is not None:
+        ext += checked_array(frame_wrenches, (n, 6), 'frame_wrenches')
+    if tip_wrench is not None:
+        ext[-1] += checked_array(tip_wrench, (6,), 'tip_wrench')
+    if gravity is not None:
+        ext[:, :3] += model.masses[:, None] * checked_array(gravity, (3,), 'gravity')
+    return ext
 
 
 def retract(state, increments):

@@ -1,9 +1,9 @@
 """
-Compliance links between two 6-DoF frames: the Timoshenko beam compliance (DESIGN §3).
+Compliance links between two 6-DoF frames: the Timoshenko beam compliance (paper eq. 2-4).
 
 A link joins frame a (= frame i) to frame b (= frame i+1). Its data are a symmetric positive
 definite 6x6 stiffness ``K = C^-1`` (C as the paper defines it: frame a clamped, loads at the
-origin of frame b, all in frame-a axes; DESIGN §3, paper eq. 2-4) and the rest transform of frame
+origin of frame b, all in frame-a axes; paper eq. 2-4) and the rest transform of frame
 b seen from frame a (offset ``d0``, rotation ``Q0``). Two sources give C: the closed form of a
 Timoshenko beam here, or a condensed FEM segment (:mod:`cbha_inverse.fem.condensation`).
 
@@ -101,7 +101,7 @@ def cowper_shear_coefficient(poisson_ratio, outer_radius, inner_radius=0.0):
 
 def timoshenko_compliance(length, youngs_modulus, poisson_ratio, outer_radius, inner_radius=0.0):
     """
-    Compliance of a straight Timoshenko beam along local +x (DESIGN §3).
+    Compliance of a straight Timoshenko beam along local +x (paper eq. 2-4).
 
     Frame a is clamped at x = 0; loads (Fx, Fy, Fz, Mx, My, Mz) act at the origin of frame b
     (x = L), displacements (dx, dy, dz, rx, ry, rz) are measured there, all in frame-a axes::

@@ -1,8 +1,8 @@
 """
 Rotation helpers on SO(3), batched over arrays: hat/vee, exp/log, quaternions, rpy, ``Jl⁻¹``.
 
-Conventions (DESIGN §2): rotation vectors are axis * angle [rad]; quaternions are (x, y, z, w)
-with ``w >= 0``; every function is batched over leading axes (``(..., 3)`` vectors,
+Conventions (`docs/design.md`): rotation vectors are axis * angle [rad]; quaternions are
+(x, y, z, w) with ``w >= 0``; every function is batched over leading axes (``(..., 3)`` vectors,
 ``(..., 3, 3)`` matrices). Rotation increments are applied on the left in world axes,
 ``R <- so3_exp(dtheta) @ R``, so the Jacobians used by the mechanics are the *left* Jacobians.
 
@@ -28,6 +28,12 @@ def _flat(array, item_shape):
     return np.ascontiguousarray(array.reshape((-1,) + item_shape)), batch
 
 
+def _batched(kernel, array, item_shape, out_shape):
+    """Run a compiled batch ``kernel`` on the items of ``array``; return (batch + out_shape)."""
+    flat, batch = _flat(array, item_shape)
+    return kernel(flat).reshape(batch + out_shape)
+
+
 def hat(v):
     """
     Return the skew-symmetric matrix of a 3-vector (``hat_a @ b`` is ``a x b``).
@@ -42,8 +48,7 @@ def hat(v):
     (..., 3, 3) ndarray
 
     """
-    flat, batch = _flat(v, (3,))
-    return hat_batch(flat).reshape(batch + (3, 3))
+    return _batched(hat_batch, v, (3,), (3, 3))
 
 
 def vee(m):
@@ -102,8 +107,7 @@ def so3_exp(rotvec):
     (..., 3, 3) ndarray
 
     """
-    flat, batch = _flat(rotvec, (3,))
-    return exp_batch(flat).reshape(batch + (3, 3))
+    return _batched(exp_batch, rotvec, (3,), (3, 3))
 
 
 def quat_from_matrix(rot):
@@ -120,8 +124,7 @@ def quat_from_matrix(rot):
     (..., 4) ndarray
 
     """
-    flat, batch = _flat(rot, (3, 3))
-    return quaternion_batch(flat).reshape(batch + (4,))
+    return _batched(quaternion_batch, rot, (3, 3), (4,))
 
 
 def matrix_from_quat(quat):
@@ -282,5 +285,4 @@ def so3_left_jacobian_inverse(rotvec):
     (..., 3, 3) ndarray
 
     """
-    flat, batch = _flat(rotvec, (3,))
-    return left_jacobian_inverse_batch(flat).reshape(batch + (3, 3))
+    return _batched(left_jacobian_inverse_batch, rotvec, (3,), (3, 3))

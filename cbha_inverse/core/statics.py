@@ -1,5 +1,5 @@
 """
-Quasi-static equilibrium of a frame chain under loads and actuation (paper eq. 9, DESIGN §3, §11).
+Quasi-static equilibrium of a frame chain under loads and actuation (paper eq. 9).
 
 :func:`solve_static` is the package's one solver of eq. 9, behind the scenes' forward model
 (:meth:`cbha_inverse.scene.Scene.forward`) and the simulated plant
@@ -8,11 +8,11 @@ Quasi-static equilibrium of a frame chain under loads and actuation (paper eq. 9
     r(q) = f(q) + lam (f_dead + J_a(q)ᵀ λ + f_load(q)) = 0
 
 with ``f`` the internal wrenches, ``f_dead`` constant world wrenches (tip, frame wrenches,
-gravity: :func:`external_wrenches`), ``J_a(q)ᵀ λ`` the actuators' configuration-dependent
-(follower) wrenches, ``f_load`` optional user follower loads and ``lam`` the load factor. The
-residual and every tangent come from the compiled kernels the control tick runs
-(:class:`cbha_inverse.core.system.EquilibriumSystem`), so the controller, the statics and the plant
-evaluate the same physics with the same code:
+gravity: :func:`cbha_inverse.core.chain.external_wrenches`), ``J_a(q)ᵀ λ`` the actuators'
+configuration-dependent (follower) wrenches, ``f_load`` optional user follower loads and ``lam``
+the load factor. The residual and every tangent come from the compiled kernels the control tick
+runs (:class:`cbha_inverse.core.system.EquilibriumSystem`), so the controller, the statics and
+the plant evaluate the same physics with the same code:
 
 - Newton increments ``dq = T⁻¹ r`` (world axes, as for :func:`cbha_inverse.core.chain.retract`)
   with ``T = -dr/dq`` the exact, non-symmetric tangent: material + geometric part of the links
@@ -21,7 +21,9 @@ evaluate the same physics with the same code:
   the bandwidth of the scene, O(n)). If the tangent is singular, the step is not finite or the
   line search rejects it, the iteration falls back to the material tangent (paper eq. 8, SPD
   whatever the stresses, compiled band Cholesky): a modified-Newton step, robust where ``T``
-  is indefinite or singular (a chain near a limit point, high pressure);
+  is indefinite or singular (a chain near a limit point, high pressure). Both come from the
+  one fallback chain of the package,
+  :meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors`;
 - the increment is applied in the chain's deformation coordinates
   (:func:`cbha_inverse.core._kernels.retraction.deformation_step`): full Newton steps stay
   acceptable at large rotations of slender chains (the PL^2/EI = 10 elastica converges from rest
@@ -51,19 +53,14 @@ so a pure moment load judges the force residual against it and vice versa. A sta
    that no double-precision state resolves below its floor, so its frames can only converge
    this way; the floor of one stiff link never lets the residual of other frames pass, and the
    rest state under a small load never passes (its correction is the deflection). The result
-   then carries a warning when the residual exceeds ``_ROUNDOFF_WARNING`` (1e-4) of the
-   applied load.
+   then carries a warning when the residual is large against the applied load.
 
 A non-finite residual never converges. With ``absolute_tolerance`` the test is instead
 ``|r|_2 <= absolute_tolerance`` (unscaled Euclidean norm in N and N*m, the plant's contract).
 
-Warnings (:attr:`StaticResult.warnings`, checked at the returned state): round-off limited
-convergence (above), a tangent that is not positive definite at the equilibrium (an unstable
-equilibrium, e.g. the straight shape under a compression above the buckling load:
-``_stability_warnings``) and links strained beyond the small-strain range of their
-compliance: an axial deformation above ``STRAIN_LIMIT`` (10 %) of the rest length, or a
-rotation above ``ROTATION_LIMIT`` (0.5 rad) within one link. The links are linear elastic in
-their corotated frame; beyond those limits refine the chain (more, shorter links).
+The converged state is checked for what the user should know (:attr:`StaticResult.warnings`,
+:mod:`cbha_inverse.core.static_warnings`): a round-off limited residual, an unstable
+equilibrium, links strained beyond the small-strain range of their compliance.
 """
 
 from dataclasses import dataclass
@@ -73,7 +70,9 @@ import weakref
 from cbha_inverse.core._kernels.residual import residual_measures
 from cbha_inverse.core._kernels.retraction import deformation_step, deformed_poses
 from cbha_inverse.core.actuation.actuators import ActuatorSet
-from cbha_inverse.core.chain import ChainState, checked_array, rest_state
+from cbha_inverse.core.chain import ChainState, checked_array, external_wrenches, rest_state
+from cbha_inverse.core.static_warnings import (roundoff_warnings, stability_warnings,
+                                               strain_warnings)
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
@@ -84,12 +83,6 @@ _MIN_LOAD_INCREMENT = 1.0 / 2 ** 20
 # applied and ends the iteration; one below 1000 eps is noise and is not even applied
 _ROUNDOFF_STEP = 1e-8
 _ROUNDOFF_NOISE = 1e3 * np.finfo(float).eps
-# a round-off limited residual above this fraction of the applied load gives a warning
-_ROUNDOFF_WARNING = 1e-4
-#: largest axial link deformation, as a fraction of the rest length, before a warning
-STRAIN_LIMIT = 0.1
-#: largest rotation within one link [rad] before a warning
-ROTATION_LIMIT = 0.5
 
 
 class StaticConvergenceError(RuntimeError):
@@ -160,64 +153,6 @@ class StaticResult:
     actuation: np.ndarray
     effector_positions: np.ndarray
     warnings: tuple = ()
-
-
-def external_wrenches(model, tip_wrench=None, frame_wrenches=None, gravity=None):
-    """
-    Dead external wrenches on frames 1..n (world axes, at the frame origins).
-
-    The one place where gravity becomes frame wrenches (the controller, the statics, the
-    scenes and the plant all call it).
-
-    Parameters
-    ----------
-    model : ChainModel
-        The chain (masses are lumped at frames 1..n).
-    tip_wrench : (6,) array_like, optional  [N, N*m]
-        Added at the last frame.
-    frame_wrenches : (n, 6) array_like, optional  [N, N*m]
-        Wrench on each of frames 1..n.
-    gravity : (3,) array_like, optional  [m/s^2]
-        Acceleration of gravity; force ``m_i g`` on frame i.
-
-    Returns
-    -------
-    (n, 6) ndarray
-
-    """
-    n = model.n_links
-    ext = np.zeros((n, 6))
-    if frame_wrenches is not None:
-        ext += checked_array(frame_wrenches, (n, 6), 'frame_wrenches')
-    if tip_wrench is not None:
-        ext[-1] += checked_array(tip_wrench, (6,), 'tip_wrench')
-    if gravity is not None:
-        ext[:, :3] += model.masses[:, None] * checked_array(gravity, (3,), 'gravity')
-    return ext
-
-
-def chain_stiffness(model, state=None):
-    """
-    Return the symmetric tangent stiffness of a bare chain over frames 1..n (dense).
-
-    Parameters
-    ----------
-    model : ChainModel
-        The chain.
-    state : ChainState, optional
-        Frame poses (default: the rest shape, where the tangent is the assembled ``K`` of the
-        links, paper eq. 8).
-
-    Returns
-    -------
-    (6n, 6n) ndarray  [N/m, N, N*m/rad]
-
-    """
-    state = rest_state(model) if state is None else state
-    system = _system(model, None)
-    tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
-    lower = system.dense(tangent)
-    return lower + np.tril(lower, -1).T
 
 
 def _residual_floor(model, length):
@@ -359,36 +294,32 @@ class _Problem:
             np.ascontiguousarray(step, dtype=float), self.coordinates)
         return self.coordinates, largest
 
-    def exact_step(self, state, lam, res):
-        """Newton step with the exact tangent (band LU)."""
-        if self._evaluated != (state, lam):
-            self.point(state, lam)
-        tangent = self.system.exact_tangent()
+    def factors(self, state, lam):
+        """
+        Yield the factors of Newton's tangents at ``state`` (exact, then material).
+
+        :meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors`, with the user load
+        stiffness; the blocks of the last :meth:`point` are reused when it evaluated ``state``.
+        """
+        evaluated = self._evaluated == (state, lam)
         load = None if self.load_tangent is None or lam == 0.0 else self.load_tangent(state)
         if load is not None:
-            matrix = self.system.dense_exact(tangent) + lam * np.asarray(load, dtype=float)
-            step = np.linalg.solve(matrix, res.reshape(-1))
-        else:
-            factor = self.system.factor_exact(tangent)
-            if factor is None:
-                raise np.linalg.LinAlgError('singular tangent')
-            step = factor.solve(res.reshape(-1))
-        if not np.all(np.isfinite(step)):
-            raise np.linalg.LinAlgError('singular tangent (non-finite Newton step)')
-        return step.reshape(-1, 6)
-
-    def material_step(self, state, lam, res):
-        """Modified-Newton step with the material tangent (SPD, band Cholesky): the fallback."""
-        tangent, _ = self.system.material_system(state.positions, state.rotations,
-                                                 lam * self.actuation)
+            load = lam * np.asarray(load, dtype=float)
+        for factor in self.system.fallback_factors(state.positions, state.rotations,
+                                                   lam * self.actuation, evaluated, load):
+            # the chain may have evaluated the system again (material tangent): forget the key
+            self._evaluated = None
+            yield factor
         self._evaluated = None
-        factor = self.system.factor(tangent)
-        if factor is None:
-            raise np.linalg.LinAlgError('material tangent not positive definite')
-        step = self.system.solve(factor, res.reshape(-1, 1))
-        if not np.all(np.isfinite(step)):
-            raise np.linalg.LinAlgError('non-finite material step')
-        return step.reshape(-1, 6)
+
+    def applied(self, state):
+        """Return the applied loads (n, 6) at ``state`` under the full load [N, N*m]."""
+        rhs = self.system.evaluate(state.positions, state.rotations, self.actuation)
+        self._evaluated = None
+        applied = (rhs[:, 1:] @ self.actuation + self.external).reshape(-1, 6)
+        if self.load_function is not None:
+            applied = applied + np.asarray(self.load_function(state), dtype=float)
+        return applied
 
     def first_alpha(self, link_rotation):
         """Return the first line-search step: no link turns by more than the limit."""
@@ -437,12 +368,15 @@ def _newton(problem, state, lam, max_iterations):
         exhausted = iterations >= max_iterations
         if exhausted and not point.roundoff:
             return False, point, iterations, 'iteration budget exhausted'
-        accepted, why = None, ''
-        for direction in (problem.exact_step, problem.material_step):
+        accepted, why = None, 'no tangent factors (exact singular, material not positive definite)'
+        for factor in problem.factors(point.state, lam):
             try:
-                step = direction(point.state, lam, point.residual)
+                step = factor.solve(point.residual.reshape(-1)).reshape(-1, 6)
             except np.linalg.LinAlgError as exc:
                 why = str(exc) or 'singular tangent'
+                continue
+            if not np.all(np.isfinite(step)):
+                why = f'non-finite Newton step ({factor.method})'
                 continue
             if point.roundoff and problem.roundoff_step(step, _ROUNDOFF_NOISE):
                 # the correction is noise itself (e.g. the rest shape under no load)
@@ -608,7 +542,7 @@ def _on_base(state, model):
 
 def _result_warnings(problem, point):
     """
-    Return the warnings (tuple of str) about a converged point (module docstring).
+    Return the warnings about a converged point (:mod:`cbha_inverse.core.static_warnings`).
 
     Parameters
     ----------
@@ -626,100 +560,10 @@ def _result_warnings(problem, point):
     warnings = []
     if problem.absolute is None and point.measure > problem.tolerance * point.load_scale:
         # converged round-off limited: how large is the residual against the applied load?
-        rhs = problem.system.evaluate(state.positions, state.rotations, problem.actuation)
-        applied = (rhs[:, 1:] @ problem.actuation + problem.external).reshape(-1, 6)
-        if problem.load_function is not None:
-            applied = applied + np.asarray(problem.load_function(state), dtype=float)
-        scaled = np.abs(applied)
-        scaled[:, 3:] /= problem.length
-        largest = scaled.max()
-        if largest > 0.0 and point.measure > _ROUNDOFF_WARNING * largest:
-            residual = np.abs(point.residual)
-            residual[:, 3:] /= problem.length
-            worst = int(np.argmax(residual.max(axis=1))) + 1
-            warnings.append(
-                f'residual {point.measure:.3g} N is limited by round-off at frame {worst} '
-                f'({point.measure / max(largest, np.finfo(float).tiny):.2g} of the applied '
-                'load): its links are too stiff relative to the load to resolve their forces in '
-                'double precision (stiffness ratio too large; merge the stiff link into its '
-                'neighbour)')
+        warnings.extend(roundoff_warnings(point.measure, point.residual, problem.applied(state),
+                                          problem.length))
     coordinates, _ = problem.coordinates_of(state)
     warnings.extend(strain_warnings(problem.model, coordinates[:, :3], coordinates[:, 3:6]))
-    warnings.extend(_stability_warnings(problem, state))
-    return tuple(warnings)
-
-
-def strain_warnings(model, offsets, rotation_vectors):
-    """
-    Warn about links deformed beyond the small-strain range of their compliance.
-
-    Parameters
-    ----------
-    model : ChainModel
-        The chain.
-    offsets : (n, 3) ndarray  [m]
-        ``R_aᵀ (x_b - x_a)`` of every link at the state.
-    rotation_vectors : (n, 3) ndarray  [rad]
-        ``log(R_aᵀ R_b Q0ᵀ)`` of every link.
-
-    Returns
-    -------
-    list of str
-        Empty when every link's axial deformation (along its rest offset) is below
-        ``STRAIN_LIMIT`` of its rest length and its rotation below ``ROTATION_LIMIT``.
-
-    """
-    rest = np.linalg.norm(model.rest_offsets, axis=1)
-    safe = np.where(rest > 0.0, rest, 1.0)
-    # axial: the transverse part of the offset change is mostly the chord turning with bending,
-    # which the rotation limit covers
-    strain = np.abs(np.einsum('ij,ij->i', offsets, model.rest_offsets) / safe - rest) / safe
-    strain[rest == 0.0] = 0.0
-    rotation = np.linalg.norm(rotation_vectors, axis=1)
-    out = []
-    worst = int(np.argmax(strain))
-    if strain[worst] > STRAIN_LIMIT:
-        out.append(f'link {worst} is strained axially by {strain[worst]:.3g} of its rest '
-                   f'length (small-strain limit {STRAIN_LIMIT:g}): its linear compliance is not '
-                   'accurate there')
-    worst = int(np.argmax(rotation))
-    if rotation[worst] > ROTATION_LIMIT:
-        out.append(f'link {worst} turns by {rotation[worst]:.3g} rad within one link (limit '
-                   f'{ROTATION_LIMIT:g} rad): use more, shorter links')
-    return out
-
-
-def _stability_warnings(problem, state):
-    """
-    Warn when the tangent at an equilibrium is not positive definite (possibly unstable).
-
-    The symmetric part of the exact tangent (structure and the actuators' load stiffness, plus
-    a user ``load_tangent``) is factorised by Cholesky; a failure means a direction of
-    decreasing stiffness. Under dead forces the equilibrium is then unstable (e.g. the straight
-    shape above the buckling load); under moments or follower loads, which are not conservative
-    in 3D, it is a warning sign rather than a proof.
-
-    Returns
-    -------
-    list of str
-
-    """
-    system = problem.system
-    tangent, _ = system.linearise(state.positions, state.rotations, problem.actuation)
     load = None if problem.load_tangent is None else problem.load_tangent(state)
-    if load is None:
-        stable = system.factor(tangent) is not None
-    else:
-        lower = system.dense(tangent)
-        load = np.asarray(load, dtype=float)
-        matrix = lower + np.tril(lower, -1).T + 0.5 * (load + load.T)
-        try:
-            np.linalg.cholesky(matrix)
-            stable = True
-        except np.linalg.LinAlgError:
-            stable = False
-    if stable:
-        return []
-    return ['the tangent stiffness is not positive definite at this equilibrium: it may be '
-            'unstable (a compression above the buckling load, lateral buckling under a large '
-            'end moment, a snap-through) and the structure need not take the returned shape']
+    warnings.extend(stability_warnings(problem.system, state, problem.actuation, load))
+    return tuple(warnings)

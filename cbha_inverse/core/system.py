@@ -17,15 +17,25 @@ plant. With the compiled kernels of :mod:`cbha_inverse.core._kernels`:
   (Newton's LU, :meth:`EquilibriumSystem.exact_system`), with the half-bandwidth of the scene
   (cables that skip frames widen it).
 
+Every factorisation returns a :class:`~cbha_inverse.core.linalg.factors.TangentFactor`, with
+``solve(rhs)`` (multi-RHS) and ``method``: a band Cholesky factor of the symmetric or material
+band (:meth:`EquilibriumSystem.factor`), a band LU factor of the exact band
+(:meth:`EquilibriumSystem.factor_exact`), a dense LU of an exact tangent with a user load
+stiffness. :meth:`EquilibriumSystem.fallback_factors` is the
+one fallback chain (exact LU, then material Cholesky) of the control tick and of Newton's method.
+
 Skinned-mesh cavities (:class:`~cbha_inverse.core.actuation.cavities.CavityGroup`, the exact
 but slow cavity model) are evaluated through their own ``evaluate``; they couple every frame, so
 the band is then the full matrix.
 """
 
-from cbha_inverse.core._kernels.band import band_cholesky, band_solve, scatter_add
+from cbha_inverse.core._kernels.band import band_cholesky, scatter_add
 from cbha_inverse.core._kernels.links import link_pass
+from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import CableGroup, CableTerms
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
+from cbha_inverse.core.chain import rest_state
+from cbha_inverse.core.linalg.factors import BandCholesky, BandLU, DenseLU
 import numpy as np
 from scipy.linalg import lapack
 
@@ -260,7 +270,7 @@ class EquilibriumSystem:
     @staticmethod
     def factor(tangent):
         """
-        Factor the tangent of :meth:`linearise` in place (compiled band Cholesky).
+        Factor the tangent of :meth:`linearise` or :meth:`material_system` in place.
 
         Parameters
         ----------
@@ -269,52 +279,11 @@ class EquilibriumSystem:
 
         Returns
         -------
-        (6n, kd + 1) ndarray or None
-            ``L`` in the same band storage, for :meth:`solve`; ``None`` if the tangent is not
-            positive definite.
+        BandCholesky or None
+            The compiled band Cholesky factor; ``None`` if the tangent is not positive definite.
 
         """
-        return tangent if band_cholesky(tangent) == 0 else None
-
-    @staticmethod
-    def solve(factor, rhs):
-        """
-        Solve ``K X = rhs`` with a factor of :meth:`factor` (all columns in one pass).
-
-        Parameters
-        ----------
-        factor : (6n, kd + 1) ndarray
-            From :meth:`factor`.
-        rhs : (6n, c) ndarray
-            Right-hand sides (not modified).
-
-        Returns
-        -------
-        (6n, c) ndarray
-
-        """
-        solved = np.array(rhs, dtype=float, order='C')
-        band_solve(factor, solved)
-        return solved
-
-    def factor_solve(self, tangent, rhs):
-        """
-        Return ``K⁻¹ rhs`` (:meth:`factor` then :meth:`solve`), ``None`` if not positive definite.
-
-        Parameters
-        ----------
-        tangent : (6n, kd + 1) ndarray
-            From :meth:`linearise` (overwritten).
-        rhs : (6n, c) ndarray
-            Right-hand sides.
-
-        Returns
-        -------
-        (6n, c) ndarray or None
-
-        """
-        factor = self.factor(tangent)
-        return None if factor is None else self.solve(factor, rhs)
+        return BandCholesky(tangent) if band_cholesky(tangent) == 0 else None
 
     def dense_exact(self, tangent):
         """
@@ -364,6 +333,59 @@ class EquilibriumSystem:
         lu, pivots, info = lapack.dgbtrf(tangent.T, self.kd, self.kd, overwrite_ab=1)
         return BandLU(lu, pivots, self.kd) if info == 0 else None
 
+    def fallback_factors(self, positions, rotations, actuation, evaluated=False, load=None):
+        """
+        Yield the factors of the fallback chain, for a state whose first choice fails.
+
+        The control tick's first choice is the Cholesky factor of the symmetric tangent
+        (:meth:`linearise`), Newton's the exact tangent; when it fails (a tangent that is not
+        positive definite at high pressures, a singular one near a limit point, a step that the
+        line search rejects), the chain is, in this order:
+
+        1. the exact tangent, structure + geometric part + exact load stiffness (not symmetric,
+           :meth:`exact_system`), by band LU (:meth:`factor_exact`); with a user load stiffness
+           ``load`` added, by dense LU;
+        2. the material tangent alone (paper eq. 8, :meth:`material_system`), positive definite
+           whatever the stresses, far from equilibrium too, by band Cholesky (:meth:`factor`).
+
+        The residual is the same for every tangent (only the convergence rate changes). A
+        tangent that does not factor is skipped. The evaluation of step 2 overwrites this
+        object's buffers (those of the last :meth:`evaluate`).
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+        actuation : (m,) ndarray  [N, Pa]
+            ``λ`` (enters the load stiffness).
+        evaluated : bool
+            The last :meth:`evaluate` (not material) was at this state and actuation: step 1
+            reuses its blocks.
+        load : (6n, 6n) ndarray or None  [N/m, N, N*m/rad]
+            Load stiffness ``-d f_load / dq`` of user follower loads, added to the exact tangent.
+
+        Yields
+        ------
+        cbha_inverse.core.linalg.factors.TangentFactor
+            Each factor that succeeds (``BandLU`` or ``DenseLU``, then ``BandCholesky``).
+
+        """
+        if not evaluated:
+            self.evaluate(positions, rotations, actuation)
+        tangent = self.exact_tangent()
+        if load is None:
+            factor = self.factor_exact(tangent)
+        else:
+            factor = DenseLU(self.dense_exact(tangent) + load)
+        if factor is not None:
+            yield factor
+        tangent, _ = self.material_system(positions, rotations, actuation)
+        factor = self.factor(tangent)
+        if factor is not None:
+            yield factor
+
     def blocks(self, tangent):
         """
         Return the lower band of :meth:`linearise` as block-tridiagonal blocks.
@@ -410,48 +432,28 @@ class EquilibriumSystem:
         return out
 
 
-class BandLU:
+def chain_stiffness(model, state=None):
     """
-    LU factor of a general band matrix (LAPACK ``dgbtrf``) with multi-RHS solves.
+    Return the symmetric tangent stiffness of a bare chain over frames 1..n (dense).
 
     Parameters
     ----------
-    lu : (3 kd + 1, N) ndarray
-        Factor in LAPACK's general band layout (Fortran order).
-    pivots : (N,) int ndarray
-        Row interchanges.
-    kd : int
-        Number of sub- and super-diagonals of the factored matrix.
+    model : cbha_inverse.core.chain.ChainModel
+        The chain.
+    state : cbha_inverse.core.chain.ChainState, optional
+        Frame poses (default: the rest shape, where the tangent is the assembled ``K`` of the
+        links, paper eq. 8).
+
+    Returns
+    -------
+    (6n, 6n) ndarray  [N/m, N, N*m/rad]
 
     """
-
-    method = 'band_lu'
-
-    def __init__(self, lu, pivots, kd):
-        """Keep the factor."""
-        self._lu, self._pivots, self._kd = lu, pivots, kd
-
-    def solve(self, rhs):
-        """
-        Solve ``K X = rhs``.
-
-        Parameters
-        ----------
-        rhs : (N,) or (N, c) ndarray
-            Right-hand sides.
-
-        Returns
-        -------
-        ndarray
-            Same shape as ``rhs`` (C order).
-
-        """
-        rhs = np.asarray(rhs, dtype=float)
-        columns = rhs.reshape(rhs.shape[0], -1)
-        x, info = lapack.dgbtrs(self._lu, self._kd, self._kd, columns, self._pivots)
-        if info != 0:
-            raise np.linalg.LinAlgError(f'dgbtrs failed (info {info})')
-        return np.ascontiguousarray(x).reshape(rhs.shape)
+    state = rest_state(model) if state is None else state
+    system = EquilibriumSystem(model, ActuatorSet((), model.n_frames), np.zeros(6 * model.n_links))
+    tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
+    lower = system.dense(tangent)
+    return lower + np.tril(lower, -1).T
 
 
 def _matches_links(group, model):

@@ -33,7 +33,7 @@ def chain_tip_compliance(model):
         Tip compliance.
 
     """
-    from cbha_inverse.core.statics import chain_stiffness
+    from cbha_inverse.core.system import chain_stiffness
     return np.linalg.inv(chain_stiffness(model))[-6:, -6:]
 
 

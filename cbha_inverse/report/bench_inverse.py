@@ -24,6 +24,7 @@ import os
 import sys
 import time
 
+from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -280,7 +281,7 @@ def main(argv=None):
     parser.add_argument('--ticks', type=int, default=2000)
     parser.add_argument('--warmup', type=int, default=100)
     parser.add_argument('--qp-solvers', nargs='+', default=['proxsuite', 'active_set'],
-                        choices=['proxsuite', 'active_set', 'gauss_seidel'],
+                        choices=QP_SOLVERS,
                         help='QP solvers to compare (default: proxsuite and the exact active set)')
     parser.add_argument('--gauss-seidel', action='store_true',
                         help='also run the projected Gauss-Seidel QP for comparison')

@@ -2,9 +2,8 @@
 
 from typing import NamedTuple
 
-from cbha_inverse.core.inverse.qp import (ActiveSetQP, ActuationQP, binding_bounds,
-                                          projected_gauss_seidel)
-from cbha_inverse.core.inverse.qp_problem import qp_matrices, qp_problem
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
+                                          ProxsuiteQP, qp_matrices, qp_problem)
 from cbha_inverse.core.inverse.solver import TargetCorrector
 import numpy as np
 import pytest
@@ -39,7 +38,7 @@ def _problem(rng, k=3, m=8, gap=0.01, previous=None, rate=None):
 
 def test_proxsuite_and_gauss_seidel_agree():
     rng = np.random.default_rng(0)
-    qp = ActuationQP(8)
+    qp = ProxsuiteQP(8)
     for _ in range(5):
         problem, _ = _problem(rng)
         a = qp.solve(problem)
@@ -59,7 +58,7 @@ def test_reachable_problem_is_solved_exactly_without_saturation():
     lam = rng.uniform(2.0, 8.0, m)
     projection = Projection(w_ea, 1e-3 * np.eye(m), -w_ea @ lam, None)
     problem = actuation_qp(projection, lam, np.zeros(m), np.full(m, 10.0), np.full(m, 10.0))
-    solution = ActuationQP(m).solve(problem)
+    solution = ProxsuiteQP(m).solve(problem)
     x = solution.x * problem.scale
     assert np.linalg.norm(w_ea @ x + projection.delta_free) < 1e-8
     assert not binding_bounds(problem, solution.x).any()
@@ -68,7 +67,7 @@ def test_reachable_problem_is_solved_exactly_without_saturation():
 def test_unreachable_target_saturates_finitely():
     rng = np.random.default_rng(2)
     problem, projection = _problem(rng, gap=100.0)
-    solution = ActuationQP(8).solve(problem)
+    solution = ProxsuiteQP(8).solve(problem)
     assert solution.ok
     assert np.all(np.isfinite(solution.x))
     assert np.all(solution.x >= problem.lower) and np.all(solution.x <= problem.upper)
@@ -79,7 +78,7 @@ def test_rate_limit_bounds_the_change():
     rng = np.random.default_rng(3)
     previous = np.full(8, 5.0)
     problem, _ = _problem(rng, gap=1.0, previous=previous, rate=np.full(8, 0.5))
-    x = ActuationQP(8).solve(problem).x * problem.scale
+    x = ProxsuiteQP(8).solve(problem).x * problem.scale
     assert np.all(np.abs(x - previous) <= 0.5 + 1e-12)
 
 
@@ -93,8 +92,8 @@ def test_redundant_qp_is_deterministic_and_unique():
     rng = np.random.default_rng(4)
     problem, _ = _problem(rng, k=1, m=8)
     assert np.linalg.eigvalsh(problem.hessian).min() > 0.0
-    first = ActuationQP(8).solve(problem).x
-    second = ActuationQP(8).solve(problem).x
+    first = ProxsuiteQP(8).solve(problem).x
+    second = ProxsuiteQP(8).solve(problem).x
     np.testing.assert_array_equal(first, second)
     exact = ActiveSetQP(8).solve(problem)
     assert exact.ok
@@ -133,7 +132,7 @@ def test_active_set_qp_is_exact_and_agrees_with_proxsuite():
         for _ in range(4):
             problem, _ = _problem(rng, k=k, m=m, gap=gap)
             exact = solver.solve(problem)
-            reference = ActuationQP(m).solve(problem)
+            reference = ProxsuiteQP(m).solve(problem)
             assert exact.ok and exact.status == 'solved' and reference.ok
             x = exact.x
             assert np.all(x >= problem.lower) and np.all(x <= problem.upper)

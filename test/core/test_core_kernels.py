@@ -137,7 +137,7 @@ def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkey
     exact = (assemble_tangent(model, ChainState(positions, rotations)).to_dense(exact=True)
              + oracle(scene.actuators).load_tangent(positions, rotations, actuation,
                                                     symmetric=False))
-    factor = solver._factor(positions, rotations, actuation)
+    factor = next(solver._tick.fallback_factors(positions, rotations, actuation))
     assert factor.method == 'band_lu'
     np.testing.assert_allclose(exact @ factor.solve(rhs), rhs, atol=1e-9)
 
@@ -146,7 +146,8 @@ def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkey
 
     monkeypatch.setattr(control.EquilibriumSystem, 'factor_exact', singular)
     material = blocks_to_dense(*material_tangent(model, ChainState(positions, rotations)))
-    factor = solver._factor(positions, rotations, actuation)
+    factor = next(solver._tick.fallback_factors(positions, rotations, actuation))
+    assert factor.method == 'band_cholesky'
     np.testing.assert_allclose(material @ factor.solve(rhs), rhs, atol=1e-9)
 
 
@@ -176,7 +177,7 @@ def test_a_tick_without_any_factorization_holds_the_actuation(monkeypatch):
     first = solver.step(scene.workspace_center + 0.002)
     state = solver.state
     monkeypatch.setattr(solver._tick, 'factor', lambda tangent: None)
-    monkeypatch.setattr(solver, '_factor', lambda positions, rotations, actuation: None)
+    monkeypatch.setattr(solver._tick, 'factor_exact', lambda tangent: None)
     held = solver.step(scene.workspace_center - 0.002)
     assert held.status == 'not_positive_definite'
     np.testing.assert_array_equal(held.actuation, first.actuation)

@@ -2,8 +2,8 @@
 
 import itertools
 
-from cbha_inverse.core.inverse.qp import ActiveSetQP, binding_bounds, polish
-from cbha_inverse.core.inverse.qp_problem import qp_matrices, qp_problem, QPProblem
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, polish, qp_matrices,
+                                          qp_problem, QPProblem)
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
@@ -170,7 +170,7 @@ def test_binding_bounds_matches_its_definition():
 
 
 def _reference_matrices(w_ea, w_aa, scale, energy_weight, proximal_weight):
-    """Return (H, T, W) of the module docstring of cbha_inverse.core.inverse.qp_problem (numpy)."""
+    """Return (H, T, W) of the module docstring of cbha_inverse.core.inverse.qp (numpy)."""
     m = scale.size
     sigma = np.diag(scale)
     tracking = sigma @ w_ea.T @ w_ea @ sigma

@@ -1,7 +1,7 @@
 """
 The QP solvers' result fields: status, iterations, ``ok``, warm starts and the fallback value.
 
-:class:`~cbha_inverse.core.inverse.qp.ActuationQP` (proxsuite) must solve each new problem of a
+:class:`~cbha_inverse.core.inverse.qp.ProxsuiteQP` (proxsuite) must solve each new problem of a
 warm-started sequence (only the gradient and the box sent, or a new Hessian), repeat a solved one
 without iterations, and keep the previous actuation when it does not converge;
 :func:`~cbha_inverse.core.inverse.qp.projected_gauss_seidel` and
@@ -9,8 +9,8 @@ without iterations, and keep the previous actuation when it does not converge;
 failure. The active-set solver is the exact reference.
 """
 
-from cbha_inverse.core.inverse.qp import ActiveSetQP, ActuationQP, projected_gauss_seidel
-from cbha_inverse.core.inverse.qp_problem import QPProblem
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, projected_gauss_seidel, ProxsuiteQP,
+                                          QPProblem)
 import numpy as np
 
 
@@ -41,7 +41,7 @@ def test_proxsuite_warm_started_updates_solve_each_new_problem():
     hessian = a @ a.T + np.eye(m)
     signs = np.array([1.0, -1.0] * (m // 2))
     first = _problem(hessian, 50.0 * signs, -np.ones(m), np.ones(m))
-    solver = ActuationQP(m)
+    solver = ProxsuiteQP(m)
     b = rng.standard_normal((m, m))
     problems = [
         (first, False),
@@ -72,7 +72,7 @@ def test_proxsuite_warm_start_repeats_a_solved_problem_without_iterations():
     a = rng.standard_normal((m, m))
     problem = _problem(a @ a.T + np.eye(m), 5.0 * rng.standard_normal(m), -np.ones(m),
                        np.ones(m))
-    solver = ActuationQP(m)
+    solver = ProxsuiteQP(m)
     cold = solver.solve(problem)
     warm = solver.solve(problem, same_hessian=True)
     assert cold.iterations > 0 and warm.iterations == 0
@@ -88,11 +88,11 @@ def test_proxsuite_not_converged_keeps_the_previous_actuation():
     hessian = (q * np.geomspace(1.0, 1e-6, m)) @ q.T
     problem = _problem(hessian, rng.standard_normal(m), -np.ones(m), np.ones(m),
                        previous=rng.uniform(-2.0, 2.0, m))
-    solution = ActuationQP(m, max_iterations=1).solve(problem)
+    solution = ProxsuiteQP(m, max_iterations=1).solve(problem)
     assert solution.status == 'max_iterations' and solution.ok is False
     np.testing.assert_array_equal(solution.x, np.clip(problem.previous, -1.0, 1.0))
     # and the next solve starts afresh (init again) and succeeds
-    again = ActuationQP(m)
+    again = ProxsuiteQP(m)
     assert again.solve(problem).ok is True
 
 

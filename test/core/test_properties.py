@@ -11,8 +11,8 @@ import math
 
 from cbha_inverse.core import so3
 from cbha_inverse.core.chain import ChainState, retract
-from cbha_inverse.core.inverse.qp import ActiveSetQP, ActuationQP, projected_gauss_seidel
-from cbha_inverse.core.inverse.qp_problem import QPProblem
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, projected_gauss_seidel, ProxsuiteQP,
+                                          QPProblem)
 from cbha_inverse.robot.robotino import CHANNELS, MAX_BAR, robotino_bar_command
 from cbha_inverse.robot.safety import (
     bounded_command, check_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
@@ -272,7 +272,7 @@ def test_active_set_qp_satisfies_kkt_on_spd_problems(problem):
 @given(box_qps(rank_deficit=1))
 def test_semidefinite_box_qp_solutions_satisfy_kkt(problem):
     """Rank-deficient H: proxsuite meets KKT to its tolerance; active set exact or fallback."""
-    proxsuite_solution = ActuationQP(problem.gradient.size, eps_abs=1e-10).solve(problem)
+    proxsuite_solution = ProxsuiteQP(problem.gradient.size, eps_abs=1e-10).solve(problem)
     assert proxsuite_solution.status == 'solved'
     _assert_kkt(problem, proxsuite_solution.x, 1e-5)
     active = ActiveSetQP(problem.gradient.size).solve(problem)

@@ -11,7 +11,7 @@ import contextlib
 import dataclasses
 import math
 
-from cbha_inverse.core.inverse.qp import ActuationQP
+from cbha_inverse.core.inverse.qp import ProxsuiteQP
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS, TARGET_QOS
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
 from cbha_inverse.scene import load_scene
@@ -65,7 +65,7 @@ def test_proxsuite_failure_falls_back_to_gauss_seidel():
     """A proxsuite limited to one iteration fails: the tick reports qp_fallback, never NaN."""
     scene, target = _target()
     solver = scene.make_inverse_solver(qp_solver='proxsuite')
-    solver._qp = ActuationQP(len(scene.actuator_names), max_iterations=1)
+    solver._qp = ProxsuiteQP(len(scene.actuator_names), max_iterations=1)
     result = solver.step(target)
     assert result.status == 'qp_fallback'
     assert result.qp_status in ('gauss_seidel_converged', 'gauss_seidel_max_iterations')

@@ -5,17 +5,17 @@ The readable reference of :func:`cbha_inverse.core._kernels.links.link_pass` (wh
 tick, the static solver and the plant run), vectorised over the links with numpy.
 A link joins frame a (= frame i) to frame b (= frame i+1). Its data are a symmetric positive
 definite 6x6 stiffness ``K = C^-1`` (C as the paper defines it: frame a clamped, loads at the
-origin of frame b, all in frame-a axes; DESIGN §3, paper eq. 2-4) and the rest transform of frame
+origin of frame b, all in frame-a axes; paper eq. 2-4) and the rest transform of frame
 b seen from frame a (offset ``d0``, rotation ``Q0``).
 
-Local deformation (DESIGN §3)::
+Local deformation (paper eq. 4-8)::
 
     delta = [ R_a^T (x_b - x_a) - d0 ;  log(R_a^T R_b Q0^T) ]          (frame-a axes)
 
 The link stores the energy ``U = delta^T K delta / 2``; its wrenches are the exact generalised
 forces ``-dU/dq`` for world-axis increments (dx, dtheta) with ``R <- exp(dtheta) R``:
 
-- on frame b, in frame-a axes at the origin of b: force ``-(K delta)_t`` (exactly DESIGN's
+- on frame b, in frame-a axes at the origin of b: force ``-(K delta)_t`` (exactly the linear
   ``w = -K delta``) and moment ``-Jl^-1(phi)^T (K delta)_r``, where ``Jl^-1`` is the inverse left
   Jacobian of SO(3) at ``phi = delta_r``. The factor ``Jl^-1^T = I + O(|phi|)`` makes the link
   conservative (symmetric material tangent, rigid-body invariance, equilibrium) and does not change
@@ -32,7 +32,7 @@ well-known non-symmetry of spatial rotation increments away from equilibrium.
 
 Assembly: frames 1..n move (frame 0 is the fixed base). Link i joins frame i to frame i+1, so
 frame j (1-based) receives the b-side wrench of link j-1 and the a-side wrench of link j; the
-global tangent is block tridiagonal with 6x6 blocks (paper §III, Fig. 1).
+global tangent is block tridiagonal with 6x6 blocks (paper Sec. III, Fig. 1).
 """
 
 from dataclasses import dataclass
@@ -79,7 +79,7 @@ def _relative_pose(rest_rotation, position_a, rotation_a, position_b, rotation_b
 
 def link_deformation(rest_offset, rest_rotation, position_a, rotation_a, position_b, rotation_b):
     """
-    Local deformation ``delta`` of links (DESIGN §3), frame-a axes.
+    Local deformation ``delta`` of links (paper eq. 4-8), frame-a axes.
 
     Parameters
     ----------

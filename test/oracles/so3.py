@@ -6,10 +6,11 @@ The readable reference of the compiled maps of :mod:`cbha_inverse.core._kernels.
 forms, its own series of ``c(t)`` with up to 10 terms below 1 rad), so the tests compare two
 implementations.
 
-Conventions (DESIGN §2): rotation vectors are axis * angle [rad]; quaternions are (x, y, z, w);
-every function is batched over leading axes (``(..., 3)`` vectors, ``(..., 3, 3)`` matrices).
-Rotation increments are applied on the left in world axes, ``R <- so3_exp(dtheta) @ R``, so the
-Jacobians used by the mechanics are the *left* Jacobians of SO(3).
+Conventions (`docs/design.md`): rotation vectors are axis * angle [rad]; quaternions are
+(x, y, z, w); every function is batched over leading axes (``(..., 3)`` vectors,
+``(..., 3, 3)`` matrices). Rotation increments are applied on the left in world axes,
+``R <- so3_exp(dtheta) @ R``, so the Jacobians used by the mechanics are the *left* Jacobians of
+SO(3).
 
 Where closed forms lose digits to cancellation, ``sinc`` forms or Taylor series are used;
 :func:`so3_log` reads the angle with ``atan2`` and, beyond 2.4 rad, goes through a (Shepperd)

@@ -1,5 +1,5 @@
 """
-Compiled cable terms of the equilibrium (DESIGN §5): columns of ``J_aᵀ``, loads, load stiffness.
+Compiled cable terms of the equilibrium (paper eq. 9): columns of ``J_aᵀ``, loads, load stiffness.
 
 :func:`cable_pass` (numba) computes the cable columns, their loads, the span stiffness
 ``C P Cᵀ`` (``P = g λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the

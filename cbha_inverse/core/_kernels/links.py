@@ -2,7 +2,7 @@
 Compiled pass over the compliance links (numba): deformation, wrenches, tangent blocks.
 
 :func:`link_pass`, per link ``l`` (frames ``a = l``, ``b = l + 1``): the deformation ``δ``
-(DESIGN §3), the local b-side wrench ``L = [-s_f; -Jl⁻ᵀ(φ) s_r] + Σ_c p_c (G0_c + H_c δ)``
+(paper eq. 4-8), the local b-side wrench ``L = [-s_f; -Jl⁻ᵀ(φ) s_r] + Σ_c p_c (G0_c + H_c δ)``
 (paper eq. 9 plus the condensed cavities of
 :mod:`cbha_inverse.core.actuation.condensed_cavities`) rotated to world axes and gathered onto
 the two frames (paper eq. 5-7), and the exact 12 x 12 world tangent ``Eᵀ R M Rᵀ E`` + the

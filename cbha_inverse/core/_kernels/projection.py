@@ -1,5 +1,5 @@
 """
-Compiled projection of a solved linearisation onto effectors and actuators (DESIGN §6 step 2).
+Compiled projection of a solved linearisation onto effectors and actuators (paper eq. 11-12).
 
 :func:`effector_levers` and :func:`effector_points` are the one implementation of the effector
 levers ``r = R_f o`` and points ``p = x_f + R_f o``; :func:`project_effectors` forms ``W_ea``,
@@ -16,7 +16,7 @@ import numpy as np
 @numba.njit(cache=True)
 def effector_levers(rotations, effector_frames, effector_offsets):
     """
-    Return the levers ``r = R_f o`` of effector points (paper §IV, ``J_e``).
+    Return the levers ``r = R_f o`` of effector points (paper Sec. IV, ``J_e``).
 
     The lever gives the ``[I, -r^]`` block of ``J_e`` on the effector's frame ``f``
     (:mod:`cbha_inverse.core.actuation.effectors`).
@@ -79,7 +79,7 @@ def effector_points(positions, rotations, effector_frames, effector_offsets):
 def project_effectors(solved, rhs, positions, rotations, effector_frames, effector_offsets,
                       previous):
     """
-    Project a solved tick onto the effectors and actuators (DESIGN §6 step 2).
+    Project a solved tick onto the effectors and actuators (paper eq. 11-12).
 
     With ``solved = K⁻¹ [r, J_aᵀ]`` and the effector Jacobian ``J_e`` (block ``[I, -r^]`` on
     the effector's frame, ``r = R_f o``, :mod:`cbha_inverse.core.actuation.effectors`):

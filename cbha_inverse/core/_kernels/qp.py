@@ -3,10 +3,9 @@ Compiled kernels of the actuation QP (paper eq. 13): its matrices, the active-se
 
 The QP of a control tick is tiny (``m`` = 6..16 actuators) and solved every tick, so a numpy
 implementation spends its time in call overhead (dozens of 1-3 us calls) rather than arithmetic.
-These kernels hold the arithmetic of :func:`cbha_inverse.core.inverse.qp_problem.qp_matrices`,
-:func:`cbha_inverse.core.inverse.qp_problem.qp_problem`, :class:`cbha_inverse.core.inverse.qp.ActiveSetQP`,
-:func:`cbha_inverse.core.inverse.qp.polish` and :func:`cbha_inverse.core.inverse.qp.binding_bounds` as plain
-loops compiled by numba (``cache=True``: compiled once, later processes load the machine code
+These kernels hold the arithmetic of :mod:`cbha_inverse.core.inverse.qp` (``qp_matrices``,
+``qp_problem``, ``ActiveSetQP``, ``polish`` and ``binding_bounds``) as plain loops compiled by
+numba (``cache=True``: compiled once, later processes load the machine code
 from ``__pycache__``). The public functions there keep the documentation and the result types;
 the equations are cited in their docstrings. Small dense solves use the hand-written Cholesky
 factorisation of :func:`solve_free_block` (``m ≲ 30``: no LAPACK call overhead).

@@ -1,5 +1,5 @@
 """
-Compiled convergence measures of the static solver's residual (DESIGN §3, paper eq. 9).
+Compiled convergence measures of the static solver's residual (paper eq. 9).
 
 :func:`residual_measures` adds the dead loads to the residual of a linearisation pass and
 returns, in one loop, the norms :mod:`cbha_inverse.core.statics` tests convergence with.

@@ -1,7 +1,7 @@
 """
 Compiled updates of the frames: world-axis retraction and the chain's deformation coordinates.
 
-:func:`retract_frames` (``x += dx``, ``R ← exp(dθ) R``, DESIGN §3) and the Newton step of a
+:func:`retract_frames` (``x += dx``, ``R ← exp(dθ) R``, `docs/design.md`) and the Newton step of a
 factored tick (:func:`apply_linear_step`); :func:`deformation_step` and :func:`deformed_poses`
 apply an increment in the links' deformation coordinates (the static solver's line search).
 """
@@ -76,7 +76,7 @@ def deformation_step(positions, rotations, rest_rotations, step, coordinates):
 
     The coordinates of link ``l`` (frames ``a = l``, ``b = l + 1``) are its offset
     ``u = R_aᵀ (x_b - x_a)`` and rotation vector ``φ = log(R_aᵀ R_b Q0ᵀ)``; their increments
-    linearise the link deformation (DESIGN §3)::
+    linearise the link deformation (paper eq. 4-8)::
 
         du = R_aᵀ (dx_b - dx_a - dθ_a x (x_b - x_a)),   dφ = Jl⁻¹(φ) R_aᵀ (dθ_b - dθ_a)
 

@@ -1,5 +1,5 @@
 """
-Compiled SO(3) maps: exponential, logarithm, quaternion, ``Jl⁻¹`` and ``hat`` (DESIGN §2-3).
+Compiled SO(3) maps: exponential, logarithm, quaternion, ``Jl⁻¹`` and ``hat``.
 
 The scalar (per-rotation) forms are called inside every kernel; the ``*_batch`` forms loop them
 over arrays for :mod:`cbha_inverse.core.so3`, the package's batched SO(3) API, so each map has

@@ -1,1 +1,1 @@
-"""Actuation of the frame chain: cables, pressure cavities, effector points (DESIGN §5)."""
+"""Actuation of the frame chain: cables, pressure cavities, effector points (paper Sec. IV)."""

@@ -1,5 +1,5 @@
 """
-Cables (tendons) of a frame chain: routing data and the tick's evaluator (DESIGN §5).
+Cables (tendons) of a frame chain: routing data and the tick's evaluator (paper Sec. IV).
 
 A cable is routed through points fixed to frames; its force on each routing point is the sum of
 the unit vectors toward its neighbouring points (the last point pulls toward the previous one),
@@ -58,7 +58,7 @@ class Cable:
 
 class CableGroup:
     """
-    All cables of a scene, evaluated together (DESIGN §5).
+    All cables of a scene, evaluated together.
 
     The force of a cable on a routing point is the sum of the unit vectors toward its neighbouring
     routing points (the last point pulls toward the previous one), times the cable's gain; it is

@@ -1,5 +1,5 @@
 """
-Pressure cavities: closed triangle surfaces skinned to frames (paper §IV, Fig. 5, DESIGN §5).
+Pressure cavities: closed triangle surfaces skinned to frames (paper Sec. IV, Fig. 5).
 
 Per unit pressure each vertex receives the outward normal times one third of the adjacent triangle
 areas; the vertices follow the two frames that enclose them by linear skinning along the segment

@@ -1,16 +1,16 @@
 """
-Effectors: points fixed to frames whose positions the inverse model drives (paper §IV, ``J_e``).
+Effectors: points on frames whose positions the inverse model drives (paper Sec. IV, ``J_e``).
 
 The paper puts an identity block on the rows of the last frame; here an effector is any point
 ``p = x_f + R_f o`` on a mobile frame ``f`` (the tip, a mid vertebra, a gripper point), several
 at once. With retract increments ``dp = dx_f + dθ_f × r = dx_f - r × dθ_f`` where ``r = R_f o``,
 i.e. the ``J_e`` block of the effector is ``[I, -r^]`` on frame ``f``. The points and levers
 are computed by the compiled kernels of :mod:`cbha_inverse.core._kernels.projection`
-(``effector_points``, ``effector_levers``), the ones the control tick's projection uses.
+(``effector_points``, ``effector_levers``), the ones the control tick's projection uses; that
+projection applies ``J_e`` itself (``project_effectors``).
 """
 
 from cbha_inverse.core._kernels.projection import effector_levers, effector_points
-from cbha_inverse.core.so3 import cross
 import numpy as np
 
 
@@ -43,7 +43,6 @@ class PointEffectors:
         if self.frames.min() < 1 or self.frames.max() >= n_frames:
             raise ValueError(f'effector frames must lie in 1..{n_frames - 1} (the base is fixed)')
         self.n_frames = int(n_frames)
-        self._dof = self.frames - 1
 
     @property
     def n_effectors(self):
@@ -86,50 +85,3 @@ class PointEffectors:
         return effector_points(np.ascontiguousarray(positions, dtype=float),
                                np.ascontiguousarray(rotations, dtype=float), self.frames,
                                self.offsets)
-
-    def apply_jacobian(self, increments, levers):
-        """
-        Return ``J_e dq`` for one or many increment fields.
-
-        Parameters
-        ----------
-        increments : (n, 6) or (n, 6, c) ndarray
-            Increments of frames ``1..n`` (``dx``, world-axis ``dθ``), optionally ``c`` columns.
-        levers : (k, 3) ndarray  [m]
-            From :meth:`levers` at the linearisation state.
-
-        Returns
-        -------
-        (k, 3) or (k, 3, c) ndarray  [m]
-            Effector displacements.
-
-        """
-        inc = increments[self._dof]
-        if inc.ndim == 2:
-            return inc[:, :3] + cross(inc[:, 3:], levers)
-        d_theta = np.moveaxis(inc[:, 3:, :], 1, 2)
-        rot = cross(d_theta, levers[:, None, :])
-        return inc[:, :3, :] + np.moveaxis(rot, 2, 1)
-
-    def jacobian(self, rotations):
-        """
-        Return the dense ``J_e`` (for tests and reports; the solver uses :meth:`apply_jacobian`).
-
-        Parameters
-        ----------
-        rotations : (n + 1, 3, 3) ndarray
-            Frame rotations (frame axes → world).
-
-        Returns
-        -------
-        (3k, 6n) ndarray
-            Rows of the effector coordinates, columns of the increments of frames ``1..n``.
-
-        """
-        n = self.n_frames - 1
-        jac = np.zeros((3 * self.n_effectors, 6 * n))
-        for e, (dof, r) in enumerate(zip(self._dof, self.levers(rotations))):
-            jac[3 * e:3 * e + 3, 6 * dof:6 * dof + 3] = np.eye(3)
-            jac[3 * e:3 * e + 3, 6 * dof + 3:6 * dof + 6] = -np.array(
-                [[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
-        return jac

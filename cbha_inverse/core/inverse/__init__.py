@@ -1,1 +1,1 @@
-"""The inverse model and controller of DESIGN §6: solver tick, QP, closed-loop correction."""
+"""The inverse model and controller (paper Sec. IV): solver tick, QP, closed-loop correction."""

@@ -1,11 +1,11 @@
-"""Closed-loop target correction from measured effector positions (DESIGN §6)."""
+"""Closed-loop target correction from measured effector positions (`docs/design.md`)."""
 
 import numpy as np
 
 
 class TargetCorrector:
     """
-    Closed-loop target correction: integral action on the measured effector error (DESIGN §6).
+    Closed-loop target correction: integral action on the measured effector error.
 
     The model is asked to reach ``target + c``; every update integrates
     ``c ← c + gain · (target - measured)`` and clamps ``|c|`` per effector to ``max_correction``.

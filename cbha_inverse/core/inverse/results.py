@@ -2,6 +2,7 @@
 
 from dataclasses import dataclass, field
 
+from cbha_inverse.core.inverse.qp import QP_SOLVERS
 import numpy as np
 
 
@@ -14,12 +15,13 @@ class InverseOptions:
     ----------
     energy_weight : float
         ``ε_E`` of the actuation-energy term (unit-free, see
-        :mod:`cbha_inverse.core.inverse.qp_problem`).
+        :mod:`cbha_inverse.core.inverse.qp`).
     proximal_weight : float
         ``ε_P`` of the tick-to-tick smoothing term (unit-free).
     rate_limit : tuple of float or None
         Largest change per tick of each actuator (N or Pa), ``None`` for none.
     qp_solver : str
+        One of :data:`~cbha_inverse.core.inverse.qp.QP_SOLVERS`:
         ``'active_set'`` (default: principal pivoting on the active set,
         :class:`cbha_inverse.core.inverse.qp.ActiveSetQP`, compiled with numba), ``'proxsuite'``
         (dense, warm-started) or ``'gauss_seidel'`` (the paper's projected Gauss-Seidel). The
@@ -34,7 +36,7 @@ class InverseOptions:
     eps_abs : float
         QP tolerance (normalised problem).
     relinearize_every : int
-        Ticks between linearisations. 1 (default) is DESIGN §6 / the paper: tangent, factor,
+        Ticks between linearisations. 1 (default) is the paper: tangent, factor,
         ``W`` and a Newton update at every tick. ``N > 1``: a linearisation is kept for up to
         ``N`` ticks and the ticks in between solve the QP of the same linear model (paper
         eq. 11, only ``δ_free`` changes with the target; proxsuite re-solves with the same
@@ -56,8 +58,8 @@ class InverseOptions:
 
     def __post_init__(self):
         """Validate."""
-        if self.qp_solver not in ('active_set', 'proxsuite', 'gauss_seidel'):
-            raise ValueError(f"qp_solver must be 'active_set', 'proxsuite' or 'gauss_seidel', "
+        if self.qp_solver not in QP_SOLVERS:
+            raise ValueError(f'qp_solver must be one of {", ".join(QP_SOLVERS)}, '
                              f'not {self.qp_solver!r}')
         if self.newton_steps < 1:
             raise ValueError('newton_steps must be >= 1')

@@ -1,5 +1,5 @@
 """
-The per-tick inverse-simulation controller (DESIGN §6, paper §IV).
+The per-tick inverse-simulation controller (paper Sec. IV, eq. 9-13; `docs/design.md`).
 
 :class:`InverseSolver` holds the immutable model (chain, actuators, effectors, gravity) and a
 mutable tick state (frame poses, current actuation, QP warm start). One :meth:`InverseSolver.step`:
@@ -8,8 +8,9 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    (:class:`cbha_inverse.core.system.EquilibriumSystem`, the static solver's evaluation too):
    tangent stiffness ``K`` (symmetric part of structure + load stiffness), actuator columns
    ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
-2. factor ``K`` (compiled band Cholesky) and solve ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS pass,
-   giving ``W_ea``, ``W_aa`` and ``δ_e^free``
+2. factor ``K`` (compiled band Cholesky; if it is not positive definite, the fallback chain
+   :meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`) and solve
+   ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS pass, giving ``W_ea``, ``W_aa`` and ``δ_e^free``
    (:func:`cbha_inverse.core._kernels.projection.project_effectors`);
 3. solve the regularised box QP (proxsuite, warm-started, or the exact active-set solver; projected
    Gauss-Seidel on request or as a fallback if proxsuite reports a failure);
@@ -34,13 +35,11 @@ from typing import NamedTuple
 from cbha_inverse.core._kernels.projection import (project_effectors, target_status,
                                                    tick_outcome)
 from cbha_inverse.core._kernels.retraction import apply_linear_step, retract_frames as _retract
-from cbha_inverse.core.chain import ChainState, rest_state
+from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
-from cbha_inverse.core.inverse.qp import (ActiveSetQP, ActuationQP, binding_bounds,
-                                          projected_gauss_seidel)
-from cbha_inverse.core.inverse.qp_problem import qp_matrices, qp_problem
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
+                                          ProxsuiteQP, qp_matrices, qp_problem)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
-from cbha_inverse.core.statics import external_wrenches
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
@@ -60,21 +59,9 @@ class _Linearization(NamedTuple):
     residual_norm: float
 
 
-class _CholeskyFactor:
-    """A band Cholesky factor of the equilibrium system, with ``solve``."""
-
-    def __init__(self, factor):
-        """Keep the factor."""
-        self._factor = factor
-
-    def solve(self, rhs):
-        """Return ``K⁻¹ rhs`` (C order)."""
-        return EquilibriumSystem.solve(self._factor, rhs)
-
-
 class InverseSolver:
     """
-    The per-tick controller of DESIGN §6 (pure numerics, no ROS).
+    The per-tick controller of the module docstring (pure numerics, no ROS).
 
     Parameters
     ----------
@@ -147,7 +134,7 @@ class InverseSolver:
                       else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
                                                     (m,))))
         self._external = external_wrenches(model, gravity=gravity).reshape(-1)
-        self._qp = ActuationQP(m, eps_abs=self.options.eps_abs)
+        self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
         self._active_set = ActiveSetQP(m)
         self._tick = EquilibriumSystem(model, actuators, self._external)
         self._m, self._k = m, effectors.n_effectors
@@ -226,26 +213,6 @@ class InverseSolver:
     def effector_positions(self):
         """Return the effector positions (k, 3) of the current model state."""
         return self.effectors.positions(*self._current())
-
-    def _factor(self, positions, rotations, actuation):
-        """
-        Factor a fallback tangent when the tick's symmetric one is not positive definite.
-
-        The normal case (:meth:`_linearise`) is the Cholesky factorization of structure +
-        symmetric load stiffness; when it fails:
-        1. band LU of the exact tangent, structure + load stiffness (non-symmetric; high
-           pressures), :meth:`~cbha_inverse.core.system.EquilibriumSystem.exact_system`;
-        2. band Cholesky of the material tangent alone (paper eq. 8; far from equilibrium),
-           :meth:`~cbha_inverse.core.system.EquilibriumSystem.material_system`.
-        The residual is exact in every case, so only the convergence rate changes.
-        """
-        tangent, _ = self._tick.exact_system(positions, rotations, actuation)
-        factor = self._tick.factor_exact(tangent)
-        if factor is not None:
-            return factor
-        tangent, _ = self._tick.material_system(positions, rotations, actuation)
-        factor = self._tick.factor(tangent)
-        return None if factor is None else _CholeskyFactor(factor)
 
     def _held(self, status, started, qp_status='not_run', warnings=()):
         """Return a tick result that keeps the actuation and the state."""
@@ -375,7 +342,7 @@ class InverseSolver:
 
     def _solve_qp(self, problem, same_hessian):
         """
-        Solve the tick's QP (DESIGN §6 step 3) with the selected solver and its fallbacks.
+        Solve the tick's QP (step 3 of the module docstring) with the chosen solver and fallbacks.
 
         The active set falls back to proxsuite when it does not converge, proxsuite (status
         checked) to projected Gauss-Seidel. Returns ``(solution, status)``, the status
@@ -403,10 +370,10 @@ class InverseSolver:
         Linearise now for the next :meth:`step`, off the target-to-command path.
 
         A node calls it right after publishing a command: the next ``step`` then only solves the
-        QP and applies it (DESIGN §6 steps 3-4), so the target-to-command latency excludes the
-        linearisation (steps 1-2). The state and actuation do not change in between, so the
-        result is exactly that of linearising inside the next step. Does nothing while the
-        current linearisation is still valid (``relinearize_every`` > 1).
+        QP and applies it (steps 3-4 of the module docstring), so the target-to-command latency
+        excludes the linearisation (steps 1-2). The state and actuation do not change in
+        between, so the result is exactly that of linearising inside the next step. Does nothing
+        while the current linearisation is still valid (``relinearize_every`` > 1).
 
         Returns
         -------
@@ -423,7 +390,7 @@ class InverseSolver:
 
     def _linearise(self, previous):
         """
-        Linearise, factor and project at the stored state (DESIGN §6 steps 1-2).
+        Linearise, factor and project at the stored state (steps 1-2 of the module docstring).
 
         Returns ``(t_assembly, t_factor, linearization)``; the linearisation is ``None`` when no
         factorization of the tangent succeeds.
@@ -432,16 +399,16 @@ class InverseSolver:
         tangent, rhs = self._tick.linearise(positions, rotations, previous)
         t_assembly = time.perf_counter()
         factor = self._tick.factor(tangent)
+        if factor is None:
+            # not positive definite: the fallback chain (exact LU, then material Cholesky) of
+            # the same evaluation; the residual is exact in every case, so only the
+            # convergence rate changes
+            factor = next(self._tick.fallback_factors(positions, rotations, previous,
+                                                      evaluated=True), None)
         t_factor = time.perf_counter()
-        if factor is not None:
-            solved = self._tick.solve(factor, rhs)
-        else:
-            factorization = self._factor(positions, rotations, previous)
-            t_factor = time.perf_counter()
-            if factorization is None:
-                return t_assembly, t_factor, None
-            # C order, as the main path: the compiled projection then needs no second signature
-            solved = np.ascontiguousarray(factorization.solve(rhs))
+        if factor is None:
+            return t_assembly, t_factor, None
+        solved = factor.solve(rhs)
         w_ea, w_aa, offset, residual_norm = project_effectors(
             solved, rhs, positions, rotations, self._effector_frames, self._effector_offsets,
             previous)
@@ -455,9 +422,10 @@ class InverseSolver:
     def _newton_step(self, actuation):
         """Apply one full Newton step at fixed actuation; return whether it succeeded."""
         tangent, rhs = self._tick.linearise(self._positions, self._rotations, actuation)
-        step = self._tick.factor_solve(tangent, rhs[:, :1])
-        if step is None:
+        factor = self._tick.factor(tangent)
+        if factor is None:
             return False
+        step = factor.solve(rhs[:, :1])
         self._positions, self._rotations = _retract(self._positions, self._rotations,
                                                     step.reshape(-1, 6),
                                                     self.options.max_rotation_step)

@@ -1,1 +1,1 @@
-"""Block-tridiagonal linear algebra of the frame chain and its LAPACK / dense comparisons."""
+"""Linear algebra of the frame chain: tangent factors, block-tridiagonal factorisation."""

@@ -2,8 +2,8 @@
 Symmetric positive definite block-tridiagonal (BTD) factorisation with multi-RHS solves.
 
 The matrix has n diagonal blocks ``D_i`` (b x b, b = 6 for the frame chain) and n - 1 upper
-blocks ``U_i`` = block (i, i+1); block (i+1, i) is ``U_i^T`` (paper §III: the global stiffness of
-the frame chain is block tridiagonal). Storage::
+blocks ``U_i`` = block (i, i+1); block (i+1, i) is ``U_i^T`` (paper Sec. III: the global
+stiffness of the frame chain is block tridiagonal). Storage::
 
     [ D_0   U_0                 ]
     [ U_0^T D_1   U_1           ]
@@ -21,8 +21,8 @@ Backends (all exact direct methods; ``method='auto'`` is ``'compiled'`` at every
   of the control tick and the static solver
   (:class:`cbha_inverse.core.system.EquilibriumSystem`);
 - ``'banded'``: LAPACK banded Cholesky ``dpbtrf``/``dpbtrs`` on the (2b, bn) lower band storage
-  (half-bandwidth 2b - 1 = 11), built from the blocks by two strided copies: the comparison
-  point DESIGN §3 asks for;
+  (half-bandwidth 2b - 1 = 11), built from the blocks by two strided copies: the standard
+  banded comparison point;
 - ``'dense'``: LAPACK ``dpotrf``/``dpotrs`` on the assembled (bn x bn) matrix, written through
   strided block views: the dense comparison point.
 

@@ -28,6 +28,7 @@ import math
 import sys
 import time
 
+from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.inverse.solver import TargetCorrector
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
@@ -93,7 +94,7 @@ class InverseSolverParams:
     qp_solver: str = param('active_set', 'QP of each tick: active_set (exact KKT solution of '
                            'the small box QP, proxsuite takes over if it does not converge), '
                            'proxsuite (dense, warm-started) or gauss_seidel (the paper)',
-                           choices=('active_set', 'proxsuite', 'gauss_seidel'))
+                           choices=QP_SOLVERS)
     marker_period: float = param(0.1, 'period of the backbone markers [s]', low=0.01, high=60.0)
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
