@@ -1,5 +1,5 @@
 """
-Input validation and fail-safe decisions of the nodes (pure, no ROS; DESIGN section 7).
+Input validation and fail-safe decisions of the nodes (pure, no ROS; see ``docs/nodes.md``).
 
 The nodes call these functions on every message and before every publication:
 
@@ -7,6 +7,8 @@ The nodes call these functions on every message and before every publication:
   frame and inside the configured workspace box;
 - :func:`valve_order` checks a node's ``valve_names`` (the command order) against the scene's
   actuators once, at start;
+- :func:`command_bounds` are the bounds of every command a node sends: the scene's actuator
+  bounds within ``[0, max_pressure]``;
 - :func:`check_command` is what a real valve driver does with an incoming command (exact length,
   finite, within ``[0, p_max]``);
 - :func:`bounded_command` is the last gate before a command is published: it never lets a NaN
@@ -149,6 +151,38 @@ def valve_order(actuator_names, valve_names=None):
         raise ValueError(f'valve_names {list(valves)} must be a permutation of the scene '
                          f'actuators {list(names)}')
     return valves, np.array([names.index(name) for name in valves], dtype=int)
+
+
+def command_bounds(lower_bounds, upper_bounds, max_pressure=None):
+    """
+    Return the bounds of the commands a node sends: actuator bounds a valve driver accepts.
+
+    Parameters
+    ----------
+    lower_bounds, upper_bounds : (m,) array_like  [Pa or N]
+        The scene's actuator bounds (in any order, e.g. a node's ``valve_names`` order).
+    max_pressure : float, optional  [Pa]
+        The driver's limit (a node's ``max_pressure``); None: no cap.
+
+    Returns
+    -------
+    lower, upper : (m,) ndarray  [Pa or N]
+        ``max(lower_bounds, 0)`` and ``min(upper_bounds, max_pressure)``.
+
+    Raises
+    ------
+    ValueError
+        If the cap lies below a lower bound.
+
+    """
+    lower = np.maximum(np.asarray(lower_bounds, dtype=float), 0.0)
+    upper = np.array(upper_bounds, dtype=float)
+    if max_pressure is not None:
+        upper = np.minimum(upper, float(max_pressure))
+    if np.any(lower > upper):
+        raise ValueError(f'max_pressure {max_pressure:g} Pa is below a lower actuator bound of '
+                         'the scene')
+    return lower, upper
 
 
 def check_command(values, n_valves, max_pressure):

@@ -22,10 +22,9 @@ import sys
 import time
 
 from cbha_inverse.errors import ConfigError
-from cbha_inverse.identify.excitation import (
-    DEFAULT_HOLD_TIME, DEFAULT_RAMP_TIME, driver_bounds, make_program)
+from cbha_inverse.identify.excitation import DEFAULT_HOLD_TIME, DEFAULT_RAMP_TIME, make_program
 from cbha_inverse.robot.robotino import ARM_VALVES
-from cbha_inverse.robot.safety import check_command, valve_order
+from cbha_inverse.robot.safety import check_command, command_bounds, valve_order
 from cbha_inverse.ros.common.conversions import command_message
 from cbha_inverse.ros.common.diagnostics import DiagnosticsPublisher, ERROR, make_status, OK
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
@@ -128,12 +127,13 @@ class ExciteNode(Node):
             p = self.params
             scene = load_scene(p.scene)
             self.valve_names, self.order = valve_order(scene.actuator_names, p.valve_names)
-            lower, upper = driver_bounds(scene, p.max_pressure)
+            lower, upper = command_bounds(scene.lower_bounds, scene.upper_bounds,
+                                          p.max_pressure)
             self.program = make_program(
                 scene, p.program, hold_time=p.hold_time, ramp_time=p.ramp_time,
                 start=self._scene_order(p.start_pressure, 'start_pressure', lower, upper),
                 end=self._scene_order(p.end_pressure, 'end_pressure', lower, upper),
-                max_pressure=p.max_pressure)
+                bounds=(lower, upper))
         except ConfigError:
             self.destroy_node()
             raise

@@ -45,8 +45,9 @@ from cbha_inverse.ros.common.params import declare_parameters, param, ParameterE
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
-from cbha_inverse.scene.calibration import Calibration
+from cbha_inverse.scene.calibration import finite_triple
 from cbha_inverse.sim.plant import StaticPlant
+from cbha_inverse.sim.plant_errors import plant_errors
 from cbha_inverse.sim.valves import ValveLine
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -107,53 +108,9 @@ class CbhaSimParams:
     marker_radius: float = param(0.006, 'stereo output: radius of the tip sphere [m]',
                                  low=0.0005, high=0.1)
 
-
-def plant_errors(section_names, valve_names, section_scales, gain_scales,
-                 base_offset=(0.0, 0.0, 0.0)):
-    """
-    Turn the per-section and per-valve error parameters into a scene calibration.
-
-    Parameters
-    ----------
-    section_names : sequence of str
-        The scene's chain sections, in order.
-    valve_names : sequence of str
-        The command order.
-    section_scales : sequence of float  [-]
-        One stiffness factor per section, or one for all.
-    gain_scales : sequence of float  [-]
-        One effective-area factor per valve (cavity), or one for all.
-    base_offset : (3,) sequence of float  [m]
-        Position of the plant's chain base in ``base_frame``.
-
-    Returns
-    -------
-    cbha_inverse.scene.calibration.Calibration
-        Only the factors that differ from 1 (a scene without sections or cavities accepts ones).
-
-    Raises
-    ------
-    ValueError
-        On a wrong count, a factor that is not finite and positive, or an offset that is not 3
-        finite numbers.
-
-    """
-    tables = []
-    for label, names, scales in (('section_stiffness_scale', section_names, section_scales),
-                                 ('cavity_gain_scale', valve_names, gain_scales)):
-        values = [float(v) for v in scales]
-        if len(values) == 1 and (names or values[0] == 1.0):
-            values = values * len(names)
-        if len(values) != len(names):
-            raise ValueError(f'{label} needs 1 or {len(names)} values ({list(names)}), got '
-                             f'{len(scales)}')
-        if not all(math.isfinite(v) and v > 0.0 for v in values):
-            raise ValueError(f'{label} must be finite and > 0, got {list(scales)}')
-        tables.append({n: v for n, v in zip(names, values) if v != 1.0})
-    offset = [float(v) for v in base_offset]
-    if len(offset) != 3 or not all(math.isfinite(v) for v in offset):
-        raise ValueError(f'base_offset must be 3 finite numbers [m], got {list(base_offset)}')
-    return Calibration(*tables, base_position=tuple(offset))
+    def __post_init__(self):
+        """Check the plant gravity (3 finite numbers)."""
+        finite_triple('gravity', self.gravity)
 
 
 class CbhaSimNode(Node):
@@ -177,8 +134,6 @@ class CbhaSimNode(Node):
         try:
             self.params = declare_parameters(self, CbhaSimParams)
             p = self.params
-            if len(p.gravity) != 3 or not all(math.isfinite(g) for g in p.gravity):
-                raise ValueError(f'gravity must be 3 finite numbers, got {list(p.gravity)}')
             nominal = load_scene(p.scene)
             self.valve_names, self.order = valve_order(nominal.actuator_names, p.valve_names)
             errors = plant_errors(nominal.section_names, self.valve_names,

@@ -31,7 +31,8 @@ import time
 from cbha_inverse.core.inverse.solver import TargetCorrector
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
-    bounded_command, check_point, stale_action, StalenessWatch, valve_order, WorkspaceBox)
+    bounded_command, check_point, command_bounds, stale_action, StalenessWatch, valve_order,
+    WorkspaceBox)
 from cbha_inverse.ros.common.conversions import backbone_markers, command_message, point_array
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
@@ -175,10 +176,9 @@ class InverseSolverNode(Node):
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
-        self.lower = np.maximum(self.scene.lower_bounds[self.order], 0.0)
-        self.upper = np.minimum(self.scene.upper_bounds[self.order], p.max_pressure)
-        if np.any(self.lower > self.upper):
-            raise ValueError('max_pressure is below a lower actuator bound of the scene')
+        self.lower, self.upper = command_bounds(self.scene.lower_bounds[self.order],
+                                                self.scene.upper_bounds[self.order],
+                                                p.max_pressure)
         self.vent_command = bounded_command(np.full(len(self.valve_names), p.vent_pressure),
                                             self.lower, self.upper)
         self.box = WorkspaceBox(p.workspace_min, p.workspace_max)
@@ -338,14 +338,7 @@ class InverseSolverNode(Node):
             self.get_logger().warning(warning, throttle_duration_sec=self.params.log_throttle)
         self._last_solve = self._node_seconds()
         self.ticks += 1
-        try:
-            command = bounded_command(result.actuation[self.order], self.lower, self.upper)
-        except ValueError as exc:
-            self.rejected['solver.non_finite'] = self.rejected.get('solver.non_finite', 0) + 1
-            self.get_logger().error(f'solver output rejected, holding: {exc}',
-                                    throttle_duration_sec=self.params.log_throttle)
-            command = self.command
-        self._publish(command)
+        self._publish(result.actuation[self.order])
         published = time.perf_counter()
         # linearise for the next tick now, off the target -> command path (DESIGN §6 steps 1-2)
         try:
@@ -360,7 +353,15 @@ class InverseSolverNode(Node):
         self.get_logger().error(f'{what}: {exc!r}', throttle_duration_sec=self.params.log_throttle)
 
     def _publish(self, command):
-        command = bounded_command(command, self.lower, self.upper)
+        """Publish a command through the last gate; one that is not finite: the last again."""
+        try:
+            command = bounded_command(command, self.lower, self.upper)
+        except ValueError as exc:
+            # only a solver output can fail: hold, vent and the last command passed the gate
+            self.rejected['solver.non_finite'] = self.rejected.get('solver.non_finite', 0) + 1
+            self.get_logger().error(f'solver output rejected, holding: {exc}',
+                                    throttle_duration_sec=self.params.log_throttle)
+            command = self.command
         self.command = command
         self.command_publisher.publish(command_message(command, self.valve_names))
         self.published += 1
