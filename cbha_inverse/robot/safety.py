@@ -13,9 +13,10 @@ The nodes call these functions on every message and before every publication:
   finite, within ``[0, p_max]``);
 - :func:`bounded_command` is the last gate before a command is published: it never lets a NaN
   or an out-of-range pressure through;
-- :class:`StalenessWatch` and :func:`stale_action` decide when to hold or vent (stale feedback;
-  a stale target stays the set-point), on a steady clock (``time.monotonic``) passed in by the
-  caller, so that a bag replay or ``use_sim_time`` cannot fool the watchdog.
+- :class:`StalenessWatch`, :func:`stale_action` and :func:`controller_decision` decide when to
+  hold or vent (stale feedback; a stale target stays the set-point), on a steady clock
+  (``time.monotonic``) passed in by the caller, so that a bag replay or ``use_sim_time`` cannot
+  fool the watchdog; :func:`watchdog_action` is what a watchdog tick then publishes.
 """
 
 from dataclasses import dataclass
@@ -311,3 +312,56 @@ def stale_action(feedback_stale, closed_loop, action):
     if closed_loop and feedback_stale:
         return action
     return 'run'
+
+
+def controller_decision(enabled, has_target, feedback_stale, closed_loop, action):
+    """
+    Decide what the controller does this tick, from its state and :func:`stale_action`.
+
+    Parameters
+    ----------
+    enabled : bool
+        Whether commanding is enabled (``~/enable``).
+    has_target : bool
+        Whether a valid target has arrived.
+    feedback_stale, closed_loop : bool
+        See :func:`stale_action`.
+    action : str
+        ``'hold'`` or ``'vent'``, see :func:`stale_action`.
+
+    Returns
+    -------
+    str
+        ``'disabled'``, ``'waiting'`` (no target yet), ``'run'``, ``'hold'`` or ``'vent'``.
+
+    """
+    if not enabled:
+        return 'disabled'
+    if not has_target:
+        return 'waiting'
+    return stale_action(feedback_stale, closed_loop, action)
+
+
+def watchdog_action(decision, publish_idle):
+    """
+    Return what a watchdog tick (steady clock) publishes for a decision.
+
+    Parameters
+    ----------
+    decision : str
+        ``'hold'``, ``'vent'``, ``'waiting'`` (no valid input yet), ``'run'`` or ``'disabled'``.
+    publish_idle : bool
+        Whether the vent command is published while waiting for the first valid input.
+
+    Returns
+    -------
+    str or None
+        ``'hold'`` (the last command again), ``'vent'`` (the safe command) or None (nothing: a
+        running loop publishes on its own, a disabled one not at all).
+
+    """
+    if decision in ACTIONS:
+        return decision
+    if decision == 'waiting' and publish_idle:
+        return 'vent'
+    return None

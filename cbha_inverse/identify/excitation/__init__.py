@@ -12,7 +12,7 @@ Excitation programs for identification: pressure holds joined by linear ramps (n
 
 from cbha_inverse.identify.excitation.builder import make_program
 from cbha_inverse.identify.excitation.named import (
-    bend_holds, extension_holds, EXTENSION_FRACTIONS, named_holds, program_names,
+    bend_holds, EXTENSION_FRACTIONS, extension_holds, named_holds, program_names,
     section_groups)
 from cbha_inverse.identify.excitation.program import (
     check_bounds, DEFAULT_HOLD_TIME, DEFAULT_RAMP_TIME, ExcitationProgram, mid_range)

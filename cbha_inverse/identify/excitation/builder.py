@@ -18,8 +18,9 @@ def make_program(scene, program, *, hold_time=DEFAULT_HOLD_TIME, ramp_time=DEFAU
         Its ``actuator_names``, ``actuator_sections`` and (without ``bounds``) actuator
         bounds are used.
     program : str or os.PathLike
-        A name of :func:`cbha_inverse.identify.excitation.named.program_names` or a YAML file of holds (``.yaml``/``.yml``: a path, or
-        relative to the package's ``config/``, e.g. ``excitation/cbha_example.yaml``).
+        A name of :func:`cbha_inverse.identify.excitation.named.program_names` or a YAML file
+        of holds (``.yaml``/``.yml``: a path, or relative to the package's ``config/``, e.g.
+        ``excitation/cbha_example.yaml``).
     hold_time, ramp_time : float  [s]
         See :class:`cbha_inverse.identify.excitation.program.ExcitationProgram`.
     start, end : (m,) array_like, optional  [Pa]

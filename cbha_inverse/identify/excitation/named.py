@@ -22,7 +22,6 @@ EXTENSION_FRACTIONS = (0.0, 0.25, 0.5, 0.75, 1.0)
 """Fractions of each actuator's range held by the ``extension`` program."""
 
 
-
 def section_groups(actuator_sections):
     """
     Group actuators by chain section.

@@ -2,9 +2,10 @@
 The rendered stereo cameras of ``cbha_sim`` on ROS topics (``tip_output: stereo | both``).
 
 At ``camera_rate_hz`` the current plant state is rendered by
-:class:`cbha_inverse.sim.cameras.SimulatedStereo` and published as ``stereo/{left,right}/image_raw``
-(bgr8, RELIABLE) with ``stereo/{left,right}/camera_info``, both images stamped with the time of
-the plant state they show; a state already sent is not sent again.
+:class:`cbha_inverse.sim.cameras.SimulatedStereo` and published as
+``stereo/{left,right}/image_raw`` (bgr8, RELIABLE) with ``stereo/{left,right}/camera_info``,
+both images stamped with the time of the plant state they show; a state already sent is not
+sent again.
 This module imports OpenCV; ``cbha_sim`` imports it only when stereo output is on.
 """
 

@@ -21,8 +21,6 @@ the last valid command stays. Every command passes
 :func:`cbha_inverse.robot.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
 """
 
-import bisect
-import collections
 from dataclasses import dataclass
 import math
 import sys
@@ -31,9 +29,11 @@ import time
 from cbha_inverse.core.inverse.solver import TargetCorrector
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
-    bounded_command, check_point, command_bounds, stale_action, StalenessWatch, valve_order,
-    WorkspaceBox)
-from cbha_inverse.ros.common.conversions import backbone_markers, command_message, point_array
+    bounded_command, check_point, command_bounds, controller_decision, StalenessWatch,
+    valve_order, watchdog_action, WorkspaceBox)
+from cbha_inverse.robot.targets import TargetHistory
+from cbha_inverse.ros.common.conversions import (
+    backbone_markers, command_message, point_array, stamp_ns)
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
@@ -101,11 +101,6 @@ class InverseSolverParams:
                                 low=0.0, high=3600.0)
 
 
-def _stamp_ns(message):
-    """Return a header stamp in integer nanoseconds."""
-    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
-
-
 class InverseSolverNode(Node):
     """
     The controller: target (+ measurement) in, pressure command out.
@@ -133,7 +128,7 @@ class InverseSolverNode(Node):
         p = self.params
         self.period = 1.0 / p.rate_hz
         self.target = None
-        self.target_history = collections.deque(maxlen=256)
+        self.target_history = TargetHistory()
         self.target_error = math.nan
         self.measured = None
         self.target_watch = StalenessWatch(p.target_timeout)
@@ -210,7 +205,7 @@ class InverseSolverNode(Node):
             self._reject('target', check)
             return
         self.target = point
-        self.target_history.append((_stamp_ns(message), point))
+        self.target_history.add(stamp_ns(message.header.stamp), point)
         self.target_watch.mark(time.monotonic())
         if self.params.trigger == 'target' and self._decide() == 'run':
             self.latencies.add(self._solve_and_publish() - received)
@@ -225,38 +220,19 @@ class InverseSolverNode(Node):
         self.feedback_watch.mark(time.monotonic())
         if self.params.mode == 'closed' and self.target is not None and self.enabled:
             saturated = self.last_result is not None and self.last_result.status == 'saturated'
-            reference = self._target_at(_stamp_ns(message))
+            # the target of the measurement's own time: delivery delays and bursts of
+            # measurements stay out of the integral
+            reference = self.target_history.at(stamp_ns(message.header.stamp), self.target)
             self.corrector.update(reference[None], point[None], saturated=saturated)
             self.target_error = float(np.linalg.norm(reference - point))
-
-    def _target_at(self, stamp_ns):
-        """
-        Return the target that was current at a measurement's stamp.
-
-        Comparing a measurement with the target of its own time keeps delivery delays and bursts
-        of measurements out of the integral; without a target history covering the stamp (e.g.
-        unstamped or differently clocked measurements) the current target is used.
-        """
-        history = self.target_history
-        if not history or stamp_ns < history[0][0] or stamp_ns > history[-1][0]:
-            return self.target
-        index = bisect.bisect_right(self._history_stamps(), stamp_ns) - 1
-        return history[max(index, 0)][1]
-
-    def _history_stamps(self):
-        return [stamp for stamp, _ in self.target_history]
 
     # control --------------------------------------------------------------------------------
     def _decide(self):
         """Return this tick's decision: disabled, waiting, run, hold or vent (logged on change)."""
         now = time.monotonic()
-        if not self.enabled:
-            decision = 'disabled'
-        elif self.target is None:
-            decision = 'waiting'
-        else:
-            decision = stale_action(self.feedback_watch.stale(now), self.params.mode == 'closed',
-                                    self.params.stale_action)
+        decision = controller_decision(self.enabled, self.target is not None,
+                                       self.feedback_watch.stale(now),
+                                       self.params.mode == 'closed', self.params.stale_action)
         logger = self.get_logger()
         if decision != self.decision:
             # rclpy refuses two severities from one call site: one call per severity
@@ -288,10 +264,10 @@ class InverseSolverNode(Node):
 
     def _on_watchdog(self):
         """Tick on the steady clock: hold or vent on stale feedback, idle vent if configured."""
-        decision = self._decide()
-        if decision == 'hold':
+        action = watchdog_action(self._decide(), self.params.publish_idle)
+        if action == 'hold':
             self._publish(self.command)
-        elif decision == 'vent' or (decision == 'waiting' and self.params.publish_idle):
+        elif action == 'vent':
             self._publish(self.vent_command)
 
     def _on_enable(self, request, response):
