@@ -4,7 +4,7 @@
 The session fixture ``robotino_msgs`` builds the shipped interface package once. A driver
 stand-in (``robotino_helpers.DriverStandIn``) takes ``/set_bha_pressures`` and publishes
 ``/bha_readings`` as ``robotino_node`` does. Expected set-points are written out by hand from the
-vendor channel table (notes/cbha.md), not computed with the mapping under test.
+vendor channel table (docs/own-robot.md), not computed with the mapping under test.
 """
 
 import subprocess

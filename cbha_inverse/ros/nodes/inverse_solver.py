@@ -1,5 +1,5 @@
 """
-``inverse_solver``: the controller node (DESIGN sections 6 and 7).
+``inverse_solver``: the controller node (``docs/nodes.md``; the tick: ``docs/design.md``).
 
 Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/measured``
 (PointStamped, sensor data); publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order =
@@ -316,7 +316,7 @@ class InverseSolverNode(Node):
         self.ticks += 1
         self._publish(result.actuation[self.order])
         published = time.perf_counter()
-        # linearise for the next tick now, off the target -> command path (DESIGN §6 steps 1-2)
+        # linearise for the next tick now, off the target -> command path (``docs/design.md``)
         try:
             self.solver.prepare()
         except (ValueError, ArithmeticError, RuntimeError) as exc:

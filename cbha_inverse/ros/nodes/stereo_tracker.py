@@ -1,5 +1,5 @@
 """
-``stereo_tracker``: the tip position from two calibrated cameras (DESIGN section 8).
+``stereo_tracker``: the tip position from two calibrated cameras (``docs/cameras.md``).
 
 Subscribes ``stereo/left/image_raw`` and ``stereo/right/image_raw`` (sensor_msgs/Image ``mono8``,
 ``bgr8`` or ``rgb8``; RELIABLE, keep-last ``image_depth`` by default: large images lose fragments
