@@ -76,6 +76,9 @@ def test_holds_and_ramps_follow_their_definition():
     # ramps, before and after: no hold
     outside = (-1.0, 0.0, 0.5 * r, r + h + 0.5 * r, program.duration)
     assert [program.hold_index(t) for t in outside] == [-1] * 5
+    # the end, to the clock's resolution of 1 ns
+    assert not program.finished(program.duration - 2e-9)
+    assert program.finished(program.duration - 5e-10) and program.finished(program.duration)
 
 
 def test_ramps_are_linear_and_continuous():

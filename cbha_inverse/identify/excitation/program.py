@@ -242,6 +242,15 @@ class ExcitationProgram:
         out = np.clip(out, self.lower, self.upper)
         return out[0] if t.ndim == 0 else out.reshape(t.shape + (self.lower.size,))
 
+    def finished(self, t):
+        """
+        Return whether the program has ended at time ``t`` [s].
+
+        Within the clock's resolution (1 ns) of :attr:`duration` is the end: durations are sums
+        of floats (3 x 0.2 + 4 x 0.1 s is 1 s + 2e-16 s).
+        """
+        return float(t) >= self.duration - 1e-9
+
     def hold_index(self, t):
         """
         Return the index of the hold that time ``t`` [s] lies in, or -1 (a ramp, before, after).

@@ -247,9 +247,7 @@ class ExciteNode(Node):
             self._finish(REFUSED_EXIT, 'clock went backwards')
             return
         self.elapsed = elapsed
-        # within the clock's resolution (1 ns) of the end is the end (durations are sums of
-        # floats: 3 x 0.2 + 4 x 0.1 s is 1 s + 2e-16 s)
-        finished = elapsed >= self.program.duration - 1e-9
+        finished = self.program.finished(elapsed)
         command = self.program.pressures_at(self.program.duration if finished else elapsed)
         command = command[self.order]
         check = check_command(command, len(self.valve_names), self.params.max_pressure)

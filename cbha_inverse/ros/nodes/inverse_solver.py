@@ -191,18 +191,22 @@ class InverseSolverNode(Node):
                                          max_correction=p.max_correction)
 
     # inputs ---------------------------------------------------------------------------------
-    def _reject(self, topic, check):
+    def _accepted_point(self, topic, message):
+        """Return the checked point of a message, or None (rejection counted and logged)."""
+        point = point_array(message)
+        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
+        if check.ok:
+            return point
         key = f'{topic}.{check.reason}'
         self.rejected[key] = self.rejected.get(key, 0) + 1
         self.get_logger().warn(f'rejected {topic}: {check.detail} (total {self.rejected[key]})',
                                throttle_duration_sec=self.params.log_throttle)
+        return None
 
     def _on_target(self, message):
         received = time.perf_counter()
-        point = point_array(message)
-        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
-        if not check.ok:
-            self._reject('target', check)
+        point = self._accepted_point('target', message)
+        if point is None:
             return
         self.target = point
         self.target_history.add(stamp_ns(message.header.stamp), point)
@@ -211,10 +215,8 @@ class InverseSolverNode(Node):
             self.latencies.add(self._solve_and_publish() - received)
 
     def _on_measured(self, message):
-        point = point_array(message)
-        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
-        if not check.ok:
-            self._reject('tip/measured', check)
+        point = self._accepted_point('tip/measured', message)
+        if point is None:
             return
         self.measured = point
         self.feedback_watch.mark(time.monotonic())
