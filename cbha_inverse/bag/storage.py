@@ -30,6 +30,11 @@ class BagError(ValueError):
     """A bag is missing, damaged or cannot be written; the message is one line."""
 
 
+def absolute_topic(topic):
+    """Return a topic name resolved against the root namespace (``target`` -> ``/target``)."""
+    return topic if topic.startswith('/') else '/' + topic
+
+
 @dataclass(frozen=True)
 class TopicRecord:
     """

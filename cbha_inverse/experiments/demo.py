@@ -49,6 +49,7 @@ from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.identify.excitation import make_program
 from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
+from cbha_inverse.robot.safety import command_bounds
 from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -440,10 +441,12 @@ def main(argv=None):
     excitation = None
     if args.excite is not None:
         try:       # the program cbha_excite will run, checked before any node starts
+            max_pressure = read_yaml(config_path(
+                'cbha_excite.yaml'))['/**']['ros__parameters']['max_pressure']
             excitation = make_program(
                 scene, args.excite, hold_time=args.excite_hold_time,
-                ramp_time=args.excite_ramp_time, max_pressure=read_yaml(config_path(
-                    'cbha_excite.yaml'))['/**']['ros__parameters']['max_pressure'])
+                ramp_time=args.excite_ramp_time,
+                bounds=command_bounds(scene.lower_bounds, scene.upper_bounds, max_pressure))
         except ValueError as exc:      # ConfigError included
             return report_config_error('cbha_demo', exc)
     domain = args.domain

@@ -1,5 +1,5 @@
 """
-``cbha_identify_check``: the identification check of issue 17, end to end on real DDS.
+``cbha_identify_check``: the identification check, end to end on real DDS (``docs/identify.md``).
 
 1. ``cbha_demo`` runs the circle and the square open loop with the nominal model on a simulated
    arm with errors the fit is not tuned to (default: sections x0.85 and x1.1, cavity gains

@@ -1,5 +1,7 @@
 """
-Mapping of our pressure command to the Robotino driver's 8-channel bar array (notes/cbha.md).
+Mapping of our pressure command to the Robotino driver's 8-channel bar array.
+
+See ``docs/own-robot.md`` for running the arm through the driver.
 
 The existing ROS 2 driver of the Robotino XT (``robotino_node``) subscribes to
 ``set_bha_pressures``: exactly 8 set-points in bar, channels 0-2 the inner (proximal) section's
@@ -124,3 +126,23 @@ def robotino_pressures(channel_bar, valve_names=ARM_VALVES):
         raise ValueError(f'{channel_bar.size} channels read, valve_names need '
                          f'{max(channels) + 1}')
     return channel_bar[channels] * PASCAL_PER_BAR
+
+
+def string_pot_names(names, count):
+    """
+    Return the names of ``count`` string potentiometers (``BHAReadings.cablepull`` order).
+
+    Parameters
+    ----------
+    names : sequence of str
+        The configured names (``robotino_bridge`` ``string_pot_names``).
+    count : int
+        Potentiometers read.
+
+    Returns
+    -------
+    tuple of str
+        ``names[i]``, and ``'string_pot_<i>'`` beyond the configured ones.
+
+    """
+    return tuple(names[i] if i < len(names) else f'string_pot_{i}' for i in range(count))

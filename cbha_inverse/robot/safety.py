@@ -1,5 +1,5 @@
 """
-Input validation and fail-safe decisions of the nodes (pure, no ROS; DESIGN section 7).
+Input validation and fail-safe decisions of the nodes (pure, no ROS; see ``docs/nodes.md``).
 
 The nodes call these functions on every message and before every publication:
 
@@ -7,13 +7,16 @@ The nodes call these functions on every message and before every publication:
   frame and inside the configured workspace box;
 - :func:`valve_order` checks a node's ``valve_names`` (the command order) against the scene's
   actuators once, at start;
+- :func:`command_bounds` are the bounds of every command a node sends: the scene's actuator
+  bounds within ``[0, max_pressure]``;
 - :func:`check_command` is what a real valve driver does with an incoming command (exact length,
   finite, within ``[0, p_max]``);
 - :func:`bounded_command` is the last gate before a command is published: it never lets a NaN
   or an out-of-range pressure through;
-- :class:`StalenessWatch` and :func:`stale_action` decide when to hold or vent (stale feedback;
-  a stale target stays the set-point), on a steady clock (``time.monotonic``) passed in by the
-  caller, so that a bag replay or ``use_sim_time`` cannot fool the watchdog.
+- :class:`StalenessWatch`, :func:`stale_action` and :func:`controller_decision` decide when to
+  hold or vent (stale feedback; a stale target stays the set-point), on a steady clock
+  (``time.monotonic``) passed in by the caller, so that a bag replay or ``use_sim_time`` cannot
+  fool the watchdog; :func:`watchdog_action` is what a watchdog tick then publishes.
 """
 
 from dataclasses import dataclass
@@ -151,6 +154,38 @@ def valve_order(actuator_names, valve_names=None):
     return valves, np.array([names.index(name) for name in valves], dtype=int)
 
 
+def command_bounds(lower_bounds, upper_bounds, max_pressure=None):
+    """
+    Return the bounds of the commands a node sends: actuator bounds a valve driver accepts.
+
+    Parameters
+    ----------
+    lower_bounds, upper_bounds : (m,) array_like  [Pa or N]
+        The scene's actuator bounds (in any order, e.g. a node's ``valve_names`` order).
+    max_pressure : float, optional  [Pa]
+        The driver's limit (a node's ``max_pressure``); None: no cap.
+
+    Returns
+    -------
+    lower, upper : (m,) ndarray  [Pa or N]
+        ``max(lower_bounds, 0)`` and ``min(upper_bounds, max_pressure)``.
+
+    Raises
+    ------
+    ValueError
+        If the cap lies below a lower bound.
+
+    """
+    lower = np.maximum(np.asarray(lower_bounds, dtype=float), 0.0)
+    upper = np.array(upper_bounds, dtype=float)
+    if max_pressure is not None:
+        upper = np.minimum(upper, float(max_pressure))
+    if np.any(lower > upper):
+        raise ValueError(f'max_pressure {max_pressure:g} Pa is below a lower actuator bound of '
+                         'the scene')
+    return lower, upper
+
+
 def check_command(values, n_valves, max_pressure):
     """
     Validate an incoming pressure command as a valve driver does.
@@ -277,3 +312,56 @@ def stale_action(feedback_stale, closed_loop, action):
     if closed_loop and feedback_stale:
         return action
     return 'run'
+
+
+def controller_decision(enabled, has_target, feedback_stale, closed_loop, action):
+    """
+    Decide what the controller does this tick, from its state and :func:`stale_action`.
+
+    Parameters
+    ----------
+    enabled : bool
+        Whether commanding is enabled (``~/enable``).
+    has_target : bool
+        Whether a valid target has arrived.
+    feedback_stale, closed_loop : bool
+        See :func:`stale_action`.
+    action : str
+        ``'hold'`` or ``'vent'``, see :func:`stale_action`.
+
+    Returns
+    -------
+    str
+        ``'disabled'``, ``'waiting'`` (no target yet), ``'run'``, ``'hold'`` or ``'vent'``.
+
+    """
+    if not enabled:
+        return 'disabled'
+    if not has_target:
+        return 'waiting'
+    return stale_action(feedback_stale, closed_loop, action)
+
+
+def watchdog_action(decision, publish_idle):
+    """
+    Return what a watchdog tick (steady clock) publishes for a decision.
+
+    Parameters
+    ----------
+    decision : str
+        ``'hold'``, ``'vent'``, ``'waiting'`` (no valid input yet), ``'run'`` or ``'disabled'``.
+    publish_idle : bool
+        Whether the vent command is published while waiting for the first valid input.
+
+    Returns
+    -------
+    str or None
+        ``'hold'`` (the last command again), ``'vent'`` (the safe command) or None (nothing: a
+        running loop publishes on its own, a disabled one not at all).
+
+    """
+    if decision in ACTIONS:
+        return decision
+    if decision == 'waiting' and publish_idle:
+        return 'vent'
+    return None

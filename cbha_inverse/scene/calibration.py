@@ -65,16 +65,12 @@ class Calibration:
         for label, values in (('section_stiffness', self.section_stiffness),
                               ('actuator_gain', self.actuator_gain)):
             for name, value in values.items():
-                if not (math.isfinite(value) and value > 0.0):
-                    raise ValueError(f'{label}.{name} must be finite and > 0, got {value}')
+                check_factor(f'{label}.{name}', value)
         if not (math.isfinite(self.tip_payload_mass) and self.tip_payload_mass >= 0.0):
             raise ValueError(f'tip_payload_mass must be finite and >= 0, got '
                              f'{self.tip_payload_mass}')
         for label in ('base_position', 'base_rpy'):
-            value = np.asarray(getattr(self, label), dtype=float)
-            if value.shape != (3,) or not np.all(np.isfinite(value)):
-                raise ValueError(f'{label} must be 3 finite numbers, got {getattr(self, label)}')
-            object.__setattr__(self, label, tuple(float(v) + 0.0 for v in value))  # no -0.0
+            object.__setattr__(self, label, finite_triple(label, getattr(self, label)))
 
     def base_pose(self):
         """
@@ -122,6 +118,61 @@ class Calibration:
                 'tip_payload_mass': float(self.tip_payload_mass),
                 'base_offset': {'position': list(self.base_position),
                                 'rpy': list(self.base_rpy)}}
+
+
+def check_factor(label, value):
+    """
+    Return a correction factor, checked finite and positive.
+
+    Parameters
+    ----------
+    label : str
+        What it is, for the error (``'actuator_gain.outer_left'``, a node parameter's name).
+    value : float  [-]
+        The factor.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ValueError
+        Unless ``value`` is finite and > 0.
+
+    """
+    value = float(value)
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f'{label} must be finite and > 0, got {value}')
+    return value
+
+
+def finite_triple(label, value):
+    """
+    Return three finite numbers (a position, angles, a gravity vector) as a tuple of floats.
+
+    Parameters
+    ----------
+    label : str
+        What it is, for the error (``'base_position'``, a node parameter's name).
+    value : (3,) array_like
+        The numbers.
+
+    Returns
+    -------
+    (3,) tuple of float
+        Without negative zeros.
+
+    Raises
+    ------
+    ValueError
+        Unless ``value`` is 3 finite numbers.
+
+    """
+    array = np.asarray(value, dtype=float)
+    if array.shape != (3,) or not np.all(np.isfinite(array)):
+        raise ValueError(f'{label} must be 3 finite numbers, got {value}')
+    return tuple(float(v) + 0.0 for v in array)  # + 0.0: no -0.0
 
 
 def _composed(first, second):

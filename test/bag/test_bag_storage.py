@@ -10,7 +10,8 @@ import shutil
 
 from cbha_inverse.bag.info import format_info
 from cbha_inverse.bag.qos import adapt_offered, DEFAULT_QOS, load_qos_overrides
-from cbha_inverse.bag.storage import BagError, BagWriter, deserialize, open_bag
+from cbha_inverse.bag.storage import (
+    absolute_topic, BagError, BagWriter, deserialize, open_bag)
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.ros.bag.cli import main as cbha_bag
 from mcap.reader import make_reader
@@ -279,3 +280,9 @@ def test_adapted_qos_reaches_every_publisher():
     assert adapt_offered([latched, best_effort]).depth == 30
     assert adapt_offered([]) == DEFAULT_QOS
     assert deserialize(_point_bytes(3), POINT).point.x == pytest.approx(0.3)
+
+
+def test_topic_names_are_resolved_against_the_root_namespace():
+    assert absolute_topic('target') == '/target'
+    assert absolute_topic('cbha/tip/true') == '/cbha/tip/true'
+    assert absolute_topic('/cbha/target') == '/cbha/target'

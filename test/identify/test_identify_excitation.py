@@ -10,9 +10,10 @@ file against the file and key its error must name.
 
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.identify.excitation import (
-    bend_holds, driver_bounds, ExcitationProgram, extension_holds, make_program, mid_range,
-    program_names, read_program_file, section_groups)
+    bend_holds, ExcitationProgram, extension_holds, make_program, mid_range, program_names,
+    read_program_file, section_groups)
 from cbha_inverse.paths import config_path
+from cbha_inverse.robot.safety import command_bounds
 from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
@@ -75,6 +76,9 @@ def test_holds_and_ramps_follow_their_definition():
     # ramps, before and after: no hold
     outside = (-1.0, 0.0, 0.5 * r, r + h + 0.5 * r, program.duration)
     assert [program.hold_index(t) for t in outside] == [-1] * 5
+    # the end, to the clock's resolution of 1 ns
+    assert not program.finished(program.duration - 2e-9)
+    assert program.finished(program.duration - 5e-10) and program.finished(program.duration)
 
 
 def test_ramps_are_linear_and_continuous():
@@ -133,18 +137,12 @@ def test_named_programs_of_the_cbha_scene(cbha):
         assert program.duration == pytest.approx(len(holds) * 4.0 + 1.0)
     assert 'outer_right max' in make_program(cbha, 'outer_bends').labels[1]
     # a driver cap (cbha_excite max_pressure) is the programs' new maximum and moves mid range
-    capped = make_program(cbha, 'outer_bends', max_pressure=100e3, hold_time=0.2,
-                          ramp_time=0.1)
+    capped = make_program(cbha, 'outer_bends', hold_time=0.2, ramp_time=0.1,
+                          bounds=command_bounds(cbha.lower_bounds, cbha.upper_bounds, 100e3))
     np.testing.assert_array_equal(capped.hold_pressures[0], [50e3] * 3 + [100e3, 0, 0])
     assert capped.duration == pytest.approx(3 * 0.2 + 4 * 0.1)
     with pytest.raises(ValueError, match='unknown excitation program .outerbends'):
         make_program(cbha, 'outerbends')
-    lower, upper = driver_bounds(cbha, 120e3)
-    np.testing.assert_array_equal(lower, np.zeros(6))
-    np.testing.assert_array_equal(upper, np.full(6, 120e3))
-    np.testing.assert_array_equal(driver_bounds(cbha)[1], np.full(6, P))
-    with pytest.raises(ValueError, match='below a lower actuator bound'):
-        driver_bounds(load_scene('tendon_6f_8c'), -1.0)
 
 
 def test_scenes_without_sections_have_the_extension_only():
@@ -214,7 +212,8 @@ def test_the_shipped_example_file(cbha):
     program = make_program(cbha, 'excitation/cbha_example.yaml', hold_time=0.5)
     np.testing.assert_array_equal(program.hold_pressures, holds)
     with pytest.raises(ConfigError) as error:
-        make_program(cbha, 'excitation/cbha_example.yaml', max_pressure=120e3)
+        make_program(cbha, 'excitation/cbha_example.yaml',
+                     bounds=command_bounds(cbha.lower_bounds, cbha.upper_bounds, 120e3))
     assert error.value.key == 'holds[0][3]' and error.value.path == str(path)
     assert '150000 is outside the bounds [0, 120000] of outer_over' in str(error.value)
 

@@ -1,4 +1,4 @@
-"""The Pa -> Robotino 8-channel bar mapping (notes/cbha.md)."""
+"""The Pa -> Robotino 8-channel bar mapping (the vendor channel table of docs/own-robot.md)."""
 
 import math
 

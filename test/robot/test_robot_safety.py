@@ -3,8 +3,9 @@
 import math
 
 from cbha_inverse.robot.safety import (
-    bounded_command, check_command, check_point, stale_action, StalenessWatch, valve_order,
-    WorkspaceBox)
+    bounded_command, check_command, check_point, command_bounds, stale_action, StalenessWatch,
+    valve_order, WorkspaceBox)
+from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
 
@@ -97,3 +98,19 @@ def test_valve_order_maps_each_command_entry_to_its_scene_actuator():
                   ['a', 'b', 'c']):
         with pytest.raises(ValueError, match='must be a permutation of the scene actuators'):
             valve_order(names, wrong)
+
+
+def test_command_bounds_are_the_scene_bounds_within_zero_and_max_pressure():
+    cbha = load_scene('cbha')
+    lower, upper = command_bounds(cbha.lower_bounds, cbha.upper_bounds, 120e3)
+    np.testing.assert_array_equal(lower, np.zeros(6))
+    np.testing.assert_array_equal(upper, np.full(6, 120e3))
+    np.testing.assert_array_equal(command_bounds(cbha.lower_bounds, cbha.upper_bounds)[1],
+                                  np.full(6, 150000.0))
+    # a negative lower bound is raised to 0 (no suction), an upper bound below the cap stays
+    lower, upper = command_bounds([-5.0, 1.0], [4.0, 8.0], 6.0)
+    np.testing.assert_array_equal(lower, [0.0, 1.0])
+    np.testing.assert_array_equal(upper, [4.0, 6.0])
+    with pytest.raises(ValueError, match='below a lower actuator bound'):
+        command_bounds(load_scene('tendon_6f_8c').lower_bounds,
+                       load_scene('tendon_6f_8c').upper_bounds, -1.0)

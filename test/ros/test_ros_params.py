@@ -23,7 +23,7 @@ def _overrides(node_class):
 def test_every_parameter_is_described_typed_and_ranged(rclpy_context, node_class):
     node = node_class(context=rclpy_context, parameter_overrides=_overrides(node_class))
     try:
-        names = [name for name in node._parameters if name != 'use_sim_time']
+        names = [name for name in node.list_parameters([], 0).names if name != 'use_sim_time']
         descriptors = node.describe_parameters(names)
     finally:
         node.destroy_node()

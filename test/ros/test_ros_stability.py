@@ -1,4 +1,4 @@
-"""``inverse_solver`` on a scene with a zero-range actuator: one line naming it (issue 11)."""
+"""``inverse_solver`` on a scene with a zero-range actuator: one line naming it."""
 
 from pathlib import Path
 
@@ -12,7 +12,7 @@ SCENES = Path(__file__).resolve().parents[2] / 'config' / 'scenes'
 
 
 def test_inverse_solver_refuses_a_zero_range_actuator(rclpy_context, tmp_path):
-    """max_tension: 0 used to raise ZeroDivisionError in the warm-up tick (exit 1)."""
+    """max_tension: 0 is a ParameterError naming file and key, not a division by zero."""
     spec = yaml.safe_load((SCENES / 'tendon_6f_8c.yaml').read_text(encoding='utf-8'))
     spec['cables'][1]['max_tension'] = 0.0
     scene = tmp_path / 'zero_range.yaml'

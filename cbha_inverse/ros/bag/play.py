@@ -17,7 +17,7 @@ import sys
 import time
 
 from cbha_inverse.bag.qos import adapt_offered, load_qos_overrides
-from cbha_inverse.bag.storage import BagError, open_bag
+from cbha_inverse.bag.storage import absolute_topic, BagError, open_bag
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.ros.bag.qos import message_class, qos_to_rclpy
 from rclpy.duration import Duration
@@ -93,12 +93,8 @@ def parse_remaps(pairs):
         old, separator, new = pair.partition(':=')
         if not separator or not old or not new:
             raise ValueError(f'remap {pair!r} is not old:=new')
-        remaps[_absolute(old)] = _absolute(new)
+        remaps[absolute_topic(old)] = absolute_topic(new)
     return remaps
-
-
-def _absolute(topic):
-    return topic if topic.startswith('/') else '/' + topic
 
 
 def _wait_until(due_ns, stopped):
@@ -144,7 +140,7 @@ class BagPlayer:
         with open_bag(path) as bag:
             self.summary = bag.summary
         recorded = {t.name: t for t in self.summary.topics}
-        wanted = [_absolute(t) for t in options.topics] or list(recorded)
+        wanted = [absolute_topic(t) for t in options.topics] or list(recorded)
         missing = [t for t in wanted if t not in recorded]
         if missing:
             raise BagError(f'{path}: topics {missing} are not in the bag '

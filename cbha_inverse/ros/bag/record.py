@@ -14,7 +14,7 @@ import sys
 import time
 
 from cbha_inverse.bag.qos import adapt_offered
-from cbha_inverse.bag.storage import BagError, BagWriter, knows_type
+from cbha_inverse.bag.storage import absolute_topic, BagError, BagWriter, knows_type
 from cbha_inverse.errors import report_config_error
 from cbha_inverse.ros.bag.qos import message_class, qos_from_rclpy, qos_to_rclpy
 from rclpy.clock import Clock, ClockType
@@ -23,11 +23,6 @@ from rclpy.parameter import Parameter
 
 RECORD_DEPTH = 1000
 """History depth of the recorder's subscriptions (a slow disk must not drop reliable samples)."""
-
-
-def absolute(topic):
-    """Return a topic name resolved against the root namespace (``target`` -> ``/target``)."""
-    return topic if topic.startswith('/') else '/' + topic
 
 
 class BagRecorder:
@@ -56,7 +51,7 @@ class BagRecorder:
         self.node = Node('cbha_bag_record', context=context, start_parameter_services=False,
                          parameter_overrides=[Parameter('use_sim_time', value=use_sim_time)])
         self.writer = writer
-        self.wanted = {absolute(t) for t in topics}
+        self.wanted = {absolute_topic(t) for t in topics}
         self.all_topics = all_topics
         self.progress = sys.stderr if progress is None else progress
         self.subscriptions = {}

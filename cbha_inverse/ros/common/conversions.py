@@ -12,6 +12,16 @@ def point_array(message):
     return np.array([point.x, point.y, point.z], dtype=float)
 
 
+def stamp_ns(stamp):
+    """Return a ``builtin_interfaces/Time`` in integer nanoseconds."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def stamp_seconds(stamp):
+    """Return a ``builtin_interfaces/Time`` in seconds (float)."""
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
 def point_stamped(point, stamp, frame_id):
     """
     Build a ``PointStamped``.

@@ -126,3 +126,31 @@ class TimingStats:
             values = (float(np.median(samples)), float(np.percentile(samples, 99)),
                       float(np.max(samples)))
         return dict(zip((f'{prefix}_median_ms', f'{prefix}_p99_ms', f'{prefix}_max_ms'), values))
+
+
+class RateMeter:
+    """
+    Messages per second between two diagnostics reports.
+
+    Parameters
+    ----------
+    now : float  [s]
+        Steady time of the start.
+
+    """
+
+    def __init__(self, now):
+        self.count = 0
+        self._since = now
+        self._count_then = 0
+
+    def add(self):
+        """Count one message."""
+        self.count += 1
+
+    def rate(self, now):
+        """Return the messages per second since the last call [Hz] and restart the window."""
+        elapsed = now - self._since
+        rate = (self.count - self._count_then) / elapsed if elapsed > 0.0 else math.nan
+        self._since, self._count_then = now, self.count
+        return rate

@@ -1,5 +1,5 @@
 """
-QoS profiles of the package's topics (DESIGN section 7), chosen per topic on purpose.
+QoS profiles of the package's topics (``docs/nodes.md``), chosen per topic on purpose.
 
 Commands and targets are RELIABLE (a dropped set-point is a missed step); measured streams use the
 sensor-data profile (BEST_EFFORT, depth 5: the newest sample matters, an old one is useless). A

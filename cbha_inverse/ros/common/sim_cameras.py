@@ -1,18 +1,17 @@
 """
-Rendered stereo cameras of ``cbha_sim`` (``tip_output: stereo | both``).
+The rendered stereo cameras of ``cbha_sim`` on ROS topics (``tip_output: stereo | both``).
 
-At ``camera_rate_hz`` the current tip marker (and the backbone, as clutter) is rendered into both
-cameras of a rig (:class:`cbha_inverse.vision.render.StereoRenderer`: lens distortion, blur,
-noise) and published as ``stereo/{left,right}/image_raw`` (bgr8, RELIABLE) with
-``stereo/{left,right}/camera_info``, both images stamped with the time of the plant state they
-show (a hardware-triggered pair exposed at that instant); a frame whose state has not changed
-since the last one is not sent again.
+At ``camera_rate_hz`` the current plant state is rendered by
+:class:`cbha_inverse.sim.cameras.SimulatedStereo` and published as
+``stereo/{left,right}/image_raw`` (bgr8, RELIABLE) with ``stereo/{left,right}/camera_info``,
+both images stamped with the time of the plant state they show; a state already sent is not
+sent again.
 This module imports OpenCV; ``cbha_sim`` imports it only when stereo output is on.
 """
 
 from cbha_inverse.ros.common.images import camera_info_message, image_message
 from cbha_inverse.ros.common.qos import reliable
-from cbha_inverse.vision.render import RenderSettings, StereoRenderer
+from cbha_inverse.sim.cameras import SimulatedStereo
 from sensor_msgs.msg import CameraInfo, Image
 
 IMAGE_QOS = reliable(2)
@@ -45,23 +44,21 @@ class SimulatedCameras:
         self.node = node
         self.rig = rig
         self.shape = shape
-        self.renderer = StereoRenderer(rig, RenderSettings(marker_radius=marker_radius), seed)
+        self.stereo = SimulatedStereo(rig, marker_radius, seed)
         self.images = {side: node.create_publisher(Image, f'stereo/{side}/image_raw', IMAGE_QOS)
                        for side in ('left', 'right')}
         self.infos = {side: node.create_publisher(CameraInfo, f'stereo/{side}/camera_info',
                                                   reliable(10)) for side in ('left', 'right')}
         self.frames = 0
-        self._last_stamp = None
         self.timer = node.create_timer(1.0 / rate_hz, self.publish)
 
     def publish(self):
         """Render the current tip into both cameras and publish the pair with its camera_info."""
         state = self.shape()
-        if state is None or state[2] == self._last_stamp:
+        pair = None if state is None else self.stereo.render(*state)
+        if pair is None:
             return
-        tip, backbone, stamp = state
-        self._last_stamp = stamp
-        pair = self.renderer.render(tip, backbone=backbone)
+        stamp = state[2]
         for side, camera, pixels in zip(('left', 'right'), (self.rig.left, self.rig.right), pair):
             frame_id = f'stereo_{side}_optical'
             self.infos[side].publish(camera_info_message(camera, stamp, frame_id))

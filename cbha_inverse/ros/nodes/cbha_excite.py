@@ -22,10 +22,9 @@ import sys
 import time
 
 from cbha_inverse.errors import ConfigError
-from cbha_inverse.identify.excitation import (
-    DEFAULT_HOLD_TIME, DEFAULT_RAMP_TIME, driver_bounds, make_program)
+from cbha_inverse.identify.excitation import DEFAULT_HOLD_TIME, DEFAULT_RAMP_TIME, make_program
 from cbha_inverse.robot.robotino import ARM_VALVES
-from cbha_inverse.robot.safety import check_command, valve_order
+from cbha_inverse.robot.safety import check_command, command_bounds, valve_order
 from cbha_inverse.ros.common.conversions import command_message
 from cbha_inverse.ros.common.diagnostics import DiagnosticsPublisher, ERROR, make_status, OK
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
@@ -128,12 +127,13 @@ class ExciteNode(Node):
             p = self.params
             scene = load_scene(p.scene)
             self.valve_names, self.order = valve_order(scene.actuator_names, p.valve_names)
-            lower, upper = driver_bounds(scene, p.max_pressure)
+            lower, upper = command_bounds(scene.lower_bounds, scene.upper_bounds,
+                                          p.max_pressure)
             self.program = make_program(
                 scene, p.program, hold_time=p.hold_time, ramp_time=p.ramp_time,
                 start=self._scene_order(p.start_pressure, 'start_pressure', lower, upper),
                 end=self._scene_order(p.end_pressure, 'end_pressure', lower, upper),
-                max_pressure=p.max_pressure)
+                bounds=(lower, upper))
         except ConfigError:
             self.destroy_node()
             raise
@@ -247,9 +247,7 @@ class ExciteNode(Node):
             self._finish(REFUSED_EXIT, 'clock went backwards')
             return
         self.elapsed = elapsed
-        # within the clock's resolution (1 ns) of the end is the end (durations are sums of
-        # floats: 3 x 0.2 + 4 x 0.1 s is 1 s + 2e-16 s)
-        finished = elapsed >= self.program.duration - 1e-9
+        finished = self.program.finished(elapsed)
         command = self.program.pressures_at(self.program.duration if finished else elapsed)
         command = command[self.order]
         check = check_command(command, len(self.valve_names), self.params.max_pressure)

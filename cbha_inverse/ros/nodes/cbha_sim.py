@@ -20,8 +20,9 @@ piecewise-constant commands, whatever the tick times). Every tick at ``rate_hz``
 - the tip is published on ``tip/measured`` (PointStamped, sensor data QoS) with Gaussian noise
   ``noise_std`` (seeded) and, noise-free, on ``tip/true``.
 
-Time (ticks, latency, valve lag, stamps) is the node clock: with ``use_sim_time`` the plant runs
-on ``/clock``.
+Valves, plant and sensor noise are :class:`cbha_inverse.sim.arm.SimulatedArm`, the plant's
+model errors :func:`cbha_inverse.sim.plant_errors.plant_errors`. Time (ticks, latency, valve lag,
+stamps) is the node clock: with ``use_sim_time`` the plant runs on ``/clock``.
 
 ``tip_output: stereo`` replaces ``tip/measured`` by rendered stereo cameras (the tip marker drawn
 into both cameras of ``camera_rig`` at ``camera_rate_hz``: ``stereo/{left,right}/image_raw`` and
@@ -45,11 +46,10 @@ from cbha_inverse.ros.common.params import declare_parameters, param, ParameterE
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
-from cbha_inverse.scene.calibration import Calibration
-from cbha_inverse.sim.plant import StaticPlant
-from cbha_inverse.sim.valves import ValveLine
+from cbha_inverse.scene.calibration import finite_triple
+from cbha_inverse.sim.arm import SimulatedArm
+from cbha_inverse.sim.plant_errors import plant_errors
 from geometry_msgs.msg import PointStamped
-import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -107,53 +107,9 @@ class CbhaSimParams:
     marker_radius: float = param(0.006, 'stereo output: radius of the tip sphere [m]',
                                  low=0.0005, high=0.1)
 
-
-def plant_errors(section_names, valve_names, section_scales, gain_scales,
-                 base_offset=(0.0, 0.0, 0.0)):
-    """
-    Turn the per-section and per-valve error parameters into a scene calibration.
-
-    Parameters
-    ----------
-    section_names : sequence of str
-        The scene's chain sections, in order.
-    valve_names : sequence of str
-        The command order.
-    section_scales : sequence of float  [-]
-        One stiffness factor per section, or one for all.
-    gain_scales : sequence of float  [-]
-        One effective-area factor per valve (cavity), or one for all.
-    base_offset : (3,) sequence of float  [m]
-        Position of the plant's chain base in ``base_frame``.
-
-    Returns
-    -------
-    cbha_inverse.scene.calibration.Calibration
-        Only the factors that differ from 1 (a scene without sections or cavities accepts ones).
-
-    Raises
-    ------
-    ValueError
-        On a wrong count, a factor that is not finite and positive, or an offset that is not 3
-        finite numbers.
-
-    """
-    tables = []
-    for label, names, scales in (('section_stiffness_scale', section_names, section_scales),
-                                 ('cavity_gain_scale', valve_names, gain_scales)):
-        values = [float(v) for v in scales]
-        if len(values) == 1 and (names or values[0] == 1.0):
-            values = values * len(names)
-        if len(values) != len(names):
-            raise ValueError(f'{label} needs 1 or {len(names)} values ({list(names)}), got '
-                             f'{len(scales)}')
-        if not all(math.isfinite(v) and v > 0.0 for v in values):
-            raise ValueError(f'{label} must be finite and > 0, got {list(scales)}')
-        tables.append({n: v for n, v in zip(names, values) if v != 1.0})
-    offset = [float(v) for v in base_offset]
-    if len(offset) != 3 or not all(math.isfinite(v) for v in offset):
-        raise ValueError(f'base_offset must be 3 finite numbers [m], got {list(base_offset)}')
-    return Calibration(*tables, base_position=tuple(offset))
+    def __post_init__(self):
+        """Check the plant gravity (3 finite numbers)."""
+        finite_triple('gravity', self.gravity)
 
 
 class CbhaSimNode(Node):
@@ -177,8 +133,6 @@ class CbhaSimNode(Node):
         try:
             self.params = declare_parameters(self, CbhaSimParams)
             p = self.params
-            if len(p.gravity) != 3 or not all(math.isfinite(g) for g in p.gravity):
-                raise ValueError(f'gravity must be 3 finite numbers, got {list(p.gravity)}')
             nominal = load_scene(p.scene)
             self.valve_names, self.order = valve_order(nominal.actuator_names, p.valve_names)
             errors = plant_errors(nominal.section_names, self.valve_names,
@@ -188,12 +142,11 @@ class CbhaSimNode(Node):
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
-        self.plant = StaticPlant(self.scene, tolerance=p.tolerance,
-                                 max_iterations=p.max_iterations)
-        self.rng = np.random.default_rng(p.seed)
-        # an independent child stream: the tip noise sequence of a seed stays what it was
-        self.pressure_rng = np.random.default_rng(np.random.SeedSequence(p.seed, spawn_key=(1,)))
-        self.valves = ValveLine(len(self.valve_names), p.latency, p.valve_time_constant)
+        self.arm = SimulatedArm(self.scene, self.order, latency=p.latency,
+                                valve_time_constant=p.valve_time_constant,
+                                tip_noise=p.noise_std, pressure_noise=p.pressure_noise_std,
+                                seed=p.seed, tolerance=p.tolerance,
+                                max_iterations=p.max_iterations)
         self.rejected = {}
         self.accepted = 0
         self.last_result = None
@@ -251,23 +204,20 @@ class CbhaSimNode(Node):
             self.get_logger().warn(f'rejected pressure_command: {check.detail}',
                                    throttle_duration_sec=self.params.log_throttle)
             return
-        in_scene_order = np.empty(len(self.order))
-        in_scene_order[self.order] = values
-        self.valves.send(self._node_seconds(), in_scene_order)
+        self.arm.send(self._node_seconds(), values)
         self.accepted += 1
 
     @property
     def pressures(self):
         """(m,) ndarray [Pa]: the valve pressures of the last tick, scene actuator order."""
-        return self.valves.pressures
+        return self.arm.pressures
 
     def _node_seconds(self):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_reset(self, request, response):
         """``~/reset``: plant at rest, valves vented, pending commands dropped."""
-        self.plant.reset()
-        self.valves.reset()
+        self.arm.reset()
         self.last_result = None
         self.resets += 1
         response.success = True
@@ -278,12 +228,10 @@ class CbhaSimNode(Node):
     def _tick(self):
         start = time.perf_counter()
         # node clock (use_sim_time: /clock); a clock that jumps back (a looped bag) is a pause
-        pressures = self.valves.advance(self._node_seconds())
-        measured = pressures[self.order] + self.pressure_rng.normal(
-            0.0, self.params.pressure_noise_std, len(self.order))
+        measured = self.arm.advance(self._node_seconds())
         self.pressure_publisher.publish(command_message(measured, self.valve_names))
         try:
-            result = self.plant.update(pressures)
+            result, noisy = self.arm.update_plant()
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.failures += 1
             self.get_logger().error(f'plant update failed, state kept: {exc!r}',
@@ -293,7 +241,6 @@ class CbhaSimNode(Node):
         self.last_result, self.last_stamp = result, stamp
         self.not_converged += not result.converged
         tip = result.effector_positions[-1]
-        noisy = tip + self.rng.normal(0.0, self.params.noise_std, 3)
         if self.params.tip_output != 'stereo':
             self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
         self.truth_publisher.publish(point_stamped(tip, stamp, self.params.frame_id))

@@ -1,5 +1,5 @@
 """
-``inverse_solver``: the controller node (DESIGN sections 6 and 7).
+``inverse_solver``: the controller node (``docs/nodes.md``; the tick: ``docs/design.md``).
 
 Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/measured``
 (PointStamped, sensor data); publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order =
@@ -21,8 +21,6 @@ the last valid command stays. Every command passes
 :func:`cbha_inverse.robot.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
 """
 
-import bisect
-import collections
 from dataclasses import dataclass
 import math
 import sys
@@ -32,8 +30,11 @@ from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.inverse.solver import TargetCorrector
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
-    bounded_command, check_point, stale_action, StalenessWatch, valve_order, WorkspaceBox)
-from cbha_inverse.ros.common.conversions import backbone_markers, command_message, point_array
+    bounded_command, check_point, command_bounds, controller_decision, StalenessWatch,
+    valve_order, watchdog_action, WorkspaceBox)
+from cbha_inverse.robot.targets import TargetHistory
+from cbha_inverse.ros.common.conversions import (
+    backbone_markers, command_message, point_array, stamp_ns)
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
@@ -101,11 +102,6 @@ class InverseSolverParams:
                                 low=0.0, high=3600.0)
 
 
-def _stamp_ns(message):
-    """Return a header stamp in integer nanoseconds."""
-    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
-
-
 class InverseSolverNode(Node):
     """
     The controller: target (+ measurement) in, pressure command out.
@@ -133,7 +129,7 @@ class InverseSolverNode(Node):
         p = self.params
         self.period = 1.0 / p.rate_hz
         self.target = None
-        self.target_history = collections.deque(maxlen=256)
+        self.target_history = TargetHistory()
         self.target_error = math.nan
         self.measured = None
         self.target_watch = StalenessWatch(p.target_timeout)
@@ -176,10 +172,9 @@ class InverseSolverNode(Node):
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
-        self.lower = np.maximum(self.scene.lower_bounds[self.order], 0.0)
-        self.upper = np.minimum(self.scene.upper_bounds[self.order], p.max_pressure)
-        if np.any(self.lower > self.upper):
-            raise ValueError('max_pressure is below a lower actuator bound of the scene')
+        self.lower, self.upper = command_bounds(self.scene.lower_bounds[self.order],
+                                                self.scene.upper_bounds[self.order],
+                                                p.max_pressure)
         self.vent_command = bounded_command(np.full(len(self.valve_names), p.vent_pressure),
                                             self.lower, self.upper)
         self.box = WorkspaceBox(p.workspace_min, p.workspace_max)
@@ -197,67 +192,50 @@ class InverseSolverNode(Node):
                                          max_correction=p.max_correction)
 
     # inputs ---------------------------------------------------------------------------------
-    def _reject(self, topic, check):
+    def _accepted_point(self, topic, message):
+        """Return the checked point of a message, or None (rejection counted and logged)."""
+        point = point_array(message)
+        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
+        if check.ok:
+            return point
         key = f'{topic}.{check.reason}'
         self.rejected[key] = self.rejected.get(key, 0) + 1
         self.get_logger().warn(f'rejected {topic}: {check.detail} (total {self.rejected[key]})',
                                throttle_duration_sec=self.params.log_throttle)
+        return None
 
     def _on_target(self, message):
         received = time.perf_counter()
-        point = point_array(message)
-        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
-        if not check.ok:
-            self._reject('target', check)
+        point = self._accepted_point('target', message)
+        if point is None:
             return
         self.target = point
-        self.target_history.append((_stamp_ns(message), point))
+        self.target_history.add(stamp_ns(message.header.stamp), point)
         self.target_watch.mark(time.monotonic())
         if self.params.trigger == 'target' and self._decide() == 'run':
             self.latencies.add(self._solve_and_publish() - received)
 
     def _on_measured(self, message):
-        point = point_array(message)
-        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
-        if not check.ok:
-            self._reject('tip/measured', check)
+        point = self._accepted_point('tip/measured', message)
+        if point is None:
             return
         self.measured = point
         self.feedback_watch.mark(time.monotonic())
         if self.params.mode == 'closed' and self.target is not None and self.enabled:
             saturated = self.last_result is not None and self.last_result.status == 'saturated'
-            reference = self._target_at(_stamp_ns(message))
+            # the target of the measurement's own time: delivery delays and bursts of
+            # measurements stay out of the integral
+            reference = self.target_history.at(stamp_ns(message.header.stamp), self.target)
             self.corrector.update(reference[None], point[None], saturated=saturated)
             self.target_error = float(np.linalg.norm(reference - point))
-
-    def _target_at(self, stamp_ns):
-        """
-        Return the target that was current at a measurement's stamp.
-
-        Comparing a measurement with the target of its own time keeps delivery delays and bursts
-        of measurements out of the integral; without a target history covering the stamp (e.g.
-        unstamped or differently clocked measurements) the current target is used.
-        """
-        history = self.target_history
-        if not history or stamp_ns < history[0][0] or stamp_ns > history[-1][0]:
-            return self.target
-        index = bisect.bisect_right(self._history_stamps(), stamp_ns) - 1
-        return history[max(index, 0)][1]
-
-    def _history_stamps(self):
-        return [stamp for stamp, _ in self.target_history]
 
     # control --------------------------------------------------------------------------------
     def _decide(self):
         """Return this tick's decision: disabled, waiting, run, hold or vent (logged on change)."""
         now = time.monotonic()
-        if not self.enabled:
-            decision = 'disabled'
-        elif self.target is None:
-            decision = 'waiting'
-        else:
-            decision = stale_action(self.feedback_watch.stale(now), self.params.mode == 'closed',
-                                    self.params.stale_action)
+        decision = controller_decision(self.enabled, self.target is not None,
+                                       self.feedback_watch.stale(now),
+                                       self.params.mode == 'closed', self.params.stale_action)
         logger = self.get_logger()
         if decision != self.decision:
             # rclpy refuses two severities from one call site: one call per severity
@@ -289,10 +267,10 @@ class InverseSolverNode(Node):
 
     def _on_watchdog(self):
         """Tick on the steady clock: hold or vent on stale feedback, idle vent if configured."""
-        decision = self._decide()
-        if decision == 'hold':
+        action = watchdog_action(self._decide(), self.params.publish_idle)
+        if action == 'hold':
             self._publish(self.command)
-        elif decision == 'vent' or (decision == 'waiting' and self.params.publish_idle):
+        elif action == 'vent':
             self._publish(self.vent_command)
 
     def _on_enable(self, request, response):
@@ -339,16 +317,9 @@ class InverseSolverNode(Node):
             self.get_logger().warning(warning, throttle_duration_sec=self.params.log_throttle)
         self._last_solve = self._node_seconds()
         self.ticks += 1
-        try:
-            command = bounded_command(result.actuation[self.order], self.lower, self.upper)
-        except ValueError as exc:
-            self.rejected['solver.non_finite'] = self.rejected.get('solver.non_finite', 0) + 1
-            self.get_logger().error(f'solver output rejected, holding: {exc}',
-                                    throttle_duration_sec=self.params.log_throttle)
-            command = self.command
-        self._publish(command)
+        self._publish(result.actuation[self.order])
         published = time.perf_counter()
-        # linearise for the next tick now, off the target -> command path (DESIGN §6 steps 1-2)
+        # linearise for the next tick now, off the target -> command path (``docs/design.md``)
         try:
             self.solver.prepare()
         except (ValueError, ArithmeticError, RuntimeError) as exc:
@@ -361,7 +332,15 @@ class InverseSolverNode(Node):
         self.get_logger().error(f'{what}: {exc!r}', throttle_duration_sec=self.params.log_throttle)
 
     def _publish(self, command):
-        command = bounded_command(command, self.lower, self.upper)
+        """Publish a command through the last gate; one that is not finite: the last again."""
+        try:
+            command = bounded_command(command, self.lower, self.upper)
+        except ValueError as exc:
+            # only a solver output can fail: hold, vent and the last command passed the gate
+            self.rejected['solver.non_finite'] = self.rejected.get('solver.non_finite', 0) + 1
+            self.get_logger().error(f'solver output rejected, holding: {exc}',
+                                    throttle_duration_sec=self.params.log_throttle)
+            command = self.command
         self.command = command
         self.command_publisher.publish(command_message(command, self.valve_names))
         self.published += 1

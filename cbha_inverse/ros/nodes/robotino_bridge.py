@@ -36,10 +36,11 @@ import time
 
 from cbha_inverse.robot.robotino import (
     ARM_VALVES, CHANNELS, MAX_BAR, N_CHANNELS, PASCAL_PER_BAR, robotino_bar_command,
-    robotino_pressures)
-from cbha_inverse.robot.safety import check_command, StalenessWatch
+    robotino_pressures, string_pot_names)
+from cbha_inverse.robot.safety import check_command, StalenessWatch, watchdog_action
 from cbha_inverse.ros.common.conversions import command_array, command_message
-from cbha_inverse.ros.common.diagnostics import DiagnosticsPublisher, make_status, OK, WARN
+from cbha_inverse.ros.common.diagnostics import (
+    DiagnosticsPublisher, make_status, OK, RateMeter, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import (
     COMMAND_QOS, DRIVER_READINGS_QOS, DRIVER_SET_POINTS_QOS, MEASURED_QOS)
@@ -134,34 +135,6 @@ def import_robotino_msgs():
         raise ModuleNotFoundError(MISSING_MESSAGES.format(error=exc)) from None
 
 
-class RateMeter:
-    """
-    Messages per second between two diagnostics reports.
-
-    Parameters
-    ----------
-    now : float  [s]
-        Steady time of the start.
-
-    """
-
-    def __init__(self, now):
-        self.count = 0
-        self._since = now
-        self._count_then = 0
-
-    def add(self):
-        """Count one message."""
-        self.count += 1
-
-    def rate(self, now):
-        """Return the messages per second since the last call [Hz] and restart the window."""
-        elapsed = now - self._since
-        rate = (self.count - self._count_then) / elapsed if elapsed > 0.0 else math.nan
-        self._since, self._count_then = now, self.count
-        return rate
-
-
 class RobotinoBridgeNode(Node):
     """
     The bridge between ``pressure_command`` (Pa) and the Robotino driver's messages (bar).
@@ -245,14 +218,12 @@ class RobotinoBridgeNode(Node):
     def _on_timer(self):
         if not self.command_watch.stale(time.monotonic()):
             return
-        if self.decision == 'waiting':
-            if self.params.publish_idle:
-                self._send(self.vent_bar)
-            return
-        action = self.params.stale_action
-        self._set_decision(action)
-        self._send(self.set_points if action == 'hold' else self.vent_bar)
-        self.stale_published += 1
+        if self.decision != 'waiting':
+            self._set_decision(self.params.stale_action)
+            self.stale_published += 1
+        action = watchdog_action(self.decision, self.params.publish_idle)
+        if action is not None:
+            self._send(self.set_points if action == 'hold' else self.vent_bar)
 
     def _set_decision(self, decision):
         if decision != self.decision:
@@ -285,10 +256,8 @@ class RobotinoBridgeNode(Node):
         pots = JointState()
         pots.header.stamp = message.stamp
         pots.header.frame_id = p.frame_id
-        raw = [float(v) for v in message.cablepull]
-        pots.name = [p.string_pot_names[i] if i < len(p.string_pot_names) else f'string_pot_{i}'
-                     for i in range(len(raw))]
-        pots.position = raw
+        pots.position = [float(v) for v in message.cablepull]
+        pots.name = list(string_pot_names(p.string_pot_names, len(pots.position)))
         self.pots_publisher.publish(pots)
 
     # diagnostics ----------------------------------------------------------------------------
@@ -306,7 +275,7 @@ class RobotinoBridgeNode(Node):
                   'sent_bar': ' '.join(f'{v:.3f}' for v in self.sent) if self.sent is not None
                   else ''}
         if self.sent is not None and self.measured is not None:
-            commanded = self.sent[self.channels] * PASCAL_PER_BAR
+            commanded = robotino_pressures(self.sent, p.valve_names)
             for name, error in zip(p.valve_names, self.measured - commanded):
                 values[f'measured_minus_commanded_pa.{name}'] = float(error)
         if self.decision in ('hold', 'vent'):

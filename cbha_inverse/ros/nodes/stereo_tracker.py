@@ -1,5 +1,5 @@
 """
-``stereo_tracker``: the tip position from two calibrated cameras (DESIGN section 8).
+``stereo_tracker``: the tip position from two calibrated cameras (``docs/cameras.md``).
 
 Subscribes ``stereo/left/image_raw`` and ``stereo/right/image_raw`` (sensor_msgs/Image ``mono8``,
 ``bgr8`` or ``rgb8``; RELIABLE, keep-last ``image_depth`` by default: large images lose fragments
@@ -23,7 +23,7 @@ import time
 
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.paths import config_path
-from cbha_inverse.ros.common.conversions import point_stamped
+from cbha_inverse.ros.common.conversions import point_stamped, stamp_seconds
 from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_status, OK,
                                                  TimingStats, WARN)
 from cbha_inverse.ros.common.images import camera_from_info, image_array, ImageRejected
@@ -32,6 +32,7 @@ from cbha_inverse.ros.common.qos import MEASURED_QOS
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.vision.camera import load_camera_yaml
 from cbha_inverse.vision.marker import MarkerParams
+from cbha_inverse.vision.pairing import SIDES, StereoPairer
 from cbha_inverse.vision.rig import check_pose, StereoRig
 from cbha_inverse.vision.stereo import StereoLimits
 from cbha_inverse.vision.tracking import StereoTracker
@@ -42,7 +43,6 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 
 NODE_NAME = 'stereo_tracker'
-SIDES = ('left', 'right')
 
 
 @dataclass(frozen=True)
@@ -106,10 +106,6 @@ class StereoTrackerParams:
                                 high=3600.0)
 
 
-def _stamp_seconds(stamp):
-    return stamp.sec + 1e-9 * stamp.nanosec
-
-
 def _camera_file(name):
     if not name:
         return None
@@ -161,7 +157,7 @@ class StereoTrackerNode(Node):
         except ValueError as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
-        self.queues = {side: collections.deque() for side in SIDES}
+        self.pairer = StereoPairer(p.max_pair_dt, p.queue_size)
         self.counts = collections.Counter()
         self.pairs = 0
         self.published = 0
@@ -223,42 +219,31 @@ class StereoTrackerNode(Node):
         except ImageRejected as exc:
             self._count(exc.reason, f'rejected {side} image: {exc}')
             return
-        stamp = _stamp_seconds(message.header.stamp)
-        other = 'right' if side == 'left' else 'left'
-        partner = min(self.queues[other], key=lambda item: abs(item[0] - stamp), default=None)
-        if partner is None or abs(partner[0] - stamp) > self.params.max_pair_dt:
-            queue = self.queues[side]
-            if len(queue) >= self.params.queue_size:
-                queue.popleft()
-                self._count('dropped_unpaired', f'{side} image dropped: no partner within '
-                            f'{self.params.max_pair_dt * 1e3:g} ms')
-            queue.append((stamp, pixels, order, message.header.stamp))
-            return
-        for queue, keep_after in ((self.queues[other], partner[0]), (self.queues[side], stamp)):
-            while queue and queue[0][0] < keep_after:
-                queue.popleft()
-                self._count('dropped_unpaired', 'image dropped: a newer pair was complete')
-        self.queues[other].popleft()
-        mine = (stamp, pixels, order, message.header.stamp)
-        left, right = (mine, partner) if side == 'left' else (partner, mine)
-        self._process(left, right)
+        pair, dropped = self.pairer.add(side, stamp_seconds(message.header.stamp),
+                                        (pixels, order, message.header.stamp))
+        for reason in dropped:
+            self._count('dropped_unpaired', f'{side} image dropped: no partner within '
+                        f'{self.params.max_pair_dt * 1e3:g} ms' if reason == 'no_partner'
+                        else 'image dropped: a newer pair was complete')
+        if pair is not None:
+            self._process(*pair)
 
     def _process(self, left, right):
         start = time.perf_counter()
         if self.tracker is None:
             self._count('no_camera_model', 'image pair before both camera models')
             return
-        if left[2] != right[2]:
+        if left[1] != right[1]:
             self._count('encoding_mismatch', 'left and right images have different encodings')
             return
-        result = self.tracker.track(left[1], right[1], left[2])
+        result = self.tracker.track(left[0], right[0], left[1])
         self.pairs += 1
         self.last_reason = result.reason
         if math.isfinite(result.epipolar_error):
             self.epipolar.append(result.epipolar_error)
             self.reprojection.append(result.reprojection_error)
         if result.ok and np.all(np.isfinite(result.p_base)):
-            self.publisher.publish(point_stamped(result.p_base, left[3], self.params.frame_id))
+            self.publisher.publish(point_stamped(result.p_base, left[2], self.params.frame_id))
             self.published += 1
         else:
             self._count(result.reason, f'no tip published: {result.reason}')

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import sys
 
 from cbha_inverse.robot.trajectory import make_trajectory, PLANES, SHAPES
+from cbha_inverse.ros.common.conversions import point_stamped
 from cbha_inverse.ros.common.diagnostics import DiagnosticsPublisher, make_status, OK
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import TARGET_QOS
@@ -99,12 +100,9 @@ class TrajectoryNode(Node):
                                     < self.params.wait_for_subscribers):
             return
         elapsed = self.elapsed()
-        point = self.trajectory.sample(elapsed)[0]
-        message = PointStamped()
-        message.header.stamp = self.get_clock().now().to_msg()
-        message.header.frame_id = self.params.frame_id
-        message.point.x, message.point.y, message.point.z = (float(v) for v in point)
-        self.publisher.publish(message)
+        self.publisher.publish(point_stamped(self.trajectory.sample(elapsed)[0],
+                                             self.get_clock().now().to_msg(),
+                                             self.params.frame_id))
         self.published += 1
 
     def _statuses(self):

@@ -1,0 +1,258 @@
+"""
+The scene loader: a YAML file that names the chain, actuators and effectors of a run.
+
+``load_scene(path)`` builds only what the scene names: a beam-and-tendon scene imports neither
+gmsh nor meshio nor OpenCV; a segment scene (the CBHA) reads condensed segments through
+:func:`cbha_inverse.fem.segment_io.load_segment`, imported only then.
+
+Scene YAML schema (SI units)::
+
+    name: str
+    description: str
+    base_frame: str                      # TF name of the world (default cbha_base)
+    gravity: [gx, gy, gz] or null        # m/s^2, base_frame axes (+x along the backbone at rest)
+    chain:                               # one of two types
+      type: beam_vertebrae               # Timoshenko beams, vertebrae every `beams_per_interval`
+      n_vertebrae, beams_per_interval, interval_length, vertebra_mass, backbone: {youngs_modulus,
+      poisson_ratio, outer_radius, inner_radius, density}
+    chain:
+      type: segments                     # condensed segments in series
+      sections: [{name, segment: <path relative to the scene file>, count}]
+    cables: [{name, angle_deg, radius, end_vertebra, max_tension}]       # routed base → end
+    cavities: [{name, section, cavity: <segment cavity name>, max_pressure}]
+    cavity_model: linear | mesh          # core.actuation.condensed_cavities / .cavities
+    actuator_order: [names]              # column order (default: cables, then cavities)
+    effectors: [{name, frame: <int or 'tip'> or vertebra: <int>, offset: [x, y, z]}]
+    workspace_center: [x, y, z] or {actuation_fraction: f}
+    solver: {energy_weight, proximal_weight, rate_limit, relinearize_every, ...}  # defaults
+    calibration:                         # identified corrections (cbha_identify), optional
+      section_stiffness: {<section name>: factor}    # stiffness factor of a segments section
+      actuator_gain: {<actuator name>: factor}       # cavity effective area, cable force/N
+      tip_payload_mass: kg                           # mass added at the last frame
+      base_offset: {position: [x, y, z], rpy: [r, p, y]}  # chain base in base_frame, m / rad
+
+Frame 0 of the chain (the base) sits at the origin of ``base_frame``, or at
+``calibration.base_offset`` when given: every frame, routing and effector point moves with it,
+as does an explicit ``workspace_center``; gravity and targets stay in ``base_frame`` axes.
+
+Scenes shipped in ``config/scenes``: ``tendon_6f_8c`` and ``tendon_10f_16c`` (the paper's Fig. 6
+trunks, Timoshenko beams and cables) and ``cbha`` (16 condensed bellows segments, 6 cavities).
+"""
+
+from dataclasses import fields
+from pathlib import Path
+
+from cbha_inverse.config_files import read_section
+from cbha_inverse.core.actuation.actuators import ActuatorSet
+from cbha_inverse.core.actuation.cables import Cable, CableGroup
+from cbha_inverse.core.actuation.effectors import PointEffectors
+from cbha_inverse.core.chain import ChainModel
+from cbha_inverse.core.inverse.solver import InverseOptions
+from cbha_inverse.core.links import timoshenko_compliance
+from cbha_inverse.paths import config_path
+from cbha_inverse.scene.calibration import check_names, read_calibration
+from cbha_inverse.scene.scene import Scene
+import numpy as np
+
+
+def resolve_scene_path(path):
+    """
+    Return the YAML path of a scene given a path or a bare name (``'cbha'``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A file path, or a scene name looked up in ``config/scenes/``.
+
+    Returns
+    -------
+    pathlib.Path
+
+    """
+    p = Path(path)
+    if p.is_file():
+        return p
+    named = config_path('scenes', p.name if p.suffix == '.yaml' else f'{p.name}.yaml')
+    if named.is_file():
+        return named
+    raise FileNotFoundError(f'no scene {path!s} (nor {named})')
+
+
+def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
+    """
+    Load a scene YAML and build only what it names.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Scene file, or a name in ``config/scenes`` (``'tendon_6f_8c'``, ``'cbha'``).
+    stiffness_scale : float
+        Multiplies every link stiffness (divides the compliances), e.g. to model a stiffer or
+        softer robot than the nominal one.
+    gravity : (3,) array_like, optional  [m/s^2]
+        Overrides the scene's gravity (``[0, 0, 0]`` disables it).
+    calibration : cbha_inverse.scene.calibration.Calibration, optional
+        Applied on top of the scene's own ``calibration`` block (factors multiply, masses add,
+        base offsets compose, see :meth:`Calibration.combined`), e.g. the deliberate errors of a
+        simulated plant.
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    FileNotFoundError
+        If no scene of that path or name exists.
+    cbha_inverse.errors.ConfigError
+        If the scene (or a segment file it names) is not valid YAML, misses a key or has a value
+        of the wrong type or range: the message names the file and the key.
+
+    """
+    if not stiffness_scale > 0.0:
+        raise ValueError('stiffness_scale must be positive')
+    path = resolve_scene_path(path)
+    spec = read_section(path)
+    calibrated = read_calibration(spec).combined(calibration)
+    chain = spec.section('chain')
+    kind = chain.text('type', choices=('beam_vertebrae', 'segments'))
+    if kind == 'beam_vertebrae':
+        model = _beam_chain(chain, stiffness_scale, calibrated.tip_payload_mass)
+        vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
+    else:
+        from cbha_inverse.scene.segments import segment_chain
+        model, sections, parts = segment_chain(chain, path.parent, stiffness_scale, calibrated)
+        vertebra_frames = np.arange(model.n_frames)
+    base_position, base_rotation = calibrated.base_pose()
+    model = model.transformed(base_position, base_rotation)
+    check_names(spec, calibrated, sections,
+                [item.data.get('name') for key in ('cavities', 'cables')
+                 for item in spec.sections(key, []) if isinstance(item.data.get('name'), str)])
+    groups = []
+    if spec.has('cables'):
+        groups.append(CableGroup(_cables(spec.sections('cables'), vertebra_frames,
+                                         calibrated.actuator_gain), model.n_frames))
+    if spec.has('cavities'):
+        from cbha_inverse.scene.segments import cavity_group
+        groups.append(cavity_group(spec.sections('cavities'), sections, parts, model.n_frames,
+                                   spec.text('cavity_model', 'linear',
+                                             choices=('linear', 'mesh')),
+                                   calibrated.actuator_gain))
+    if not groups:
+        raise spec.error('cables', 'a scene needs cables or cavities (no actuator)')
+    actuators = _actuator_set(spec, groups, model.n_frames)
+    section_of = {item.data.get('name'): item.data.get('section')
+                  for item in spec.sections('cavities', [])}
+    effector_items = spec.sections('effectors')
+    if not effector_items:
+        raise spec.error('effectors', 'at least one effector is needed')
+    effectors = _effectors(effector_items, model, vertebra_frames)
+    g = spec.vector('gravity', 3, (0.0, 0.0, -9.81)) if gravity is None else gravity
+    workspace = _workspace(spec)
+    if isinstance(workspace, tuple):
+        workspace = tuple(base_rotation @ np.asarray(workspace) + base_position)
+    return Scene(spec.text('name', path.stem), model, actuators, effectors, g,
+                 description=spec.text('description', ''),
+                 base_frame=spec.text('base_frame', 'cbha_base'),
+                 workspace=workspace, solver_defaults=_solver_defaults(spec),
+                 section_names=tuple(sections),
+                 actuator_sections=tuple(section_of.get(n) for n in actuators.names),
+                 calibration=calibrated, path=path)
+
+
+def _actuator_set(spec, groups, n_frames):
+    """Build the actuator set in the scene's ``actuator_order`` (names checked)."""
+    order = spec.data.get('actuator_order')
+    try:
+        return ActuatorSet(groups, n_frames, order)
+    except ValueError as exc:
+        raise spec.error('actuator_order', str(exc)) from None
+
+
+def _workspace(spec):
+    """Return ``workspace_center``: None, three coordinates or ``{actuation_fraction: f}``."""
+    if not spec.has('workspace_center'):
+        return None
+    if isinstance(spec.data['workspace_center'], dict):
+        center = spec.section('workspace_center')
+        return {'actuation_fraction': center.number('actuation_fraction', minimum=0.0)}
+    return spec.vector('workspace_center', 3)
+
+
+def _solver_defaults(spec):
+    """Return the scene's ``solver`` section, its keys checked against ``InverseOptions``."""
+    if not spec.has('solver'):
+        return None
+    solver = spec.section('solver')
+    known = {f.name for f in fields(InverseOptions)}
+    for key in solver.data:
+        if key not in known:
+            raise solver.error(key, f'unknown solver option (known: {sorted(known)})')
+    return dict(solver.data)
+
+
+def _vertebra_frames(chain):
+    """Frame index of vertebra v (0 = base) for a beam_vertebrae chain."""
+    return (np.arange(chain.integer('n_vertebrae', minimum=1) + 1)
+            * chain.integer('beams_per_interval', minimum=1))
+
+
+def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
+    """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene."""
+    n_v = chain.integer('n_vertebrae', minimum=1)
+    per = chain.integer('beams_per_interval', minimum=1)
+    b = chain.section('backbone')
+    length = chain.number('interval_length', positive=True) / per
+    outer = b.number('outer_radius', positive=True)
+    inner = b.number('inner_radius', 0.0, minimum=0.0)
+    if inner >= outer:
+        raise b.error('inner_radius', f'must be below outer_radius {outer:g}, got {inner:g}')
+    c = timoshenko_compliance(length, b.number('youngs_modulus', positive=True),
+                              b.number('poisson_ratio', minimum=-1.0), outer, inner)
+    n = n_v * per
+    area = np.pi * (outer ** 2 - inner ** 2)
+    masses = np.full(n, b.number('density', 0.0, minimum=0.0) * area * length)
+    masses[per - 1::per] += chain.number('vertebra_mass', 0.0, minimum=0.0)
+    masses[-1] += tip_payload_mass
+    offsets = np.tile([length, 0.0, 0.0], (n, 1))
+    return ChainModel.from_compliances(np.broadcast_to(c / stiffness_scale, (n, 6, 6)), offsets,
+                                       masses=masses)
+
+
+def _cables(items, vertebra_frames, gains=None):
+    """Route each cable from the base through every vertebra up to its end vertebra."""
+    cables = []
+    for item in items:
+        angle = np.deg2rad(item.number('angle_deg'))
+        radius = item.number('radius', positive=True)
+        end = item.integer('end_vertebra')
+        if not 1 <= end < len(vertebra_frames):
+            raise item.error('end_vertebra', f'{end} outside 1..{len(vertebra_frames) - 1}')
+        frames = vertebra_frames[:end + 1]
+        offset = np.array([0.0, radius * np.cos(angle), radius * np.sin(angle)])
+        name = item.text('name')
+        cables.append(Cable(name, frames, np.tile(offset, (len(frames), 1)),
+                            item.number('max_tension', positive=True),
+                            (gains or {}).get(name, 1.0)))
+    return cables
+
+
+def _effectors(items, model, vertebra_frames):
+    """Build the effector points."""
+    names, frames, offsets = [], [], []
+    for item in items:
+        if item.has('vertebra'):
+            vertebra = item.integer('vertebra', minimum=0)
+            if vertebra >= len(vertebra_frames):
+                raise item.error('vertebra', f'{vertebra} outside 0..{len(vertebra_frames) - 1}')
+            frame = int(vertebra_frames[vertebra])
+        elif item.data.get('frame', 'tip') == 'tip':
+            frame = model.n_links
+        else:
+            frame = item.integer('frame', minimum=0)
+            if frame > model.n_links:
+                raise item.error('frame', f'{frame} outside 0..{model.n_links} (or tip)')
+        names.append(item.text('name'))
+        frames.append(frame)
+        offsets.append(item.vector('offset', 3, (0.0, 0.0, 0.0)))
+    return PointEffectors(names, frames, offsets, model.n_frames)

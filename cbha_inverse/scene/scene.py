@@ -1,0 +1,168 @@
+"""
+The loaded scene: chain model, actuators, effectors and gravity, with its forward solve.
+
+Built by :func:`cbha_inverse.scene.loader.load_scene` from a scene YAML; immutable. Frame 0 of
+the chain (the base) sits at the origin of ``base_frame``, or at the calibration's base offset
+(:mod:`cbha_inverse.scene.calibration`); gravity and targets are in ``base_frame`` axes.
+"""
+
+from functools import cached_property
+from pathlib import Path
+
+from cbha_inverse.core.inverse.solver import InverseOptions, InverseSolver
+from cbha_inverse.core.statics import solve_static
+from cbha_inverse.scene.calibration import Calibration
+import numpy as np
+
+
+class Scene:
+    """
+    A loaded scene: chain model, actuators, effectors and gravity (immutable).
+
+    Build it with :func:`cbha_inverse.scene.load_scene`.
+
+    Attributes
+    ----------
+    name : str
+    description : str
+    base_frame : str
+    model : cbha_inverse.core.chain.ChainModel
+    actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
+    gravity : (3,) ndarray or None  [m/s^2]
+        In ``base_frame`` axes (the world of the solvers).
+    actuator_names, effector_names : tuple of str
+    lower_bounds, upper_bounds : (m,) ndarray  [N or Pa]
+    section_names : tuple of str
+        Chain sections of a ``segments`` chain, in chain order (empty for beams).
+    actuator_sections : tuple of (str or None)
+        The chain section of each actuator, scene actuator order: a cavity's ``section``, None
+        for a cable.
+    calibration : cbha_inverse.scene.calibration.Calibration
+        The corrections applied at load (the file's block and the caller's, combined; its base
+        offset is ``model.base_position`` / ``model.base_rotation``).
+    path : pathlib.Path or None
+        The scene file.
+
+    """
+
+    def __init__(self, name, model, actuators, effectors, gravity, *, description='',
+                 base_frame='cbha_base', workspace=None, solver_defaults=None,
+                 section_names=(), actuator_sections=None, calibration=None, path=None):
+        """Store the parts (use :func:`cbha_inverse.scene.load_scene`)."""
+        self.name = name
+        self.description = description
+        self.base_frame = base_frame
+        self.model = model
+        self.actuators = actuators
+        self.effectors = effectors
+        self.gravity = None if gravity is None else np.asarray(gravity, dtype=float)
+        self.actuator_names = tuple(actuators.names)
+        self.effector_names = tuple(effectors.names)
+        self.lower_bounds = np.array(actuators.lower_bounds, dtype=float)
+        self.upper_bounds = np.array(actuators.upper_bounds, dtype=float)
+        self.section_names = tuple(section_names)
+        self.actuator_sections = (tuple(actuator_sections) if actuator_sections is not None
+                                  else (None,) * len(self.actuator_names))
+        if len(self.actuator_sections) != len(self.actuator_names):
+            raise ValueError('actuator_sections needs one entry per actuator')
+        self.calibration = Calibration() if calibration is None else calibration
+        self.path = None if path is None else Path(path)
+        self._workspace = workspace
+        self._solver_defaults = dict(solver_defaults or {})
+
+    def __repr__(self):
+        """Summarise the scene."""
+        return (f'Scene({self.name!r}: {self.model.n_links} links, '
+                f'{len(self.actuator_names)} actuators, {len(self.effector_names)} effectors)')
+
+    def forward(self, actuation, *, initial_state=None, tolerance=1e-10, strict=False):
+        """
+        Solve the static equilibrium under an actuation (paper eq. 9).
+
+        Uses :func:`cbha_inverse.core.statics.solve_static` (the package's one static solver,
+        with the actuators' load stiffness, line search, load stepping), which evaluates the
+        same compiled kernels as the inverse solver.
+
+        Parameters
+        ----------
+        actuation : (m,) array_like  [N or Pa]
+            Tensions / gauge pressures in actuator order (must lie within the bounds).
+        initial_state : ChainState, optional
+            Warm start.
+        tolerance : float
+            Relative tolerance of the static solver (:mod:`cbha_inverse.core.statics`).
+        strict : bool
+            Raise ``RuntimeError`` when the solve does not converge.
+
+        Returns
+        -------
+        cbha_inverse.core.statics.StaticResult
+            The equilibrium with its ``effector_positions`` and ``actuation`` (``converged``
+            says whether it was reached).
+
+        """
+        a = np.asarray(actuation, dtype=float).reshape(-1)
+        if a.size != len(self.actuator_names) or not np.all(np.isfinite(a)):
+            raise ValueError(f'actuation must be {len(self.actuator_names)} finite values')
+        if np.any(a < self.lower_bounds - 1e-9 * np.abs(self.upper_bounds)) or np.any(
+                a > self.upper_bounds * (1.0 + 1e-9)):
+            raise ValueError('actuation outside the actuator bounds')
+        res = solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
+                           actuation=a, effectors=self.effectors, initial_state=initial_state,
+                           tolerance=tolerance)
+        if strict and not res.converged:
+            raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
+        return res
+
+    @cached_property
+    def rest_effector_positions(self):
+        """(k, 3) effector positions at zero actuation (under the scene's gravity)."""
+        return self.forward(np.clip(np.zeros(len(self.actuator_names)), self.lower_bounds,
+                                    self.upper_bounds), strict=True).effector_positions
+
+    @cached_property
+    def workspace_center(self):
+        """
+        (k, 3) suggested centre of target trajectories [m].
+
+        From the scene's ``workspace_center``: explicit coordinates (tip effector, moved with
+        the calibration's base offset; other effectors at rest), or ``{actuation_fraction: f}``
+        = the effectors at the uniform actuation ``lower + f (upper - lower)``. Without it: the
+        rest effector positions. For the CBHA this is the tip at mid pressure in every tube,
+        around which the paper's 60 mm circle in the y-z plane is reachable.
+        """
+        spec = self._workspace
+        if spec is None:
+            return self.rest_effector_positions.copy()
+        if isinstance(spec, dict):
+            f = float(spec.get('actuation_fraction', 0.0))
+            a = self.lower_bounds + f * (self.upper_bounds - self.lower_bounds)
+            return self.forward(a, strict=True).effector_positions
+        center = self.rest_effector_positions.copy()
+        center[-1] = np.asarray(spec, dtype=float)
+        return center
+
+    def make_inverse_solver(self, **options):
+        """
+        Build the per-tick inverse solver of this scene (the tick of ``docs/design.md``).
+
+        Parameters
+        ----------
+        **options
+            Fields of :class:`cbha_inverse.core.inverse.solver.InverseOptions` (``energy_weight``,
+            ``proximal_weight``, ``rate_limit``, ``qp_solver``, ``newton_steps``, ...); the
+            scene's ``solver`` section gives the defaults.
+
+        Returns
+        -------
+        cbha_inverse.core.inverse.solver.InverseSolver
+            Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult``.
+
+        """
+        merged = {**self._solver_defaults, **options}
+        if merged.get('rate_limit') is not None:
+            merged['rate_limit'] = tuple(np.broadcast_to(
+                np.asarray(merged['rate_limit'], dtype=float), (len(self.actuator_names),)))
+        return InverseSolver(self.model, self.actuators, self.effectors, gravity=self.gravity,
+                             options=InverseOptions(**merged))
