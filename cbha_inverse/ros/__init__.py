@@ -1,7 +1,8 @@
 """
-The ROS 2 layer (rclpy): ``nodes/`` (one node per module), ``common/`` (what the nodes share),
-``bag/`` (the rclpy side of ``cbha_bag``) and ``launch/`` (the compositions and ``cbha_launch``).
+The ROS 2 layer (rclpy).
 
-Below this layer nothing imports rclpy; above it only :mod:`cbha_inverse.experiments` and the bag
-benchmark :mod:`cbha_inverse.report.bench_bag` do (see ``docs/design.md``).
+``nodes/`` (one node per module), ``common/`` (what the nodes share), ``bag/`` (the rclpy side of
+``cbha_bag``) and ``launch/`` (the compositions and ``cbha_launch``). Below this layer nothing
+imports rclpy; above it only :mod:`cbha_inverse.experiments` and the bag benchmark
+:mod:`cbha_inverse.report.bench_bag` do (see ``docs/design.md``).
 """
