@@ -2,12 +2,12 @@
 ``cbha_launch sim|robot [name:=value ...]``: the launch files' compositions, without ``launch``.
 
 Starts every node of :data:`cbha_inverse.ros.launch.compositions.COMPOSITIONS` ``[name]`` as a
-process (``python -m cbha_inverse.ros.nodes.<node> --ros-args -r __ns:=<namespace> --params-file
-<file> --params-file <overrides>``), prefixes each output line with ``[<node>]``, and on SIGINT or
-SIGTERM sends SIGINT to every node and waits for them. All nodes are required: when one exits by
-itself, the others are stopped. Exit status: 0 when every node stopped cleanly after the signal,
-else the first non-zero status of a node; 2 on a bad argument or params file (one line on stderr).
-``--dry-run`` prints the command lines instead.
+process (``python -m cbha_inverse.ros.launch.node_process cbha_inverse.ros.nodes.<node> --ros-args
+-r __ns:=<namespace> --params-file <file> --params-file <overrides>``), prefixes each output line
+with ``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits for them. All
+nodes are required: when one exits by itself, the others are stopped. Exit status: 0 when every
+node stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad
+argument or params file (one line on stderr). ``--dry-run`` prints the command lines instead.
 """
 
 import argparse
@@ -28,6 +28,8 @@ import yaml
 
 PROGRAM = 'cbha_launch'
 STOP_TIMEOUT = 15.0
+NODE_PROCESS = 'cbha_inverse.ros.launch.node_process'
+"""Runs each node: a stop while it still loads is quiet (:mod:`.node_process`)."""
 
 
 def _parser():
@@ -103,8 +105,9 @@ def command_lines(processes, overrides_dir):
     for process in processes:
         for params in process.params_files:
             read_yaml(params)
-        argv = [sys.executable, '-m', node_module(process.executable), '--ros-args',
-                '-r', f'__ns:={process.namespace}', '-r', f'__node:={process.executable}']
+        argv = [sys.executable, '-m', NODE_PROCESS, node_module(process.executable),
+                '--ros-args', '-r', f'__ns:={process.namespace}',
+                '-r', f'__node:={process.executable}']
         for params in process.params_files:
             argv += ['--params-file', params]
         if process.parameters:

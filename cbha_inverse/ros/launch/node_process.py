@@ -1,0 +1,65 @@
+"""
+One node of a composition as ``cbha_launch`` runs it: a quiet stop while the node still loads.
+
+``python -m cbha_inverse.ros.launch.node_process MODULE [ARGS ...]`` imports the node module
+``MODULE`` (e.g. ``cbha_inverse.ros.nodes.cbha_sim``) and returns its
+``main([executable, *ARGS])``.
+Loading a node (numpy, scipy, numba's cached kernels, the scene) takes a second or more; a SIGINT
+or SIGTERM in that time (``cbha_launch`` stopping the others because one node failed at once, or a
+Ctrl-C right after the start) ends the process with status 0 and one line, instead of a
+``KeyboardInterrupt`` traceback from deep inside an import. Once the module is loaded, the node's
+own handling applies (rclpy's: :func:`cbha_inverse.ros.common.runner.run_node`).
+"""
+
+import importlib
+import signal
+import sys
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class _StoppedWhileLoading(BaseException):
+    """Raised by the signal handler while the node module is imported."""
+
+
+def _on_stop_signal(signum, frame):
+    raise _StoppedWhileLoading(signal.Signals(signum).name)
+
+
+def main(argv=None):
+    """
+    Load a node module and run its ``main``.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        ``[MODULE, ARGS ...]`` (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The node's exit status; 0 when stopped by a signal while it was loading; 2 without a
+        module name.
+
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv:
+        print('usage: python -m cbha_inverse.ros.launch.node_process MODULE [ARGS ...]',
+              file=sys.stderr)
+        return 2
+    module_name, node_args = argv[0], argv[1:]
+    executable = module_name.rsplit('.', 1)[-1]
+    previous = {sig: signal.signal(sig, _on_stop_signal) for sig in STOP_SIGNALS}
+    try:
+        module = importlib.import_module(module_name)
+    except _StoppedWhileLoading as stop:
+        print(f'{executable}: stopped by {stop} while loading', file=sys.stderr)
+        return 0
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return module.main([executable, *node_args])
+
+
+if __name__ == '__main__':
+    sys.exit(main())
