@@ -181,6 +181,8 @@ def command_bounds(lower_bounds, upper_bounds, max_pressure=None):
     if max_pressure is not None:
         upper = np.minimum(upper, float(max_pressure))
     if np.any(lower > upper):
+        if max_pressure is None:
+            raise ValueError('an upper actuator bound lies below its lower bound (or below 0)')
         raise ValueError(f'max_pressure {max_pressure:g} Pa is below a lower actuator bound of '
                          'the scene')
     return lower, upper

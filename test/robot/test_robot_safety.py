@@ -114,3 +114,6 @@ def test_command_bounds_are_the_scene_bounds_within_zero_and_max_pressure():
     with pytest.raises(ValueError, match='below a lower actuator bound'):
         command_bounds(load_scene('tendon_6f_8c').lower_bounds,
                        load_scene('tendon_6f_8c').upper_bounds, -1.0)
+    # without a cap, bounds that cross are refused with their own reason
+    with pytest.raises(ValueError, match='upper actuator bound lies below its lower bound'):
+        command_bounds([0.0, 2.0], [1.0, 1.0])
