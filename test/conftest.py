@@ -6,6 +6,7 @@ localhost, so parallel runs on one host never cross-talk; ROS logs go to a tempo
 """
 
 import contextlib
+import fcntl
 import os
 from pathlib import Path
 import sys
@@ -77,4 +78,11 @@ def robotino_msgs(tmp_path_factory):
     environment of its ``install/setup.sh``.
     """
     from robotino_helpers import build_and_load
-    return build_and_load(tmp_path_factory.mktemp('robotino_msgs_ws'))
+    if os.environ.get('PYTEST_XDIST_WORKER') is None:
+        return build_and_load(tmp_path_factory.mktemp('robotino_msgs_ws'))
+    # pytest-xdist: the workers share one build (their base temporary folders have one parent);
+    # the first to take the lock builds, the others load what it built
+    shared = tmp_path_factory.getbasetemp().parent
+    with open(shared / 'robotino_msgs_ws.lock', 'w') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return build_and_load(shared / 'robotino_msgs_ws')

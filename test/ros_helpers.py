@@ -243,3 +243,31 @@ def start_node(module, *ros_args):
     return subprocess.Popen(
         [sys.executable, '-m', module, '--ros-args', *ros_args], cwd=REPO_ROOT, env=child_env(),
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def aborted_logs(folder, lines=60):
+    """
+    Return the end of every process log under ``folder`` that holds a faulthandler stack.
+
+    ``cbha_demo`` sends SIGABRT to a process that does not stop after SIGINT; with
+    ``PYTHONFAULTHANDLER`` its log then ends with the stack of every thread.
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        A ``cbha_demo --output`` folder (its runs write ``<run>/<process>.log``).
+    lines : int
+        Lines per log.
+
+    Returns
+    -------
+    str
+        One block per such log (empty when there is none): an assertion message.
+
+    """
+    blocks = []
+    for log in sorted(Path(folder).rglob('*.log')):
+        text = log.read_text(errors='replace')
+        if 'Fatal Python error' in text:
+            blocks.append(f'--- {log} ---\n' + '\n'.join(text.splitlines()[-lines:]))
+    return '\n'.join(blocks)

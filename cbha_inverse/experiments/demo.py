@@ -130,6 +130,9 @@ def _environment(domain):
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
     env['PYTHONUNBUFFERED'] = '1'
+    # a node that does not stop is sent SIGABRT before SIGKILL (_stop): its log then ends
+    # with the Python stack of every thread
+    env['PYTHONFAULTHANDLER'] = '1'
     return env
 
 
@@ -165,18 +168,33 @@ def _start_recorder(run_dir, env, recorded=RECORDED):
     return process
 
 
+STOP_TIMEOUT_S = 15.0
+"""Longest wait [s] for a process to end after SIGINT before it is aborted."""
+
+
 def _stop(processes):
-    """SIGINT every process, then wait; return the exit codes."""
+    """
+    SIGINT every process, then wait; return the exit codes.
+
+    A process still running :data:`STOP_TIMEOUT_S` after SIGINT gets SIGABRT (its log ends with
+    the stack of every thread: ``PYTHONFAULTHANDLER``), then SIGKILL; a line on stderr names it.
+    """
     for process in processes.values():
         if process.poll() is None:
             process.send_signal(signal.SIGINT)
     codes = {}
     for name, process in processes.items():
         try:
-            codes[name] = process.wait(timeout=15)
+            codes[name] = process.wait(timeout=STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
-            process.kill()
-            codes[name] = process.wait()
+            process.send_signal(signal.SIGABRT)
+            try:
+                codes[name] = process.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                codes[name] = process.wait()
+            print(f'cbha_demo: {name} did not stop within {STOP_TIMEOUT_S:.0f} s of SIGINT '
+                  f'(its stack: the end of {process.log.name})', file=sys.stderr)
         process.log.close()
     return codes
 

@@ -13,7 +13,7 @@ import sys
 
 from cbha_inverse.report.cli import main as report_main
 import pytest
-from ros_helpers import child_env, REPO_ROOT
+from ros_helpers import aborted_logs, child_env, REPO_ROOT
 
 
 def test_demo_runs_a_short_closed_loop_lap(tmp_path):
@@ -32,8 +32,9 @@ def test_demo_runs_a_short_closed_loop_lap(tmp_path):
     (run,) = json.loads((tmp_path / 'summary.json').read_text())['runs']
     assert (run['shape'], run['mode']) == ('circle', 'closed')
     assert {'cbha_sim', 'inverse_solver', 'trajectory'} <= set(run['exit_codes'])
-    assert all(code == 0 for code in run['exit_codes'].values()), run['exit_codes']
-    assert result.returncode == 0, result.stdout + result.stderr
+    assert all(code == 0 for code in run['exit_codes'].values()), (
+        run['exit_codes'], aborted_logs(tmp_path))
+    assert result.returncode == 0, result.stdout + result.stderr + aborted_logs(tmp_path)
     assert run['rms_mm'] < 0.25 * radius * 1e3
     # the tip is sampled by the recorder at the plant's 100 Hz over most of the lap
     assert run['samples'] > 0.5 * 100.0 * run['lap_s']

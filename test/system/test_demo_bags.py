@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
-from ros_helpers import child_env, REPO_ROOT
+from ros_helpers import aborted_logs, child_env, REPO_ROOT
 
 
 def test_demo_bag_eval_gives_the_printed_rms(tmp_path):
@@ -27,7 +27,7 @@ def test_demo_bag_eval_gives_the_printed_rms(tmp_path):
          '--shapes', 'circle', '--modes', 'open', '--feedback', 'direct', '--radius', '0.005',
          '--start-hold', '0.5'],
         cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=240)
-    assert demo.returncode == 0, demo.stdout + demo.stderr
+    assert demo.returncode == 0, demo.stdout + demo.stderr + aborted_logs(output)
     printed = float(re.search(r'circle open  : RMS +([0-9.]+) mm', demo.stdout).group(1))
     (run,) = json.loads((output / 'summary.json').read_text())['runs']
     assert run['rms_mm'] == pytest.approx(printed, abs=5e-4)  # printed with 3 decimals
@@ -77,7 +77,7 @@ def test_demo_excite_records_the_program_on_the_plant(tmp_path):
          '--start-hold', '0.5', '--excite', 'outer_bends', '--excite-hold-time', '0.3',
          '--excite-ramp-time', '0.2'],
         cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=240)
-    assert demo.returncode == 0, demo.stdout + demo.stderr
+    assert demo.returncode == 0, demo.stdout + demo.stderr + aborted_logs(output)
     summary = json.loads((output / 'summary.json').read_text())
     assert [run['shape'] for run in summary['runs']] == ['circle']
     excitation = summary['excitation']

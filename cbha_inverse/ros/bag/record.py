@@ -9,7 +9,6 @@ clock (``--use-sim-time``: ``/clock``), so SIGINT or SIGTERM loses nothing that 
 spin loop ends and the bag is closed (``metadata.yaml`` written).
 """
 
-import signal
 import sys
 import time
 
@@ -17,6 +16,7 @@ from cbha_inverse.bag.qos import adapt_offered
 from cbha_inverse.bag.storage import absolute_topic, BagError, BagWriter, knows_type
 from cbha_inverse.errors import report_config_error
 from cbha_inverse.ros.bag.qos import message_class, qos_from_rclpy, qos_to_rclpy
+from cbha_inverse.ros.common.runner import SPIN_POLL_S, StopRequest
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -134,27 +134,26 @@ def record(args):
     except (BagError, OSError) as exc:
         return report_config_error('cbha_bag record', exc)
     # SIGINT/SIGTERM only set a flag: a signal never interrupts a write half-way, the loop
-    # notices it within 0.1 s and the bag is closed below
-    stop = []
-    for number in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(number, lambda *_: stop.append(True))
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    recorder = executor = None
-    try:
-        recorder = BagRecorder(rclpy.get_default_context(), writer, args.topics, args.all,
-                               args.use_sim_time)
-        executor = SingleThreadedExecutor()
-        executor.add_node(recorder.node)
-        deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
-        while not stop and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=min(0.1, max(deadline - time.monotonic(), 0.0)))
-    finally:
-        path = writer.close()
-        if recorder is not None:
-            recorder.report()
-            recorder.destroy()
-        if executor is not None:
-            executor.shutdown()
-        rclpy.try_shutdown()
-    print(f'wrote {path} ({sum(writer.counts.values())} messages)', file=sys.stderr)
+    # notices it within SPIN_POLL_S and the bag is closed below
+    with StopRequest() as stop:
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        recorder = executor = None
+        try:
+            recorder = BagRecorder(rclpy.get_default_context(), writer, args.topics, args.all,
+                                   args.use_sim_time)
+            executor = SingleThreadedExecutor()
+            executor.add_node(recorder.node)
+            deadline = time.monotonic() + args.duration if args.duration > 0 else float('inf')
+            while not stop.requested and time.monotonic() < deadline:
+                executor.spin_once(
+                    timeout_sec=min(SPIN_POLL_S, max(deadline - time.monotonic(), 0.0)))
+        finally:
+            path = writer.close()
+            if recorder is not None:
+                recorder.report()
+                recorder.destroy()
+            if executor is not None:
+                executor.shutdown()
+            rclpy.try_shutdown()
+        print(f'wrote {path} ({sum(writer.counts.values())} messages)', file=sys.stderr)
     return 0

@@ -4,17 +4,89 @@ The Jazzy ``main()`` of every node: ``--help``, params-file checks, spin, clean 
 ``<node> --help`` prints the node's parameters (name, type, default, range, description) and
 exits 0 without starting ROS; a broken params file, an invalid parameter or an unusable scene
 prints one line (:func:`cbha_inverse.errors.report_config_error`) and exits 2.
+
+SIGINT and SIGTERM only set a flag (:class:`StopRequest`) that the spin loop polls every
+:data:`SPIN_POLL_S`: rclpy's own handlers are not installed, because they raise
+``KeyboardInterrupt`` at whatever Python line runs when the signal lands (inside rclpy's executor,
+a message conversion, a lock) and shut the context down from another thread, which made a rare
+stop fail with a ``RuntimeError`` from a half-taken message or hang in the teardown. The node
+is destroyed and the context shut down in order, on the main thread. A second signal stops at
+once (``KeyboardInterrupt``).
 """
 
+import signal
 import sys
 
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.ros.common.params import check_params_files, parameter_help, ParameterError
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 
 INTERRUPTED_EXIT = 1
 """Exit status of a node that ends by itself (``done``) when SIGINT/SIGTERM stopped it first."""
+
+
+SPIN_POLL_S = 0.1
+"""Longest time [s] between a stop signal and the spin loop noticing it."""
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class StopRequest:
+    """
+    SIGINT/SIGTERM as a flag: the first signal asks the spin loop to stop, a second one raises.
+
+    Use as a context manager: the handlers are installed on entry and the previous ones restored
+    on exit.
+    """
+
+    def __init__(self):
+        self.signal_name = None
+        self._previous = {}
+
+    @property
+    def requested(self):
+        """Whether a stop signal has arrived."""
+        return self.signal_name is not None
+
+    def _on_signal(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt(signal.Signals(signum).name)
+        self.signal_name = signal.Signals(signum).name
+
+    def __enter__(self):
+        self._previous = {sig: signal.signal(sig, self._on_signal) for sig in STOP_SIGNALS}
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        return False
+
+
+def spin_until_stopped(node, stop, done=None):
+    """
+    Spin ``node`` on its own executor until a stop, ``done`` or the context's shutdown.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node.
+    stop : StopRequest
+        Polled every :data:`SPIN_POLL_S`.
+    done : rclpy.task.Future, optional
+        A node that ends by itself completes it.
+
+    """
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        while not stop.requested and node.context.ok() and (done is None or not done.done()):
+            executor.spin_once(timeout_sec=SPIN_POLL_S)
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
 
 
 def node_help(node_name, node_class, params_class):
@@ -87,29 +159,21 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
         check_params_files(argv, node_name, params_class)
     except ConfigError as exc:
         return report_config_error(node_name, exc)
-    rclpy.init(args=argv)
     node = done = None
-    try:
-        node = node_class()
-        done = getattr(node, 'done', None)
-        if done is None:
-            rclpy.spin(node)
-        else:
-            rclpy.spin_until_future_complete(node, done)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except RuntimeError:
-        # A signal that shuts the context down while a callback runs makes the next wait-set
-        # construction (RCLError) or message take (a plain RuntimeError from the bindings) fail
-        # instead of raising ExternalShutdownException: still a clean stop.
-        if rclpy.ok():
-            raise
-    except (ParameterError, ConfigError, FileNotFoundError, ModuleNotFoundError) as exc:
-        return report_config_error(node_name, exc)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    with StopRequest() as stop:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            node = node_class()
+            done = getattr(node, 'done', None)
+            spin_until_stopped(node, stop, done)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        except (ParameterError, ConfigError, FileNotFoundError, ModuleNotFoundError) as exc:
+            return report_config_error(node_name, exc)
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     if done is None:
         return 0
     return int(done.result()) if done.done() else INTERRUPTED_EXIT
