@@ -184,6 +184,8 @@ class InverseSolver:
         self.step(targets)
         self.prepare()
         self.step(targets)
+        # the compiled projection that follows a fallback factorization (reset forgets it)
+        fused.project_tick(*self._data.project_arguments)
         self.reset(state, actuation)
 
     def _current(self, in_place=False):
