@@ -30,7 +30,8 @@ the band is then the full matrix.
 """
 
 from cbha_inverse.core._kernels.band import band_cholesky, scatter_add
-from cbha_inverse.core._kernels.links import link_pass
+from cbha_inverse.core._kernels.cables import cable_work_size
+from cbha_inverse.core._kernels.links import link_pass, link_work_size
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import CableGroup, CableTerms
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
@@ -222,15 +223,19 @@ class EquilibriumSystem:
             cab, pair_values, moment_values = self._cable_values[0]
             cable = (cab.gains, cab.offsets, cab.frames,
                      np.stack([cab.start, cab.end, cab.span_owner, cab.span_pair]),
-                     np.stack([cab.point_owner, cab.point_slot]), cab.columns)
+                     np.stack([cab.point_owner, cab.point_slot]), cab.columns,
+                     np.zeros(cable_work_size(cab.frames.size, cab.start.size,
+                                              pair_values.size // 144)))
             counts = (n_link, pair_values.size, moment_values.size)
         else:
             empty = np.zeros(0, dtype=np.int64)
             cable = (np.zeros(0), np.zeros((0, 3)), empty, np.zeros((4, 0), dtype=np.int64),
-                     np.zeros((2, 0), dtype=np.int64), empty)
+                     np.zeros((2, 0), dtype=np.int64), empty, np.zeros(0))
             counts = (n_link, 0, 0)
+        link_work = np.zeros(link_work_size(self._cavity_wrench.shape[1]))
         return ((self.stiffness, self.rest_offsets, self._q0t, self._cavity_wrench,
-                 self._cavity_stiffness, self.external) + cable
+                 self._cavity_stiffness, link_work, np.ascontiguousarray(self.external))
+                + cable
                 + (self._index, self._weights, np.array(counts, dtype=np.int64), self._values,
                    self._band, self._rhs))
 

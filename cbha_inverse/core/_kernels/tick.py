@@ -14,8 +14,8 @@ every call, ~0.1 us each). The rows of the stacks are the constants below.
 """
 
 from cbha_inverse.core._kernels.band import band_cholesky, band_solve, scatter_add
-from cbha_inverse.core._kernels.cables import cable_pass
-from cbha_inverse.core._kernels.links import link_pass
+from cbha_inverse.core._kernels.cables import cable_pass_into
+from cbha_inverse.core._kernels.links import link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_points_into, project_effectors_into,
                                                    tick_outcome_into)
 from cbha_inverse.core._kernels.qp import (active_set_box_qp_into, bounds_binding_into,
@@ -45,15 +45,16 @@ REJECTED = -1
 
 @numba.njit(cache=True)
 def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
-                   cavity_wrench, cavity_stiffness, external, cable_gains, cable_offsets,
-                   cable_frames, cable_spans, cable_points, cable_columns, index, slot_weights,
+                   cavity_wrench, cavity_stiffness, link_work, external, cable_gains,
+                   cable_offsets, cable_frames, cable_spans, cable_points, cable_columns,
+                   cable_work, index, slot_weights,
                    counts, values, band, rhs, solved, matrices, effector_matrices, gaps, moved,
                    effector_frames, effector_offsets, levers, weights, cholesky):
     """
     Linearise, factor and project at the given state (steps 1-2 of the tick), in place.
 
-    Runs :func:`~cbha_inverse.core._kernels.links.link_pass`,
-    :func:`~cbha_inverse.core._kernels.cables.cable_pass` (one cable group, or none),
+    Runs :func:`~cbha_inverse.core._kernels.links.link_pass_into`,
+    :func:`~cbha_inverse.core._kernels.cables.cable_pass_into` (one cable group, or none),
     :func:`~cbha_inverse.core._kernels.band.scatter_add` into the symmetric lower band,
     :func:`~cbha_inverse.core._kernels.band.band_cholesky` and, when it succeeds,
     :func:`project_tick`.
@@ -68,6 +69,8 @@ def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_
         Actuator rows; reads ``ACTUATION`` (``λ_prev``) and ``SCALE``, writes ``LINEARISED``.
     stiffness, rest_offsets, rest_rotations_t, cavity_wrench, cavity_stiffness : ndarray
         The link terms of :func:`~cbha_inverse.core._kernels.links.link_pass`.
+    link_work, cable_work : ndarray
+        Workspace of the link and cable passes.
     external : (6n,) ndarray  [N, N*m]
         Constant external wrenches.
     cable_gains, cable_offsets, cable_frames, cable_columns : ndarray
@@ -119,15 +122,15 @@ def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_
     link_end = counts[0]
     pair_end = link_end + counts[1]
     moment_end = pair_end + counts[2]
-    link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-              cavity_wrench, cavity_stiffness, rhs, values[:link_end].reshape((n, 12, 12)),
-              False)
+    link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
+                   cavity_wrench, cavity_stiffness, rhs, values[:link_end].reshape((n, 12, 12)),
+                   False, link_work)
     if cable_frames.size > 0:
-        cable_pass(positions, rotations, actuation, cable_gains, cable_frames, cable_offsets,
-                   cable_spans[0], cable_spans[1], cable_spans[2], cable_points[0],
-                   cable_columns, cable_spans[3], cable_points[1], rhs,
-                   values[link_end:pair_end].reshape((-1, 12, 12)),
-                   values[pair_end:moment_end].reshape((-1, 3, 3)))
+        cable_pass_into(positions, rotations, actuation, cable_gains, cable_frames,
+                        cable_offsets, cable_spans[0], cable_spans[1], cable_spans[2],
+                        cable_points[0], cable_columns, cable_spans[3], cable_points[1], rhs,
+                        values[link_end:pair_end].reshape((-1, 12, 12)),
+                        values[pair_end:moment_end].reshape((-1, 3, 3)), cable_work)
     for row in range(rhs.shape[0]):
         rhs[row, 0] += external[row]
     scatter_add(index, values, slot_weights, band)
