@@ -97,7 +97,11 @@ class TickResult:
     residual_norm : float  [N, N*m]
         Norm of the equilibrium residual at the last linearisation (before its update).
     timings : dict
-        Seconds spent in ``assembly``, ``factor``, ``projection``, ``qp``, ``update``, ``total``.
+        Seconds spent in ``assembly`` (the whole linearisation, steps 1-2 of
+        :class:`~cbha_inverse.core.inverse.solver.InverseSolver`, one compiled call; 0 on a tick
+        that reuses a linearisation), ``qp`` (the QP, its outcome and, with the active set, the
+        Newton step and the effector positions), ``update`` (further Newton steps, the result)
+        and ``total``; ``factor`` and ``projection`` are 0 (they run inside the linearisation).
     warnings : tuple of str
         What the user should know about this tick (a clamped or rejected target, a held
         non-finite QP solution); a node logs them.

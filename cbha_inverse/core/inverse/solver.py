@@ -295,9 +295,10 @@ class InverseSolver:
             if not self._linearised:
                 return self._held('not_positive_definite', t_start)
             self._age = 1
+            t_linearised = time.perf_counter()
         else:
             self._age = 1 if prepared else self._age + 1
-        t_linearised = time.perf_counter()
+            t_linearised = t_start
         apply_step = self.options.relinearize_every == 1
         data = self._data
         if self.options.qp_solver == 'active_set':
