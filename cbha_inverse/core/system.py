@@ -197,7 +197,7 @@ class EquilibriumSystem:
 
     @property
     def rhs(self):
-        """The (6n, m + 1) buffer that :meth:`evaluate` writes and returns."""
+        """Return the (6n, m + 1) buffer that :meth:`evaluate` writes and returns."""
         return self._rhs
 
     def fused_terms(self):

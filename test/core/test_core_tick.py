@@ -68,9 +68,9 @@ def test_a_thousand_ticks_allocate_nothing_but_their_results(name, every):
     numba counts every allocation of its runtime; each array passed from Python gets one
     wrapper (freed on return), so a tick that allocates nothing of its own makes exactly as
     many allocations as it passes arrays: the linearisation's (and, between linearisations,
-    the linear step's), the solve's and the target check's three. ``tracemalloc`` then sees numpy keep only the results' own arrays (actuation,
-    effector positions, saturated flags) and no memory left behind by ticks whose results are
-    dropped.
+    the linear step's), the solve's and the target check's three. ``tracemalloc`` then sees
+    numpy keep only the results' own arrays (actuation, effector positions, saturated flags)
+    and no memory left behind by ticks whose results are dropped.
     """
     scene = load_scene(name)
     solver = scene.make_inverse_solver(relinearize_every=every)

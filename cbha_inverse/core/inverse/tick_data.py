@@ -95,8 +95,8 @@ class TickData:
         self.effector_positions = np.zeros((k, 3))
         self.matrices = QPMatrices(self.matrices_stack[rows.HESSIAN],
                                    self.matrices_stack[rows.TRACKING],
-                                   self.effector_matrices[rows.WEIGHTED_W], self.vectors[rows.SCALE],
-                                   options.proximal_weight)
+                                   self.effector_matrices[rows.WEIGHTED_W],
+                                   self.vectors[rows.SCALE], options.proximal_weight)
         frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
         offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
         moved, levers = np.zeros((3 * k, m + 1)), np.zeros((k, 3))
