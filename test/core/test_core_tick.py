@@ -11,6 +11,7 @@ import tracemalloc
 from cbha_inverse.core._kernels import tick as fused
 from cbha_inverse.core._kernels.projection import project_effectors
 from cbha_inverse.core.inverse.qp import qp_matrices
+from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.scene import load_scene
 from numba.core.runtime import _nrt_python, rtsys
 import numpy as np
@@ -120,3 +121,21 @@ def test_a_thousand_ticks_allocate_nothing_but_their_results(name, every):
     assert kept == 1000 * (8 * m + 24 * k + m)
     # below one byte per tick (the interpreter's own caches move by a few hundred bytes)
     assert abs(left - traced) < 1000
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+@pytest.mark.parametrize('every', [1, 5])
+def test_the_kernels_one_by_one_give_the_fused_ticks(name, every, monkeypatch):
+    """A scene the fused pass cannot evaluate runs the same kernels one by one: same ticks."""
+    scene = load_scene(name)
+    fused_solver = scene.make_inverse_solver(relinearize_every=every)
+    monkeypatch.setattr(EquilibriumSystem, 'fused_terms', lambda self: None)
+    composed = scene.make_inverse_solver(relinearize_every=every)
+    assert fused_solver._data.fused and not composed._data.fused
+    for target in _circle(scene, 12, radius=0.01):
+        expected, got = fused_solver.step(target), composed.step(target)
+        assert got.status == expected.status
+        np.testing.assert_allclose(got.actuation, expected.actuation, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(got.effector_positions, expected.effector_positions,
+                                   rtol=0, atol=1e-12)
+        assert got.residual_norm == pytest.approx(expected.residual_norm, rel=1e-9)
