@@ -6,11 +6,13 @@ Cholesky, multi-RHS solve, projection, QP matrices); the allocations of 1,000 ti
 by numba's runtime statistics (compiled code) and by ``tracemalloc`` (Python and numpy).
 """
 
+import dataclasses
 import tracemalloc
 
 from cbha_inverse.core._kernels import tick as fused
 from cbha_inverse.core._kernels.projection import project_effectors
 from cbha_inverse.core.inverse.qp import qp_matrices
+from cbha_inverse.core.inverse.results import TickResult
 from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.scene import load_scene
 from numba.core.runtime import _nrt_python, rtsys
@@ -139,3 +141,15 @@ def test_the_kernels_one_by_one_give_the_fused_ticks(name, every, monkeypatch):
         np.testing.assert_allclose(got.effector_positions, expected.effector_positions,
                                    rtol=0, atol=1e-12)
         assert got.residual_norm == pytest.approx(expected.residual_norm, rel=1e-9)
+
+
+def test_a_result_of_the_tick_is_the_constructors_result():
+    """TickResult.of_tick builds the same frozen result as TickResult(...)."""
+    fields = (np.arange(3.0), np.ones((1, 3)), 'solved', 'solved', 1, np.zeros(3, dtype=bool),
+              0.5, 2.0, {'total': 1e-5}, ('note',))
+    fast, plain = TickResult.of_tick(*fields), TickResult(*fields)
+    assert repr(fast) == repr(plain)
+    assert dataclasses.astuple(fast)[2:5] == dataclasses.astuple(plain)[2:5]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fast.status = 'rejected'
+    assert dataclasses.replace(fast, status='saturated').status == 'saturated'

@@ -246,6 +246,8 @@ def solve_tick(targets, vectors, matrices, effector_matrices, gaps, flags, free,
         Largest predicted effector gap.
     largest_move : float
         Largest dimensionless actuation change.
+    binding : bool
+        Whether some bound binds (the QP is solved and the tick saturated).
 
     """
     k = targets.shape[0]
@@ -264,15 +266,18 @@ def solve_tick(targets, vectors, matrices, effector_matrices, gaps, flags, free,
         hessian, vectors[GRADIENT], lower, upper, flags[STATE], max_iterations, x, free,
         flags[PIVOT], index, matrices[FACTOR], vectors[SOLVE])
     if code != SOLVED:
-        return code, iterations, 0.0, 0.0
+        return code, iterations, 0.0, 0.0, False
     proposed = vectors[PROPOSED]
     largest_gap, largest_move, finite = tick_outcome_into(
         effector_matrices[W_EA], delta_free, vectors[SCALE], x, vectors[X_PREVIOUS],
         vectors[LOWER], vectors[UPPER], proposed, gap)
     if not finite:
-        return REJECTED, iterations, largest_gap, largest_move
+        return REJECTED, iterations, largest_gap, largest_move, False
     bounds_binding_into(matrices[TRACKING], vectors[TRACKING_GRADIENT], lower, upper, x,
                         tolerance, free)
+    binding = False
+    for j in range(free.size):
+        binding = binding or free[j]
     vectors[ACTUATION, :] = proposed
     if apply_step:
         change = vectors[CHANGE]
@@ -283,4 +288,4 @@ def solve_tick(targets, vectors, matrices, effector_matrices, gaps, flags, free,
                                max_rotation, increments, work)
         effector_points_into(positions, rotations, effector_frames, effector_offsets,
                              effector_positions)
-    return SOLVED, iterations, largest_gap, largest_move
+    return SOLVED, iterations, largest_gap, largest_move, binding

@@ -302,12 +302,12 @@ class InverseSolver:
         apply_step = self.options.relinearize_every == 1
         data = self._data
         if self.options.qp_solver == 'active_set':
-            code, iterations, largest_gap, largest_move = fused.solve_tick(
+            code, iterations, largest_gap, largest_move, binding = fused.solve_tick(
                 targets, *data.solve_arguments, apply_step)
             if code == fused.REJECTED:
                 return self._rejected(t_start, 'solved', warnings)
             if code == SOLVED:
-                return self._finish(targets, 'saturated' if data.mask.any() else 'solved',
+                return self._finish(targets, 'saturated' if binding else 'solved',
                                     'solved', iterations, data.mask.copy(), largest_gap,
                                     largest_move, apply_step, warnings, t_start, t_linearised)
             # the active set did not converge: proxsuite (status checked) takes over; it has
@@ -374,7 +374,7 @@ class InverseSolver:
         t_end = time.perf_counter()
         timings = {'assembly': t_linearised - t_start, 'factor': 0.0, 'projection': 0.0,
                    'qp': t_qp - t_linearised, 'update': t_end - t_qp, 'total': t_end - t_start}
-        return TickResult(self.actuation.copy(), effector_positions, status, qp_status,
+        return TickResult.of_tick(self.actuation.copy(), effector_positions, status, qp_status,
                           iterations, saturated, largest_gap, self._residual_norm, timings,
                           warnings)
 
