@@ -375,8 +375,8 @@ class InverseSolver:
         timings = {'assembly': t_linearised - t_start, 'factor': 0.0, 'projection': 0.0,
                    'qp': t_qp - t_linearised, 'update': t_end - t_qp, 'total': t_end - t_start}
         return TickResult.of_tick(self.actuation.copy(), effector_positions, status, qp_status,
-                          iterations, saturated, largest_gap, self._residual_norm, timings,
-                          warnings)
+                                  iterations, saturated, largest_gap, self._residual_norm,
+                                  timings, warnings)
 
     def _solve_qp(self, problem, qp_solver, same_hessian):
         """
