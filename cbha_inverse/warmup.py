@@ -5,8 +5,9 @@ The kernels (every module of :mod:`cbha_inverse.core._kernels`) are ``numba.njit
 the first process that calls them compiles them (~15 s on the 2-core development machine) and
 writes the machine code to ``__pycache__`` next to the sources (or to ``NUMBA_CACHE_DIR``); later
 processes load it (~0.25 s for a first tick). This module runs representative ticks and static
-solves on every scene and QP solver, and one solve of the compiled BTD backend
-(:mod:`cbha_inverse.core.linalg.btd`, the benchmark's), so that the compile happens once, at
+solves on every scene and QP solver (the solver's two compiled tick entries among them), one solve
+of the compiled BTD backend (:mod:`cbha_inverse.core.linalg.btd`, the benchmark's) and the
+benchmark's multiply-add loop, so that the compile happens once, at
 install, and never inside a timed test, the demo or a control loop.
 
 Usage: ``python -m cbha_inverse.warmup [--scenes NAME ...]``. Pure numerics, no rclpy.
@@ -16,6 +17,7 @@ import argparse
 import sys
 import time
 
+from cbha_inverse.core._kernels.flop_rate import multiply_add_chains
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.linalg import btd
 from cbha_inverse.paths import config_path
@@ -138,6 +140,8 @@ def main(argv=None):
     # the compiled BTD backend (its inputs are normalised to one type, so one small solve
     # compiles all it ever needs)
     btd.solve(np.tile(np.eye(6), (2, 1, 1)), np.zeros((1, 6, 6)), np.ones(12))
+    # the benchmark's measure of the machine's multiply-add rate
+    multiply_add_chains(1, 0.5)
     ran = []
     for name in args.scenes:
         if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():

@@ -30,7 +30,8 @@ the band is then the full matrix.
 """
 
 from cbha_inverse.core._kernels.band import band_cholesky, scatter_add
-from cbha_inverse.core._kernels.links import link_pass
+from cbha_inverse.core._kernels.cables import cable_work_size
+from cbha_inverse.core._kernels.links import link_pass, link_work_size
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import CableGroup, CableTerms
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
@@ -57,8 +58,13 @@ class EquilibriumSystem:
     ----------
     kd : int
         Half-bandwidth of the tangent (11 for a chain whose actuators act within a link).
+    tick_cholesky : bool
+        The control tick's first choice is the band Cholesky of the symmetric tangent (default);
+        False sends every tick to :meth:`fallback_factors` (the fallback chain's tests).
 
     """
+
+    tick_cholesky = True
 
     def __init__(self, model, actuators, external):
         """Precompute constants, buffers and the assembly index."""
@@ -188,6 +194,50 @@ class EquilibriumSystem:
             rhs[:, 1 + cols] = jat.T
             rhs[:, 0] += actuation[cols] @ jat
         return rhs
+
+    @property
+    def rhs(self):
+        """Return the (6n, m + 1) buffer that :meth:`evaluate` writes and returns."""
+        return self._rhs
+
+    def fused_terms(self):
+        """
+        Return the model arrays and buffers of the fused linearisation, or None.
+
+        The arguments ``stiffness`` ... ``rhs`` of
+        :func:`cbha_inverse.core._kernels.tick.linearise_tick`, in its order: the constant
+        terms of the links and of the cable group, the assembly index of the symmetric band and
+        this object's buffers (so :meth:`fallback_factors` with ``evaluated=True`` reuses the
+        blocks it leaves). ``None`` when the fused entry cannot evaluate the actuators (more
+        than one cable group, or skinned-mesh cavities): the tick then runs :meth:`linearise`.
+
+        Returns
+        -------
+        tuple of ndarray or None
+
+        """
+        if self._generic or len(self._cables) > 1:
+            return None
+        n_link = self.n * 144
+        if self._cables:
+            cab, pair_values, moment_values = self._cable_values[0]
+            cable = (cab.gains, cab.offsets, cab.frames,
+                     np.stack([cab.start, cab.end, cab.span_owner, cab.span_pair]),
+                     np.stack([cab.point_owner, cab.point_slot]), cab.columns,
+                     np.zeros(cable_work_size(cab.frames.size, cab.start.size,
+                                              pair_values.size // 144)))
+            counts = (n_link, pair_values.size, moment_values.size)
+        else:
+            empty = np.zeros(0, dtype=np.int64)
+            cable = (np.zeros(0), np.zeros((0, 3)), empty, np.zeros((4, 0), dtype=np.int64),
+                     np.zeros((2, 0), dtype=np.int64), empty, np.zeros(0))
+            counts = (n_link, 0, 0)
+        link_work = np.zeros(link_work_size(self._cavity_wrench.shape[1]))
+        return ((self.stiffness, self.rest_offsets, self._q0t, self._cavity_wrench,
+                 self._cavity_stiffness, link_work, np.ascontiguousarray(self.external))
+                + cable
+                + (self._index, self._weights, np.array(counts, dtype=np.int64), self._values,
+                   self._band, self._rhs))
 
     def linearise(self, positions, rotations, actuation):
         """

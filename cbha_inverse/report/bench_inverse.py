@@ -4,10 +4,14 @@ Benchmark of the inverse-simulation control tick per scene (``cbha_bench_inverse
 For every scene the solver tracks a circle in the y-z plane around the scene's workspace centre
 (the paper's 60 mm circle for the CBHA, a 10 mm circle for the tendon trunks) and the table shows
 the tick time (median and 99th percentile over the measured ticks) and its median breakdown
-(assembly = the fused linearisation: internal wrenches, tangent, actuator columns and load
-stiffness; factor = LAPACK Cholesky; W = the multi-RHS solve and the projection to W_ea, W_aa,
-δ_free and the QP matrices; QP = the box QP with its checks; update = Newton step and effector
-positions) beside the figures reported in the paper (SOFA, 2.66 GHz Core i7, 2015). ``lin`` is the
+(lin = the linearisation: internal wrenches, tangent, actuator columns and load stiffness, band
+Cholesky, the multi-RHS solve and the projection to W_ea, W_aa, δ_free and the QP matrices, one
+compiled call; QP = the box QP with its checks, with the active set also the Newton step and the
+effector positions, one compiled call; update = the rest: Newton steps beyond the first, the
+result) beside the figures reported in the paper (SOFA, 2.66 GHz Core i7, 2015), and the distance
+to the limit: the tick's flops counted from its shapes
+(:func:`cbha_inverse.report.tick_flops.tick_flops`), their time at this machine's measured rate
+of multiply-add chains (``bound``) and the median over it (``x bound``). ``lin`` is the
 ``relinearize_every`` option: 1 linearises at every tick (as the paper does); 5 keeps a
 linearisation for up to 5 ticks (the ticks in between only re-solve the QP of the linear model,
 so their phases before the QP are ~0 and the median is theirs; the p99 is the linearisation
@@ -26,6 +30,7 @@ import time
 
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.report.tick_flops import measured_flop_rate, tick_flops, tick_shapes
 from cbha_inverse.scene import load_scene
 import numpy as np
 
@@ -116,8 +121,11 @@ def bench_scene(name, n_ticks=2000, warmup=100, qp_solver='proxsuite', newton_st
         # evaluated outside the timed tick
         errors[i] = np.linalg.norm(solver.effector_positions()[-1] - targets[warmup + i][-1])
         statuses[out.status] = statuses.get(out.status, 0) + 1
+    flops = tick_flops(tick_shapes(solver))
     return {
         'scene': name,
+        # a tick between linearisations only solves the QP
+        'flops': flops['total'] if relinearize_every == 1 else flops['qp'],
         'frames': scene.model.n_links,
         'actuators': len(scene.actuator_names),
         'effectors': len(scene.effector_names),
@@ -215,17 +223,20 @@ def format_forward(forward_rows, tick_medians):
     return '\n'.join(lines)
 
 
-def format_table(rows):
+def format_table(rows, flop_rate):
     """
     Format benchmark rows as a plain-text table.
 
-    Per row: tick median and p99, the median of each phase, the goal of this machine (median /
-    p99, ``ok`` when met), the paper's tick time and the ratio paper / ours (median).
+    Per row: tick median and p99, the median of each phase, the flops, their bound and the
+    median over it, the goal of this machine (median / p99, ``ok`` when met), the paper's tick
+    time and the ratio paper / ours (median).
 
     Parameters
     ----------
     rows : list of dict
         From :func:`bench_scene`.
+    flop_rate : float  [flop/s]
+        From :func:`cbha_inverse.report.tick_flops.measured_flop_rate`, measured in the run.
 
     Returns
     -------
@@ -233,8 +244,9 @@ def format_table(rows):
 
     """
     head = (f"{'scene':16s} {'n':>3s} {'m':>3s} {'k':>2s} {'QP':>10s} {'lin':>3s} {'median':>8s} "
-            f"{'p99':>8s} | {'assem':>7s} {'factor':>7s} {'W':>7s} {'QP':>7s} {'update':>7s}"
-            f" | {'err med':>8s} | {'goal med/p99':>16s} | {'paper':>6s} {'paper/us':>8s}")
+            f"{'p99':>8s} | {'lin':>7s} {'QP':>7s} {'update':>7s} | {'kflop':>6s} {'bound':>7s}"
+            f" {'x bound':>7s} | {'err med':>8s} | {'goal med/p99':>16s} | {'paper':>6s}"
+            f" {'paper/us':>8s}")
     lines = [head, '-' * len(head)]
     for r in rows:
         med = r['median']
@@ -246,15 +258,16 @@ def format_table(rows):
             goal = (f"{1e6 * goal_med:.0f}/{'-' if goal_p99 is None else f'{1e6 * goal_p99:.0f}'}"
                     f"us {'ok' if met else 'NO'}")
         paper = PAPER_TICK.get(r['scene'])
+        bound = r['flops'] / flop_rate
         ratio = (f"{paper / med['total']:7.1f}x" if paper else '       -')
         paper_text = f'{1e3 * paper:4.0f}ms' if paper else '     -'
         lines.append(
             f"{r['scene']:16s} {r['frames']:3d} {r['actuators']:3d} {r['effectors']:2d} "
             f"{r['qp_solver']:>10s} {r['relinearize_every']:3d} "
-            f"{us['total']:6.0f}us {1e6 * r['p99']:6.0f}us | "
-            f"{us['assembly']:5.0f}us {us['factor']:5.0f}us {us['projection']:5.0f}us "
-            f"{us['qp']:5.0f}us {us['update']:5.0f}us | {1e3 * r['tracking_error_median']:6.3f}mm"
-            f' | {goal:>16s} | {paper_text} {ratio}')
+            f"{us['total']:6.1f}us {1e6 * r['p99']:6.0f}us | "
+            f"{us['assembly']:5.1f}us {us['qp']:5.1f}us {us['update']:5.1f}us | "
+            f"{r['flops'] / 1e3:6.1f} {1e6 * bound:5.1f}us {med['total'] / bound:6.1f}x | "
+            f"{1e3 * r['tracking_error_median']:6.3f}mm | {goal:>16s} | {paper_text} {ratio}")
     lines.append('')
     lines += [f'{name}: {text}' for name, text in PAPER.items()]
     return '\n'.join(lines)
@@ -296,6 +309,7 @@ def main(argv=None):
         return report_config_error('cbha_bench_inverse', exc)
     rows = []
     started = time.perf_counter()
+    flop_rate = measured_flop_rate()
     for name in args.scenes:
         solvers = list(args.qp_solvers) + (['gauss_seidel'] if args.gauss_seidel
                                            and 'gauss_seidel' not in args.qp_solvers else [])
@@ -303,7 +317,11 @@ def main(argv=None):
             for every in args.relinearize_every:
                 rows.append(bench_scene(name, args.ticks, args.warmup, qp_solver,
                                         relinearize_every=every))
-    print(format_table(rows))
+    # the rate again after the ticks: the faster of the two (the machine is shared)
+    flop_rate = max(flop_rate, measured_flop_rate())
+    print(format_table(rows, flop_rate))
+    print(f'flop rate of independent multiply-add chains on this machine: '
+          f'{flop_rate / 1e9:.1f} Gflop/s (bound = kflop / rate)')
     tick_medians = {}
     for name in args.scenes:
         same = [r for r in rows if r['scene'] == name and r['qp_solver'] == 'active_set'

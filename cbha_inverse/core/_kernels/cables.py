@@ -64,18 +64,47 @@ def cable_pass(positions, rotations, actuation, gains, frames, offsets, span_sta
         Receives the point moment blocks summed per frame.
 
     """
+    work = np.empty(cable_work_size(frames.size, span_start.size, pair_values.shape[0]))
+    cable_pass_into(positions, rotations, actuation, gains, frames, offsets, span_start, span_end,
+                    span_owner, point_owner, columns, span_pair, point_slot, rhs, pair_values,
+                    moment_values, work)
+
+
+@numba.njit(cache=True)
+def cable_work_size(n_points, n_spans, n_pairs):
+    """Return the length of the workspace of :func:`cable_pass_into`."""
+    return 9 * n_points + 4 * n_spans + 54 * n_pairs + 45
+
+
+@numba.njit(cache=True)
+def cable_pass_into(positions, rotations, actuation, gains, frames, offsets, span_start,
+                    span_end, span_owner, point_owner, columns, span_pair, point_slot, rhs,
+                    pair_values, moment_values, work):
+    """:func:`cable_pass` with its workspace given, ``work`` (:func:`cable_work_size`,)."""
     n_points = frames.size
     n_spans = span_start.size
-    levers = np.empty((n_points, 3))
-    points = np.empty((n_points, 3))
+    n_pairs = pair_values.shape[0]
+    end = 3 * n_points
+    levers = work[:end].reshape((n_points, 3))
+    points = work[end:2 * end].reshape((n_points, 3))
+    forces = work[2 * end:3 * end].reshape((n_points, 3))
+    used = 3 * end
+    units = work[used:used + 3 * n_spans].reshape((n_spans, 3))
+    lengths = work[used + 3 * n_spans:used + 4 * n_spans]
+    used += 4 * n_spans
+    sums = work[used:used + 54 * n_pairs].reshape((n_pairs, 6, 3, 3))
+    used += 54 * n_pairs
+    proj = work[used:used + 9].reshape((3, 3))
+    s_hat = work[used + 9:used + 18].reshape((3, 3))
+    t_hat = work[used + 18:used + 27].reshape((3, 3))
+    sp = work[used + 27:used + 36].reshape((3, 3))
+    tp = work[used + 36:used + 45].reshape((3, 3))
     for p in range(n_points):
         rot = rotations[frames[p]]
         for i in range(3):
             levers[p, i] = rot[i, 0] * offsets[p, 0] + rot[i, 1] * offsets[p, 1] + rot[
                 i, 2] * offsets[p, 2]
             points[p, i] = positions[frames[p], i] + levers[p, i]
-    units = np.empty((n_spans, 3))
-    lengths = np.empty(n_spans)
     for s in range(n_spans):
         for i in range(3):
             units[s, i] = points[span_end[s], i] - points[span_start[s], i]
@@ -85,7 +114,7 @@ def cable_pass(positions, rotations, actuation, gains, frames, offsets, span_sta
             units[s, i] /= length
     # a span pulls its start point toward its end and the end point back (unit tension, times
     # the cable's gain)
-    forces = np.zeros((n_points, 3))
+    forces[:, :] = 0.0
     for s in range(n_spans):
         gain = gains[span_owner[s]]
         for i in range(3):
@@ -114,13 +143,7 @@ def cable_pass(positions, rotations, actuation, gains, frames, offsets, span_sta
     # C P C^T with C = [I; S; -I; -T] (S, T the hats of the start and end levers): block (i, j)
     # is sign_i sign_j B_i P B_j^T with B = (I, S, I, T), sign = (1, 1, -1, -1); only the six
     # products P, SP, TP, SPS^T, TPS^T, TPT^T are summed per frame pair, then expanded
-    n_pairs = pair_values.shape[0]
-    sums = np.zeros((n_pairs, 6, 3, 3))
-    proj = np.empty((3, 3))
-    s_hat = np.empty((3, 3))
-    t_hat = np.empty((3, 3))
-    sp = np.empty((3, 3))
-    tp = np.empty((3, 3))
+    sums[:, :, :, :] = 0.0
     for s in range(n_spans):
         scale = gains[span_owner[s]] * actuation[columns[span_owner[s]]] / lengths[s]
         u = units[s]

@@ -57,24 +57,39 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
         Write the material tangent instead of the exact one (the residual is the same).
 
     """
+    link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
+                   cavity_wrench, cavity_stiffness, rhs, blocks, material,
+                   np.empty(link_work_size(cavity_wrench.shape[1])))
+
+
+@numba.njit(cache=True)
+def link_work_size(n_cavities):
+    """Return the length of the workspace of :func:`link_pass_into` (``c`` cavity columns)."""
+    return 177 + 12 * (1 + n_cavities)
+
+
+@numba.njit(cache=True)
+def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
+                   cavity_wrench, cavity_stiffness, rhs, blocks, material, work):
+    """:func:`link_pass` with its workspace given, ``work`` (:func:`link_work_size`,)."""
     n = stiffness.shape[0]
     n_cav = cavity_wrench.shape[1]
     kc = 1 + n_cav
     rhs[:, :] = 0.0
-    rel = np.empty((3, 3))
-    tmp = np.empty((3, 3))
-    delta = np.empty(6)
-    stress = np.empty(6)
-    jinv = np.empty((3, 3))
-    a = np.empty((6, 6))
-    mat = np.empty((6, 6))
-    rotated = np.empty((6, 6))
-    local = np.empty((6, kc))
-    world = np.empty((6, kc))
-    diff = np.empty(3)
-    diff_hat = np.empty((3, 3))
-    f_hat = np.empty((3, 3))
-    m_hat = np.empty((3, 3))
+    rel = work[0:9].reshape((3, 3))
+    tmp = work[9:18].reshape((3, 3))
+    delta = work[18:24]
+    stress = work[24:30]
+    jinv = work[30:39].reshape((3, 3))
+    a = work[39:75].reshape((6, 6))
+    mat = work[75:111].reshape((6, 6))
+    rotated = work[111:147].reshape((6, 6))
+    diff = work[147:150]
+    diff_hat = work[150:159].reshape((3, 3))
+    f_hat = work[159:168].reshape((3, 3))
+    m_hat = work[168:177].reshape((3, 3))
+    local = work[177:177 + 6 * kc].reshape((6, kc))
+    world = work[177 + 6 * kc:177 + 12 * kc].reshape((6, kc))
     for link in range(n):
         ra = rotations[link]
         rb = rotations[link + 1]

@@ -36,14 +36,19 @@ def effector_levers(rotations, effector_frames, effector_offsets):
         ``R_f o``.
 
     """
-    k = effector_frames.size
-    levers = np.empty((k, 3))
-    for e in range(k):
+    levers = np.empty((effector_frames.size, 3))
+    effector_levers_into(rotations, effector_frames, effector_offsets, levers)
+    return levers
+
+
+@numba.njit(cache=True)
+def effector_levers_into(rotations, effector_frames, effector_offsets, levers):
+    """:func:`effector_levers` into a preallocated ``levers`` (k, 3)."""
+    for e in range(effector_frames.size):
         rot = rotations[effector_frames[e]]
         offset = effector_offsets[e]
         for i in range(3):
             levers[e, i] = rot[i, 0] * offset[0] + rot[i, 1] * offset[1] + rot[i, 2] * offset[2]
-    return levers
 
 
 @numba.njit(cache=True)
@@ -68,11 +73,18 @@ def effector_points(positions, rotations, effector_frames, effector_offsets):
         ``x_f + R_f o`` (the lever ``R_f o`` from :func:`effector_levers`).
 
     """
-    points = effector_levers(rotations, effector_frames, effector_offsets)
+    points = np.empty((effector_frames.size, 3))
+    effector_points_into(positions, rotations, effector_frames, effector_offsets, points)
+    return points
+
+
+@numba.njit(cache=True)
+def effector_points_into(positions, rotations, effector_frames, effector_offsets, points):
+    """:func:`effector_points` into a preallocated ``points`` (k, 3)."""
+    effector_levers_into(rotations, effector_frames, effector_offsets, points)
     for e in range(effector_frames.size):
         for i in range(3):
             points[e, i] += positions[effector_frames[e], i]
-    return points
 
 
 @numba.njit(cache=True)
@@ -114,17 +126,32 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
         ``|r|``.
 
     """
+    width = solved.shape[1]
+    k = effector_frames.size
+    w_ea, w_aa, offset = np.empty((3 * k, width - 1)), np.empty((width - 1, width - 1)), np.empty(
+        3 * k)
+    residual_norm = project_effectors_into(
+        solved, rhs, positions, rotations, effector_frames, effector_offsets, previous, w_ea,
+        w_aa, offset, np.empty((3 * k, width)), np.empty((k, 3)))
+    return w_ea, w_aa, offset, residual_norm
+
+
+@numba.njit(cache=True)
+def project_effectors_into(solved, rhs, positions, rotations, effector_frames, effector_offsets,
+                           previous, w_ea, w_aa, offset, moved, levers):
+    """
+    :func:`project_effectors` into preallocated ``w_ea``, ``w_aa`` and ``offset``.
+
+    ``moved`` (3k, m + 1) and ``levers`` (k, 3) are its workspace. Returns ``|r|``.
+    """
     size, width = solved.shape
     m = width - 1
     k = effector_frames.size
-    moved = np.empty((3 * k, width))
-    offset = np.empty(3 * k)
-    points = effector_points(positions, rotations, effector_frames, effector_offsets)
-    levers = effector_levers(rotations, effector_frames, effector_offsets)
+    effector_levers_into(rotations, effector_frames, effector_offsets, levers)
     for e in range(k):
         lever = levers[e]
         for i in range(3):
-            offset[3 * e + i] = points[e, i]
+            offset[3 * e + i] = positions[effector_frames[e], i] + lever[i]
         base = 6 * (effector_frames[e] - 1)
         for col in range(width):
             rx, ry, rz = solved[base + 3, col], solved[base + 4, col], solved[base + 5, col]
@@ -132,13 +159,13 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
             moved[3 * e, col] = solved[base, col] + ry * lever[2] - rz * lever[1]
             moved[3 * e + 1, col] = solved[base + 1, col] + rz * lever[0] - rx * lever[2]
             moved[3 * e + 2, col] = solved[base + 2, col] + rx * lever[1] - ry * lever[0]
-    w_ea = np.ascontiguousarray(moved[:, 1:])
     for row in range(3 * k):
         acc = offset[row] + moved[row, 0]
         for j in range(m):
-            acc -= w_ea[row, j] * previous[j]
+            w_ea[row, j] = moved[row, 1 + j]
+            acc -= moved[row, 1 + j] * previous[j]
         offset[row] = acc
-    w_aa = np.zeros((m, m))
+    w_aa[:, :] = 0.0
     residual = 0.0
     for q in range(size):
         residual += rhs[q, 0] * rhs[q, 0]
@@ -147,7 +174,7 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
             if weight != 0.0:
                 for j in range(m):
                     w_aa[i, j] += weight * solved[q, 1 + j]
-    return w_ea, w_aa, offset, math.sqrt(residual)
+    return math.sqrt(residual)
 
 
 @numba.njit(cache=True)
@@ -182,8 +209,21 @@ def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bou
         Whether every ``x`` is finite (else the caller holds the actuation).
 
     """
+    actuation, gap = np.empty(w_ea.shape[1]), np.empty(w_ea.shape[0])
+    largest_gap, largest_move, finite = tick_outcome_into(
+        w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bounds, actuation, gap)
+    return actuation, gap, largest_gap, largest_move, finite
+
+
+@numba.njit(cache=True)
+def tick_outcome_into(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bounds,
+                      actuation, gap):
+    """
+    :func:`tick_outcome` into preallocated ``actuation`` (m,) and ``gap`` (3k,).
+
+    Returns ``(largest_gap, largest_move, finite)``.
+    """
     rows, m = w_ea.shape
-    actuation = np.empty(m)
     largest_move = 0.0
     finite = True
     for j in range(m):
@@ -191,7 +231,6 @@ def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bou
             finite = False
         actuation[j] = min(max(scale[j] * x[j], lower_bounds[j]), upper_bounds[j])
         largest_move = max(largest_move, abs(x[j] - x_previous[j]))
-    gap = np.empty(rows)
     for r in range(rows):
         acc = delta_free[r]
         for j in range(m):
@@ -200,7 +239,7 @@ def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bou
     largest = 0.0
     for e in range(rows // 3):
         largest = max(largest, gap[3 * e] ** 2 + gap[3 * e + 1] ** 2 + gap[3 * e + 2] ** 2)
-    return actuation, gap, math.sqrt(largest), largest_move, finite
+    return math.sqrt(largest), largest_move, finite
 
 
 @numba.njit(cache=True)

@@ -59,12 +59,24 @@ def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
 
     """
     rows, m = w_ea.shape
-    w = np.empty((rows, m))
+    hessian, tracking, w = np.empty((m, m)), np.empty((m, m)), np.empty((rows, m))
+    qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, hessian, tracking, w)
+    return hessian, tracking, w
+
+
+@numba.njit(cache=True)
+def qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, hessian, tracking, w):
+    """
+    :func:`qp_hessians` into preallocated ``hessian``, ``tracking`` (m, m) and ``w`` (3k, m).
+
+    ``w_ea`` must not be ``w`` (it is read while ``w`` is written).
+    """
+    rows, m = w_ea.shape
     for r in range(rows):
         for j in range(m):
             w[r, j] = w_ea[r, j] * scale[j]
     # upper triangle of Wᵀ W, accumulated row by row of W (contiguous inner loop)
-    tracking = np.zeros((m, m))
+    tracking[:, :] = 0.0
     for r in range(rows):
         for i in range(m):
             w_ri = w[r, i]
@@ -76,7 +88,9 @@ def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
     norm /= m
     if not norm > 0.0:
         norm = 1.0
-    w /= norm
+    for r in range(rows):
+        for j in range(m):
+            w[r, j] /= norm
     energy_norm = 0.0
     for i in range(m):
         energy_norm += w_aa[i, i] * scale[i] * scale[i]
@@ -84,7 +98,6 @@ def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
     energy_factor = 0.0
     if energy_norm > 0.0 and energy_weight > 0.0:
         energy_factor = 0.5 * energy_weight / energy_norm
-    hessian = np.empty((m, m))
     for i in range(m):
         for j in range(i, m):
             t = tracking[i, j] / norm
@@ -94,7 +107,6 @@ def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
             hessian[i, j] = h
             hessian[j, i] = h
         hessian[i, i] += proximal_weight
-    return hessian, tracking, w
 
 
 @numba.njit(cache=True)
@@ -131,8 +143,17 @@ def qp_vectors(weighted_w, proximal_weight, scale, delta_free, previous, lower_b
         unpacking it gives the rows).
 
     """
+    vectors = np.empty((5, weighted_w.shape[1]))
+    qp_vectors_into(weighted_w, proximal_weight, scale, delta_free, previous, lower_bounds,
+                    upper_bounds, rate_limit, vectors)
+    return vectors
+
+
+@numba.njit(cache=True)
+def qp_vectors_into(weighted_w, proximal_weight, scale, delta_free, previous, lower_bounds,
+                    upper_bounds, rate_limit, vectors):
+    """:func:`qp_vectors` into a preallocated ``vectors`` (5, m)."""
     rows, m = weighted_w.shape
-    vectors = np.empty((5, m))
     gradient, lower, upper, x_prev, tracking_gradient = (
         vectors[0], vectors[1], vectors[2], vectors[3], vectors[4])
     for j in range(m):
@@ -148,7 +169,6 @@ def qp_vectors(weighted_w, proximal_weight, scale, delta_free, previous, lower_b
             step = rate_limit[j] / scale[j]
             lower[j] = max(lower[j], x_prev[j] - step)
             upper[j] = min(upper[j], x_prev[j] + step)
-    return vectors
 
 
 @numba.njit(cache=True)
@@ -177,14 +197,23 @@ def solve_free_block(h, g, x, free):
 
     """
     m = x.size
-    index = np.empty(m, dtype=np.int64)
+    return solve_free_block_into(h, g, x, free, np.empty(m, dtype=np.int64), np.empty((m, m)),
+                                 np.empty(m))
+
+
+@numba.njit(cache=True)
+def solve_free_block_into(h, g, x, free, index, a, y):
+    """
+    :func:`solve_free_block` with its workspace given: ``index`` (m,) int64, ``a`` (m, m), ``y`` (m,).
+
+    The free block ``H_ff`` and its factor use the top-left ``n x n`` corner of ``a``.
+    """
+    m = x.size
     n = 0
     for i in range(m):
         if free[i]:
             index[n] = i
             n += 1
-    a = np.empty((n, n))
-    y = np.empty(n)
     for p in range(n):
         i = index[p]
         s = -g[i]
@@ -275,8 +304,22 @@ def active_set_box_qp(h, g, lower, upper, state, max_iterations):
     m = g.size
     state = state.copy()
     x = np.empty(m)
-    free = np.empty(m, dtype=np.bool_)
-    pivot = np.empty(m, dtype=np.int8)
+    status, iterations = active_set_box_qp_into(
+        h, g, lower, upper, state, max_iterations, x, np.empty(m, dtype=np.bool_),
+        np.empty(m, dtype=np.int8), np.empty(m, dtype=np.int64), np.empty((m, m)), np.empty(m))
+    return x, status, iterations, state
+
+
+@numba.njit(cache=True)
+def active_set_box_qp_into(h, g, lower, upper, state, max_iterations, x, free, pivot, index,
+                           a, y):
+    """
+    :func:`active_set_box_qp` in place: ``state`` is updated, ``x`` (m,) written.
+
+    ``free`` (m,) bool, ``pivot`` (m,) int8 and the workspace ``index``, ``a``, ``y`` of
+    :func:`solve_free_block_into` are given. Returns ``(status, iterations)``.
+    """
+    m = g.size
     g_max = 0.0
     for i in range(m):
         g_max = max(g_max, abs(g[i]))
@@ -286,8 +329,8 @@ def active_set_box_qp(h, g, lower, upper, state, max_iterations):
         for i in range(m):
             free[i] = state[i] == 0
             x[i] = lower[i] if state[i] < 0 else upper[i]
-        if not solve_free_block(h, g, x, free):
-            return x, SINGULAR, iteration, state
+        if not solve_free_block_into(h, g, x, free, index, a, y):
+            return SINGULAR, iteration
         # pivot[i]: the new state of a violating variable, 2 for none
         first = -1
         for i in range(m):
@@ -306,14 +349,14 @@ def active_set_box_qp(h, g, lower, upper, state, max_iterations):
         if first < 0:
             for i in range(m):
                 x[i] = min(max(x[i], lower[i]), upper[i])
-            return x, SOLVED, iteration, state
+            return SOLVED, iteration
         if iteration > 3:
             state[first] = pivot[first]
         else:
             for i in range(m):
                 if pivot[i] != 2:
                     state[i] = pivot[i]
-    return x, MAX_ITERATIONS, max_iterations, state
+    return MAX_ITERATIONS, max_iterations
 
 
 @numba.njit(cache=True)
@@ -404,12 +447,19 @@ def bounds_binding(tracking_hessian, tracking_gradient, lower, upper, x, toleran
         The binding bounds.
 
     """
-    m = x.size
-    binding = np.zeros(m, dtype=np.bool_)
-    for i in range(m):
+    binding = np.empty(x.size, dtype=np.bool_)
+    bounds_binding_into(tracking_hessian, tracking_gradient, lower, upper, x, tolerance, binding)
+    return binding
+
+
+@numba.njit(cache=True)
+def bounds_binding_into(tracking_hessian, tracking_gradient, lower, upper, x, tolerance,
+                        binding):
+    """:func:`bounds_binding` into a preallocated ``binding`` (m,) bool."""
+    for i in range(x.size):
+        binding[i] = False
         near_lower = x[i] <= lower[i] + tolerance
         near_upper = x[i] >= upper[i] - tolerance
         if near_lower or near_upper:
             grad = _gradient_entry(tracking_hessian, tracking_gradient, x, i)
             binding[i] = (near_lower and grad > tolerance) or (near_upper and grad < -tolerance)
-    return binding

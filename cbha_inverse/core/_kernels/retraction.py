@@ -17,15 +17,24 @@ import numpy as np
 @numba.njit(cache=True)
 def _retract_into(positions, rotations, increments, max_rotation):
     """Apply the increments to frames 1..n in place (see :func:`retract_frames`)."""
+    retract_in_place(positions, rotations, increments, max_rotation, np.empty((7, 3)))
+
+
+@numba.njit(cache=True)
+def retract_in_place(positions, rotations, increments, max_rotation, work):
+    """
+    Apply world-axis increments to frames 1..n in place, ``x += dx``, ``R ← exp(dθ) R``.
+
+    The whole step is scaled down so that no frame rotates more than ``max_rotation`` [rad];
+    ``work`` (7, 3) is the workspace (rotation vector, new and old rotation).
+    """
     largest = 0.0
     for f in range(increments.shape[0]):
         largest = max(largest, increments[f, 3] ** 2 + increments[f, 4] ** 2
                       + increments[f, 5] ** 2)
     largest = math.sqrt(largest)
     factor = max_rotation / largest if largest > max_rotation else 1.0
-    step = np.empty(3)
-    rot = np.empty((3, 3))
-    old = np.empty((3, 3))
+    step, rot, old = work[0], work[1:4], work[4:7]
     for f in range(increments.shape[0]):
         for i in range(3):
             positions[f + 1, i] += factor * increments[f, i]
@@ -59,14 +68,26 @@ def apply_linear_step(positions, rotations, free_step, solved_actuators, change,
         Scale the whole step down so that no frame rotates more than this.
 
     """
+    size = solved_actuators.shape[0]
+    apply_linear_step_into(positions, rotations, free_step, solved_actuators, change,
+                           max_rotation, np.empty((size // 6, 6)), np.empty((7, 3)))
+
+
+@numba.njit(cache=True)
+def apply_linear_step_into(positions, rotations, free_step, solved_actuators, change,
+                           max_rotation, increments, work):
+    """
+    :func:`apply_linear_step` with its workspace given: ``increments`` (n, 6), ``work`` (7, 3).
+
+    ``change`` may be a buffer of the caller (read before anything is written).
+    """
     size, m = solved_actuators.shape
-    increments = np.empty((size // 6, 6))
     for row in range(size):
         acc = free_step[row]
         for j in range(m):
             acc += solved_actuators[row, j] * change[j]
         increments[row // 6, row % 6] = acc
-    _retract_into(positions, rotations, increments, max_rotation)
+    retract_in_place(positions, rotations, increments, max_rotation, work)
 
 
 @numba.njit(cache=True)

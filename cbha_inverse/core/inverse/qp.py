@@ -299,19 +299,23 @@ class ActiveSetQP:
         ``m``.
     max_iterations : int
         Iteration limit (default ``4 m + 10``).
+    state : (m,) int8 ndarray, optional
+        The buffer that holds the warm start (the solver's tick data shares it with its
+        compiled tick); default: its own.
 
     """
 
-    def __init__(self, n_actuators, max_iterations=None):
+    def __init__(self, n_actuators, max_iterations=None, state=None):
         """Start with every variable free."""
         self.n_actuators = int(n_actuators)
         self.max_iterations = (4 * self.n_actuators + 10 if max_iterations is None
                                else int(max_iterations))
+        self._state = np.zeros(self.n_actuators, dtype=np.int8) if state is None else state
         self.reset()
 
     def reset(self):
         """Forget the warm start (active set)."""
-        self._state = np.zeros(self.n_actuators, dtype=np.int8)
+        self._state[:] = 0
 
     def solve(self, problem):
         """
@@ -333,7 +337,7 @@ class ActiveSetQP:
             problem.hessian, problem.gradient, problem.lower, problem.upper, self._state,
             self.max_iterations)
         if code == qp_kernels.SOLVED:
-            self._state = state
+            self._state[:] = state
             return QPSolution(x, 'solved', iterations, True)
         self.reset()
         x = np.minimum(np.maximum(problem.previous, problem.lower), problem.upper)

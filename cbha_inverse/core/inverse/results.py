@@ -97,7 +97,11 @@ class TickResult:
     residual_norm : float  [N, N*m]
         Norm of the equilibrium residual at the last linearisation (before its update).
     timings : dict
-        Seconds spent in ``assembly``, ``factor``, ``projection``, ``qp``, ``update``, ``total``.
+        Seconds spent in ``assembly`` (the whole linearisation, steps 1-2 of
+        :class:`~cbha_inverse.core.inverse.solver.InverseSolver`, one compiled call; 0 on a tick
+        that reuses a linearisation), ``qp`` (the QP, its outcome and, with the active set, the
+        Newton step and the effector positions), ``update`` (further Newton steps, the result)
+        and ``total``; ``factor`` and ``projection`` are 0 (they run inside the linearisation).
     warnings : tuple of str
         What the user should know about this tick (a clamped or rejected target, a held
         non-finite QP solution); a node logs them.
@@ -114,3 +118,20 @@ class TickResult:
     residual_norm: float
     timings: dict = field(default_factory=dict)
     warnings: tuple = ()
+
+    @classmethod
+    def of_tick(cls, actuation, effector_positions, status, qp_status, qp_iterations, saturated,
+                predicted_error, residual_norm, timings, warnings):
+        """
+        Return the result of a solved tick, the fields given in order (all required).
+
+        The same object as the constructor's, built with one update of its ``__dict__``
+        instead of the frozen dataclass's ten ``object.__setattr__`` calls (~3 µs of a ~10 µs
+        tick).
+        """
+        result = object.__new__(cls)
+        result.__dict__.update(actuation=actuation, effector_positions=effector_positions,
+                               status=status, qp_status=qp_status, qp_iterations=qp_iterations,
+                               saturated=saturated, predicted_error=predicted_error,
+                               residual_norm=residual_norm, timings=timings, warnings=warnings)
+        return result

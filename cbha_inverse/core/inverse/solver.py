@@ -30,33 +30,24 @@ throw the linearisation off.
 
 import math
 import time
-from typing import NamedTuple
 
-from cbha_inverse.core._kernels.projection import (project_effectors, target_status,
-                                                   tick_outcome)
-from cbha_inverse.core._kernels.retraction import apply_linear_step, retract_frames as _retract
+from cbha_inverse.core._kernels import tick as fused
+from cbha_inverse.core._kernels.projection import target_status, tick_outcome
+from cbha_inverse.core._kernels.qp import SOLVED
+from cbha_inverse.core._kernels.retraction import apply_linear_step_into, retract_frames
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
 from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
-                                          ProxsuiteQP, qp_matrices, qp_problem)
+                                          ProxsuiteQP, qp_problem)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
+from cbha_inverse.core.inverse.tick_data import TickData
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
 # targets farther from the base than this many chain lengths are clamped onto that sphere
 _REACH_FACTOR = 2.0
-
-
-class _Linearization(NamedTuple):
-    """What a linearisation tick keeps for the linear ticks that follow it (paper eq. 11)."""
-
-    w_ea: np.ndarray
-    matrices: object
-    offset: np.ndarray            # p_e + J_e K⁻¹ r - W_ea λ_prev (so δ_free = offset - target)
-    free_step: np.ndarray         # K⁻¹ r
-    solved_actuators: np.ndarray  # K⁻¹ J_aᵀ
-    previous: np.ndarray          # λ_prev at the linearisation
-    residual_norm: float
+# an actuator moving more than this fraction of its range in one tick ends a kept linearisation
+_FAST_MOVE = 0.02
 
 
 class InverseSolver:
@@ -134,18 +125,24 @@ class InverseSolver:
                       else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
                                                     (m,))))
         self._external = external_wrenches(model, gravity=gravity).reshape(-1)
-        self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
-        self._active_set = ActiveSetQP(m)
         self._tick = EquilibriumSystem(model, actuators, self._external)
+        self._active_set = ActiveSetQP(m)
+        self._data = TickData(self._tick, effectors, self._scale, self.lower_bounds,
+                              self.upper_bounds, self._rate, self.options,
+                              self._active_set.max_iterations)
+        self._active_set = ActiveSetQP(m, state=self._data.state)
+        self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
         self._m, self._k = m, effectors.n_effectors
-        step = self.options.max_rotation_step
-        self._max_rotation = math.inf if step is None else float(step)
+        self._max_rotation = self._data.max_rotation
         self._effector_frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
         self._effector_offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
         # no effector can be farther from the base than this (overflow-safe targets)
         self._base = np.array(model.base_position, dtype=float)
         self._reach = _REACH_FACTOR * (model.length + np.linalg.norm(
             self._effector_offsets, axis=1))
+        # the frames and the actuation live in the tick data (the compiled tick updates them)
+        self._positions, self._rotations = self._data.positions, self._data.rotations
+        self.actuation = self._data.actuation
         self.reset()
 
     def reset(self, state=None, actuation=None):
@@ -161,14 +158,16 @@ class InverseSolver:
 
         """
         state = rest_state(self.model) if state is None else state
-        self._positions = np.array(state.positions, dtype=float)
-        self._rotations = np.array(state.rotations, dtype=float)
+        self._positions[:] = state.positions
+        self._rotations[:] = state.rotations
         a = np.zeros(len(self.actuator_names)) if actuation is None else actuation
-        self.actuation = np.clip(np.asarray(a, dtype=float), self.lower_bounds, self.upper_bounds)
+        self.actuation[:] = np.clip(np.asarray(a, dtype=float), self.lower_bounds,
+                                    self.upper_bounds)
         self._qp.reset()
         self._active_set.reset()
-        self._linearization = None
-        self._pending = None
+        self._linearised = False      # the tick data holds a valid linearisation
+        self._residual_norm = math.nan
+        self._pending = False         # its linear step with the current actuation is not applied
         self._age = 0
         self._prepared = False
 
@@ -185,24 +184,26 @@ class InverseSolver:
         self.step(targets)
         self.prepare()
         self.step(targets)
+        # the compiled projection that follows a fallback factorization (reset forgets it)
+        fused.project_tick(*self._data.project_arguments)
         self.reset(state, actuation)
 
     def _current(self, in_place=False):
         """Return the frames with the pending linear step applied (stored if ``in_place``)."""
-        if self._pending is None:
+        if not self._pending:
             return self._positions, self._rotations
-        free_step, solved_a, previous = self._pending
+        data = self._data
         positions, rotations = ((self._positions, self._rotations) if in_place
                                 else (self._positions.copy(), self._rotations.copy()))
-        apply_linear_step(positions, rotations, free_step, solved_a, self.actuation - previous,
-                          self._max_rotation)
+        apply_linear_step_into(positions, rotations, *data.step_arguments[2:4], data.change(),
+                               *data.step_arguments[5:])
         return positions, rotations
 
     def _materialise(self):
         """Apply the pending linear step to the stored frames."""
-        if self._pending is not None:
+        if self._pending:
             self._current(in_place=True)
-            self._pending = None
+            self._pending = False
 
     @property
     def state(self):
@@ -280,67 +281,104 @@ class InverseSolver:
                 targets = targets.reshape(1, 3)
             else:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
-        targets = np.ascontiguousarray(targets)
+        if not targets.flags.c_contiguous:
+            targets = np.ascontiguousarray(targets)
         checked = target_status(targets, self._base, self._reach)
         if checked == 1:
             return self._held('rejected', t_start, warnings=('non-finite target rejected',))
         targets, warnings = self._reachable(targets) if checked == 2 else (targets, ())
-        lin = self._linearization
         prepared, self._prepared = self._prepared, False
-        fresh = lin is None or self._age >= self.options.relinearize_every
+        fresh = not self._linearised or self._age >= self.options.relinearize_every
         if fresh:
             self._materialise()
-            previous = self.actuation
-            t_assembly, t_factor, lin = self._linearise(previous)
-            if lin is None:
-                self._linearization = None
+            self._linearised = self._linearise()
+            if not self._linearised:
                 return self._held('not_positive_definite', t_start)
-            self._linearization, self._age = lin, 1
+            self._age = 1
+            t_linearised = time.perf_counter()
         else:
-            previous = self.actuation
-            t_assembly = t_factor = t_start
             self._age = 1 if prepared else self._age + 1
-        delta_free = lin.offset - targets.reshape(-1)
-        t_projection = time.perf_counter()
-        problem = qp_problem(lin.matrices, delta_free, previous, self.lower_bounds,
+            t_linearised = t_start
+        apply_step = self.options.relinearize_every == 1
+        data = self._data
+        if self.options.qp_solver == 'active_set':
+            code, iterations, largest_gap, largest_move, binding = fused.solve_tick(
+                targets, *data.solve_arguments, apply_step)
+            if code == fused.REJECTED:
+                return self._rejected(t_start, 'solved', warnings)
+            if code == SOLVED:
+                return self._finish(targets, 'saturated' if binding else 'solved',
+                                    'solved', iterations, data.mask.copy(), largest_gap,
+                                    largest_move, apply_step, warnings, t_start, t_linearised)
+            # the active set did not converge: proxsuite (status checked) takes over; it has
+            # not seen this Hessian
+            self._active_set.reset()
+            qp_solver, same_hessian = 'proxsuite', False
+        else:
+            qp_solver, same_hessian = self.options.qp_solver, not (fresh or prepared)
+        delta_free = data.offset - targets.reshape(-1)
+        problem = qp_problem(data.matrices, delta_free, self.actuation, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._rate)
-        solution, status = self._solve_qp(problem, same_hessian=not (fresh or prepared))
+        solution, status = self._solve_qp(problem, qp_solver, same_hessian)
         actuation, gap, largest_gap, largest_move, finite = tick_outcome(
-            lin.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
+            data.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
             self.upper_bounds)
         if not finite:
-            # never a NaN actuation, never a poisoned warm start: hold, the next tick recovers
-            self._qp.reset()
-            self._active_set.reset()
-            return self._held('rejected', t_start, solution.status,
-                              warnings + ('QP returned a non-finite actuation: held',))
+            return self._rejected(t_start, solution.status, warnings)
         saturated = binding_bounds(problem, solution.x)
         if status == 'solved' and saturated.any():
             status = 'saturated'
-        if self._age < self.options.relinearize_every and largest_move > 0.02:
+        self.actuation[:] = actuation
+        data.gap[:] = gap
+        if apply_step:
+            apply_linear_step_into(*data.step_arguments[:4], data.change(),
+                                   *data.step_arguments[5:])
+        return self._finish(targets, status, solution.status, solution.iterations, saturated,
+                            largest_gap, largest_move, False, warnings, t_start, t_linearised)
+
+    def _rejected(self, t_start, qp_status, warnings):
+        """Hold after a non-finite QP solution and forget the warm starts."""
+        # never a NaN actuation, never a poisoned warm start: hold, the next tick recovers
+        self._qp.reset()
+        self._active_set.reset()
+        return self._held('rejected', t_start, qp_status,
+                          warnings + ('QP returned a non-finite actuation: held',))
+
+    def _finish(self, targets, status, qp_status, iterations, saturated, largest_gap,
+                largest_move, positions_written, warnings, t_start, t_linearised):
+        """
+        Close a solved tick: age of the linearisation, Newton steps, effector positions, result.
+
+        ``positions_written``: the compiled tick applied the step and wrote the effector
+        positions into the tick data.
+        """
+        data = self._data
+        if self._age < self.options.relinearize_every and largest_move > _FAST_MOVE:
             # the actuation moves fast: the next tick relinearises
             self._age = self.options.relinearize_every
         t_qp = time.perf_counter()
-        self.actuation = actuation
-        self._pending = (lin.free_step, lin.solved_actuators, lin.previous)
         if self.options.relinearize_every == 1:
-            self._materialise()
+            self._pending = False
+            newton = self.options.newton_steps > 1
             for _ in range(self.options.newton_steps - 1):
-                if not self._newton_step(actuation):
+                if not self._newton_step():
                     break
-            effector_positions = self.effectors.positions(self._positions, self._rotations)
+            if positions_written and not newton:
+                effector_positions = data.effector_positions.copy()
+            else:
+                effector_positions = self.effectors.positions(self._positions, self._rotations)
         else:
             # between linearisations the tick is the linear model of paper eq. 11
-            effector_positions = targets + gap.reshape(-1, 3)
+            self._pending = True
+            effector_positions = targets + data.gap.reshape(-1, 3)
         t_end = time.perf_counter()
-        timings = {'assembly': t_assembly - t_start, 'factor': t_factor - t_assembly,
-                   'projection': t_projection - t_factor, 'qp': t_qp - t_projection,
-                   'update': t_end - t_qp, 'total': t_end - t_start}
-        return TickResult(actuation.copy(), effector_positions, status, solution.status,
-                          solution.iterations, saturated, largest_gap, lin.residual_norm, timings,
-                          warnings)
+        timings = {'assembly': t_linearised - t_start, 'factor': 0.0, 'projection': 0.0,
+                   'qp': t_qp - t_linearised, 'update': t_end - t_qp, 'total': t_end - t_start}
+        return TickResult.of_tick(self.actuation.copy(), effector_positions, status, qp_status,
+                                  iterations, saturated, largest_gap, self._residual_norm,
+                                  timings, warnings)
 
-    def _solve_qp(self, problem, same_hessian):
+    def _solve_qp(self, problem, qp_solver, same_hessian):
         """
         Solve the tick's QP (step 3 of the module docstring) with the chosen solver and fallbacks.
 
@@ -349,7 +387,6 @@ class InverseSolver:
         ``'solved'`` or ``'qp_fallback'``.
         """
         status = 'solved'
-        qp_solver = self.options.qp_solver
         if qp_solver == 'active_set':
             solution = self._active_set.solve(problem)
             if solution.ok:
@@ -381,54 +418,60 @@ class InverseSolver:
             False when no factorization of the tangent succeeds (the next step then holds).
 
         """
-        if self._linearization is not None and self._age < self.options.relinearize_every:
+        if self._linearised and self._age < self.options.relinearize_every:
             return True
         self._materialise()
-        _, _, lin = self._linearise(self.actuation)
-        self._linearization, self._age, self._prepared = lin, 0, lin is not None
-        return lin is not None
+        self._linearised = self._linearise()
+        self._age, self._prepared = 0, self._linearised
+        return self._linearised
 
-    def _linearise(self, previous):
+    def _linearise(self):
         """
-        Linearise, factor and project at the stored state (steps 1-2 of the module docstring).
+        Linearise, factor and project at the stored state and actuation (steps 1-2).
 
-        Returns ``(t_assembly, t_factor, linearization)``; the linearisation is ``None`` when no
-        factorization of the tangent succeeds.
+        One compiled entry (:func:`cbha_inverse.core._kernels.tick.linearise_tick`) when the
+        scene allows it; when the band Cholesky fails (or the scene's actuators need the
+        general evaluation), the evaluation, the fallback chain
+        (:meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`) and the
+        compiled projection (:func:`~cbha_inverse.core._kernels.tick.project_tick`). Returns
+        whether a factorization succeeded (the tick data then holds the linearisation).
         """
-        positions, rotations = self._positions, self._rotations
-        tangent, rhs = self._tick.linearise(positions, rotations, previous)
-        t_assembly = time.perf_counter()
-        factor = self._tick.factor(tangent)
+        data, system = self._data, self._tick
+        if data.fused:
+            info, residual_norm = fused.linearise_tick(*data.linearise_arguments,
+                                                       system.tick_cholesky)
+            if info == 0:
+                self._residual_norm = residual_norm
+                return True
+        else:
+            tangent, _ = system.linearise(self._positions, self._rotations, self.actuation)
+            data.linearised[:] = self.actuation
+            if not system.tick_cholesky:
+                tangent = None
+        factor = None
+        if not data.fused and tangent is not None:
+            factor = system.factor(tangent)
         if factor is None:
             # not positive definite: the fallback chain (exact LU, then material Cholesky) of
             # the same evaluation; the residual is exact in every case, so only the
             # convergence rate changes
-            factor = next(self._tick.fallback_factors(positions, rotations, previous,
-                                                      evaluated=True), None)
-        t_factor = time.perf_counter()
+            factor = next(system.fallback_factors(self._positions, self._rotations,
+                                                  self.actuation, evaluated=True), None)
         if factor is None:
-            return t_assembly, t_factor, None
-        solved = factor.solve(rhs)
-        w_ea, w_aa, offset, residual_norm = project_effectors(
-            solved, rhs, positions, rotations, self._effector_frames, self._effector_offsets,
-            previous)
-        matrices = qp_matrices(w_ea, w_aa, self._scale,
-                               energy_weight=self.options.energy_weight,
-                               proximal_weight=self.options.proximal_weight)
-        lin = _Linearization(w_ea, matrices, offset, solved[:, 0], solved[:, 1:], previous,
-                             residual_norm)
-        return t_assembly, t_factor, lin
+            return False
+        data.solved[:] = factor.solve(data.rhs)
+        self._residual_norm = fused.project_tick(*data.project_arguments)
+        return True
 
-    def _newton_step(self, actuation):
-        """Apply one full Newton step at fixed actuation; return whether it succeeded."""
-        tangent, rhs = self._tick.linearise(self._positions, self._rotations, actuation)
+    def _newton_step(self):
+        """Apply one full Newton step at the current actuation; return whether it succeeded."""
+        tangent, rhs = self._tick.linearise(self._positions, self._rotations, self.actuation)
         factor = self._tick.factor(tangent)
         if factor is None:
             return False
         step = factor.solve(rhs[:, :1])
-        self._positions, self._rotations = _retract(self._positions, self._rotations,
-                                                    step.reshape(-1, 6),
-                                                    self.options.max_rotation_step)
+        retract_frames(self._positions, self._rotations, step.reshape(-1, 6),
+                       self.options.max_rotation_step, in_place=True)
         return True
 
     @staticmethod

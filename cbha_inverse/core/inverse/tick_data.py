@@ -1,0 +1,130 @@
+"""
+The buffers of the control tick: the data half of the solver's model / data split.
+
+:class:`TickData` holds every array the two compiled entries of a tick write
+(:func:`cbha_inverse.core._kernels.tick.linearise_tick` and
+:func:`~cbha_inverse.core._kernels.tick.solve_tick`) next to the constant arrays of the model
+they read, and their argument tuples, built once: a tick passes them without building anything.
+The solver (:class:`cbha_inverse.core.inverse.solver.InverseSolver`) owns one; the model
+(chain, actuators, effectors, options) never changes, the data changes every tick. Named
+attributes are views of the stacked arrays (rows in :mod:`cbha_inverse.core._kernels.tick`),
+so the Python side and the compiled side read the same memory.
+"""
+
+import math
+
+from cbha_inverse.core._kernels import tick as rows
+from cbha_inverse.core.inverse.qp import QPMatrices
+import numpy as np
+
+
+class TickData:
+    """
+    Preallocated buffers of one solver's ticks, and the entries' argument tuples.
+
+    Parameters
+    ----------
+    system : cbha_inverse.core.system.EquilibriumSystem
+        The solver's evaluator (its assembly index and buffers are shared).
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
+        The effector points (``k``).
+    scale, lower_bounds, upper_bounds : (m,) ndarray
+        ``σ`` and the actuator bounds.
+    rate_limit : (m,) ndarray or None
+        Largest change per tick (``None``: no limit, an infinite rate for the compiled QP).
+    options : cbha_inverse.core.inverse.results.InverseOptions
+        Energy and proximal weights, rotation step.
+    max_iterations : int
+        Active-set iteration limit.
+
+    Attributes
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins of the solver's state.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations of the solver's state.
+    actuation : (m,) ndarray  [N or Pa]
+        The current actuation.
+    linearised : (m,) ndarray
+        ``λ_prev`` of the current linearisation.
+    solved : (6n, m + 1) ndarray
+        ``K⁻¹ [r, J_aᵀ]`` of the current linearisation.
+    offset : (3k,) ndarray  [m]
+        ``p_e + J_e K⁻¹ r - W_ea λ_prev`` (so ``δ_free = offset - target``).
+    w_ea : (3k, m) ndarray
+        ``W_ea`` of the current linearisation.
+    gap : (3k,) ndarray  [m]
+        The last solved tick's predicted gap ``W_ea λ + δ_free``.
+    mask : (m,) bool ndarray
+        After a solved compiled tick, the binding bounds.
+    state : (m,) int8 ndarray
+        The active set (warm start of the exact QP).
+    effector_positions : (k, 3) ndarray  [m]
+        Effector positions of the state after a compiled tick that applied its step.
+    matrices : cbha_inverse.core.inverse.qp.QPMatrices
+        The current QP matrices, as views.
+    fused : bool
+        Whether the linearisation runs as one compiled entry (see
+        :meth:`cbha_inverse.core.system.EquilibriumSystem.fused_terms`).
+
+    """
+
+    def __init__(self, system, effectors, scale, lower_bounds, upper_bounds, rate_limit,
+                 options, max_iterations):
+        """Allocate every buffer and build the argument tuples."""
+        n, m, k = system.n, system.m, effectors.n_effectors
+        self.positions = np.zeros((n + 1, 3))
+        self.rotations = np.zeros((n + 1, 3, 3))
+        self.vectors = np.zeros((rows.ACTUATOR_ROWS, m))
+        self.vectors[rows.SCALE] = scale
+        self.vectors[rows.LOWER] = lower_bounds
+        self.vectors[rows.UPPER] = upper_bounds
+        self.vectors[rows.RATE] = math.inf if rate_limit is None else rate_limit
+        self.actuation = self.vectors[rows.ACTUATION]
+        self.linearised = self.vectors[rows.LINEARISED]
+        self.solved = np.zeros((6 * n, m + 1))
+        self.rhs = system.rhs
+        self.matrices_stack = np.zeros((rows.MATRIX_ROWS, m, m))
+        self.effector_matrices = np.zeros((2, 3 * k, m))
+        self.gaps = np.zeros((3, 3 * k))
+        self.offset, self.gap = self.gaps[rows.OFFSET], self.gaps[rows.GAP]
+        self.w_ea = self.effector_matrices[rows.W_EA]
+        self.flags = np.zeros((2, m), dtype=np.int8)
+        self.state = self.flags[rows.STATE]
+        self.mask = np.zeros(m, dtype=np.bool_)
+        self.effector_positions = np.zeros((k, 3))
+        self.matrices = QPMatrices(self.matrices_stack[rows.HESSIAN],
+                                   self.matrices_stack[rows.TRACKING],
+                                   self.effector_matrices[rows.WEIGHTED_W],
+                                   self.vectors[rows.SCALE], options.proximal_weight)
+        frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
+        offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
+        moved, levers = np.zeros((3 * k, m + 1)), np.zeros((k, 3))
+        weights = np.array([options.energy_weight, options.proximal_weight], dtype=float)
+        max_rotation = (math.inf if options.max_rotation_step is None
+                        else float(options.max_rotation_step))
+        self.max_rotation = max_rotation
+        self.project_arguments = (self.positions, self.rotations, self.vectors, self.rhs,
+                                  self.solved, self.matrices_stack, self.effector_matrices,
+                                  self.gaps, moved, frames, offsets, levers, weights)
+        terms = system.fused_terms()
+        self.fused = terms is not None
+        self.linearise_arguments = None if terms is None else (
+            (self.positions, self.rotations, self.vectors) + terms
+            + (self.solved, self.matrices_stack, self.effector_matrices, self.gaps, moved, frames,
+               offsets, levers, weights))
+        self.solve_arguments = (
+            self.vectors, self.matrices_stack, self.effector_matrices, self.gaps, self.flags,
+            self.mask, np.zeros(m, dtype=np.int64), float(options.proximal_weight),
+            int(max_iterations), 1e-6, self.positions, self.rotations, self.solved,
+            np.zeros((n, 6)), np.zeros((7, 3)), frames, offsets, self.effector_positions,
+            max_rotation)
+        self.step_arguments = (self.positions, self.rotations, self.solved[:, 0],
+                               self.solved[:, 1:], self.vectors[rows.CHANGE], max_rotation,
+                               np.zeros((n, 6)), np.zeros((7, 3)))
+
+    def change(self):
+        """Write and return ``λ - λ_prev`` of the current linearisation (the pending step)."""
+        change = self.vectors[rows.CHANGE]
+        np.subtract(self.actuation, self.linearised, out=change)
+        return change

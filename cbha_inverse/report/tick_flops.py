@@ -1,0 +1,161 @@
+"""
+The arithmetic of one control tick, counted from its shapes, and this machine's rate for it.
+
+:func:`tick_flops` counts the floating-point operations of a tick that linearises (the kernels of
+:func:`cbha_inverse.core._kernels.tick.linearise_tick` and
+:func:`~cbha_inverse.core._kernels.tick.solve_tick`), loop by loop from the kernels: a multiply
+and an add are 2 flops, a division, square root or trigonometric call 1. Only the arithmetic is
+counted (no copies, no index arithmetic); the active-set QP is counted for one iteration, its
+usual count on a tracked target. :func:`measured_flop_rate` times the compiled multiply-add
+chains of :mod:`cbha_inverse.core._kernels.flop_rate`; ``flops / rate`` is the tick's arithmetic
+bound, the time it would take if it did nothing but its arithmetic at that rate
+(``cbha_bench_inverse`` prints the measured tick over it).
+"""
+
+import time
+from typing import NamedTuple
+
+from cbha_inverse.core._kernels.flop_rate import multiply_add_chains
+
+# flops of one link in link_pass_into (loops of the kernel): the geometry, deformation, stress,
+# B^T K, the local wrench, the rotated tangent and its geometric terms ...
+_LINK_BASE = 1372
+# ... the rest-rotation product when a link's rest rotation is not the identity ...
+_LINK_REST_ROTATION = 45
+# ... per condensed cavity column (its wrench, G0 + H δ, and load stiffness p H) ...
+_LINK_PER_CAVITY = 156
+# ... and per wrench column (rotation to world axes, gathering onto the two frames)
+_LINK_PER_COLUMN = 51
+# cable_pass_into: per routing point (lever, point, force, wrench, moment block) and per span
+# (unit vector, force, projector, the six summed 3 x 3 products)
+_CABLE_PER_POINT = 75
+_CABLE_PER_SPAN = 330
+# one frame of the retraction (rotation exponential and product, position update)
+_RETRACT_PER_FRAME = 90
+
+
+class TickShapes(NamedTuple):
+    """
+    The sizes that fix a tick's arithmetic.
+
+    Attributes
+    ----------
+    n : int
+        Links (``N = 6 n`` unknowns).
+    m : int
+        Actuators.
+    k : int
+        Effectors.
+    kd : int
+        Half-bandwidth of the tangent.
+    cavities : int
+        Condensed cavity columns of the link pass (0 without cavities).
+    rest_rotations : bool
+        Whether the links have rest rotations other than the identity.
+    points, spans : int
+        Cable routing points and spans (0 without cables).
+    values : int
+        Assembled tangent values (link and cable blocks).
+    jacobian_entries : int
+        Nonzero entries of ``J_aᵀ`` (the ``W_aa`` product skips the zeros).
+
+    """
+
+    n: int
+    m: int
+    k: int
+    kd: int
+    cavities: int
+    rest_rotations: bool
+    points: int
+    spans: int
+    values: int
+    jacobian_entries: int
+
+
+def tick_shapes(solver):
+    """
+    Return the shapes of a solver's tick.
+
+    Parameters
+    ----------
+    solver : cbha_inverse.core.inverse.solver.InverseSolver
+        After at least one tick (``J_aᵀ`` is read from its last linearisation).
+
+    Returns
+    -------
+    TickShapes
+
+    """
+    system = solver._tick
+    (_, _, rest_rotations_t, cavity_wrench, _, _, _, _, _, frames, spans, _, _, _, _, _,
+     _, values, _, rhs) = system.fused_terms()
+    return TickShapes(system.n, system.m, len(solver.effector_names), system.kd,
+                      cavity_wrench.shape[1], rest_rotations_t.shape[0] > 0, frames.size,
+                      spans.shape[1], values.size, int((rhs[:, 1:] != 0.0).sum()))
+
+
+def tick_flops(shapes):
+    """
+    Return the flops of one linearising tick per phase (module docstring).
+
+    Parameters
+    ----------
+    shapes : TickShapes
+        The tick's sizes.
+
+    Returns
+    -------
+    dict of str -> int
+        ``links``, ``cables``, ``assembly``, ``factor``, ``solve``, ``projection``, ``qp``,
+        ``update`` and their ``total``.
+
+    """
+    n, m, k, kd = shapes.n, shapes.m, shapes.k, shapes.kd
+    size, rows, columns = 6 * n, 3 * shapes.k, m + 1
+    link = (_LINK_BASE + _LINK_REST_ROTATION * shapes.rest_rotations
+            + _LINK_PER_CAVITY * shapes.cavities + _LINK_PER_COLUMN * (1 + shapes.cavities))
+    # band Cholesky: per column a square root, `below` scalings and the rank-one update of the
+    # trailing triangle; the solve: forward and backward sweeps over every right-hand side
+    factor = sum(1 + below + below * (below + 1) for below in
+                 (min(kd, size - 1 - j) for j in range(size)))
+    solve = sum(2 * columns * (1 + 2 * min(kd, size - 1 - j)) for j in range(size))
+    projection = (rows * columns * 12 + rows * m * 2 + shapes.jacobian_entries * m * 2 + size * 2
+                  # the QP matrices: W σ, Wᵀ W (upper triangle), normalisation, Hessian
+                  + rows * m * 2 + rows * m * (m + 1) + m * m * 6)
+    # QP vectors, one active-set iteration (free-block Cholesky, its solves, the multiplier
+    # checks), the outcome and the binding bounds
+    qp = (m * (2 * rows + 6) + (m ** 3) // 3 + 4 * m * m + 2 * m * m
+          + (2 * rows * m + 4 * m + 5 * k) + 2 * m * m)
+    update = size * 2 * m + n * _RETRACT_PER_FRAME + 18 * k
+    counts = {'links': n * link,
+              'cables': _CABLE_PER_POINT * shapes.points + _CABLE_PER_SPAN * shapes.spans,
+              'assembly': 2 * shapes.values + size, 'factor': factor, 'solve': solve,
+              'projection': projection, 'qp': qp, 'update': update}
+    counts['total'] = sum(counts.values())
+    return counts
+
+
+def measured_flop_rate(repeats=20, n_steps=100_000):
+    """
+    Return this machine's rate of independent multiply-add chains [flop/s], best of some runs.
+
+    Parameters
+    ----------
+    repeats : int
+        Runs (the fastest counts: a loaded machine only slows runs down).
+    n_steps : int
+        Steps per run (16 flops each; 1.6 Mflop, ~0.2 ms, per run by default).
+
+    Returns
+    -------
+    float  [flop/s]
+
+    """
+    multiply_add_chains(1, 0.5)
+    best = float('inf')
+    for _ in range(repeats):
+        started = time.perf_counter()
+        multiply_add_chains(n_steps, 0.5)
+        best = min(best, time.perf_counter() - started)
+    return 16.0 * n_steps / best

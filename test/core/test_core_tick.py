@@ -1,0 +1,155 @@
+"""
+The compiled tick: two entries over the solver's preallocated data, nothing allocated per tick.
+
+The fused linearisation is checked against the composed public steps (evaluation, band
+Cholesky, multi-RHS solve, projection, QP matrices); the allocations of 1,000 ticks are counted
+by numba's runtime statistics (compiled code) and by ``tracemalloc`` (Python and numpy).
+"""
+
+import dataclasses
+import tracemalloc
+
+from cbha_inverse.core._kernels import tick as fused
+from cbha_inverse.core._kernels.projection import project_effectors
+from cbha_inverse.core.inverse.qp import qp_matrices
+from cbha_inverse.core.inverse.results import TickResult
+from cbha_inverse.core.system import EquilibriumSystem
+from cbha_inverse.scene import load_scene
+from numba.core.runtime import _nrt_python, rtsys
+import numpy as np
+import pytest
+
+
+def _circle(scene, n_ticks, radius=0.003):
+    phase = 2.0 * np.pi * np.arange(n_ticks) / 200
+    targets = np.repeat(np.asarray(scene.workspace_center, dtype=float)[None], n_ticks, axis=0)
+    targets[:, -1, 1] += radius * np.cos(phase)
+    targets[:, -1, 2] += radius * np.sin(phase)
+    return targets
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'tendon_10f_16c', 'cbha'])
+def test_fused_linearisation_equals_the_composed_steps(name):
+    """linearise_tick vs linearise + factor + solve + project_effectors + qp_matrices."""
+    scene = load_scene(name)
+    solver = scene.make_inverse_solver()
+    for target in _circle(scene, 5):
+        solver.step(target)
+    data, system = solver._data, solver._tick
+    assert data.fused
+    positions, rotations = data.positions.copy(), data.rotations.copy()
+    actuation = data.actuation.copy()
+    info, residual_norm = fused.linearise_tick(*data.linearise_arguments, True)
+    assert info == 0
+    tangent, rhs = system.linearise(positions, rotations, actuation)
+    solved = system.factor(tangent).solve(rhs)
+    w_ea, w_aa, offset, norm = project_effectors(
+        solved, rhs, positions, rotations, solver._effector_frames, solver._effector_offsets,
+        actuation)
+    matrices = qp_matrices(w_ea, w_aa, solver._scale, energy_weight=solver.options.energy_weight,
+                           proximal_weight=solver.options.proximal_weight)
+    np.testing.assert_array_equal(data.solved, solved)
+    np.testing.assert_array_equal(data.w_ea, w_ea)
+    np.testing.assert_array_equal(data.offset, offset)
+    np.testing.assert_array_equal(data.matrices.hessian, matrices.hessian)
+    np.testing.assert_array_equal(data.matrices.weighted_w, matrices.weighted_w)
+    np.testing.assert_array_equal(data.linearised, actuation)
+    assert residual_norm == norm == pytest.approx(np.linalg.norm(rhs[:, 0]), rel=1e-12)
+    # the state is only read
+    np.testing.assert_array_equal(data.positions, positions)
+
+
+def _array_arguments(*tuples):
+    return sum(isinstance(value, np.ndarray) for values in tuples for value in values)
+
+
+@pytest.mark.parametrize('name, every', [('tendon_6f_8c', 1), ('cbha', 1), ('cbha', 5)])
+def test_a_thousand_ticks_allocate_nothing_but_their_results(name, every):
+    """
+    Compiled code: no allocation but numba's wrapper of each array argument; Python: the result.
+
+    numba counts every allocation of its runtime; each array passed from Python gets one
+    wrapper (freed on return), so a tick that allocates nothing of its own makes exactly as
+    many allocations as it passes arrays: the linearisation's (and, between linearisations,
+    the linear step's), the solve's and the target check's three. ``tracemalloc`` then sees
+    numpy keep only the results' own arrays (actuation, effector positions, saturated flags)
+    and no memory left behind by ticks whose results are dropped.
+    """
+    scene = load_scene(name)
+    solver = scene.make_inverse_solver(relinearize_every=every)
+    targets = _circle(scene, 1100)
+    for target in targets[:100]:
+        solver.step(target)
+    data = solver._data
+    linearisations = sum(1 for i in range(1000) if i % every == 0)
+    _nrt_python.memsys_enable_stats()
+    try:
+        before = rtsys.get_allocation_stats()
+        results = [solver.step(target) for target in targets[100:]]
+        after = rtsys.get_allocation_stats()
+    finally:
+        _nrt_python.memsys_disable_stats()
+    assert all(r.status in ('solved', 'saturated') for r in results)
+    per_solve = _array_arguments(data.solve_arguments) + 1          # + the targets
+    per_linearisation = _array_arguments(data.linearise_arguments)
+    if every > 1:
+        # a kept linearisation's step is applied before the next one
+        per_linearisation += _array_arguments(data.step_arguments)
+    made = after.alloc - before.alloc
+    extra = made - 1000 * (per_solve + 3)
+    # every tick solves; every 'every'-th tick (or more, when the actuation moves fast)
+    # linearises
+    assert extra % per_linearisation == 0
+    assert linearisations <= extra // per_linearisation <= 1000
+    assert after.free - before.free == made
+    del results
+
+    m, k = len(scene.actuator_names), len(scene.effector_names)
+    domain = [tracemalloc.DomainFilter(True, np.lib.tracemalloc_domain)]
+    tracemalloc.start()
+    try:
+        start = tracemalloc.take_snapshot().filter_traces(domain)
+        results = [solver.step(target) for target in targets[100:]]
+        kept = sum(stat.size_diff for stat in tracemalloc.take_snapshot().filter_traces(
+            domain).compare_to(start, 'filename'))
+        del results, start
+        # after one run the interpreter's free lists are filled: a second leaves nothing
+        traced, _ = tracemalloc.get_traced_memory()
+        for target in targets[100:]:
+            solver.step(target)
+        left, _ = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert kept == 1000 * (8 * m + 24 * k + m)
+    # below one byte per tick (the interpreter's own caches move by a few hundred bytes)
+    assert abs(left - traced) < 1000
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+@pytest.mark.parametrize('every', [1, 5])
+def test_the_kernels_one_by_one_give_the_fused_ticks(name, every, monkeypatch):
+    """A scene the fused pass cannot evaluate runs the same kernels one by one: same ticks."""
+    scene = load_scene(name)
+    fused_solver = scene.make_inverse_solver(relinearize_every=every)
+    monkeypatch.setattr(EquilibriumSystem, 'fused_terms', lambda self: None)
+    composed = scene.make_inverse_solver(relinearize_every=every)
+    assert fused_solver._data.fused and not composed._data.fused
+    for target in _circle(scene, 12, radius=0.01):
+        expected, got = fused_solver.step(target), composed.step(target)
+        assert got.status == expected.status
+        np.testing.assert_allclose(got.actuation, expected.actuation, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(got.effector_positions, expected.effector_positions,
+                                   rtol=0, atol=1e-12)
+        assert got.residual_norm == pytest.approx(expected.residual_norm, rel=1e-9)
+
+
+def test_a_result_of_the_tick_is_the_constructors_result():
+    """TickResult.of_tick builds the same frozen result as TickResult(...)."""
+    fields = (np.arange(3.0), np.ones((1, 3)), 'solved', 'solved', 1, np.zeros(3, dtype=bool),
+              0.5, 2.0, {'total': 1e-5}, ('note',))
+    fast, plain = TickResult.of_tick(*fields), TickResult(*fields)
+    assert repr(fast) == repr(plain)
+    assert dataclasses.astuple(fast)[2:5] == dataclasses.astuple(plain)[2:5]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        fast.status = 'rejected'
+    assert dataclasses.replace(fast, status='saturated').status == 'saturated'
