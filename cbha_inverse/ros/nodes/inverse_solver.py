@@ -28,6 +28,7 @@ import time
 
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.inverse.solver import TargetCorrector
+from cbha_inverse.robot.ordering import DROPPED, StampOrder
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
     bounded_command, check_point, command_bounds, controller_decision, StalenessWatch,
@@ -134,6 +135,7 @@ class InverseSolverNode(Node):
         self.measured = None
         self.target_watch = StalenessWatch(p.target_timeout)
         self.feedback_watch = StalenessWatch(p.feedback_timeout)
+        self.measured_order = StampOrder()
         self.command = self.vent_command.copy()
         self.decision = 'waiting'
         self.enabled = True
@@ -198,11 +200,14 @@ class InverseSolverNode(Node):
         check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
         if check.ok:
             return point
-        key = f'{topic}.{check.reason}'
-        self.rejected[key] = self.rejected.get(key, 0) + 1
-        self.get_logger().warn(f'rejected {topic}: {check.detail} (total {self.rejected[key]})',
-                               throttle_duration_sec=self.params.log_throttle)
+        self._count_rejected(topic, check.reason, check.detail)
         return None
+
+    def _count_rejected(self, topic, reason, detail):
+        key = f'{topic}.{reason}'
+        self.rejected[key] = self.rejected.get(key, 0) + 1
+        self.get_logger().warn(f'rejected {topic}: {detail} (total {self.rejected[key]})',
+                               throttle_duration_sec=self.params.log_throttle)
 
     def _on_target(self, message):
         received = time.perf_counter()
@@ -219,13 +224,20 @@ class InverseSolverNode(Node):
         point = self._accepted_point('tip/measured', message)
         if point is None:
             return
+        # a duplicated or reordered (older) sample is not integrated twice or backwards
+        stamp = stamp_ns(message.header.stamp)
+        verdict = self.measured_order.admit(stamp, self.feedback_watch.stale(time.monotonic()))
+        if verdict in DROPPED:
+            self._count_rejected('tip/measured', verdict, f'stamp {stamp} ns is {verdict} '
+                                 f'(last used {self.measured_order.last} ns)')
+            return
         self.measured = point
         self.feedback_watch.mark(time.monotonic())
         if self.params.mode == 'closed' and self.target is not None and self.enabled:
             saturated = self.last_result is not None and self.last_result.status == 'saturated'
             # the target of the measurement's own time: delivery delays and bursts of
             # measurements stay out of the integral
-            reference = self.target_history.at(stamp_ns(message.header.stamp), self.target)
+            reference = self.target_history.at(stamp, self.target)
             self.corrector.update(reference[None], point[None], saturated=saturated)
             self.target_error = float(np.linalg.norm(reference - point))
 
