@@ -40,6 +40,7 @@ CONSOLE_SCRIPTS = [
     'stereo_calibrate = cbha_inverse.vision.calibrate_cli:main',
     'cbha_bench_stereo = cbha_inverse.report.bench_stereo:main',
     'robotino_bridge = cbha_inverse.ros.nodes.robotino_bridge:main',
+    'fault_relay = cbha_inverse.ros.nodes.fault_relay:main',
     'cbha_build_robotino_msgs = cbha_inverse.interfaces.robotino_msgs_build:main',
     'cbha_bag = cbha_inverse.ros.bag.cli:main',
     'cbha_bench_bag = cbha_inverse.report.bench_bag:main',
