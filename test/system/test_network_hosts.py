@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from ros_helpers import loop_lag_error
 
-HOLD, SETTLE, SCORED = 1.0, 1.0, 4.0
+HOLD, SETTLE, SCORED = 0.5, 1.0, 3.0
 """Trajectory start hold, settling after it, then the scored time [s]."""
 MAX_PRESSURE = 150000.0
 """The CBHA's command ceiling [Pa] (config/inverse_solver.yaml, config/cbha_sim.yaml)."""
@@ -68,9 +68,7 @@ def start_probe(lab, host, env, namespace='/cbha'):
 
 
 def recorded(probe):
-    """
-    Return what the probe printed: targets, tips (stamp [s], xyz [m]), commands (time, values).
-    """
+    """Return what the probe printed: targets, tips (stamp, xyz), commands (time, values)."""
     out = {'T': [], 'P': [], 'C': []}
     for _, line in list(probe.lines):
         kind, _, rest = line.partition(' ')
@@ -173,3 +171,91 @@ def test_loss_and_jitter_on_feedback_and_commands(capsys):
     assert commands and not invalid_commands(commands)
     # the tip lags the target by the loop lag and the network delay, there and back
     assert timed <= LAG_BOUND + TrajectoryParams.speed * 2 * 0.01 and cross <= 1e-3
+
+
+def test_link_cut_holds_then_the_loop_resumes(capsys):
+    """
+    The robot's cable is pulled for 2 s: hold at ``feedback_timeout``, resume after, no burst.
+
+    The solver (``stale_action: hold``, ``feedback_timeout`` 0.5 s) must log the hold once and
+    the resumption once, within 2 s of the cable's return, with the same process (no restart);
+    the commands that reach the robot after the return must not come in a burst: within 25 ms
+    of the first one at most 5 (a 100 Hz stream gives 3; the held commands that a writer of
+    depth 10 keeps came as 10 or more within a few ms).
+    """
+    skip_without_namespaces()
+    cut_for, timeout = 2.0, 0.5
+    with NetworkLab(['robot', 'control']) as lab:
+        env = lab.ros_env()
+        probe = start_probe(lab, 'robot', env)
+        nodes = start_arm(lab, env, control=('control', ('-p', f'feedback_timeout:={timeout}')))
+        first = first_target_time(probe)
+        time.sleep(max(first + HOLD + SETTLE - time.time(), 0.0))
+        cut = time.time()
+        lab.set_link('robot', up=False)
+        time.sleep(cut_for)
+        back = time.time()
+        lab.set_link('robot', up=True)
+        time.sleep(3.0)
+        solver = nodes['inverse_solver']
+        alive = {name: p.poll() is None for name, p in nodes.items()}
+        holds = log_events(solver, r'^run -> hold')
+        runs = log_events(solver, r'^hold -> run')
+        _, tips, commands = recorded(probe)
+    after = [t for t, _ in commands if t > back]
+    tips_after = [t for t, _ in tips if t > back]
+    burst = sum(1 for t in after if t - after[0] <= 0.025) if after else 0
+    with capsys.disabled():
+        print(f'\nlink cut {cut_for:g} s: hold {holds[0] - cut if holds else math.nan:.2f} s '
+              f'after the cut, run again {runs[-1] - back if runs else math.nan:.2f} s after the '
+              f'return; {burst} commands within 25 ms of the first one after the return')
+    assert all(alive.values()), alive
+    assert len([t for t in holds if t > cut]) == 1, holds
+    assert timeout <= holds[-1] - cut <= timeout + 1.0
+    resumed = [t for t in runs if t > back]
+    assert len(resumed) == 1 and resumed[0] - back <= 2.0, runs
+    assert tips_after and after and not invalid_commands(commands)
+    assert burst <= 5
+
+
+def test_two_arms_on_one_domain_do_not_cross_talk(capsys):
+    """
+    ``/cbha_a`` and ``/cbha_b``, both across the hosts on one domain: each tracks its own path.
+
+    The two trajectories are circles of different radii about one centre: each arm's targets
+    must all lie on its own circle, its tip must follow its own path (cross-track RMS <= 1 mm)
+    and stay far from the other's.
+    """
+    skip_without_namespaces()
+    center = np.array(TrajectoryParams.center)
+    radii = {'/cbha_a': TrajectoryParams.radius, '/cbha_b': 0.5 * TrajectoryParams.radius}
+    with NetworkLab(['robot', 'control']) as lab:
+        env = lab.ros_env()
+        probes = {ns: start_probe(lab, 'robot', env, ns) for ns in radii}
+        nodes = {ns: start_arm(lab, env, ns, trajectory=('-p', f'radius:={r}'))
+                 for ns, r in radii.items()}
+        for probe in probes.values():
+            first_target_time(probe)
+        time.sleep(HOLD + SETTLE + SCORED)
+        runs = {ns: recorded(p) for ns, p in probes.items()}
+        alive = {f'{ns}{name}': p.poll() is None for ns, arm in nodes.items()
+                 for name, p in arm.items()}
+    lines = []
+    for ns, (targets, tips, commands) in runs.items():
+        other = next(n for n in radii if n != ns)
+        points = np.array([p for _, p in targets])
+        radius = np.linalg.norm(points[:, 1:] - center[1:], axis=1)     # the yz plane
+        moving = radius > 0.5 * radii[ns]       # not the start point (at the centre's side)
+        start = targets[0][0] + HOLD + SETTLE
+        tip_points = np.array([p for t, p in tips if start <= t <= targets[-1][0]])
+        own = cross_track_errors(points[[t >= start - 0.5 for t, _ in targets]], tip_points)
+        lines.append(f'{ns}: cross-track RMS {np.sqrt(np.mean(own ** 2)) * 1e3:.3f} mm')
+        np.testing.assert_allclose(radius[moving], radii[ns], atol=1e-9)
+        assert np.sqrt(np.mean(own ** 2)) <= 1e-3, lines
+        assert commands and not invalid_commands(commands)
+        # the other arm's circle is 30 mm away: no tip of this arm comes near it
+        away = np.abs(np.linalg.norm(tip_points[:, 1:] - center[1:], axis=1) - radii[other])
+        assert away.min() > 0.01
+    with capsys.disabled():
+        print('\ntwo arms: ' + ', '.join(lines))
+    assert all(alive.values()), alive

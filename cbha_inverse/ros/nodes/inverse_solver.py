@@ -39,7 +39,7 @@ from cbha_inverse.ros.common.conversions import (
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.common.qos import COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
@@ -150,7 +150,7 @@ class InverseSolverNode(Node):
         self.tick_times = TimingStats()
         self.latencies = TimingStats()
         self.command_publisher = self.create_publisher(
-            Float64MultiArray, 'pressure_command', COMMAND_QOS)
+            Float64MultiArray, 'pressure_command', COMMAND_WRITER_QOS)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
         self.create_subscription(PointStamped, 'tip/measured', self._on_measured, MEASURED_QOS)
