@@ -129,6 +129,17 @@ class NetworkLab:
         """Plug (``up``) or pull the cable of ``host`` at the switch."""
         self.ip('switch', 'link', 'set', self.port(host), 'up' if up else 'down')
 
+    def traffic(self, host):
+        """Return the bytes ``(received, sent)`` so far on ``host``'s ``eth0``."""
+        result = subprocess.run(self.enter(host) + ['cat', '/proc/net/dev'], capture_output=True,
+                                text=True, timeout=10, check=True)
+        for line in result.stdout.splitlines():
+            name, _, counters = line.partition(':')
+            if name.strip() == 'eth0':
+                values = counters.split()
+                return int(values[0]), int(values[8])
+        raise RuntimeError(f'no eth0 in {host}')
+
     # processes --------------------------------------------------------------------------------
     def ros_env(self, static_peers=False, **extra):
         """

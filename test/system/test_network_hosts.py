@@ -131,12 +131,17 @@ def test_closed_loop_circle_across_three_hosts(discovery, capsys):
         env = lab.ros_env(static_peers=static)
         probe = start_probe(lab, 'cameras', env)
         nodes = start_arm(lab, env)
+        first_target_time(probe)
+        before, started = lab.traffic('robot'), time.monotonic()
         timed, cross, cross_max = run_scored(probe)
+        after, elapsed = lab.traffic('robot'), time.monotonic() - started
         _, _, commands = recorded(probe)
         alive = {name: p.poll() is None for name, p in nodes.items()}
     with capsys.disabled():
         print(f'\n{discovery}: circle across hosts, RMS {timed * 1e3:.3f} mm at the tip stamp, '
-              f'cross-track RMS {cross * 1e3:.3f} mm (max {cross_max * 1e3:.3f})')
+              f'cross-track RMS {cross * 1e3:.3f} mm (max {cross_max * 1e3:.3f}); robot host '
+              f'{(after[0] - before[0]) / elapsed / 1e3:.1f} kB/s in, '
+              f'{(after[1] - before[1]) / elapsed / 1e3:.1f} kB/s out')
     assert all(alive.values()), alive
     assert commands and not invalid_commands(commands)
     assert timed <= LAG_BOUND and cross <= 1e-3
