@@ -1,4 +1,4 @@
-"""``role:=`` splits each composition between the machines of a cell, and ``all`` is their union."""
+"""``role:=`` splits each composition between the machines of a cell; ``all`` is their union."""
 
 import re
 
@@ -36,5 +36,6 @@ def test_each_role_starts_its_part_and_all_starts_every_node_once(name):
 
 
 def test_an_unknown_role_is_refused():
-    with pytest.raises(ArgumentError, match=re.escape('role:=lab is not one of robot|control|cameras|all')):
+    message = 'role:=lab is not one of robot|control|cameras|all'
+    with pytest.raises(ArgumentError, match=re.escape(message)):
         resolve(COMPOSITIONS['sim'], {'role': 'lab'})

@@ -127,6 +127,10 @@ class InverseSolverNode(Node):
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
+        self._setup_interfaces()
+
+    def _setup_interfaces(self):
+        """Create the controller's state, topics, services and timers: the node runs."""
         p = self.params
         self.period = 1.0 / p.rate_hz
         self.target = None
