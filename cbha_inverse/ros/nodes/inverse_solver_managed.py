@@ -51,7 +51,8 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters.
 
     """
-    return run_node(ManagedInverseSolverNode, NODE_NAME, argv, params_class=InverseSolverParams)
+    return run_node(ManagedInverseSolverNode, NODE_NAME, argv, params_class=InverseSolverParams,
+                    executable='inverse_solver_managed')
 
 
 if __name__ == '__main__':

@@ -52,7 +52,7 @@ def main(argv=None):
 
     """
     return run_node(ManagedRobotinoBridgeNode, NODE_NAME, argv,
-                    params_class=RobotinoBridgeParams)
+                    params_class=RobotinoBridgeParams, executable='robotino_bridge_managed')
 
 
 if __name__ == '__main__':
