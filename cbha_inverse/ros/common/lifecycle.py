@@ -12,11 +12,13 @@ A managed node is its plain node driven through the ROS 2 lifecycle (``rclpy.lif
   second), then its topics, services and timers go: **inactive**;
 - ``cleanup``: back to unconfigured; ``shutdown`` from any state: vents first when active.
 
-The plain node class provides ``_setup_model()``, ``_setup_interfaces()`` and ``_vent()`` (which
-returns the publisher it vented on); :class:`Managed` adds the transitions.
+The plain node class provides ``_setup_model()`` and ``_setup_interfaces()``; the managed class
+(``class ManagedX(XNode, Managed)``) names the node, its parameters and its executable and adds
+``_vent()`` (which returns the publisher it vented on); :class:`Managed` adds the transitions.
 """
 
 from cbha_inverse.ros.common.params import declare_parameters, ParameterError
+from cbha_inverse.ros.common.runner import run_node
 from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.publisher import Publisher
@@ -45,15 +47,38 @@ class Managed(LifecycleNode):
     """
     The lifecycle transitions of a managed node (base class after the plain node's class).
 
-    Use as ``class ManagedX(XNode, Managed)`` with ``__init__`` calling :meth:`_init_managed`.
+    Use as ``class ManagedX(XNode, Managed)``, with ``__init__ = Managed.__init__`` (the plain
+    node's constructor would set everything up at once) and the class attributes below.
+
+    Attributes
+    ----------
+    node_name, executable : str
+        Node name (that of the plain node, for its params files) and executable name.
+    params_class : type
+        The plain node's parameters dataclass.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.lifecycle.LifecycleNode`` (``context``, ``namespace``,
+        ``parameter_overrides``).
+
+    Raises
+    ------
+    ParameterError
+        On invalid parameters (the node is destroyed first).
+
     """
 
-    def _init_managed(self, node_name, params_class, **kwargs):
-        """Initialise the lifecycle node and declare the parameters (``ParameterError``)."""
-        LifecycleNode.__init__(self, node_name, **kwargs)
+    node_name = None
+    executable = None
+    params_class = None
+
+    def __init__(self, **kwargs):
+        LifecycleNode.__init__(self, self.node_name, **kwargs)
         self._active_interfaces = None
         try:
-            self.params = declare_parameters(self, params_class)
+            self.params = declare_parameters(self, self.params_class)
         except ParameterError:
             self.destroy_node()
             raise
@@ -115,3 +140,24 @@ class Managed(LifecycleNode):
         for entity in self._active_interfaces:
             _destroy(self, entity)
         self._active_interfaces = None
+
+
+def run_managed(node_class, argv=None):
+    """
+    Run a managed node until SIGINT/SIGTERM; its transitions come from a lifecycle manager.
+
+    Parameters
+    ----------
+    node_class : type
+        A :class:`Managed` node class.
+    argv : list of str, optional
+        Command line (default ``sys.argv``).
+
+    Returns
+    -------
+    int
+        0 on a clean shutdown, 2 on invalid parameters.
+
+    """
+    return run_node(node_class, node_class.node_name, argv, params_class=node_class.params_class,
+                    executable=node_class.executable)

@@ -131,20 +131,10 @@ class FaultRelayNode(Node):
 
 def main(argv=None):
     """
-    Run the ``fault_relay`` node until SIGINT/SIGTERM.
+    Run ``fault_relay`` until SIGINT/SIGTERM (0; 2 on invalid parameters).
 
-    Parameters
-    ----------
-    argv : list of str, optional
-        Command line (default ``sys.argv``), e.g. ``['fault_relay', '--ros-args', '-p',
-        'inputs:=[tip/measured/wire]', '-p', 'outputs:=[tip/measured]', '-p',
-        'types:=[geometry_msgs/msg/PointStamped]', '-p', 'qos:=[sensor]', '-p', 'drop:=0.05']``.
-
-    Returns
-    -------
-    int
-        0 on a clean shutdown, 2 on invalid parameters.
-
+    E.g. ``fault_relay --ros-args -p 'inputs:=[tip/measured/wire]' -p 'outputs:=[tip/measured]'
+    -p 'types:=[geometry_msgs/msg/PointStamped]' -p 'qos:=[sensor]' -p drop:=0.05``.
     """
     return run_node(FaultRelayNode, NODE_NAME, argv, params_class=FaultRelayParams)
 

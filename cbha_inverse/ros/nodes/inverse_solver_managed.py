@@ -9,31 +9,18 @@ vent command (``vent_pressure``) and stop.
 
 import sys
 
-from cbha_inverse.ros.common.lifecycle import Managed
-from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.ros.common.lifecycle import Managed, run_managed
 from cbha_inverse.ros.nodes.inverse_solver import (
     InverseSolverNode, InverseSolverParams, NODE_NAME)
 
 
 class ManagedInverseSolverNode(InverseSolverNode, Managed):
-    """
-    ``inverse_solver`` under the lifecycle: unconfigured at construction.
+    """``inverse_solver`` under the lifecycle: unconfigured at construction."""
 
-    Parameters
-    ----------
-    **kwargs
-        Passed to ``rclpy.lifecycle.LifecycleNode`` (``context``, ``namespace``,
-        ``parameter_overrides``).
-
-    Raises
-    ------
-    ParameterError
-        On invalid parameters (the node is destroyed first).
-
-    """
-
-    def __init__(self, **kwargs):
-        self._init_managed(NODE_NAME, InverseSolverParams, **kwargs)
+    node_name = NODE_NAME
+    executable = 'inverse_solver_managed'
+    params_class = InverseSolverParams
+    __init__ = Managed.__init__
 
     def _vent(self):
         """Publish the vent command; return its publisher."""
@@ -42,17 +29,8 @@ class ManagedInverseSolverNode(InverseSolverNode, Managed):
 
 
 def main(argv=None):
-    """
-    Run ``inverse_solver_managed`` until SIGINT/SIGTERM (transitions come from its manager).
-
-    Returns
-    -------
-    int
-        0 on a clean shutdown, 2 on invalid parameters.
-
-    """
-    return run_node(ManagedInverseSolverNode, NODE_NAME, argv, params_class=InverseSolverParams,
-                    executable='inverse_solver_managed')
+    """Run ``inverse_solver_managed`` until SIGINT/SIGTERM (0; 2 on invalid parameters)."""
+    return run_managed(ManagedInverseSolverNode, argv)
 
 
 if __name__ == '__main__':

@@ -9,31 +9,18 @@ set-points to the driver and stop.
 
 import sys
 
-from cbha_inverse.ros.common.lifecycle import Managed
-from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.ros.common.lifecycle import Managed, run_managed
 from cbha_inverse.ros.nodes.robotino_bridge import (
     NODE_NAME, RobotinoBridgeNode, RobotinoBridgeParams)
 
 
 class ManagedRobotinoBridgeNode(RobotinoBridgeNode, Managed):
-    """
-    ``robotino_bridge`` under the lifecycle: unconfigured at construction.
+    """``robotino_bridge`` under the lifecycle: unconfigured at construction."""
 
-    Parameters
-    ----------
-    **kwargs
-        Passed to ``rclpy.lifecycle.LifecycleNode`` (``context``, ``namespace``,
-        ``parameter_overrides``).
-
-    Raises
-    ------
-    ParameterError
-        On invalid parameters (the node is destroyed first).
-
-    """
-
-    def __init__(self, **kwargs):
-        self._init_managed(NODE_NAME, RobotinoBridgeParams, **kwargs)
+    node_name = NODE_NAME
+    executable = 'robotino_bridge_managed'
+    params_class = RobotinoBridgeParams
+    __init__ = Managed.__init__
 
     def _vent(self):
         """Send the vent set-points to the driver; return their publisher."""
@@ -42,17 +29,8 @@ class ManagedRobotinoBridgeNode(RobotinoBridgeNode, Managed):
 
 
 def main(argv=None):
-    """
-    Run ``robotino_bridge_managed`` until SIGINT/SIGTERM (transitions come from its manager).
-
-    Returns
-    -------
-    int
-        0 on a clean shutdown, 2 on invalid parameters.
-
-    """
-    return run_node(ManagedRobotinoBridgeNode, NODE_NAME, argv,
-                    params_class=RobotinoBridgeParams, executable='robotino_bridge_managed')
+    """Run ``robotino_bridge_managed`` until SIGINT/SIGTERM (0; 2 on invalid parameters)."""
+    return run_managed(ManagedRobotinoBridgeNode, argv)
 
 
 if __name__ == '__main__':
