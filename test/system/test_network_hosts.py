@@ -17,6 +17,7 @@ import re
 import sys
 import time
 
+from cbha_inverse.interfaces.robotino_msgs_build import interface_environment
 from cbha_inverse.metrics import cross_track_errors, tracking_errors
 from cbha_inverse.paths import config_path
 from cbha_inverse.ros.nodes.trajectory import TrajectoryParams
@@ -41,17 +42,20 @@ def params_file(node):
 
 
 def start_arm(lab, env, namespace='/cbha', robot=('robot', ()), control=('control', ()),
-              trajectory=()):
+              trajectory=(), plant=True):
     """
     Start ``cbha_sim`` in the robot host, ``inverse_solver`` and ``trajectory`` in the control.
 
     ``robot`` and ``control`` are ``(host, extra ros args)`` of the plant and the solver;
-    ``trajectory`` extra ros args of the trajectory. Returns the processes by node name.
+    ``trajectory`` extra ros args of the trajectory; ``plant=False``: no ``cbha_sim``. Returns
+    the processes by node name.
     """
     ns = ('-r', f'__ns:={namespace}')
+    nodes = {'cbha_sim': lab.node(robot[0], 'cbha_sim', '--params-file',
+                                  params_file('cbha_sim'), *ns, *robot[1], env=env)
+             } if plant else {}
     return {
-        'cbha_sim': lab.node(robot[0], 'cbha_sim', '--params-file', params_file('cbha_sim'),
-                             *ns, *robot[1], env=env),
+        **nodes,
         'inverse_solver': lab.node(control[0], 'inverse_solver', '--params-file',
                                    params_file('inverse_solver'), *ns, '-p', 'mode:=closed',
                                    *control[1], env=env),
@@ -237,6 +241,44 @@ def test_link_cut_holds_then_the_loop_resumes(capsys):
     assert len(resumed) == 1 and resumed[0] - back <= 2.0, runs
     assert tips_after and after and not invalid_commands(commands)
     assert burst <= 5
+
+
+def test_link_cut_vents_the_bridge_at_its_timeout_and_it_resumes(robotino_msgs):
+    """
+    The robot PC's cable pulled for 2 s with ``robotino_bridge`` there: it vents once, resumes.
+
+    ``robotino_bridge`` (robot host, ``command_timeout`` 0.5 s, ``stale_action: vent``) gets
+    ``pressure_command`` from an open-loop ``inverse_solver`` on the control host: it must log
+    ``run -> vent`` once, ``command_timeout`` after the cut, and ``vent -> run`` once, within
+    2 s of the return, with the same process.
+    """
+    skip_without_namespaces()
+    cut_for, timeout = 2.0, 0.5
+    with NetworkLab(['robot', 'control']) as lab:
+        env = lab.ros_env()
+        bridge = lab.node('robot', 'robotino_bridge', '--params-file',
+                          params_file('robotino_bridge'), '-r', '__ns:=/cbha',
+                          '-p', f'command_timeout:={timeout}', '-p', 'stale_action:=vent',
+                          env=interface_environment(robotino_msgs, env))
+        start_arm(lab, env, control=('control', ('-p', 'mode:=open')), plant=False,
+                  trajectory=('-p', 'wait_for_subscribers:=1'))
+        assert wait_for(lambda: log_events(bridge, r'^waiting -> run'), 40.0), 'no command'
+        time.sleep(1.0)
+        cut = time.time()
+        lab.set_link('robot', up=False)
+        time.sleep(cut_for)
+        back = time.time()
+        lab.set_link('robot', up=True)
+        assert wait_for(lambda: log_events(bridge, r'^vent -> run'), 3.0)
+        time.sleep(0.5)
+        alive = bridge.poll() is None
+        vents = log_events(bridge, r'^run -> vent')
+        runs = [t for t in log_events(bridge, r'^vent -> run') if t > back]
+    print(f'bridge: vent {vents[0] - cut if vents else math.nan:.2f} s after the cut, run '
+          f'{runs[0] - back if runs else math.nan:.2f} s after the return')
+    assert alive
+    assert len(vents) == 1 and timeout <= vents[0] - cut <= timeout + 1.0, vents
+    assert len(runs) == 1 and runs[0] - back <= 2.0, runs
 
 
 def test_two_arms_on_one_domain_do_not_cross_talk(capsys):
