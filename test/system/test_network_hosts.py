@@ -88,16 +88,21 @@ def first_target_time(probe, timeout=40.0):
     return recorded(probe)[0][0][0]
 
 
+RUNNING = r'^(waiting|hold) -> run'
+"""The solver's log line when it starts running."""
+
+
 def running_since(probe, solver, timeout=40.0):
     """
     Wait until the loop runs; return since when [s] (wall clock, as the stamps).
 
-    Running: the solver left its initial hold (``hold -> run``: feedback arrived, on a loaded
-    machine discovery across the hosts can take seconds) and the probe receives tips.
+    Running: the solver runs (``waiting -> run`` or ``hold -> run``: a target and feedback
+    arrived; on a loaded machine discovery across the hosts can take seconds) and the probe
+    receives tips.
     """
-    assert wait_for(lambda: log_events(solver, r'^hold -> run') and recorded(probe)[1],
+    assert wait_for(lambda: log_events(solver, RUNNING) and recorded(probe)[1],
                     timeout), 'the loop did not start'
-    return log_events(solver, r'^hold -> run')[0]
+    return log_events(solver, RUNNING)[0]
 
 
 def scored_start(probe, solver):
@@ -126,14 +131,19 @@ def invalid_commands(commands):
         math.isfinite(v) and 0.0 <= v <= MAX_PRESSURE for v in c)]
 
 
-def log_events(process, pattern):
-    """Return the ROS log times [s] of ``process``'s lines that match ``pattern``."""
-    times = []
+def log_messages(process, pattern):
+    """Return ``(ROS log time [s], message)`` of ``process``'s lines that match ``pattern``."""
+    found = []
     for _, line in list(process.lines):
         match = re.match(r'\[\w+\] \[(\d+\.\d+)\] \[[^]]+\]: (.*)', line)
         if match and re.search(pattern, match.group(2)):
-            times.append(float(match.group(1)))
-    return times
+            found.append((float(match.group(1)), match.group(2)))
+    return found
+
+
+def log_events(process, pattern):
+    """Return the ROS log times [s] of ``process``'s lines that match ``pattern``."""
+    return [t for t, _ in log_messages(process, pattern)]
 
 
 def run_scored(probe, solver):
@@ -224,19 +234,22 @@ def test_link_cut_holds_then_the_loop_resumes(capsys):
         time.sleep(3.0)
         solver = nodes['inverse_solver']
         alive = {name: p.poll() is None for name, p in nodes.items()}
-        holds = log_events(solver, r'^run -> hold')
+        holds = log_messages(solver, r'^run -> hold')
         runs = log_events(solver, r'^hold -> run')
         _, tips, commands = recorded(probe)
     after = [t for t, _ in commands if t > back]
     tips_after = [t for t, _ in tips if t > back]
     burst = sum(1 for t in after if t - after[0] <= 0.025) if after else 0
     with capsys.disabled():
-        print(f'\nlink cut {cut_for:g} s: hold {holds[0] - cut if holds else math.nan:.2f} s '
-              f'after the cut, run again {runs[-1] - back if runs else math.nan:.2f} s after the '
+        print(f'\nlink cut {cut_for:g} s: hold {holds[0][0] - cut if holds else math.nan:.2f} s '
+              f'after the cut ({holds[0][1] if holds else ""}), run again {runs[-1] - back if runs else math.nan:.2f} s after the '
               f'return; {burst} commands within 25 ms of the first one after the return')
     assert all(alive.values()), alive
-    assert len([t for t in holds if t > cut]) == 1, holds
-    assert timeout <= holds[-1] - cut <= timeout + 1.0
+    # one hold, after the cut, once the feedback was feedback_timeout old (the last tip came
+    # before the cut, earlier when the plant stalls on a loaded machine)
+    assert len(holds) == 1 and 0.0 < holds[0][0] - cut <= timeout + 1.0, holds
+    age = float(re.search(r'no tip/measured for (\d+\.\d+) s', holds[0][1]).group(1))
+    assert timeout <= age <= timeout + 0.25, holds
     resumed = [t for t in runs if t > back]
     assert len(resumed) == 1 and resumed[0] - back <= 2.0, runs
     assert tips_after and after and not invalid_commands(commands)
@@ -249,8 +262,8 @@ def test_link_cut_vents_the_bridge_at_its_timeout_and_it_resumes(robotino_msgs):
 
     ``robotino_bridge`` (robot host, ``command_timeout`` 0.5 s, ``stale_action: vent``) gets
     ``pressure_command`` from an open-loop ``inverse_solver`` on the control host: it must log
-    ``run -> vent`` once, ``command_timeout`` after the cut, and ``vent -> run`` once, within
-    2 s of the return, with the same process.
+    ``run -> vent`` once, at most ``command_timeout`` + 1 s after the cut, and ``vent -> run``
+    once, within 2 s of the return, with the same process.
     """
     skip_without_namespaces()
     cut_for, timeout = 2.0, 0.5
@@ -277,7 +290,8 @@ def test_link_cut_vents_the_bridge_at_its_timeout_and_it_resumes(robotino_msgs):
     print(f'bridge: vent {vents[0] - cut if vents else math.nan:.2f} s after the cut, run '
           f'{runs[0] - back if runs else math.nan:.2f} s after the return')
     assert alive
-    assert len(vents) == 1 and timeout <= vents[0] - cut <= timeout + 1.0, vents
+    # the last command may have come before the cut, earlier on a loaded machine
+    assert len(vents) == 1 and 0.0 < vents[0] - cut <= timeout + 1.0, vents
     assert len(runs) == 1 and runs[0] - back <= 2.0, runs
 
 
