@@ -241,9 +241,11 @@ def test_link_cut_holds_then_the_loop_resumes(capsys):
     tips_after = [t for t, _ in tips if t > back]
     burst = sum(1 for t in after if t - after[0] <= 0.025) if after else 0
     with capsys.disabled():
-        print(f'\nlink cut {cut_for:g} s: hold {holds[0][0] - cut if holds else math.nan:.2f} s '
-              f'after the cut ({holds[0][1] if holds else ""}), run again {runs[-1] - back if runs else math.nan:.2f} s after the '
-              f'return; {burst} commands within 25 ms of the first one after the return')
+        hold_at = holds[0][0] - cut if holds else math.nan
+        run_at = runs[-1] - back if runs else math.nan
+        print(f'\nlink cut {cut_for:g} s: hold {hold_at:.2f} s after the cut '
+              f'({holds[0][1] if holds else ""}), run again {run_at:.2f} s after the return; '
+              f'{burst} commands within 25 ms of the first one after the return')
     assert all(alive.values()), alive
     # one hold, after the cut, once the feedback was feedback_timeout old (the last tip came
     # before the cut, earlier when the plant stalls on a loaded machine)
