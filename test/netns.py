@@ -149,6 +149,10 @@ class NetworkLab:
         ``ROS_STATIC_PEERS`` = every host's address (unicast only).
         """
         env = child_env()
+        # untraced: coverage's tracing of child processes (``make test``) slows the nodes'
+        # callbacks several times, and the loop's accuracy is what these hosts measure
+        for name in ('COVERAGE_PROCESS_CONFIG', 'COVERAGE_PROCESS_START'):
+            env.pop(name, None)
         if static_peers:
             env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
             env['ROS_STATIC_PEERS'] = ';'.join(self.addresses.values())
