@@ -37,6 +37,11 @@ TARGET_QOS = reliable(10)
 COMMAND_QOS = reliable(10)
 """``pressure_command`` (std_msgs/Float64MultiArray): reliable, depth 10 (ros2_control style)."""
 
+COMMAND_WRITER_QOS = reliable(1)
+"""The controller's ``pressure_command`` writer: reliable, depth 1, so that after a link outage
+the reader receives the newest command only, not a burst of those held meanwhile (a writer of
+depth 1 matches readers of any depth)."""
+
 MEASURED_QOS = qos_profile_sensor_data
 """``tip/measured`` (geometry_msgs/PointStamped): sensor data (best effort, depth 5)."""
 

@@ -89,18 +89,20 @@ def spin_until_stopped(node, stop, done=None):
         executor.shutdown()
 
 
-def node_help(node_name, node_class, params_class):
+def node_help(node_name, node_class, params_class, executable=None):
     """
     Return the ``--help`` text of a node.
 
     Parameters
     ----------
     node_name : str
-        Executable and node name.
+        Node name (and params-file stem).
     node_class : type
         The node class (its docstring's summary is the description).
     params_class : type or None
         Its parameters dataclass.
+    executable : str, optional
+        Executable name, when it differs from the node name.
 
     Returns
     -------
@@ -109,8 +111,9 @@ def node_help(node_name, node_class, params_class):
 
     """
     summary = (node_class.__doc__ or '').strip().splitlines()[0] if node_class.__doc__ else ''
-    lines = [f'usage: {node_name} [-h] [--ros-args [-r __ns:=/cbha] [--params-file FILE] '
-             '[-p NAME:=VALUE] ...]', '', f'{node_name}: {summary}', '',
+    executable = executable or node_name
+    lines = [f'usage: {executable} [-h] [--ros-args [-r __ns:=/cbha] [--params-file FILE] '
+             '[-p NAME:=VALUE] ...]', '', f'{executable}: {summary}', '',
              f'Parameters (name, type, default, range; set them in config/{node_name}.yaml or '
              'with -p):']
     if params_class is not None:
@@ -124,7 +127,7 @@ def _user_arguments(argv):
     return args[:args.index('--ros-args')] if '--ros-args' in args else args
 
 
-def run_node(node_class, node_name, argv=None, *, params_class=None):
+def run_node(node_class, node_name, argv=None, *, params_class=None, executable=None):
     """
     Create one node, spin it until SIGINT/SIGTERM and shut down cleanly.
 
@@ -140,6 +143,8 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
         Command line (default ``sys.argv``), with ``--ros-args ...``.
     params_class : type, optional
         The node's parameters dataclass: ``--help`` lists it, params files are checked against it.
+    executable : str, optional
+        Executable name for ``--help``, when it differs from the node name.
 
     Returns
     -------
@@ -153,7 +158,7 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
     argv = list(sys.argv if argv is None else argv)
     user = _user_arguments(argv)
     if '-h' in user or '--help' in user:
-        print(node_help(node_name, node_class, params_class))
+        print(node_help(node_name, node_class, params_class, executable))
         return 0
     try:
         check_params_files(argv, node_name, params_class)

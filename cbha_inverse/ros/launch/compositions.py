@@ -79,12 +79,15 @@ class NodeEntry:
     overrides : tuple of Override
     when : tuple of (str, str) or None
         Only started if argument ``when[0]`` equals ``when[1]``.
+    role : str
+        The machine that runs it (:data:`ROLES`): with ``role:=<it>`` or ``role:=all``.
 
     """
 
     executable: str
     overrides: tuple = ()
     when: tuple = None
+    role: str = 'control'
 
 
 @dataclass(frozen=True)
@@ -138,8 +141,15 @@ class NodeProcess:
     parameters: dict
 
 
+ROLES = ('robot', 'control', 'cameras')
+"""The machines of a cell (``docs/multi-host.md``): the arm's driver or plant, the controller,
+the camera PC."""
+
+
 def _common(feedback_default, feedback_choices, mode_default):
     return (
+        Argument('role', 'all', 'the nodes of one machine (docs/multi-host.md), or all',
+                 (*ROLES, 'all')),
         Argument('namespace', '/cbha', 'namespace of every node (topics are relative)'),
         Argument('scene', 'cbha.yaml', 'scene YAML of the model (and the plant): a path, or a '
                  'name in config/scenes'),
@@ -162,14 +172,15 @@ COMPOSITIONS = {
          # the demo rig (640x512, f = 700 px) renders at 30 frames/s on two cores; the full
          # 1280x1024 default rig reached ~12 pairs/s there with many images dropped
          NodeEntry('cbha_sim', (SCENE, Override('tip_output', 'stereo', STEREO),
-                                Override('camera_rig', 'cameras/demo_rig.yaml', STEREO))),
-         NodeEntry('stereo_tracker', when=('feedback', 'stereo')))),
+                                Override('camera_rig', 'cameras/demo_rig.yaml', STEREO)),
+                   role='robot'),
+         NodeEntry('stereo_tracker', when=('feedback', 'stereo'), role='cameras'))),
     'robot': Composition(
         'robot', 'real arm: inverse_solver + robotino_bridge (+ stereo_tracker)',
         _common('stereo', ('stereo', 'none'), 'closed'),
         (NodeEntry('inverse_solver', (SCENE, Override('mode', '{mode}'))),
-         NodeEntry('stereo_tracker', when=('feedback', 'stereo')),
-         NodeEntry('robotino_bridge'))),
+         NodeEntry('stereo_tracker', when=('feedback', 'stereo'), role='cameras'),
+         NodeEntry('robotino_bridge', role='robot'))),
 }
 
 
@@ -216,7 +227,7 @@ def resolve(composition, values):
 
     processes = []
     for node in composition.nodes:
-        if not applies(node.when):
+        if not applies(node.when) or chosen['role'] not in ('all', node.role):
             continue
         params = chosen[f'{node.executable}_params'] or str(config_path(f'{node.executable}.yaml'))
         processes.append(NodeProcess(

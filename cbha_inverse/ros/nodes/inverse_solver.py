@@ -28,6 +28,7 @@ import time
 
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.inverse.solver import TargetCorrector
+from cbha_inverse.robot.ordering import DROPPED, StampOrder
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
     bounded_command, check_point, command_bounds, controller_decision, StalenessWatch,
@@ -38,7 +39,7 @@ from cbha_inverse.ros.common.conversions import (
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.common.qos import COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
@@ -126,6 +127,10 @@ class InverseSolverNode(Node):
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
+        self._setup_interfaces()
+
+    def _setup_interfaces(self):
+        """Create the controller's state, topics, services and timers: the node runs."""
         p = self.params
         self.period = 1.0 / p.rate_hz
         self.target = None
@@ -134,6 +139,7 @@ class InverseSolverNode(Node):
         self.measured = None
         self.target_watch = StalenessWatch(p.target_timeout)
         self.feedback_watch = StalenessWatch(p.feedback_timeout)
+        self.measured_order = StampOrder()
         self.command = self.vent_command.copy()
         self.decision = 'waiting'
         self.enabled = True
@@ -148,7 +154,7 @@ class InverseSolverNode(Node):
         self.tick_times = TimingStats()
         self.latencies = TimingStats()
         self.command_publisher = self.create_publisher(
-            Float64MultiArray, 'pressure_command', COMMAND_QOS)
+            Float64MultiArray, 'pressure_command', COMMAND_WRITER_QOS)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
         self.create_subscription(PointStamped, 'tip/measured', self._on_measured, MEASURED_QOS)
@@ -198,11 +204,14 @@ class InverseSolverNode(Node):
         check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
         if check.ok:
             return point
-        key = f'{topic}.{check.reason}'
-        self.rejected[key] = self.rejected.get(key, 0) + 1
-        self.get_logger().warn(f'rejected {topic}: {check.detail} (total {self.rejected[key]})',
-                               throttle_duration_sec=self.params.log_throttle)
+        self._count_rejected(topic, check.reason, check.detail)
         return None
+
+    def _count_rejected(self, topic, reason, detail):
+        key = f'{topic}.{reason}'
+        self.rejected[key] = self.rejected.get(key, 0) + 1
+        self.get_logger().warn(f'rejected {topic}: {detail} (total {self.rejected[key]})',
+                               throttle_duration_sec=self.params.log_throttle)
 
     def _on_target(self, message):
         received = time.perf_counter()
@@ -219,13 +228,20 @@ class InverseSolverNode(Node):
         point = self._accepted_point('tip/measured', message)
         if point is None:
             return
+        # a duplicated or reordered (older) sample is not integrated twice or backwards
+        stamp = stamp_ns(message.header.stamp)
+        verdict = self.measured_order.admit(stamp, self.feedback_watch.stale(time.monotonic()))
+        if verdict in DROPPED:
+            self._count_rejected('tip/measured', verdict, f'stamp {stamp} ns is {verdict} '
+                                 f'(last used {self.measured_order.last} ns)')
+            return
         self.measured = point
         self.feedback_watch.mark(time.monotonic())
         if self.params.mode == 'closed' and self.target is not None and self.enabled:
             saturated = self.last_result is not None and self.last_result.status == 'saturated'
             # the target of the measurement's own time: delivery delays and bursts of
             # measurements stay out of the integral
-            reference = self.target_history.at(stamp_ns(message.header.stamp), self.target)
+            reference = self.target_history.at(stamp, self.target)
             self.corrector.update(reference[None], point[None], saturated=saturated)
             self.target_error = float(np.linalg.norm(reference - point))
 

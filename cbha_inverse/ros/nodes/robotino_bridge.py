@@ -158,14 +158,23 @@ class RobotinoBridgeNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         try:
             self.params = declare_parameters(self, RobotinoBridgeParams)
-            self.set_pressures_type, readings_type = import_robotino_msgs()
+            self._setup_model()
         except (ParameterError, ModuleNotFoundError):
             self.destroy_node()
             raise
+        self._setup_interfaces()
+
+    def _setup_model(self):
+        """Import the driver's messages; the channel map and the vent set-points."""
+        self.set_pressures_type, self.readings_type = import_robotino_msgs()
         p = self.params
         self.channels = np.array([CHANNELS[name] for name in p.valve_names])
         self.vent_bar = robotino_bar_command(np.full(len(p.valve_names), p.vent_pressure),
                                              p.valve_names, p.max_bar, (0.0, 0.0))
+
+    def _setup_interfaces(self):
+        """Create the bridge's state, topics and timers: the node runs."""
+        p = self.params
         self.set_points = self.vent_bar.copy()
         self.sent = None
         self.measured = None
@@ -186,7 +195,7 @@ class RobotinoBridgeNode(Node):
         self.pots_publisher = self.create_publisher(JointState, 'string_pots', MEASURED_QOS)
         self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
                                  COMMAND_QOS)
-        self.create_subscription(readings_type, p.driver_readings_topic, self._on_readings,
+        self.create_subscription(self.readings_type, p.driver_readings_topic, self._on_readings,
                                  DRIVER_READINGS_QOS)
         self.timer = self.create_timer(1.0 / p.rate_hz, self._on_timer)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
