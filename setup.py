@@ -34,6 +34,7 @@ CONSOLE_SCRIPTS = [
     'cbha_report = cbha_inverse.report.cli:main',
     'cbha_bench_core = cbha_inverse.report.bench_core:main',
     'cbha_bench_inverse = cbha_inverse.report.bench_inverse:main',
+    'cbha_bench_estimator = cbha_inverse.report.bench_estimator:main',
     'cbha_fem_report = cbha_inverse.report.fem_report:main',
     'cbha_launch = cbha_inverse.ros.launch.launcher:main',
     'cbha_scene = cbha_inverse.scene.cli:main',

@@ -69,9 +69,6 @@ class StuckDetector:
         self.count, self.window = int(count), int(window)
         self.tolerance, self.motion = float(tolerance), float(motion)
         self._history = np.zeros((max(self.window, 1), self.count))
-        # row i: the pots other than i
-        self._others = np.array([[j for j in range(self.count) if j != i]
-                                 for i in range(self.count)], dtype=int).reshape(self.count, -1)
         self.reset()
 
     def reset(self):
@@ -104,7 +101,9 @@ class StuckDetector:
         spread = self._history.max(axis=0) - self._history.min(axis=0)
         still = spread < self.tolerance
         self.stuck &= still
-        if still.any() and self.count > 1:
-            others = np.median(spread[self._others], axis=1)
-            self.stuck |= still & (others > self.motion)
+        if still.any():
+            # the median of the others exceeds `motion` when more than half of them do
+            moving = spread > self.motion
+            others = moving.sum() - moving
+            self.stuck |= still & (2 * others > self.count - 1)
         return self.stuck.copy()
