@@ -25,6 +25,7 @@ CONSOLE_SCRIPTS = [
     # nodes (node name = executable name = config/<name>.yaml)
     'trajectory = cbha_inverse.ros.nodes.trajectory:main',
     'inverse_solver = cbha_inverse.ros.nodes.inverse_solver:main',
+    'shape_estimator = cbha_inverse.ros.nodes.shape_estimator:main',
     'cbha_sim = cbha_inverse.ros.nodes.cbha_sim:main',
     'stereo_tracker = cbha_inverse.ros.nodes.stereo_tracker:main',
     'cbha_excite = cbha_inverse.ros.nodes.cbha_excite:main',
