@@ -55,7 +55,11 @@ class EstimatorOptions:
         Random walk of the effective actuation per update (its prior when no pressure is
         measured).
     initial_actuation_std : float  [Pa]
-        Prior standard deviation of the first estimate.
+        Prior standard deviation of the first estimate, and the random walk of an update after
+        one that was not settled.
+    settle_sigma : float
+        An update is settled when every pot used is within this many standard deviations of
+        its prediction; only then is the outlier test applied and the walk the small one.
     payload_std : float or None  [kg]
         Prior standard deviation of an unknown mass at the last frame (a payload, its weight
         along the scene's gravity); None: no such unknown.
@@ -85,8 +89,9 @@ class EstimatorOptions:
     """
 
     pressure_std: float = 1.0e4
-    actuation_walk_std: float = 2.0e4
+    actuation_walk_std: float = 20000.0
     initial_actuation_std: float = 5.0e4
+    settle_sigma: float = 4.0
     payload_std: float = None
     payload_walk_std: float = 1.0e-4
     outlier_sigma: float = 8.0
@@ -204,6 +209,8 @@ class ShapeEstimator:
         walk = [self.options.actuation_walk_std] * self._m + [
             self.options.payload_walk_std] * self._n_mass
         self._walk = (np.asarray(walk) / self._scale) ** 2
+        self._settle_walk = self._walk.copy()
+        self._settle_walk[:self._m] = (self.options.initial_actuation_std / _PRESSURE_SCALE) ** 2
         self._pressure_weight = (_PRESSURE_SCALE / self.options.pressure_std) ** 2
         self._no_pressure = np.zeros(0)
         self._effector_frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
@@ -267,6 +274,8 @@ class ShapeEstimator:
         self._ranks = {}
         self._settled = False
         self.gain_error = np.zeros(self._m)
+        self._increment = np.zeros(self._m + self._n_mass)
+        self._last_pressures = None
         self._last = None
 
     @property
@@ -311,6 +320,12 @@ class ShapeEstimator:
         if reason is not None:
             return self._rejected(reason, started)
         stuck = self._stuck.update(lengths)
+        if pressures is not None:
+            # the prediction: the effective actuation moves as the measured pressures do
+            if self._last_pressures is not None:
+                self._increment[:self._m] = ((pressures - self._last_pressures)
+                                             * (1.0 + self.gain_error))
+            self._last_pressures = pressures
         for _ in range(max(1, self.options.iterations)):
             estimate = self._step(lengths, pressures, stuck)
             if estimate is None:
@@ -377,16 +392,20 @@ class ShapeEstimator:
                     else pressures * (1.0 + self.gain_error) / _PRESSURE_SCALE)
         z, covariance, predicted, ratio, active, w_sz = length_update(
             jacobian @ solved, ell0, lengths, self.sensors.noise_std, self._scale,
-            x_previous / self._scale, self._covariance, self._walk, measured,
+            x_previous / self._scale, (x_previous + self._increment) / self._scale,
+            self._covariance, self._walk if self._settled else self._settle_walk, measured,
             self._pressure_weight, self.options.outlier_sigma, self._settled, stuck)
         x = z * self._scale
+        self._increment = np.zeros_like(x)
         w_ex, _, _, _ = project_effectors(solved, columns, positions, rotations,
                                           self._effector_frames, self._effector_offsets,
                                           x_previous)
         w_tip = w_ex[-3:] * self._scale
         apply_linear_step(positions, rotations, solved[:, 0], solved[:, 1:], x - x_previous,
                           self.options.max_rotation_step)
-        self._settled = bool(np.all(np.abs(x - x_previous)[:m] < self.options.pressure_std))
+        # settled: every used pot within settle_sigma of its prediction (else the next update
+        # lets the actuation move by initial_actuation_std, as from far away)
+        self._settled = bool(np.all(ratio[active] < self.options.settle_sigma))
         self._x, self._covariance = x, covariance
         if pressures is not None and active.all() and self._settled:
             self._learn_gain(x[:m], pressures)

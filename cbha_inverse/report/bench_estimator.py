@@ -8,7 +8,8 @@ sections; at every pose its pot lengths, with Gaussian noise, and its pressures 
 table gives the update time (median and p99; goal: median <= 100 us), the inverse solver's tick
 on the same scene in the same run (for the ratio on a loaded machine), the estimated tip's RMS
 error against the plant's true tip and the open-loop model's (the nominal forward solve at the
-same pressures), and how many updates were degraded.
+same pressures), and how many updates were degraded (``--stuck-pot`` freezes one pot from the
+middle of the lap on).
 """
 
 import argparse
@@ -75,7 +76,7 @@ def plant_calibration(stiffness_error, gain_error, payload):
 
 
 def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10, payload=0.0,
-          seed=0, options=None):
+          seed=0, options=None, stuck_pot=None):
     """
     Run the lap and collect the timings and errors.
 
@@ -93,6 +94,8 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
         Seed of the noise.
     options : EstimatorOptions, optional
         The estimator's options.
+    stuck_pot : int, optional
+        This pot keeps its reading from the middle of the measured lap on.
 
     Returns
     -------
@@ -119,9 +122,13 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
         nominal_state = open_loop.state
         model.append(open_loop.effector_positions[-1])
     times, ticks, errors, open_errors, degraded = [], [], [], [], 0
+    frozen = None
     for k in range(laps):
-        for pressures, (tip, lengths), open_tip in zip(lap, truth, model):
+        for i, (pressures, (tip, lengths), open_tip) in enumerate(zip(lap, truth, model)):
             readings = nominal.sensors.readings(lengths + noise * rng.standard_normal(6))
+            if stuck_pot is not None and k == laps - 1 and i >= n_poses // 2:
+                frozen = readings[stuck_pot] if frozen is None else frozen
+                readings[stuck_pot] = frozen
             estimate = estimator.update(readings, pressures)
             tick = solver.step(tip)
             if k == 0:
@@ -135,7 +142,8 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
             'tick_median': float(np.median(ticks)),
             'rms': float(np.sqrt(np.mean(np.square(errors)))),
             'open_loop_rms': float(np.sqrt(np.mean(np.square(open_errors)))),
-            'degraded': int(degraded), 'updates': len(times)}
+            'degraded': int(degraded), 'updates': len(times),
+            'finite': bool(np.all(np.isfinite(errors)))}
 
 
 def main(argv=None):
@@ -161,12 +169,15 @@ def main(argv=None):
     parser.add_argument('--payload', type=float, default=0.0, help='plant tip payload [kg]')
     parser.add_argument('--estimate-payload', type=float, default=None, metavar='STD',
                         help='estimate the payload with this prior std [kg]')
+    parser.add_argument('--stuck-pot', type=int, default=None, metavar='INDEX',
+                        help='freeze this pot from the middle of the measured lap on')
     parser.add_argument('--json', help='write the row to this JSON file')
     args = parser.parse_args(argv)
     started = time.perf_counter()
     row = bench(args.poses, noise=args.noise, stiffness_error=args.stiffness_error,
                 gain_error=args.gain_error, payload=args.payload,
-                options=EstimatorOptions(payload_std=args.estimate_payload))
+                options=EstimatorOptions(payload_std=args.estimate_payload),
+                stuck_pot=args.stuck_pot)
     verdict = 'ok' if row['median'] <= GOAL else 'over'
     median, p99, tick = (row[key] * 1e6 for key in ('median', 'p99', 'tick_median'))
     print(f'cbha: estimator update median {median:.0f} us, p99 {p99:.0f} us (goal '

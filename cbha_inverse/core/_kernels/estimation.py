@@ -15,7 +15,8 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def length_update(moved, ell0, lengths, noise, scale, z_previous, covariance, walk, pressures,
+def length_update(moved, ell0, lengths, noise, scale, z_previous, z_prior, covariance, walk,
+                  pressures,
                   pressure_weight, outlier_sigma, gate, stuck):
     """
     Return the posterior of one update and the pots' innovations.
@@ -34,6 +35,9 @@ def length_update(moved, ell0, lengths, noise, scale, z_previous, covariance, wa
         Unit of every unknown (``x = scale z``).
     z_previous : (u,) ndarray
         The previous estimate (scaled), where the step starts.
+    z_prior : (u,) ndarray
+        The predicted mean (scaled): the previous estimate moved by the measured change of the
+        pressures since it.
     covariance : (u, u) ndarray
         Its covariance (scaled).
     walk : (u,) ndarray
@@ -79,7 +83,7 @@ def length_update(moved, ell0, lengths, noise, scale, z_previous, covariance, wa
     for j in range(u):
         grown[j, j] += walk[j]
     information = np.linalg.inv(grown)
-    vector = information @ z_previous
+    vector = information @ z_prior
     for j in range(pressures.size):
         information[j, j] += pressure_weight
         vector[j] += pressure_weight * pressures[j]
