@@ -539,7 +539,7 @@ def main(argv=None):
                       f"{result['stereo_processing_p99_ms']:.2f} ms per pair", flush=True)
             if feedback == 'proprio':
                 print(f"{'':6s} {'':6s}  closed loop on the string-pot estimate (no tip "
-                      f"measurement): estimated tip vs true RMS "
+                      'measurement): estimated tip vs true RMS '
                       f"{result['estimate_tip_rms_mm']:.3f} mm, estimate median "
                       f"{result['estimate_median_ms']:.3f} ms, p99 "
                       f"{result['estimate_p99_ms']:.3f} ms, "

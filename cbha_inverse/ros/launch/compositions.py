@@ -174,7 +174,8 @@ COMPOSITIONS = {
          NodeEntry('stereo_tracker', when=STEREO),
          NodeEntry('shape_estimator', (SCENE,), when=PROPRIO))),
     'robot': Composition(
-        'robot', 'real arm: inverse_solver + robotino_bridge (+ stereo_tracker or shape_estimator)',
+        'robot', 'real arm: inverse_solver + robotino_bridge (+ stereo_tracker or '
+        'shape_estimator)',
         _common('stereo', ('stereo', 'none', 'proprio'), 'closed'),
         (NodeEntry('inverse_solver', (SCENE, Override('mode', '{mode}'), ESTIMATED)),
          NodeEntry('stereo_tracker', when=STEREO),
