@@ -10,10 +10,11 @@ misnamed and stale readings are rejected by reason and publish nothing.
 from builtin_interfaces.msg import Time
 from cbha_inverse.ros.common.conversions import (command_message, joint_state, point_array,
                                                  stamp_ns)
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.qos import COMMAND_QOS, DIAGNOSTICS_QOS, MARKER_QOS, MEASURED_QOS
 from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
 from cbha_inverse.ros.nodes.shape_estimator import ShapeEstimatorNode
 from cbha_inverse.scene import load_scene
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
@@ -21,6 +22,7 @@ from rclpy.parameter import Parameter
 from ros_helpers import spin_until, spinning
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
 
 PRESSURES = np.array([1.0e5, 0.2e5, 0.0, 0.3e5, 0.8e5, 0.0])
 GAINS = [1.1, 0.9, 1.05, 0.92, 1.08, 0.95]
@@ -46,11 +48,17 @@ def test_estimated_tip_follows_the_true_tip(rclpy_context):
     probe.create_subscription(PointStamped, '/se/tip/measured', measured.append, MEASURED_QOS)
     probe.create_subscription(PointStamped, '/se_probe/tip/estimated', probe_tips.append,
                               MEASURED_QOS)
+    markers, statuses = [], {}
+    probe.create_subscription(MarkerArray, '/se/backbone_estimated', markers.append, MARKER_QOS)
+    probe.create_subscription(DiagnosticArray, '/diagnostics', lambda m: statuses.update(
+        {s.name: {v.key: v.value for v in s.values} for s in m.status}), DIAGNOSTICS_QOS)
     with spinning(rclpy_context, sim, estimator, probe_target, probe) as executor:
         assert spin_until(executor, lambda: command.get_subscription_count() >= 1
                           and bad.get_subscription_count() >= 1, 20.0)
         command.publish(command_message(PRESSURES, sim.valve_names))
-        assert spin_until(executor, lambda: estimator.published >= 100, 30.0)
+        assert spin_until(executor, lambda: estimator.published >= 100 and markers
+                          and 'residual_mm.string_pot_outer_left' in statuses.get(
+                              'shape_estimator: estimate', {}), 30.0)
         now = probe.get_clock().now().to_msg()
         names = list(estimator.pot_names)
         good = np.full(6, 150.0)
@@ -69,3 +77,8 @@ def test_estimated_tip_follows_the_true_tip(rclpy_context):
     assert max(errors) < 1.5e-3, errors
     assert estimator.last.status == 'ok' and estimator.last.rank == 6
     assert not estimator.rejected
+    # the markers draw the estimated backbone: 17 frames from the base
+    assert len(markers[-1].markers[0].points) == 17
+    assert markers[-1].markers[0].header.frame_id == 'cbha_base'
+    report = statuses['shape_estimator: estimate']
+    assert report['rank'] == '6' and float(report['estimate_median_ms']) > 0.0
