@@ -2,7 +2,8 @@
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
 For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
-tip/true, tip/measured, pressure_command, pressure_measured, /diagnostics), then ``cbha_sim``,
+tip/true, tip/measured, tip/estimated, pressure_command, pressure_measured, string_pots,
+/diagnostics), then ``cbha_sim``,
 ``inverse_solver`` and ``trajectory`` as separate processes (as ``ros2 run`` would, with the
 installed params files plus a per-run override file written into the output folder), runs one
 lap, stops the nodes and the recorder with SIGINT and prints one summary line: tracking RMS and
