@@ -330,6 +330,12 @@ class ShapeEstimator:
             estimate = self._step(lengths, pressures, stuck)
             if estimate is None:
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
+            if not (np.all(np.isfinite(estimate.effector_positions))
+                    and np.all(np.isfinite(self._x))):
+                # never a NaN estimate: start over from rest, the next readings settle it
+                self.reset()
+                return self._rejected('diverged: non-finite estimate, restarted at rest',
+                                      started)
         self._last = estimate._replace(seconds=time.perf_counter() - started)
         return self._last
 
