@@ -2,7 +2,7 @@
 ``shape_estimator`` on ``cbha_sim``'s string pots, over real DDS.
 
 A camera-less plant (``tip_output: none``) with cavity-gain errors holds a bent pose; the
-estimator's ``tip/estimated`` carries the stamps of the pot readings and lies within 1.5 mm of
+estimator's ``tip/estimated`` carries the stamps of the pot readings and lies within 2 mm RMS of
 ``tip/true`` of the same stamp while the nominal model is several mm off. A probe's malformed,
 misnamed and stale readings are rejected by reason and publish nothing.
 """
@@ -56,7 +56,7 @@ def test_estimated_tip_follows_the_true_tip(rclpy_context):
         assert spin_until(executor, lambda: command.get_subscription_count() >= 1
                           and bad.get_subscription_count() >= 1, 20.0)
         command.publish(command_message(PRESSURES, sim.valve_names))
-        assert spin_until(executor, lambda: estimator.published >= 100 and markers
+        assert spin_until(executor, lambda: estimator.published >= 120 and markers
                           and 'residual_mm.string_pot_outer_left' in statuses.get(
                               'shape_estimator: estimate', {}), 30.0)
         now = probe.get_clock().now().to_msg()
@@ -70,11 +70,13 @@ def test_estimated_tip_follows_the_true_tip(rclpy_context):
     assert probe_target.rejected == {'non_finite': 1, 'wrong_names': 1, 'stale': 1}
     common = sorted(set(truth) & set(estimated))
     assert len(common) >= 50 and set(estimated) <= set(truth)
-    late = common[-20:]
-    errors = [np.linalg.norm(estimated[ns] - truth[ns]) for ns in late]
+    late = common[-50:]
+    errors = np.array([np.linalg.norm(estimated[ns] - truth[ns]) for ns in late])
     nominal = load_scene('cbha').forward(PRESSURES, strict=True).effector_positions[-1]
-    assert np.linalg.norm(nominal - truth[late[-1]]) > 4e-3
-    assert max(errors) < 1.5e-3, errors
+    open_loop = np.linalg.norm(nominal - truth[late[-1]])
+    # the 0.1 mm pot noise moves the estimated tip by ~1 mm (docs/proprioception.md)
+    rms = np.sqrt(np.mean(errors ** 2))
+    assert open_loop > 4e-3 and rms < min(2e-3, open_loop / 3.0), (rms, open_loop)
     assert estimator.last.status == 'ok' and estimator.last.rank == 6
     assert not estimator.rejected
     # the markers draw the estimated backbone: 17 frames from the base
