@@ -25,6 +25,7 @@ CONSOLE_SCRIPTS = [
     # nodes (node name = executable name = config/<name>.yaml)
     'trajectory = cbha_inverse.ros.nodes.trajectory:main',
     'inverse_solver = cbha_inverse.ros.nodes.inverse_solver:main',
+    'shape_estimator = cbha_inverse.ros.nodes.shape_estimator:main',
     'cbha_sim = cbha_inverse.ros.nodes.cbha_sim:main',
     'stereo_tracker = cbha_inverse.ros.nodes.stereo_tracker:main',
     'cbha_excite = cbha_inverse.ros.nodes.cbha_excite:main',
@@ -34,6 +35,7 @@ CONSOLE_SCRIPTS = [
     'cbha_report = cbha_inverse.report.cli:main',
     'cbha_bench_core = cbha_inverse.report.bench_core:main',
     'cbha_bench_inverse = cbha_inverse.report.bench_inverse:main',
+    'cbha_bench_estimator = cbha_inverse.report.bench_estimator:main',
     'cbha_fem_report = cbha_inverse.report.fem_report:main',
     'cbha_launch = cbha_inverse.ros.launch.launcher:main',
     'cbha_scene = cbha_inverse.scene.cli:main',

@@ -1,5 +1,6 @@
 """
-A real arm: inverse_solver + robotino_bridge (+ stereo_tracker with feedback:=stereo).
+A real arm: inverse_solver + robotino_bridge (+ stereo_tracker with feedback:=stereo, or
+shape_estimator with feedback:=proprio).
 
 ``ros2 launch cbha_inverse robot.launch.py [name:=value ...]``; ``ros2 launch cbha_inverse
 robot.launch.py --show-args`` lists the arguments. The composition is the table

@@ -1,5 +1,6 @@
 """
-Simulation: trajectory + inverse_solver + cbha_sim (+ stereo_tracker with feedback:=stereo).
+Simulation: trajectory + inverse_solver + cbha_sim (+ stereo_tracker with feedback:=stereo, or
+shape_estimator with feedback:=proprio).
 
 ``ros2 launch cbha_inverse sim.launch.py [name:=value ...]``; ``ros2 launch cbha_inverse
 sim.launch.py --show-args`` lists the arguments. The composition is the table

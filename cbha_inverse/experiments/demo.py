@@ -2,7 +2,8 @@
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
 For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
-tip/true, tip/measured, pressure_command, pressure_measured, /diagnostics), then ``cbha_sim``,
+tip/true, tip/measured, tip/estimated, pressure_command, pressure_measured, string_pots,
+/diagnostics), then ``cbha_sim``,
 ``inverse_solver`` and ``trajectory`` as separate processes (as ``ros2 run`` would, with the
 installed params files plus a per-run override file written into the output folder), runs one
 lap, stops the nodes and the recorder with SIGINT and prints one summary line: tracking RMS and
@@ -25,6 +26,13 @@ feedback (0.1 x 100 Hz): a frame interval, the image transport and the tracking 
 delay, and 10 /s rang after the start jump on the loaded 2-core machine). Its line is printed
 beside the direct-feedback runs.
 
+``--feedback proprio`` (in the default) closes the loop without any tip measurement:
+``cbha_sim`` publishes ``string_pots`` and no tip (``tip_output: none``), ``shape_estimator``
+estimates the tip from the pots and the measured pressures (``docs/proprioception.md``) and
+``inverse_solver`` closes the loop on ``tip/estimated``; the run is scored against ``tip/true``
+as the others, and its second line gives the estimate's own RMS against ``tip/true``.
+``--plant-payload`` hangs a payload at the plant's tip that no model knows.
+
 ``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``outer_bends``, ``extension``,
 ``all``, ... or a YAML file of holds) adds, after the trajectory runs, an excitation run for
 identification: ``cbha_sim`` (the same plant) and ``cbha_excite`` alone (no solver, no
@@ -46,6 +54,7 @@ from cbha_inverse.bag.evaluate import evaluate_bag
 from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.experiments.proprio import estimate_error
 from cbha_inverse.identify.excitation import make_program
 from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
@@ -60,10 +69,11 @@ MODULES = {'cbha_sim': 'cbha_inverse.ros.nodes.cbha_sim',
            'inverse_solver': 'cbha_inverse.ros.nodes.inverse_solver',
            'trajectory': 'cbha_inverse.ros.nodes.trajectory',
            'stereo_tracker': 'cbha_inverse.ros.nodes.stereo_tracker',
-           'cbha_excite': 'cbha_inverse.ros.nodes.cbha_excite'}
+           'cbha_excite': 'cbha_inverse.ros.nodes.cbha_excite',
+           'shape_estimator': 'cbha_inverse.ros.nodes.shape_estimator'}
 NAMESPACE = '/cbha'
-RECORDED = ('target', 'tip/true', 'tip/measured', 'pressure_command', 'pressure_measured',
-            '/diagnostics')
+RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'pressure_command',
+            'pressure_measured', 'string_pots', '/diagnostics')
 EXCITE_RECORDED = ('pressure_command', 'pressure_measured', 'tip/measured', 'tip/true')
 
 
@@ -96,10 +106,20 @@ def parse_args(argv):
     parser.add_argument('--model-scene', default=None,
                         help="inverse_solver's scene (default --scene), e.g. a cbha_identify "
                         'result')
-    parser.add_argument('--feedback', default='direct,stereo',
+    parser.add_argument('--feedback', default='direct,stereo,proprio',
                         help='comma-separated: direct (tip/measured from the plant: every shape '
                         'and mode) and/or stereo (closed loop through rendered cameras and '
-                        'stereo_tracker, for --stereo-shapes)')
+                        'stereo_tracker, for --stereo-shapes) and/or proprio (closed loop on '
+                        'the string-pot estimate of shape_estimator, no tip measurement, for '
+                        '--proprio-shapes)')
+    parser.add_argument('--proprio-shapes', default='circle',
+                        help='shapes of the proprio runs')
+    parser.add_argument('--plant-payload', type=float, default=0.0,
+                        help='plant tip payload unknown to the controller [kg]')
+    parser.add_argument('--pot-noise', type=float, default=1e-4,
+                        help='string-pot length noise of the plant [m]')
+    parser.add_argument('--estimate-payload', type=float, default=0.0, metavar='STD',
+                        help='proprio runs: shape_estimator payload_std [kg] (0: none)')
     parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
     parser.add_argument('--stereo-rig', default='cameras/demo_rig.yaml',
                         help='rig of the stereo runs (path, or relative to config/)')
@@ -211,6 +231,9 @@ class Recorder:
 
         self.node = Node('cbha_demo_recorder', context=context, namespace=NAMESPACE)
         self.targets, self.tips, self.measured, self.diagnostics = [], [], [], {}
+        self.estimated = []
+        self.node.create_subscription(PointStamped, 'tip/estimated', self._point(self.estimated),
+                                      MEASURED_QOS)
         self.node.create_subscription(PointStamped, 'target', self._point(self.targets),
                                       TARGET_QOS)
         self.node.create_subscription(PointStamped, 'tip/true', self._point(self.tips),
@@ -246,6 +269,7 @@ class Recorder:
         self.targets.clear()
         self.tips.clear()
         self.measured.clear()
+        self.estimated.clear()
         self.diagnostics.clear()
 
     def close(self):
@@ -282,7 +306,8 @@ def _sim_overrides(args, valve_names):
             'stiffness_scale': args.stiffness_scale,
             'section_stiffness_scale': _floats(args.plant_section_scale),
             'cavity_gain_scale': _floats(args.plant_gain_scale),
-            'base_offset': _floats(args.plant_base_offset), 'seed': args.plant_seed}
+            'base_offset': _floats(args.plant_base_offset), 'seed': args.plant_seed,
+            'payload_mass': args.plant_payload, 'string_pot_noise_std': args.pot_noise}
 
 
 def excite_run_name(program):
@@ -357,10 +382,18 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         sim_extra, tracker_params = _stereo_overrides(args)
         solver_extra = {'loop_gain': args.stereo_loop_gain}
         waited.append('stereo_tracker')
+    if feedback == 'proprio':
+        sim_extra = {'tip_output': 'none'}
+        solver_extra = {'feedback_topic': 'tip/estimated'}
+        waited.append('shape_estimator')
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
         **_sim_overrides(args, valve_names), **sim_extra}, env)}
     if feedback == 'stereo':
         processes['stereo_tracker'] = _start('stereo_tracker', run_dir, tracker_params, env)
+    if feedback == 'proprio':
+        processes['shape_estimator'] = _start('shape_estimator', run_dir, {
+            **common, 'scene': str(args.model_scene or args.scene), 'diagnostics_period': 0.5,
+            'payload_std': args.estimate_payload}, env)
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
         **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
         'diagnostics_period': 0.5, **solver_extra}, env)
@@ -396,6 +429,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     control = recorder.diagnostics.get('inverse_solver: control', ({}, 0.0))[0]
     plant = recorder.diagnostics.get('cbha_sim: plant', ({}, 0.0))[0]
     tracking = recorder.diagnostics.get('stereo_tracker: tracking', ({}, 0.0))[0]
+    estimating = recorder.diagnostics.get('shape_estimator: estimate', ({}, 0.0))[0]
 
     def number(values, key):
         try:
@@ -409,7 +443,14 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         'stereo_processing_p99_ms': number(tracking, 'processing_p99_ms'),
         'stereo_input_rate_hz': number(tracking, 'input_rate_hz'),
         'stereo_rejected': number(tracking, 'rejected_total')}
-    return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo,
+    proprio = {} if feedback != 'proprio' else {
+        'estimate_median_ms': number(estimating, 'estimate_median_ms'),
+        'estimate_p99_ms': number(estimating, 'estimate_p99_ms'),
+        'estimate_degraded': number(estimating, 'degraded_updates'),
+        'estimate_rejected': number(estimating, 'rejected_total'),
+        'estimate_tip_rms_mm': estimate_error(recorder, args.start_hold,
+                                              trajectory.duration) * 1e3}
+    return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo, **proprio,
             'speed_m_s': speed, 'lap_s': trajectory.lap_time,
             'rms_mm': errors.rms * 1e3, 'max_mm': errors.maximum * 1e3,
             'samples': int(errors.errors.size),
@@ -496,13 +537,15 @@ def main(argv=None):
             for mode in args.modes.split(',') if 'direct' in feedbacks]
     runs += [(shape, 'closed', 'stereo') for shape in args.stereo_shapes.split(',')
              if 'stereo' in feedbacks]
+    runs += [(shape, 'closed', 'proprio') for shape in args.proprio_shapes.split(',')
+             if 'proprio' in feedbacks]
     try:
         for shape, mode, feedback in runs:
-            name = f'{shape}_{mode}' + ('_stereo' if feedback == 'stereo' else '')
+            name = f'{shape}_{mode}' + ('' if feedback == 'direct' else f'_{feedback}')
             result = run_once(recorder, output / name, shape, mode, args, center, valve_names,
                               env, feedback)
             results.append(result)
-            label = mode if feedback == 'direct' else 'stereo'
+            label = mode if feedback == 'direct' else feedback
             print(f"{shape:6s} {label:6s}: RMS {result['rms_mm']:6.3f} mm, max "
                   f"{result['max_mm']:6.3f} mm | tick median {result['tick_median_ms']:.3f}"
                   f" ms, p99 {result['tick_p99_ms']:.3f} ms | target->command latency "
@@ -513,6 +556,13 @@ def main(argv=None):
                       f"{result['stereo_detection_rate']:.3f}, tracker median "
                       f"{result['stereo_processing_median_ms']:.2f} ms, p99 "
                       f"{result['stereo_processing_p99_ms']:.2f} ms per pair", flush=True)
+            if feedback == 'proprio':
+                print(f"{'':6s} {'':6s}  closed loop on the string-pot estimate (no tip "
+                      'measurement): estimated tip vs true RMS '
+                      f"{result['estimate_tip_rms_mm']:.3f} mm, estimate median "
+                      f"{result['estimate_median_ms']:.3f} ms, p99 "
+                      f"{result['estimate_p99_ms']:.3f} ms, "
+                      f"{result['estimate_degraded']:.0f} degraded updates", flush=True)
         if excitation is not None:
             excited = run_excitation(recorder, output / excite_run_name(args.excite), args,
                                      excitation, valve_names, env)
@@ -526,7 +576,8 @@ def main(argv=None):
         if reservation is not None:
             reservation.__exit__(None, None, None)
     plot_runs([{'title': f"{r['shape']} {r['mode']} loop"
-                + (' (stereo cameras)' if r['feedback'] == 'stereo' else ''),
+                + {'stereo': ' (stereo cameras)', 'proprio': ' (string pots)'}.get(
+                    r['feedback'], ''),
                 'targets': r['_targets'],
                 'tips': r['_tips'], 'rms': r['rms_mm'] * 1e-3} for r in results],
               output / 'demo.png')

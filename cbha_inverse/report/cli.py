@@ -14,6 +14,8 @@ REPORTS = {
              'block-tridiagonal solver vs LAPACK banded/dense, static-solve times'),
     'inverse': ('cbha_inverse.report.bench_inverse',
                 'inverse-model tick time per scene with its breakdown'),
+    'estimator': ('cbha_inverse.report.bench_estimator',
+                  'shape-estimator update time and tip accuracy on the CBHA string pots'),
     'fem': ('cbha_inverse.report.fem_report',
             'condensation error against run time, chain vs full FE'),
     'stability': ('cbha_inverse.report.stability',
@@ -21,8 +23,8 @@ REPORTS = {
     'accuracy': ('cbha_inverse.report.accuracy',
                  'error against run time, Pareto plots ([--quick] [--output DIR])'),
 }
-GROUPS = {'bench': ('core', 'inverse'),
-          'all': ('core', 'inverse', 'fem', 'stability', 'accuracy')}
+GROUPS = {'bench': ('core', 'inverse', 'estimator'),
+          'all': ('core', 'inverse', 'estimator', 'fem', 'stability', 'accuracy')}
 #: reports that take the common ``[--quick] [--output DIR]`` (passed on by a group run)
 COMMON_ARGS = ('stability', 'accuracy')
 

@@ -24,6 +24,10 @@ Scene YAML schema (SI units)::
     actuator_order: [names]              # column order (default: cables, then cavities)
     effectors: [{name, frame: <int or 'tip'> or vertebra: <int>, offset: [x, y, z]}]
     workspace_center: [x, y, z] or {actuation_fraction: f}
+    sensors:                             # string potentiometers (core.sensors), optional
+      - {name, kind: string_pot, angle_deg, radius, end_vertebra, start_vertebra (0)}  # or
+      - {name, kind: string_pot, points: [{vertebra or frame, offset: [x, y, z]}, ...]}
+        # each with offset [reading], gain [reading / m], noise_std [m] (length noise)
     solver: {energy_weight, proximal_weight, rate_limit, relinearize_every, ...}  # defaults
     calibration:                         # identified corrections (cbha_identify), optional
       section_stiffness: {<section name>: factor}    # stiffness factor of a segments section
@@ -49,6 +53,7 @@ from cbha_inverse.core.actuation.effectors import PointEffectors
 from cbha_inverse.core.chain import ChainModel
 from cbha_inverse.core.inverse.solver import InverseOptions
 from cbha_inverse.core.links import timoshenko_compliance
+from cbha_inverse.core.sensors import StringPots
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene.calibration import check_names, read_calibration
 from cbha_inverse.scene.scene import Scene
@@ -147,6 +152,7 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     if not effector_items:
         raise spec.error('effectors', 'at least one effector is needed')
     effectors = _effectors(effector_items, model, vertebra_frames)
+    sensors = _sensors(spec.sections('sensors', []), model, vertebra_frames)
     g = spec.vector('gravity', 3, (0.0, 0.0, -9.81)) if gravity is None else gravity
     workspace = _workspace(spec)
     if isinstance(workspace, tuple):
@@ -157,7 +163,7 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
                  workspace=workspace, solver_defaults=_solver_defaults(spec),
                  section_names=tuple(sections),
                  actuator_sections=tuple(section_of.get(n) for n in actuators.names),
-                 calibration=calibrated, path=path)
+                 calibration=calibrated, sensors=sensors, path=path)
 
 
 def _actuator_set(spec, groups, n_frames):
@@ -223,36 +229,88 @@ def _cables(items, vertebra_frames, gains=None):
     """Route each cable from the base through every vertebra up to its end vertebra."""
     cables = []
     for item in items:
-        angle = np.deg2rad(item.number('angle_deg'))
-        radius = item.number('radius', positive=True)
-        end = item.integer('end_vertebra')
-        if not 1 <= end < len(vertebra_frames):
-            raise item.error('end_vertebra', f'{end} outside 1..{len(vertebra_frames) - 1}')
-        frames = vertebra_frames[:end + 1]
-        offset = np.array([0.0, radius * np.cos(angle), radius * np.sin(angle)])
+        frames, offsets = _vertebra_route(item, vertebra_frames)
         name = item.text('name')
-        cables.append(Cable(name, frames, np.tile(offset, (len(frames), 1)),
-                            item.number('max_tension', positive=True),
+        cables.append(Cable(name, frames, offsets, item.number('max_tension', positive=True),
                             (gains or {}).get(name, 1.0)))
     return cables
+
+
+def _vertebra_route(item, vertebra_frames):
+    """
+    Return the routing of ``{angle_deg, radius, end_vertebra[, start_vertebra]}``.
+
+    The route runs through every vertebra from ``start_vertebra`` (default 0, the base) to
+    ``end_vertebra``, at ``radius`` from the backbone, ``angle_deg`` from +y toward +z.
+    """
+    angle = np.deg2rad(item.number('angle_deg'))
+    radius = item.number('radius', positive=True)
+    end = item.integer('end_vertebra')
+    if not 1 <= end < len(vertebra_frames):
+        raise item.error('end_vertebra', f'{end} outside 1..{len(vertebra_frames) - 1}')
+    start = item.integer('start_vertebra', 0, minimum=0)
+    if start >= end:
+        raise item.error('start_vertebra', f'{start} must lie below end_vertebra {end}')
+    frames = vertebra_frames[start:end + 1]
+    offset = np.array([0.0, radius * np.cos(angle), radius * np.sin(angle)])
+    return frames, np.tile(offset, (len(frames), 1))
+
+
+def _sensors(items, model, vertebra_frames):
+    """Build the scene's string potentiometers (None when it names no sensor)."""
+    if not items:
+        return None
+    names, frames, offsets = [], [], []
+    calibration = {'offset': [], 'gain': [], 'noise_std': []}
+    for item in items:
+        item.text('kind', choices=('string_pot',))
+        name = item.text('name')
+        if name in names:
+            raise item.error('name', f'sensor {name!r} named twice')
+        if item.has('points'):
+            points = item.sections('points')
+            if len(points) < 2:
+                raise item.error('points', 'a string pot needs >= 2 attachment points')
+            route = [_point_frame(point, model, vertebra_frames) for point in points]
+            route_frames = [frame for frame, _ in route]
+            route_offsets = [offset for _, offset in route]
+        else:
+            route_frames, route_offsets = _vertebra_route(item, vertebra_frames)
+        names.append(name)
+        frames.append(route_frames)
+        offsets.append(route_offsets)
+        calibration['offset'].append(item.number('offset', 0.0))
+        gain = item.number('gain', 1.0)
+        if gain == 0.0:
+            raise item.error('gain', 'must be non-zero (reading per metre)')
+        calibration['gain'].append(gain)
+        calibration['noise_std'].append(item.number('noise_std', 1.0e-4, positive=True))
+    return StringPots(names, frames, offsets, model.n_frames, calibration['offset'],
+                      calibration['gain'], calibration['noise_std'])
+
+
+def _point_frame(item, model, vertebra_frames):
+    """Return ``(frame, offset)`` of a point given by ``vertebra`` or ``frame`` (int or tip)."""
+    if item.has('vertebra'):
+        vertebra = item.integer('vertebra', minimum=0)
+        if vertebra >= len(vertebra_frames):
+            raise item.error('vertebra', f'{vertebra} outside 0..{len(vertebra_frames) - 1}')
+        frame = int(vertebra_frames[vertebra])
+    elif item.data.get('frame', 'tip') == 'tip':
+        frame = model.n_links
+    else:
+        frame = item.integer('frame', minimum=0)
+        if frame > model.n_links:
+            raise item.error('frame', f'{frame} outside 0..{model.n_links} (or tip)')
+    return frame, item.vector('offset', 3, (0.0, 0.0, 0.0))
 
 
 def _effectors(items, model, vertebra_frames):
     """Build the effector points."""
     names, frames, offsets = [], [], []
     for item in items:
-        if item.has('vertebra'):
-            vertebra = item.integer('vertebra', minimum=0)
-            if vertebra >= len(vertebra_frames):
-                raise item.error('vertebra', f'{vertebra} outside 0..{len(vertebra_frames) - 1}')
-            frame = int(vertebra_frames[vertebra])
-        elif item.data.get('frame', 'tip') == 'tip':
-            frame = model.n_links
-        else:
-            frame = item.integer('frame', minimum=0)
-            if frame > model.n_links:
-                raise item.error('frame', f'{frame} outside 0..{model.n_links} (or tip)')
+        frame, offset = _point_frame(item, model, vertebra_frames)
         names.append(item.text('name'))
         frames.append(frame)
-        offsets.append(item.vector('offset', 3, (0.0, 0.0, 0.0)))
+        offsets.append(offset)
     return PointEffectors(names, frames, offsets, model.n_frames)

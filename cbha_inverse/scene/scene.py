@@ -41,6 +41,8 @@ class Scene:
     calibration : cbha_inverse.scene.calibration.Calibration
         The corrections applied at load (the file's block and the caller's, combined; its base
         offset is ``model.base_position`` / ``model.base_rotation``).
+    sensors : cbha_inverse.core.sensors.StringPots or None
+        The string potentiometers of the scene's ``sensors`` block (None without one).
     path : pathlib.Path or None
         The scene file.
 
@@ -48,7 +50,8 @@ class Scene:
 
     def __init__(self, name, model, actuators, effectors, gravity, *, description='',
                  base_frame='cbha_base', workspace=None, solver_defaults=None,
-                 section_names=(), actuator_sections=None, calibration=None, path=None):
+                 section_names=(), actuator_sections=None, calibration=None, sensors=None,
+                 path=None):
         """Store the parts (use :func:`cbha_inverse.scene.load_scene`)."""
         self.name = name
         self.description = description
@@ -67,6 +70,7 @@ class Scene:
         if len(self.actuator_sections) != len(self.actuator_names):
             raise ValueError('actuator_sections needs one entry per actuator')
         self.calibration = Calibration() if calibration is None else calibration
+        self.sensors = sensors
         self.path = None if path is None else Path(path)
         self._workspace = workspace
         self._solver_defaults = dict(solver_defaults or {})

@@ -25,7 +25,7 @@ LAYERS = (
     ('core',),
     ('fem', 'vision', 'metrics'),
     ('scene',),
-    ('sim', 'robot', 'bag', 'identify'),
+    ('sim', 'robot', 'bag', 'identify', 'estimate'),
     ('ros', 'interfaces', 'warmup', 'report'),
     ('experiments',),
 )

@@ -49,7 +49,8 @@ def test_demo_bag_eval_gives_the_printed_rms(tmp_path):
             for _, channel, _, message in reader.iter_decoded_messages():
                 topics.setdefault(channel.topic, []).append(message)
     assert set(topics) == {'/cbha/target', '/cbha/tip/true', '/cbha/tip/measured',
-                           '/cbha/pressure_command', '/cbha/pressure_measured', '/diagnostics'}
+                           '/cbha/pressure_command', '/cbha/pressure_measured',
+                           '/cbha/string_pots', '/diagnostics'}
     assert all(len(message.data) == 6 for message in topics['/cbha/pressure_command'])
     # the plant's valve pressures (noise-free by default): within the commands' range
     commanded = np.array([message.data for message in topics['/cbha/pressure_command']])

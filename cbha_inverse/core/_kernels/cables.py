@@ -6,6 +6,8 @@ Compiled cable terms of the equilibrium (paper eq. 9): columns of ``J_aᵀ``, lo
 exact point moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``, for the routing data of
 :class:`cbha_inverse.core.actuation.cables.CableTerms`. A cable's gain ``g`` (calibration; 1 for
 the ideal cable) scales its force per unit tension ``F``: column, load and load stiffness alike.
+:func:`routing_lengths` gives the routed lengths and their gradient from the same routing
+geometry (the passive cables of string potentiometers, :mod:`cbha_inverse.core.sensors`).
 """
 
 import math
@@ -22,13 +24,177 @@ _CABLE_PRODUCT = np.array([[0, -1, -1], [1, 3, -1], [2, 4, 5]])
 
 
 @numba.njit(cache=True)
+def point_wrench(force, lever):
+    """
+    Return the wrench ``(f, r × f)`` of a force at a lever from its frame's origin.
+
+    Parameters
+    ----------
+    force : (3,) ndarray  [N]
+    lever : (3,) ndarray  [m]
+
+    Returns
+    -------
+    tuple of 6 float  [N, N*m]
+
+    """
+    f, r = force, lever
+    return (f[0], f[1], f[2], r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2],
+            r[0] * f[1] - r[1] * f[0])
+
+
+@numba.njit(cache=True)
+def routing_spans(positions, rotations, frames, offsets, span_start, span_end):
+    """
+    Return the routing points of cables (or string potentiometers) and their straight spans.
+
+    Parameters
+    ----------
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    frames : (P,) int ndarray
+        Frame of every routing point.
+    offsets : (P, 3) ndarray  [m]
+        Routing points in their frame's axes.
+    span_start, span_end : (S,) int ndarray
+        Points of every straight span.
+
+    Returns
+    -------
+    levers : (P, 3) ndarray  [m]
+        ``R_f o`` of every point.
+    points : (P, 3) ndarray  [m]
+        World positions of the points.
+    units : (S, 3) ndarray
+        Unit vector of every span, from its start point to its end point.
+    lengths : (S,) ndarray  [m]
+        Length of every span.
+
+    """
+    levers = np.empty((frames.size, 3))
+    points = np.empty((frames.size, 3))
+    units = np.empty((span_start.size, 3))
+    lengths = np.empty(span_start.size)
+    routing_spans_into(positions, rotations, frames, offsets, span_start, span_end, levers,
+                       points, units, lengths)
+    return levers, points, units, lengths
+
+
+@numba.njit(cache=True)
+def routing_spans_into(positions, rotations, frames, offsets, span_start, span_end, levers,
+                       points, units, lengths):
+    """:func:`routing_spans` into given ``levers``, ``points``, ``units``, ``lengths``."""
+    for p in range(frames.size):
+        rot = rotations[frames[p]]
+        for i in range(3):
+            levers[p, i] = rot[i, 0] * offsets[p, 0] + rot[i, 1] * offsets[p, 1] + rot[
+                i, 2] * offsets[p, 2]
+            points[p, i] = positions[frames[p], i] + levers[p, i]
+    for s in range(span_start.size):
+        for i in range(3):
+            units[s, i] = points[span_end[s], i] - points[span_start[s], i]
+        length = math.sqrt(units[s, 0] ** 2 + units[s, 1] ** 2 + units[s, 2] ** 2)
+        lengths[s] = length
+        for i in range(3):
+            units[s, i] /= length
+
+
+@numba.njit(cache=True)
+def routing_forces(units, gains, span_start, span_end, span_owner, n_points):
+    """
+    Return the force per unit tension on every routing point: ``-gain d(length)/d(point)``.
+
+    A span pulls its start point toward its end and the end point back.
+
+    Parameters
+    ----------
+    units : (S, 3) ndarray
+        Span unit vectors (:func:`routing_spans`).
+    gains : (c,) ndarray  [-]
+        Factor of every cable on its force (1 for the bare length gradient).
+    span_start, span_end, span_owner : (S,) int ndarray
+        Points and cable of every span.
+    n_points : int
+        Number of routing points.
+
+    Returns
+    -------
+    (P, 3) ndarray  [-]
+
+    """
+    forces = np.empty((n_points, 3))
+    routing_forces_into(units, gains, span_start, span_end, span_owner, forces)
+    return forces
+
+
+@numba.njit(cache=True)
+def routing_forces_into(units, gains, span_start, span_end, span_owner, forces):
+    """:func:`routing_forces` into a given ``(P, 3)`` array ``forces`` (overwritten)."""
+    forces[:, :] = 0.0
+    for s in range(span_start.size):
+        gain = gains[span_owner[s]]
+        for i in range(3):
+            forces[span_start[s], i] += gain * units[s, i]
+            forces[span_end[s], i] -= gain * units[s, i]
+
+
+@numba.njit(cache=True)
+def routing_lengths(positions, rotations, frames, offsets, span_start, span_end, span_owner,
+                    point_owner, n_cables, jacobian):
+    """
+    Return the routed length of every cable and write its gradient ``d(length)/dq``.
+
+    The length is the sum of the straight spans (:func:`routing_spans`); its gradient, in the
+    retract increments ``dq = (dx_f, dθ_f)`` of frames 1..n, is minus the cable's column of
+    ``J_aᵀ`` at unit gain (:func:`cable_pass`): the routing geometry is the same.
+
+    Parameters
+    ----------
+    positions, rotations, frames, offsets, span_start, span_end
+        As :func:`routing_spans`.
+    span_owner, point_owner : (S,), (P,) int ndarray
+        Cable (0..c - 1) of every span and point.
+    n_cables : int
+        Number of cables ``c``.
+    jacobian : (c, 6n) ndarray
+        Receives ``d(length)/dq`` [-, m/rad] (overwritten).
+
+    Returns
+    -------
+    (c,) ndarray  [m]
+
+    """
+    n_points = frames.size
+    levers, _, units, span_lengths = routing_spans(positions, rotations, frames, offsets,
+                                                   span_start, span_end)
+    forces = routing_forces(units, np.ones(n_cables), span_start, span_end, span_owner,
+                            n_points)
+    lengths = np.zeros(n_cables)
+    for s in range(span_start.size):
+        lengths[span_owner[s]] += span_lengths[s]
+    jacobian[:, :] = 0.0
+    for p in range(n_points):
+        if frames[p] > 0:
+            f, r = forces[p], levers[p]
+            row = point_owner[p]
+            col = 6 * (frames[p] - 1)
+            wrench = point_wrench(f, r)
+            for i in range(6):
+                jacobian[row, col + i] -= wrench[i]
+    return lengths
+
+
+@numba.njit(cache=True)
 def cable_pass(positions, rotations, actuation, gains, frames, offsets, span_start, span_end,
                span_owner, point_owner, columns, span_pair, point_slot, rhs, pair_values,
                moment_values):
     """
     Add one cable group's columns and loads to ``rhs``; write its stiffness blocks.
 
-    The span blocks are symmetric; the point moment blocks are the exact (non-symmetric) load
+    The routing geometry is :func:`routing_spans` and :func:`routing_forces` (shared with the
+    string potentiometers' :func:`routing_lengths`). The span blocks are symmetric; the point moment blocks are the exact (non-symmetric) load
     stiffness, whose symmetric part the control tick keeps.
 
     Parameters
@@ -99,27 +265,9 @@ def cable_pass_into(positions, rotations, actuation, gains, frames, offsets, spa
     t_hat = work[used + 18:used + 27].reshape((3, 3))
     sp = work[used + 27:used + 36].reshape((3, 3))
     tp = work[used + 36:used + 45].reshape((3, 3))
-    for p in range(n_points):
-        rot = rotations[frames[p]]
-        for i in range(3):
-            levers[p, i] = rot[i, 0] * offsets[p, 0] + rot[i, 1] * offsets[p, 1] + rot[
-                i, 2] * offsets[p, 2]
-            points[p, i] = positions[frames[p], i] + levers[p, i]
-    for s in range(n_spans):
-        for i in range(3):
-            units[s, i] = points[span_end[s], i] - points[span_start[s], i]
-        length = math.sqrt(units[s, 0] ** 2 + units[s, 1] ** 2 + units[s, 2] ** 2)
-        lengths[s] = length
-        for i in range(3):
-            units[s, i] /= length
-    # a span pulls its start point toward its end and the end point back (unit tension, times
-    # the cable's gain)
-    forces[:, :] = 0.0
-    for s in range(n_spans):
-        gain = gains[span_owner[s]]
-        for i in range(3):
-            forces[span_start[s], i] += gain * units[s, i]
-            forces[span_end[s], i] -= gain * units[s, i]
+    routing_spans_into(positions, rotations, frames, offsets, span_start, span_end, levers,
+                       points, units, lengths)
+    routing_forces_into(units, gains, span_start, span_end, span_owner, forces)
     moment_values[:, :, :] = 0.0
     for p in range(n_points):
         f, r = forces[p], levers[p]
@@ -127,8 +275,7 @@ def cable_pass_into(positions, rotations, actuation, gains, frames, offsets, spa
         if frames[p] > 0:
             row = 6 * (frames[p] - 1)
             col = 1 + columns[point_owner[p]]
-            wrench = (f[0], f[1], f[2], r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2],
-                      r[0] * f[1] - r[1] * f[0])
+            wrench = point_wrench(f, r)
             for i in range(6):
                 rhs[row + i, col] += wrench[i]
                 rhs[row + i, 0] += tension * wrench[i]

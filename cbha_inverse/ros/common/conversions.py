@@ -2,6 +2,7 @@
 
 from geometry_msgs.msg import Point, PointStamped
 import numpy as np
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -46,6 +47,60 @@ def point_stamped(point, stamp, frame_id):
     message.header.frame_id = frame_id
     message.point.x, message.point.y, message.point.z = (float(v) for v in point)
     return message
+
+
+def joint_state(names, positions, stamp, frame_id):
+    """
+    Build a ``JointState`` of named raw readings (the ``string_pots`` topic).
+
+    Parameters
+    ----------
+    names : sequence of str
+        One name per reading.
+    positions : (c,) array_like
+        The readings.
+    stamp : builtin_interfaces.msg.Time
+        Header stamp.
+    frame_id : str
+        Header frame.
+
+    Returns
+    -------
+    sensor_msgs.msg.JointState
+
+    """
+    message = JointState()
+    message.header.stamp = stamp
+    message.header.frame_id = frame_id
+    message.name = list(names)
+    message.position = [float(v) for v in positions]
+    return message
+
+
+def joint_positions(message, names):
+    """
+    Return the positions of a ``JointState`` in the order of ``names``.
+
+    Parameters
+    ----------
+    message : sensor_msgs.msg.JointState
+        The message.
+    names : sequence of str
+        The wanted names.
+
+    Returns
+    -------
+    (c,) ndarray or None
+        None when a name is missing or the message's names and positions differ in number
+        (NaN/inf pass through for validation).
+
+    """
+    if len(message.name) != len(message.position):
+        return None
+    index = {name: k for k, name in enumerate(message.name)}
+    if any(name not in index for name in names):
+        return None
+    return np.array([message.position[index[name]] for name in names], dtype=float)
 
 
 def command_message(values, valve_names):

@@ -9,9 +9,12 @@ import.
 - ``sim``: ``trajectory`` + ``inverse_solver`` + ``cbha_sim`` (the simulated CBHA), and
   ``stereo_tracker`` when ``feedback:=stereo`` (``cbha_sim`` then renders the cameras of
   ``config/cameras/demo_rig.yaml``, ``tip_output: stereo``; the tracker reads their models from
-  the camera_info topics).
+  the camera_info topics), or ``shape_estimator`` when ``feedback:=proprio`` (``cbha_sim``
+  publishes no tip, ``tip_output: none``; ``inverse_solver`` closes its loop on
+  ``tip/estimated``, the string-pot estimate, ``docs/proprioception.md``).
 - ``robot``: ``inverse_solver`` + ``robotino_bridge`` (the Robotino driver's 8-channel bar
-  message) for a real arm, and ``stereo_tracker`` when ``feedback:=stereo`` (the default).
+  message) for a real arm, and ``stereo_tracker`` when ``feedback:=stereo`` (the default), or
+  ``shape_estimator`` on the driver's string pots when ``feedback:=proprio``.
 
 Every node gets its params file (argument ``<node>_params``, default the installed
 ``config/<node>.yaml``), then the composition's overrides (scene, mode, ...) as a second params
@@ -156,30 +159,38 @@ def _common(feedback_default, feedback_choices, mode_default):
         Argument('mode', mode_default, 'inverse_solver loop: open (model only) or closed '
                  '(integral correction from tip/measured; without feedback it holds, so use '
                  'open with feedback:=none)', ('open', 'closed')),
-        Argument('feedback', feedback_default, 'source of tip/measured', feedback_choices),
+        Argument('feedback', feedback_default, 'source of the tip feedback (proprio: the '
+                 'string-pot estimate tip/estimated)', feedback_choices),
     )
 
 
 SCENE = Override('scene', '{scene}')
 STEREO = ('feedback', 'stereo')
+PROPRIO = ('feedback', 'proprio')
+ESTIMATED = Override('feedback_topic', 'tip/estimated', PROPRIO)
 
 COMPOSITIONS = {
     'sim': Composition(
-        'sim', 'simulation: trajectory + inverse_solver + cbha_sim (+ stereo_tracker)',
-        _common('sim', ('sim', 'stereo'), 'closed'),
+        'sim', 'simulation: trajectory + inverse_solver + cbha_sim (+ stereo_tracker or '
+        'shape_estimator)',
+        _common('sim', ('sim', 'stereo', 'proprio'), 'closed'),
         (NodeEntry('trajectory'),
-         NodeEntry('inverse_solver', (SCENE, Override('mode', '{mode}'))),
+         NodeEntry('inverse_solver', (SCENE, Override('mode', '{mode}'), ESTIMATED)),
          # the demo rig (640x512, f = 700 px) renders at 30 frames/s on two cores; the full
          # 1280x1024 default rig reached ~12 pairs/s there with many images dropped
          NodeEntry('cbha_sim', (SCENE, Override('tip_output', 'stereo', STEREO),
-                                Override('camera_rig', 'cameras/demo_rig.yaml', STEREO)),
+                                Override('camera_rig', 'cameras/demo_rig.yaml', STEREO),
+                                Override('tip_output', 'none', PROPRIO)),
                    role='robot'),
-         NodeEntry('stereo_tracker', when=('feedback', 'stereo'), role='cameras'))),
+         NodeEntry('stereo_tracker', when=STEREO, role='cameras'),
+         NodeEntry('shape_estimator', (SCENE,), when=PROPRIO))),
     'robot': Composition(
-        'robot', 'real arm: inverse_solver + robotino_bridge (+ stereo_tracker)',
-        _common('stereo', ('stereo', 'none'), 'closed'),
-        (NodeEntry('inverse_solver', (SCENE, Override('mode', '{mode}'))),
-         NodeEntry('stereo_tracker', when=('feedback', 'stereo'), role='cameras'),
+        'robot', 'real arm: inverse_solver + robotino_bridge (+ stereo_tracker or '
+        'shape_estimator)',
+        _common('stereo', ('stereo', 'none', 'proprio'), 'closed'),
+        (NodeEntry('inverse_solver', (SCENE, Override('mode', '{mode}'), ESTIMATED)),
+         NodeEntry('stereo_tracker', when=STEREO, role='cameras'),
+         NodeEntry('shape_estimator', (SCENE,), when=PROPRIO),
          NodeEntry('robotino_bridge', role='robot'))),
 }
 

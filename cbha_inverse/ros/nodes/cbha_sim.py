@@ -27,7 +27,13 @@ stamps) is the node clock: with ``use_sim_time`` the plant runs on ``/clock``.
 ``tip_output: stereo`` replaces ``tip/measured`` by rendered stereo cameras (the tip marker drawn
 into both cameras of ``camera_rig`` at ``camera_rate_hz``: ``stereo/{left,right}/image_raw`` and
 ``camera_info``, see :mod:`cbha_inverse.ros.common.sim_cameras`) for ``stereo_tracker``; ``both``
-publishes both. OpenCV is imported only then.
+publishes both, ``none`` no tip measurement at all (a camera-less arm; ``tip/true`` stays).
+OpenCV is imported only for stereo. ``payload_mass`` hangs a payload the controller does not
+know at the tip. A scene with a ``sensors`` block also gets ``string_pots`` (sensor_msgs/
+JointState, names and raw readings as ``robotino_bridge`` publishes them, the stamp of the plant
+state) at ``string_pot_rate_hz``, from the plant's true shape with ``string_pot_noise_std``
+[m] and the plant's own ``string_pot_offset`` / ``string_pot_gain``
+(:class:`cbha_inverse.sim.pots.SimulatedPots`).
 
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 """
@@ -39,18 +45,21 @@ import time
 
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import check_command, valve_order
-from cbha_inverse.ros.common.conversions import command_array, command_message, point_stamped
+from cbha_inverse.ros.common.conversions import (command_array, command_message,
+                                                 joint_state, point_stamped)
 from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_status, OK,
                                                  TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
-from cbha_inverse.scene.calibration import finite_triple
+from cbha_inverse.scene.calibration import Calibration, finite_triple
 from cbha_inverse.sim.arm import SimulatedArm
 from cbha_inverse.sim.plant_errors import plant_errors
+from cbha_inverse.sim.pots import SimulatedPots
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
@@ -100,7 +109,19 @@ class CbhaSimParams:
     log_throttle: float = param(1.0, 'least time between two logs of rejected commands [s]',
                                 low=0.0, high=3600.0)
     tip_output: str = param('point', 'tip feedback: tip/measured points, rendered stereo '
-                            'images, or both', choices=('point', 'stereo', 'both'))
+                            'images, both, or none (a camera-less arm; tip/true stays)',
+                            choices=('point', 'stereo', 'both', 'none'))
+    payload_mass: float = param(0.0, 'plant payload at the tip, unknown to the controller [kg]',
+                                low=0.0, high=10.0)
+    string_pot_offset: tuple = param(None, 'plant string-pot offsets [reading] (1 or one per '
+                                     'pot; unset: those of the scene)',
+                                     unset_type='double_array')
+    string_pot_gain: tuple = param(None, 'plant string-pot gains [reading/m] (1 or one per pot; '
+                                   'unset: those of the scene)', unset_type='double_array')
+    string_pot_noise_std: float = param(0.0001, 'string-pot length noise [m]', low=0.0,
+                                        high=0.01)
+    string_pot_rate_hz: float = param(100.0, 'string_pots publication rate [Hz] (a scene with '
+                                      'sensors)', low=0.1, high=1000.0)
     camera_rig: str = param('cameras/rig.yaml', 'stereo output: rig file (a path, or relative '
                             'to config/)')
     camera_rate_hz: float = param(30.0, 'stereo output: frame rate [Hz]', low=0.1, high=1000.0)
@@ -137,8 +158,12 @@ class CbhaSimNode(Node):
             self.valve_names, self.order = valve_order(nominal.actuator_names, p.valve_names)
             errors = plant_errors(nominal.section_names, self.valve_names,
                                   p.section_stiffness_scale, p.cavity_gain_scale, p.base_offset)
+            errors = errors.combined(Calibration(tip_payload_mass=p.payload_mass))
             self.scene = load_scene(p.scene, stiffness_scale=p.stiffness_scale,
                                     gravity=p.gravity, calibration=errors)
+            self.pots = (None if self.scene.sensors is None else SimulatedPots(
+                self.scene.sensors, p.string_pot_offset, p.string_pot_gain,
+                p.string_pot_noise_std, p.seed))
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
@@ -165,8 +190,11 @@ class CbhaSimNode(Node):
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
         self.cameras = None
-        if p.tip_output != 'point':
+        if p.tip_output in ('stereo', 'both'):
             self.cameras = self._start_cameras()
+        if self.pots is not None:
+            self.pots_publisher = self.create_publisher(JointState, 'string_pots', MEASURED_QOS)
+            self.pots_timer = self.create_timer(1.0 / p.string_pot_rate_hz, self._publish_pots)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
             f'plant {self.scene.name} x{p.stiffness_scale:g} stiffness (sections '
@@ -241,10 +269,17 @@ class CbhaSimNode(Node):
         self.last_result, self.last_stamp = result, stamp
         self.not_converged += not result.converged
         tip = result.effector_positions[-1]
-        if self.params.tip_output != 'stereo':
+        if self.params.tip_output in ('point', 'both'):
             self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
         self.truth_publisher.publish(point_stamped(tip, stamp, self.params.frame_id))
         self.tick_times.add(time.perf_counter() - start)
+
+    def _publish_pots(self):
+        result, stamp = self.last_result, self.last_stamp
+        if result is not None:
+            self.pots_publisher.publish(joint_state(
+                self.pots.names, self.pots.read(result.positions, result.rotations), stamp,
+                self.params.frame_id))
 
     def _statuses(self):
         result = self.last_result

@@ -2,8 +2,9 @@
 ``inverse_solver``: the controller node (``docs/nodes.md``; the tick: ``docs/design.md``).
 
 Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/measured``
-(PointStamped, sensor data); publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order =
-``valve_names``, reliable), ``/diagnostics`` (~1 Hz) and ``backbone`` (MarkerArray).
+(PointStamped, sensor data; ``feedback_topic``: e.g. ``tip/estimated`` of ``shape_estimator``);
+publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable),
+``/diagnostics`` (~1 Hz) and ``backbone`` (MarkerArray).
 
 Nothing is published before the first valid target (``publish_idle: true`` publishes the vent
 command meanwhile). With ``trigger: target`` a valid target is solved and its command published
@@ -82,6 +83,8 @@ class InverseSolverParams:
     vent_pressure: float = param(0.0, 'safe pressure commanded when venting [Pa]',
                                  low=0.0, high=1.0e7)
     frame_id: str = param('cbha_base', 'the only accepted frame_id of target and tip/measured')
+    feedback_topic: str = param('tip/measured', 'closed loop: the measured tip (PointStamped); '
+                                'tip/estimated for the string-pot estimate of shape_estimator')
     workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected')
     workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]')
@@ -157,7 +160,7 @@ class InverseSolverNode(Node):
             Float64MultiArray, 'pressure_command', COMMAND_WRITER_QOS)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
-        self.create_subscription(PointStamped, 'tip/measured', self._on_measured, MEASURED_QOS)
+        self.create_subscription(PointStamped, p.feedback_topic, self._on_measured, MEASURED_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)

@@ -1,0 +1,1 @@
+"""Estimation of the arm's shape from its own sensors (``docs/proprioception.md``)."""

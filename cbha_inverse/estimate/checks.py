@@ -1,0 +1,109 @@
+"""
+Input checks of the shape estimator: malformed vectors and stuck string potentiometers.
+
+:func:`check_vector` gives the reason a reading is rejected (``wrong_length``, ``non_finite``,
+``out_of_range``; the first word of the reason is its counter's key); :class:`StuckDetector`
+finds a pot that no longer moves while the others do.
+"""
+
+import numpy as np
+
+
+def check_vector(values, size, what, limit=None):
+    """
+    Return a reading as floats, or the reason it is rejected.
+
+    Parameters
+    ----------
+    values : array_like
+        The reading.
+    size : int
+        Expected number of values.
+    what : str
+        Its name, for the reason.
+    limit : float, optional
+        Largest accepted magnitude.
+
+    Returns
+    -------
+    values : (size,) ndarray or None
+    reason : str or None
+        ``'<key>: <what is wrong>'``, key one of ``wrong_length``, ``non_finite``,
+        ``out_of_range``; None when accepted.
+
+    """
+    try:
+        array = np.asarray(values, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None, f'wrong_length: {what} are not numbers'
+    if array.size != size:
+        return None, f'wrong_length: {array.size} {what} for {size}'
+    if not np.all(np.isfinite(array)):
+        return None, f'non_finite: {what} contain NaN or inf'
+    if limit is not None and np.abs(array).max() > limit:
+        return None, f'out_of_range: {what} beyond {limit:g}'
+    return array, None
+
+
+class StuckDetector:
+    """
+    Pots whose length no longer moves while the others do.
+
+    Over the last ``window`` updates, a pot is stuck when its range (max - min) is below
+    ``tolerance`` while the median range of the other pots exceeds ``motion``. A stuck pot stays
+    stuck until its own range exceeds ``tolerance`` again.
+
+    Parameters
+    ----------
+    count : int
+        Number of pots.
+    window : int
+        Updates looked at (0 disables the detector).
+    tolerance : float  [m]
+    motion : float  [m]
+
+    """
+
+    def __init__(self, count, window, tolerance, motion):
+        """Allocate the window."""
+        self.count, self.window = int(count), int(window)
+        self.tolerance, self.motion = float(tolerance), float(motion)
+        self._history = np.zeros((max(self.window, 1), self.count))
+        self.reset()
+
+    def reset(self):
+        """Forget the history."""
+        self._filled = 0
+        self._next = 0
+        self.stuck = np.zeros(self.count, dtype=bool)
+
+    def update(self, lengths):
+        """
+        Add one reading; return which pots are stuck.
+
+        Parameters
+        ----------
+        lengths : (count,) ndarray  [m]
+            The pots' lengths.
+
+        Returns
+        -------
+        (count,) ndarray of bool
+
+        """
+        if self.window <= 0:
+            return self.stuck
+        self._history[self._next] = lengths
+        self._next = (self._next + 1) % self.window
+        self._filled = min(self._filled + 1, self.window)
+        if self._filled < self.window:
+            return self.stuck
+        spread = self._history.max(axis=0) - self._history.min(axis=0)
+        still = spread < self.tolerance
+        self.stuck &= still
+        if still.any():
+            # the median of the others exceeds `motion` when more than half of them do
+            moving = spread > self.motion
+            others = moving.sum() - moving
+            self.stuck |= still & (2 * others > self.count - 1)
+        return self.stuck.copy()

@@ -1,0 +1,220 @@
+"""
+``shape_estimator``: the arm's shape and tip from its string potentiometers (``docs/nodes.md``).
+
+Subscribes ``string_pots`` (sensor_msgs/JointState, raw readings by name, as ``robotino_bridge``
+and ``cbha_sim`` publish them) and ``pressure_measured`` (Float64MultiArray, Pa in
+``valve_names`` order); every accepted reading runs one update of
+:class:`cbha_inverse.estimate.shape.ShapeEstimator` (``docs/proprioception.md``), with the last
+pressures when they are at most ``pressure_timeout`` old, and publishes the estimated tip on
+``tip/estimated`` (PointStamped, ``frame_id``, the stamp of the pot reading, sensor data QoS),
+which ``inverse_solver`` closes its loop on with ``feedback_topic: tip/estimated``. A reading
+that lacks a pot name, is malformed, non-finite or out of range, or is older than
+``reading_timeout`` is rejected, counted by reason and logged (throttled); nothing is published
+for it, so readings that stop or go stale stop ``tip/estimated`` and the solver's stale-feedback
+hold or vent acts. A pot dropped from the fit (stuck, or many sigma off) is a WARN and
+``degraded``. ``backbone_estimated`` (MarkerArray) draws the estimated backbone every
+``marker_period``; ``/diagnostics`` reports the residual per pot, the rank, the tip's standard
+deviation, the rejections by reason and the time per estimate.
+"""
+
+from dataclasses import dataclass
+import sys
+import time
+
+from cbha_inverse.estimate.shape import EstimatorOptions, ShapeEstimator
+from cbha_inverse.robot.safety import valve_order
+from cbha_inverse.ros.common.conversions import (backbone_markers, command_array,
+                                                 joint_positions, point_stamped, stamp_ns)
+from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_status, OK,
+                                                 TimingStats, WARN)
+from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
+from cbha_inverse.ros.common.qos import MARKER_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.scene import load_scene
+from geometry_msgs.msg import PointStamped
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
+
+NODE_NAME = 'shape_estimator'
+
+
+@dataclass(frozen=True)
+class ShapeEstimatorParams:
+    """Parameters of ``shape_estimator`` (``config/shape_estimator.yaml``)."""
+
+    scene: str = param('cbha.yaml', 'scene YAML with a sensors block: a file path, or a name in '
+                       'config/scenes')
+    valve_names: tuple = param(None, 'order of pressure_measured: a permutation of the scene '
+                               'actuators (unset: the scene order)', unset_type='string_array')
+    use_pressures: bool = param(True, 'use pressure_measured as the prior of the actuation')
+    pressure_timeout: float = param(0.2, 'pressures older than this are not used [s]',
+                                    low=0.001, high=60.0)
+    reading_timeout: float = param(0.5, 'a reading stamped older than this is rejected as stale '
+                                   '[s] (0: never)', low=0.0, high=60.0)
+    pressure_std: float = param(10000.0, 'effective actuation about the measured pressure [Pa]',
+                                low=1.0, high=1.0e6)
+    actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update [Pa]',
+                                      low=1.0, high=1.0e6)
+    payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none)',
+                               low=0.0, high=10.0)
+    outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
+                                 low=1.0, high=1.0e6)
+    stuck_window: int = param(25, 'updates over which a stuck pot is looked for (0: never)',
+                              low=0, high=100000)
+    frame_id: str = param('cbha_base', 'frame of tip/estimated and the markers')
+    marker_period: float = param(0.1, 'period of the estimated backbone markers [s]', low=0.01,
+                                 high=60.0)
+    diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
+    log_throttle: float = param(1.0, 'least time between two logs of rejected or degraded '
+                                'readings [s]', low=0.0, high=3600.0)
+
+
+class ShapeEstimatorNode(Node):
+    """
+    The estimator node: string pots (+ pressures) in, estimated tip out.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node``.
+
+    Raises
+    ------
+    ParameterError
+        On invalid parameters or a scene without sensors.
+
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        try:
+            self.params = declare_parameters(self, ShapeEstimatorParams)
+            p = self.params
+            self.scene = load_scene(p.scene)
+            self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
+            self.estimator = ShapeEstimator.from_scene(self.scene, EstimatorOptions(
+                pressure_std=p.pressure_std, actuation_walk_std=p.actuation_walk_std,
+                payload_std=p.payload_std or None, outlier_sigma=p.outlier_sigma,
+                stuck_window=p.stuck_window))
+        except (ValueError, FileNotFoundError, KeyError) as exc:
+            self.destroy_node()
+            raise ParameterError(str(exc)) from None
+        self.pot_names = self.scene.sensors.names
+        self._warm_up()
+        self.pressures = None
+        self.pressure_time = -np.inf
+        self.rejected = {}
+        self.published = 0
+        self.degraded = 0
+        self.last = None
+        self.estimate_times = TimingStats()
+        self.tip_publisher = self.create_publisher(PointStamped, 'tip/estimated', MEASURED_QOS)
+        self.marker_publisher = self.create_publisher(MarkerArray, 'backbone_estimated',
+                                                      MARKER_QOS)
+        self.create_subscription(JointState, 'string_pots', self._on_pots, MEASURED_QOS)
+        if p.use_pressures:
+            self.create_subscription(Float64MultiArray, 'pressure_measured', self._on_pressures,
+                                     MEASURED_QOS)
+        self.marker_timer = self.create_timer(p.marker_period, self._publish_markers)
+        self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
+        self.get_logger().info(
+            f'scene {self.scene.name}: {len(self.pot_names)} string pots {list(self.pot_names)}'
+            f', pressures {"used" if p.use_pressures else "not used"} '
+            f'({list(self.valve_names)}); {self.tip_publisher.topic_name}')
+
+    def _warm_up(self):
+        """Run one update at rest (compiles or loads the kernels), then start over."""
+        rest = self.estimator.state
+        lengths = self.scene.sensors.lengths(rest.positions, rest.rotations)
+        self.estimator.update(self.scene.sensors.readings(lengths))
+        self.estimator.reset()
+
+    def _reject(self, reason):
+        key = reason.split(':')[0]
+        self.rejected[key] = self.rejected.get(key, 0) + 1
+        self.get_logger().warn(f'rejected string_pots: {reason}',
+                               throttle_duration_sec=self.params.log_throttle)
+
+    def _on_pressures(self, message):
+        values = command_array(message)
+        if values.size != self.order.size:
+            self.rejected['pressures.wrong_length'] = (
+                self.rejected.get('pressures.wrong_length', 0) + 1)
+            return
+        in_scene_order = np.empty(self.order.size)
+        in_scene_order[self.order] = values
+        self.pressures, self.pressure_time = in_scene_order, time.monotonic()
+
+    def _on_pots(self, message):
+        p = self.params
+        readings = joint_positions(message, self.pot_names)
+        if readings is None:
+            self._reject(f'wrong_names: need {list(self.pot_names)}, got {list(message.name)}')
+            return
+        age = (self.get_clock().now().nanoseconds - stamp_ns(message.header.stamp)) * 1e-9
+        if p.reading_timeout > 0.0 and age > p.reading_timeout:
+            self._reject(f'stale: reading {age:.3f} s old')
+            return
+        fresh = time.monotonic() - self.pressure_time <= p.pressure_timeout
+        estimate = self.estimator.update(readings, self.pressures if fresh else None)
+        if estimate.status == 'rejected':
+            self._reject(estimate.reason)
+            return
+        self.estimate_times.add(estimate.seconds)
+        self.last = estimate
+        if estimate.degraded:
+            self.degraded += 1
+            self.get_logger().warn(f'degraded estimate: {estimate.reason}',
+                                   throttle_duration_sec=p.log_throttle)
+        self.tip_publisher.publish(point_stamped(estimate.tip, message.header.stamp,
+                                                 p.frame_id))
+        self.published += 1
+
+    def _publish_markers(self):
+        if self.last is not None:
+            self.marker_publisher.publish(backbone_markers(
+                self.estimator.state.positions, None, self.get_clock().now().to_msg(),
+                self.params.frame_id, namespace='backbone_estimated'))
+
+    def _statuses(self):
+        last = self.last
+        total = sum(self.rejected.values())
+        values = {'published': self.published, 'degraded_updates': self.degraded,
+                  'rejected_total': total,
+                  **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
+                  **self.estimate_times.summary('estimate')}
+        if last is not None:
+            values.update({f'residual_mm.{name}': float(r) * 1e3
+                           for name, r in zip(self.pot_names, last.residuals)})
+            values.update({'rank': last.rank, 'degraded': last.degraded,
+                           'tip_std_mm': last.confidence * 1e3, 'payload_kg': last.payload})
+        level = WARN if (last is not None and last.degraded) or total else OK
+        message = (last.reason if last is not None and last.degraded else
+                   f'{total} rejected readings' if total else
+                   'ok' if last is not None else 'waiting for string_pots')
+        return [make_status(NODE_NAME, 'estimate', level, message, values)]
+
+
+def main(argv=None):
+    """
+    Run the ``shape_estimator`` node until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command line (default ``sys.argv``).
+
+    Returns
+    -------
+    int
+        0 on a clean shutdown, 2 on invalid parameters.
+
+    """
+    return run_node(ShapeEstimatorNode, NODE_NAME, argv, params_class=ShapeEstimatorParams)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,56 @@
+"""
+``cbha_sim`` publishes ``string_pots`` from the plant's true shape, over real DDS.
+
+With ``tip_output: none`` no ``tip/measured`` is published, ``tip/true`` is; the readings of a
+plant with its own pot offset and gain (noise off) equal ``offset + gain * length`` of the routed
+lengths at the published true state, in the driver's names and order, with the plant state's
+stamp; a ``payload_mass`` lowers the tip.
+"""
+
+from cbha_inverse.ros.common.conversions import point_array
+from cbha_inverse.ros.common.qos import MEASURED_QOS
+from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
+from geometry_msgs.msg import PointStamped
+import numpy as np
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from ros_helpers import spin_until, spinning
+from sensor_msgs.msg import JointState
+
+OFFSET = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+GAIN = 900.0
+
+
+def test_sim_publishes_string_pots_and_no_tip_measurement(rclpy_context):
+    common = {'scene': 'cbha', 'tip_output': 'none', 'string_pot_noise_std': 0.0,
+              'string_pot_offset': OFFSET, 'string_pot_gain': [GAIN], 'rate_hz': 50.0,
+              'string_pot_rate_hz': 50.0}
+    sims = {name: CbhaSimNode(context=rclpy_context, namespace=f'/pots_{name}',
+                              parameter_overrides=[Parameter(k, value=v) for k, v in {
+                                  **common, 'payload_mass': mass}.items()])
+            for name, mass in (('bare', 0.0), ('loaded', 0.1))}
+    probe = Node('probe', context=rclpy_context)
+    pots, truth, measured = {n: [] for n in sims}, {n: [] for n in sims}, []
+    for name in sims:
+        probe.create_subscription(JointState, f'/pots_{name}/string_pots',
+                                  lambda m, n=name: pots[n].append(m), MEASURED_QOS)
+        probe.create_subscription(PointStamped, f'/pots_{name}/tip/true',
+                                  lambda m, n=name: truth[n].append(m), MEASURED_QOS)
+        probe.create_subscription(PointStamped, f'/pots_{name}/tip/measured', measured.append,
+                                  MEASURED_QOS)
+    with spinning(rclpy_context, *sims.values(), probe) as executor:
+        assert spin_until(executor, lambda: all(len(pots[n]) >= 3 and truth[n] for n in sims),
+                          20.0)
+    sim = sims['bare']
+    assert not measured
+    message = pots['bare'][-1]
+    assert list(message.name) == [f'string_pot_{v}' for v in sim.valve_names]
+    assert message.header.frame_id == 'cbha_base'
+    result = sim.last_result
+    lengths = sim.scene.sensors.lengths(result.positions, result.rotations)
+    # the plant is at rest: every published state is the same
+    np.testing.assert_allclose(message.position, np.array(OFFSET) + GAIN * lengths, rtol=1e-9)
+    stamps = {(m.header.stamp.sec, m.header.stamp.nanosec) for m in truth['bare']}
+    assert (message.header.stamp.sec, message.header.stamp.nanosec) in stamps
+    drop = point_array(truth['bare'][-1])[2] - point_array(truth['loaded'][-1])[2]
+    assert drop > 0.02, drop
