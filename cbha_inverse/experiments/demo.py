@@ -10,9 +10,9 @@ lap, stops the nodes and the recorder with SIGINT and prints one summary line: t
 max error (tip of the plant vs target, moving part of the lap), computed from the run's bag by
 :func:`cbha_inverse.bag.evaluate.evaluate_bag` (what ``cbha_bag eval <bag> --start S --end E``
 prints, with the window stored in ``summary.json``), and the solver's tick time median / p99 and
-its target-to-command latency p99 (target callback entry to command published, measured in the
-node, from its diagnostics). It writes ``demo.png`` (target vs tip in the y-z plane) and
-``summary.json``, and per run the params files used, the node logs and the bag.
+its target-to-command latency median and p99 (target callback entry to command published,
+measured in the node, from its diagnostics). It writes ``demo.png`` (target vs tip in the y-z
+plane) and ``summary.json``, and per run the params files used, the node logs and the bag.
 
 Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
 centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
@@ -549,7 +549,8 @@ def main(argv=None):
             print(f"{shape:6s} {label:6s}: RMS {result['rms_mm']:6.3f} mm, max "
                   f"{result['max_mm']:6.3f} mm | tick median {result['tick_median_ms']:.3f}"
                   f" ms, p99 {result['tick_p99_ms']:.3f} ms | target->command latency "
-                  f"p99 {result['latency_p99_ms']:.3f} ms", flush=True)
+                  f"median {result['latency_median_ms']:.3f} ms, p99 "
+                  f"{result['latency_p99_ms']:.3f} ms", flush=True)
             if feedback == 'stereo':
                 print(f"{'':6s} {'':6s}  closed loop through the cameras ({args.camera_rate:g}"
                       f' frames/s, {args.stereo_rig}): detection rate '

@@ -161,7 +161,7 @@ def detect_sphere_coarse(image, params, order='bgr', step=2):
     """
     if step <= 1:
         return detect_sphere(image, params, order)
-    small = np.ascontiguousarray(image[::step, ::step])
+    small = subsample(image, step)
     coarse_params = replace(params, min_area=params.min_area / step ** 2 / 4.0,
                             max_area=params.max_area / step ** 2 * 2.0, min_circularity=0.0)
     rows, cols = image.shape[:2]
@@ -180,6 +180,37 @@ def detect_sphere_coarse(image, params, order='bgr', step=2):
                 found.append((score, fine))
     found.sort(key=lambda item: -item[0])
     return _decide(found, image, params, order, (0, 0))
+
+
+def subsample(image, step):
+    """
+    Return every ``step``-th pixel of every ``step``-th row: ``image[::step, ::step]``, copied.
+
+    ``cv2.resize`` with nearest-neighbour interpolation and scale ``1 / step`` picks source pixel
+    ``floor(step * i)`` for output pixel ``i``: the same pixels as the slice, gathered ~5x faster
+    than numpy's strided copy of a 1280x1024 colour frame.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) ndarray of uint8
+        The image.
+    step : int
+        Subsampling step (>= 1).
+
+    Returns
+    -------
+    (ceil(H / step), ceil(W / step)[, 3]) ndarray of uint8
+        The subsampled copy (C-contiguous).
+
+    """
+    rows, cols = image.shape[:2]
+    size = (-(-cols // step), -(-rows // step))
+    small = cv2.resize(image, None, fx=1.0 / step, fy=1.0 / step,
+                       interpolation=cv2.INTER_NEAREST)
+    if small.shape[1::-1] != size:
+        # odd sizes: OpenCV rounds the output size, the slice rounds it up
+        return np.ascontiguousarray(image[::step, ::step])
+    return small
 
 
 def sphere_candidates(image, params, order='bgr', skip_border=False):
@@ -250,23 +281,23 @@ def _weighted_centroid(contour, image, params, order):
     rows, cols = image.shape[:2]
     top, left = max(y0 - pad, 0), max(x0 - pad, 0)
     bottom, right = min(y0 + height + pad, rows), min(x0 + width + pad, cols)
-    crop = image[top:bottom, left:right].astype(np.int16)
+    crop = image[top:bottom, left:right]
+    # uint8 subtraction saturates at 0: max(R - max(G, B), 0), max(I - threshold, 0)
     if order == 'mono':
-        weight_source = crop - params.mono_threshold
+        weights = cv2.subtract(crop, params.mono_threshold)
     else:
         red = 2 if order == 'bgr' else 0
-        weight_source = crop[..., red] - np.maximum(crop[..., 1], crop[..., 2 - red])
+        weights = cv2.subtract(crop[..., red], cv2.max(crop[..., 1], crop[..., 2 - red]))
     blob = np.zeros((bottom - top, right - left), np.uint8)
-    cv2.drawContours(blob, [contour - np.array([left, top], dtype=contour.dtype)], -1, 1,
+    cv2.drawContours(blob, [contour - np.array([left, top], dtype=contour.dtype)], -1, 255,
                      thickness=cv2.FILLED)
     blob = cv2.dilate(blob, np.ones((5, 5), np.uint8))
-    weights = np.clip(weight_source, 0, None).astype(np.float64) * blob
-    total = weights.sum()
+    # integer weights: the moments are exact sums
+    moments = cv2.moments(cv2.bitwise_and(weights, blob))
+    total = moments['m00']
     if not total > 0.0:
         return None
-    v_index, u_index = np.indices(weights.shape)
-    return np.array([(weights * u_index).sum() / total + left,
-                     (weights * v_index).sum() / total + top])
+    return np.array([moments['m10'] / total + left, moments['m01'] / total + top])
 
 
 class ArucoDetector:

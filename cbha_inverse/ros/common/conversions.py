@@ -1,5 +1,7 @@
 """Conversions between ROS messages and numpy arrays (no maths here)."""
 
+from array import array
+
 from geometry_msgs.msg import Point, PointStamped
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -45,7 +47,7 @@ def point_stamped(point, stamp, frame_id):
     message = PointStamped()
     message.header.stamp = stamp
     message.header.frame_id = frame_id
-    message.point.x, message.point.y, message.point.z = (float(v) for v in point)
+    message.point.x, message.point.y, message.point.z = np.asarray(point, dtype=float).tolist()
     return message
 
 
@@ -117,14 +119,17 @@ def command_message(values, valve_names):
     Returns
     -------
     std_msgs.msg.Float64MultiArray
-        ``data`` = the pressures.
+        ``data`` = the pressures (an ``array('d')`` filled from the values' bytes: no Python
+        float per value, no per-element check in the message's setter).
 
     """
     message = Float64MultiArray()
     size = len(valve_names)
     message.layout.dim = [MultiArrayDimension(label=','.join(valve_names), size=size,
                                               stride=size)]
-    message.data = [float(v) for v in values]
+    data = array('d')
+    data.frombytes(np.asarray(values, dtype=np.float64).reshape(-1).tobytes())
+    message.data = data
     return message
 
 

@@ -330,15 +330,16 @@ class InverseSolverNode(Node):
             self._count_failure('solver failed, holding the last command', exc)
             self._publish(self.command)
             return time.perf_counter()
+        self._publish(result.actuation[self.order])
+        published = time.perf_counter()
+        # the bookkeeping and the linearisation for the next tick come after the publication,
+        # off the target -> command path (``docs/design.md``)
         self.last_result = result
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         for warning in result.warnings:
             self.get_logger().warning(warning, throttle_duration_sec=self.params.log_throttle)
         self._last_solve = self._node_seconds()
         self.ticks += 1
-        self._publish(result.actuation[self.order])
-        published = time.perf_counter()
-        # linearise for the next tick now, off the target -> command path (``docs/design.md``)
         try:
             self.solver.prepare()
         except (ValueError, ArithmeticError, RuntimeError) as exc:
