@@ -1,10 +1,14 @@
-"""The nodes' spin loop (rclpy's events executor): callbacks run, ``done`` and shutdown end it."""
+"""The nodes' spin loop (rclpy's events executor): callbacks run; a stop signal, ``done`` and
+shutdown end it."""
 
+import os
+import signal
 import threading
+import time
 
 from cbha_inverse.ros.common.conversions import command_array, command_message
 from cbha_inverse.ros.common.qos import COMMAND_QOS
-from cbha_inverse.ros.common.runner import spin
+from cbha_inverse.ros.common.runner import spin_until_stopped, StopRequest
 import numpy as np
 from rclpy.node import Node
 from rclpy.task import Future
@@ -34,7 +38,7 @@ def test_spin_runs_timers_and_messages_until_done(rclpy_context):
     node.create_timer(0.01, lambda: publisher.publish(command_message(values, ['a', 'b', 'c'])))
     guard = _guard(rclpy_context)
     try:
-        spin(node, done)
+        spin_until_stopped(node, StopRequest(), done)
     finally:
         guard.cancel()
         node.destroy_node()
@@ -44,7 +48,7 @@ def test_spin_runs_timers_and_messages_until_done(rclpy_context):
 
 
 def test_spin_without_done_returns_when_the_context_shuts_down(rclpy_context):
-    """What SIGINT does through rclpy's handler: the context shuts down, spin returns."""
+    """A shutdown of the context from another thread ends the loop."""
     node = Node('spin_until_shutdown', context=rclpy_context)
     ticks = []
 
@@ -56,8 +60,41 @@ def test_spin_without_done_returns_when_the_context_shuts_down(rclpy_context):
     node.create_timer(0.01, tick)
     guard = _guard(rclpy_context)
     try:
-        spin(node)
+        spin_until_stopped(node, StopRequest())
     finally:
         guard.cancel()
         node.destroy_node()
     assert 10 <= len(ticks) <= 12
+
+
+def test_a_stop_signal_during_a_callback_lets_it_finish_then_ends_the_spin(rclpy_context):
+    """
+    SIGINT while a callback runs: the callback completes, the loop ends at its next poll.
+
+    rclpy's own handlers raise ``KeyboardInterrupt`` at whatever line runs (here: inside the
+    callback, which would then never finish) and shut the context down from another thread.
+    """
+    node = Node('stop_request_probe', context=rclpy_context)
+    finished = []
+
+    def busy_callback():
+        if not finished:
+            # the signal arrives while this Python loop runs
+            threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT)).start()
+            deadline = time.monotonic() + 0.3
+            while time.monotonic() < deadline:
+                pass
+        finished.append(time.monotonic())
+
+    node.create_timer(0.01, busy_callback)
+    guard = _guard(rclpy_context)
+    try:
+        with StopRequest() as stop:
+            spin_until_stopped(node, stop)
+        assert stop.signal_name == 'SIGINT'
+        assert finished, 'the callback the signal landed in did not finish'
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        assert rclpy_context.ok(), 'the loop must leave the shutdown to its caller'
+    finally:
+        guard.cancel()
+        node.destroy_node()

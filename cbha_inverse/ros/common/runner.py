@@ -95,6 +95,8 @@ def spin_until_stopped(node, stop, done=None):
     try:
         while not stop.requested and node.context.ok() and not until.done():
             executor.spin_until_future_complete(until, timeout_sec=SPIN_POLL_S)
+    except ExternalShutdownException:
+        pass
     finally:
         executor.shutdown()
 
