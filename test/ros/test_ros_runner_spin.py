@@ -1,5 +1,4 @@
-"""The nodes' spin loop (rclpy's events executor): callbacks run; a stop signal, ``done`` and
-shutdown end it."""
+"""The nodes' spin loop (events executor): callbacks run; a stop, ``done`` or shutdown ends it."""
 
 import os
 import signal

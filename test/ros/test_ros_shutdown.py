@@ -59,4 +59,3 @@ def test_nodes_exit_cleanly_on_sigint_and_sigterm():
             if process.poll() is None:
                 process.kill()
                 process.communicate()
-
