@@ -194,8 +194,9 @@ def cable_pass(positions, rotations, actuation, gains, frames, offsets, span_sta
     Add one cable group's columns and loads to ``rhs``; write its stiffness blocks.
 
     The routing geometry is :func:`routing_spans` and :func:`routing_forces` (shared with the
-    string potentiometers' :func:`routing_lengths`). The span blocks are symmetric; the point moment blocks are the exact (non-symmetric) load
-    stiffness, whose symmetric part the control tick keeps.
+    string potentiometers' :func:`routing_lengths`). The span blocks are symmetric; the point
+    moment blocks are the exact (non-symmetric) load stiffness, whose symmetric part the control
+    tick keeps.
 
     Parameters
     ----------
