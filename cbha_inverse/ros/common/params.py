@@ -264,40 +264,23 @@ def check_params_files(argv, node_name, params_class):
         Naming the file, the key and what is wrong.
 
     """
-    from cbha_inverse.config_files import read_yaml
     from cbha_inverse.errors import ConfigError
+    from cbha_inverse.ros.common.params_files import node_entries
     files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
     specs = {} if params_class is None else {
         spec.metadata.get('ros_name') or spec.name: spec for spec in fields(params_class)}
     for path in files:
-        data = read_yaml(path)
-        for section, content in data.items():
-            if not isinstance(content, dict) or not isinstance(
-                    content.get('ros__parameters'), dict):
-                raise ConfigError(path, f'{section}', 'must hold a ros__parameters: mapping')
-            if str(section).split('/')[-1] not in ('**', '*', node_name):
+        for section, name, value in node_entries(path, node_name):
+            spec = specs.get(name)
+            if spec is None:
                 continue
-            for name, value in _flatten(content['ros__parameters']):
-                spec = specs.get(name)
-                if spec is None:
-                    continue
-                key = f'{section}.ros__parameters.{name}'
-                problem = _type_problem(value, type_name(spec.default, spec.metadata))
-                low, high = spec.metadata.get('low'), spec.metadata.get('high')
-                choices = spec.metadata.get('choices')
-                if not problem and low is not None and not low <= value <= high:
-                    problem = f'must lie in [{low:g}, {high:g}], got {value!r}'
-                if not problem and choices and value not in choices:
-                    problem = f'must be one of {list(choices)}, got {value!r}'
-                if problem:
-                    raise ConfigError(path, key, problem)
-
-
-def _flatten(mapping, prefix=''):
-    """Yield (dotted name, value) of a nested ``ros__parameters`` mapping."""
-    for key, value in mapping.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, dict):
-            yield from _flatten(value, f'{name}.')
-        else:
-            yield name, value
+            key = f'{section}.ros__parameters.{name}'
+            problem = _type_problem(value, type_name(spec.default, spec.metadata))
+            low, high = spec.metadata.get('low'), spec.metadata.get('high')
+            choices = spec.metadata.get('choices')
+            if not problem and low is not None and not low <= value <= high:
+                problem = f'must lie in [{low:g}, {high:g}], got {value!r}'
+            if not problem and choices and value not in choices:
+                problem = f'must be one of {list(choices)}, got {value!r}'
+            if problem:
+                raise ConfigError(path, key, problem)

@@ -7,13 +7,15 @@ process (``python -m cbha_inverse.ros.launch.node_process cbha_inverse.ros.nodes
 with ``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits for them. All
 nodes are required: when one exits by itself, the others are stopped. Exit status: 0 when every
 node stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad
-argument or params file (one line on stderr). ``--dry-run`` prints the command lines instead.
+argument, params file or conflict between them (one line on stderr). ``--dry-run`` prints the
+command lines instead, and keeps the overrides params files they name.
 """
 
 import argparse
 import os
 from pathlib import Path
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -39,7 +41,10 @@ def _parser():
         for argument in composition.all_arguments():
             default = argument.default or '(installed file)'
             choices = f" [{'|'.join(argument.choices)}]" if argument.choices else ''
-            epilog.append(f'  {argument.name}:={default}{choices}  {argument.description}')
+            yields = ' (when not given: unless a <node>_params file sets it)' \
+                if argument.yielding else ''
+            epilog.append(f'  {argument.name}:={default}{choices}  {argument.description}'
+                          f'{yields}')
     parser = argparse.ArgumentParser(
         prog=PROGRAM, formatter_class=argparse.RawDescriptionHelpFormatter,
         description='Start a composition of cbha_inverse nodes (as launch/<name>.launch.py).',
@@ -227,16 +232,24 @@ def main(argv=None):
     """
     args = _parser().parse_intermixed_args(argv)
     composition = COMPOSITIONS[args.composition]
+    if args.dry_run:
+        # the printed command lines name the overrides files: they must outlive this command
+        overrides_dir = tempfile.mkdtemp(prefix='cbha_launch_')
+        try:
+            lines = command_lines(resolve(composition, parse_assignments(args.arguments)),
+                                  overrides_dir)
+        except (ArgumentError, ConfigError) as exc:
+            shutil.rmtree(overrides_dir, ignore_errors=True)
+            return report_config_error(PROGRAM, exc)
+        for name, argv_line in lines:
+            print(f'{name}: {shlex.join(argv_line)}')
+        return 0
     with tempfile.TemporaryDirectory(prefix='cbha_launch_') as overrides_dir:
         try:
             processes = resolve(composition, parse_assignments(args.arguments))
             lines = command_lines(processes, overrides_dir)
         except (ArgumentError, ConfigError) as exc:
             return report_config_error(PROGRAM, exc)
-        if args.dry_run:
-            for name, argv_line in lines:
-                print(f'{name}: {shlex.join(argv_line)}')
-            return 0
         print(f'[{PROGRAM}] {composition.name}: ' + ', '.join(
             f'{p.executable} ({p.namespace})' for p in processes), flush=True)
         return supervise(lines)
