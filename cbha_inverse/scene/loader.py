@@ -112,10 +112,11 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     if not stiffness_scale > 0.0:
         raise ValueError('stiffness_scale must be positive')
     path = resolve_scene_path(path)
-    spec = read_section(path)
+    spec = read_section(path).only(*SCENE_KEYS)
     calibrated = read_calibration(spec).combined(calibration)
     chain = spec.section('chain')
     kind = chain.text('type', choices=('beam_vertebrae', 'segments'))
+    chain.only('type', *_CHAIN_KEYS[kind])
     if kind == 'beam_vertebrae':
         model = _beam_chain(chain, stiffness_scale, calibrated.tip_payload_mass)
         vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
@@ -160,6 +161,16 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
                  calibration=calibrated, path=path)
 
 
+SCENE_KEYS = ('name', 'description', 'base_frame', 'gravity', 'chain', 'cables', 'cavities',
+              'cavity_model', 'actuator_order', 'effectors', 'workspace_center', 'solver',
+              'calibration')
+"""The keys of a scene file (docs/own-robot.md describes them)."""
+
+_CHAIN_KEYS = {'segments': ('sections',),
+               'beam_vertebrae': ('n_vertebrae', 'beams_per_interval', 'interval_length',
+                                  'backbone', 'vertebra_mass')}
+
+
 def _actuator_set(spec, groups, n_frames):
     """Build the actuator set in the scene's ``actuator_order`` (names checked)."""
     order = spec.data.get('actuator_order')
@@ -174,7 +185,7 @@ def _workspace(spec):
     if not spec.has('workspace_center'):
         return None
     if isinstance(spec.data['workspace_center'], dict):
-        center = spec.section('workspace_center')
+        center = spec.section('workspace_center').only('actuation_fraction')
         return {'actuation_fraction': center.number('actuation_fraction', minimum=0.0)}
     return spec.vector('workspace_center', 3)
 
@@ -183,11 +194,7 @@ def _solver_defaults(spec):
     """Return the scene's ``solver`` section, its keys checked against ``InverseOptions``."""
     if not spec.has('solver'):
         return None
-    solver = spec.section('solver')
-    known = {f.name for f in fields(InverseOptions)}
-    for key in solver.data:
-        if key not in known:
-            raise solver.error(key, f'unknown solver option (known: {sorted(known)})')
+    solver = spec.section('solver').only(*(f.name for f in fields(InverseOptions)))
     return dict(solver.data)
 
 
@@ -201,7 +208,8 @@ def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
     """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene."""
     n_v = chain.integer('n_vertebrae', minimum=1)
     per = chain.integer('beams_per_interval', minimum=1)
-    b = chain.section('backbone')
+    b = chain.section('backbone').only('youngs_modulus', 'poisson_ratio', 'outer_radius',
+                                       'inner_radius', 'density')
     length = chain.number('interval_length', positive=True) / per
     outer = b.number('outer_radius', positive=True)
     inner = b.number('inner_radius', 0.0, minimum=0.0)
@@ -223,6 +231,7 @@ def _cables(items, vertebra_frames, gains=None):
     """Route each cable from the base through every vertebra up to its end vertebra."""
     cables = []
     for item in items:
+        item.only('name', 'angle_deg', 'radius', 'end_vertebra', 'max_tension')
         angle = np.deg2rad(item.number('angle_deg'))
         radius = item.number('radius', positive=True)
         end = item.integer('end_vertebra')
@@ -241,6 +250,7 @@ def _effectors(items, model, vertebra_frames):
     """Build the effector points."""
     names, frames, offsets = [], [], []
     for item in items:
+        item.only('name', 'frame', 'vertebra', 'offset')
         if item.has('vertebra'):
             vertebra = item.integer('vertebra', minimum=0)
             if vertebra >= len(vertebra_frames):

@@ -21,6 +21,9 @@ from rclpy.parameter import Parameter
 _TYPE_NAMES = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
 _UNSET_TYPES = {'string_array': Parameter.Type.STRING_ARRAY,
                 'double_array': Parameter.Type.DOUBLE_ARRAY}
+# what rclpy itself declares on every node (or reads as QoS overrides)
+_ROS_PARAMETERS = ('use_sim_time', 'start_type_description_service')
+_ROS_PREFIXES = ('qos_overrides.',)
 
 
 class ParameterError(ValueError):
@@ -244,10 +247,12 @@ def check_params_files(argv, node_name, params_class):
     """
     Check every ``--params-file`` of a node's command line before rclpy reads it.
 
-    rclpy reports a broken params file as a traceback and a wrong-typed entry without the file;
-    this names the file and the key. Applicable sections are ``/**`` and those whose last name is
-    the node's; there, every parameter of ``params_class`` must have its type, range and choices.
-    Other keys are left alone (one file may serve several nodes).
+    rclpy reports a broken params file as a traceback and a wrong-typed entry without the file,
+    and ignores a parameter the node does not declare; this names the file and the key.
+    Applicable sections are ``/**`` and those whose last name is the node's; there, every
+    parameter of ``params_class`` must have its type, range and choices, and no other key may
+    appear (but those rclpy declares itself, ``use_sim_time``, ``qos_overrides.*``): a typo is
+    named with the nearest parameter. Every ``-p name:=value`` must name a parameter too.
 
     Parameters
     ----------
@@ -262,19 +267,31 @@ def check_params_files(argv, node_name, params_class):
     ------
     cbha_inverse.errors.ConfigError
         Naming the file, the key and what is wrong.
+    ParameterError
+        On a ``-p`` override of a parameter the node does not have.
 
     """
+    from cbha_inverse.config_files import unknown_key
     from cbha_inverse.errors import ConfigError
     from cbha_inverse.ros.common.params_files import node_entries
     files = [argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == '--params-file']
     specs = {} if params_class is None else {
         spec.metadata.get('ros_name') or spec.name: spec for spec in fields(params_class)}
+
+    what = f'parameter of {node_name}'
+
+    def unknown(name):
+        return params_class is not None and name not in specs and name not in (
+            _ROS_PARAMETERS) and not name.startswith(_ROS_PREFIXES)
+
     for path in files:
         for section, name, value in node_entries(path, node_name):
+            key = f'{section}.ros__parameters.{name}'
+            if unknown(name):
+                raise ConfigError(path, key, unknown_key(name, specs, what))
             spec = specs.get(name)
             if spec is None:
                 continue
-            key = f'{section}.ros__parameters.{name}'
             problem = _type_problem(value, type_name(spec.default, spec.metadata))
             low, high = spec.metadata.get('low'), spec.metadata.get('high')
             choices = spec.metadata.get('choices')
@@ -284,3 +301,20 @@ def check_params_files(argv, node_name, params_class):
                 problem = f'must be one of {list(choices)}, got {value!r}'
             if problem:
                 raise ConfigError(path, key, problem)
+    for item in _parameter_overrides(argv):
+        name = item.partition(':=')[0]
+        if unknown(name):
+            raise ParameterError(f'-p {item}: {unknown_key(name, specs, what)}')
+
+
+def _parameter_overrides(argv):
+    """Return the ``name:=value`` items of the ``-p``/``--param`` ROS arguments."""
+    names, inside = [], False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            inside = True
+        elif arg == '--':
+            inside = False
+        elif inside and arg in ('-p', '--param') and i + 1 < len(argv):
+            names.append(argv[i + 1])
+    return names

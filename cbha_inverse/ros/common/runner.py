@@ -85,7 +85,7 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
         return 0
     try:
         check_params_files(argv, node_name, params_class)
-    except ConfigError as exc:
+    except (ConfigError, ParameterError) as exc:
         return report_config_error(node_name, exc)
     rclpy.init(args=argv)
     node = done = None
