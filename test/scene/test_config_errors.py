@@ -81,6 +81,7 @@ def test_every_node_answers_help_without_starting():
             low = spec.metadata.get('low')
             if low is not None:
                 assert f'range [{low:g}, ' in entry.group(2)
+            assert entry.group(2).endswith(', live' if spec.metadata['live'] else ', read-only')
         assert '[INFO]' not in out + err, f'{node} started instead of printing help'
 
 
