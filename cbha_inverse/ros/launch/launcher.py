@@ -8,7 +8,8 @@ with ``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits
 nodes are required: when one exits by itself, the others are stopped. Exit status: 0 when every
 node stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad
 argument, params file or conflict between them (one line on stderr). ``--dry-run`` prints the
-command lines instead, and keeps the overrides params files they name.
+command lines instead, and keeps the overrides params files they name; ``--show-args`` lists the
+composition's arguments (as ``ros2 launch ... --show-args``).
 """
 
 import argparse
@@ -52,7 +53,22 @@ def _parser():
     parser.add_argument('composition', choices=sorted(COMPOSITIONS))
     parser.add_argument('arguments', nargs='*', metavar='name:=value')
     parser.add_argument('--dry-run', action='store_true', help='print the commands, start none')
+    parser.add_argument('-s', '--show-args', action='store_true',
+                        help="list the composition's arguments (as ros2 launch --show-args)")
     return parser
+
+
+def show_arguments(composition):
+    """Return the arguments of a composition, as ``ros2 launch --show-args`` lists them."""
+    lines = [f'Arguments of {composition.name} (pass arguments as <name>:=<value>):']
+    for argument in composition.all_arguments():
+        lines += [f"    '{argument.name}':", f'        {argument.description}']
+        if argument.choices:
+            lines.append(f"        Valid choices are: {list(argument.choices)}")
+        default = argument.default or '(the installed config/ file)'
+        lines.append(f"        (default: '{default}'" + (
+            ', unless a <node>_params file sets it)' if argument.yielding else ')'))
+    return '\n'.join(lines)
 
 
 def parse_assignments(items):
@@ -232,6 +248,9 @@ def main(argv=None):
     """
     args = _parser().parse_intermixed_args(argv)
     composition = COMPOSITIONS[args.composition]
+    if args.show_args:
+        print(show_arguments(composition))
+        return 0
     if args.dry_run:
         # the printed command lines name the overrides files: they must outlive this command
         overrides_dir = tempfile.mkdtemp(prefix='cbha_launch_')
