@@ -64,7 +64,7 @@ def show_arguments(composition):
     for argument in composition.all_arguments():
         lines += [f"    '{argument.name}':", f'        {argument.description}']
         if argument.choices:
-            lines.append(f"        Valid choices are: {list(argument.choices)}")
+            lines.append(f'        Valid choices are: {list(argument.choices)}')
         default = argument.default or '(the installed config/ file)'
         lines.append(f"        (default: '{default}'" + (
             ', unless a <node>_params file sets it)' if argument.yielding else ')'))
