@@ -140,10 +140,16 @@ def unknown_key(name, known, what='key'):
 
     """
     known = sorted(str(k) for k in known)
-    near = difflib.get_close_matches(str(name), known, n=1, cutoff=0.6)
-    if near:
-        return f'unknown {what}, did you mean {near[0]!r}?'
+    near = nearest(name, known)
+    if near is not None:
+        return f'unknown {what}, did you mean {near!r}?'
     return f"unknown {what} (valid: {', '.join(known) or 'none'})"
+
+
+def nearest(name, known):
+    """Return the name of ``known`` nearest to ``name`` (:mod:`difflib`), or None if none is."""
+    near = difflib.get_close_matches(str(name), [str(k) for k in known], n=1, cutoff=0.6)
+    return near[0] if near else None
 
 
 def check_keys(path, mapping, known, where=''):

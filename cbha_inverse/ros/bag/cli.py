@@ -29,6 +29,8 @@ def parse_args(argv):
     record.add_argument('--topics', dest='more_topics', nargs='+', default=[],
                         help='topics to record (as the positional list)')
     record.add_argument('-a', '--all', action='store_true', help='record every topic')
+    record.add_argument('--allow-empty', action='store_true',
+                        help='exit 0 even if no message was recorded (default: exit 1)')
     record.add_argument('-o', '--output', help='bag folder (default rosbag2_<date>-<time>)')
     record.add_argument('-s', '--storage', default='mcap', choices=('mcap',),
                         help='storage plugin (mcap, the Jazzy default)')
