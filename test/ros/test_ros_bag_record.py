@@ -182,8 +182,8 @@ def test_record_all_split_by_duration_stopped_by_sigterm(source, tmp_path):
             assert sum(1 for _ in make_reader(stream).iter_messages()) > 0
 
 
-def test_a_topic_without_publisher_is_warned_and_no_message_is_an_error(rclpy_context,
-                                                                           tmp_path):
+def test_a_topic_without_publisher_is_warned_and_no_message_is_an_error(
+        rclpy_context, tmp_path):
     """A misspelt topic: one warning naming the nearest published topic, then exit 1."""
     node = Node('publisher', context=rclpy_context, namespace='/cbha')
     node.create_publisher(PointStamped, 'tip/measured', 10)
