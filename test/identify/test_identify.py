@@ -336,6 +336,7 @@ def test_valve_names_map_the_recorded_commands_to_the_scene_order():
 
 
 class _Terminal(io.StringIO):
+
     def isatty(self):
         return True
 
