@@ -6,13 +6,14 @@ and ``<ns>/pressure_command`` as std_msgs/Float64MultiArray, decoded without rcl
 error is :func:`cbha_inverse.metrics.tracking_errors` on the header stamps (the same
 function and window as ``cbha_demo``). The target-to-command latency pairs each target with the
 first command the recorder received after it (and before the next target), on the bag's receive
-times: it includes the delivery of both messages to the recorder.
+times: it includes the delivery of both messages to the recorder. With ``start=None`` the
+start-up transient is left out of the score (:func:`cbha_inverse.metrics.transient_end`).
 """
 
 from dataclasses import dataclass
 
 from cbha_inverse.bag.storage import BagError, deserialize, open_bag
-from cbha_inverse.metrics import plot_runs, tracking_errors
+from cbha_inverse.metrics import plot_runs, tracking_errors, transient_end
 import numpy as np
 
 POINT_TYPE = 'geometry_msgs/msg/PointStamped'
@@ -64,6 +65,8 @@ class BagEvaluation:
         None when the bag has no commands.
     latencies : (L,) ndarray  [s]
         Target-to-command delays (receive times).
+    skipped : float or None  [s]
+        With ``start=None``: the start-up transient left out, after the first target.
 
     """
 
@@ -74,6 +77,7 @@ class BagEvaluation:
     tips: np.ndarray
     commands: object
     latencies: np.ndarray
+    skipped: float = None
 
 
 def point_series(bag, topic):
@@ -197,8 +201,9 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
     tip : {'auto', 'true', 'measured'}
         Tip topic: ``tip/true`` (the plant's truth), ``tip/measured``, or ``auto`` (true if
         recorded, else measured).
-    start : float  [s]
-        Scoring starts this long after the first target's stamp.
+    start : float or None  [s]
+        Scoring starts this long after the first target's stamp; None: after the start-up
+        transient (:func:`cbha_inverse.metrics.transient_end`).
     end : float, optional  [s]
         Scoring ends this long after the first target's stamp (default: the last target).
     max_pressure : float  [Pa]
@@ -235,18 +240,25 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
         if names.get(command_topic) == COMMAND_TYPE:
             command_times, commands = command_series(bag, command_topic)
     first = target_stamps[0]
-    window = np.array([first + start, first + end if end is not None else target_stamps[-1]])
+    window = np.array([first + (start or 0.0),
+                       first + end if end is not None else target_stamps[-1]])
     try:
         tracking = tracking_errors(target_stamps, targets, tip_stamps, tips, *window)
     except ValueError:
         tracking = None
+    skipped = None
+    if start is None and tracking is not None:
+        window[0] = transient_end(tracking.times, tracking.errors)
+        skipped = float(window[0] - first)
+        tracking = tracking_errors(target_stamps, targets, tip_stamps, tips, *window)
     statistics = None
     if commands and len({c.size for c in commands}) == 1:
         statistics = command_statistics(np.stack(commands), max_pressure)
     in_window = (target_stamps >= window[0]) & (target_stamps <= window[1])
     tip_in_window = (tip_stamps >= window[0]) & (tip_stamps <= window[1])
     return BagEvaluation(tip_topic, window, tracking, targets[in_window], tips[tip_in_window],
-                         statistics, target_command_latencies(target_received, command_times))
+                         statistics, target_command_latencies(target_received, command_times),
+                         skipped)
 
 
 def format_evaluation(evaluation):
@@ -271,6 +283,10 @@ def format_evaluation(evaluation):
     else:
         lines.append(f'tracking ({evaluation.tip_topic}): RMS {tracking.rms * 1e3:.6f} mm, max '
                      f'{tracking.maximum * 1e3:.6f} mm over {tracking.errors.size} samples')
+        if evaluation.skipped is not None:
+            lines.append(f'  scored from {evaluation.skipped:.2f} s after the first target: the '
+                         'start-up transient (errors above 3x the settled median) left out; '
+                         '--start 0 scores it')
     commands = evaluation.commands
     if commands is None:
         lines.append('commands: none recorded')
@@ -308,4 +324,4 @@ def plot_evaluation(evaluation, path, title):
     """
     rms = evaluation.tracking.rms if evaluation.tracking is not None else float('nan')
     plot_runs([{'title': title, 'targets': evaluation.targets, 'tips': evaluation.tips,
-                'rms': rms}], path)
+                'rms': rms, 'tip_label': evaluation.tip_topic}], path)

@@ -71,8 +71,10 @@ def parse_args(argv):
     evaluate.add_argument('--namespace', default='/cbha', help='namespace of the topics')
     evaluate.add_argument('--tip', default='auto', choices=('auto', 'true', 'measured'),
                           help='tip topic compared with the targets (auto: true if recorded)')
-    evaluate.add_argument('--start', type=float, default=0.0,
-                          help='score from this many seconds after the first target stamp')
+    evaluate.add_argument('--start', type=_start, default=None, metavar='SECONDS|auto',
+                          help='score from this many seconds after the first target stamp '
+                          '(default auto: after the start-up transient, the last error of the '
+                          "run's first half above 3x the median error of its second half)")
     evaluate.add_argument('--end', type=float, default=None,
                           help='score until this many seconds after the first target stamp')
     evaluate.add_argument('--max-pressure', type=float, default=150000.0,
@@ -82,6 +84,11 @@ def parse_args(argv):
     if args.command == 'record':
         args.topics = list(args.topics) + list(args.more_topics)
     return args
+
+
+def _start(text):
+    """Parse ``eval --start``: seconds, or ``auto`` (None)."""
+    return None if text.strip().lower() == 'auto' else float(text)
 
 
 def _info(args):
@@ -100,7 +107,10 @@ def _eval(args):
     if args.plot:
         if evaluation.tracking is None:
             raise BagError(f'{args.bag}: nothing to plot (no tip samples in the window)')
-        plot_evaluation(evaluation, args.plot, str(args.bag))
+        try:
+            plot_evaluation(evaluation, args.plot, str(args.bag))
+        except OSError as exc:
+            raise BagError(f'{args.plot}: cannot write the plot: {exc.strerror or exc}') from None
         print(f'wrote {args.plot}')
     return 0
 
