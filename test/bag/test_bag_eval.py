@@ -83,3 +83,35 @@ def test_transient_end():
     assert transient_end(times, errors) == pytest.approx(1.5)
     errors[30] = 4.0              # above 3x the settled median within the first half
     assert transient_end(times, errors) == pytest.approx(3.1)
+
+
+def test_eval_reads_units_and_bounds_from_the_scene(bag, tmp_path, capsys):
+    from cbha_inverse.bag.storage import open_bag
+    from cbha_inverse.scene import load_scene
+    # the tendon trunk's 8 tensions [N]: 0 N (slack) or 10 N (its max_tension) saturate
+    scene = load_scene('tendon_6f_8c')
+    tensions = np.array([[0.0, 2.0, 5.0, 10.0, 3.0, 3.0, 3.0, 3.0]] * 4)
+    path = tmp_path / 'tendons'
+    writer = BagWriter(path)
+    with open_bag(bag) as source:
+        for topic in source.summary.topics:
+            writer.add_topic(topic.name, topic.msgtype)
+        for topic, stamp, data in source.messages([t.name for t in source.summary.topics]):
+            writer.write(topic, stamp, data)
+    writer.add_topic('/cbha/pressure_command', 'std_msgs/msg/Float64MultiArray')
+    for k, values in enumerate(tensions):
+        message = TYPESTORE.types['std_msgs/msg/Float64MultiArray'](
+            layout=TYPESTORE.types['std_msgs/msg/MultiArrayLayout'](dim=[], data_offset=0),
+            data=values)
+        writer.write('/cbha/pressure_command', int((100.0 + k) * 1e9) + 2,
+                     bytes(TYPESTORE.serialize_cdr(message, 'std_msgs/msg/Float64MultiArray')))
+    writer.close()
+    assert list(scene.upper_bounds) == [10.0] * 8
+    assert cbha_bag(['eval', str(path), '--scene', 'tendon_6f_8c']) == 0
+    out = capsys.readouterr().out
+    assert 'per valve [N] min 0.000 2.000 5.000 10.000 3.000' in out, out
+    assert 'saturation: 100.0 % of commands, per valve 100.0 0.0 0.0 100.0 0.0' in out, out
+    # without the scene (the CBHA's 6 cavities) the 8 values do not fit: one line
+    assert cbha_bag(['eval', str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and 'the commands have 8 values, the scene 6' in err, err

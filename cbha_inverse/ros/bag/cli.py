@@ -13,6 +13,7 @@ import sys
 
 from cbha_inverse.bag.storage import BagError
 from cbha_inverse.errors import ConfigError, report_config_error
+import numpy as np
 
 
 def _size(text):
@@ -77,8 +78,12 @@ def parse_args(argv):
                           "run's first half above 3x the median error of its second half)")
     evaluate.add_argument('--end', type=float, default=None,
                           help='score until this many seconds after the first target stamp')
-    evaluate.add_argument('--max-pressure', type=float, default=150000.0,
-                          help='upper command bound for the saturation count [Pa]')
+    evaluate.add_argument('--scene', default='cbha.yaml',
+                          help="the run's scene: the unit (N for cables, Pa for cavities) and "
+                          'bounds of each command value, in scene order')
+    evaluate.add_argument('--max-pressure', type=float, default=None,
+                          help='cap of the upper bounds for the saturation count [N or Pa] '
+                          "(default: the scene's bounds)")
     evaluate.add_argument('--plot', help='write target vs tip to this PNG')
     args = parser.parse_args(argv)
     if args.command == 'record':
@@ -101,8 +106,14 @@ def _info(args):
 
 def _eval(args):
     from cbha_inverse.bag.evaluate import evaluate_bag, format_evaluation, plot_evaluation
+    from cbha_inverse.scene import load_scene
+    from cbha_inverse.scene.cli import actuator_units
+    scene = load_scene(args.scene)
+    upper = scene.upper_bounds if args.max_pressure is None else np.minimum(
+        scene.upper_bounds, args.max_pressure)
     evaluation = evaluate_bag(args.bag, namespace=args.namespace, tip=args.tip,
-                              start=args.start, end=args.end, max_pressure=args.max_pressure)
+                              start=args.start, end=args.end, max_pressure=upper,
+                              units=actuator_units(scene))
     print(format_evaluation(evaluation))
     if args.plot:
         if evaluation.tracking is None:
@@ -143,7 +154,7 @@ def main(argv=None):
         if args.command == 'info':
             return _info(args)
         return _eval(args)
-    except (BagError, ConfigError) as exc:
+    except (BagError, ConfigError, FileNotFoundError) as exc:
         return report_config_error(f'cbha_bag {args.command}', exc)
 
 
