@@ -20,15 +20,11 @@ import subprocess
 import sys
 import time
 
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.qos import MEASURED_QOS
 from cbha_inverse.ros.launch.compositions import (
     ArgumentError, COMPOSITIONS, node_module, resolve)
-from geometry_msgs.msg import PointStamped
 import pytest
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from ros_helpers import child_env, REPO_ROOT, spin_until
-from std_msgs.msg import Float64MultiArray
+from ros_helpers import child_env, loop_listener, REPO_ROOT, spin_until
 import yaml
 
 SCRIPTS = dict(re.findall(r"'(\w+) = ([\w.]+):main'", (REPO_ROOT / 'setup.py').read_text()))
@@ -122,13 +118,7 @@ def tendon_trajectory(tmp_path):
 
 def test_cbha_launch_sim_runs_the_nodes_and_stops_them_all_on_sigint(rclpy_context,
                                                                      tendon_trajectory):
-    listener = Node('launch_listener', context=rclpy_context, namespace='/cbha')
-    commands, tips = [], []
-    listener.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
-                                 COMMAND_QOS)
-    listener.create_subscription(PointStamped, 'tip/measured', tips.append, MEASURED_QOS)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    executor.add_node(listener)
+    executor, listener, commands, tips = loop_listener(rclpy_context)
     process = _launch('scene:=tendon_6f_8c', f'trajectory_params:={tendon_trajectory}')
     try:
         running = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20

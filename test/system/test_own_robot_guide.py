@@ -17,13 +17,8 @@ import subprocess
 import sys
 
 from cbha_inverse.fem.segment_io import load_segment
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
-from geometry_msgs.msg import PointStamped
 import numpy as np
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from ros_helpers import child_env, REPO_ROOT, spin_until
-from std_msgs.msg import Float64MultiArray
+from ros_helpers import child_env, loop_listener, REPO_ROOT, spin_until
 
 GUIDE = REPO_ROOT / 'docs' / 'own-robot.md'
 EXAMPLE = REPO_ROOT / 'docs' / 'examples' / 'rod_robot'
@@ -81,13 +76,7 @@ def test_guide_example_runs(tmp_path, rclpy_context):
     reach = [float(v) for v in re.findall(r'\|(\d+\.\d) mm\|', out)]
     assert len(reach) == 4 and all(36.0 < v < 38.0 for v in reach), out
 
-    listener = Node('guide_listener', context=rclpy_context, namespace='/cbha')
-    commands, tips = [], []
-    listener.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
-                                 COMMAND_QOS)
-    listener.create_subscription(PointStamped, 'tip/measured', tips.append, MEASURED_QOS)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    executor.add_node(listener)
+    executor, listener, commands, tips = loop_listener(rclpy_context)
     process = _run(launch, work)
     try:
         ran = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
@@ -129,13 +118,7 @@ def test_guide_own_driver_step_runs_without_a_robotino(tmp_path, rclpy_context):
     shutil.copytree(EXAMPLE, work)
     process = _run(_commands()[0], work)
     assert process.communicate(timeout=300) and process.returncode == 0
-    listener = Node('guide_listener', context=rclpy_context, namespace='/cbha')
-    commands, tips = [], []
-    listener.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
-                                 COMMAND_QOS)
-    listener.create_subscription(PointStamped, 'tip/measured', tips.append, MEASURED_QOS)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    executor.add_node(listener)
+    executor, listener, commands, tips = loop_listener(rclpy_context)
     processes = [_run(command, work) for command in _commands(1)]
     try:
         ran = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
