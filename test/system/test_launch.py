@@ -244,3 +244,13 @@ def test_dry_run_names_overrides_files_that_exist():
             '/**': {'ros__parameters': {'scene': 'cbha.yaml', 'mode': 'open'}}}
     finally:
         shutil.rmtree(Path(overrides[0]).parent, ignore_errors=True)
+
+
+@pytest.mark.parametrize('delay', [0.3, 0.6, 1.0])
+def test_sigint_at_any_moment_of_the_start_is_a_clean_stop(delay):
+    process = _launch('scene:=tendon_6f_8c')
+    time.sleep(delay)
+    process.send_signal(signal.SIGINT)
+    output, _ = process.communicate(timeout=60)
+    assert process.returncode == 0, output
+    assert 'Traceback' not in output and 'Fatal Python error' not in output, output

@@ -85,9 +85,13 @@ def run_node(node_class, node_name, argv=None, *, params_class=None):
         return 0
     try:
         check_params_files(argv, node_name, params_class)
+        # a stop before rclpy handles the signals: a clean stop too
+        rclpy.init(args=argv)
     except (ConfigError, ParameterError) as exc:
         return report_config_error(node_name, exc)
-    rclpy.init(args=argv)
+    except KeyboardInterrupt:
+        rclpy.try_shutdown()
+        return 0
     node = done = None
     try:
         node = node_class()

@@ -181,9 +181,16 @@ def supervise(lines, out=None):
     children, relays = [], []
     try:
         for name, argv in lines:
-            # own session: a Ctrl-C in the terminal reaches the nodes once, through us
-            child = subprocess.Popen(argv, env=_child_environment(), stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, start_new_session=True)
+            # own session: a Ctrl-C in the terminal reaches the nodes once, through us; started
+            # with the stop signals blocked (node_process unblocks them once it can handle them:
+            # a stop during the interpreter's start is then a quiet stop, not a fatal error)
+            blocked = signal.pthread_sigmask(signal.SIG_BLOCK, (signal.SIGINT, signal.SIGTERM))
+            try:
+                child = subprocess.Popen(argv, env=_child_environment(), stdout=subprocess.PIPE,
+                                         stderr=subprocess.STDOUT, text=True,
+                                         start_new_session=True)
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
             children.append((name, child))
             relay = threading.Thread(target=_relay, args=(name, child.stdout, out, lock),
                                      daemon=True)
@@ -246,6 +253,14 @@ def main(argv=None):
         See the module docstring.
 
     """
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:      # before the nodes start: nothing to stop
+        print(f'{PROGRAM}: stopped before starting the nodes', file=sys.stderr)
+        return 0
+
+
+def _main(argv):
     args = _parser().parse_intermixed_args(argv)
     composition = COMPOSITIONS[args.composition]
     if args.show_args:
