@@ -5,10 +5,12 @@ Read the package's YAML files so that every mistake becomes one :class:`ConfigEr
 one, a YAML syntax error (with its line) or a wrong top-level type into
 ``ConfigError(path, key, problem)``; :class:`Section` reads typed keys from a parsed mapping and
 names the dotted key of whatever is missing or wrong (``chain.sections[1].count: must be an
-integer, got str 'eight'``). Scene, segment, geometry, params, camera and rig files all go
-through here.
+integer, got str 'eight'``). A key a file may not hold is an error too (:func:`unknown_key`,
+:meth:`Section.only`: ``gravty: unknown key, did you mean 'gravity'?``). Scene, segment, geometry,
+params, camera and rig files all go through here.
 """
 
+import difflib
 import math
 from pathlib import Path
 
@@ -117,6 +119,67 @@ def read_yaml(path, *, expect=dict):
     return parse_yaml(read_text(path), path, expect=expect)
 
 
+def unknown_key(name, known, what='key'):
+    """
+    Say that a key is not one of those a file may hold, naming the nearest valid one.
+
+    Parameters
+    ----------
+    name : object
+        The key found.
+    known : iterable of str
+        The valid keys there.
+    what : str
+        What a key is there (``'parameter of inverse_solver'``).
+
+    Returns
+    -------
+    str
+        ``unknown key, did you mean 'gravity'?`` (the nearest, by
+        :func:`difflib.get_close_matches`), or ``unknown key (valid: ...)`` when none is near.
+
+    """
+    known = sorted(str(k) for k in known)
+    near = nearest(name, known)
+    if near is not None:
+        return f'unknown {what}, did you mean {near!r}?'
+    return f"unknown {what} (valid: {', '.join(known) or 'none'})"
+
+
+def nearest(name, known):
+    """Return the name of ``known`` nearest to ``name`` (:mod:`difflib`), or None if none is."""
+    near = difflib.get_close_matches(str(name), [str(k) for k in known], n=1, cutoff=0.6)
+    return near[0] if near else None
+
+
+def check_keys(path, mapping, known, where=''):
+    """
+    Raise a :class:`ConfigError` for the first key of ``mapping`` that is not in ``known``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file (named in the error).
+    mapping : dict
+        The parsed mapping.
+    known : iterable of str
+        The keys it may hold.
+    where : str
+        Dotted key of the mapping in the file ('' at the top level).
+
+    Raises
+    ------
+    ConfigError
+        ``<file>: <where.key>: unknown key, did you mean '<nearest>'?``.
+
+    """
+    known = set(known)
+    for key in mapping:
+        if key not in known:
+            raise ConfigError(path, f'{where}.{key}' if where else str(key),
+                              unknown_key(key, known))
+
+
 def _describe(value):
     """Name a YAML value for a message."""
     if value is None:
@@ -156,6 +219,11 @@ class Section:
             raise ConfigError(self.path, where or 'top level',
                               f'must be a mapping of keys, got {_describe(data)}')
         self.data = data
+
+    def only(self, *known):
+        """Return this section after checking that it holds no other key (:func:`check_keys`)."""
+        check_keys(self.path, self.data, known, self.where)
+        return self
 
     def key(self, name):
         """Return the dotted key of ``name`` in this section."""

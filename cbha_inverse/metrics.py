@@ -78,6 +78,41 @@ def tracking_errors(target_times, targets, tip_times, tips, start, end):
                           float(np.max(errors)))
 
 
+TRANSIENT_FACTOR = 3.0
+"""A start-up transient: errors above this many times the settled (median) error."""
+
+
+def transient_end(times, errors):
+    """
+    Return when the start-up transient of a run ends.
+
+    The settled error is the median error of the run's second half; the transient ends after the
+    last sample of the first half whose error exceeds :data:`TRANSIENT_FACTOR` times it (the
+    run's start when there is none). Later excursions stay in the score.
+
+    Parameters
+    ----------
+    times : (N,) array_like  [s]
+        Sample times (increasing).
+    errors : (N,) array_like  [m]
+        Tracking errors.
+
+    Returns
+    -------
+    float  [s]
+        The first time of the settled run.
+
+    """
+    times = np.asarray(times, dtype=float)
+    errors = np.asarray(errors, dtype=float)
+    half = times.size // 2
+    if half == 0:
+        return float(times[0]) if times.size else 0.0
+    settled = np.median(errors[half:])
+    above = np.flatnonzero(errors[:half] > TRANSIENT_FACTOR * settled)
+    return float(times[above[-1] + 1]) if above.size else float(times[0])
+
+
 def cross_track_errors(path, tips):
     """
     Return the distance of each tip sample to a path polyline (timing ignored).
@@ -115,7 +150,8 @@ def plot_runs(runs, path):
     Parameters
     ----------
     runs : list of dict
-        Each with ``title`` (str), ``targets`` (T, 3), ``tips`` (N, 3) [m], ``rms`` [m].
+        Each with ``title`` (str), ``targets`` (T, 3), ``tips`` (N, 3) [m], ``rms`` [m], and
+        optionally ``tip_label`` (the legend of the tips, default ``tip (plant)``).
     path : str or os.PathLike
         Output PNG.
 
@@ -132,7 +168,8 @@ def plot_runs(runs, path):
         targets = np.asarray(run['targets']) * 1e3
         tips = np.asarray(run['tips']) * 1e3
         axis.plot(targets[:, 1], targets[:, 2], 'k--', lw=1.0, label='target')
-        axis.plot(tips[:, 1], tips[:, 2], '-', color='tab:red', lw=1.2, label='tip (plant)')
+        axis.plot(tips[:, 1], tips[:, 2], '-', color='tab:red', lw=1.2,
+                  label=run.get('tip_label', 'tip (plant)'))
         axis.set_title(f"{run['title']}: RMS {run['rms'] * 1e3:.2f} mm")
         axis.set_xlabel('y [mm]')
         axis.set_ylabel('z [mm]')

@@ -1,6 +1,6 @@
 """
-A real arm: inverse_solver + robotino_bridge (+ stereo_tracker with feedback:=stereo, or
-shape_estimator with feedback:=proprio).
+A real arm: inverse_solver + robotino_bridge (driver:=robotino) (+ stereo_tracker with
+feedback:=stereo, or shape_estimator with feedback:=proprio).
 
 ``ros2 launch cbha_inverse robot.launch.py [name:=value ...]``; ``ros2 launch cbha_inverse
 robot.launch.py --show-args`` lists the arguments. The composition is the table
@@ -29,9 +29,6 @@ def _nodes(context):
 
 def generate_launch_description():
     """Declare the composition's arguments and start its nodes."""
-    arguments = [DeclareLaunchArgument(argument.name, default_value=argument.default,
-                                       description=argument.description,
-                                       **({'choices': list(argument.choices)}
-                                          if argument.choices else {}))
+    arguments = [DeclareLaunchArgument(argument.name, **argument.declaration())
                  for argument in COMPOSITION.all_arguments()]
     return LaunchDescription([*arguments, OpaqueFunction(function=_nodes)])

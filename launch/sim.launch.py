@@ -29,9 +29,6 @@ def _nodes(context):
 
 def generate_launch_description():
     """Declare the composition's arguments and start its nodes."""
-    arguments = [DeclareLaunchArgument(argument.name, default_value=argument.default,
-                                       description=argument.description,
-                                       **({'choices': list(argument.choices)}
-                                          if argument.choices else {}))
+    arguments = [DeclareLaunchArgument(argument.name, **argument.declaration())
                  for argument in COMPOSITION.all_arguments()]
     return LaunchDescription([*arguments, OpaqueFunction(function=_nodes)])

@@ -172,6 +172,34 @@ def spinning(context, *nodes):
             node.destroy_node()
 
 
+def loop_listener(context, namespace='/cbha'):
+    """
+    Return a node that keeps every ``pressure_command`` and ``tip/measured`` it receives.
+
+    Returns
+    -------
+    executor : rclpy.executors.SingleThreadedExecutor
+        Spinning the listener (shut it down and destroy the node afterwards).
+    listener : rclpy.node.Node
+    commands, tips : list
+        The received messages.
+
+    """
+    from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
+    from geometry_msgs.msg import PointStamped
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray
+    listener = Node('loop_listener', context=context, namespace=namespace)
+    commands, tips = [], []
+    listener.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
+                                 COMMAND_QOS)
+    listener.create_subscription(PointStamped, 'tip/measured', tips.append, MEASURED_QOS)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(listener)
+    return executor, listener, commands, tips
+
+
 def spin_for(executor, duration):
     """Spin ``executor`` for ``duration`` seconds."""
     deadline = time.monotonic() + duration

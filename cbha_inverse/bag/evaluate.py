@@ -6,13 +6,14 @@ and ``<ns>/pressure_command`` as std_msgs/Float64MultiArray, decoded without rcl
 error is :func:`cbha_inverse.metrics.tracking_errors` on the header stamps (the same
 function and window as ``cbha_demo``). The target-to-command latency pairs each target with the
 first command the recorder received after it (and before the next target), on the bag's receive
-times: it includes the delivery of both messages to the recorder.
+times: it includes the delivery of both messages to the recorder. With ``start=None`` the
+start-up transient is left out of the score (:func:`cbha_inverse.metrics.transient_end`).
 """
 
 from dataclasses import dataclass
 
 from cbha_inverse.bag.storage import BagError, deserialize, open_bag
-from cbha_inverse.metrics import plot_runs, tracking_errors
+from cbha_inverse.metrics import plot_runs, tracking_errors, transient_end
 import numpy as np
 
 POINT_TYPE = 'geometry_msgs/msg/PointStamped'
@@ -64,6 +65,10 @@ class BagEvaluation:
         None when the bag has no commands.
     latencies : (L,) ndarray  [s]
         Target-to-command delays (receive times).
+    skipped : float or None  [s]
+        With ``start=None``: the start-up transient left out, after the first target.
+    units : tuple of str or None
+        Unit of each command value (``'Pa'`` or ``'N'``); None: Pa.
 
     """
 
@@ -74,6 +79,8 @@ class BagEvaluation:
     tips: np.ndarray
     commands: object
     latencies: np.ndarray
+    skipped: float = None
+    units: tuple = None
 
 
 def point_series(bag, topic):
@@ -133,16 +140,18 @@ def command_series(bag, topic):
     return np.array(received, dtype=np.int64), commands
 
 
-def command_statistics(commands, max_pressure):
+def command_statistics(commands, max_pressure, lower=0.0):
     """
     Summarise commands.
 
     Parameters
     ----------
-    commands : (K, m) ndarray  [Pa]
+    commands : (K, m) ndarray  [Pa or N]
         The commands in order.
-    max_pressure : float  [Pa]
-        The upper bound used to count saturation.
+    max_pressure : float or (m,) array_like  [Pa or N]
+        The upper bound (per valve) used to count saturation.
+    lower : float or (m,) array_like  [Pa or N]
+        The lower bound (0: vented cavity, slack tendon).
 
     Returns
     -------
@@ -150,7 +159,9 @@ def command_statistics(commands, max_pressure):
         Per-valve minimum, mean, maximum and saturation.
 
     """
-    saturated = (commands <= 1.0) | (commands >= max_pressure - 1.0)
+    upper = np.asarray(max_pressure, dtype=float)
+    tolerance = 1e-5 * np.abs(upper)      # 1.5 Pa of 150 kPa, 0.1 mN of 10 N
+    saturated = (commands <= lower + tolerance) | (commands >= upper - tolerance)
     return CommandStatistics(len(commands), commands.min(axis=0), commands.mean(axis=0),
                              commands.max(axis=0), saturated.mean(axis=0),
                              float(np.mean(np.any(saturated, axis=1))))
@@ -184,7 +195,7 @@ def target_command_latencies(target_times, command_times):
 
 
 def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
-                 max_pressure=150000.0):
+                 max_pressure=150000.0, units=None):
     """
     Evaluate one recorded run.
 
@@ -197,12 +208,15 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
     tip : {'auto', 'true', 'measured'}
         Tip topic: ``tip/true`` (the plant's truth), ``tip/measured``, or ``auto`` (true if
         recorded, else measured).
-    start : float  [s]
-        Scoring starts this long after the first target's stamp.
+    start : float or None  [s]
+        Scoring starts this long after the first target's stamp; None: after the start-up
+        transient (:func:`cbha_inverse.metrics.transient_end`).
     end : float, optional  [s]
         Scoring ends this long after the first target's stamp (default: the last target).
-    max_pressure : float  [Pa]
-        Upper command bound, for the saturation count.
+    max_pressure : float or (m,) array_like  [Pa or N]
+        Upper command bound (per valve), for the saturation count.
+    units : sequence of str, optional
+        Unit of each command value (``'Pa'``, ``'N'``), e.g. from the scene's actuators.
 
     Returns
     -------
@@ -235,23 +249,33 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
         if names.get(command_topic) == COMMAND_TYPE:
             command_times, commands = command_series(bag, command_topic)
     first = target_stamps[0]
-    window = np.array([first + start, first + end if end is not None else target_stamps[-1]])
+    window = np.array([first + (start or 0.0),
+                       first + end if end is not None else target_stamps[-1]])
     try:
         tracking = tracking_errors(target_stamps, targets, tip_stamps, tips, *window)
     except ValueError:
         tracking = None
+    skipped = None
+    if start is None and tracking is not None:
+        window[0] = transient_end(tracking.times, tracking.errors)
+        skipped = float(window[0] - first)
+        tracking = tracking_errors(target_stamps, targets, tip_stamps, tips, *window)
     statistics = None
     if commands and len({c.size for c in commands}) == 1:
+        if units is not None and len(units) != commands[0].size:
+            raise BagError(f'{path}: the commands have {commands[0].size} values, the scene '
+                           f'{len(units)} actuators (give its scene)')
         statistics = command_statistics(np.stack(commands), max_pressure)
     in_window = (target_stamps >= window[0]) & (target_stamps <= window[1])
     tip_in_window = (tip_stamps >= window[0]) & (tip_stamps <= window[1])
     return BagEvaluation(tip_topic, window, tracking, targets[in_window], tips[tip_in_window],
-                         statistics, target_command_latencies(target_received, command_times))
+                         statistics, target_command_latencies(target_received, command_times),
+                         skipped, None if units is None else tuple(units))
 
 
 def format_evaluation(evaluation):
     """
-    Return the report of :func:`evaluate_bag` as text lines (mm, kPa, ms).
+    Return the report of :func:`evaluate_bag` as text lines (mm; kPa or N; ms).
 
     Parameters
     ----------
@@ -271,14 +295,24 @@ def format_evaluation(evaluation):
     else:
         lines.append(f'tracking ({evaluation.tip_topic}): RMS {tracking.rms * 1e3:.6f} mm, max '
                      f'{tracking.maximum * 1e3:.6f} mm over {tracking.errors.size} samples')
+        if evaluation.skipped is not None:
+            lines.append(f'  scored from {evaluation.skipped:.2f} s after the first target: the '
+                         'start-up transient (errors above 3x the settled median) left out; '
+                         '--start 0 scores it')
     commands = evaluation.commands
     if commands is None:
         lines.append('commands: none recorded')
     else:
-        def kpa(values):
-            return ' '.join(f'{v * 1e-3:.1f}' for v in values)
-        lines += [f'commands: {commands.count}, per valve [kPa] min {kpa(commands.minimum)} | '
-                  f'mean {kpa(commands.mean)} | max {kpa(commands.maximum)}',
+        units = evaluation.units or ('Pa',) * len(commands.minimum)
+        scale = np.array([1e-3 if unit == 'Pa' else 1.0 for unit in units])
+        shown = '|'.join(sorted({'kPa' if unit == 'Pa' else unit for unit in units}))
+
+        def in_units(values):
+            return ' '.join(f'{v:.1f}' if unit == 'Pa' else f'{v:.3f}'
+                            for v, unit in zip(values * scale, units))
+        lines += [f'commands: {commands.count}, per valve [{shown}] min '
+                  f'{in_units(commands.minimum)} | mean {in_units(commands.mean)} | max '
+                  f'{in_units(commands.maximum)}',
                   f'saturation: {100 * commands.any_saturated_fraction:.1f} % of commands, per '
                   'valve ' + ' '.join(f'{100 * v:.1f}' for v in commands.saturated_fraction)
                   + ' %']
@@ -308,4 +342,4 @@ def plot_evaluation(evaluation, path, title):
     """
     rms = evaluation.tracking.rms if evaluation.tracking is not None else float('nan')
     plot_runs([{'title': title, 'targets': evaluation.targets, 'tips': evaluation.tips,
-                'rms': rms}], path)
+                'rms': rms, 'tip_label': evaluation.tip_topic}], path)

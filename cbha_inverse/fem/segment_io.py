@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 
 from cbha_inverse import __version__
-from cbha_inverse.config_files import read_yaml
+from cbha_inverse.config_files import check_keys, read_yaml
 from cbha_inverse.core.links import checked_compliance
 from cbha_inverse.errors import ConfigError
 import numpy as np
@@ -238,6 +238,12 @@ def write_segment(path, segment, *, name, material, inputs_sha256, cavities=(), 
     return path
 
 
+SEGMENT_KEYS = ('name', 'units', 'compliance', 'rest_offset', 'rest_rotation', 'mass_kg',
+                'material', 'element_order', 'mesh_size', 'n_nodes', 'n_elements',
+                'inputs_sha256', 'package_version', 'condensation_seconds', 'cavities', 'notes')
+"""The keys of a segment file, as :func:`write_segment` writes them."""
+
+
 def load_segment(path):
     """
     Read a segment YAML (and its cavity surfaces) without gmsh.
@@ -261,6 +267,7 @@ def load_segment(path):
     """
     path = Path(path)
     data = read_yaml(path)
+    check_keys(path, data, SEGMENT_KEYS)
     arrays = {}
     for key, shape in (('compliance', (6, 6)), ('rest_offset', (3,)), ('rest_rotation', (3, 3))):
         if data.get(key) is None:
@@ -287,6 +294,7 @@ def load_segment(path):
         if not (isinstance(item, dict) and isinstance(item.get('name'), str)
                 and isinstance(item.get('file'), str)):
             raise ConfigError(path, f'cavities[{i}]', 'needs a name and a file (strings)')
+        check_keys(path, item, ('name', 'file'), f'cavities[{i}]')
         surface = path.parent / item['file']
         if not surface.is_file():
             raise ConfigError(path, f'cavities[{i}].file', f'no cavity surface {surface}')

@@ -232,15 +232,16 @@ def read_segment_spec(path):
 
     """
     path = Path(path)
-    spec = read_section(path)
+    spec = read_section(path).only('name', 'kind', 'geometry', 'material', 'mesh')
     name = spec.text('name')
     kind = spec.text('kind', 'bellows_segment', choices=KINDS)
-    mesh = spec.section('mesh')
+    mesh = spec.section('mesh').only('mesh_size', 'order')
     mesh_size = mesh.number('mesh_size', positive=True)
     order = mesh.integer('order', 2)
     if order not in (1, 2):
         raise mesh.error('order', f'must be 1 or 2, got {order}')
-    material = spec.section('material')
+    material = spec.section('material').only('name', 'youngs_modulus', 'poisson_ratio',
+                                             'density')
     youngs_modulus = material.number('youngs_modulus', positive=True)
     poisson = material.number('poisson_ratio')
     if not -1.0 < poisson < 0.5:
@@ -249,6 +250,7 @@ def read_segment_spec(path):
     typed_material = Material(material.text('name', name), youngs_modulus, poisson, density)
     shape = spec.section('geometry')
     if kind == 'cylinder':
+        shape.only('length', 'outer_radius', 'inner_radius')
         outer = shape.number('outer_radius', positive=True)
         length = shape.number('length', positive=True)
         inner = shape.number('inner_radius', 0.0, minimum=0.0)
@@ -262,9 +264,10 @@ def read_segment_spec(path):
 
 def _bellows_geometry(shape):
     """Return the :class:`BellowsGeometry` of a checked ``geometry`` section."""
-    lengths = {key: shape.number(key, positive=True)
-               for key in ('segment_length', 'vertebra_thickness', 'tube_pitch_radius',
-                           'tube_mean_radius', 'corrugation_amplitude', 'wall_thickness')}
+    keys = ('segment_length', 'vertebra_thickness', 'tube_pitch_radius', 'tube_mean_radius',
+            'corrugation_amplitude', 'wall_thickness')
+    shape.only(*keys, 'corrugation_periods', 'vertebra_mass', 'tubes')
+    lengths = {key: shape.number(key, positive=True) for key in keys}
     periods = shape.integer('corrugation_periods', minimum=1)
     vertebra_mass = shape.number('vertebra_mass', 0.0, minimum=0.0)
     tubes = shape.sections('tubes')
@@ -274,5 +277,6 @@ def _bellows_geometry(shape):
         raise shape.error('vertebra_thickness', 'must be below segment_length')
     return BellowsGeometry(
         corrugation_periods=periods, vertebra_mass=vertebra_mass,
-        tubes=tuple(Tube(tube.text('name'), tube.number('angle_deg')) for tube in tubes),
+        tubes=tuple(Tube(tube.only('name', 'angle_deg').text('name'), tube.number('angle_deg'))
+                    for tube in tubes),
         **lengths)

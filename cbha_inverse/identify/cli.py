@@ -29,6 +29,7 @@ from cbha_inverse.bag.storage import BagError
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error, report_error
 from cbha_inverse.identify.fit import identify
+from cbha_inverse.identify.progress import ProgressLine
 from cbha_inverse.identify.samples import (acting_pressures, IdentificationError,
                                            pooled_samples, PRESSURE_SOURCES,
                                            quasi_static_samples, read_session)
@@ -81,6 +82,11 @@ def parse_args(argv):
                         'registration error)')
     parser.add_argument('--base-position-sigma', type=_prior_sigma, default=0.01,
                         help='prior standard deviation of each base coordinate [m] ("none")')
+    shown = parser.add_mutually_exclusive_group()
+    shown.add_argument('--quiet', action='store_true', help='no progress line')
+    shown.add_argument('--verbose', action='store_true',
+                       help='every forward evaluation on its own line (default: one updating '
+                            'line)')
     return parser.parse_args(argv)
 
 
@@ -237,6 +243,7 @@ def main(argv=None):
     """
     args = parse_args(sys.argv[1:] if argv is None else argv)
     started = time.monotonic()
+    progress = ProgressLine(mode='quiet' if args.quiet else 'verbose' if args.verbose else 'line')
     try:
         scene_path = resolve_scene_path(args.scene)
         scene = load_scene(scene_path)
@@ -276,11 +283,13 @@ def main(argv=None):
                           base_position_sigma=args.base_position_sigma,
                           latency=samples.delay if args.fit_latency else None,
                           latency_sigma=args.latency_sigma,
-                          progress=lambda line: print(line, flush=True))
+                          progress=progress)
     except (ConfigError, FileNotFoundError, BagError) as exc:
         return report_config_error(PROGRAM, exc)
     except (IdentificationError, ValueError) as exc:
         return report_error(PROGRAM, exc, 1)
+    finally:
+        progress.close()
     output = Path(args.output)
     output.mkdir(parents=True, exist_ok=True)
     stem = f'{scene_path.stem}_identified'

@@ -55,6 +55,13 @@ def main(argv=None):
                         help='arguments passed to the report (single report only)')
     args = parser.parse_args(argv)
     names = GROUPS.get(args.report, (args.report,))
+    if len(names) > 1 and {'-h', '--help'} & set(args.report_args):
+        # a group passes its arguments on to reports: its --help is its own, and runs nothing
+        print(f'usage: cbha_report {args.report} [--quick] [--output DIR]\n\nruns, in turn:')
+        for name in names:
+            print(f'  {name}: {REPORTS[name][1]}')
+        print('\n`cbha_report <name> --help` describes the arguments of one report.')
+        return 0
     for name in names:
         module_name, text = REPORTS[name]
         print(f'== {name}: {text}', flush=True)

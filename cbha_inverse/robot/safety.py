@@ -16,7 +16,8 @@ The nodes call these functions on every message and before every publication:
 - :class:`StalenessWatch`, :func:`stale_action` and :func:`controller_decision` decide when to
   hold or vent (stale feedback; a stale target stays the set-point), on a steady clock
   (``time.monotonic``) passed in by the caller, so that a bag replay or ``use_sim_time`` cannot
-  fool the watchdog; :func:`watchdog_action` is what a watchdog tick then publishes.
+  fool the watchdog; :func:`watchdog_action` is what a watchdog tick then publishes;
+  :class:`SilenceWarning` says when to warn that an input (the driver's readings) is missing.
 """
 
 from dataclasses import dataclass
@@ -316,9 +317,13 @@ def stale_action(feedback_stale, closed_loop, action):
     return 'run'
 
 
-def controller_decision(enabled, has_target, feedback_stale, closed_loop, action):
+def controller_decision(enabled, has_target, feedback_stale, closed_loop, action,
+                        has_feedback=True):
     """
     Decide what the controller does this tick, from its state and :func:`stale_action`.
+
+    A closed loop that has never had a measurement waits (it has nothing to hold: no command
+    was computed from feedback yet).
 
     Parameters
     ----------
@@ -330,18 +335,76 @@ def controller_decision(enabled, has_target, feedback_stale, closed_loop, action
         See :func:`stale_action`.
     action : str
         ``'hold'`` or ``'vent'``, see :func:`stale_action`.
+    has_feedback : bool
+        Whether a valid measurement has ever arrived.
 
     Returns
     -------
     str
-        ``'disabled'``, ``'waiting'`` (no target yet), ``'run'``, ``'hold'`` or ``'vent'``.
+        ``'disabled'``, ``'waiting'`` (no target yet; closed loop: or no measurement yet),
+        ``'run'``, ``'hold'`` or ``'vent'``.
 
     """
     if not enabled:
         return 'disabled'
-    if not has_target:
+    if not has_target or (closed_loop and not has_feedback):
         return 'waiting'
     return stale_action(feedback_stale, closed_loop, action)
+
+
+class SilenceWarning:
+    """
+    When to warn that an input does not arrive.
+
+    Once it is silent for its timeout, then at most every ``period`` while it stays silent.
+
+    Parameters
+    ----------
+    timeout : float  [s]
+        Silence (since the last input, or since ``start`` before the first) that is worth a
+        warning.
+    period : float  [s]
+        Least time between two warnings of one silence (> 0).
+    start : float  [s]
+        Steady time at which the input could first arrive (the node's start).
+
+    """
+
+    def __init__(self, timeout, period, start):
+        """Start silent since ``start``, not yet warned."""
+        if not period > 0.0:
+            raise ValueError(f'period must be > 0, got {period}')
+        self.timeout = float(timeout)
+        self.period = float(period)
+        self.start = float(start)
+        self.warned = None
+
+    def due(self, now, last):
+        """
+        Return whether to warn now.
+
+        Parameters
+        ----------
+        now : float  [s]
+            Steady time.
+        last : float or None  [s]
+            Steady time of the last input (None: none yet).
+
+        Returns
+        -------
+        bool
+            True on the first tick of a silence beyond ``timeout``, then once every ``period``;
+            an input ends the silence (the next one is warned again).
+
+        """
+        silent = now - (self.start if last is None else last)
+        if silent <= self.timeout:
+            self.warned = None
+            return False
+        if self.warned is None or now - self.warned >= self.period:
+            self.warned = now
+            return True
+        return False
 
 
 def watchdog_action(decision, publish_idle):

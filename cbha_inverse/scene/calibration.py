@@ -220,7 +220,7 @@ def read_calibration(spec):
         return Calibration()
     block = spec.section('calibration')
     known = ('section_stiffness', 'actuator_gain', 'tip_payload_mass', 'base_offset')
-    _check_keys(block, known, 'calibration key')
+    block.only(*known)
     factors = []
     for key in known[:2]:
         values = {}
@@ -231,16 +231,9 @@ def read_calibration(spec):
         factors.append(values)
     offset = block.section('base_offset', None) or Section(block.path, {},
                                                            block.key('base_offset'))
-    _check_keys(offset, ('position', 'rpy'), 'base_offset key')
+    offset.only('position', 'rpy')
     return Calibration(*factors, block.number('tip_payload_mass', 0.0, minimum=0.0),
                        offset.vector('position', 3, _ZERO), offset.vector('rpy', 3, _ZERO))
-
-
-def _check_keys(section, known, what):
-    """Raise a ``ConfigError`` naming the first key of ``section`` not in ``known``."""
-    for key in section.data:
-        if key not in known:
-            raise section.error(key, f'unknown {what} (known: {list(known)})')
 
 
 def check_names(spec, calibration, sections, actuators):

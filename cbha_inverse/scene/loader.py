@@ -117,10 +117,11 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     if not stiffness_scale > 0.0:
         raise ValueError('stiffness_scale must be positive')
     path = resolve_scene_path(path)
-    spec = read_section(path)
+    spec = read_section(path).only(*SCENE_KEYS)
     calibrated = read_calibration(spec).combined(calibration)
     chain = spec.section('chain')
     kind = chain.text('type', choices=('beam_vertebrae', 'segments'))
+    chain.only('type', *_CHAIN_KEYS[kind])
     if kind == 'beam_vertebrae':
         model = _beam_chain(chain, stiffness_scale, calibrated.tip_payload_mass)
         vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
@@ -166,6 +167,16 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
                  calibration=calibrated, sensors=sensors, path=path)
 
 
+SCENE_KEYS = ('name', 'description', 'base_frame', 'gravity', 'chain', 'cables', 'cavities',
+              'cavity_model', 'actuator_order', 'effectors', 'workspace_center', 'solver',
+              'calibration', 'sensors')
+"""The keys of a scene file (docs/own-robot.md describes them)."""
+
+_CHAIN_KEYS = {'segments': ('sections',),
+               'beam_vertebrae': ('n_vertebrae', 'beams_per_interval', 'interval_length',
+                                  'backbone', 'vertebra_mass')}
+
+
 def _actuator_set(spec, groups, n_frames):
     """Build the actuator set in the scene's ``actuator_order`` (names checked)."""
     order = spec.data.get('actuator_order')
@@ -180,7 +191,7 @@ def _workspace(spec):
     if not spec.has('workspace_center'):
         return None
     if isinstance(spec.data['workspace_center'], dict):
-        center = spec.section('workspace_center')
+        center = spec.section('workspace_center').only('actuation_fraction')
         return {'actuation_fraction': center.number('actuation_fraction', minimum=0.0)}
     return spec.vector('workspace_center', 3)
 
@@ -189,11 +200,7 @@ def _solver_defaults(spec):
     """Return the scene's ``solver`` section, its keys checked against ``InverseOptions``."""
     if not spec.has('solver'):
         return None
-    solver = spec.section('solver')
-    known = {f.name for f in fields(InverseOptions)}
-    for key in solver.data:
-        if key not in known:
-            raise solver.error(key, f'unknown solver option (known: {sorted(known)})')
+    solver = spec.section('solver').only(*(f.name for f in fields(InverseOptions)))
     return dict(solver.data)
 
 
@@ -207,7 +214,8 @@ def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
     """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene."""
     n_v = chain.integer('n_vertebrae', minimum=1)
     per = chain.integer('beams_per_interval', minimum=1)
-    b = chain.section('backbone')
+    b = chain.section('backbone').only('youngs_modulus', 'poisson_ratio', 'outer_radius',
+                                       'inner_radius', 'density')
     length = chain.number('interval_length', positive=True) / per
     outer = b.number('outer_radius', positive=True)
     inner = b.number('inner_radius', 0.0, minimum=0.0)
@@ -229,6 +237,8 @@ def _cables(items, vertebra_frames, gains=None):
     """Route each cable from the base through every vertebra up to its end vertebra."""
     cables = []
     for item in items:
+        item.only('name', 'angle_deg', 'radius', 'end_vertebra', 'start_vertebra',
+                  'max_tension')
         frames, offsets = _vertebra_route(item, vertebra_frames)
         name = item.text('name')
         cables.append(Cable(name, frames, offsets, item.number('max_tension', positive=True),
@@ -263,6 +273,8 @@ def _sensors(items, model, vertebra_frames):
     names, frames, offsets = [], [], []
     calibration = {'offset': [], 'gain': [], 'noise_std': []}
     for item in items:
+        item.only('name', 'kind', 'points', 'angle_deg', 'radius', 'end_vertebra',
+                  'start_vertebra', 'offset', 'gain', 'noise_std')
         item.text('kind', choices=('string_pot',))
         name = item.text('name')
         if name in names:
@@ -271,7 +283,8 @@ def _sensors(items, model, vertebra_frames):
             points = item.sections('points')
             if len(points) < 2:
                 raise item.error('points', 'a string pot needs >= 2 attachment points')
-            route = [_point_frame(point, model, vertebra_frames) for point in points]
+            route = [_point_frame(point.only('frame', 'vertebra', 'offset'), model,
+                                  vertebra_frames) for point in points]
             route_frames = [frame for frame, _ in route]
             route_offsets = [offset for _, offset in route]
         else:
@@ -309,6 +322,7 @@ def _effectors(items, model, vertebra_frames):
     """Build the effector points."""
     names, frames, offsets = [], [], []
     for item in items:
+        item.only('name', 'frame', 'vertebra', 'offset')
         frame, offset = _point_frame(item, model, vertebra_frames)
         names.append(item.text('name'))
         frames.append(frame)

@@ -48,6 +48,7 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0, calibration=None):
     if not items:
         raise chain.error('sections', 'at least one section is needed')
     for item in items:
+        item.only('name', 'segment', 'count')
         segment_path = Path(base_dir, item.text('segment'))
         if not segment_path.is_file():
             raise item.error('segment', f'no segment file {segment_path}')
@@ -130,6 +131,7 @@ def cavity_group(items, sections, segments, n_frames, model='linear', gains=None
     """
     cavities = []
     for item in items:
+        item.only('name', 'section', 'cavity', 'max_pressure')
         section = item.text('section')
         if section not in sections:
             raise item.error('section', f'no chain section {section!r} (has {sorted(sections)})')

@@ -17,7 +17,7 @@ files written by the ROS ``camera_calibration`` tool load unchanged. No OpenCV h
 from dataclasses import dataclass
 from pathlib import Path
 
-from cbha_inverse.config_files import parse_yaml, read_text
+from cbha_inverse.config_files import check_keys, parse_yaml, read_text
 from cbha_inverse.errors import ConfigError
 import numpy as np
 import yaml
@@ -157,6 +157,11 @@ def camera_model(width, height, distortion_model, distortion, camera_matrix, rec
                        rotation, p_matrix, str(name))
 
 
+CAMERA_KEYS = ('image_width', 'image_height', 'camera_name', 'camera_matrix', 'distortion_model',
+               'distortion_coefficients', 'rectification_matrix', 'projection_matrix')
+"""The keys of a camera_calibration_parsers YAML file (:func:`camera_to_yaml` writes them all)."""
+
+
 def _matrix_entry(rows, cols, array):
     return {'rows': rows, 'cols': cols, 'data': [float(v) for v in np.ravel(array)]}
 
@@ -216,6 +221,7 @@ def _matrix(path, document, key, rows, cols=None):
     entry = document.get(key)
     if not isinstance(entry, dict) or 'data' not in entry:
         raise ConfigError(path, key, 'missing, or not a mapping with rows, cols and data')
+    check_keys(path, entry, ('rows', 'cols', 'data'), key)
     data = entry['data']
     if not isinstance(data, list):
         raise ConfigError(path, f'{key}.data', f'must be a list of numbers, got {data!r}')
@@ -253,6 +259,7 @@ def camera_from_yaml(text, path='<string>'):
 
     """
     document = parse_yaml(text, path)
+    check_keys(path, document, CAMERA_KEYS)
     for key in ('image_width', 'image_height', 'distortion_model'):
         if key not in document:
             raise ConfigError(path, key, 'missing')

@@ -5,7 +5,8 @@ A hardware-triggered stereo pair carries (nearly) one stamp in both images; the 
 arrive independently. :class:`StereoPairer` holds the images still waiting for a partner, pairs
 an arriving image with the closest-stamped one of the other side when within ``max_dt``, and
 drops what can no longer pair: the oldest of a full queue, and every image older than a pair
-just completed. ``stereo_tracker`` feeds it the image streams.
+just completed. ``stereo_tracker`` feeds it the image streams; :class:`DropMonitor` tells the
+drops of normal running from a tracker that falls behind.
 """
 
 import collections
@@ -72,3 +73,46 @@ class StereoPairer:
         self.queues[other].popleft()
         pair = (item, partner[1]) if side == 'left' else (partner[1], item)
         return pair, tuple(dropped)
+
+
+class DropMonitor:
+    """
+    Whether a tracker falls behind: the share of dropped images over the last ones.
+
+    A few images dropped now and then are normal (two free-running streams, a pair that one
+    delayed image misses); a tracker that drops a large share of them cannot keep up.
+
+    Parameters
+    ----------
+    window : int
+        Number of arriving images the share is taken over (>= 1).
+    share : float
+        Share of dropped images, in (0, 1], from which the tracker falls behind.
+
+    """
+
+    def __init__(self, window=60, share=0.25):
+        if window < 1 or not 0.0 < share <= 1.0:
+            raise ValueError(f'need window >= 1 and share in (0, 1], got {window}, {share}')
+        self.share = float(share)
+        self.events = collections.deque(maxlen=int(window))
+
+    def add(self, dropped):
+        """
+        Record one arriving image and the images dropped on its arrival.
+
+        Parameters
+        ----------
+        dropped : int
+            Images dropped when it arrived (>= 0).
+
+        Returns
+        -------
+        bool
+            Whether the tracker falls behind: a full window whose dropped images reach
+            ``share`` of its arrivals.
+
+        """
+        self.events.append(int(dropped))
+        return (len(self.events) == self.events.maxlen
+                and sum(self.events) >= self.share * len(self.events))

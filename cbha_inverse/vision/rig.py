@@ -16,7 +16,7 @@ The rig file (``config/cameras/rig.yaml``) names the two camera_info YAMLs and h
 from dataclasses import dataclass
 from pathlib import Path
 
-from cbha_inverse.config_files import read_yaml
+from cbha_inverse.config_files import check_keys, read_yaml
 from cbha_inverse.core.so3 import matrix_from_quat, quat_from_matrix
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.vision.camera import camera_model, load_camera_yaml, save_camera_yaml
@@ -227,6 +227,7 @@ def load_rig(path):
     """
     path = Path(path)
     document = read_yaml(path)
+    check_keys(path, document, ('left_camera_info', 'right_camera_info', 'base_from_left'))
     cameras = []
     for key in ('left_camera_info', 'right_camera_info'):
         if not isinstance(document.get(key), str):

@@ -1,10 +1,14 @@
 """cbha_identify: recovery of known plant errors, clear refusals of data that cannot give a fit."""
 
+import io
 import json
+import re
+import time
 
 from cbha_inverse.bag.storage import BagWriter
 from cbha_inverse.identify.cli import main
 from cbha_inverse.identify.fit import identify, parameter_names, TipPredictor
+from cbha_inverse.identify.progress import ProgressLine
 from cbha_inverse.identify.samples import (IdentificationError, quasi_static_samples,
                                            valve_pressures)
 from cbha_inverse.metrics import cross_track_errors
@@ -169,10 +173,21 @@ def test_cbha_identify_writes_a_scene_that_reproduces_the_plant(tmp_path, capsys
     names = parameter_names(load_scene('cbha'))
     tips = TipPredictor('cbha', names, commands)(TRUTH)
     _write_bag(tmp_path / 'bag', commands, tips, NOISE)
+    started = time.monotonic()
     assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'out'),
                  '--max-samples', '24']) == 0
+    elapsed = time.monotonic() - started
     out = capsys.readouterr().out
-    assert 'evaluation 1: tip RMS' in out
+    # progress off a terminal: the first evaluation, then at most one line per 5 s, the last
+    shown = [line for line in out.splitlines() if ': tip RMS' in line]
+    evaluations = int(re.search(r'(\d+) forward evaluations', out).group(1))
+    assert shown[0].startswith('evaluation 1: ')
+    numbers = [int(line.split()[1].rstrip(':')) for line in shown]
+    assert numbers == sorted(numbers) and len(numbers) >= 2    # the last one ends the fit
+    assert len(shown) <= 2 + elapsed / 5.0 < evaluations, out
+    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'quiet'), '--quiet',
+                 '--max-samples', '24']) == 0
+    assert ': tip RMS' not in capsys.readouterr().out
     assert 'standard error' in (tmp_path / 'out' / 'cbha_identified_report.txt').read_text()
     assert (tmp_path / 'out' / 'cbha_identified.png').stat().st_size > 10_000
     identified = load_scene(tmp_path / 'out' / 'cbha_identified.yaml')
@@ -318,3 +333,38 @@ def test_valve_names_map_the_recorded_commands_to_the_scene_order():
     np.testing.assert_array_equal(command_order(scene, None), np.arange(6))
     with pytest.raises(ValueError, match='must be a permutation'):
         command_order(scene, 'inner_over,outer_over')
+
+
+class _Terminal(io.StringIO):
+
+    def isatty(self):
+        return True
+
+
+def test_progress_is_one_updating_line():
+    terminal = _Terminal()
+    progress = ProgressLine(terminal)
+    for message in ('evaluation 1: 10.0 mm', 'evaluation 2: 9.5 mm', 'evaluation 10: 1 mm'):
+        progress(message)
+    progress.close()
+    text = terminal.getvalue()
+    assert text.count('\n') == 1 and text.endswith('\n')
+    assert text.split('\r')[-1].rstrip() == 'evaluation 10: 1 mm'
+    # into a file: a line at most every period, and the last one at the end
+    now = [0.0]
+    written = io.StringIO()
+    progress = ProgressLine(written, period=5.0, clock=lambda: now[0])
+    for k in range(20):
+        now[0] = float(k)
+        progress(f'evaluation {k}')
+    progress.close()
+    assert written.getvalue().splitlines() == [
+        'evaluation 0', 'evaluation 5', 'evaluation 10', 'evaluation 15', 'evaluation 19']
+    verbose, quiet = io.StringIO(), io.StringIO()
+    for mode, stream in (('verbose', verbose), ('quiet', quiet)):
+        progress = ProgressLine(stream, mode=mode)
+        for k in range(3):
+            progress(f'evaluation {k}')
+        progress.close()
+    assert verbose.getvalue().splitlines() == ['evaluation 0', 'evaluation 1', 'evaluation 2']
+    assert quiet.getvalue() == ''

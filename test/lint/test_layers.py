@@ -165,7 +165,7 @@ def test_compiled_code_and_ros_stay_in_their_homes(what, pattern, homes):
 
 
 def test_ros_package_holds_only_subpackages():
-    """``cbha_inverse/ros/`` is sorted by kind: nodes/, common/, bag/, launch/; no flat module."""
+    """``cbha_inverse/ros/`` is sorted by kind: nodes/, common/, bag/, launch/, console/."""
     flat = sorted(p.name for p in (PACKAGE_DIR / 'ros').glob('*.py') if p.name != '__init__.py')
     assert not flat, f'modules directly in cbha_inverse/ros/: {flat}'
 

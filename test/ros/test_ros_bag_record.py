@@ -18,10 +18,11 @@ from geometry_msgs.msg import PointStamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import pytest
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import serialize_message
-from ros_helpers import child_env, REPO_ROOT
+from ros_helpers import child_env, REPO_ROOT, spin_until
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -181,11 +182,34 @@ def test_record_all_split_by_duration_stopped_by_sigterm(source, tmp_path):
             assert sum(1 for _ in make_reader(stream).iter_messages()) > 0
 
 
+def test_a_topic_without_publisher_is_warned_and_no_message_is_an_error(
+        rclpy_context, tmp_path):
+    """A misspelt topic: one warning naming the nearest published topic, then exit 1."""
+    node = Node('publisher', context=rclpy_context, namespace='/cbha')
+    node.create_publisher(PointStamped, 'tip/measured', 10)
+    executor = SingleThreadedExecutor(context=rclpy_context)
+    executor.add_node(node)
+    recorder = _record('-o', tmp_path / 'typo', '--duration', 5.0, '/cbha/tip/mesured')
+    try:
+        spin_until(executor, lambda: recorder.poll() is not None, 60.0)
+        output = recorder.communicate(timeout=30)[0]
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+    assert recorder.returncode == 1, output
+    assert output.count('warning: no publisher of /cbha/tip/mesured after 3 s (did you mean '
+                        '/cbha/tip/measured?); still waiting') == 1, output
+    assert output.splitlines()[-1] == (
+        'cbha_bag record: error: 0 messages recorded (no publisher of /cbha/tip/mesured); '
+        '--allow-empty accepts an empty bag'), output
+
+
 def test_record_duration_gives_an_empty_valid_bag(tmp_path):
     """--duration stops by itself; a bag without messages is still a valid rosbag2 bag."""
     output = tmp_path / 'empty'
     started = time.monotonic()
-    result = subprocess.run(_command('record', '-o', output, '--duration', 1.0, '/nothing'),
+    result = subprocess.run(_command('record', '-o', output, '--duration', 1.0, '--allow-empty',
+                                     '/nothing'),
                             cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True,
                             timeout=60)
     assert result.returncode == 0, result.stderr

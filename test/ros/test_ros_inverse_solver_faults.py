@@ -3,7 +3,8 @@
 
 In closed loop, with the targets still moving, the measurements stop; once they are
 ``feedback_timeout`` old, ``hold`` must repeat the command solved last (not the vent value, not an
-older command) and ``vent`` must publish the vent value, which no solved command equals.
+older command) and ``vent`` must publish the vent value, which no solved command equals. Before
+the first measurement a closed loop has nothing to hold: it waits and says which topic it lacks.
 """
 
 import time
@@ -88,3 +89,32 @@ def test_stale_feedback_holds_the_last_solved_command_or_vents(rclpy_context, ac
     assert any(np.array_equal(held, c) for c in last_ticks), 'held value was not solved last'
     # and the solver was still moving then: the running commands are not all equal
     assert len({c.tobytes() for c in running}) > 1
+
+
+def test_closed_loop_before_the_first_measurement_waits_and_names_the_topic(rclpy_context,
+                                                                            capfd):
+    """No tip/measured yet: no command at all (no hold of nothing), one WARN naming the topic."""
+    names = list(load_scene(TENDON).actuator_names)
+    solver = make_node(InverseSolverNode, rclpy_context, scene=TENDON, valve_names=names,
+                       rate_hz=100.0, mode='closed', feedback_timeout=0.2, stale_action='hold')
+    client = Node('client', context=rclpy_context, namespace='/cbha')
+    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    measured_pub = client.create_publisher(PointStamped, 'tip/measured', MEASURED_QOS)
+    commands = []
+    client.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
+                               COMMAND_QOS)
+    center = np.array(TENDON_CENTER)
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
+                          and solver.command_publisher.get_subscription_count() > 0, 10.0)
+        for _ in range(50):
+            target_pub.publish(target_point(center))
+            spin_for(executor, 0.02)
+        assert solver.decision == 'waiting' and not commands and solver.ticks == 0
+        measured_pub.publish(target_point(center))
+        target_pub.publish(target_point(center))
+        assert spin_until(executor, lambda: len(commands) >= 3, 10.0)
+    assert solver.decision == 'run'
+    log = capfd.readouterr().err
+    assert log.count('closed loop, no measurement yet on /cbha/tip/measured') == 1, log
+    assert 'no tip/measured for inf' not in log, log

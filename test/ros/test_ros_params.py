@@ -1,5 +1,8 @@
 """Every node parameter is declared with a type, a description and (for numbers) a range."""
 
+from dataclasses import fields, is_dataclass
+import sys
+
 from cbha_inverse.ros.common.params import ParameterError
 from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
@@ -10,6 +13,12 @@ from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 
 SCENE = 'tendon_6f_8c'
+
+
+def _params_class(node_class):
+    module = sys.modules[node_class.__module__]
+    [found] = [v for k, v in vars(module).items() if k.endswith('Params') and is_dataclass(v)]
+    return found
 
 
 def _overrides(node_class):
@@ -23,14 +32,20 @@ def _overrides(node_class):
 def test_every_parameter_is_described_typed_and_ranged(rclpy_context, node_class):
     node = node_class(context=rclpy_context, parameter_overrides=_overrides(node_class))
     try:
-        names = [name for name in node.list_parameters([], 0).names if name != 'use_sim_time']
+        names = [name for name in node.list_parameters([], 0).names
+                 if name not in ('use_sim_time', 'start_type_description_service')]
         descriptors = node.describe_parameters(names)
     finally:
         node.destroy_node()
     assert len(descriptors) >= 10
+    live = {spec.metadata.get('ros_name') or spec.name: spec.metadata['live']
+            for spec in fields(_params_class(node_class))}
     for descriptor in descriptors:
         assert descriptor.description, f'{descriptor.name} has no description'
-        assert descriptor.read_only, f'{descriptor.name} is not read-only'
+        # tuning parameters are live, the structural ones read-only (and say so)
+        assert descriptor.read_only == (not live[descriptor.name]), descriptor.name
+        assert descriptor.read_only == descriptor.description.endswith(
+            '(read-only: restart the node to change it)'), descriptor.name
         assert descriptor.type != ParameterType.PARAMETER_NOT_SET
         if descriptor.type == ParameterType.PARAMETER_DOUBLE:
             assert descriptor.floating_point_range, f'{descriptor.name} has no range'

@@ -325,3 +325,25 @@ def test_closed_loop_through_bridge_and_driver_tracks_like_the_direct_loop(rclpy
 def test_invalid_parameters_are_refused_at_start(rclpy_context, overrides, match):
     with pytest.raises(ParameterError, match=match):
         _bridge(rclpy_context, **overrides)
+
+
+def test_no_driver_readings_warns_once_then_every_period(rclpy_context, robotino_msgs, capfd):
+    driver = DriverStandIn(rclpy_context)                    # silent until asked
+    start = time.monotonic()
+    bridge = _bridge(rclpy_context, reading_timeout=0.2, silence_warn_period=0.5)
+    warning = 'no bha_readings from the driver on /bha_readings for 0.2 s or more'
+    with spinning(rclpy_context, bridge, driver) as executor:
+        if time.monotonic() - start < 0.15:
+            spin_for(executor, 0.15 - (time.monotonic() - start))
+            assert warning not in capfd.readouterr().err     # not before its timeout
+        spin_for(executor, 1.1)
+        elapsed = time.monotonic() - start
+        log = capfd.readouterr().err
+        assert 1 <= log.count(warning) <= 1 + (elapsed - 0.2) / 0.5, log
+        # readings end the silence: no warning while they arrive
+        assert spin_until(executor, lambda: driver.publish_readings() and bridge.readings, 10.0)
+        capfd.readouterr()
+        for _ in range(20):
+            driver.publish_readings()
+            spin_for(executor, 0.025)
+        assert warning not in capfd.readouterr().err

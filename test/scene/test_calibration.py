@@ -311,7 +311,7 @@ def test_calibration_refuses_a_bad_offset(field_name, value):
     ({'base_offset': {'position': 0.1}}, 'calibration.base_offset.position',
      'list of 3 finite numbers'),
     ({'base_offset': {'translation': [0.0, 0.0, 0.0]}}, 'calibration.base_offset.translation',
-     'unknown base_offset key'),
+     'unknown key (valid: position, rpy)'),
     ({'base_offset': [0.0, 0.0, 0.0]}, 'calibration.base_offset', 'mapping'),
 ])
 def test_bad_cable_gain_or_offset_names_the_file_and_key(tmp_path, block, key, problem):
@@ -330,7 +330,7 @@ def test_bad_cable_gain_or_offset_names_the_file_and_key(tmp_path, block, key, p
     ({'actuator_gain': {'wrist': 1.0}}, 'calibration.actuator_gain.wrist', 'no actuator'),
     ({'actuator_gain': {'inner_over': 'big'}}, 'actuator_gain.inner_over', 'number'),
     ({'tip_payload_mass': -0.1}, 'calibration.tip_payload_mass', '>= 0'),
-    ({'stiffness': 1.0}, 'calibration.stiffness', 'unknown calibration key'),
+    ({'stiffness': 1.0}, 'calibration.stiffness', 'unknown key'),
 ])
 def test_bad_calibration_names_the_file_and_key(tmp_path, block, key, problem):
     path = _scene_file(tmp_path, calibration=block)

@@ -1,8 +1,9 @@
 """
 Configuration files and parameters: defaults, ``--help``, and one clear line for every mistake.
 
-Every YAML the package reads (scene, segment, geometry, params) fails with one line naming the
-file, the key or line and what is wrong, exit code 2, for nodes (real processes) and commands
+Every YAML the package reads (scene, segment, geometry, params, camera) fails with one line naming
+the file, the key or line and what is wrong (an unknown key: with the nearest valid one), exit
+code 2, for nodes (real processes) and commands
 alike; ``<node> --help`` lists the node's parameters and exits 0 without starting ROS; the code
 defaults equal the shipped params files.
 """
@@ -87,6 +88,7 @@ def test_every_node_answers_help_without_starting():
             low = spec.metadata.get('low')
             if low is not None:
                 assert f'range [{low:g}, ' in entry.group(2)
+            assert entry.group(2).endswith(', live' if spec.metadata['live'] else ', read-only')
         assert '[INFO]' not in out + err, f'{node} started instead of printing help'
 
 
@@ -108,6 +110,7 @@ def broken_files(tmp_path_factory):
         'bad_section_params': '/**:\n  rate_hz: 100.0\n',
         'no_model_camera': 'image_width: 640\nimage_height: 480\n',
         'no_camera_rig': 'base_from_left: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]\n',
+        'typo_params': '/**:\n  ros__parameters:\n    use_sim_time: true\n    loop_gian: 0.3\n',
     }
     paths = {}
     for name, text in files.items():
@@ -136,6 +139,12 @@ NODE_CASES = [
      r'no_model_camera\.yaml: distortion_model: missing'),
     ('cbha_sim', ['-p', 'tip_output:=stereo', '-p', 'camera_rig:={no_camera_rig}'],
      r'no_camera_rig\.yaml: left_camera_info: missing'),
+    ('inverse_solver', ['--params-file', '{typo_params}'],
+     r'typo_params\.yaml: /\*\*\.ros__parameters\.loop_gian: unknown parameter of '
+     r"inverse_solver, did you mean 'loop_gain'\?$"),
+    ('trajectory', ['-p', 'bogus:=1'], r'-p bogus:=1: unknown parameter of trajectory \(valid: '),
+    ('cbha_sim', ['-p', 'use_sim_time:=true', '-p', 'noise_sdt:=0.0'],
+     r"-p noise_sdt:=0.0: unknown parameter of cbha_sim, did you mean 'noise_std'\?$"),
 ]
 
 
@@ -171,9 +180,10 @@ def test_scene_errors_name_the_key(tmp_path, text, key):
 def test_a_broken_segment_file_is_named_by_the_scene_that_reads_it(tmp_path):
     segment = tmp_path / 'seg.yaml'
     segment.write_text('compliance: [[1.0, 0.0], [0.0, 1.0]]\nrest_offset: [0.01, 0.0, 0.0]\n')
-    scene_text = (config_path('scenes', 'tendon_6f_8c.yaml').read_text()
-                  .replace('type: beam_vertebrae', 'type: segments\n  sections: '
-                           '[{name: s, segment: seg.yaml, count: 2}]'))
+    text = config_path('scenes', 'tendon_6f_8c.yaml').read_text()
+    scene_text = re.sub(r'chain:\n(  .*\n)+', 'chain:\n  type: segments\n  sections: '
+                        '[{name: s, segment: seg.yaml, count: 2}]\n', text)
+    assert 'n_vertebrae' not in scene_text
     (tmp_path / 'scene.yaml').write_text(scene_text)
     with pytest.raises(ConfigError, match=rf'^{re.escape(str(segment))}: compliance: must be a '
                        r'\(6, 6\) array'):
@@ -182,7 +192,9 @@ def test_a_broken_segment_file_is_named_by_the_scene_that_reads_it(tmp_path):
 
 @pytest.mark.parametrize('edit, key', [
     (lambda text: text + 'mesh: [\n', r'line \d+: invalid YAML'),
-    (lambda text: text.replace('mesh_size: 0.003', 'size: 0.003'), r'mesh\.mesh_size: missing'),
+    (lambda text: text.replace('mesh_size: 0.003', 'size: 0.003'),
+     r"mesh\.size: unknown key, did you mean 'mesh_size'\?"),
+    (lambda text: re.sub(r'\n +mesh_size: 0\.003', '', text), r'mesh\.mesh_size: missing'),
     (lambda text: text.replace('poisson_ratio: 0.3', 'poisson_ratio: 0.5'),
      r'material\.poisson_ratio: must lie in \(-1, 0\.5\)'),
     (lambda text: text.replace('kind: cylinder', 'kind: cone'), r'kind: must be one of'),
@@ -218,3 +230,67 @@ def test_condense_segment_writes_next_to_its_input_or_to_output(tmp_path, capsys
                           '--order', '1']) == 0
     assert (work / 'cbha_segment.yaml').is_file()
     assert sorted(Path(meshes_path()).iterdir()) == before
+
+
+def _tendon_scene(tmp_path, edit):
+    path = tmp_path / 'scene.yaml'
+    text = config_path('scenes', 'tendon_6f_8c.yaml').read_text()
+    edited = edit(text)
+    assert edited != text, 'the edit changed nothing'
+    path.write_text(edited)
+    return path
+
+
+@pytest.mark.parametrize('edit, key, nearest', [
+    (lambda t: t.replace('gravity:', 'gravty:'), 'gravty', 'gravity'),
+    (lambda t: t.replace('n_vertebrae:', 'n_vertebra:'), 'chain.n_vertebra', 'n_vertebrae'),
+    (lambda t: t.replace('outer_radius:', 'outer_radus:'), 'chain.backbone.outer_radus',
+     'outer_radius'),
+    (lambda t: t.replace('max_tension:', 'max_tensoin:', 1), 'cables[0].max_tensoin',
+     'max_tension'),
+    (lambda t: t.replace('offset:', 'ofset:', 1), 'effectors[0].ofset', 'offset'),
+    (lambda t: t.replace('actuation_fraction:', 'actuation_fractoin:'),
+     'workspace_center.actuation_fractoin', 'actuation_fraction'),
+    (lambda t: t + 'solver:\n  tolerence: 1.0e-6\n', 'solver.tolerence', None),
+])
+def test_an_unknown_scene_key_names_the_nearest_valid_one(tmp_path, edit, key, nearest):
+    path = _tendon_scene(tmp_path, edit)
+    with pytest.raises(ConfigError) as info:
+        load_scene(path)
+    assert (info.value.path, info.value.key) == (str(path), key)
+    assert info.value.problem.startswith('unknown key')
+    if nearest:
+        assert info.value.problem == f'unknown key, did you mean {nearest!r}?'
+
+
+def test_unknown_keys_of_segment_geometry_and_camera_files_are_errors(tmp_path):
+    from cbha_inverse.fem.segment_io import load_segment
+    from cbha_inverse.fem.segment_spec import read_segment_spec
+    from cbha_inverse.vision.camera import load_camera_yaml
+    from cbha_inverse.vision.rig import load_rig
+    cases = [
+        (load_segment, config_path('segments', 'cbha_segment.yaml'), ('mass_kg:', 'mas_kg:'),
+         'mas_kg', 'mass_kg'),
+        (read_segment_spec, CYLINDER_YAML, ('poisson_ratio:', 'poison_ratio:'),
+         'material.poison_ratio', 'poisson_ratio'),
+        (load_camera_yaml, config_path('cameras', 'left.yaml'), ('camera_name:', 'camera_nme:'),
+         'camera_nme', 'camera_name'),
+        (load_camera_yaml, config_path('cameras', 'left.yaml'), ('  cols: 5', '  colls: 5'),
+         'distortion_coefficients.colls', 'cols'),
+        (load_rig, config_path('cameras', 'rig.yaml'), ('base_from_left:', 'base_from_lft:'),
+         'base_from_lft', 'base_from_left'),
+    ]
+    for load, source, (old, new), key, nearest in cases:
+        path = tmp_path / source.name
+        for sibling in source.parent.iterdir():
+            if sibling.suffix in ('.yaml', '.vtk'):
+                shutil.copy(sibling, tmp_path / sibling.name)
+        text = source.read_text()
+        assert old in text, (source, old)
+        path.write_text(text.replace(old, new, 1))
+        with pytest.raises(ConfigError) as info:
+            load(path)
+        assert (info.value.path, info.value.key) == (str(path), key), info.value
+        assert info.value.problem == f'unknown key, did you mean {nearest!r}?'
+        shutil.copy(source, path)
+        load(path)

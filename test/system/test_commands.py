@@ -73,3 +73,25 @@ def test_inverse_report_ticks_reach_the_target(tmp_path, capsys):
     assert 'tendon_6f_8c' in capsys.readouterr().out
     with pytest.raises(SystemExit):
         report_main(['no_such_report'])
+
+
+@pytest.mark.parametrize('group', ['all', 'bench'])
+def test_a_report_groups_help_runs_no_report(capsys, group):
+    assert report_main([group, '--help']) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f'usage: cbha_report {group}'), out
+    assert '== ' not in out, f'a report ran:\n{out}'
+    for name in {'all': ('core', 'inverse', 'fem', 'stability', 'accuracy'),
+                 'bench': ('core', 'inverse')}[group]:
+        assert f'  {name}: ' in out
+
+
+def test_cbha_launch_show_args_lists_every_argument():
+    from cbha_inverse.ros.launch.compositions import COMPOSITIONS
+    for name, composition in COMPOSITIONS.items():
+        result = subprocess.run([sys.executable, '-m', 'cbha_inverse.ros.launch.launcher', name,
+                                 '--show-args'], env=child_env(), capture_output=True,
+                                text=True, timeout=60)
+        assert result.returncode == 0, result.stderr
+        listed = re.findall(r"^    '(\w+)':$", result.stdout, re.MULTILINE)
+        assert listed == [a.name for a in composition.all_arguments()], result.stdout

@@ -12,20 +12,19 @@ import ast
 from dataclasses import fields, is_dataclass
 import importlib
 from itertools import product
+from pathlib import Path
 import re
+import shutil
 import signal
 import subprocess
 import sys
 import time
 
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
-from cbha_inverse.ros.launch.compositions import COMPOSITIONS, node_module, resolve
-from geometry_msgs.msg import PointStamped
+from cbha_inverse.ros.common.qos import MEASURED_QOS
+from cbha_inverse.ros.launch.compositions import (
+    ArgumentError, COMPOSITIONS, node_module, resolve)
 import pytest
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from ros_helpers import child_env, REPO_ROOT, spin_until
-from std_msgs.msg import Float64MultiArray
+from ros_helpers import child_env, loop_listener, REPO_ROOT, spin_until
 import yaml
 
 SCRIPTS = dict(re.findall(r"'(\w+) = ([\w.]+):main'", (REPO_ROOT / 'setup.py').read_text()))
@@ -119,13 +118,7 @@ def tendon_trajectory(tmp_path):
 
 def test_cbha_launch_sim_runs_the_nodes_and_stops_them_all_on_sigint(rclpy_context,
                                                                      tendon_trajectory):
-    listener = Node('launch_listener', context=rclpy_context, namespace='/cbha')
-    commands, tips = [], []
-    listener.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
-                                 COMMAND_QOS)
-    listener.create_subscription(PointStamped, 'tip/measured', tips.append, MEASURED_QOS)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    executor.add_node(listener)
+    executor, listener, commands, tips = loop_listener(rclpy_context)
     process = _launch('scene:=tendon_6f_8c', f'trajectory_params:={tendon_trajectory}')
     try:
         running = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
@@ -179,3 +172,85 @@ def test_rviz_view_shows_what_the_nodes_publish_with_matching_qos():
         reliable = qos.reliability == ReliabilityPolicy.RELIABLE
         assert shown[topic]['Topic']['Reliability Policy'] == (
             'Reliable' if reliable else 'Best Effort'), topic
+
+
+def _user_params(tmp_path, **parameters):
+    path = tmp_path / 'my_inverse_solver.yaml'
+    path.write_text(yaml.safe_dump({'/**': {'ros__parameters': parameters}}))
+    return str(path)
+
+
+def _solver(processes):
+    return next(p for p in processes if p.executable == 'inverse_solver')
+
+
+def test_robot_driver_none_starts_no_bridge():
+    robot = COMPOSITIONS['robot']
+    assert 'robotino_bridge' in [p.executable for p in resolve(robot, {})]
+    started = [p.executable for p in resolve(robot, {'driver': 'none', 'feedback': 'none'})]
+    assert started == ['inverse_solver']
+    with pytest.raises(ArgumentError, match='driver:=ros is not one of robotino|none'):
+        resolve(robot, {'driver': 'ros'})
+
+
+def test_a_users_params_file_wins_over_the_compositions_defaults(tmp_path):
+    sim = COMPOSITIONS['sim']
+    # the installed params file: the composition's defaults apply over it
+    assert _solver(resolve(sim, {})).parameters == {'scene': 'cbha.yaml', 'mode': 'closed'}
+    params = _user_params(tmp_path, scene='identified.yaml', mode='open', loop_gain=0.2)
+    solver = _solver(resolve(sim, {'inverse_solver_params': params}))
+    assert solver.params_files == (params,) and solver.parameters == {}
+    # what the file does not set still gets the composition's default
+    params = _user_params(tmp_path, loop_gain=0.2)
+    assert _solver(resolve(sim, {'inverse_solver_params': params})).parameters == {
+        'scene': 'cbha.yaml', 'mode': 'closed'}
+    # an argument given explicitly applies, to the nodes whose file does not say otherwise
+    params = _user_params(tmp_path, scene='identified.yaml')
+    processes = resolve(sim, {'inverse_solver_params': params, 'mode': 'open'})
+    assert _solver(processes).parameters == {'mode': 'open'}
+    plant = next(p for p in processes if p.executable == 'cbha_sim')
+    assert plant.parameters == {'scene': 'cbha.yaml'}
+
+
+def test_an_explicit_argument_that_contradicts_the_users_params_file_is_a_conflict(tmp_path):
+    sim = COMPOSITIONS['sim']
+    params = _user_params(tmp_path, scene='identified.yaml', mode='open')
+    with pytest.raises(ArgumentError, match=r'scene:=cbha.yaml conflicts with scene: '
+                       r'identified.yaml in .*my_inverse_solver.yaml'):
+        resolve(sim, {'inverse_solver_params': params, 'scene': 'cbha.yaml'})
+    agreed = resolve(sim, {'inverse_solver_params': params, 'scene': 'identified.yaml',
+                           'mode': 'open'})
+    assert _solver(agreed).parameters == {'scene': 'identified.yaml', 'mode': 'open'}
+    result = subprocess.run([sys.executable, '-m', 'cbha_inverse.ros.launch.launcher', 'sim',
+                             '--dry-run', f'inverse_solver_params:={params}', 'mode:=closed'],
+                            env=child_env(), capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result
+    assert result.stderr == (f'cbha_launch: error: mode:=closed conflicts with mode: open in '
+                             f'{params} (give one of them)\n')
+
+
+def test_dry_run_names_overrides_files_that_exist():
+    result = subprocess.run([sys.executable, '-m', 'cbha_inverse.ros.launch.launcher', 'sim',
+                             '--dry-run', 'mode:=open'],
+                            env=child_env(), capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result
+    files = re.findall(r'--params-file (\S+)', result.stdout)
+    assert len(files) == 5, result.stdout
+    overrides = [f for f in files if 'cbha_launch_' in f]
+    try:
+        assert overrides and all(Path(f).is_file() for f in overrides), result.stdout
+        solver = next(f for f in overrides if f.endswith('inverse_solver.yaml'))
+        assert yaml.safe_load(Path(solver).read_text()) == {
+            '/**': {'ros__parameters': {'scene': 'cbha.yaml', 'mode': 'open'}}}
+    finally:
+        shutil.rmtree(Path(overrides[0]).parent, ignore_errors=True)
+
+
+@pytest.mark.parametrize('delay', [0.3, 0.6, 1.0])
+def test_sigint_at_any_moment_of_the_start_is_a_clean_stop(delay):
+    process = _launch('scene:=tendon_6f_8c')
+    time.sleep(delay)
+    process.send_signal(signal.SIGINT)
+    output, _ = process.communicate(timeout=60)
+    assert process.returncode == 0, output
+    assert 'Traceback' not in output and 'Fatal Python error' not in output, output

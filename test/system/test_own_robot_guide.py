@@ -4,7 +4,9 @@ The own-robot guide (docs/own-robot.md) runs as written.
 The test copies the guide's example, ``docs/examples/rod_robot/``, to a temporary folder, checks
 that the YAML shown in the guide is the files' content, and runs the guide's commands there:
 ``condense_segment`` (real gmsh and FEM), ``cbha_scene check`` and ``cbha_launch sim``, the last
-over real DDS until the controller commands the simulated rod, then SIGINT.
+over real DDS until the controller commands the simulated rod, then SIGINT; and step 5's commands
+(``cbha_launch robot driver:=none``, ``trajectory``, the ``cbha_sim`` stand-in for the user's
+driver and sensor), without a Robotino, until the closed loop runs.
 """
 
 import re
@@ -15,13 +17,8 @@ import subprocess
 import sys
 
 from cbha_inverse.fem.segment_io import load_segment
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
-from geometry_msgs.msg import PointStamped
 import numpy as np
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
-from ros_helpers import child_env, REPO_ROOT, spin_until
-from std_msgs.msg import Float64MultiArray
+from ros_helpers import child_env, loop_listener, REPO_ROOT, spin_until
 
 GUIDE = REPO_ROOT / 'docs' / 'own-robot.md'
 EXAMPLE = REPO_ROOT / 'docs' / 'examples' / 'rod_robot'
@@ -32,12 +29,14 @@ def _blocks(language):
     return re.findall(rf'```{language}\n(.*?)```', GUIDE.read_text(), re.DOTALL)
 
 
-def _commands():
-    """Return the guide's commands after ``cd``: (executable, arguments)."""
-    lines = [line.split('#')[0].strip() for line in _blocks('sh')[0].splitlines()]
+def _commands(block=0):
+    """Return the commands of a ``sh`` block of the guide, after ``cd``: (executable, args)."""
+    lines = [line.split('#')[0].strip() for line in _blocks('sh')[block].splitlines()]
     commands = [shlex.split(line) for line in lines if line and not line.startswith(('cp ', 'cd '))
                 and '&&' not in line]
-    assert [c[0] for c in commands] == ['condense_segment', 'cbha_scene', 'cbha_launch']
+    expected = (['condense_segment', 'cbha_scene', 'cbha_launch'] if block == 0 else
+                ['cbha_launch', 'trajectory', 'cbha_sim'])
+    assert [c[0] for c in commands] == expected
     return commands
 
 
@@ -77,13 +76,7 @@ def test_guide_example_runs(tmp_path, rclpy_context):
     reach = [float(v) for v in re.findall(r'\|(\d+\.\d) mm\|', out)]
     assert len(reach) == 4 and all(36.0 < v < 38.0 for v in reach), out
 
-    listener = Node('guide_listener', context=rclpy_context, namespace='/cbha')
-    commands, tips = [], []
-    listener.create_subscription(Float64MultiArray, 'pressure_command', commands.append,
-                                 COMMAND_QOS)
-    listener.create_subscription(PointStamped, 'tip/measured', tips.append, MEASURED_QOS)
-    executor = SingleThreadedExecutor(context=rclpy_context)
-    executor.add_node(listener)
+    executor, listener, commands, tips = loop_listener(rclpy_context)
     process = _run(launch, work)
     try:
         ran = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
@@ -118,3 +111,34 @@ def test_guide_error_example_is_what_the_command_prints(tmp_path):
     out, err = process.communicate(timeout=120)
     assert process.returncode == 2
     assert err.strip() == shown
+
+
+def test_guide_own_driver_step_runs_without_a_robotino(tmp_path, rclpy_context):
+    work = tmp_path / 'my_robot'
+    shutil.copytree(EXAMPLE, work)
+    process = _run(_commands()[0], work)
+    assert process.communicate(timeout=300) and process.returncode == 0
+    executor, listener, commands, tips = loop_listener(rclpy_context)
+    processes = [_run(command, work) for command in _commands(1)]
+    try:
+        ran = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
+                         or any(p.poll() is not None for p in processes), 120.0)
+        alive = [p.poll() is None for p in processes]
+        for process in processes:
+            process.send_signal(signal.SIGINT)
+        outputs = [process.communicate(timeout=30) for process in processes]
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+                process.communicate()
+        executor.shutdown()
+        listener.destroy_node()
+    launch_out = outputs[0][0]
+    assert ran and all(alive), f'{len(commands)} commands, {len(tips)} tips: {outputs}'
+    assert [p.returncode for p in processes] == [0, 0, 0], outputs
+    # the controller only: no bridge, no tracker; the params file's scene and closed loop hold
+    assert re.search(r'\] robot: inverse_solver \(/cbha\)$', launch_out, re.MULTILINE), launch_out
+    assert 'scene rod_robot: 4 valves' in launch_out and 'closed loop' in launch_out, launch_out
+    assert 'exit statuses: inverse_solver 0' in launch_out, launch_out
+    assert all(len(c.data) == 4 and max(c.data) <= 10.0 for c in commands)

@@ -1,6 +1,7 @@
 """Left/right image pairing by stamp (the stereo_tracker's queues), without ROS."""
 
-from cbha_inverse.vision.pairing import StereoPairer
+from cbha_inverse.vision.pairing import DropMonitor, StereoPairer
+import pytest
 
 
 def test_images_pair_by_the_closest_stamp_within_max_dt():
@@ -25,3 +26,16 @@ def test_a_full_queue_drops_its_oldest_image():
     assert [item for _, item in pairer.queues['left']] == ['b', 'c']
     # exact stamps pair with max_dt 0
     assert pairer.add('right', 3.0, 'r') == (('c', 'r'), ('superseded',))
+
+
+def test_drop_monitor_tells_occasional_drops_from_falling_behind():
+    monitor = DropMonitor(window=20, share=0.25)
+    # one image in ten dropped (normal running of two free streams): never behind
+    assert not any(monitor.add(1 if i % 10 == 0 else 0) for i in range(200))
+    # one in three: behind, once the window holds enough of them
+    behind = [monitor.add(1 if i % 3 == 0 else 0) for i in range(40)]
+    assert not behind[0] and behind[-1]
+    # back to normal: no longer behind after a window
+    assert not [monitor.add(0) for _ in range(20)][-1]
+    with pytest.raises(ValueError):
+        DropMonitor(window=0)

@@ -69,10 +69,7 @@ def read_program_file(path, actuator_names, lower, upper):
     """
     lower, upper = check_bounds(lower, upper)
     names = list(actuator_names)
-    top = Section(path, read_yaml(path))
-    for key in top.data:
-        if key not in _FILE_KEYS:
-            raise top.error(key, f'unknown key (known: {list(_FILE_KEYS)})')
+    top = Section(path, read_yaml(path)).only(*_FILE_KEYS)
     if top.has('description'):
         top.text('description')
     items = top.data.get('holds')

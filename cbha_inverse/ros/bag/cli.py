@@ -13,6 +13,7 @@ import sys
 
 from cbha_inverse.bag.storage import BagError
 from cbha_inverse.errors import ConfigError, report_config_error
+import numpy as np
 
 
 def _size(text):
@@ -29,6 +30,8 @@ def parse_args(argv):
     record.add_argument('--topics', dest='more_topics', nargs='+', default=[],
                         help='topics to record (as the positional list)')
     record.add_argument('-a', '--all', action='store_true', help='record every topic')
+    record.add_argument('--allow-empty', action='store_true',
+                        help='exit 0 even if no message was recorded (default: exit 1)')
     record.add_argument('-o', '--output', help='bag folder (default rosbag2_<date>-<time>)')
     record.add_argument('-s', '--storage', default='mcap', choices=('mcap',),
                         help='storage plugin (mcap, the Jazzy default)')
@@ -69,17 +72,28 @@ def parse_args(argv):
     evaluate.add_argument('--namespace', default='/cbha', help='namespace of the topics')
     evaluate.add_argument('--tip', default='auto', choices=('auto', 'true', 'measured'),
                           help='tip topic compared with the targets (auto: true if recorded)')
-    evaluate.add_argument('--start', type=float, default=0.0,
-                          help='score from this many seconds after the first target stamp')
+    evaluate.add_argument('--start', type=_start, default=None, metavar='SECONDS|auto',
+                          help='score from this many seconds after the first target stamp '
+                          '(default auto: after the start-up transient, the last error of the '
+                          "run's first half above 3x the median error of its second half)")
     evaluate.add_argument('--end', type=float, default=None,
                           help='score until this many seconds after the first target stamp')
-    evaluate.add_argument('--max-pressure', type=float, default=150000.0,
-                          help='upper command bound for the saturation count [Pa]')
+    evaluate.add_argument('--scene', default='cbha.yaml',
+                          help="the run's scene: the unit (N for cables, Pa for cavities) and "
+                          'bounds of each command value, in scene order')
+    evaluate.add_argument('--max-pressure', type=float, default=None,
+                          help='cap of the upper bounds for the saturation count [N or Pa] '
+                          "(default: the scene's bounds)")
     evaluate.add_argument('--plot', help='write target vs tip to this PNG')
     args = parser.parse_args(argv)
     if args.command == 'record':
         args.topics = list(args.topics) + list(args.more_topics)
     return args
+
+
+def _start(text):
+    """Parse ``eval --start``: seconds, or ``auto`` (None)."""
+    return None if text.strip().lower() == 'auto' else float(text)
 
 
 def _info(args):
@@ -92,13 +106,22 @@ def _info(args):
 
 def _eval(args):
     from cbha_inverse.bag.evaluate import evaluate_bag, format_evaluation, plot_evaluation
+    from cbha_inverse.scene import load_scene
+    from cbha_inverse.scene.cli import actuator_units
+    scene = load_scene(args.scene)
+    upper = scene.upper_bounds if args.max_pressure is None else np.minimum(
+        scene.upper_bounds, args.max_pressure)
     evaluation = evaluate_bag(args.bag, namespace=args.namespace, tip=args.tip,
-                              start=args.start, end=args.end, max_pressure=args.max_pressure)
+                              start=args.start, end=args.end, max_pressure=upper,
+                              units=actuator_units(scene))
     print(format_evaluation(evaluation))
     if args.plot:
         if evaluation.tracking is None:
             raise BagError(f'{args.bag}: nothing to plot (no tip samples in the window)')
-        plot_evaluation(evaluation, args.plot, str(args.bag))
+        try:
+            plot_evaluation(evaluation, args.plot, str(args.bag))
+        except OSError as exc:
+            raise BagError(f'{args.plot}: cannot write the plot: {exc.strerror or exc}') from None
         print(f'wrote {args.plot}')
     return 0
 
@@ -131,7 +154,7 @@ def main(argv=None):
         if args.command == 'info':
             return _info(args)
         return _eval(args)
-    except (BagError, ConfigError) as exc:
+    except (BagError, ConfigError, FileNotFoundError) as exc:
         return report_config_error(f'cbha_bag {args.command}', exc)
 
 

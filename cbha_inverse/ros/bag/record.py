@@ -6,7 +6,9 @@ steady clock), with the profile that reaches every publisher (reliable only if a
 :func:`cbha_inverse.bag.qos.adapt_offered`) and a deep history; the publishers' offered profiles
 go into the metadata. Each message is written in its callback with the receive time of the node
 clock (``--use-sim-time``: ``/clock``), so SIGINT or SIGTERM loses nothing that was received: the
-spin loop ends and the bag is closed (``metadata.yaml`` written).
+spin loop ends and the bag is closed (``metadata.yaml`` written). A requested topic without a
+publisher after :data:`NO_PUBLISHER_WARNING` seconds is warned about once (with the nearest topic
+of the graph); a bag of 0 messages is an error (exit 1) unless ``--allow-empty``.
 """
 
 import sys
@@ -14,7 +16,8 @@ import time
 
 from cbha_inverse.bag.qos import adapt_offered
 from cbha_inverse.bag.storage import absolute_topic, BagError, BagWriter, knows_type
-from cbha_inverse.errors import report_config_error
+from cbha_inverse.config_files import nearest
+from cbha_inverse.errors import report_config_error, report_error
 from cbha_inverse.ros.bag.qos import message_class, qos_from_rclpy, qos_to_rclpy
 from cbha_inverse.ros.common.runner import SPIN_POLL_S, StopRequest
 from rclpy.clock import Clock, ClockType
@@ -23,6 +26,9 @@ from rclpy.parameter import Parameter
 
 RECORD_DEPTH = 1000
 """History depth of the recorder's subscriptions (a slow disk must not drop reliable samples)."""
+
+NO_PUBLISHER_WARNING = 3.0
+"""Seconds after the start when a requested topic without a publisher is warned about."""
 
 
 class BagRecorder:
@@ -56,6 +62,8 @@ class BagRecorder:
         self.progress = sys.stderr if progress is None else progress
         self.subscriptions = {}
         self.skipped = set()
+        self.started = time.monotonic()
+        self.warned = set()
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.node.create_timer(0.1, self.discover, clock=steady)
         self.node.create_timer(1.0, self.report, clock=steady)
@@ -95,8 +103,26 @@ class BagRecorder:
     def _say(self, text):
         print(text, file=self.progress, flush=True)
 
+    def missing(self):
+        """Return the requested topics that have no subscription yet (sorted)."""
+        return sorted(self.wanted - set(self.subscriptions) - self.skipped)
+
+    def warn_missing(self, now):
+        """Warn once about each requested topic still without publisher after the delay."""
+        if now - self.started < NO_PUBLISHER_WARNING:
+            return
+        graph = [name for name, _ in self.node.get_topic_names_and_types()]
+        for name in self.missing():
+            if name not in self.warned:
+                self.warned.add(name)
+                near = nearest(name, set(graph) - {name})
+                hint = f' (did you mean {near}?)' if near else ''
+                self._say(f'warning: no publisher of {name} after {NO_PUBLISHER_WARNING:g} s'
+                          f'{hint}; still waiting')
+
     def report(self):
         """Print the progress line: messages recorded per topic."""
+        self.warn_missing(time.monotonic())
         counts = ', '.join(f'{name} {count}' for name, count in self.writer.counts.items())
         self._say(f'recording {sum(self.writer.counts.values())} messages: {counts or "-"}')
 
@@ -118,7 +144,8 @@ def record(args):
     Returns
     -------
     int
-        0 once the bag is closed, 2 on bad arguments.
+        0 once the bag is closed, 1 if it holds no message (unless ``allow_empty``), 2 on bad
+        arguments.
 
     """
     import rclpy
@@ -155,5 +182,11 @@ def record(args):
             if executor is not None:
                 executor.shutdown()
             rclpy.try_shutdown()
-        print(f'wrote {path} ({sum(writer.counts.values())} messages)', file=sys.stderr)
+    total = sum(writer.counts.values())
+    print(f'wrote {path} ({total} messages)', file=sys.stderr)
+    if total == 0 and not getattr(args, 'allow_empty', False):
+        missing = recorder.missing() if recorder is not None else []
+        why = f' (no publisher of {", ".join(missing)})' if missing else ''
+        return report_error('cbha_bag record', f'0 messages recorded{why}; --allow-empty '
+                            'accepts an empty bag', 1)
     return 0

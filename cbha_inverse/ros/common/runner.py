@@ -174,8 +174,11 @@ def run_node(node_class, node_name, argv=None, *, params_class=None, executable=
         return 0
     try:
         check_params_files(argv, node_name, params_class)
-    except ConfigError as exc:
+    except (ConfigError, ParameterError) as exc:
         return report_config_error(node_name, exc)
+    except KeyboardInterrupt:
+        # a stop while the params files are read, before the stop flag is installed
+        return 0
     node = done = None
     with StopRequest() as stop:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)

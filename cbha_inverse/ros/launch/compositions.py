@@ -13,18 +13,24 @@ import.
   publishes no tip, ``tip_output: none``; ``inverse_solver`` closes its loop on
   ``tip/estimated``, the string-pot estimate, ``docs/proprioception.md``).
 - ``robot``: ``inverse_solver`` + ``robotino_bridge`` (the Robotino driver's 8-channel bar
-  message) for a real arm, and ``stereo_tracker`` when ``feedback:=stereo`` (the default), or
+  message; ``driver:=none``: no bridge, your own driver subscribes ``pressure_command``) for a
+  real arm, and ``stereo_tracker`` when ``feedback:=stereo`` (the default), or
   ``shape_estimator`` on the driver's string pots when ``feedback:=proprio``.
 
 Every node gets its params file (argument ``<node>_params``, default the installed
-``config/<node>.yaml``), then the composition's overrides (scene, mode, ...) as a second params
-file, which wins, as a ``parameters=[file, {...}]`` list does in a launch file.
+``config/<node>.yaml``), then the composition's overrides as a second params file, which wins, as
+a ``parameters=[file, {...}]`` list does in a launch file. The overrides of a *yielding* argument
+(``scene``, ``mode``) are weaker: given explicitly, they apply; not given, the composition's
+default applies only where no ``<node>_params`` file of the user sets the parameter; given and set
+otherwise by such a file, that is a conflict (:func:`resolve` raises).
 """
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from string import Formatter
 
 from cbha_inverse.paths import config_path
+from cbha_inverse.ros.common.params_files import node_values
 
 
 @dataclass(frozen=True)
@@ -40,6 +46,9 @@ class Argument:
     description : str
     choices : tuple of str or None
         The allowed values, if restricted.
+    yielding : bool
+        Its overrides apply only when it is given, or where no ``<node>_params`` file given by
+        the user sets the parameter (see the module docstring); '' means "not given".
 
     """
 
@@ -47,6 +56,15 @@ class Argument:
     default: str
     description: str
     choices: tuple = None
+    yielding: bool = False
+
+    def declaration(self):
+        """Return the ``DeclareLaunchArgument`` keywords (a yielding argument defaults to '')."""
+        if self.yielding:
+            return {'default_value': '', 'description': f'{self.description} (default: '
+                    f'{self.default}, unless a <node>_params file sets it)'}
+        return {'default_value': self.default, 'description': self.description,
+                **({'choices': list(self.choices)} if self.choices else {})}
 
 
 @dataclass(frozen=True)
@@ -155,10 +173,10 @@ def _common(feedback_default, feedback_choices, mode_default):
                  (*ROLES, 'all')),
         Argument('namespace', '/cbha', 'namespace of every node (topics are relative)'),
         Argument('scene', 'cbha.yaml', 'scene YAML of the model (and the plant): a path, or a '
-                 'name in config/scenes'),
+                 'name in config/scenes', yielding=True),
         Argument('mode', mode_default, 'inverse_solver loop: open (model only) or closed '
-                 '(integral correction from tip/measured; without feedback it holds, so use '
-                 'open with feedback:=none)', ('open', 'closed')),
+                 '(integral correction from the tip feedback; it waits for the first one)',
+                 ('open', 'closed'), yielding=True),
         Argument('feedback', feedback_default, 'source of the tip feedback (proprio: the '
                  'string-pot estimate tip/estimated)', feedback_choices),
     )
@@ -187,16 +205,66 @@ COMPOSITIONS = {
     'robot': Composition(
         'robot', 'real arm: inverse_solver + robotino_bridge (+ stereo_tracker or '
         'shape_estimator)',
-        _common('stereo', ('stereo', 'none', 'proprio'), 'closed'),
+        _common('stereo', ('stereo', 'none', 'proprio'), 'closed') + (
+            Argument('driver', 'robotino', 'robotino: robotino_bridge to the Robotino driver; '
+                     'none: no bridge (your driver subscribes pressure_command)',
+                     ('robotino', 'none')),),
         (NodeEntry('inverse_solver', (SCENE, Override('mode', '{mode}'), ESTIMATED)),
          NodeEntry('stereo_tracker', when=STEREO, role='cameras'),
          NodeEntry('shape_estimator', (SCENE,), when=PROPRIO),
-         NodeEntry('robotino_bridge', role='robot'))),
+         NodeEntry('robotino_bridge', when=('driver', 'robotino'), role='robot'))),
 }
 
 
 class ArgumentError(ValueError):
-    """A launch argument is unknown or has a value outside its choices."""
+    """A launch argument is unknown, has a value outside its choices or conflicts with a file."""
+
+
+def _yielding_overrides(node, chosen, arguments, params):
+    """
+    Return the overrides of a node, the yielding ones as the module docstring says.
+
+    Parameters
+    ----------
+    node : NodeEntry
+        The node.
+    chosen : dict
+        Argument values ('' for a yielding argument not given).
+    arguments : dict
+        ``name -> Argument``.
+    params : str
+        The user's ``<node>_params`` file ('' if none was given).
+
+    Returns
+    -------
+    dict
+        ``parameter -> value`` (str).
+
+    Raises
+    ------
+    ArgumentError
+        If a yielding argument is given and the user's params file sets its parameter otherwise.
+
+    """
+    in_file = node_values(params, node.executable) if params else {}
+    overrides = {}
+    for override in node.overrides:
+        if override.when is not None and chosen[override.when[0]] != override.when[1]:
+            continue
+        names = {f for _, f, _, _ in Formatter().parse(override.value) if f}
+        yielding = [name for name in names if arguments[name].yielding]
+        given = all(chosen[name] != '' for name in yielding)
+        if yielding and not given and override.name in in_file:
+            continue
+        value = override.value.format(**{
+            name: chosen[name] or arguments[name].default for name in chosen})
+        if yielding and given and override.name in in_file and str(
+                in_file[override.name]) != value:
+            raise ArgumentError(
+                f'{yielding[0]}:={chosen[yielding[0]]} conflicts with {override.name}: '
+                f'{in_file[override.name]} in {params} (give one of them)')
+        overrides[override.name] = value
+    return overrides
 
 
 def resolve(composition, values):
@@ -218,7 +286,10 @@ def resolve(composition, values):
     Raises
     ------
     ArgumentError
-        On an unknown argument or a value outside its choices.
+        On an unknown argument, a value outside its choices or a yielding argument that
+        conflicts with the user's params file.
+    cbha_inverse.errors.ConfigError
+        If a user's params file cannot be read.
 
     """
     arguments = {argument.name: argument for argument in composition.all_arguments()}
@@ -226,10 +297,11 @@ def resolve(composition, values):
     if unknown:
         raise ArgumentError(f'unknown argument {unknown[0]!r} of {composition.name} (known: '
                             f"{', '.join(arguments)})")
-    chosen = {name: str(values.get(name, argument.default))
+    chosen = {name: str(values.get(name, '' if argument.yielding else argument.default))
               for name, argument in arguments.items()}
     for name, argument in arguments.items():
-        if argument.choices and chosen[name] not in argument.choices:
+        if argument.choices and chosen[name] not in argument.choices + (
+                ('',) if argument.yielding else ()):
             raise ArgumentError(f'{name}:={chosen[name]} is not one of '
                                 f"{'|'.join(argument.choices)}")
 
@@ -240,10 +312,11 @@ def resolve(composition, values):
     for node in composition.nodes:
         if not applies(node.when) or chosen['role'] not in ('all', node.role):
             continue
-        params = chosen[f'{node.executable}_params'] or str(config_path(f'{node.executable}.yaml'))
+        given = chosen[f'{node.executable}_params']
+        params = given or str(config_path(f'{node.executable}.yaml'))
         processes.append(NodeProcess(
             node.executable, chosen['namespace'], (str(Path(params)),),
-            {o.name: o.value.format(**chosen) for o in node.overrides if applies(o.when)}))
+            _yielding_overrides(node, chosen, arguments, given)))
     return processes
 
 

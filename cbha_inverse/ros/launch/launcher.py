@@ -7,13 +7,16 @@ process (``python -m cbha_inverse.ros.launch.node_process cbha_inverse.ros.nodes
 with ``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits for them. All
 nodes are required: when one exits by itself, the others are stopped. Exit status: 0 when every
 node stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad
-argument or params file (one line on stderr). ``--dry-run`` prints the command lines instead.
+argument, params file or conflict between them (one line on stderr). ``--dry-run`` prints the
+command lines instead, and keeps the overrides params files they name; ``--show-args`` lists the
+composition's arguments (as ``ros2 launch ... --show-args``).
 """
 
 import argparse
 import os
 from pathlib import Path
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -39,7 +42,10 @@ def _parser():
         for argument in composition.all_arguments():
             default = argument.default or '(installed file)'
             choices = f" [{'|'.join(argument.choices)}]" if argument.choices else ''
-            epilog.append(f'  {argument.name}:={default}{choices}  {argument.description}')
+            yields = ' (when not given: unless a <node>_params file sets it)' \
+                if argument.yielding else ''
+            epilog.append(f'  {argument.name}:={default}{choices}  {argument.description}'
+                          f'{yields}')
     parser = argparse.ArgumentParser(
         prog=PROGRAM, formatter_class=argparse.RawDescriptionHelpFormatter,
         description='Start a composition of cbha_inverse nodes (as launch/<name>.launch.py).',
@@ -47,7 +53,22 @@ def _parser():
     parser.add_argument('composition', choices=sorted(COMPOSITIONS))
     parser.add_argument('arguments', nargs='*', metavar='name:=value')
     parser.add_argument('--dry-run', action='store_true', help='print the commands, start none')
+    parser.add_argument('-s', '--show-args', action='store_true',
+                        help="list the composition's arguments (as ros2 launch --show-args)")
     return parser
+
+
+def show_arguments(composition):
+    """Return the arguments of a composition, as ``ros2 launch --show-args`` lists them."""
+    lines = [f'Arguments of {composition.name} (pass arguments as <name>:=<value>):']
+    for argument in composition.all_arguments():
+        lines += [f"    '{argument.name}':", f'        {argument.description}']
+        if argument.choices:
+            lines.append(f'        Valid choices are: {list(argument.choices)}')
+        default = argument.default or '(the installed config/ file)'
+        lines.append(f"        (default: '{default}'" + (
+            ', unless a <node>_params file sets it)' if argument.yielding else ')'))
+    return '\n'.join(lines)
 
 
 def parse_assignments(items):
@@ -160,9 +181,16 @@ def supervise(lines, out=None):
     children, relays = [], []
     try:
         for name, argv in lines:
-            # own session: a Ctrl-C in the terminal reaches the nodes once, through us
-            child = subprocess.Popen(argv, env=_child_environment(), stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, start_new_session=True)
+            # own session: a Ctrl-C in the terminal reaches the nodes once, through us; started
+            # with the stop signals blocked (node_process unblocks them once it can handle them:
+            # a stop during the interpreter's start is then a quiet stop, not a fatal error)
+            blocked = signal.pthread_sigmask(signal.SIG_BLOCK, (signal.SIGINT, signal.SIGTERM))
+            try:
+                child = subprocess.Popen(argv, env=_child_environment(), stdout=subprocess.PIPE,
+                                         stderr=subprocess.STDOUT, text=True,
+                                         start_new_session=True)
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
             children.append((name, child))
             relay = threading.Thread(target=_relay, args=(name, child.stdout, out, lock),
                                      daemon=True)
@@ -225,18 +253,37 @@ def main(argv=None):
         See the module docstring.
 
     """
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:      # before the nodes start: nothing to stop
+        print(f'{PROGRAM}: stopped before starting the nodes', file=sys.stderr)
+        return 0
+
+
+def _main(argv):
     args = _parser().parse_intermixed_args(argv)
     composition = COMPOSITIONS[args.composition]
+    if args.show_args:
+        print(show_arguments(composition))
+        return 0
+    if args.dry_run:
+        # the printed command lines name the overrides files: they must outlive this command
+        overrides_dir = tempfile.mkdtemp(prefix='cbha_launch_')
+        try:
+            lines = command_lines(resolve(composition, parse_assignments(args.arguments)),
+                                  overrides_dir)
+        except (ArgumentError, ConfigError) as exc:
+            shutil.rmtree(overrides_dir, ignore_errors=True)
+            return report_config_error(PROGRAM, exc)
+        for name, argv_line in lines:
+            print(f'{name}: {shlex.join(argv_line)}')
+        return 0
     with tempfile.TemporaryDirectory(prefix='cbha_launch_') as overrides_dir:
         try:
             processes = resolve(composition, parse_assignments(args.arguments))
             lines = command_lines(processes, overrides_dir)
         except (ArgumentError, ConfigError) as exc:
             return report_config_error(PROGRAM, exc)
-        if args.dry_run:
-            for name, argv_line in lines:
-                print(f'{name}: {shlex.join(argv_line)}')
-            return 0
         print(f'[{PROGRAM}] {composition.name}: ' + ', '.join(
             f'{p.executable} ({p.namespace})' for p in processes), flush=True)
         return supervise(lines)

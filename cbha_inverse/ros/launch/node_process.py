@@ -9,6 +9,11 @@ or SIGTERM in that time (``cbha_launch`` stopping the others because one node fa
 Ctrl-C right after the start) ends the process with status 0 and one line, instead of a
 ``KeyboardInterrupt`` traceback from deep inside an import. Once the module is loaded, the node's
 own handling applies (rclpy's: :func:`cbha_inverse.ros.common.runner.run_node`).
+
+``cbha_launch`` starts the process with SIGINT and SIGTERM blocked, so that a signal during the
+interpreter's own start (before this module runs, where it would end in a fatal error) waits;
+they are unblocked here once the handler is set, and a signal that came meanwhile is handled as
+one during the import.
 """
 
 import importlib
@@ -51,6 +56,7 @@ def main(argv=None):
     executable = module_name.rsplit('.', 1)[-1]
     previous = {sig: signal.signal(sig, _on_stop_signal) for sig in STOP_SIGNALS}
     try:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
         module = importlib.import_module(module_name)
     except _StoppedWhileLoading as stop:
         print(f'{executable}: stopped by {stop} while loading', file=sys.stderr)

@@ -87,17 +87,18 @@ class CbhaSimParams:
                                f'channels 0-5, {", ".join(ARM_VALVES)})',
                                unset_type='string_array')
     max_pressure: float = param(150000.0, 'driver limit [Pa]: commands above are rejected',
-                                low=0.0, high=1.0e7)
+                                low=0.0, high=1.0e7, live=True)
     valve_time_constant: float = param(0.01, 'first-order valve response [s] (paper: 10 ms)',
-                                       low=0.0, high=10.0)
+                                       low=0.0, high=10.0, live=True)
     latency: float = param(0.003, 'transport latency command -> valves [s] (paper: 3 ms)',
-                           low=0.0, high=10.0)
+                           low=0.0, high=10.0, live=True)
     rate_hz: float = param(100.0, 'plant update and tip publication rate [Hz]',
-                           low=1.0, high=2000.0)
+                           low=1.0, high=2000.0, live=True)
     noise_std: float = param(0.0002, 'standard deviation of the tip measurement noise per axis '
-                             '[m]', low=0.0, high=0.1)
+                             '[m]', low=0.0, high=0.1, live=True)
     pressure_noise_std: float = param(0.0, 'standard deviation of the noise on '
-                                      'pressure_measured per valve [Pa]', low=0.0, high=1.0e6)
+                                      'pressure_measured per valve [Pa]', low=0.0, high=1.0e6,
+                                      live=True)
     seed: int = param(0, 'seed of the measurement noise (tip and pressures: separate streams)',
                       low=0, high=2 ** 31 - 1)
     tolerance: float = param(1e-6, 'static equilibrium residual tolerance [N, N*m]',
@@ -107,7 +108,7 @@ class CbhaSimParams:
     frame_id: str = param('cbha_base', 'frame_id of the published tip')
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected commands [s]',
-                                low=0.0, high=3600.0)
+                                low=0.0, high=3600.0, live=True)
     tip_output: str = param('point', 'tip feedback: tip/measured points, rendered stereo '
                             'images, both, or none (a camera-less arm; tip/true stays)',
                             choices=('point', 'stereo', 'both', 'none'))
@@ -152,7 +153,7 @@ class CbhaSimNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         try:
-            self.params = declare_parameters(self, CbhaSimParams)
+            self.params = declare_parameters(self, CbhaSimParams, self._apply_parameters)
             p = self.params
             nominal = load_scene(p.scene)
             self.valve_names, self.order = valve_order(nominal.actuator_names, p.valve_names)
@@ -203,6 +204,14 @@ class CbhaSimNode(Node):
             f'{list(p.gravity)}, valves {p.valve_time_constant * 1e3:g} ms, latency '
             f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm and '
             f'{p.pressure_noise_std:g} Pa, {p.rate_hz:g} Hz')
+
+    def _apply_parameters(self, old, new):
+        """Apply a change of the live parameters (checked by :func:`declare_parameters`)."""
+        self.arm.valves.latency = new.latency
+        self.arm.valves.time_constant = new.valve_time_constant
+        self.arm.tip_noise, self.arm.pressure_noise = new.noise_std, new.pressure_noise_std
+        self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
+        self.params = new
 
     def _start_cameras(self):
         from cbha_inverse.paths import config_path

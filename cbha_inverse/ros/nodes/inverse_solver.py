@@ -59,7 +59,7 @@ class InverseSolverParams:
     """Parameters of the ``inverse_solver`` node."""
 
     scene: str = param('cbha.yaml', 'scene YAML: a file path, or a name in config/scenes')
-    rate_hz: float = param(100.0, 'control tick rate [Hz]', low=1.0, high=2000.0)
+    rate_hz: float = param(100.0, 'control tick rate [Hz]', low=1.0, high=2000.0, live=True)
     trigger: str = param('target', 'target: solve when a target arrives (and on the timer when '
                          'none came for a period); timer: solve on the timer only',
                          choices=('target', 'timer'))
@@ -70,28 +70,29 @@ class InverseSolverParams:
                                f'channels 0-5, {", ".join(ARM_VALVES)})',
                                unset_type='string_array')
     max_pressure: float = param(150000.0, 'p_max [Pa] ceiling of every command (1.5 bar)',
-                                low=0.0, high=1.0e7)
+                                low=0.0, high=1.0e7, live=True)
     target_timeout: float = param(0.5, 'a target older than this is reported stale [s] '
                                   '(steady clock; it stays the set-point, the model keeps '
-                                  'converging to it)', low=0.001, high=3600.0)
+                                  'converging to it)', low=0.001, high=3600.0, live=True)
     feedback_timeout: float = param(0.5, 'closed loop: measurement older than this is stale [s]',
-                                    low=0.001, high=3600.0)
+                                    low=0.001, high=3600.0, live=True)
     stale_action: str = param('hold', 'closed loop, on stale feedback: hold the last command '
-                              'or vent', choices=('hold', 'vent'))
+                              'or vent', choices=('hold', 'vent'), live=True)
     publish_idle: bool = param(False, 'before the first valid target, publish the vent command '
-                               'at rate_hz (false: publish nothing until a target arrives)')
+                               'at rate_hz (false: publish nothing until a target arrives)',
+                               live=True)
     vent_pressure: float = param(0.0, 'safe pressure commanded when venting [Pa]',
-                                 low=0.0, high=1.0e7)
+                                 low=0.0, high=1.0e7, live=True)
     frame_id: str = param('cbha_base', 'the only accepted frame_id of target and tip/measured')
     feedback_topic: str = param('tip/measured', 'closed loop: the measured tip (PointStamped); '
                                 'tip/estimated for the string-pot estimate of shape_estimator')
     workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
-                                 'and measurements outside are rejected')
-    workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]')
+                                 'and measurements outside are rejected', live=True)
+    workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]', live=True)
     loop_gain: float = param(0.1, 'closed loop: integral gain per measurement [-]',
-                             low=0.0, high=1.0)
+                             low=0.0, high=1.0, live=True)
     max_correction: float = param(0.03, 'closed loop: largest target correction [m]',
-                                  low=0.0, high=1.0)
+                                  low=0.0, high=1.0, live=True)
     newton_steps: int = param(1, 'Newton steps of the model per tick', low=1, high=20)
     relinearize_every: int = param(1, 'ticks between linearisations (1 = every tick, the paper; '
                                    'N > 1 re-solves the QP of the last linear model in between)',
@@ -103,7 +104,7 @@ class InverseSolverParams:
     marker_period: float = param(0.1, 'period of the backbone markers [s]', low=0.01, high=60.0)
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
-                                low=0.0, high=3600.0)
+                                low=0.0, high=3600.0, live=True)
 
 
 class InverseSolverNode(Node):
@@ -125,7 +126,7 @@ class InverseSolverNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         try:
-            self.params = declare_parameters(self, InverseSolverParams)
+            self.params = declare_parameters(self, InverseSolverParams, self._apply_parameters)
             self._setup_model()
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
@@ -145,6 +146,7 @@ class InverseSolverNode(Node):
         self.measured_order = StampOrder()
         self.command = self.vent_command.copy()
         self.decision = 'waiting'
+        self.told_no_feedback = False
         self.enabled = True
         self.resets = 0
         self.target_stale = False
@@ -181,12 +183,7 @@ class InverseSolverNode(Node):
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
-        self.lower, self.upper = command_bounds(self.scene.lower_bounds[self.order],
-                                                self.scene.upper_bounds[self.order],
-                                                p.max_pressure)
-        self.vent_command = bounded_command(np.full(len(self.valve_names), p.vent_pressure),
-                                            self.lower, self.upper)
-        self.box = WorkspaceBox(p.workspace_min, p.workspace_max)
+        self.lower, self.upper, self.vent_command, self.box = self._limits(p)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
                                                      qp_solver=p.qp_solver)
@@ -199,6 +196,28 @@ class InverseSolverNode(Node):
             self.get_logger().warning(f'scene {self.scene.name}: {warning}')
         self.corrector = TargetCorrector(1, gain=p.loop_gain if p.mode == 'closed' else 0.0,
                                          max_correction=p.max_correction)
+
+    def _limits(self, p):
+        """Return the command bounds, the vent command and the workspace box of parameters p."""
+        lower, upper = command_bounds(self.scene.lower_bounds[self.order],
+                                      self.scene.upper_bounds[self.order], p.max_pressure)
+        vent = bounded_command(np.full(len(self.valve_names), p.vent_pressure), lower, upper)
+        return lower, upper, vent, WorkspaceBox(p.workspace_min, p.workspace_max)
+
+    def _apply_parameters(self, old, new):
+        """Apply a change of the live parameters (checked; a ``ValueError`` refuses it)."""
+        self.lower, self.upper, self.vent_command, self.box = self._limits(new)
+        self.target_watch.timeout = new.target_timeout
+        self.feedback_watch.timeout = new.feedback_timeout
+        self.corrector.gain = new.loop_gain if new.mode == 'closed' else 0.0
+        self.corrector.max_correction = new.max_correction
+        self.period = 1.0 / new.rate_hz
+        for timer in (self.timer, self.watchdog_timer):
+            timer.timer_period_ns = int(round(self.period * 1e9))
+        self.params = new
+        self.get_logger().info('parameters set: ' + ', '.join(
+            f'{name} {getattr(new, name)}' for name in vars(new)
+            if getattr(new, name) != getattr(old, name)))
 
     # inputs ---------------------------------------------------------------------------------
     def _accepted_point(self, topic, message):
@@ -254,7 +273,8 @@ class InverseSolverNode(Node):
         now = time.monotonic()
         decision = controller_decision(self.enabled, self.target is not None,
                                        self.feedback_watch.stale(now),
-                                       self.params.mode == 'closed', self.params.stale_action)
+                                       self.params.mode == 'closed', self.params.stale_action,
+                                       has_feedback=self.measured is not None)
         logger = self.get_logger()
         if decision != self.decision:
             # rclpy refuses two severities from one call site: one call per severity
@@ -264,6 +284,11 @@ class InverseSolverNode(Node):
             else:
                 logger.info(f'{self.decision} -> {decision}')
             self.decision = decision
+        if decision == 'waiting' and self.target is not None and not self.told_no_feedback:
+            self.told_no_feedback = True
+            topic = self.resolve_topic_name('tip/measured')
+            logger.warn(f'closed loop, no measurement yet on {topic}: no command until one '
+                        'arrives')
         target_stale = self.target is not None and self.target_watch.stale(now)
         if target_stale != self.target_stale:
             self.target_stale = target_stale

@@ -37,7 +37,8 @@ import time
 from cbha_inverse.robot.robotino import (
     ARM_VALVES, CHANNELS, MAX_BAR, N_CHANNELS, PASCAL_PER_BAR, robotino_bar_command,
     robotino_pressures, string_pot_names)
-from cbha_inverse.robot.safety import check_command, StalenessWatch, watchdog_action
+from cbha_inverse.robot.safety import (
+    check_command, SilenceWarning, StalenessWatch, watchdog_action)
 from cbha_inverse.ros.common.conversions import command_array, command_message
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, make_status, OK, RateMeter, WARN)
@@ -71,24 +72,27 @@ class RobotinoBridgeParams:
                                'wrist_horizontal, wrist_vertical)')
     max_pressure: float = param(150000.0, 'largest forwarded command [Pa]: commands above are '
                                 'rejected (at most 1.5 bar)', low=0.0,
-                                high=MAX_BAR * PASCAL_PER_BAR)
+                                high=MAX_BAR * PASCAL_PER_BAR, live=True)
     max_bar: float = param(MAX_BAR, 'cap of every set-point sent to the driver [bar]',
                            low=0.0, high=MAX_BAR)
     wrist_bar: tuple = param((0.0, 0.0), 'set-points of the wrist channels 6 and 7 [bar] when '
                              'valve_names does not command them')
     command_timeout: float = param(0.5, 'pressure_command older than this is stale [s] (steady '
-                                   'clock)', low=0.001, high=3600.0)
+                                   'clock)', low=0.001, high=3600.0, live=True)
     stale_action: str = param('vent', 'on a stale command stream: hold the last set-points or '
-                              'vent', choices=('hold', 'vent'))
+                              'vent', choices=('hold', 'vent'), live=True)
     vent_pressure: float = param(0.0, 'arm pressure commanded when venting [Pa]', low=0.0,
-                                 high=MAX_BAR * PASCAL_PER_BAR)
+                                 high=MAX_BAR * PASCAL_PER_BAR, live=True)
     reading_timeout: float = param(0.5, 'bha_readings older than this are reported stale in '
-                                   'diagnostics [s]', low=0.001, high=3600.0)
+                                   'diagnostics and warned about [s]', low=0.001, high=3600.0,
+                                   live=True)
+    silence_warn_period: float = param(10.0, 'while no bha_readings arrive: least time between '
+                                       'two warnings [s]', low=0.1, high=3600.0, live=True)
     publish_idle: bool = param(False, 'before the first valid command, publish the vent '
                                'set-points at rate_hz (false: publish nothing until a command '
-                               'arrives)')
+                               'arrives)', live=True)
     rate_hz: float = param(50.0, 'watchdog rate, and publication rate of hold/vent set-points '
-                           '[Hz]', low=1.0, high=1000.0)
+                           '[Hz]', low=1.0, high=1000.0, live=True)
     driver_command_topic: str = param('/set_bha_pressures', "topic of the driver's "
                                       'SetBHAPressures')
     driver_readings_topic: str = param('/bha_readings', "topic of the driver's BHAReadings")
@@ -97,7 +101,7 @@ class RobotinoBridgeParams:
     frame_id: str = param('cbha_base', 'frame_id of string_pots')
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
-                                low=0.0, high=3600.0)
+                                low=0.0, high=3600.0, live=True)
 
     def __post_init__(self):
         """Check the valve names and the wrist set-points against the driver's channels."""
@@ -157,7 +161,7 @@ class RobotinoBridgeNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         try:
-            self.params = declare_parameters(self, RobotinoBridgeParams)
+            self.params = declare_parameters(self, RobotinoBridgeParams, self._apply_parameters)
             self._setup_model()
         except (ParameterError, ModuleNotFoundError):
             self.destroy_node()
@@ -169,8 +173,7 @@ class RobotinoBridgeNode(Node):
         self.set_pressures_type, self.readings_type = import_robotino_msgs()
         p = self.params
         self.channels = np.array([CHANNELS[name] for name in p.valve_names])
-        self.vent_bar = robotino_bar_command(np.full(len(p.valve_names), p.vent_pressure),
-                                             p.valve_names, p.max_bar, (0.0, 0.0))
+        self.vent_bar = self._vent_bar(p)
 
     def _setup_interfaces(self):
         """Create the bridge's state, topics and timers: the node runs."""
@@ -186,6 +189,7 @@ class RobotinoBridgeNode(Node):
         now = time.monotonic()
         self.command_watch = StalenessWatch(p.command_timeout)
         self.reading_watch = StalenessWatch(p.reading_timeout)
+        self.silence = SilenceWarning(p.reading_timeout, p.silence_warn_period, now)
         self.command_rate = RateMeter(now)
         self.reading_rate = RateMeter(now)
         self.driver_publisher = self.create_publisher(
@@ -203,6 +207,20 @@ class RobotinoBridgeNode(Node):
             f'{list(p.valve_names)} Pa -> {self.driver_publisher.topic_name} channels '
             f'{self.channels.tolist()} bar (cap {p.max_bar:g}, wrist {list(p.wrist_bar)}); '
             f'stale after {p.command_timeout:g} s -> {p.stale_action}')
+
+    @staticmethod
+    def _vent_bar(p):
+        return robotino_bar_command(np.full(len(p.valve_names), p.vent_pressure), p.valve_names,
+                                    p.max_bar, (0.0, 0.0))
+
+    def _apply_parameters(self, old, new):
+        """Apply a change of the live parameters (checked; a ``ValueError`` refuses it)."""
+        self.vent_bar = self._vent_bar(new)
+        self.command_watch.timeout = new.command_timeout
+        self.reading_watch.timeout = self.silence.timeout = new.reading_timeout
+        self.silence.period = new.silence_warn_period
+        self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
+        self.params = new
 
     # commands -------------------------------------------------------------------------------
     def _reject(self, key, detail):
@@ -225,7 +243,13 @@ class RobotinoBridgeNode(Node):
         self.forwarded += 1
 
     def _on_timer(self):
-        if not self.command_watch.stale(time.monotonic()):
+        now = time.monotonic()
+        if self.silence.due(now, self.reading_watch.last):
+            topic = self.resolve_topic_name(self.params.driver_readings_topic)
+            self.get_logger().warn(f'no bha_readings from the driver on {topic} for '
+                                   f'{self.silence.timeout:g} s or more: is the Robotino driver '
+                                   'running?')
+        if not self.command_watch.stale(now):
             return
         if self.decision != 'waiting':
             self._set_decision(self.params.stale_action)

@@ -32,7 +32,7 @@ from cbha_inverse.ros.common.qos import MEASURED_QOS
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.vision.camera import load_camera_yaml
 from cbha_inverse.vision.marker import MarkerParams
-from cbha_inverse.vision.pairing import SIDES, StereoPairer
+from cbha_inverse.vision.pairing import DropMonitor, SIDES, StereoPairer
 from cbha_inverse.vision.rig import check_pose, StereoRig
 from cbha_inverse.vision.stereo import StereoLimits
 from cbha_inverse.vision.tracking import StereoTracker
@@ -158,6 +158,7 @@ class StereoTrackerNode(Node):
             self.destroy_node()
             raise ParameterError(str(exc)) from None
         self.pairer = StereoPairer(p.max_pair_dt, p.queue_size)
+        self.drops = DropMonitor()
         self.counts = collections.Counter()
         self.pairs = 0
         self.published = 0
@@ -221,10 +222,17 @@ class StereoTrackerNode(Node):
             return
         pair, dropped = self.pairer.add(side, stamp_seconds(message.header.stamp),
                                         (pixels, order, message.header.stamp))
+        # dropped images: counted (diagnostics), DEBUG; WARN only when the tracker falls behind
+        self.counts['dropped_unpaired'] += len(dropped)
         for reason in dropped:
-            self._count('dropped_unpaired', f'{side} image dropped: no partner within '
-                        f'{self.params.max_pair_dt * 1e3:g} ms' if reason == 'no_partner'
-                        else 'image dropped: a newer pair was complete')
+            self.get_logger().debug(f'{side} image dropped: no partner within '
+                                    f'{self.params.max_pair_dt * 1e3:g} ms' if reason ==
+                                    'no_partner' else 'image dropped: a newer pair was complete')
+        if self.drops.add(len(dropped)):
+            events, total = self.drops.events, self.counts['dropped_unpaired']
+            self.get_logger().warn(
+                f'falling behind: {sum(events)} of the last {len(events)} images dropped '
+                f'unpaired (total {total})', throttle_duration_sec=self.params.log_throttle)
         if pair is not None:
             self._process(*pair)
 

@@ -1,0 +1,149 @@
+"""
+``cbha_status``: what the loop is doing, as one refreshing block read from ``/diagnostics``.
+
+For users without the ``ros2`` CLI: subscribes ``/diagnostics`` (diagnostic_msgs/DiagnosticArray,
+what every node of the package publishes about once a second) and shows, refreshed every
+``--period`` seconds, the controller's decision, tracking error, saturated actuators, feedback
+age, tick and latency percentiles, whether a driver (``robotino_bridge``, or ``cbha_sim``) is
+there, and every status line with its level and age. On a terminal the block is redrawn in
+place; into a pipe each refresh is printed below the last. ``--once`` prints one block after
+``--wait`` seconds and exits (status 1 if no diagnostics arrived). SIGINT ends it, status 0.
+"""
+
+import argparse
+import sys
+import time
+
+LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
+PROGRAM = 'cbha_status'
+
+
+def _number(values, key, scale=1.0, digits=2):
+    """Return ``values[key]`` as a formatted number, or '-'."""
+    try:
+        value = float(values[key]) * scale
+    except (KeyError, ValueError):
+        return '-'
+    return '-' if value != value else f'{value:.{digits}f}'
+
+
+def status_lines(statuses, now):
+    """
+    Return the lines of the status block.
+
+    Parameters
+    ----------
+    statuses : dict
+        ``status name -> (level, message, values, received)``: the last DiagnosticStatus of
+        each name (level 0-3, values a ``{key: text}`` dict, ``received`` a steady time [s]).
+    now : float  [s]
+        Steady time of the refresh.
+
+    Returns
+    -------
+    list of str
+        The block.
+
+    """
+    lines = []
+    control = next((status for name, status in statuses.items()
+                    if name.endswith('inverse_solver: control')), None)
+    if control is None:
+        lines.append('controller  no inverse_solver on /diagnostics')
+    else:
+        values = control[2]
+        lines.append(f"controller  {values.get('decision', '-')} ({values.get('mode', '-')} "
+                     f'loop): {control[1]}')
+        lines.append(f"            error {_number(values, 'measured_error_mm')} mm, predicted "
+                     f"{_number(values, 'predicted_error_mm')} mm, saturated "
+                     f"{values.get('saturated') or 'none'}")
+        lines.append(f"            feedback age {_number(values, 'feedback_age_s')} s, target age "
+                     f"{_number(values, 'target_age_s')} s")
+        lines.append(f"            tick median {_number(values, 'tick_median_ms', digits=3)} ms, "
+                     f"p99 {_number(values, 'tick_p99_ms', digits=3)} ms; latency median "
+                     f"{_number(values, 'latency_median_ms', digits=3)} ms, p99 "
+                     f"{_number(values, 'latency_p99_ms', digits=3)} ms")
+    drivers = [(name, s) for name, s in statuses.items()
+               if name.startswith(('robotino_bridge', 'cbha_sim'))]
+    if not drivers:
+        lines.append('driver      none on /diagnostics (no robotino_bridge, no cbha_sim)')
+    for name, (level, message, values, _) in drivers:
+        reading = values.get('reading_age_s')
+        extra = f", readings {_number(values, 'reading_age_s')} s old" if reading else ''
+        lines.append(f'driver      {name}: {LEVELS.get(level, level)} {message}{extra}')
+    lines.append('')
+    for name in sorted(statuses):
+        level, message, _, received = statuses[name]
+        lines.append(f'{LEVELS.get(level, str(level)):5s} {name}: {message} '
+                     f'({now - received:.1f} s ago)')
+    return lines
+
+
+def _parser():
+    parser = argparse.ArgumentParser(prog=PROGRAM, description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--period', type=float, default=1.0, help='refresh period [s]')
+    parser.add_argument('--once', action='store_true',
+                        help='print one block after --wait seconds and exit')
+    parser.add_argument('--wait', type=float, default=3.0,
+                        help='with --once: how long to gather diagnostics [s]')
+    return parser
+
+
+def main(argv=None):
+    """
+    Run ``cbha_status``.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments (default ``sys.argv[1:]``); ROS arguments after ``--ros-args``.
+
+    Returns
+    -------
+    int
+        0 (SIGINT, or ``--once`` with diagnostics), 1 (``--once`` without any).
+
+    """
+    argv = sys.argv[1:] if argv is None else list(argv)
+    ros_args = argv[argv.index('--ros-args'):] if '--ros-args' in argv else []
+    args = _parser().parse_args(argv[:len(argv) - len(ros_args)])
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import ExternalShutdownException
+    statuses = {}
+
+    def on_diagnostics(message):
+        received = time.monotonic()
+        for status in message.status:
+            level = status.level if isinstance(status.level, int) else ord(status.level)
+            statuses[status.name] = (level, status.message,
+                                     {kv.key: kv.value for kv in status.values}, received)
+
+    rclpy.init(args=['cbha_status', *ros_args])
+    node = rclpy.create_node('cbha_status')
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    terminal = sys.stdout.isatty()
+    try:
+        if args.once:
+            deadline = time.monotonic() + args.wait
+            while time.monotonic() < deadline:
+                rclpy.spin_once(node, timeout_sec=0.05)
+            print('\n'.join(status_lines(statuses, time.monotonic())), flush=True)
+            return 0 if statuses else 1
+        while True:
+            deadline = time.monotonic() + args.period
+            while time.monotonic() < deadline:
+                rclpy.spin_once(node, timeout_sec=0.05)
+            clock = time.strftime('%H:%M:%S')
+            block = '\n'.join([f'{PROGRAM}: {len(statuses)} statuses on /diagnostics, {clock}',
+                               *status_lines(statuses, time.monotonic())])
+            print(('\x1b[H\x1b[J' if terminal else '\n') + block, flush=True)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    sys.exit(main())
