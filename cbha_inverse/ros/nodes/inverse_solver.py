@@ -279,14 +279,14 @@ class InverseSolverNode(Node):
         if decision != self.decision:
             # rclpy refuses two severities from one call site: one call per severity
             if decision in ('hold', 'vent'):
-                logger.warn(f'{self.decision} -> {decision}: no tip/measured for '
+                logger.warn(f'{self.decision} -> {decision}: no {self.params.feedback_topic} for '
                             f'{self.feedback_watch.age(now):.2f} s')
             else:
                 logger.info(f'{self.decision} -> {decision}')
             self.decision = decision
         if decision == 'waiting' and self.target is not None and not self.told_no_feedback:
             self.told_no_feedback = True
-            topic = self.resolve_topic_name('tip/measured')
+            topic = self.resolve_topic_name(self.params.feedback_topic)
             logger.warn(f'closed loop, no measurement yet on {topic}: no command until one '
                         'arrives')
         target_stale = self.target is not None and self.target_watch.stale(now)
