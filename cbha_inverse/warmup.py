@@ -20,6 +20,7 @@ import time
 from cbha_inverse.core._kernels.flop_rate import multiply_add_chains
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.linalg import btd
+from cbha_inverse.estimate.shape import ShapeEstimator
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 import numpy as np
@@ -114,6 +115,13 @@ def warm_scene(name):
             solver.step(target)
             solver.prepare()
         ticks += 2 + len(targets)
+    if scene.sensors is not None:
+        # the shape estimator's kernels: updates on the readings of the rest shape
+        estimator = ShapeEstimator.from_scene(scene)
+        rest = estimator.state
+        readings = scene.sensors.readings(scene.sensors.lengths(rest.positions, rest.rotations))
+        for _ in range(2):
+            estimator.update(readings, np.zeros(len(scene.actuator_names)))
     return ticks
 
 

@@ -45,6 +45,25 @@ def pytest_configure(config):
     config.addinivalue_line('markers', 'pep257: ament_pep257')
 
 
+# Tests whose bounds include the timing of several node processes (closed-loop tracking, lag,
+# replays, hosts, start-up): under pytest-xdist they run one after the other on one worker
+# (--dist loadgroup), so two of them never share the cores; the rest runs beside them.
+CLOSED_LOOP_FILES = (
+    'test/ros/test_ros_excite.py', 'test/ros/test_ros_lifecycle.py',
+    'test/ros/test_ros_robotino_bridge.py', 'test/system/test_commands.py',
+    'test/system/test_demo_bags.py', 'test/system/test_demo_proprio.py',
+    'test/system/test_launch.py', 'test/system/test_network_hosts.py',
+    'test/system/test_own_robot_guide.py', 'test/system/test_replay_regression.py',
+    'test/system/test_ros_loop.py')
+
+
+def pytest_collection_modifyitems(config, items):
+    """Put the closed-loop tests into one pytest-xdist group (:data:`CLOSED_LOOP_FILES`)."""
+    for item in items:
+        if item.nodeid.split('::', 1)[0] in CLOSED_LOOP_FILES:
+            item.add_marker(pytest.mark.xdist_group('closed_loop'))
+
+
 def pytest_unconfigure(config):
     """Release the reserved domain id."""
     _RESERVATION.close()

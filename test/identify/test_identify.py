@@ -55,6 +55,8 @@ def short_arm(tmp_path_factory):
     for section in data['chain']['sections']:
         section['segment'] = str((source.parent / section['segment']).resolve())
         section['count'] = 3
+    # its string pots are routed to vertebrae 8 and 16 of the full arm
+    data.pop('sensors', None)
     path = tmp_path_factory.mktemp('scene') / 'short_arm.yaml'
     path.write_text(yaml.safe_dump(data))
     rng = np.random.default_rng(7)

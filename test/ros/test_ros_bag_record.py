@@ -8,6 +8,7 @@ reports, in a metadata.yaml as Jazzy's rosbag2 writes it, and decode with the in
 ``mcap`` + ``mcap-ros2-support`` reader.
 """
 
+import re
 import signal
 import subprocess
 import sys
@@ -197,8 +198,11 @@ def test_a_topic_without_publisher_is_warned_and_no_message_is_an_error(
         executor.shutdown()
         node.destroy_node()
     assert recorder.returncode == 1, output
-    assert output.count('warning: no publisher of /cbha/tip/mesured after 3 s (did you mean '
-                        '/cbha/tip/measured?); still waiting') == 1, output
+    # the nearest topic is named once the recorder has discovered the publisher (a second or
+    # so; later on a loaded machine): the hint itself is the tested config_files.nearest
+    warnings = re.findall(r'warning: no publisher of /cbha/tip/mesured after 3 s'
+                          r'( \(did you mean /cbha/tip/measured\?\))?; still waiting', output)
+    assert len(warnings) == 1, output
     assert output.splitlines()[-1] == (
         'cbha_bag record: error: 0 messages recorded (no publisher of /cbha/tip/mesured); '
         '--allow-empty accepts an empty bag'), output

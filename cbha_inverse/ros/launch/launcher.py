@@ -12,22 +12,39 @@ command lines instead, and keeps the overrides params files they name; ``--show-
 composition's arguments (as ``ros2 launch ... --show-args``).
 """
 
-import argparse
-import os
-from pathlib import Path
-import shlex
-import shutil
 import signal
-import subprocess
 import sys
-import tempfile
-import threading
-import time
 
-from cbha_inverse.config_files import read_yaml
-from cbha_inverse.errors import ConfigError, report_config_error
-from cbha_inverse.ros.launch.compositions import ArgumentError, COMPOSITIONS, node_module, resolve
-import yaml
+
+def _stopped_while_loading(signum, frame):
+    """Leave quietly on a stop while this module still loads: no node has started yet."""
+    sys.stderr.write('cbha_launch: stopped before starting the nodes\n')
+    raise SystemExit(0)
+
+
+# a Ctrl-C right after the start lands in the imports below: one line and status 0, not a
+# KeyboardInterrupt traceback (restored once they are done)
+_LOADING = {sig: signal.signal(sig, _stopped_while_loading)
+            for sig in (signal.SIGINT, signal.SIGTERM)}
+
+import argparse  # noqa: E402, I100
+import os  # noqa: E402
+from pathlib import Path  # noqa: E402
+import shlex  # noqa: E402
+import shutil  # noqa: E402
+import subprocess  # noqa: E402
+import tempfile  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+
+from cbha_inverse.config_files import read_yaml  # noqa: E402
+from cbha_inverse.errors import ConfigError, report_config_error  # noqa: E402
+from cbha_inverse.ros.launch.compositions import (  # noqa: E402
+    ArgumentError, COMPOSITIONS, node_module, resolve)
+import yaml  # noqa: E402
+
+for _signal, _handler in _LOADING.items():
+    signal.signal(_signal, _handler)
 
 PROGRAM = 'cbha_launch'
 STOP_TIMEOUT = 15.0
