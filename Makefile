@@ -36,7 +36,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # Coverage of every run (child processes included: coverage's patch = subprocess, setup.cfg),
 # then the total of the non-compiled code (the numba kernels run as machine code, not Python:
 # make cover-kernels measures them with the JIT off).
-test: install  ## the whole test suite with coverage (~8-10 min on 2 cores)
+test: install  ## the whole test suite with coverage, one worker per core (~8 min on 2 cores)
 	$(VPY) -m pytest test -q -rs -n $(TEST_WORKERS) --dist loadgroup --durations=15 $(COVERAGE_ARGS) $(PYTEST_ARGS)
 	@$(VPY) -m coverage report --omit='$(subst $(space),$(comma),$(KERNEL_SOURCES))' \
 	  | tail -n 1 | sed 's/^TOTAL/non-compiled code (kernels omitted): TOTAL/'
