@@ -39,7 +39,7 @@ from cbha_inverse.robot.robotino import (
     robotino_pressures, string_pot_names)
 from cbha_inverse.robot.safety import (
     check_command, SilenceWarning, StalenessWatch, watchdog_action)
-from cbha_inverse.ros.common.conversions import command_array, command_message
+from cbha_inverse.ros.common.conversions import command_array, command_message, joint_state
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, make_status, OK, RateMeter, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
@@ -286,12 +286,9 @@ class RobotinoBridgeNode(Node):
         self.readings += 1
         self.measured = pascal
         self.measured_publisher.publish(command_message(pascal, p.valve_names))
-        pots = JointState()
-        pots.header.stamp = message.stamp
-        pots.header.frame_id = p.frame_id
-        pots.position = [float(v) for v in message.cablepull]
-        pots.name = list(string_pot_names(p.string_pot_names, len(pots.position)))
-        self.pots_publisher.publish(pots)
+        pulls = list(message.cablepull)
+        self.pots_publisher.publish(joint_state(
+            string_pot_names(p.string_pot_names, len(pulls)), pulls, message.stamp, p.frame_id))
 
     # diagnostics ----------------------------------------------------------------------------
     def _statuses(self):
