@@ -116,12 +116,7 @@ def warm_scene(name):
             solver.prepare()
         ticks += 2 + len(targets)
     if scene.sensors is not None:
-        # the shape estimator's kernels: updates on the readings of the rest shape
-        estimator = ShapeEstimator.from_scene(scene)
-        rest = estimator.state
-        readings = scene.sensors.readings(scene.sensors.lengths(rest.positions, rest.rotations))
-        for _ in range(2):
-            estimator.update(readings, np.zeros(len(scene.actuator_names)))
+        ShapeEstimator.from_scene(scene).warm_up()
     return ticks
 
 

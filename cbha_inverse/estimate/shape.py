@@ -278,6 +278,14 @@ class ShapeEstimator:
         self._last_pressures = None
         self._last = None
 
+    def warm_up(self):
+        """Update on the rest shape's readings (compiles or loads the kernels), then reset."""
+        rest = rest_state(self.model)
+        readings = self.sensors.readings(self.sensors.lengths(rest.positions, rest.rotations))
+        self.update(readings)
+        self.update(readings, np.zeros(self._m))
+        self.reset()
+
     @property
     def state(self):
         """Return a copy of the estimated frames as a ``ChainState``."""

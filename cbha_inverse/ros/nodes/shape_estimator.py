@@ -103,7 +103,7 @@ class ShapeEstimatorNode(Node):
             self.destroy_node()
             raise ParameterError(str(exc)) from None
         self.pot_names = self.scene.sensors.names
-        self._warm_up()
+        self.estimator.warm_up()
         self.pressures = None
         self.pressure_time = -np.inf
         self.rejected = {}
@@ -124,13 +124,6 @@ class ShapeEstimatorNode(Node):
             f'scene {self.scene.name}: {len(self.pot_names)} string pots {list(self.pot_names)}'
             f', pressures {"used" if p.use_pressures else "not used"} '
             f'({list(self.valve_names)}); {self.tip_publisher.topic_name}')
-
-    def _warm_up(self):
-        """Run one update at rest (compiles or loads the kernels), then start over."""
-        rest = self.estimator.state
-        lengths = self.scene.sensors.lengths(rest.positions, rest.rotations)
-        self.estimator.update(self.scene.sensors.readings(lengths))
-        self.estimator.reset()
 
     def _reject(self, reason):
         key = reason.split(':')[0]
