@@ -13,10 +13,12 @@ import signal
 import subprocess
 import sys
 
+from builtin_interfaces.msg import Time
 from cbha_inverse.interfaces.colcon_build import interface_environment
 from cbha_inverse.paths import config_path
 from cbha_inverse.ros.common.qos import MARKER_QOS, TARGET_QOS, TF_QOS, TF_STATIC_QOS
-from cbha_inverse.ros.common.tf import backbone_poses
+from cbha_inverse.ros.common.conversions import transform_stamped
+from cbha_inverse.ros.common.tf import backbone_poses, TfTemplate
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -126,6 +128,24 @@ def test_backbone_poses_name_every_frame_and_the_tip():
                                    rotation.as_matrix(), atol=1e-14)
 
 
+def test_tf_template_serialises_what_the_message_would(tf2_msgs):
+    from rclpy.serialization import deserialize_message, serialize_message
+    from tf2_msgs.msg import TFMessage
+    rng = np.random.default_rng(5)
+    children = ['cbha_frame_0', 'a', 'stereo_right_optical', 'cbha_tip']
+    template = TfTemplate(TFMessage, 'cbha_base', children)
+    for _ in range(3):
+        poses = np.hstack([rng.normal(0.0, 0.3, (4, 3)), Rotation.random(4, rng).as_quat()])
+        stamp_ns = int(rng.integers(0, 2 ** 31)) * 1_000_000_000 + int(rng.integers(0, 10 ** 9))
+        data = template.fill(poses, stamp_ns)
+        stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
+        expected = TFMessage(transforms=[transform_stamped('cbha_base', child, pose, stamp)
+                                         for child, pose in zip(children, poses)])
+        # the same bytes but the CDR padding (whatever the serialiser leaves there)
+        assert len(data) == len(serialize_message(expected))
+        assert deserialize_message(data, TFMessage) == expected
+
+
 def test_inverse_solver_publishes_the_model_frames_on_tf_decimated(rclpy_context, tf2_msgs):
     from tf2_msgs.msg import TFMessage
     solver = make_node(InverseSolverNode, rclpy_context, tf_every_n_ticks=EVERY)
@@ -180,3 +200,12 @@ def test_inverse_solver_publishes_the_model_frames_on_tf_decimated(rclpy_context
         executor.shutdown()
         for node in (solver, listener):
             node.destroy_node()
+
+
+def test_rviz_view_shows_every_tf_frame_in_the_solvers_frame():
+    from cbha_inverse.ros.nodes.inverse_solver import InverseSolverParams
+    view = yaml.safe_load((REPO_ROOT / 'rviz' / 'cbha.rviz').read_text())
+    manager = view['Visualization Manager']
+    [tf] = [d for d in manager['Displays'] if d['Class'] == 'rviz_default_plugins/TF']
+    assert tf['Enabled'] and tf['Frames']['All Enabled'] and tf['Show Axes']
+    assert manager['Global Options']['Fixed Frame'] == InverseSolverParams().frame_id
