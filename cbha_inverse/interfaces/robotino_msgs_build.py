@@ -5,9 +5,10 @@ The Robotino ROS 2 driver's ``robotino_msgs`` is not on PyPI. Where the driver's
 hand, this command builds the package's own copy of its two CBHA messages
 (``cbha_inverse/interfaces/robotino_msgs``: same package name, message names, field names and
 types, hence the same type hashes) into a colcon workspace with
-:func:`cbha_inverse.interfaces.colcon_build.build_interface_package` (what it needs, and how a
-process then finds the built libraries, is said there): source ``install/setup.sh`` (or set the
-variables of :func:`interface_environment`) before starting a node.
+:func:`cbha_inverse.interfaces.colcon_build.build_interface_package` (``build``: its options,
+what it needs and raises, and how a process then finds the built libraries): source
+``install/setup.sh`` (or set the variables of :func:`interface_environment`) before starting a
+node.
 """
 
 import sys
@@ -30,29 +31,7 @@ def install_prefix(workspace):
 
 
 def build_robotino_msgs(workspace, timeout=600.0, env=None):
-    """
-    Copy the shipped package into ``<workspace>/src`` and build it with colcon.
-
-    Parameters
-    ----------
-    workspace : str or os.PathLike
-        Workspace folder (created if missing; an earlier build there is reused by colcon).
-    timeout : float  [s]
-        Longest build.
-    env : mapping, optional
-        Starting environment (default ``os.environ``).
-
-    Returns
-    -------
-    pathlib.Path
-        The install prefix (``<workspace>/install/robotino_msgs``).
-
-    Raises
-    ------
-    BuildError
-        If a build tool is missing, the export files are not repaired, or colcon fails.
-
-    """
+    """Build the shipped package into a workspace; return its install prefix (see ``build``)."""
     return build_interface_package(PACKAGE, workspace, DEPENDENCIES, timeout, env)
 
 

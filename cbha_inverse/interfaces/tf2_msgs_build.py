@@ -6,7 +6,8 @@ the system ``tf2_msgs`` is used and nothing needs building. Elsewhere this comma
 package's own copy of ``TFMessage`` (``cbha_inverse/interfaces/tf2_msgs``: same package name,
 message name, field name and type, hence the same type hash; ``geometry_msgs/TransformStamped``
 comes from the common_interfaces wheels) into a colcon workspace with
-:func:`cbha_inverse.interfaces.colcon_build.build_interface_package`: source
+:func:`cbha_inverse.interfaces.colcon_build.build_interface_package` (``build``: its options,
+what it needs and raises) and :func:`~cbha_inverse.interfaces.colcon_build.build_command`: source
 ``install/setup.sh`` before starting the nodes that publish TF (``inverse_solver``,
 ``stereo_tracker``, ``docs/nodes.md``).
 """
@@ -20,48 +21,13 @@ DEPENDENCIES = ('geometry_msgs',)
 """The interface packages its message uses (``TransformStamped``)."""
 
 
-def build_tf2_msgs(workspace, timeout=600.0, env=None):
-    """
-    Copy the shipped ``tf2_msgs`` into ``<workspace>/src`` and build it with colcon.
-
-    Parameters
-    ----------
-    workspace : str or os.PathLike
-        Workspace folder (created if missing; an earlier build there is reused by colcon).
-    timeout : float  [s]
-        Longest build.
-    env : mapping, optional
-        Starting environment (default ``os.environ``).
-
-    Returns
-    -------
-    pathlib.Path
-        The install prefix (``<workspace>/install/tf2_msgs``).
-
-    Raises
-    ------
-    cbha_inverse.interfaces.colcon_build.BuildError
-        If a build tool is missing, the export files are not repaired, or colcon fails.
-
-    """
-    return build_interface_package(PACKAGE, workspace, DEPENDENCIES, timeout, env)
+def build_tf2_msgs(workspace, **options):
+    """Build the shipped package into a workspace; return its install prefix (see ``build``)."""
+    return build_interface_package(PACKAGE, workspace, DEPENDENCIES, **options)
 
 
 def main(argv=None):
-    """
-    Build ``tf2_msgs`` into a workspace and say how to use it.
-
-    Parameters
-    ----------
-    argv : list of str, optional
-        Command-line arguments (default ``sys.argv[1:]``).
-
-    Returns
-    -------
-    int
-        0 on success, 2 when the package cannot be built here (one line says why).
-
-    """
+    """Run ``cbha_build_tf2_msgs [--workspace WS]``; return 0, or 2 with one line saying why."""
     return build_command(
         PACKAGE, DEPENDENCIES, "Build tf2_msgs's TFMessage (the type of /tf and /tf_static) "
         'shipped with cbha_inverse into a colcon workspace (a ROS 2 install has its own).',

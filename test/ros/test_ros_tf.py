@@ -16,8 +16,8 @@ import sys
 from builtin_interfaces.msg import Time
 from cbha_inverse.interfaces.colcon_build import interface_environment
 from cbha_inverse.paths import config_path
-from cbha_inverse.ros.common.qos import MARKER_QOS, TARGET_QOS, TF_QOS, TF_STATIC_QOS
 from cbha_inverse.ros.common.conversions import transform_stamped
+from cbha_inverse.ros.common.qos import MARKER_QOS, TARGET_QOS, TF_QOS, TF_STATIC_QOS
 from cbha_inverse.ros.common.tf import backbone_poses, TfTemplate
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
 from geometry_msgs.msg import PointStamped
