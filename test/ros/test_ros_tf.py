@@ -9,6 +9,7 @@ numbers with scipy. ``/tf``: ``inverse_solver`` publishes every model frame and 
 markers and its model state, the tip on the target it converged to, none with ``0``.
 """
 
+from pathlib import Path
 import signal
 import subprocess
 import sys
@@ -209,3 +210,15 @@ def test_rviz_view_shows_every_tf_frame_in_the_solvers_frame():
     [tf] = [d for d in manager['Displays'] if d['Class'] == 'rviz_default_plugins/TF']
     assert tf['Enabled'] and tf['Frames']['All Enabled'] and tf['Show Axes']
     assert manager['Global Options']['Fixed Frame'] == InverseSolverParams().frame_id
+
+
+def test_the_built_tfmessage_has_the_type_hash_of_ros_jazzy(tf2_msgs):
+    """Match the type hash of ROS 2 Jazzy (its golden value): RViz and tf2 match types by it."""
+    import json
+    from ament_index_python.packages import get_package_share_directory
+    share = Path(get_package_share_directory('tf2_msgs') if tf2_msgs is None
+                 else tf2_msgs / 'share' / 'tf2_msgs')
+    description = json.loads((share / 'msg' / 'TFMessage.json').read_text())
+    [entry] = [h for h in description['type_hashes'] if h['type_name'] == 'tf2_msgs/msg/TFMessage']
+    assert entry['hash_string'] == (
+        'RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087')
