@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cbha_inverse.config_files import check_keys, read_yaml
-from cbha_inverse.core.so3 import matrix_from_quat, pose_vector  # noqa: F401 (rig API)
+from cbha_inverse.core.so3 import matrix_from_quat, pose_vector
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.vision.camera import camera_model, load_camera_yaml, save_camera_yaml
 import numpy as np
