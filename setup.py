@@ -47,6 +47,7 @@ CONSOLE_SCRIPTS = [
     'inverse_solver_managed = cbha_inverse.ros.nodes.inverse_solver_managed:main',
     'robotino_bridge_managed = cbha_inverse.ros.nodes.robotino_bridge_managed:main',
     'cbha_build_robotino_msgs = cbha_inverse.interfaces.robotino_msgs_build:main',
+    'cbha_build_tf2_msgs = cbha_inverse.interfaces.tf2_msgs_build:main',
     'cbha_bag = cbha_inverse.ros.bag.cli:main',
     'cbha_bench_bag = cbha_inverse.report.bench_bag:main',
     'cbha_identify = cbha_inverse.identify.cli:main',
@@ -65,9 +66,10 @@ setup(
         *tree_data_files('launch'),
         *tree_data_files('rviz'),
     ],
-    # the Robotino driver's messages, built on demand by cbha_build_robotino_msgs
-    package_data={'cbha_inverse.interfaces': ['robotino_msgs/*.txt', 'robotino_msgs/*.xml',
-                                              'robotino_msgs/msg/*.msg']},
+    # the Robotino driver's messages and tf2_msgs, built on demand by cbha_build_<package>
+    package_data={'cbha_inverse.interfaces': [
+        f'{package}/{pattern}' for package in ('robotino_msgs', 'tf2_msgs')
+        for pattern in ('*.txt', '*.xml', 'msg/*.msg')]},
     install_requires=['setuptools'],
     zip_safe=False,
     maintainer='cbha_inverse maintainers',

@@ -87,6 +87,18 @@ def rclpy_context():
         rclpy.try_shutdown(context=context)
 
 
+def _built_once(tmp_path_factory, package, build_and_load):
+    """Return ``build_and_load(workspace)``: one build per session, shared by xdist workers."""
+    if os.environ.get('PYTEST_XDIST_WORKER') is None:
+        return build_and_load(tmp_path_factory.mktemp(f'{package}_ws'))
+    # pytest-xdist: the workers share one build (their base temporary folders have one parent);
+    # the first to take the lock builds, the others load what it built
+    shared = tmp_path_factory.getbasetemp().parent
+    with open(shared / f'{package}_ws.lock', 'w') as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return build_and_load(shared / f'{package}_ws')
+
+
 @pytest.fixture(scope='session')
 def robotino_msgs(tmp_path_factory):
     """
@@ -97,11 +109,21 @@ def robotino_msgs(tmp_path_factory):
     environment of its ``install/setup.sh``.
     """
     from robotino_helpers import build_and_load
-    if os.environ.get('PYTEST_XDIST_WORKER') is None:
-        return build_and_load(tmp_path_factory.mktemp('robotino_msgs_ws'))
-    # pytest-xdist: the workers share one build (their base temporary folders have one parent);
-    # the first to take the lock builds, the others load what it built
-    shared = tmp_path_factory.getbasetemp().parent
-    with open(shared / 'robotino_msgs_ws.lock', 'w') as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        return build_and_load(shared / 'robotino_msgs_ws')
+    return _built_once(tmp_path_factory, 'robotino_msgs', build_and_load)
+
+
+@pytest.fixture(scope='session')
+def tf2_msgs(tmp_path_factory):
+    """
+    Make ``tf2_msgs`` usable: the system one (a sourced ROS 2), else the shipped one, built once.
+
+    Returns None for the system package, else the install prefix of the build (loaded in this
+    process; ``interface_environment(prefix, child_env())`` for child processes).
+    """
+    import importlib.util
+    if importlib.util.find_spec('tf2_msgs') is not None:
+        return None
+    from cbha_inverse.interfaces.tf2_msgs_build import build_tf2_msgs
+    from ros_helpers import load_interface
+    return _built_once(tmp_path_factory, 'tf2_msgs',
+                       lambda workspace: load_interface(build_tf2_msgs(workspace)))

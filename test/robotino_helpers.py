@@ -3,20 +3,14 @@ The Robotino driver's messages in tests: build them once, load them, and a drive
 
 :func:`build_and_load` builds the shipped ``robotino_msgs`` with colcon
 (:func:`cbha_inverse.interfaces.robotino_msgs_build.build_robotino_msgs`) and makes it usable in
-this already running test process. A process reads ``LD_LIBRARY_PATH`` once at start, and the
-ROS type support opens ``librobotino_msgs__rosidl_typesupport_*.so`` by that name; so the built
-libraries are loaded here by their full paths first (the dynamic loader then resolves the name
-to the loaded library), and the Python package's folder goes on ``sys.path``. Child processes get
-the environment of ``install/setup.sh`` instead (:func:`robotino_child_env`).
+this already running test process (:func:`ros_helpers.load_interface`). Child processes get the
+environment of ``install/setup.sh`` instead (:func:`robotino_child_env`).
 
 :class:`DriverStandIn` speaks the driver's messages as ``robotino_node`` does: it takes
 ``set_bha_pressures`` (anything but exactly 8 values ignored), records it, optionally forwards
 the arm channels in Pa to a plant (``cbha_sim``) and publishes ``bha_readings``.
 """
 
-import ctypes
-import os
-import sys
 import time
 
 from cbha_inverse.interfaces.robotino_msgs_build import (
@@ -26,7 +20,7 @@ from cbha_inverse.ros.common.conversions import command_message
 from cbha_inverse.ros.common.qos import COMMAND_QOS, DRIVER_SET_POINTS_QOS, MEASURED_QOS
 import numpy as np
 from rclpy.node import Node
-from ros_helpers import child_env
+from ros_helpers import child_env, load_interface
 from std_msgs.msg import Float64MultiArray
 
 
@@ -43,13 +37,7 @@ def build_and_load(workspace):
     started = time.perf_counter()
     prefix = build_robotino_msgs(workspace)
     print(f'robotino_msgs built with colcon in {time.perf_counter() - started:.1f} s')
-    for library in sorted((prefix / 'lib').glob('*.so')):
-        ctypes.CDLL(str(library), mode=os.RTLD_GLOBAL)
-    version = f'python{sys.version_info.major}.{sys.version_info.minor}'
-    site = str(prefix / 'lib' / version / 'site-packages')
-    if site not in sys.path:
-        sys.path.insert(0, site)
-    return prefix
+    return load_interface(prefix)
 
 
 def robotino_child_env(prefix):

@@ -222,6 +222,33 @@ def child_env():
     return env
 
 
+def load_interface(prefix):
+    """
+    Make a built interface package usable in this already running process; return ``prefix``.
+
+    A process reads ``LD_LIBRARY_PATH`` once at start, and the ROS type support opens
+    ``lib<pkg>__rosidl_typesupport_*.so`` by that name; so the built libraries are loaded here by
+    their full paths first (the dynamic loader then resolves the name to the loaded library), and
+    the Python package's folder goes on ``sys.path``. Child processes get the environment of
+    ``install/setup.sh`` instead
+    (:func:`cbha_inverse.interfaces.colcon_build.interface_environment`).
+
+    Parameters
+    ----------
+    prefix : pathlib.Path
+        The package's install prefix (``<workspace>/install/<package>``).
+
+    """
+    import ctypes
+    for library in sorted((prefix / 'lib').glob('*.so')):
+        ctypes.CDLL(str(library), mode=os.RTLD_GLOBAL)
+    version = f'python{sys.version_info.major}.{sys.version_info.minor}'
+    site = str(prefix / 'lib' / version / 'site-packages')
+    if site not in sys.path:
+        sys.path.insert(0, site)
+    return prefix
+
+
 def colcon_build(work):
     """
     Build the package with colcon into the folder ``work``; return the install base.

@@ -1,5 +1,5 @@
 """
-Rotation helpers on SO(3), batched over arrays: hat/vee, exp/log, quaternions, rpy, ``Jl⁻¹``.
+Rotation helpers on SO(3), batched: hat/vee, exp/log, quaternions, poses, rpy, ``Jl⁻¹``.
 
 Conventions (`docs/design.md`): rotation vectors are axis * angle [rad]; quaternions are
 (x, y, z, w) with ``w >= 0``; every function is batched over leading axes (``(..., 3)`` vectors,
@@ -125,6 +125,28 @@ def quat_from_matrix(rot):
 
     """
     return _batched(quaternion_batch, rot, (3, 3), (4,))
+
+
+def pose_vector(rotation, translation):
+    """
+    Pack rotations and translations into poses ``[x, y, z, qx, qy, qz, qw]``.
+
+    Parameters
+    ----------
+    rotation : (..., 3, 3) array_like
+        Rotation matrices.
+    translation : (..., 3) array_like  [m]
+        Translations (same leading shape).
+
+    Returns
+    -------
+    (..., 7) ndarray
+        The poses (quaternions of :func:`quat_from_matrix`, ``qw >= 0``).
+
+    """
+    translation = np.asarray(translation, dtype=float)
+    return np.concatenate([translation, quat_from_matrix(np.asarray(rotation, dtype=float))],
+                          axis=-1)
 
 
 def matrix_from_quat(quat):

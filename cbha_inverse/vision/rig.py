@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cbha_inverse.config_files import check_keys, read_yaml
-from cbha_inverse.core.so3 import matrix_from_quat, quat_from_matrix
+from cbha_inverse.core.so3 import matrix_from_quat, pose_vector
 from cbha_inverse.errors import ConfigError
 from cbha_inverse.vision.camera import camera_model, load_camera_yaml, save_camera_yaml
 import numpy as np
@@ -108,26 +108,23 @@ class StereoRig:
         p_rect_right = p_rect - np.array([self.baseline, 0.0, 0.0])
         return p_rect_right @ self.right.rectification
 
+    def camera_poses(self):
+        """
+        Return the poses of the two raw optical frames in ``cbha_base``.
 
-def pose_vector(rotation, translation):
-    """
-    Pack a rotation and a translation into ``[x, y, z, qx, qy, qz, qw]``.
+        Returns
+        -------
+        dict
+            ``{'left': (7,) ndarray, 'right': (7,) ndarray}``, ``[x, y, z, qx, qy, qz, qw]``
+            [m, -]: ``base_from_left``, and the right frame from the rectified geometry of
+            :meth:`right_from_left` inverted, ``R_base_right = R_base_left R_leftᵀ R_right``,
+            ``t_base_right = t_base_left + R_base_left R_leftᵀ [B, 0, 0]``.
 
-    Parameters
-    ----------
-    rotation : (3, 3) array_like
-        Rotation matrix.
-    translation : (3,) array_like  [m]
-        Translation.
-
-    Returns
-    -------
-    (7,) ndarray
-        The pose (quaternion with ``qw >= 0``).
-
-    """
-    return np.concatenate([np.asarray(translation, dtype=float).reshape(3),
-                           quat_from_matrix(np.asarray(rotation, dtype=float))])
+        """
+        base_from_rect = self.rotation_base_left @ self.left.rectification.T
+        rotation = base_from_rect @ self.right.rectification
+        translation = self.base_from_left[:3] + base_from_rect @ np.array([self.baseline, 0., 0.])
+        return {'left': self.base_from_left.copy(), 'right': pose_vector(rotation, translation)}
 
 
 def check_pose(pose):

@@ -77,6 +77,27 @@ def test_quaternions_against_scipy():
                                so3.so3_exp(v), atol=1e-14)
 
 
+def test_pose_vectors_closed_form_axis_angle_quaternion():
+    """A rotation by t about the unit axis u is (u sin(t/2), cos(t/2)); batched over frames."""
+    axes = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [2.0, -1.0, 2.0]]) / [[1.0], [1.0], [3.0]]
+    angles = np.array([0.3, 2.5, 3.1])
+    rotations = []
+    for u, t in zip(axes, angles):
+        # Rodrigues' formula written out: R = cos t I + sin t [u]x + (1 - cos t) u u^T
+        cross = np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+        rotations.append(np.cos(t) * np.eye(3) + np.sin(t) * cross
+                         + (1.0 - np.cos(t)) * np.outer(u, u))
+    translations = np.array([[0.1, 0.2, 0.3], [-1.0, 0.0, 2.0], [0.0, 0.0, 0.0]])
+    poses = so3.pose_vector(np.array(rotations), translations)
+    assert poses.shape == (3, 7)
+    np.testing.assert_array_equal(poses[:, :3], translations)
+    np.testing.assert_allclose(poses[:, 3:6], axes * np.sin(angles / 2)[:, None], atol=1e-15)
+    np.testing.assert_allclose(poses[:, 6], np.cos(angles / 2), atol=1e-15)
+    # a half turn about z: (0, 0, 1, 0); one pose alone is (7,)
+    np.testing.assert_allclose(so3.pose_vector(np.diag([-1.0, -1.0, 1.0]), [1.0, 2.0, 3.0]),
+                               [1.0, 2.0, 3.0, 0.0, 0.0, 1.0, 0.0], atol=1e-15)
+
+
 @pytest.mark.parametrize('angle', [0.0, 1e-6, 0.05, 0.3, 0.7, 2.0, 3.0])
 def test_left_jacobian_inverse_and_derivative(angle):
     """Jl^-1 linearises log(exp(e) exp(phi)); its transpose derivative matches central FD."""

@@ -22,7 +22,7 @@ NODE_EXECUTABLES = ('trajectory', 'inverse_solver', 'cbha_sim', 'stereo_tracker'
                     'robotino_bridge', 'cbha_excite')
 COMMAND_EXECUTABLES = ('condense_segment', 'cbha_report', 'cbha_demo', 'cbha_launch',
                        'cbha_scene', 'stereo_calibrate', 'cbha_build_robotino_msgs',
-                       'cbha_bag')
+                       'cbha_build_tf2_msgs', 'cbha_bag')
 
 
 @pytest.fixture(scope='module')
@@ -113,7 +113,7 @@ def test_installed_cbha_launch_uses_the_installed_params_files(colcon_install):
 
 def test_shipped_robotino_msgs_is_installed_as_data_and_not_crawled(colcon_install, tmp_path):
     """
-    The shipped interface package is package data, and colcon does not build it by itself.
+    The shipped interface packages are package data, and colcon does not build them by itself.
 
     colcon stops descending at a package's folder, so a workspace holding cbha_inverse lists
     only cbha_inverse; a robotino_msgs of the driver's source in the same workspace cannot
@@ -121,10 +121,11 @@ def test_shipped_robotino_msgs_is_installed_as_data_and_not_crawled(colcon_insta
     """
     site = (colcon_install / PACKAGE / 'lib' /
             f'python{sys.version_info.major}.{sys.version_info.minor}' / 'site-packages')
-    shipped = site / PACKAGE / 'interfaces' / 'robotino_msgs'
-    for name in ('package.xml', 'CMakeLists.txt', 'msg/SetBHAPressures.msg',
-                 'msg/BHAReadings.msg'):
-        assert (shipped / name).is_file(), f'{shipped / name} not installed'
+    for shipped, messages in ((site / PACKAGE / 'interfaces' / 'robotino_msgs',
+                               ('SetBHAPressures', 'BHAReadings')),
+                              (site / PACKAGE / 'interfaces' / 'tf2_msgs', ('TFMessage',))):
+        for name in ('package.xml', 'CMakeLists.txt', *(f'msg/{m}.msg' for m in messages)):
+            assert (shipped / name).is_file(), f'{shipped / name} not installed'
     (tmp_path / 'src').mkdir()
     (tmp_path / 'src' / PACKAGE).symlink_to(REPO_ROOT, target_is_directory=True)
     colcon = Path(sys.executable).with_name('colcon')

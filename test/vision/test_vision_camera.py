@@ -8,7 +8,7 @@ from cbha_inverse.paths import config_path
 from cbha_inverse.vision.camera import (
     camera_from_yaml, camera_model, camera_to_yaml, load_camera_yaml, save_camera_yaml)
 from cbha_inverse.vision.rig import (
-    load_rig, parallel_rig, pose_vector, register_base_from_left, save_rig)
+    load_rig, parallel_rig, pose_vector, register_base_from_left, save_rig, StereoRig)
 import numpy as np
 import pytest
 
@@ -114,6 +114,31 @@ def test_default_rig_geometry():
     demo = load_rig(config_path('cameras', 'demo_rig.yaml'))
     assert np.array_equal(demo.base_from_left, rig.base_from_left)
     assert demo.left.camera_matrix[0, 0] == pytest.approx(0.5 * rig.left.camera_matrix[0, 0])
+
+
+def test_camera_poses_map_each_optical_frame_into_cbha_base():
+    """The two poses of camera_poses() carry right-frame points where the rig's geometry does."""
+    rng = np.random.default_rng(4)
+    k_matrix = np.array([[1400.0, 0.0, 640.0], [0.0, 1400.0, 512.0], [0.0, 0.0, 1.0]])
+    p_left = np.hstack([k_matrix, np.zeros((3, 1))])
+    p_right = p_left.copy()
+    p_right[0, 3] = -1400.0 * 0.15
+    cameras = [camera_model(1280, 1024, 'plumb_bob', np.zeros(5), k_matrix, so3_exp(rotvec),
+                            projection, name) for rotvec, projection, name in (
+        ([0.02, -0.01, 0.005], p_left, 'left'), ([-0.01, 0.03, 0.0], p_right, 'right'))]
+    rig = StereoRig(cameras[0], cameras[1], pose_vector(so3_exp([0.4, -1.0, 2.2]),
+                                                        [0.7, -0.1, 0.05]))
+    poses = rig.camera_poses()
+    np.testing.assert_array_equal(poses['left'], rig.base_from_left)
+    points_left = rng.uniform(-0.2, 0.2, (20, 3)) + [0.0, 0.0, 0.6]
+    points_right = rig.right_from_left(points_left)
+    rotation, translation = matrix_from_quat(poses['right'][3:]), poses['right'][:3]
+    np.testing.assert_allclose(points_right @ rotation.T + translation,
+                               rig.base_from_left_points(points_left), atol=1e-14)
+    # the default rig: parallel cameras, the right one 0.12 m along +y of cbha_base
+    default = load_rig(config_path('cameras', 'rig.yaml')).camera_poses()
+    np.testing.assert_allclose(default['right'], [0.8308, 0.06, -0.0292, -0.5, -0.5, 0.5, 0.5],
+                               atol=1e-14)
 
 
 def test_rig_round_trip_and_broken_pose(tmp_path):

@@ -2,7 +2,7 @@
 
 from array import array
 
-from geometry_msgs.msg import Point, PointStamped
+from geometry_msgs.msg import Point, PointStamped, TransformStamped
 import numpy as np
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -48,6 +48,36 @@ def point_stamped(point, stamp, frame_id):
     message.header.stamp = stamp
     message.header.frame_id = frame_id
     message.point.x, message.point.y, message.point.z = np.asarray(point, dtype=float).tolist()
+    return message
+
+
+def transform_stamped(parent, child, pose, stamp):
+    """
+    Build a ``TransformStamped`` (one entry of ``/tf`` or ``/tf_static``).
+
+    Parameters
+    ----------
+    parent, child : str
+        ``header.frame_id`` and ``child_frame_id``.
+    pose : (7,) array_like  [m, -]
+        The child frame in the parent, ``[x, y, z, qx, qy, qz, qw]``.
+    stamp : builtin_interfaces.msg.Time
+        Header stamp.
+
+    Returns
+    -------
+    geometry_msgs.msg.TransformStamped
+        The message.
+
+    """
+    message = TransformStamped()
+    message.header.stamp = stamp
+    message.header.frame_id = parent
+    message.child_frame_id = child
+    x, y, z, qx, qy, qz, qw = np.asarray(pose, dtype=float).reshape(7).tolist()
+    translation, rotation = message.transform.translation, message.transform.rotation
+    translation.x, translation.y, translation.z = x, y, z
+    rotation.x, rotation.y, rotation.z, rotation.w = qx, qy, qz, qw
     return message
 
 

@@ -58,3 +58,12 @@ reliable writer reaches a reliable or a best-effort reader)."""
 DRIVER_READINGS_QOS = qos_profile_sensor_data
 """``/bha_readings`` (robotino_msgs/BHAReadings, from the driver): sensor data, so that a driver
 that publishes reliable or best effort is received."""
+
+TF_QOS = reliable(100)
+"""``/tf`` (tf2_msgs/TFMessage): reliable, volatile, depth 100, as tf2's transform broadcaster."""
+
+TF_STATIC_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""``/tf_static`` (tf2_msgs/TFMessage): latched (reliable, transient local, depth 1), as tf2's
+static broadcaster: a listener that starts later still receives the last message."""

@@ -4,13 +4,15 @@ The rendered stereo cameras of ``cbha_sim`` on ROS topics (``tip_output: stereo 
 At ``camera_rate_hz`` the current plant state is rendered by
 :class:`cbha_inverse.sim.cameras.SimulatedStereo` and published as
 ``stereo/{left,right}/image_raw`` (bgr8, RELIABLE) with ``stereo/{left,right}/camera_info``,
-both images stamped with the time of the plant state they show; a state already sent is not
-sent again.
+both images stamped with the time of the plant state they show, in the optical frames that
+``stereo_tracker`` latches on ``/tf_static`` (:func:`cbha_inverse.ros.common.tf.camera_frame`); a
+state already sent is not sent again.
 This module imports OpenCV; ``cbha_sim`` imports it only when stereo output is on.
 """
 
 from cbha_inverse.ros.common.images import camera_info_message, image_message
 from cbha_inverse.ros.common.qos import reliable
+from cbha_inverse.ros.common.tf import camera_frame
 from cbha_inverse.sim.cameras import SimulatedStereo
 from sensor_msgs.msg import CameraInfo, Image
 
@@ -60,7 +62,7 @@ class SimulatedCameras:
             return
         stamp = state[2]
         for side, camera, pixels in zip(('left', 'right'), (self.rig.left, self.rig.right), pair):
-            frame_id = f'stereo_{side}_optical'
+            frame_id = camera_frame(side)
             self.infos[side].publish(camera_info_message(camera, stamp, frame_id))
             self.images[side].publish(image_message(pixels, 'bgr8', stamp, frame_id))
         self.frames += 1

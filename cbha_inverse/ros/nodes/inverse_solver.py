@@ -4,7 +4,8 @@
 Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/measured``
 (PointStamped, sensor data; ``feedback_topic``: e.g. ``tip/estimated`` of ``shape_estimator``);
 publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable),
-``/diagnostics`` (~1 Hz) and ``backbone`` (MarkerArray).
+``/diagnostics`` (~1 Hz), ``backbone`` (MarkerArray) and, every ``tf_every_n_ticks`` ticks, the
+model frames and the tip on ``/tf`` (:mod:`cbha_inverse.ros.common.tf`; needs tf2_msgs).
 
 Nothing is published before the first valid target (``publish_idle: true`` publishes the vent
 command meanwhile). With ``trigger: target`` a valid target is solved and its command published
@@ -42,6 +43,7 @@ from cbha_inverse.ros.common.diagnostics import (
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
 from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -102,6 +104,9 @@ class InverseSolverParams:
                            'proxsuite (dense, warm-started) or gauss_seidel (the paper)',
                            choices=QP_SOLVERS)
     marker_period: float = param(0.1, 'period of the backbone markers [s]', low=0.01, high=60.0)
+    tf_every_n_ticks: int = param(10, 'publish the model frames (cbha_frame_<i>) and the tip '
+                                  '(cbha_tip) on /tf every N solver ticks (10: 10 Hz at 100 Hz; '
+                                  '0 = off)', low=0, high=1000000, live=True)
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
                                 low=0.0, high=3600.0, live=True)
@@ -161,6 +166,7 @@ class InverseSolverNode(Node):
         self.command_publisher = self.create_publisher(
             Float64MultiArray, 'pressure_command', COMMAND_WRITER_QOS)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
+        self.tf = make_broadcaster(self)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
         self.create_subscription(PointStamped, p.feedback_topic, self._on_measured, MEASURED_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
@@ -370,6 +376,9 @@ class InverseSolverNode(Node):
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self._count_failure('linearisation failed (the next tick retries)', exc)
         self.tick_times.add(time.perf_counter() - start)
+        every = self.params.tf_every_n_ticks
+        if self.tf is not None and every and self.ticks % every == 0:
+            self._publish_tf()
         return published
 
     def _count_failure(self, what, exc):
@@ -395,6 +404,12 @@ class InverseSolverNode(Node):
         self.marker_publisher.publish(backbone_markers(
             self.solver.state.positions, self.target, self.get_clock().now().to_msg(),
             self.params.frame_id))
+
+    def _publish_tf(self):
+        state = self.solver.state
+        self.tf.send(self.params.frame_id, *backbone_poses(
+            state.positions, state.rotations, self.solver.effectors.frames[0],
+            self.solver.effector_positions()[0]))
 
     def _statuses(self):
         now = time.monotonic()

@@ -6,13 +6,14 @@ Subscribes ``stereo/left/image_raw`` and ``stereo/right/image_raw`` (sensor_msgs
 over best effort; ``image_reliability: best_effort`` as the option) and
 ``stereo/{left,right}/camera_info``. The camera models come from the camera_info topics as soon as
 one arrives; until then from the camera_info YAML files of the params file (the fallback).
-``base_from_left`` is a parameter (no tf2 on PyPI). Images are paired by header stamp within
+``base_from_left`` is a parameter. Images are paired by header stamp within
 ``max_pair_dt`` (bounded queues: the oldest is dropped and counted); each pair goes through
 :class:`cbha_inverse.vision.tracking.StereoTracker` and a good point is published on
 ``tip/measured`` (PointStamped in ``frame_id``, stamp = the pair's left stamp, sensor-data QoS).
 A pair without a valid marker publishes nothing (WARN, throttled) and counts its reason in
 ``/diagnostics`` with the detection rate, epipolar and reprojection errors, processing time and
-input frame rate.
+input frame rate. The two optical frames of the rig (``base_from_left`` and the camera models)
+are latched on ``/tf_static`` (``publish_camera_tf``; :mod:`cbha_inverse.ros.common.tf`).
 """
 
 import collections
@@ -30,6 +31,7 @@ from cbha_inverse.ros.common.images import camera_from_info, image_array, ImageR
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import MEASURED_QOS
 from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.ros.common.tf import camera_frame, make_broadcaster
 from cbha_inverse.vision.camera import load_camera_yaml
 from cbha_inverse.vision.marker import MarkerParams
 from cbha_inverse.vision.pairing import DropMonitor, SIDES, StereoPairer
@@ -58,6 +60,8 @@ class StereoTrackerParams:
         (0.8308, -0.06, -0.0292, -0.5, -0.5, 0.5, 0.5),
         'pose of the left optical frame in frame_id, [x, y, z, qx, qy, qz, qw] [m]')
     frame_id: str = param('cbha_base', 'frame_id of the published tip')
+    publish_camera_tf: bool = param(True, 'latch the optical frames (stereo_left_optical, '
+                                    'stereo_right_optical) in frame_id on /tf_static')
     max_pair_dt: float = param(0.002, 'largest stamp difference of a left/right pair [s]',
                                low=0.0, high=1.0)
     queue_size: int = param(4, 'images kept per camera while waiting for a partner', low=1,
@@ -144,6 +148,7 @@ class StereoTrackerNode(Node):
                 coarse_step=p.coarse_step)
             self.limits = StereoLimits(p.max_epipolar_error, p.max_reprojection_error,
                                        p.min_depth, p.max_depth)
+            self.camera_tf = make_broadcaster(self, static=True) if p.publish_camera_tf else None
             self.cameras = {}
             for side, name in zip(SIDES, (p.left_camera_info_file, p.right_camera_info_file)):
                 path = _camera_file(name)
@@ -196,6 +201,10 @@ class StereoTrackerNode(Node):
         if all(side in self.cameras for side in SIDES):
             rig = StereoRig(self.cameras['left'][0], self.cameras['right'][0], self.pose)
             self.tracker = StereoTracker(rig, self.marker, self.limits)
+            if self.camera_tf is not None:
+                poses = rig.camera_poses()
+                self.camera_tf.send(self.params.frame_id, [camera_frame(s) for s in SIDES],
+                                    [poses[s] for s in SIDES])
 
     def _on_camera_info(self, side, message):
         try:
