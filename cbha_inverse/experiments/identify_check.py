@@ -286,8 +286,8 @@ def main(argv=None):
     if camera_less:
         print('camera-less closed loop (string pots, no tip measurement), tracking RMS:')
     for label, shapes in camera_less.items():
-        print(f'  {label:13s} ' + ', '.join(f'{shape} {rms * 1e3:6.3f} mm'
-                                           for shape, rms in shapes.items()))
+        rms = ', '.join(f'{shape} {value * 1e3:6.3f} mm' for shape, value in shapes.items())
+        print(f'  {label:13s} {rms}')
     (output / 'summary.json').write_text(json.dumps({
         'string_pots': pots, 'camera_less_rms_m': camera_less,
         'square_open': {k: {'tracking_rms_m': v[0], 'cross_track_rms_m': v[1]}

@@ -1,10 +1,10 @@
 """
 ``cbha_identify BAG [BAG ...] [--scene SCENE] [--output DIR]``: a calibrated scene from a session.
 
-Reads ``tip/measured`` (``--tip-topic``) and the acting valve pressures from the bag: ``pressure_measured`` when
-recorded (``--pressure-source``), else ``pressure_command`` aligned through the link
-``--latency`` and the valves' ``--valve-time-constant`` (by default the paper's 3 ms and
-10 ms; ``--fit-latency`` estimates the delay instead of taking it as given). Keeps at most
+Reads ``tip/measured`` (``--tip-topic``) and the acting valve pressures from the bag:
+``pressure_measured`` when recorded (``--pressure-source``), else ``pressure_command`` aligned
+through the link ``--latency`` and the valves' ``--valve-time-constant`` (by default the paper's
+3 ms and 10 ms; ``--fit-latency`` estimates the delay instead of taking it as given). Keeps at most
 ``--max-samples`` quasi-static samples and fits the scene's per-section stiffness and
 per-actuator (cavity or cable) gain factors, optionally the base position
 (``--fit-base-position``) (:func:`cbha_inverse.identify.fit.identify`; a Gaussian prior around

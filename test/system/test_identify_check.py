@@ -62,8 +62,8 @@ def test_the_plants_pots_and_the_camera_less_runs(tmp_path):
     assert [label for label, _ in steps][3:] == [
         'camera-less reference', 'camera-less uncalibrated', 'camera-less identified']
     nominal = demo_args(steps[0][1]()[1:])
-    assert _sim_overrides(nominal, ['v'])['string_pot_offset'] == [3.0, -2.0, 1.5, -4.0, 2.5,
-                                                                     -1.0]
+    offsets = _sim_overrides(nominal, ['v'])['string_pot_offset']
+    assert offsets == [3.0, -2.0, 1.5, -4.0, 2.5, -1.0]
     assert _sim_overrides(nominal, ['v'])['string_pot_gain'] == [1020.0]
     reference, uncalibrated, identified = (demo_args(command()[1:]) for _, command in steps[3:])
     for run in (reference, uncalibrated, identified):
