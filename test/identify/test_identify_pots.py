@@ -5,7 +5,8 @@ import json
 from cbha_inverse.identify.cli import main
 from cbha_inverse.identify.fit import parameter_names, TipPredictor
 from cbha_inverse.identify.pots import calibrate_pots
-from cbha_inverse.identify.samples import IdentificationError
+from cbha_inverse.identify.samples import (IdentificationError, pooled_samples,
+                                           quasi_static_samples, read_session)
 from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
@@ -77,17 +78,23 @@ def test_cbha_identify_recovers_the_pot_calibration_within_its_standard_errors(
     assert np.max(np.abs(cbha.sensors.lengths_of(readings) - true_lengths)) > 5e-3
 
 
-def test_a_swapped_pot_order_is_refused(tmp_path, cbha, plant, capsys):
+@pytest.mark.parametrize('swap', [(0, 1), (3, 5), (1, 4)])
+def test_a_swapped_pot_order_is_refused(cbha, plant, swap):
+    """Two pots' readings exchanged (by the driver's names or the scene's block) are named."""
+    commands, _, lengths = plant
+    readings = OFFSETS + GAINS * (lengths + np.random.default_rng(3).normal(0.0, POT_NOISE,
+                                                                            lengths.shape))
     names = list(cbha.sensors.names)
-    names[0], names[1] = names[1], names[0]
-    _write(tmp_path / 'bag', cbha, plant, names=names)
-    assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / 'out'), '--quiet',
-                 '--max-samples', '32']) == 1
-    err = capsys.readouterr().err
-    assert (f'{names[0]} follows the length of {names[1]}' in err
-            and f'{names[1]} follows the length of {names[0]}' in err), err
-    assert 'the pot order is wrong' in err
-    assert not (tmp_path / 'out').exists()
+    a, b = (names[k] for k in swap)
+    names[swap[0]], names[swap[1]] = b, a
+    with pytest.raises(IdentificationError, match='the pot order is wrong') as error:
+        calibrate_pots('cbha', parameter_names(cbha), TRUTH, np.zeros((8, 8)), commands,
+                       readings, names)
+    assert f'{a} follows the length of {b}' in str(error.value)
+    assert f'{b} follows the length of {a}' in str(error.value)
+    # in the right order the same readings calibrate
+    calibrate_pots('cbha', parameter_names(cbha), TRUTH, np.zeros((8, 8)), commands, readings,
+                   cbha.sensors.names)
 
 
 def test_a_recording_without_a_scene_pot_is_refused(tmp_path, cbha, plant, capsys):
@@ -143,3 +150,30 @@ def test_the_model_uncertainty_widens_the_pot_standard_errors(cbha, plant):
     with pytest.raises(IdentificationError, match='declares no sensors'):
         calibrate_pots('tendon_6f_8c', ('actuator_gain.c0',), [1.0], np.zeros((1, 1)),
                        np.zeros((3, 8)), readings[:3], cbha.sensors.names)
+
+
+def test_pot_readings_are_read_by_name_interpolated_and_bad_ones_dropped(tmp_path):
+    names = ('a', 'b')
+    pots = [(1.0 + 0.01 * k, names, [k, 2.0 * k]) for k in range(100)]
+    pots[10] = (pots[10][0], ('b', 'a'), [0.0, 0.0])        # other names
+    pots[20] = (pots[20][0], names, [np.nan, 1.0])           # not finite
+    pots[30] = (pots[30][0], names, [1.0])                   # too short
+    tips = [(1.5 + 0.01 * k, [0.2, 0.0, 0.0]) for k in range(40)]
+    write_session_bag(tmp_path / 'bag', commands=[(1.0, np.zeros(6))], tips=tips, pots=pots)
+    session = read_session(tmp_path / 'bag')
+    assert session.pot_names == names and session.pots_dropped == 3
+    assert len(session.pot_times) == 97
+    samples = quasi_static_samples(session, max_samples=1000)
+    # the readings are linear in time: interpolated exactly at the tips' receive times
+    expected = (samples.receive_times - 1.0) / 0.01
+    np.testing.assert_allclose(samples.pots, np.stack([expected, 2.0 * expected], axis=1),
+                               atol=1e-6)
+    write_session_bag(tmp_path / 'bare', commands=[(1.0, np.zeros(6))], tips=tips)
+    bare = quasi_static_samples(read_session(tmp_path / 'bare'), max_samples=1000)
+    pooled = pooled_samples([samples, bare], 1000)
+    assert pooled.pot_names == names
+    assert np.isfinite(pooled.pots[pooled.part == 0]).all()
+    assert np.isnan(pooled.pots[pooled.part == 1]).all()
+    other = samples.__class__(**{**samples.__dict__, 'pot_names': ('a', 'c')})
+    with pytest.raises(IdentificationError, match='name different string pots'):
+        pooled_samples([samples, other], 1000)
