@@ -5,7 +5,8 @@ import numpy as np
 from rosbags.typesys import get_typestore, Stores
 
 
-def write_session_bag(path, commands=(), measured=(), tips=(), pots=(), namespace='/cbha'):
+def write_session_bag(path, commands=(), measured=(), tips=(), pots=(), namespace='/cbha',
+                      tip_topic='tip/measured'):
     """
     Write a session into a rosbag2 bag, each message at its receive time (= its stamp).
 
@@ -16,11 +17,13 @@ def write_session_bag(path, commands=(), measured=(), tips=(), pots=(), namespac
     commands, measured : sequence of (float, (m,) array_like)
         ``(t [s], pressures [Pa])`` of ``pressure_command`` and ``pressure_measured``.
     tips : sequence of (float, (3,) array_like)
-        ``(t [s], point [m])`` of ``tip/measured``.
+        ``(t [s], point [m])`` of ``tip_topic``.
     pots : sequence of (float, sequence of str, (c,) array_like)
         ``(t [s], names, raw readings)`` of ``string_pots`` (sensor_msgs/JointState).
     namespace : str
         Namespace of the topics.
+    tip_topic : str
+        The tips' topic in the namespace (``tip/measured`` or ``tip/true``).
 
     """
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -41,7 +44,7 @@ def write_session_bag(path, commands=(), measured=(), tips=(), pots=(), namespac
 
     messages = [(t, 'pressure_command', pressures(v)) for t, v in commands]
     messages += [(t, 'pressure_measured', pressures(v)) for t, v in measured]
-    messages += [(t, 'tip/measured', store.serialize_cdr(point(
+    messages += [(t, tip_topic, store.serialize_cdr(point(
         header=header(t), point=types['geometry_msgs/msg/Point'](x=p[0], y=p[1], z=p[2])),
         point.__msgtype__)) for t, p in tips]
     empty = np.zeros(0)
@@ -51,7 +54,7 @@ def write_session_bag(path, commands=(), measured=(), tips=(), pots=(), namespac
     writer = BagWriter(path)
     for topic, series, type_name in (('pressure_command', commands, array.__msgtype__),
                                      ('pressure_measured', measured, array.__msgtype__),
-                                     ('tip/measured', tips, point.__msgtype__),
+                                     (tip_topic, tips, point.__msgtype__),
                                      ('string_pots', pots, joints.__msgtype__)):
         if len(series):
             writer.add_topic(f'{namespace}/{topic}', type_name)

@@ -177,3 +177,13 @@ def test_pot_readings_are_read_by_name_interpolated_and_bad_ones_dropped(tmp_pat
     other = samples.__class__(**{**samples.__dict__, 'pot_names': ('a', 'c')})
     with pytest.raises(IdentificationError, match='name different string pots'):
         pooled_samples([samples, other], 1000)
+
+
+def test_the_tip_reference_of_a_simulation_is_tip_true(tmp_path):
+    tips = [(1.5 + 0.01 * k, [0.2, 0.0, 0.01 * k]) for k in range(10)]
+    write_session_bag(tmp_path / 'bag', commands=[(1.0, np.zeros(6))], tips=tips,
+                      tip_topic='tip/true')
+    with pytest.raises(IdentificationError, match='no /cbha/tip/measured messages'):
+        read_session(tmp_path / 'bag')
+    session = read_session(tmp_path / 'bag', tip='tip/true')
+    np.testing.assert_allclose(session.tips, [tip for _, tip in tips])
