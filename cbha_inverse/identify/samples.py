@@ -238,7 +238,7 @@ def _valid_series(received, values, size, named=None):
 
 def interpolate_pressures(measured_times, measured, times, max_gap=math.inf):
     """
-    Interpolate a measured pressure series linearly in time.
+    Interpolate a measured series (valve pressures, pot readings) linearly in time.
 
     Parameters
     ----------
