@@ -18,6 +18,7 @@ import numpy as np
 
 POINT_TYPE = 'geometry_msgs/msg/PointStamped'
 COMMAND_TYPE = 'std_msgs/msg/Float64MultiArray'
+JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
 
 
 @dataclass(frozen=True)
@@ -138,6 +139,36 @@ def command_series(bag, topic):
         received.append(timestamp)
         commands.append(np.asarray(deserialize(data, COMMAND_TYPE).data, dtype=float))
     return np.array(received, dtype=np.int64), commands
+
+
+def joint_state_series(bag, topic):
+    """
+    Return the messages of a sensor_msgs/JointState topic of an open bag (named raw readings).
+
+    Parameters
+    ----------
+    bag : cbha_inverse.bag.storage.BagReader
+        An open bag.
+    topic : str
+        A JointState topic (e.g. ``/cbha/string_pots``).
+
+    Returns
+    -------
+    received : (K,) int64 ndarray  [ns]
+        Receive (log) times.
+    names : list of tuple of str
+        The names of each message.
+    positions : list of (c,) ndarray
+        The positions of each message (their lengths are not checked here).
+
+    """
+    received, names, positions = [], [], []
+    for _, timestamp, data in bag.messages([topic]):
+        message = deserialize(data, JOINT_STATE_TYPE)
+        received.append(timestamp)
+        names.append(tuple(message.name))
+        positions.append(np.asarray(message.position, dtype=float))
+    return np.array(received, dtype=np.int64), names, positions
 
 
 def command_statistics(commands, max_pressure, lower=0.0):

@@ -54,7 +54,8 @@ from cbha_inverse.bag.evaluate import evaluate_bag
 from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
-from cbha_inverse.experiments.proprio import estimate_error
+from cbha_inverse.experiments.proprio import (add_plant_pot_arguments, estimate_error,
+                                              plant_pot_parameters)
 from cbha_inverse.identify.excitation import make_program
 from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
@@ -116,8 +117,7 @@ def parse_args(argv):
                         help='shapes of the proprio runs')
     parser.add_argument('--plant-payload', type=float, default=0.0,
                         help='plant tip payload unknown to the controller [kg]')
-    parser.add_argument('--pot-noise', type=float, default=1e-4,
-                        help='string-pot length noise of the plant [m]')
+    add_plant_pot_arguments(parser)
     parser.add_argument('--estimate-payload', type=float, default=0.0, metavar='STD',
                         help='proprio runs: shape_estimator payload_std [kg] (0: none)')
     parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
@@ -307,7 +307,7 @@ def _sim_overrides(args, valve_names):
             'section_stiffness_scale': _floats(args.plant_section_scale),
             'cavity_gain_scale': _floats(args.plant_gain_scale),
             'base_offset': _floats(args.plant_base_offset), 'seed': args.plant_seed,
-            'payload_mass': args.plant_payload, 'string_pot_noise_std': args.pot_noise}
+            'payload_mass': args.plant_payload, **plant_pot_parameters(args)}
 
 
 def excite_run_name(program):

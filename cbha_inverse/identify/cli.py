@@ -1,10 +1,10 @@
 """
 ``cbha_identify BAG [BAG ...] [--scene SCENE] [--output DIR]``: a calibrated scene from a session.
 
-Reads ``tip/measured`` and the acting valve pressures from the bag: ``pressure_measured`` when
-recorded (``--pressure-source``), else ``pressure_command`` aligned through the link
-``--latency`` and the valves' ``--valve-time-constant`` (by default the paper's 3 ms and
-10 ms; ``--fit-latency`` estimates the delay instead of taking it as given). Keeps at most
+Reads ``tip/measured`` (``--tip-topic``) and the acting valve pressures from the bag:
+``pressure_measured`` when recorded (``--pressure-source``), else ``pressure_command`` aligned
+through the link ``--latency`` and the valves' ``--valve-time-constant`` (by default the paper's
+3 ms and 10 ms; ``--fit-latency`` estimates the delay instead of taking it as given). Keeps at most
 ``--max-samples`` quasi-static samples and fits the scene's per-section stiffness and
 per-actuator (cavity or cable) gain factors, optionally the base position
 (``--fit-base-position``) (:func:`cbha_inverse.identify.fit.identify`; a Gaussian prior around
@@ -13,9 +13,13 @@ the nominal scene, ``--prior-sigma``, keeps what the data cannot see at the nomi
 ``-p scene:=...``), ``DIR/<scene>_identified_report.txt`` (values with standard errors, the
 least determined combinations, correlation matrix, tip RMS before/after, identifiability
 warnings) and ``DIR/<scene>_identified.png`` (measured vs predicted tip, y-z plane, before and
-after), and the same numbers as ``DIR/<scene>_identified.json``. Exit status 0 on a valid fit,
-1 when the data cannot give one (no tip measurements, too little excitation: nothing is
-written), 2 on a bad file.
+after), and the same numbers as ``DIR/<scene>_identified.json``. When the bags have
+``string_pots`` and the scene a ``sensors`` block, the pots' offsets and gains are then fitted
+against the identified model (:func:`cbha_inverse.identify.pots.calibrate_pots`; a pot whose
+length moves less than ``--pot-min-range`` keeps the scene's gain) and written into the
+identified scene's ``sensors`` block. Exit status 0 on a valid fit, 1 when the data cannot give
+one (no tip measurements, too little excitation, pot readings that follow another pot's length:
+nothing is written), 2 on a bad file.
 """
 
 import argparse
@@ -29,6 +33,8 @@ from cbha_inverse.bag.storage import BagError
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error, report_error
 from cbha_inverse.identify.fit import identify
+from cbha_inverse.identify.pots import (calibrate_pots, calibrated_sensor_items, pot_data,
+                                        reading_columns, report_lines)
 from cbha_inverse.identify.progress import ProgressLine
 from cbha_inverse.identify.samples import (acting_pressures, IdentificationError,
                                            pooled_samples, PRESSURE_SOURCES,
@@ -50,6 +56,9 @@ def parse_args(argv):
     parser.add_argument('--scene', default='cbha.yaml', help='nominal scene (path or name)')
     parser.add_argument('--output', default='output/identify', help='output folder')
     parser.add_argument('--namespace', default='/cbha', help='namespace of the topics')
+    parser.add_argument('--tip-topic', default='tip/measured',
+                        help='the tip reference: tip/measured (a tracker), or tip/true of a '
+                        'simulated plant')
     parser.add_argument('--valve-names', default=None,
                         help='comma-separated command order (default: the scene order)')
     parser.add_argument('--latency', type=float, default=0.003,
@@ -82,6 +91,9 @@ def parse_args(argv):
                         'registration error)')
     parser.add_argument('--base-position-sigma', type=_prior_sigma, default=0.01,
                         help='prior standard deviation of each base coordinate [m] ("none")')
+    parser.add_argument('--pot-min-range', type=float, default=0.002,
+                        help='a string pot whose routed length moves less over the samples '
+                        "keeps the scene's gain (only its offset is fitted) [m]")
     shown = parser.add_mutually_exclusive_group()
     shown.add_argument('--quiet', action='store_true', help='no progress line')
     shown.add_argument('--verbose', action='store_true',
@@ -112,7 +124,7 @@ def command_order(scene, valve_names):
     return np.argsort(scene_index)
 
 
-def identified_scene_data(scene_path, calibration):
+def identified_scene_data(scene_path, calibration, pots=None):
     """
     Return the scene file's data with the calibration block replaced (segment paths absolute).
 
@@ -122,6 +134,8 @@ def identified_scene_data(scene_path, calibration):
         The nominal scene file.
     calibration : cbha_inverse.scene.calibration.Calibration
         The calibration to carry.
+    pots : cbha_inverse.identify.pots.PotCalibration, optional
+        Fitted string-pot offsets and gains for the ``sensors`` block.
 
     Returns
     -------
@@ -134,11 +148,13 @@ def identified_scene_data(scene_path, calibration):
         if isinstance(item, dict) and isinstance(item.get('segment'), str):
             item['segment'] = str((scene_path.parent / item['segment']).resolve())
     data['calibration'] = calibration.as_yaml()
+    if pots is not None:
+        data['sensors'] = calibrated_sensor_items(data.get('sensors') or [], pots)
     return data
 
 
-def format_report(result, samples, bag, scene_name):
-    """Return the text report of an identification."""
+def format_report(result, samples, bag, scene_name, pots=None):
+    """Return the text report of an identification (and of the pots' calibration, if any)."""
     lines = [f'cbha_identify: {bag}, scene {scene_name}',
              f'samples: {samples.recorded} tip measurements, {samples.quasi_static} quasi-static, '
              f'{len(samples.tips)} fitted; {result.evaluations} forward evaluations',
@@ -164,6 +180,8 @@ def format_report(result, samples, bag, scene_name):
     lines += ['', 'identifiability warnings:' if result.warnings else
               'identifiability: every factor is separable from this data']
     lines += [f'  {w}' for w in result.warnings]
+    if pots is not None:
+        lines += report_lines(pots)
     return '\n'.join(lines) + '\n'
 
 
@@ -185,8 +203,9 @@ def _delayed_pressures(sessions, samples, order, valve_time_constant, delay):
     return out[:, order]
 
 
-def result_data(result, samples):
+def result_data(result, samples, pots=None):
     """Return the identification as plain data (the ``DIR/<scene>_identified.json`` file)."""
+    pot_entry = {} if pots is None else {'string_pots': pot_data(pots)}
     return {
         'parameters': {n: {'value': float(v), 'standard_error': float(se),
                            'prior_sigma': float(p) if np.isfinite(p) else None}
@@ -201,7 +220,7 @@ def result_data(result, samples):
         'evaluations': result.evaluations,
         'samples': {'recorded': samples.recorded, 'quasi_static': samples.quasi_static,
                     'fitted': len(samples.tips), 'pressure_source': samples.pressure_source,
-                    'measured_dropped': samples.measured_dropped}}
+                    'measured_dropped': samples.measured_dropped}, **pot_entry}
 
 
 def plot_fit(path, tips, before, after, title):
@@ -224,6 +243,22 @@ def plot_fit(path, tips, before, after, title):
     figure.tight_layout()
     figure.savefig(path, dpi=100)
     plt.close(figure)
+
+
+def _pot_calibration(scene_path, scene, result, pressures, samples, min_range):
+    """Return the pots' calibration against the fitted model (None: no pots to calibrate)."""
+    if samples.pots is None:
+        return None
+    if scene.sensors is None:
+        print(f'{PROGRAM}: the bags have string_pots, scene {scene.name} declares no sensors: '
+              'the pots are not calibrated', flush=True)
+        return None
+    print(f'{PROGRAM}: calibrating {scene.sensors.n_sensors} string pots against the '
+          'identified model', flush=True)
+    errors = result.standard_errors
+    covariance = np.nan_to_num(result.correlation) * np.outer(errors, errors)
+    return calibrate_pots(scene_path, result.names, result.values, covariance, pressures,
+                          samples.pots, samples.pot_names, min_range=min_range)
 
 
 def main(argv=None):
@@ -251,7 +286,7 @@ def main(argv=None):
         sessions, parts = [], []
         for bag in args.bags:
             print(f'{PROGRAM}: reading {bag}', flush=True)
-            session = read_session(bag, args.namespace)
+            session = read_session(bag, args.namespace, args.tip_topic)
             if session[1].shape[1] != len(order):
                 raise IdentificationError(f'{bag}: commands of {session[1].shape[1]} valves, '
                                           f'the scene has {len(order)} actuators')
@@ -268,6 +303,8 @@ def main(argv=None):
                   f'{parts[-1].quasi_static} quasi-static ({parts[-1].pressure_source} '
                   'pressures)', flush=True)
         samples = pooled_samples(parts, args.max_samples)
+        if samples.pots is not None and scene.sensors is not None:
+            reading_columns(scene.sensors.names, samples.pot_names)   # before the long fit
         print(f'{PROGRAM}: fitting {len(samples.tips)} samples through scene {scene.name}',
               flush=True)
         pressures = samples.pressures[:, order]
@@ -284,6 +321,8 @@ def main(argv=None):
                           latency=samples.delay if args.fit_latency else None,
                           latency_sigma=args.latency_sigma,
                           progress=progress)
+        pots = _pot_calibration(scene_path, scene, result, pressures, samples,
+                                args.pot_min_range)
     except (ConfigError, FileNotFoundError, BagError) as exc:
         return report_config_error(PROGRAM, exc)
     except (IdentificationError, ValueError) as exc:
@@ -297,10 +336,11 @@ def main(argv=None):
     header = (f'# {scene_file.name}: written by {PROGRAM} from {", ".join(args.bags)} '
               f'(nominal scene {scene_path}); see {stem}_report.txt\n')
     scene_file.write_text(header + yaml.safe_dump(
-        identified_scene_data(scene_path, result.calibration), sort_keys=False))
-    report = format_report(result, samples, ', '.join(args.bags), scene.name)
+        identified_scene_data(scene_path, result.calibration, pots), sort_keys=False))
+    report = format_report(result, samples, ', '.join(args.bags), scene.name, pots)
     (output / f'{stem}_report.txt').write_text(report)
-    (output / f'{stem}.json').write_text(json.dumps(result_data(result, samples), indent=1))
+    (output / f'{stem}.json').write_text(json.dumps(result_data(result, samples, pots),
+                                                    indent=1))
     plot_fit(output / f'{stem}.png', samples.tips, result.predicted_before,
              result.predicted_after,
              f'{PROGRAM}: {", ".join(Path(b).name for b in args.bags)}')

@@ -190,16 +190,21 @@ class TipPredictor:
     pressures : (N, m) ndarray or callable  [Pa]
         Sample pressures in the scene's actuator order, or a function of the latency [s]
         returning them (required when ``names`` has ``latency``).
+    sensor_lengths : bool
+        Also keep the routed length of each of the scene's sensors at every sample of the last
+        evaluation (:attr:`lengths`, (N, c) [m]).
 
     """
 
-    def __init__(self, scene_path, names, pressures):
+    def __init__(self, scene_path, names, pressures, sensor_lengths=False):
         self.scene_path = scene_path
         self.names = tuple(names)
         self.pressures = pressures if callable(pressures) else np.asarray(pressures, float)
         if 'latency' in self.names and not callable(pressures):
             raise ValueError('fitting the latency needs the pressures as a function of it')
         self.evaluations = 0
+        self.sensor_lengths = sensor_lengths
+        self.lengths = None
         self._states = None
 
     def __call__(self, values):
@@ -213,6 +218,8 @@ class TipPredictor:
         if self._states is None:
             self._states = [None] * len(pressures)
         tips = np.empty((len(pressures), 3))
+        if self.sensor_lengths:
+            self.lengths = np.empty((len(pressures), scene.sensors.n_sensors))
         for i, pressure in enumerate(pressures):
             result = scene.forward(np.clip(pressure, scene.lower_bounds, scene.upper_bounds),
                                    initial_state=self._states[i])
@@ -224,6 +231,9 @@ class TipPredictor:
                                           f'for {dict(zip(self.names, np.round(values, 4)))}')
             self._states[i] = result.state
             tips[i] = result.effector_positions[-1]
+            if self.sensor_lengths:
+                self.lengths[i] = scene.sensors.lengths(result.state.positions,
+                                                        result.state.rotations)
         self.evaluations += 1
         return tips
 

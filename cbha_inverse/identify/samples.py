@@ -25,13 +25,20 @@ Measured messages that cannot be a reading of the valves (another length than th
 non-finite entry) are dropped and counted (:attr:`Session.measured_dropped`, reported by
 ``cbha_identify``): one glitch of a sensor does not void a session, and a series with no valid
 message at all is refused when it is to be used.
+
+When the bag has ``string_pots`` (sensor_msgs/JointState, the raw pot readings by name, as
+``robotino_bridge`` and ``cbha_sim`` publish them), each sample also carries the readings
+interpolated at its tip's receive time (NaN where the series leaves a gap longer than
+``settle_time``): what :mod:`cbha_inverse.identify.pots` calibrates the pots with. Messages with
+other names than the first one's, another number of positions or a non-finite one are dropped and
+counted (:attr:`Session.pots_dropped`).
 """
 
 from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
-from cbha_inverse.bag.evaluate import command_series, point_series
+from cbha_inverse.bag.evaluate import command_series, joint_state_series, point_series
 from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.sim.valves import first_order_step
 import numpy as np
@@ -72,6 +79,11 @@ class Samples:
         The delay the pressures were aligned with (``latency`` or ``measured_latency``).
     part : (N,) int ndarray
         Session of each sample (:func:`pooled_samples`; zeros for one session).
+    pots : (N, c) ndarray or None  [reading]
+        Raw string-pot readings at each sample (NaN rows where not recorded; None: no session
+        has them).
+    pot_names : tuple of str or None
+        The pots' names, in the columns' order.
 
     """
 
@@ -85,6 +97,8 @@ class Samples:
     receive_times: np.ndarray = None
     delay: float = 0.0
     part: np.ndarray = None
+    pots: np.ndarray = None
+    pot_names: tuple = None
 
 
 class Session(NamedTuple):
@@ -110,6 +124,14 @@ class Session(NamedTuple):
         The valid measured pressures, in command order.
     measured_dropped : int
         Measured messages dropped (wrong length or non-finite entries).
+    pot_times : (P,) ndarray or None  [s]
+        Receive times of the valid string-pot readings, increasing (None: none recorded).
+    pots : (P, c) ndarray or None  [reading]
+        The valid raw readings, in the order of ``pot_names``.
+    pot_names : tuple of str or None
+        The pots' names (those of the first message).
+    pots_dropped : int
+        String-pot messages dropped (other names, wrong length or non-finite entries).
 
     """
 
@@ -120,9 +142,13 @@ class Session(NamedTuple):
     measured_times: np.ndarray = None
     measured: np.ndarray = None
     measured_dropped: int = 0
+    pot_times: np.ndarray = None
+    pots: np.ndarray = None
+    pot_names: tuple = None
+    pots_dropped: int = 0
 
 
-def read_session(path, namespace='/cbha'):
+def read_session(path, namespace='/cbha', tip='tip/measured'):
     """
     Read the commands, the measured tips and, if recorded, the measured pressures of a bag.
 
@@ -132,13 +158,17 @@ def read_session(path, namespace='/cbha'):
         The bag folder.
     namespace : str
         Namespace of the topics.
+    tip : str
+        The tip reference's topic in the namespace: ``tip/measured`` (a tracker), or
+        ``tip/true`` of a simulated plant (a run without a tip measurement).
 
     Returns
     -------
     Session
         ``measured_times`` / ``measured`` are None when the bag has no
         ``<namespace>/pressure_measured`` messages; messages of another length than the
-        commands or with non-finite entries are dropped and counted.
+        commands or with non-finite entries are dropped and counted; the same for
+        ``<namespace>/string_pots`` (``pot_times``, ``pots``, ``pot_names``).
 
     Raises
     ------
@@ -149,11 +179,12 @@ def read_session(path, namespace='/cbha'):
 
     """
     prefix = namespace.rstrip('/')
-    command_topic, tip_topic = f'{prefix}/pressure_command', f'{prefix}/tip/measured'
+    command_topic, tip_topic = f'{prefix}/pressure_command', f'{prefix}/{tip}'
     with open_bag(path) as bag:
         command_received, commands = command_series(bag, command_topic)
         tip_received, _, tips = point_series(bag, tip_topic)
         measured_received, measured = command_series(bag, f'{prefix}/pressure_measured')
+        pot_received, pot_names, pot_readings = joint_state_series(bag, f'{prefix}/string_pots')
     if not commands:
         raise IdentificationError(f'{path}: no {command_topic} messages: record the valve '
                                   'commands (cbha_bag record ... pressure_command)')
@@ -164,19 +195,50 @@ def read_session(path, namespace='/cbha'):
         raise IdentificationError(f'{path}: {command_topic} messages of different lengths')
     session = Session(command_received * 1e-9, np.array(commands, dtype=float),
                       tip_received * 1e-9, tips)
+    if pot_readings:
+        times, rows, dropped = _valid_series(pot_received, pot_readings, len(pot_names[0]),
+                                             [n == pot_names[0] for n in pot_names])
+        session = session._replace(pot_times=times, pots=rows, pot_names=pot_names[0],
+                                   pots_dropped=dropped)
     if not measured:
         return session
-    size = len(commands[0])
-    valid = np.array([len(p) == size and bool(np.all(np.isfinite(p))) for p in measured])
-    order = np.argsort(measured_received[valid], kind='stable')
-    rows = np.array([p for p, ok in zip(measured, valid) if ok], dtype=float).reshape(-1, size)
-    return session._replace(measured_times=measured_received[valid][order] * 1e-9,
-                            measured=rows[order], measured_dropped=int(np.sum(~valid)))
+    times, rows, dropped = _valid_series(measured_received, measured, len(commands[0]))
+    return session._replace(measured_times=times, measured=rows, measured_dropped=dropped)
+
+
+def _valid_series(received, values, size, named=None):
+    """
+    Return the valid messages of a series in time order, and how many were dropped.
+
+    Parameters
+    ----------
+    received : (K,) int64 ndarray  [ns]
+        Receive times.
+    values : list of (m,) ndarray
+        The messages' values.
+    size : int
+        The length a valid message has (its entries all finite).
+    named : sequence of bool, optional
+        Whether each message has the expected names.
+
+    Returns
+    -------
+    times : (M,) ndarray  [s]
+    rows : (M, size) ndarray
+    dropped : int
+
+    """
+    valid = np.array([len(v) == size and bool(np.all(np.isfinite(v))) for v in values])
+    if named is not None:
+        valid &= np.asarray(named, dtype=bool)
+    order = np.argsort(received[valid], kind='stable')
+    rows = np.array([v for v, ok in zip(values, valid) if ok], dtype=float).reshape(-1, size)
+    return received[valid][order] * 1e-9, rows[order], int(np.sum(~valid))
 
 
 def interpolate_pressures(measured_times, measured, times, max_gap=math.inf):
     """
-    Interpolate a measured pressure series linearly in time.
+    Interpolate a measured series (valve pressures, pot readings) linearly in time.
 
     Parameters
     ----------
@@ -382,9 +444,15 @@ def quasi_static_samples(session, *, latency=0.003, valve_time_constant=0.01, se
                                   'recording')
     if chosen.size > max_samples:
         chosen = chosen[np.round(np.linspace(0, chosen.size - 1, max_samples)).astype(int)]
+    pots = None
+    if session.pot_times is not None and len(session.pot_times):
+        pots, covered = interpolate_pressures(session.pot_times, session.pots,
+                                              tip_times[chosen], max_gap)
+        pots[~covered] = np.nan
     return Samples(tip_times[chosen] - command_times[0], now[chosen], tips[chosen],
                    len(tip_times), int(keep.sum()), source, session.measured_dropped,
-                   tip_times[chosen], delay, np.zeros(chosen.size, dtype=int))
+                   tip_times[chosen], delay, np.zeros(chosen.size, dtype=int), pots,
+                   None if pots is None else session.pot_names)
 
 
 def pooled_samples(parts, max_samples):
@@ -402,11 +470,24 @@ def pooled_samples(parts, max_samples):
     -------
     Samples
         ``part`` tells each sample's session; ``pressure_source`` and ``delay`` are the common
-        ones (``'mixed'`` and NaN when the sessions differ); counts are summed.
+        ones (``'mixed'`` and NaN when the sessions differ); counts are summed; the pot readings
+        of a session without them are NaN.
+
+    Raises
+    ------
+    IdentificationError
+        When sessions name different string pots.
 
     """
     if not parts:
         raise ValueError('no sessions to pool')
+    pot_names = {p.pot_names for p in parts if p.pot_names is not None}
+    if len(pot_names) > 1:
+        raise IdentificationError(f'the sessions name different string pots: {sorted(pot_names)}')
+    pot_names = pot_names.pop() if pot_names else None
+    pots = None if pot_names is None else np.concatenate([
+        p.pots if p.pots is not None else np.full((len(p.tips), len(pot_names)), np.nan)
+        for p in parts])
     part = np.concatenate([np.full(len(p.tips), k) for k, p in enumerate(parts)])
     chosen = np.arange(part.size)
     if part.size > max_samples:
@@ -420,4 +501,5 @@ def pooled_samples(parts, max_samples):
                    sources.pop() if len(sources) == 1 else 'mixed',
                    sum(p.measured_dropped for p in parts),
                    np.concatenate([p.receive_times for p in parts])[chosen],
-                   delays.pop() if len(delays) == 1 else math.nan, part[chosen])
+                   delays.pop() if len(delays) == 1 else math.nan, part[chosen],
+                   None if pots is None else pots[chosen], pot_names)

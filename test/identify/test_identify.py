@@ -5,7 +5,6 @@ import json
 import re
 import time
 
-from cbha_inverse.bag.storage import BagWriter
 from cbha_inverse.identify.cli import main
 from cbha_inverse.identify.fit import identify, parameter_names, TipPredictor
 from cbha_inverse.identify.progress import ProgressLine
@@ -15,7 +14,7 @@ from cbha_inverse.metrics import cross_track_errors
 from cbha_inverse.scene import load_scene, resolve_scene_path
 import numpy as np
 import pytest
-from rosbags.typesys import get_typestore, Stores
+from session_bags import write_session_bag
 import yaml
 
 TRUTH = np.array([0.85, 1.1, 0.9, 1.05, 1.1, 0.95, 1.08, 0.92])
@@ -131,31 +130,7 @@ def test_valve_pressures_follow_delayed_first_order_lag():
 
 def _write_session(path, command_times, commands, tip_times=(), tips=()):
     """Write ``pressure_command`` and ``tip/measured`` messages at their times [s] to a bag."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    array, point = (store.types['std_msgs/msg/Float64MultiArray'],
-                    store.types['geometry_msgs/msg/PointStamped'])
-    header, stamp = store.types['std_msgs/msg/Header'], store.types['builtin_interfaces/msg/Time']
-    layout = store.types['std_msgs/msg/MultiArrayLayout']
-    vector = store.types['geometry_msgs/msg/Point']
-    writer = BagWriter(path)
-    writer.add_topic('/cbha/pressure_command', 'std_msgs/msg/Float64MultiArray')
-    writer.add_topic('/cbha/tip/measured', 'geometry_msgs/msg/PointStamped')
-    events = [(t, 0, c) for t, c in zip(command_times, commands)]
-    events += [(t, 1, p) for t, p in zip(tip_times, tips)]
-    for t, kind, value in sorted(events, key=lambda e: (e[0], e[1])):
-        t_ns = int(round(t * 1e9))
-        if kind == 0:
-            writer.write('/cbha/pressure_command', t_ns, store.serialize_cdr(
-                array(layout=layout(dim=[], data_offset=0), data=np.asarray(value, float)),
-                array.__msgtype__))
-        else:
-            message = point(header=header(stamp=stamp(sec=t_ns // 10 ** 9,
-                                                      nanosec=t_ns % 10 ** 9),
-                                          frame_id='cbha_base'),
-                            point=vector(x=value[0], y=value[1], z=value[2]))
-            writer.write('/cbha/tip/measured', t_ns,
-                         store.serialize_cdr(message, point.__msgtype__))
-    writer.close()
+    write_session_bag(path, list(zip(command_times, commands)), tips=list(zip(tip_times, tips)))
 
 
 def _write_bag(path, commands, tips=None, noise=0.0):

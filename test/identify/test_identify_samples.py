@@ -8,7 +8,6 @@ follow the measurements, ``auto`` falls back to the commands without them, inval
 are dropped and counted, and cbha_identify fits (and names) the measured pressures.
 """
 
-from cbha_inverse.bag.storage import BagWriter
 from cbha_inverse.identify.cli import main
 from cbha_inverse.identify.fit import parameter_names, TipPredictor
 from cbha_inverse.identify.samples import (IdentificationError, interpolate_pressures,
@@ -17,7 +16,7 @@ from cbha_inverse.scene import load_scene
 from cbha_inverse.sim.valves import first_order_step, ValveLine
 import numpy as np
 import pytest
-from rosbags.typesys import get_typestore, Stores
+from session_bags import write_session_bag
 
 TAU = 0.01
 LATENCY = 0.003
@@ -101,34 +100,7 @@ def test_interpolation_matches_closed_forms():
 
 def _write_bag(path, commands=(), measured=(), tips=()):
     """Write ``(t [s], values)`` commands, measured pressures and tips into a rosbag2 bag."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    types = store.types
-    array, point = types['std_msgs/msg/Float64MultiArray'], types['geometry_msgs/msg/PointStamped']
-    layout = types['std_msgs/msg/MultiArrayLayout'](dim=[], data_offset=0)
-    writer = BagWriter(path)
-    for topic, series, type_name in (('/cbha/pressure_command', commands, array.__msgtype__),
-                                     ('/cbha/pressure_measured', measured, array.__msgtype__),
-                                     ('/cbha/tip/measured', tips, point.__msgtype__)):
-        if len(series):
-            writer.add_topic(topic, type_name)
-    messages = []
-    for t, values in commands:
-        messages.append((t, '/cbha/pressure_command', store.serialize_cdr(
-            array(layout=layout, data=np.asarray(values, dtype=float)), array.__msgtype__)))
-    for t, values in measured:
-        messages.append((t, '/cbha/pressure_measured', store.serialize_cdr(
-            array(layout=layout, data=np.asarray(values, dtype=float)), array.__msgtype__)))
-    for t, tip in tips:
-        ns = int(round(t * 1e9))
-        header = types['std_msgs/msg/Header'](
-            stamp=types['builtin_interfaces/msg/Time'](sec=ns // 10 ** 9, nanosec=ns % 10 ** 9),
-            frame_id='cbha_base')
-        messages.append((t, '/cbha/tip/measured', store.serialize_cdr(point(
-            header=header, point=types['geometry_msgs/msg/Point'](
-                x=tip[0], y=tip[1], z=tip[2])), point.__msgtype__)))
-    for t, topic, data in sorted(messages, key=lambda m: m[0]):
-        writer.write(topic, int(round(t * 1e9)), data)
-    writer.close()
+    write_session_bag(path, commands, measured, tips)
 
 
 HOLD = 0.5

@@ -53,3 +53,23 @@ def test_a_plant_base_offset_is_applied_and_fitted(tmp_path):
     for command in (nominal, identified):
         assert command[command.index('--plant-base-offset') + 1] == '0.002,-0.003,0.001'
     assert '--fit-base-position' in identification
+
+
+def test_the_plants_pots_and_the_camera_less_runs(tmp_path):
+    from cbha_inverse.experiments.demo import _sim_overrides, parse_args as demo_args
+    pots = ['--plant-pot-offset', '3,-2,1.5,-4,2.5,-1', '--plant-pot-gain', '1020']
+    steps = check_steps(parse_args(['--output', str(tmp_path), '--proprio', *pots]), tmp_path)
+    assert [label for label, _ in steps][3:] == [
+        'camera-less reference', 'camera-less uncalibrated', 'camera-less identified']
+    nominal = demo_args(steps[0][1]()[1:])
+    offsets = _sim_overrides(nominal, ['v'])['string_pot_offset']
+    assert offsets == [3.0, -2.0, 1.5, -4.0, 2.5, -1.0]
+    assert _sim_overrides(nominal, ['v'])['string_pot_gain'] == [1020.0]
+    reference, uncalibrated, identified = (demo_args(command()[1:]) for _, command in steps[3:])
+    for run in (reference, uncalibrated, identified):
+        assert (run.modes, run.feedback, run.proprio_shapes) == ('closed', 'proprio',
+                                                                 'circle,square')
+    assert 'string_pot_offset' not in _sim_overrides(reference, ['v'])
+    assert reference.model_scene is None and uncalibrated.model_scene is None
+    assert uncalibrated.plant_pot_gain == identified.plant_pot_gain == '1020'
+    assert identified.model_scene == str(tmp_path / 'identified' / 'cbha_identified.yaml')
