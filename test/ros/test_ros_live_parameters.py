@@ -95,7 +95,7 @@ def _set_atomically(node, **values):
 
 
 def _check_refused(node, reason, **values):
-    """A refused change answers with the reason and leaves every value as it was."""
+    """Check that a change is refused with the reason and every value stays as it was."""
     before = {name: node.get_parameter(name.replace('__', '.')).value for name in values}
     result = _set_atomically(node, **values)
     assert not result.successful and reason in result.reason, result

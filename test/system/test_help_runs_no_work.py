@@ -1,5 +1,5 @@
 """
-``--help`` of every executable (and of every report and subcommand) prints its usage and does no work.
+``--help`` of every executable, report and subcommand prints its usage and does no work.
 
 No work, measured without a clock: after each ``--help`` not one numba kernel of the package has
 been compiled or loaded from its cache (every dispatcher's ``signatures`` is still empty) and no
@@ -21,7 +21,7 @@ EXTRA = [['cbha_report', name, '--help'] for name in (
     ['cbha_launch', name, '--help'] for name in ('sim', 'robot')] + [
     ['cbha_scene', 'check', '--help']]
 
-PROBE = r'''
+PROBE = r"""
 import contextlib, importlib, io, json, sys
 from numba.core.dispatcher import Dispatcher
 
@@ -51,7 +51,7 @@ for command, target in json.loads(sys.argv[1]):
     results.append({'command': command, 'code': code, 'out': out.getvalue(),
                     'compiled': compiled()})
 print(json.dumps({'results': results, 'dispatchers': dispatchers()}))
-'''
+"""
 
 
 def _entry_points():
