@@ -14,11 +14,12 @@ from cbha_inverse.ros.nodes.shape_estimator import ShapeEstimatorNode
 from cbha_inverse.ros.nodes.stereo_tracker import StereoTrackerNode
 from cbha_inverse.ros.nodes.trajectory import TrajectoryNode
 from cbha_inverse.scene import load_scene
+import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from ros_helpers import make_node, spin_until
+from ros_helpers import assert_refused, make_node, set_parameters, spin_until
 from std_msgs.msg import Float64MultiArray
 
 SCENE = 'tendon_6f_8c'
@@ -88,41 +89,39 @@ def test_live_parameters_take_effect_and_bad_ones_are_refused_with_a_reason(rclp
         user.destroy_node()
 
 
-def _set_atomically(node, **values):
-    """Set parameters as one change through rclpy's parameter API (what the service runs)."""
-    return node.set_parameters_atomically([
-        Parameter(name.replace('__', '.'), value=v) for name, v in values.items()])
+def _timer_period(node):
+    return node.timer.timer_period_ns
 
 
-def _check_refused(node, reason, **values):
-    """Check that a change is refused with the reason and every value stays as it was."""
-    before = {name: node.get_parameter(name.replace('__', '.')).value for name in values}
-    result = _set_atomically(node, **values)
-    assert not result.successful and reason in result.reason, result
-    for name, value in before.items():
-        assert node.get_parameter(name.replace('__', '.')).value == value, name
+# node, its overrides, a live change and what it changes, a refused one and its reason, a
+# read-only parameter
+NODE_CASES = {
+    'trajectory': (TrajectoryNode, {}, {'rate_hz': 20.0, 'wait_for_subscribers': 1},
+                   (_timer_period, 50_000_000), ('out of range', {'rate_hz': 0.0}),
+                   {'radius': 0.02}),
+    'cbha_excite': (ExciteNode, {'scene': SCENE, 'program': 'extension',
+                                 'wait_for_subscribers': 5},
+                    {'rate_hz': 25.0, 'wait_for_subscribers': 0}, (_timer_period, 40_000_000),
+                    ('DOUBLE', {'rate_hz': 25}), {'hold_time': 1.0}),
+    'shape_estimator': (ShapeEstimatorNode, {}, {'reading_timeout': 0.0,
+                                                 'pressure_timeout': 1.0},
+                        (lambda node: node.params.pressure_timeout, 1.0),
+                        ('out of range', {'pressure_timeout': 0.0}), {'pressure_std': 1.0}),
+}
 
 
-def test_trajectory_rate_is_live_and_its_path_read_only(rclpy_context):
-    node = make_node(TrajectoryNode, rclpy_context)
+@pytest.mark.parametrize('case', sorted(NODE_CASES))
+def test_a_nodes_tuning_is_live_and_its_structure_read_only(rclpy_context, case):
+    node_class, overrides, change, (effect, expected), (reason, refused), structural = (
+        NODE_CASES[case])
+    node = make_node(node_class, rclpy_context, **overrides)
     try:
-        assert _set_atomically(node, rate_hz=20.0, wait_for_subscribers=1).successful
-        assert node.timer.timer_period_ns == 50_000_000 and node.params.wait_for_subscribers == 1
-        _check_refused(node, 'out of range', rate_hz=0.0)
-        _check_refused(node, 'read-only', radius=0.02)
-        assert node.timer.timer_period_ns == 50_000_000 and node.params.radius == 0.06
-    finally:
-        node.destroy_node()
-
-
-def test_excite_rate_is_live_and_its_program_read_only(rclpy_context):
-    node = make_node(ExciteNode, rclpy_context, scene=SCENE, program='extension',
-                     wait_for_subscribers=5)
-    try:
-        assert _set_atomically(node, rate_hz=25.0, wait_for_subscribers=0).successful
-        assert node.timer.timer_period_ns == 40_000_000 and node.params.wait_for_subscribers == 0
-        _check_refused(node, 'DOUBLE', rate_hz=25)
-        _check_refused(node, 'read-only', hold_time=1.0)
+        assert set_parameters(node, **change).successful
+        assert effect(node) == expected
+        assert all(getattr(node.params, name) == value for name, value in change.items())
+        assert_refused(node, reason, **refused)
+        assert_refused(node, 'read-only', **structural)
+        assert effect(node) == expected
     finally:
         node.destroy_node()
 
@@ -130,33 +129,21 @@ def test_excite_rate_is_live_and_its_program_read_only(rclpy_context):
 def test_stereo_thresholds_are_live_with_the_start_up_checks(rclpy_context):
     node = make_node(StereoTrackerNode, rclpy_context)
     try:
-        tracker = node.tracker
-        assert tracker is not None
-        assert _set_atomically(node, max_depth=1.5, marker__min_area=30.0,
-                               max_pair_dt=0.004).successful
+        assert node.tracker is not None
+        assert set_parameters(node, max_depth=1.5, marker__min_area=30.0,
+                              max_pair_dt=0.004).successful
         assert node.tracker.limits.max_depth == 1.5 and node.marker.min_area == 30.0
         assert node.tracker.trackers[0].params.min_area == 30.0
         assert node.pairer.max_dt == 0.004
         tracker = node.tracker
         # the node's own checks, as at start: empty ranges, an unknown ArUco dictionary
-        _check_refused(node, 'must be below max_depth', min_depth=1.8)
-        _check_refused(node, 'above marker.max_area', marker__min_area=3.0e4)
-        _check_refused(node, 'unknown ArUco dictionary', marker__kind='aruco',
+        assert_refused(node, 'must be below max_depth', min_depth=1.8)
+        assert_refused(node, 'above marker.max_area', marker__min_area=3.0e4)
+        assert_refused(node, 'unknown ArUco dictionary', marker__kind='aruco',
                        marker__aruco_dictionary='DICT_NONE')
         assert node.tracker is tracker and node.marker.kind == 'sphere'
-        _check_refused(node, 'read-only', image_depth=5)
-        assert _set_atomically(node, log_throttle=5.0).successful
+        assert_refused(node, 'read-only', image_depth=5)
+        assert set_parameters(node, log_throttle=5.0).successful
         assert node.tracker is tracker      # a change elsewhere keeps the tracker's state
-    finally:
-        node.destroy_node()
-
-
-def test_shape_estimator_timeouts_are_live(rclpy_context):
-    node = make_node(ShapeEstimatorNode, rclpy_context)
-    try:
-        assert _set_atomically(node, reading_timeout=0.0, pressure_timeout=1.0).successful
-        assert node.params.reading_timeout == 0.0 and node.params.pressure_timeout == 1.0
-        _check_refused(node, 'out of range', pressure_timeout=0.0)
-        _check_refused(node, 'read-only', pressure_std=1.0)
     finally:
         node.destroy_node()
