@@ -9,7 +9,9 @@ through rclpy's parameter API in the process (the callback that the parameter se
 
 from cbha_inverse.ros.common.qos import COMMAND_QOS
 from cbha_inverse.ros.nodes.cbha_excite import ExciteNode
+from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
+from cbha_inverse.ros.nodes.robotino_bridge import RobotinoBridgeNode
 from cbha_inverse.ros.nodes.shape_estimator import ShapeEstimatorNode
 from cbha_inverse.ros.nodes.stereo_tracker import StereoTrackerNode
 from cbha_inverse.ros.nodes.trajectory import TrajectoryNode
@@ -103,6 +105,13 @@ NODE_CASES = {
                                  'wait_for_subscribers': 5},
                     {'rate_hz': 25.0, 'wait_for_subscribers': 0}, (_timer_period, 40_000_000),
                     ('DOUBLE', {'rate_hz': 25}), {'hold_time': 1.0}),
+    'cbha_sim': (CbhaSimNode, {'scene': SCENE}, {'latency': 0.01, 'rate_hz': 50.0},
+                 (lambda node: (node.arm.valves.latency, _timer_period(node)), (0.01, 20_000_000)),
+                 ('out of range', {'noise_std': 0.5}), {'gravity': [0.0, 0.0, 0.0]}),
+    'robotino_bridge': (RobotinoBridgeNode, {}, {'vent_pressure': 2.0e4, 'rate_hz': 20.0},
+                        (lambda node: (node.vent_bar[0], _timer_period(node)), (0.2, 50_000_000)),
+                        ('above max_pressure', {'max_pressure': 1.0e4}),
+                        {'valve_names': ['inner_over']}),
     'shape_estimator': (ShapeEstimatorNode, {}, {'reading_timeout': 0.0,
                                                  'pressure_timeout': 1.0},
                         (lambda node: node.params.pressure_timeout, 1.0),
@@ -111,9 +120,11 @@ NODE_CASES = {
 
 
 @pytest.mark.parametrize('case', sorted(NODE_CASES))
-def test_a_nodes_tuning_is_live_and_its_structure_read_only(rclpy_context, case):
+def test_a_nodes_tuning_is_live_and_its_structure_read_only(rclpy_context, case, request):
     node_class, overrides, change, (effect, expected), (reason, refused), structural = (
         NODE_CASES[case])
+    if node_class is RobotinoBridgeNode:
+        request.getfixturevalue('robotino_msgs')
     node = make_node(node_class, rclpy_context, **overrides)
     try:
         assert set_parameters(node, **change).successful
