@@ -98,6 +98,9 @@ def test_guide_example_runs(tmp_path, rclpy_context):
     assert ran and alive, f'{len(commands)} commands, {len(tips)} tips:\n{out}\n{err}'
     assert process.returncode == 0, out
     assert 'scene rod_robot: 4 valves' in out, out
+    # Ctrl-C stops all three, cleanly
+    assert 'exit statuses: trajectory 0, inverse_solver 0, cbha_sim 0' in out, out
+    assert 'Traceback' not in out + err, out + err
     assert all(len(c.data) == 4 for c in commands)
 
 
