@@ -42,6 +42,33 @@ def make_node(node_class, context, namespace='/cbha', **params):
         Parameter(name, value=value) for name, value in params.items()])
 
 
+def set_parameters(node, **values):
+    """
+    Set parameters of a node as one change, through rclpy's parameter API in the process.
+
+    The same callbacks run as for a ``set_parameters`` service request. A dotted name is written
+    with ``__`` (``marker__min_area`` for ``marker.min_area``).
+
+    Returns
+    -------
+    rcl_interfaces.msg.SetParametersResult
+        ``successful`` and the ``reason`` of a refusal.
+
+    """
+    from rclpy.parameter import Parameter
+    return node.set_parameters_atomically([
+        Parameter(name.replace('__', '.'), value=value) for name, value in values.items()])
+
+
+def assert_refused(node, reason, **values):
+    """Assert that a change is refused, ``reason`` in its answer, and every value stays."""
+    names = [name.replace('__', '.') for name in values]
+    before = [node.get_parameter(name).value for name in names]
+    result = set_parameters(node, **values)
+    assert not result.successful and reason in result.reason, result
+    assert [node.get_parameter(name).value for name in names] == before, names
+
+
 def target_point(point, frame_id='cbha_base'):
     """Return a ``PointStamped`` at ``point`` (3,) [m] in ``frame_id``, stamp 0."""
     from geometry_msgs.msg import PointStamped

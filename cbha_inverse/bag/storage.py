@@ -179,11 +179,34 @@ def _read_metadata(path):
         raise BagError(f'{path}: not a rosbag2 bag (no metadata.yaml)')
     try:
         document = yaml.safe_load(metadata.read_text())
-        information = document['rosbag2_bagfile_information']
-        int(information['version'])
-    except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError) as exc:
+    except (OSError, yaml.YAMLError, ValueError) as exc:
         raise BagError(f'{metadata}: damaged metadata: {_one_line(exc)}') from None
-    return information
+    problem = _metadata_problem(document)
+    if problem:
+        raise BagError(f'{metadata}: damaged metadata: {problem}')
+    return document[_INFORMATION]
+
+
+_INFORMATION = 'rosbag2_bagfile_information'
+# the keys of every metadata version (rosbag2 1 to 9)
+_REQUIRED_KEYS = ('version', 'storage_identifier', 'relative_file_paths',
+                  'topics_with_message_count')
+
+
+def _metadata_problem(document):
+    """Return what is wrong with the structure of a ``metadata.yaml`` document ('' if nothing)."""
+    information = document.get(_INFORMATION) if isinstance(document, dict) else None
+    if not isinstance(information, dict):
+        return f'no {_INFORMATION} mapping'
+    missing = [key for key in _REQUIRED_KEYS if key not in information]
+    if missing:
+        return f'{_INFORMATION}.{missing[0]}: missing'
+    if isinstance(information['version'], bool) or not isinstance(information['version'], int):
+        return f'{_INFORMATION}.version: not an integer, got {information["version"]!r}'
+    for key in ('relative_file_paths', 'topics_with_message_count'):
+        if not isinstance(information[key], list):
+            return f'{_INFORMATION}.{key}: not a list, got {information[key]!r}'
+    return ''
 
 
 @contextmanager

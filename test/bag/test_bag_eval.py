@@ -115,3 +115,13 @@ def test_eval_reads_units_and_bounds_from_the_scene(bag, tmp_path, capsys):
     assert cbha_bag(['eval', str(path)]) == 2
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and 'the commands have 8 values, the scene 6' in err, err
+
+
+def test_eval_plot_names_the_tip_topic_it_scores(bag, tmp_path):
+    import matplotlib
+    path = tmp_path / 'run.svg'
+    with matplotlib.rc_context({'svg.fonttype': 'none'}):     # the legend as text
+        assert cbha_bag(['eval', str(bag), '--plot', str(path)]) == 0
+    svg = path.read_text()
+    assert '/cbha/tip/measured' in svg and 'target' in svg
+    assert 'tip (plant)' not in svg

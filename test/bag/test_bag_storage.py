@@ -234,9 +234,21 @@ def test_bad_bags_give_one_line_errors(tmp_path, capsys):
     (wrong_format / 'metadata.yaml').write_text(document.replace(
         'truncated_0', 'wrong_format_0').replace('serialization_format: cdr',
                                                  'serialization_format: wrong_format'))
+    # YAML, but not a bag's metadata: named by what is missing, not by a Python error
+    not_a_mapping = tmp_path / 'not_a_mapping'
+    shutil.copytree(good, not_a_mapping)
+    (not_a_mapping / 'metadata.yaml').write_text('rosbag2_bagfile_information: hello\n')
+    no_files = tmp_path / 'no_files'
+    shutil.copytree(good, no_files)
+    (no_files / 'metadata.yaml').write_text('\n'.join(
+        line for line in (good / 'metadata.yaml').read_text().splitlines()
+        if 'relative_file_paths' not in line and not line.strip().startswith('- good_0')))
     cases = {tmp_path / 'missing': 'does not exist', tmp_path / 'empty_folder': 'no metadata',
              broken_yaml: 'damaged metadata', truncated: 'truncated',
-             wrong_format: 'wrong_format'}
+             wrong_format: 'wrong_format',
+             not_a_mapping: 'damaged metadata: no rosbag2_bagfile_information mapping',
+             no_files: 'damaged metadata: rosbag2_bagfile_information.relative_file_paths: '
+             'missing'}
     for path, words in cases.items():
         for command in (['info', str(path)], ['eval', str(path)]):
             assert cbha_bag(command) == 2, (path, command)

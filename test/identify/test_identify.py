@@ -345,3 +345,28 @@ def test_progress_is_one_updating_line():
         progress.close()
     assert verbose.getvalue().splitlines() == ['evaluation 0', 'evaluation 1', 'evaluation 2']
     assert quiet.getvalue() == ''
+
+
+def test_cbha_identify_verbose_prints_every_evaluation_and_quiet_none(tmp_path, capsys):
+    # tips of the nominal scene: the fit starts at its optimum and ends after few evaluations
+    commands = np.random.default_rng(6).uniform(0.0, 150e3, (8, 6))
+    names = parameter_names(load_scene('cbha'))
+    _write_bag(tmp_path / 'bag', commands, TipPredictor('cbha', names, commands)(
+        np.ones(len(names))))
+    shown = {}
+    for flag in ('--verbose', '--quiet'):
+        assert main([str(tmp_path / 'bag'), '--output', str(tmp_path / flag), flag,
+                     '--max-samples', '12']) == 0
+        out = capsys.readouterr().out
+        evaluations = int(re.search(r'(\d+) forward evaluations', out).group(1))
+        shown[flag] = [int(line.split()[1].rstrip(':')) for line in out.splitlines()
+                       if line.startswith('evaluation ') and ': tip RMS' in line]
+        shown[flag].append(evaluations)
+    # every evaluation of the residuals on its own line (those of the Jacobian are not);
+    # off a terminal the default shows at most one line per 5 s
+    *verbose, evaluations = shown['--verbose']
+    assert len(verbose) >= 10 and verbose == sorted(set(verbose)), verbose
+    assert verbose[0] == 1 and verbose[-1] <= evaluations, shown
+    assert shown['--quiet'] == [evaluations]
+    with pytest.raises(SystemExit, match='2'):
+        main([str(tmp_path / 'bag'), '--quiet', '--verbose'])

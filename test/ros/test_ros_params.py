@@ -4,8 +4,11 @@ from dataclasses import fields, is_dataclass
 import sys
 
 from cbha_inverse.ros.common.params import ParameterError
+from cbha_inverse.ros.nodes.cbha_excite import ExciteNode
 from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
+from cbha_inverse.ros.nodes.shape_estimator import ShapeEstimatorNode
+from cbha_inverse.ros.nodes.stereo_tracker import StereoTrackerNode
 from cbha_inverse.ros.nodes.trajectory import TrajectoryNode
 from cbha_inverse.scene import load_scene
 import pytest
@@ -17,18 +20,21 @@ SCENE = 'tendon_6f_8c'
 
 def _params_class(node_class):
     module = sys.modules[node_class.__module__]
-    [found] = [v for k, v in vars(module).items() if k.endswith('Params') and is_dataclass(v)]
+    [found] = [v for k, v in vars(module).items() if k.endswith('Params') and is_dataclass(v)
+               and v.__module__ == module.__name__]
     return found
 
 
 def _overrides(node_class):
-    if node_class is TrajectoryNode:
+    if node_class in (TrajectoryNode, StereoTrackerNode, ShapeEstimatorNode):
         return []
     names = list(load_scene(SCENE).actuator_names)
-    return [Parameter('scene', value=SCENE), Parameter('valve_names', value=names)]
+    program = [Parameter('program', value='extension')] if node_class is ExciteNode else []
+    return [Parameter('scene', value=SCENE), Parameter('valve_names', value=names), *program]
 
 
-@pytest.mark.parametrize('node_class', [TrajectoryNode, InverseSolverNode, CbhaSimNode])
+@pytest.mark.parametrize('node_class', [TrajectoryNode, InverseSolverNode, CbhaSimNode,
+                                        StereoTrackerNode, ShapeEstimatorNode, ExciteNode])
 def test_every_parameter_is_described_typed_and_ranged(rclpy_context, node_class):
     node = node_class(context=rclpy_context, parameter_overrides=_overrides(node_class))
     try:

@@ -1,10 +1,13 @@
 """Every node as a real process: starts, works, and exits 0 on SIGINT and on SIGTERM."""
 
+from pathlib import Path
 import signal
+import subprocess
+import sys
 import time
 
 from cbha_inverse.scene import load_scene
-from ros_helpers import REPO_ROOT, start_node
+from ros_helpers import child_env, REPO_ROOT, start_node
 
 SCENE = 'tendon_6f_8c'
 
@@ -59,3 +62,43 @@ def test_nodes_exit_cleanly_on_sigint_and_sigterm():
             if process.poll() is None:
                 process.kill()
                 process.communicate()
+
+
+def test_a_stop_while_a_node_executable_loads_is_quiet():
+    """SIGINT or SIGTERM at any moment of a node executable's start: status 0, no traceback."""
+    installed = str(Path(sys.executable).with_name('inverse_solver'))
+    commands = [[installed], [sys.executable, '-m', 'cbha_inverse.ros.nodes.cbha_sim']]
+    runs = []
+    for command in commands:
+        for delay, sig in ((0.3, signal.SIGINT), (0.6, signal.SIGTERM), (1.5, signal.SIGINT)):
+            process = subprocess.Popen([*command, '--ros-args', '-r', '__ns:=/quiet_start'],
+                                       env=child_env(), stdout=subprocess.PIPE,
+                                       stderr=subprocess.STDOUT, text=True)
+            time.sleep(delay)
+            process.send_signal(sig)
+            try:
+                output, _ = process.communicate(timeout=30)
+            finally:
+                if process.poll() is None:
+                    process.kill()
+                    process.communicate()
+            runs.append((command[-1], delay, sig.name, process.returncode, output))
+    for name, delay, sig, code, output in runs:
+        assert code == 0 and 'Traceback' not in output, (name, delay, sig, code, output)
+    # a node of this package loads for well over 0.3 s: those stops landed while it loaded
+    loading = [run for run in runs if 'while loading' in run[4]]
+    assert any(run[1] == 0.3 for run in loading), runs
+    for name, delay, sig, code, output in loading:
+        assert output.strip().endswith(f'stopped by {sig} while loading'), output
+
+
+def test_only_a_node_executable_gets_the_quiet_loading_stop(monkeypatch):
+    from cbha_inverse.ros.common.loading import node_executable
+    names = {'inverse_solver', 'cbha_sim'}
+    assert node_executable('/venv/bin/inverse_solver', names) == 'inverse_solver'
+    assert node_executable('/venv/bin/pytest', names) is None
+    assert node_executable('/repo/cbha_inverse/ros/launch/node_process.py', names) is None
+    monkeypatch.setattr(sys, 'orig_argv', ['python', '-m', 'cbha_inverse.ros.nodes.cbha_sim'])
+    assert node_executable('-m', names) == 'cbha_sim'
+    monkeypatch.setattr(sys, 'orig_argv', ['python', '-m', 'pytest', 'test'])
+    assert node_executable('-m', names) is None

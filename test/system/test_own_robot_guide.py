@@ -6,7 +6,10 @@ that the YAML shown in the guide is the files' content, and runs the guide's com
 ``condense_segment`` (real gmsh and FEM), ``cbha_scene check`` and ``cbha_launch sim``, the last
 over real DDS until the controller commands the simulated rod, then SIGINT; and step 5's commands
 (``cbha_launch robot driver:=none``, ``trajectory``, the ``cbha_sim`` stand-in for the user's
-driver and sensor), without a Robotino, until the closed loop runs.
+driver and sensor), without a Robotino: the controller waits (at WARN, the line the guide
+quotes) and commands nothing until the stand-in's first measurement, the closed loop runs, and
+the guide's ``ros2 param set`` (through rclpy's parameter client: no ``ros2`` CLI here) tunes it
+live.
 """
 
 import re
@@ -15,10 +18,12 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 
 from cbha_inverse.fem.segment_io import load_segment
 import numpy as np
 from ros_helpers import child_env, loop_listener, REPO_ROOT, spin_until
+import yaml
 
 GUIDE = REPO_ROOT / 'docs' / 'own-robot.md'
 EXAMPLE = REPO_ROOT / 'docs' / 'examples' / 'rod_robot'
@@ -93,6 +98,9 @@ def test_guide_example_runs(tmp_path, rclpy_context):
     assert ran and alive, f'{len(commands)} commands, {len(tips)} tips:\n{out}\n{err}'
     assert process.returncode == 0, out
     assert 'scene rod_robot: 4 valves' in out, out
+    # Ctrl-C stops all three, cleanly
+    assert 'exit statuses: trajectory 0, inverse_solver 0, cbha_sim 0' in out, out
+    assert 'Traceback' not in out + err, out + err
     assert all(len(c.data) == 4 for c in commands)
 
 
@@ -113,32 +121,85 @@ def test_guide_error_example_is_what_the_command_prints(tmp_path):
     assert err.strip() == shown
 
 
+class _Output:
+    """The lines a child process prints (stdout and stderr), read as they come."""
+
+    def __init__(self, process):
+        self.lines = []
+        self.threads = [threading.Thread(target=self._read, args=(stream,), daemon=True)
+                        for stream in (process.stdout, process.stderr)]
+        for thread in self.threads:
+            thread.start()
+
+    def _read(self, stream):
+        for line in stream:
+            self.lines.append(line.rstrip('\n'))
+
+    def text(self):
+        for thread in self.threads:
+            thread.join(timeout=30)
+        return '\n'.join(self.lines)
+
+
+def _guide_claims():
+    """Return what step 5 says the controller logs while it waits, and its live-parameter set."""
+    text = GUIDE.read_text()
+    waiting = re.search(r'\(`(closed loop, no measurement yet on [^`]+)`, at WARN\)', text)
+    node, name, value = re.search(r'`ros2 param set (\S+) (\w+) (\S+)`', text).groups()
+    return waiting.group(1), node, name, yaml.safe_load(value)
+
+
 def test_guide_own_driver_step_runs_without_a_robotino(tmp_path, rclpy_context):
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    waiting, node, name, value = _guide_claims()
     work = tmp_path / 'my_robot'
     shutil.copytree(EXAMPLE, work)
     process = _run(_commands()[0], work)
     assert process.communicate(timeout=300) and process.returncode == 0
     executor, listener, commands, tips = loop_listener(rclpy_context)
-    processes = [_run(command, work) for command in _commands(1)]
+    launch, trajectory, stand_in = _commands(1)
+    # the controller and the targets first: it waits, at WARN, and commands nothing
+    processes = [_run(launch, work), _run(trajectory, work)]
+    outputs = [_Output(p) for p in processes]
     try:
+        told = spin_until(executor, lambda: any(waiting in line and 'WARN' in line
+                                                for line in outputs[0].lines)
+                          or any(p.poll() is not None for p in processes), 120.0)
+        spin_until(executor, lambda: False, 0.5)
+        assert told and not commands, (len(commands), outputs[0].lines)
+        # then the stand-in for the user's driver and sensor: the closed loop runs
+        processes.append(_run(stand_in, work))
+        outputs.append(_Output(processes[-1]))
         ran = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
                          or any(p.poll() is not None for p in processes), 120.0)
+        # the guide's live tuning (ros2 param set, here through rclpy's parameter client)
+        client = AsyncParameterClient(listener, node)
+        assert client.wait_for_services(timeout_sec=20.0)
+        future = client.set_parameters([Parameter(name, value=value)])
+        assert spin_until(executor, future.done, 20.0)
+        [result] = future.result().results
+        assert result.successful, result.reason
         alive = [p.poll() is None for p in processes]
         for process in processes:
             process.send_signal(signal.SIGINT)
-        outputs = [process.communicate(timeout=30) for process in processes]
+        for process in processes:
+            process.wait(timeout=30)
     finally:
         for process in processes:
             if process.poll() is None:
                 process.kill()
-                process.communicate()
+                process.wait()
         executor.shutdown()
         listener.destroy_node()
-    launch_out = outputs[0][0]
-    assert ran and all(alive), f'{len(commands)} commands, {len(tips)} tips: {outputs}'
-    assert [p.returncode for p in processes] == [0, 0, 0], outputs
+    texts = [output.text() for output in outputs]
+    launch_out = texts[0]
+    assert ran and all(alive), f'{len(commands)} commands, {len(tips)} tips: {texts}'
+    assert [p.returncode for p in processes] == [0, 0, 0], texts
     # the controller only: no bridge, no tracker; the params file's scene and closed loop hold
     assert re.search(r'\] robot: inverse_solver \(/cbha\)$', launch_out, re.MULTILINE), launch_out
     assert 'scene rod_robot: 4 valves' in launch_out and 'closed loop' in launch_out, launch_out
+    assert f'parameters set: {name} {value}' in launch_out, launch_out
     assert 'exit statuses: inverse_solver 0' in launch_out, launch_out
+    assert 'Traceback' not in '\n'.join(texts), texts
     assert all(len(c.data) == 4 and max(c.data) <= 10.0 for c in commands)

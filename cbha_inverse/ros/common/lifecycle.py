@@ -12,12 +12,19 @@ A managed node is its plain node driven through the ROS 2 lifecycle (``rclpy.lif
   second), then its topics, services and timers go: **inactive**;
 - ``cleanup``: back to unconfigured; ``shutdown`` from any state: vents first when active.
 
-The plain node class provides ``_setup_model()`` and ``_setup_interfaces()``; the managed class
+Live parameters (``param(live=True)``) are settable in every state, with the plain node's checks:
+a change reaches what the state has built (configured: the model's bounds and gains, the
+plain node's ``_retune_model``; active: its timers and watchdogs, ``_retune_interfaces``), and
+what is built later reads the new values. Unconfigured, only the checks of the parameters
+themselves apply; those that need the scene run at ``configure``.
+
+The plain node class provides ``_setup_model()``, ``_setup_interfaces()`` and the two
+``_retune_*(params)``; the managed class
 (``class ManagedX(XNode, Managed)``) names the node, its parameters and its executable and adds
 ``_vent()`` (which returns the publisher it vented on); :class:`Managed` adds the transitions.
 """
 
-from cbha_inverse.ros.common.params import declare_parameters, ParameterError
+from cbha_inverse.ros.common.params import changes_text, declare_parameters, ParameterError
 from cbha_inverse.ros.common.runner import run_node
 from rclpy.duration import Duration
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
@@ -77,8 +84,9 @@ class Managed(LifecycleNode):
     def __init__(self, **kwargs):
         LifecycleNode.__init__(self, self.node_name, **kwargs)
         self._active_interfaces = None
+        self._configured = False
         try:
-            self.params = declare_parameters(self, self.params_class)
+            self.params = declare_parameters(self, self.params_class, self._on_live_change)
         except ParameterError:
             self.destroy_node()
             raise
@@ -88,6 +96,15 @@ class Managed(LifecycleNode):
         """Return True while the node runs, its topics created."""
         return self._active_interfaces is not None
 
+    def _on_live_change(self, old, new):
+        """Apply live parameters to what the current state has built (``ValueError``: refused)."""
+        if self._configured:
+            self._retune_model(new)
+        if self.active:
+            self._retune_interfaces(new)
+        self.params = new
+        self.get_logger().info(f'parameters set: {changes_text(old, new)}')
+
     def on_configure(self, state):
         """Load what the node needs (scene, solver, message types)."""
         try:
@@ -95,6 +112,7 @@ class Managed(LifecycleNode):
         except (ValueError, FileNotFoundError, KeyError, ModuleNotFoundError) as exc:
             self.get_logger().error(f'configure failed: {exc}')
             return TransitionCallbackReturn.FAILURE
+        self._configured = True
         self.get_logger().info('configured (inactive: no topics until activate)')
         return TransitionCallbackReturn.SUCCESS
 
@@ -113,6 +131,7 @@ class Managed(LifecycleNode):
 
     def on_cleanup(self, state):
         """Back to unconfigured."""
+        self._configured = False
         self.get_logger().info('cleaned up (unconfigured)')
         return TransitionCallbackReturn.SUCCESS
 
@@ -120,6 +139,7 @@ class Managed(LifecycleNode):
         """From any state: vent the arm first when active."""
         if self.active:
             self._stop()
+        self._configured = False
         self.get_logger().info('shut down')
         return TransitionCallbackReturn.SUCCESS
 
@@ -127,6 +147,7 @@ class Managed(LifecycleNode):
         """Vent when active after an error in a transition (then unconfigured)."""
         if self.active:
             self._stop()
+        self._configured = False
         return TransitionCallbackReturn.SUCCESS
 
     def _stop(self):

@@ -296,6 +296,25 @@ class LiveParameters:
         return SetParametersResult(successful=True)
 
 
+def changes_text(old, new):
+    """
+    Name the parameters that differ between two values of a node's dataclass, for the log.
+
+    Parameters
+    ----------
+    old, new : object
+        Two instances of the node's parameters dataclass.
+
+    Returns
+    -------
+    str
+        ``name value, ...`` of the changed fields, in declaration order ('' if none).
+
+    """
+    return ', '.join(f'{spec.name} {getattr(new, spec.name)}' for spec in fields(new)
+                     if getattr(new, spec.name) != getattr(old, spec.name))
+
+
 def value_problem(value, spec):
     """
     Return why a value does not fit a parameter field ('' if it does).

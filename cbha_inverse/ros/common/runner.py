@@ -20,6 +20,7 @@ import signal
 import sys
 
 from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.ros.common.loading import STOP_SIGNALS
 from cbha_inverse.ros.common.params import check_params_files, parameter_help, ParameterError
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -33,8 +34,6 @@ INTERRUPTED_EXIT = 1
 
 SPIN_POLL_S = 0.1
 """Longest time [s] between a stop signal and the spin loop noticing it."""
-
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class StopRequest:

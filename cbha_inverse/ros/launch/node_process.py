@@ -20,7 +20,7 @@ import importlib
 import signal
 import sys
 
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+from cbha_inverse.ros.common.loading import STOP_SIGNALS, stopped_message
 
 
 class _StoppedWhileLoading(BaseException):
@@ -59,7 +59,7 @@ def main(argv=None):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
         module = importlib.import_module(module_name)
     except _StoppedWhileLoading as stop:
-        print(f'{executable}: stopped by {stop} while loading', file=sys.stderr)
+        print(stopped_message(executable, stop), file=sys.stderr)
         return 0
     finally:
         for sig, handler in previous.items():

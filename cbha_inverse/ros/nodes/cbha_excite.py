@@ -14,7 +14,8 @@ looks for other publishers of ``pressure_command`` (e.g. ``inverse_solver``) and
 start (error, exit 1) if there is one, unless ``force:=true``; one that appears later stops it
 the same way. It then waits until ``wait_for_subscribers`` subscriptions (the driver or
 ``cbha_sim``, a bag recorder) match. SIGINT/SIGTERM before the end: exit 1, the last command
-stays. Bad parameters or a bad program file: one line, exit 2.
+stays. Bad parameters or a bad program file: one line, exit 2. ``rate_hz``, ``discovery_time``
+and ``wait_for_subscribers`` are live (``set_parameters``); the program is fixed at start.
 """
 
 from dataclasses import dataclass
@@ -68,7 +69,7 @@ class ExciteParams:
                              high=3600.0)
     ramp_time: float = param(DEFAULT_RAMP_TIME, 'duration of each linear ramp between '
                              'set-points [s]', low=0.01, high=3600.0)
-    rate_hz: float = param(50.0, 'command rate [Hz]', low=1.0, high=1000.0)
+    rate_hz: float = param(50.0, 'command rate [Hz]', low=1.0, high=1000.0, live=True)
     max_pressure: float = param(150000.0, 'driver limit [Pa]: the programs span the scene '
                                 'bounds capped at it; every command is checked against it',
                                 low=0.0, high=1.0e7)
@@ -80,10 +81,10 @@ class ExciteParams:
                         'pressure_command')
     discovery_time: float = param(1.0, 'time to look for other publishers of pressure_command '
                                   'before the first command [s] (steady clock)', low=0.0,
-                                  high=60.0)
+                                  high=60.0, live=True)
     wait_for_subscribers: int = param(1, 'send nothing (and keep the program at t = 0) until '
                                       'this many subscriptions match pressure_command', low=0,
-                                      high=1000)
+                                      high=1000, live=True)
 
 
 def _display(publishers):
@@ -123,7 +124,7 @@ class ExciteNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         try:
-            self.params = declare_parameters(self, ExciteParams)
+            self.params = declare_parameters(self, ExciteParams, self._apply_parameters)
             p = self.params
             scene = load_scene(p.scene)
             self.valve_names, self.order = valve_order(scene.actuator_names, p.valve_names)
@@ -161,6 +162,11 @@ class ExciteNode(Node):
             f'of {p.ramp_time:g} s, {self.program.duration:.1f} s at {p.rate_hz:g} Hz on '
             f'{self.publisher.topic_name} (valves {list(self.valve_names)}); looking for other '
             f'publishers for {p.discovery_time:g} s')
+
+    def _apply_parameters(self, old, new):
+        """Apply a change of the live parameters (checked by :func:`declare_parameters`)."""
+        self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
+        self.params = new
 
     def _scene_order(self, values, name, lower, upper):
         """Return a valve-order actuation parameter in scene order (None stays None)."""

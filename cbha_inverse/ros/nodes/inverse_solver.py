@@ -40,7 +40,8 @@ from cbha_inverse.ros.common.conversions import (
     backbone_markers, command_message, point_array, stamp_ns)
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
-from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
+from cbha_inverse.ros.common.params import (
+    changes_text, declare_parameters, param, ParameterError)
 from cbha_inverse.ros.common.qos import COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
@@ -212,18 +213,24 @@ class InverseSolverNode(Node):
 
     def _apply_parameters(self, old, new):
         """Apply a change of the live parameters (checked; a ``ValueError`` refuses it)."""
+        self._retune_model(new)
+        self._retune_interfaces(new)
+        self.params = new
+        self.get_logger().info(f'parameters set: {changes_text(old, new)}')
+
+    def _retune_model(self, new):
+        """Live parameters of what ``_setup_model`` built (a ``ValueError`` refuses them)."""
         self.lower, self.upper, self.vent_command, self.box = self._limits(new)
-        self.target_watch.timeout = new.target_timeout
-        self.feedback_watch.timeout = new.feedback_timeout
         self.corrector.gain = new.loop_gain if new.mode == 'closed' else 0.0
         self.corrector.max_correction = new.max_correction
+
+    def _retune_interfaces(self, new):
+        """Live parameters of what ``_setup_interfaces`` built."""
+        self.target_watch.timeout = new.target_timeout
+        self.feedback_watch.timeout = new.feedback_timeout
         self.period = 1.0 / new.rate_hz
         for timer in (self.timer, self.watchdog_timer):
             timer.timer_period_ns = int(round(self.period * 1e9))
-        self.params = new
-        self.get_logger().info('parameters set: ' + ', '.join(
-            f'{name} {getattr(new, name)}' for name in vars(new)
-            if getattr(new, name) != getattr(old, name)))
 
     # inputs ---------------------------------------------------------------------------------
     def _accepted_point(self, topic, message):

@@ -215,12 +215,20 @@ class RobotinoBridgeNode(Node):
 
     def _apply_parameters(self, old, new):
         """Apply a change of the live parameters (checked; a ``ValueError`` refuses it)."""
+        self._retune_model(new)
+        self._retune_interfaces(new)
+        self.params = new
+
+    def _retune_model(self, new):
+        """Live parameters of what ``_setup_model`` built."""
         self.vent_bar = self._vent_bar(new)
+
+    def _retune_interfaces(self, new):
+        """Live parameters of what ``_setup_interfaces`` built."""
         self.command_watch.timeout = new.command_timeout
         self.reading_watch.timeout = self.silence.timeout = new.reading_timeout
         self.silence.period = new.silence_warn_period
         self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
-        self.params = new
 
     # commands -------------------------------------------------------------------------------
     def _reject(self, key, detail):

@@ -14,7 +14,8 @@ for it, so readings that stop or go stale stop ``tip/estimated`` and the solver'
 hold or vent acts. A pot dropped from the fit (stuck, or many sigma off) is a WARN and
 ``degraded``. ``backbone_estimated`` (MarkerArray) draws the estimated backbone every
 ``marker_period``; ``/diagnostics`` reports the residual per pot, the rank, the tip's standard
-deviation, the rejections by reason and the time per estimate.
+deviation, the rejections by reason and the time per estimate. The timeouts and ``log_throttle``
+are live (``set_parameters``); the estimator's noise model is fixed at start.
 """
 
 from dataclasses import dataclass
@@ -51,9 +52,9 @@ class ShapeEstimatorParams:
                                'actuators (unset: the scene order)', unset_type='string_array')
     use_pressures: bool = param(True, 'use pressure_measured as the prior of the actuation')
     pressure_timeout: float = param(0.2, 'pressures older than this are not used [s]',
-                                    low=0.001, high=60.0)
+                                    low=0.001, high=60.0, live=True)
     reading_timeout: float = param(0.5, 'a reading stamped older than this is rejected as stale '
-                                   '[s] (0: never)', low=0.0, high=60.0)
+                                   '[s] (0: never)', low=0.0, high=60.0, live=True)
     pressure_std: float = param(10000.0, 'effective actuation about the measured pressure [Pa]',
                                 low=1.0, high=1.0e6)
     actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update [Pa]',
@@ -69,7 +70,7 @@ class ShapeEstimatorParams:
                                  high=60.0)
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected or degraded '
-                                'readings [s]', low=0.0, high=3600.0)
+                                'readings [s]', low=0.0, high=3600.0, live=True)
 
 
 class ShapeEstimatorNode(Node):
@@ -91,7 +92,7 @@ class ShapeEstimatorNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         try:
-            self.params = declare_parameters(self, ShapeEstimatorParams)
+            self.params = declare_parameters(self, ShapeEstimatorParams, self._apply_parameters)
             p = self.params
             self.scene = load_scene(p.scene)
             self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
@@ -124,6 +125,10 @@ class ShapeEstimatorNode(Node):
             f'scene {self.scene.name}: {len(self.pot_names)} string pots {list(self.pot_names)}'
             f', pressures {"used" if p.use_pressures else "not used"} '
             f'({list(self.valve_names)}); {self.tip_publisher.topic_name}')
+
+    def _apply_parameters(self, old, new):
+        """Apply a change of the live parameters (the callbacks read them at every message)."""
+        self.params = new
 
     def _reject(self, reason):
         key = reason.split(':')[0]

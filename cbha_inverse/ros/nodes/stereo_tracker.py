@@ -12,8 +12,11 @@ one arrives; until then from the camera_info YAML files of the params file (the 
 ``tip/measured`` (PointStamped in ``frame_id``, stamp = the pair's left stamp, sensor-data QoS).
 A pair without a valid marker publishes nothing (WARN, throttled) and counts its reason in
 ``/diagnostics`` with the detection rate, epipolar and reprojection errors, processing time and
-input frame rate. The two optical frames of the rig (``base_from_left`` and the camera models)
-are latched on ``/tf_static`` (``publish_camera_tf``; :mod:`cbha_inverse.ros.common.tf`).
+input frame rate. The detection and rejection thresholds (``marker.*``, the error and depth
+limits), ``max_pair_dt`` and ``log_throttle`` are live (``set_parameters``, checked as at start);
+the cameras, the pose, the frame and the QoS are fixed at start. The two optical frames of the
+rig (``base_from_left`` and the camera models) are latched on ``/tf_static``
+(``publish_camera_tf``; :mod:`cbha_inverse.ros.common.tf`).
 """
 
 import collections
@@ -63,7 +66,7 @@ class StereoTrackerParams:
     publish_camera_tf: bool = param(True, 'latch the optical frames (stereo_left_optical, '
                                     'stereo_right_optical) in frame_id on /tf_static')
     max_pair_dt: float = param(0.002, 'largest stamp difference of a left/right pair [s]',
-                               low=0.0, high=1.0)
+                               low=0.0, high=1.0, live=True)
     queue_size: int = param(4, 'images kept per camera while waiting for a partner', low=1,
                             high=100)
     image_reliability: str = param('reliable', 'QoS reliability of the image subscriptions',
@@ -71,43 +74,83 @@ class StereoTrackerParams:
     image_depth: int = param(2, 'QoS depth (keep-last) of the image subscriptions', low=1,
                              high=100)
     marker_kind: str = param('sphere', 'marker: red sphere or ArUco tag',
-                             choices=('sphere', 'aruco'), ros_name='marker.kind')
+                             choices=('sphere', 'aruco'), ros_name='marker.kind', live=True)
     hue_max_low: int = param(10, 'red hue band 1: [0, this] (OpenCV hue 0..179)', low=0,
-                             high=179, ros_name='marker.hue_max_low')
+                             high=179, ros_name='marker.hue_max_low', live=True)
     hue_min_high: int = param(170, 'red hue band 2: [this, 179]', low=0, high=179,
-                              ros_name='marker.hue_min_high')
+                              ros_name='marker.hue_min_high', live=True)
     saturation_min: int = param(120, 'least saturation of a marker pixel', low=0, high=255,
-                                ros_name='marker.saturation_min')
+                                ros_name='marker.saturation_min', live=True)
     value_min: int = param(60, 'least value of a marker pixel', low=0, high=255,
-                           ros_name='marker.value_min')
+                           ros_name='marker.value_min', live=True)
     mono_threshold: int = param(200, 'mono8 images: least brightness of a marker pixel', low=0,
-                                high=255, ros_name='marker.mono_threshold')
+                                high=255, ros_name='marker.mono_threshold', live=True)
     min_area: float = param(20.0, 'least blob area [px^2]', low=0.0, high=1.0e7,
-                            ros_name='marker.min_area')
+                            ros_name='marker.min_area', live=True)
     max_area: float = param(20000.0, 'largest blob area [px^2]', low=0.0, high=1.0e7,
-                            ros_name='marker.max_area')
+                            ros_name='marker.max_area', live=True)
     min_circularity: float = param(0.75, 'least 4 pi A / P^2 of a blob', low=0.0, high=1.0,
-                                   ros_name='marker.min_circularity')
+                                   ros_name='marker.min_circularity', live=True)
     ambiguity_ratio: float = param(0.3, 'second / best blob score above which an image is '
                                    'ambiguous', low=0.0, high=1.0,
-                                   ros_name='marker.ambiguity_ratio')
+                                   ros_name='marker.ambiguity_ratio', live=True)
     window: int = param(48, 'half size of the search window around the last detection [px] '
-                        '(0 = full frame always)', low=0, high=10000, ros_name='marker.window')
+                        '(0 = full frame always)', low=0, high=10000, ros_name='marker.window',
+                        live=True)
     aruco_dictionary: str = param('DICT_4X4_50', 'cv2.aruco predefined dictionary',
-                                  ros_name='marker.aruco_dictionary')
+                                  ros_name='marker.aruco_dictionary', live=True)
     aruco_id: int = param(0, 'ArUco tag id of the marker', low=0, high=100000,
-                          ros_name='marker.aruco_id')
+                          ros_name='marker.aruco_id', live=True)
     coarse_step: int = param(2, 'full-frame search: subsampling step of the first pass '
-                             '(1 = none)', low=1, high=8, ros_name='marker.coarse_step')
+                             '(1 = none)', low=1, high=8, ros_name='marker.coarse_step', live=True)
     max_epipolar_error: float = param(2.0, 'largest |v_left - v_right| after rectification '
-                                      '[px]', low=0.0, high=1000.0)
+                                      '[px]', low=0.0, high=1000.0, live=True)
     max_reprojection_error: float = param(1.5, 'largest reprojection error [px]', low=0.0,
-                                          high=1000.0)
-    min_depth: float = param(0.2, 'least depth in the left camera [m]', low=0.0, high=100.0)
-    max_depth: float = param(2.0, 'largest depth in the left camera [m]', low=0.0, high=100.0)
+                                          high=1000.0, live=True)
+    min_depth: float = param(0.2, 'least depth in the left camera [m]', low=0.0, high=100.0,
+                             live=True)
+    max_depth: float = param(2.0, 'largest depth in the left camera [m]', low=0.0, high=100.0,
+                             live=True)
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of one kind [s]', low=0.0,
-                                high=3600.0)
+                                high=3600.0, live=True)
+
+
+def detection(p):
+    """
+    Return the marker detection and the stereo rejection limits of the node's parameters.
+
+    Parameters
+    ----------
+    p : StereoTrackerParams
+        The parameters (at start and on every live change).
+
+    Returns
+    -------
+    marker : cbha_inverse.vision.marker.MarkerParams
+    limits : cbha_inverse.vision.stereo.StereoLimits
+
+    Raises
+    ------
+    ValueError
+        If an area or depth range is empty.
+
+    """
+    if p.min_area > p.max_area:
+        raise ValueError(f'marker.min_area {p.min_area:g} px^2 is above marker.max_area '
+                         f'{p.max_area:g} px^2')
+    if p.min_depth >= p.max_depth:
+        raise ValueError(f'min_depth {p.min_depth:g} m must be below max_depth '
+                         f'{p.max_depth:g} m')
+    marker = MarkerParams(
+        kind=p.marker_kind, hue_max_low=p.hue_max_low, hue_min_high=p.hue_min_high,
+        saturation_min=p.saturation_min, value_min=p.value_min, mono_threshold=p.mono_threshold,
+        min_area=p.min_area, max_area=p.max_area, min_circularity=p.min_circularity,
+        ambiguity_ratio=p.ambiguity_ratio, window=p.window, aruco_dictionary=p.aruco_dictionary,
+        aruco_id=p.aruco_id, coarse_step=p.coarse_step)
+    limits = StereoLimits(p.max_epipolar_error, p.max_reprojection_error, p.min_depth,
+                          p.max_depth)
+    return marker, limits
 
 
 def _camera_file(name):
@@ -136,18 +179,10 @@ class StereoTrackerNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         try:
-            self.params = declare_parameters(self, StereoTrackerParams)
+            self.params = declare_parameters(self, StereoTrackerParams, self._apply_parameters)
             p = self.params
             self.pose = check_pose(p.base_from_left)
-            self.marker = MarkerParams(
-                kind=p.marker_kind, hue_max_low=p.hue_max_low, hue_min_high=p.hue_min_high,
-                saturation_min=p.saturation_min, value_min=p.value_min,
-                mono_threshold=p.mono_threshold, min_area=p.min_area, max_area=p.max_area,
-                min_circularity=p.min_circularity, ambiguity_ratio=p.ambiguity_ratio,
-                window=p.window, aruco_dictionary=p.aruco_dictionary, aruco_id=p.aruco_id,
-                coarse_step=p.coarse_step)
-            self.limits = StereoLimits(p.max_epipolar_error, p.max_reprojection_error,
-                                       p.min_depth, p.max_depth)
+            self.marker, self.limits = detection(p)
             self.camera_tf = make_broadcaster(self, static=True) if p.publish_camera_tf else None
             self.cameras = {}
             for side, name in zip(SIDES, (p.left_camera_info_file, p.right_camera_info_file)):
@@ -197,14 +232,29 @@ class StereoTrackerNode(Node):
         self.get_logger().warn(f'{detail} (total {self.counts[reason]})',
                                throttle_duration_sec=self.params.log_throttle)
 
+    def _make_tracker(self, marker, limits):
+        """Return the tracker of both camera models (None while one is missing)."""
+        if not all(side in self.cameras for side in SIDES):
+            return None
+        rig = StereoRig(self.cameras['left'][0], self.cameras['right'][0], self.pose)
+        return StereoTracker(rig, marker, limits)
+
     def _rebuild_tracker(self):
-        if all(side in self.cameras for side in SIDES):
-            rig = StereoRig(self.cameras['left'][0], self.cameras['right'][0], self.pose)
-            self.tracker = StereoTracker(rig, self.marker, self.limits)
-            if self.camera_tf is not None:
-                poses = rig.camera_poses()
-                self.camera_tf.send(self.params.frame_id, [camera_frame(s) for s in SIDES],
-                                    [poses[s] for s in SIDES])
+        self.tracker = self._make_tracker(self.marker, self.limits)
+        if self.tracker is not None and self.camera_tf is not None:
+            poses = self.tracker.rig.camera_poses()
+            self.camera_tf.send(self.params.frame_id, [camera_frame(s) for s in SIDES],
+                                [poses[s] for s in SIDES])
+
+    def _apply_parameters(self, old, new):
+        """Apply a change of the live parameters (checked; a ``ValueError`` refuses it)."""
+        marker, limits = detection(new)
+        if (marker, limits) != (self.marker, self.limits):
+            # an unknown ArUco dictionary raises here, before anything changes
+            self.tracker = self._make_tracker(marker, limits)
+            self.marker, self.limits = marker, limits
+        self.pairer.max_dt = new.max_pair_dt
+        self.params = new
 
     def _on_camera_info(self, side, message):
         try:

@@ -5,7 +5,8 @@ Thin node around :mod:`cbha_inverse.robot.trajectory`. Topic ``target`` (relativ
 ``/cbha`` namespace with ``--ros-args -r __ns:=/cbha``), RELIABLE depth 10, frame ``frame_id``
 (default ``cbha_base``), one message per timer tick at ``rate_hz``. Time runs on the node clock
 (so ``use_sim_time`` follows ``/clock``) from the first tick. Bad parameters stop the node at start
-with a message that names the parameter and a non-zero exit code.
+with a message that names the parameter and a non-zero exit code. ``rate_hz`` and
+``wait_for_subscribers`` are live (``set_parameters``); the path is fixed at start.
 """
 
 from dataclasses import dataclass
@@ -43,10 +44,11 @@ class TrajectoryParams:
     laps: int = param(0, 'laps to run, then hold the end point (0 = forever)', low=0, high=100000)
     start_hold: float = param(0.0, 'time at the start point before moving [s]',
                               low=0.0, high=3600.0)
-    rate_hz: float = param(100.0, 'publication rate [Hz]', low=0.1, high=2000.0)
+    rate_hz: float = param(100.0, 'publication rate [Hz]', low=0.1, high=2000.0, live=True)
     frame_id: str = param('cbha_base', 'frame_id of the published targets')
     wait_for_subscribers: int = param(0, 'publish nothing (and keep the clock at 0) until this '
-                                      'many subscriptions match target', low=0, high=1000)
+                                      'many subscriptions match target', low=0, high=1000,
+                                      live=True)
 
 
 class TrajectoryNode(Node):
@@ -68,7 +70,7 @@ class TrajectoryNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         try:
-            self.params = declare_parameters(self, TrajectoryParams)
+            self.params = declare_parameters(self, TrajectoryParams, self._apply_parameters)
             p = self.params
             self.trajectory = make_trajectory(
                 p.shape, center=p.center, radius=p.radius, side=p.side, plane=p.plane,
@@ -87,6 +89,11 @@ class TrajectoryNode(Node):
             f'{self.trajectory.speed:.4f} m/s, lap {self.trajectory.lap_time:.2f} s, '
             f'{self.params.rate_hz:g} Hz on {self.publisher.topic_name} '
             f'(frame {self.params.frame_id})')
+
+    def _apply_parameters(self, old, new):
+        """Apply a change of the live parameters (checked by :func:`declare_parameters`)."""
+        self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
+        self.params = new
 
     def elapsed(self):
         """Return the time since the first tick [s] (node clock), 0 before it."""

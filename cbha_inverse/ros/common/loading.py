@@ -1,0 +1,91 @@
+"""
+A stop signal while a node executable still loads ends it with status 0 and one line.
+
+Loading a node (numpy, scipy, numba's cached kernels, rclpy) takes a second or more before its
+``main`` installs its own handling (:class:`cbha_inverse.ros.common.runner.StopRequest`); a
+Ctrl-C in that time would end in a ``KeyboardInterrupt`` traceback from deep inside an import.
+:func:`quiet_while_loading` runs when the package of the node modules is imported, before any of
+them: when this process is a node executable (``inverse_solver``, or ``python -m
+cbha_inverse.ros.nodes.inverse_solver``), SIGINT and SIGTERM print
+``<executable>: stopped by SIGINT while loading`` and end the process with status 0 until the
+node's ``main`` takes them over. Any other process (a test importing a node class,
+``cbha_launch``'s :mod:`cbha_inverse.ros.launch.node_process`) keeps its handlers.
+"""
+
+import os
+import signal
+import sys
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def stopped_message(executable, signal_name):
+    """Return the one line of a node stopped while it loads."""
+    return f'{executable}: stopped by {signal_name} while loading'
+
+
+def node_executable(argv0, node_names):
+    """
+    Return the node executable this process runs, or None.
+
+    Parameters
+    ----------
+    argv0 : str
+        ``sys.argv[0]`` while the node package is imported: the console script's path, or ``-m``
+        while ``python -m`` locates its module.
+    node_names : collection of str
+        The node executables (the modules of the node package).
+
+    Returns
+    -------
+    str or None
+        The executable's name (for ``-m``, the module named on the command line).
+
+    """
+    name = os.path.basename(argv0)
+    if name in node_names:
+        return name
+    if argv0 == '-m':
+        module = _module_argument(getattr(sys, 'orig_argv', []))
+        name = module.rsplit('.', 1)[-1] if module else ''
+        return name if name in node_names else None
+    return None
+
+
+def _module_argument(orig_argv):
+    """Return the module of ``python -m MODULE`` in the interpreter's own command line."""
+    for i, arg in enumerate(orig_argv[:-1]):
+        if arg == '-m':
+            return orig_argv[i + 1]
+    return ''
+
+
+def quiet_while_loading(node_names):
+    """
+    Install the quiet stop for the loading of a node executable (nothing in other processes).
+
+    Parameters
+    ----------
+    node_names : collection of str
+        The node executables.
+
+    Returns
+    -------
+    str or None
+        The executable, when the handlers were installed.
+
+    """
+    executable = node_executable(sys.argv[0], node_names)
+    if executable is None:
+        return None
+
+    def stop(signum, frame):
+        print(stopped_message(executable, signal.Signals(signum).name), file=sys.stderr,
+              flush=True)
+        raise SystemExit(0)
+
+    for sig in STOP_SIGNALS:
+        # a handler the process was given (an ignored SIGINT in a background job) stays
+        if signal.getsignal(sig) in (signal.default_int_handler, signal.SIG_DFL):
+            signal.signal(sig, stop)
+    return executable
