@@ -85,8 +85,13 @@ class EstimatorOptions:
     max_pressure : float  [Pa]
         Measured pressures above this (or below ``-max_pressure``) are rejected.
     iterations : int
-        Linearisations per update (iterated Kalman update; 1 in a loop, more to settle from
-        far away).
+        Linearisations per settled update (iterated Kalman update from the same prior).
+    settle_iterations : int
+        ... per update after one that was not settled (from far away: the pots' linear model
+        is not yet that of the equilibrium).
+    initial_newton_steps : int
+        Largest number of Newton steps of the first update toward the equilibrium of the
+        prior's actuation, before the pots are used.
     max_rotation_step : float  [rad]
         Largest frame rotation of one step (the control tick's limit).
 
@@ -109,6 +114,8 @@ class EstimatorOptions:
     length_range: tuple = (0.5, 1.5)
     max_pressure: float = 1.0e6
     iterations: int = 1
+    settle_iterations: int = 5
+    initial_newton_steps: int = 20
     max_rotation_step: float = 0.2
 
 
@@ -351,10 +358,14 @@ class ShapeEstimator:
         if self._first:
             data.pressure_rows[kernel.LAST_PRESSURE] = data.pressures
             self._first = False
+            if not self._converge():
+                return self._rejected('not_positive_definite: no factor of the tangent', started)
         data.scalars[kernel.GATE] = float(self._settled)
         walk = self._walks[measured, self._settled]
         self._snapshot()
         iterations = max(1, self.options.iterations)
+        if not self._settled:
+            iterations = max(iterations, self.options.settle_iterations)
         if iterations > 1:
             prior = (data.z.copy(), data.covariance.copy(),
                      data.pressure_rows[kernel.LAST_PRESSURE].copy())
@@ -383,6 +394,25 @@ class ShapeEstimator:
         self._used = data.active.copy()
         self._last = self._estimate(lengths, time.perf_counter() - started)
         return self._last
+
+    def _converge(self):
+        """
+        Take Newton steps at the prior's actuation and payload (no pot used) until converged.
+
+        The first update starts from the rest shape, far from the equilibrium of the measured
+        pressures; the pots' linear model is then taken near it. Returns False if no factor.
+        """
+        data = self._data
+        stuck = data.stuck.copy()
+        data.stuck[:] = True
+        for _ in range(self.options.initial_newton_steps):
+            data.walk[:] = 0.0
+            if not self._step():
+                return False
+            if (np.abs(data.moved[:, 0]) < data.noise).all():
+                break
+        data.stuck[:] = stuck
+        return True
 
     def _snapshot(self):
         """Keep the unknowns and their covariance before this update (a ring of the window)."""

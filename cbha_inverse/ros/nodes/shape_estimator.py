@@ -54,10 +54,15 @@ class ShapeEstimatorParams:
                                     low=0.001, high=60.0)
     reading_timeout: float = param(0.5, 'a reading stamped older than this is rejected as stale '
                                    '[s] (0: never)', low=0.0, high=60.0)
-    pressure_std: float = param(10000.0, 'effective actuation about the measured pressure [Pa]',
-                                low=1.0, high=1.0e6)
-    actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update [Pa]',
-                                      low=1.0, high=1.0e6)
+    pressure_std: float = param(10000.0, 'prior std of the effective actuation about the '
+                                'measured pressure [Pa]', low=1.0, high=1.0e6)
+    gain_walk_std: float = param(1.0e-4, 'random walk per update of the gain of the effective '
+                                 'actuation about the measured pressure [-]', low=0.0, high=1.0)
+    offset_walk_std: float = param(10.0, 'random walk per update of the offset of the effective '
+                                   'actuation about the measured pressure [Pa]', low=0.0,
+                                   high=1.0e6)
+    actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update without '
+                                      'measured pressures [Pa]', low=1.0, high=1.0e6)
     payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none)',
                                low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
@@ -96,7 +101,8 @@ class ShapeEstimatorNode(Node):
             self.scene = load_scene(p.scene)
             self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
             self.estimator = ShapeEstimator.from_scene(self.scene, EstimatorOptions(
-                pressure_std=p.pressure_std, actuation_walk_std=p.actuation_walk_std,
+                pressure_std=p.pressure_std, gain_walk_std=p.gain_walk_std,
+                offset_walk_std=p.offset_walk_std, actuation_walk_std=p.actuation_walk_std,
                 payload_std=p.payload_std or None, outlier_sigma=p.outlier_sigma,
                 stuck_window=p.stuck_window))
         except (ValueError, FileNotFoundError, KeyError) as exc:
