@@ -119,7 +119,8 @@ def parse_args(argv):
     parser.add_argument('--pot-noise', type=float, default=1e-4,
                         help='string-pot length noise of the plant [m]')
     parser.add_argument('--estimate-payload', type=float, default=0.0, metavar='STD',
-                        help='proprio runs: shape_estimator payload_std [kg] (0: none)')
+                        help='proprio runs: shape_estimator payload_std [kg] (0: none); the '
+                        'solver then takes its estimate as a known tip load')
     parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
     parser.add_argument('--stereo-rig', default='cameras/demo_rig.yaml',
                         help='rig of the stereo runs (path, or relative to config/)')
@@ -385,6 +386,8 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     if feedback == 'proprio':
         sim_extra = {'tip_output': 'none'}
         solver_extra = {'feedback_topic': 'tip/estimated'}
+        if args.estimate_payload:
+            solver_extra['payload_topic'] = 'payload/estimated'
         waited.append('shape_estimator')
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
         **_sim_overrides(args, valve_names), **sim_extra}, env)}

@@ -51,8 +51,8 @@ def kalman_lengths(h, pots, state, covariance, stuck, active, work):
 
     The prior is ``state[Z]`` with ``covariance + diag(state[WALK])``; a pot's innovation
     against it, over its standard deviation, is ``pots[RATIO]``; the pots not ``stuck`` and
-    within the gate ``work[u + 1]`` standard deviations of it (0: no gate) are ``active`` and
-    update the mean
+    within the gate ``work[u + 1]`` standard deviations of it (0: no gate; no gate either when
+    half of the pots or more are off) are ``active`` and update the mean
     and the covariance one after the other (exact for independent noise).
 
     Parameters
@@ -90,7 +90,14 @@ def kalman_lengths(h, pots, state, covariance, stuck, active, work):
                 acc += covariance[j, k] * h[i, k]
             spread += h[i, j] * acc
         pots[RATIO, i] = abs(innovation) / math.sqrt(spread)
-        active[i] = not stuck[i] and not (sigma > 0.0 and pots[RATIO, i] > sigma)
+    # the gate drops a minority of pots: when more are off, the linear model is (a jump of the
+    # arm), not the pots
+    off = 0
+    for i in range(c):
+        off += not stuck[i] and sigma > 0.0 and pots[RATIO, i] > sigma
+    for i in range(c):
+        active[i] = not stuck[i] and not (2 * off < c and sigma > 0.0
+                                          and pots[RATIO, i] > sigma)
     for i in range(c):
         if not active[i]:
             continue
@@ -311,8 +318,9 @@ def stuck_pots(history, counters, lengths, stuck, tolerance, motion):
     Add one reading to a window and update which pots are stuck, in place.
 
     Over the window, a pot is stuck when its range (max - min) is below ``tolerance`` while the
-    median range of the other pots exceeds ``motion`` (more than half of them move more); a
-    stuck pot stays stuck until its own range exceeds ``tolerance`` again.
+    median range of the other pots exceeds ``motion`` (more than half of them move more), and
+    fewer than half of the pots are; a stuck pot stays stuck until its own range exceeds
+    ``tolerance`` again.
 
     Parameters
     ----------
@@ -342,6 +350,7 @@ def stuck_pots(history, counters, lengths, stuck, tolerance, motion):
         lengths_range = high - low
         moving += lengths_range > motion
         stuck[i] = stuck[i] and lengths_range < tolerance
+    count = 0
     for i in range(c):
         low, high = history[0, i], history[0, i]
         for k in range(1, window):
@@ -349,3 +358,7 @@ def stuck_pots(history, counters, lengths, stuck, tolerance, motion):
         if high - low < tolerance:
             others = moving - (high - low > motion)
             stuck[i] = stuck[i] or 2 * others > c - 1
+        count += stuck[i]
+    if 2 * count >= c:
+        # half of the pots or more still: the arm holds a direction, no pot is broken
+        stuck[:] = False

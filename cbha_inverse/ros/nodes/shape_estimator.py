@@ -35,7 +35,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'shape_estimator'
@@ -63,7 +63,8 @@ class ShapeEstimatorParams:
                                    high=1.0e6)
     actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update without '
                                       'measured pressures [Pa]', low=1.0, high=1.0e6)
-    payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none)',
+    payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none); its '
+                               'estimate is published on payload/estimated',
                                low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
                                  low=1.0, high=1.0e6)
@@ -118,6 +119,8 @@ class ShapeEstimatorNode(Node):
         self.last = None
         self.estimate_times = TimingStats()
         self.tip_publisher = self.create_publisher(PointStamped, 'tip/estimated', MEASURED_QOS)
+        self.payload_publisher = (self.create_publisher(Float64, 'payload/estimated',
+                                                        MEASURED_QOS) if p.payload_std else None)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone_estimated',
                                                       MARKER_QOS)
         self.create_subscription(JointState, 'string_pots', self._on_pots, MEASURED_QOS)
@@ -170,6 +173,8 @@ class ShapeEstimatorNode(Node):
                                    throttle_duration_sec=p.log_throttle)
         self.tip_publisher.publish(point_stamped(estimate.tip, message.header.stamp,
                                                  p.frame_id))
+        if self.payload_publisher is not None:
+            self.payload_publisher.publish(Float64(data=estimate.payload))
         self.published += 1
 
     def _publish_markers(self):
