@@ -293,6 +293,7 @@ class ShapeEstimator:
         self._ranks = {}
         self._settled = False
         self._first = True
+        self._measured = None
         self._used = np.ones(self.sensors.n_sensors, dtype=bool)
         self._snapshots[2][:] = [0, 0]
         self._last = None
@@ -355,6 +356,9 @@ class ShapeEstimator:
         data.measured[:] = lengths
         measured = pressures is not None
         data.pressures[:] = pressures if measured else 0.0
+        if self._measured is not None and measured != self._measured:
+            self._restart_actuation(measured)
+        self._measured = measured
         if self._first:
             data.pressure_rows[kernel.LAST_PRESSURE] = data.pressures
             self._first = False
@@ -394,6 +398,26 @@ class ShapeEstimator:
         self._used = data.active.copy()
         self._last = self._estimate(lengths, time.perf_counter() - started)
         return self._last
+
+    def _restart_actuation(self, measured):
+        """
+        Start the actuation's unknowns again when pressures start or stop being measured.
+
+        ``λ = (1 + g) ∘ p + δ`` changes meaning: with pressures, gain and offset restart from
+        their prior about them; without, the offset is the current actuation. The payload is
+        kept; the next update is iterated as from far away.
+        """
+        data, m = self._data, self._m
+        data.z[:m] = 0.0
+        data.z[m:2 * m] = 0.0 if measured else data.actuation / _OFFSET_SCALE
+        stds = [self.options.gain_std] * m + [self.options.pressure_std if measured else
+                                              self.options.initial_actuation_std] * m
+        data.covariance[:2 * m, :] = 0.0
+        data.covariance[:, :2 * m] = 0.0
+        data.covariance[range(2 * m), range(2 * m)] = (np.asarray(stds)
+                                                       / self._scale[:2 * m]) ** 2
+        data.pressure_rows[kernel.LAST_PRESSURE] = data.pressures
+        self._settled = False
 
     def _converge(self):
         """
