@@ -3,7 +3,6 @@
 from cbha_inverse.core._kernels import estimation as kernel
 from cbha_inverse.estimate.shape import EstimatorOptions, ShapeEstimator
 from cbha_inverse.scene import load_scene
-from cbha_inverse.scene.calibration import Calibration
 import numpy as np
 import pytest
 

@@ -86,7 +86,7 @@ class InverseSolverParams:
     frame_id: str = param('cbha_base', 'the only accepted frame_id of target and tip/measured')
     feedback_topic: str = param('tip/measured', 'closed loop: the measured tip (PointStamped); '
                                 'tip/estimated for the string-pot estimate of shape_estimator')
-    payload_topic: str = param('', 'a known tip payload (std_msgs/Float64, kg) in the model\'s '
+    payload_topic: str = param('', 'a known tip payload (std_msgs/Float64, kg) in the model '
                                'loads, e.g. payload/estimated of shape_estimator (empty: none)')
     max_payload: float = param(1.0, 'payloads beyond +-this are rejected [kg]', low=0.0,
                                high=100.0)
