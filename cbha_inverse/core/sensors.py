@@ -63,6 +63,21 @@ class StringPots:
         self._jacobian = np.zeros((c, 6 * (self.n_frames - 1)))
 
     @property
+    def routing(self):
+        """
+        Return the routing arrays of the compiled length evaluation.
+
+        Returns
+        -------
+        tuple of ndarray
+            Frames (P,), offsets (P, 3), span start, end and owner (S,), point owner (P,): the
+            arguments of :func:`cbha_inverse.core._kernels.cables.routing_lengths_into`.
+
+        """
+        return (self._frames, self._offsets, self._start, self._end, self._span_owner,
+                self._point_owner)
+
+    @property
     def n_sensors(self):
         """Return the number of sensors ``c``."""
         return len(self.names)
@@ -105,9 +120,8 @@ class StringPots:
 
         """
         lengths = routing_lengths(np.ascontiguousarray(positions, dtype=float),
-                                  np.ascontiguousarray(rotations, dtype=float), self._frames,
-                                  self._offsets, self._start, self._end, self._span_owner,
-                                  self._point_owner, self.n_sensors, self._jacobian)
+                                  np.ascontiguousarray(rotations, dtype=float), *self.routing,
+                                  self.n_sensors, self._jacobian)
         return lengths, self._jacobian
 
     def readings(self, lengths):

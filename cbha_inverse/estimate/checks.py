@@ -3,9 +3,11 @@ Input checks of the shape estimator: malformed vectors and stuck string potentio
 
 :func:`check_vector` gives the reason a reading is rejected (``wrong_length``, ``non_finite``,
 ``out_of_range``; the first word of the reason is its counter's key); :class:`StuckDetector`
-finds a pot that no longer moves while the others do.
+finds a pot that no longer moves while the others do (the compiled
+:func:`cbha_inverse.core._kernels.estimation.stuck_pots`).
 """
 
+from cbha_inverse.core._kernels.estimation import stuck_pots
 import numpy as np
 
 
@@ -38,7 +40,7 @@ def check_vector(values, size, what, limit=None):
         return None, f'wrong_length: {what} are not numbers'
     if array.size != size:
         return None, f'wrong_length: {array.size} {what} for {size}'
-    if not np.all(np.isfinite(array)):
+    if not np.isfinite(array).all():
         return None, f'non_finite: {what} contain NaN or inf'
     if limit is not None and np.abs(array).max() > limit:
         return None, f'out_of_range: {what} beyond {limit:g}'
@@ -69,13 +71,14 @@ class StuckDetector:
         self.count, self.window = int(count), int(window)
         self.tolerance, self.motion = float(tolerance), float(motion)
         self._history = np.zeros((max(self.window, 1), self.count))
+        self._counters = np.zeros(2, dtype=np.int64)
+        self.stuck = np.zeros(self.count, dtype=bool)
         self.reset()
 
     def reset(self):
         """Forget the history."""
-        self._filled = 0
-        self._next = 0
-        self.stuck = np.zeros(self.count, dtype=bool)
+        self._counters[:] = 0
+        self.stuck[:] = False
 
     def update(self, lengths):
         """
@@ -89,21 +92,10 @@ class StuckDetector:
         Returns
         -------
         (count,) ndarray of bool
+            A view of :attr:`stuck` (the next update overwrites it).
 
         """
-        if self.window <= 0:
-            return self.stuck
-        self._history[self._next] = lengths
-        self._next = (self._next + 1) % self.window
-        self._filled = min(self._filled + 1, self.window)
-        if self._filled < self.window:
-            return self.stuck
-        spread = self._history.max(axis=0) - self._history.min(axis=0)
-        still = spread < self.tolerance
-        self.stuck &= still
-        if still.any():
-            # the median of the others exceeds `motion` when more than half of them do
-            moving = spread > self.motion
-            others = moving.sum() - moving
-            self.stuck |= still & (2 * others > self.count - 1)
-        return self.stuck.copy()
+        if self.window > 0:
+            stuck_pots(self._history, self._counters, lengths, self.stuck, self.tolerance,
+                       self.motion)
+        return self.stuck

@@ -2,20 +2,20 @@
 The shape estimator: the equilibrium that reproduces the string-potentiometer lengths.
 
 The pots are effectors in length space (``docs/proprioception.md``): at the current estimate of
-the frames ``q``, the effective actuation ``λ`` and, optionally, an unknown payload ``μ`` (a mass
-at the last frame, its weight along gravity), one linearisation of the equilibrium (paper eq. 9,
-the control tick's :class:`~cbha_inverse.core.system.EquilibriumSystem`) gives ``K``, ``r`` and
-``J_aᵀ``; with the pots' ``J_s`` (:class:`~cbha_inverse.core.sensors.StringPots`) the lengths
-after the Newton step ``dq = K⁻¹ (r + J_aᵀ Δλ + J_μᵀ Δμ)`` are ``ℓ0 + J_s K⁻¹ r + W_sx Δx``
-with ``W_sx = J_s K⁻¹ [J_aᵀ, J_μᵀ]`` (``W_sa = J_s K⁻¹ J_aᵀ``, the pots' ``W_ea``). One update
-is a Kalman step on ``x = (λ, μ)``, a random walk (the compiled
-:func:`cbha_inverse.core._kernels.estimation.length_update`): the previous estimate (its
-covariance grown by the walk) and the measured pressures (``λ`` measured with ``pressure_std``,
-which also covers the model's error in effective area) are the prior, the pot lengths
-(``noise_std`` each) the measurements; the regularised least-squares solution is exact (7 x 7
-for the CBHA with a payload). The state then takes the Newton step of the same factorisation
-(the control tick's ``apply_linear_step``), so repeated updates converge to the equilibrium of
-the estimate.
+the frames ``q`` and the effective actuation ``λ`` (and, optionally, an unknown payload ``μ``, a
+mass at the last frame), one linearisation of the equilibrium (paper eq. 9, the control tick's
+:func:`~cbha_inverse.core._kernels.tick.linearise_tick`) gives ``K⁻¹ [r, J_aᵀ]``; with the pots'
+``J_s`` (:class:`~cbha_inverse.core.sensors.StringPots`) the lengths after the Newton step are
+linear in the actuation through ``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, eq. 11). The
+unknowns are not the actuation itself but its error about the measured pressures,
+``λ = (1 + g) ∘ p + δ`` (a gain and an offset per actuator: the model's error in effective area
+and stiffness), and ``μ``; they change slowly, so they follow a small random walk and each update
+is a Kalman step that averages the pot noise over many updates (the compiled
+:func:`cbha_inverse.core._kernels.estimation.estimate_tick`, one call per update over the
+buffers of :class:`cbha_inverse.estimate.data.EstimatorData`). The offset's walk grows with the
+measured pressure change (the model's error shows when the arm moves); without measured pressures
+``λ = δ`` with a large walk. The state then takes the Newton step of the same factorisation, so
+repeated updates converge to the equilibrium of the estimate.
 
 Bad input (wrong length, non-finite or out-of-range readings or pressures) is rejected with a
 reason and changes nothing; a pot whose innovation is ``outlier_sigma`` standard deviations off,
@@ -28,16 +28,17 @@ import math
 import time
 from typing import NamedTuple
 
-from cbha_inverse.core._kernels.estimation import length_update
-from cbha_inverse.core._kernels.projection import project_effectors
-from cbha_inverse.core._kernels.retraction import apply_linear_step
+from cbha_inverse.core._kernels import estimation as kernel
+from cbha_inverse.core._kernels import tick as fused
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.estimate.checks import check_vector, StuckDetector
+from cbha_inverse.estimate.data import EstimatorData
 import numpy as np
 
-# scale of the unknowns inside the least squares: 1 bar of actuation, 0.1 kg of payload
-_PRESSURE_SCALE = 1.0e5
+# scale of the unknowns inside the filter: a gain of 1, 10 kPa of offset, 0.1 kg of payload
+_GAIN_SCALE = 1.0
+_OFFSET_SCALE = 1.0e4
 _MASS_SCALE = 0.1
 
 
@@ -49,17 +50,23 @@ class EstimatorOptions:
     Attributes
     ----------
     pressure_std : float  [Pa]
-        Standard deviation of the effective actuation about the measured pressure (sensor noise
-        and the model's error in effective area together).
+        Prior standard deviation of the actuation's offset ``δ`` about the measured pressure.
+    gain_std : float  [-]
+        Prior standard deviation of the actuation's gain error ``g``.
+    gain_walk_std : float  [-]
+        Random walk of ``g`` per update.
+    offset_walk_std : float  [Pa]
+        Random walk of ``δ`` per update, with measured pressures.
+    pressure_change_walk : float  [-]
+        ... plus this fraction of the measured pressure change since the previous update.
     actuation_walk_std : float  [Pa]
-        Random walk of the effective actuation per update (its prior when no pressure is
-        measured).
+        Random walk of ``δ`` (the actuation itself) per update without measured pressures.
     initial_actuation_std : float  [Pa]
-        Prior standard deviation of the first estimate, and the random walk of an update after
-        one that was not settled.
+        Random walk of ``δ`` of an update after one that was not settled (as from far away).
     settle_sigma : float
-        An update is settled when every pot used is within this many standard deviations of
-        its prediction; only then is the outlier test applied and the walk the small one.
+        An update is settled when the median pot (of those not stuck) is within this many
+        standard deviations of its prediction; only after a settled update is the outlier test
+        applied and the walk the small one.
     payload_std : float or None  [kg]
         Prior standard deviation of an unknown mass at the last frame (a payload, its weight
         along the scene's gravity); None: no such unknown.
@@ -77,18 +84,24 @@ class EstimatorOptions:
         Accepted lengths, as factors of each pot's rest length.
     max_pressure : float  [Pa]
         Measured pressures above this (or below ``-max_pressure``) are rejected.
-    gain_learning : float
-        Step of the learnt ratio of effective to measured actuation (0: not learnt).
-    gain_pressure : float  [Pa]
-        Pressures below this weigh less in that ratio.
     iterations : int
-        Newton steps per update (1 in a loop; more to settle from far away).
+        Linearisations per settled update (iterated Kalman update from the same prior).
+    settle_iterations : int
+        ... per update after one that was not settled (from far away: the pots' linear model
+        is not yet that of the equilibrium).
+    initial_newton_steps : int
+        Largest number of Newton steps of the first update toward the equilibrium of the
+        prior's actuation, before the pots are used.
     max_rotation_step : float  [rad]
         Largest frame rotation of one step (the control tick's limit).
 
     """
 
     pressure_std: float = 1.0e4
+    gain_std: float = 0.2
+    gain_walk_std: float = 1.0e-4
+    offset_walk_std: float = 10.0
+    pressure_change_walk: float = 0.0
     actuation_walk_std: float = 20000.0
     initial_actuation_std: float = 5.0e4
     settle_sigma: float = 4.0
@@ -100,9 +113,9 @@ class EstimatorOptions:
     motion_threshold: float = 2.0e-3
     length_range: tuple = (0.5, 1.5)
     max_pressure: float = 1.0e6
-    gain_learning: float = 0.05
-    gain_pressure: float = 2.0e4
     iterations: int = 1
+    settle_iterations: int = 5
+    initial_newton_steps: int = 20
     max_rotation_step: float = 0.2
 
 
@@ -188,37 +201,42 @@ class ShapeEstimator:
     """
 
     def __init__(self, model, actuators, effectors, sensors, gravity=None, options=None):
-        """Precompute the evaluator and start at rest."""
+        """Precompute the evaluator and the buffers, and start at rest."""
         self.options = options or EstimatorOptions()
+        opts = self.options
         self.model, self.actuators, self.effectors, self.sensors = (model, actuators, effectors,
                                                                     sensors)
         self._system = EquilibriumSystem(model, actuators,
                                          external_wrenches(model, gravity=gravity).reshape(-1))
-        self._m = actuators.n_actuators
-        self._n_mass = 0 if self.options.payload_std is None else 1
+        m = self._m = actuators.n_actuators
+        self._n_mass = 0 if opts.payload_std is None else 1
         if self._n_mass and gravity is None:
             raise ValueError("a payload unknown needs the scene's gravity")
-        self._gravity = np.zeros(3) if gravity is None else np.asarray(gravity, dtype=float)
-        size = self._system.size
-        # columns [r, J_aᵀ, J_fᵀ]: the force acts at the last frame's origin
-        self._columns = np.zeros((size, 1 + self._m + self._n_mass))
-        if self._n_mass:
-            self._columns[size - 6:size - 3, 1 + self._m] = self._gravity
-        self._scale = np.concatenate([np.full(self._m, _PRESSURE_SCALE),
+        gravity = np.zeros(3) if gravity is None else np.asarray(gravity, dtype=float)
+        self._scale = np.concatenate([np.full(m, _GAIN_SCALE), np.full(m, _OFFSET_SCALE),
                                       np.full(self._n_mass, _MASS_SCALE)])
-        walk = [self.options.actuation_walk_std] * self._m + [
-            self.options.payload_walk_std] * self._n_mass
-        self._walk = (np.asarray(walk) / self._scale) ** 2
-        self._settle_walk = self._walk.copy()
-        self._settle_walk[:self._m] = (self.options.initial_actuation_std / _PRESSURE_SCALE) ** 2
-        self._pressure_weight = (_PRESSURE_SCALE / self.options.pressure_std) ** 2
-        self._no_pressure = np.zeros(0)
-        self._effector_frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
-        self._effector_offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
+        self._data = EstimatorData(self._system, effectors, sensors, self._scale, gravity,
+                                   opts.max_rotation_step)
+        self._data.scalars[kernel.CHANGE_WALK] = opts.pressure_change_walk
+        self._data.scalars[kernel.GATE_SIGMA] = opts.outlier_sigma
+
+        def walk(offset):
+            stds = [opts.gain_walk_std] * m + [offset] * m + [opts.payload_walk_std] * (
+                self._n_mass)
+            return (np.asarray(stds) / self._scale) ** 2
+        # the walk per update: (pressures measured, settled) -> variances of z
+        self._walks = {(True, True): walk(opts.offset_walk_std),
+                       (False, True): walk(opts.actuation_walk_std),
+                       (True, False): walk(opts.initial_actuation_std),
+                       (False, False): walk(opts.initial_actuation_std)}
         rest = rest_state(model)
-        self._rest_lengths = sensors.lengths(rest.positions, rest.rotations).copy()
-        self._stuck = StuckDetector(sensors.n_sensors, self.options.stuck_window,
-                                    self.options.stuck_tolerance, self.options.motion_threshold)
+        self._length_bounds = np.outer(opts.length_range,
+                                       sensors.lengths(rest.positions, rest.rotations))
+        self._stuck = StuckDetector(sensors.n_sensors, opts.stuck_window,
+                                    opts.stuck_tolerance, opts.motion_threshold)
+        # the unknowns before each of the last stuck_window updates, the next slot and count
+        window, u = max(opts.stuck_window, 1), self._scale.size
+        self._snapshots = (np.zeros((window, u)), np.zeros((window, u, u)), [0, 0])
         self.reset()
 
     @classmethod
@@ -261,21 +279,23 @@ class ShapeEstimator:
 
         """
         state = rest_state(self.model) if state is None else state
-        self._positions = np.array(state.positions, dtype=float)
-        self._rotations = np.array(state.rotations, dtype=float)
-        x = np.zeros(self._m + self._n_mass)
-        if actuation is not None:
-            x[:self._m] = np.asarray(actuation, dtype=float)
-        self._x = x
-        std = [self.options.initial_actuation_std] * self._m + [
-            self.options.payload_std or 0.0] * self._n_mass
-        self._covariance = np.diag((np.asarray(std) / self._scale) ** 2)
+        data, m = self._data, self._m
+        data.positions[:] = state.positions
+        data.rotations[:] = state.rotations
+        data.actuation[:] = 0.0 if actuation is None else np.asarray(actuation, dtype=float)
+        data.z[:] = 0.0
+        data.z[m:2 * m] = data.actuation / _OFFSET_SCALE
+        stds = ([self.options.gain_std] * m + [self.options.pressure_std] * m
+                + [self.options.payload_std or 0.0] * self._n_mass)
+        data.covariance[:] = np.diag((np.asarray(stds) / self._scale) ** 2)
+        data.scalars[kernel.MASS] = 0.0
         self._stuck.reset()
         self._ranks = {}
         self._settled = False
-        self.gain_error = np.zeros(self._m)
-        self._increment = np.zeros(self._m + self._n_mass)
-        self._last_pressures = None
+        self._first = True
+        self._measured = None
+        self._used = np.ones(self.sensors.n_sensors, dtype=bool)
+        self._snapshots[2][:] = [0, 0]
         self._last = None
 
     def warm_up(self):
@@ -289,7 +309,12 @@ class ShapeEstimator:
     @property
     def state(self):
         """Return a copy of the estimated frames as a ``ChainState``."""
-        return ChainState(self._positions.copy(), self._rotations.copy())
+        return ChainState(self._data.positions.copy(), self._data.rotations.copy())
+
+    @property
+    def gain_error(self):
+        """Return the estimated gain error ``g`` of the actuation, (m,) [-]."""
+        return self._data.z[:self._m] * _GAIN_SCALE
 
     @property
     def last(self):
@@ -320,118 +345,187 @@ class ShapeEstimator:
                                              self.options.max_pressure)
         if reason is None:
             lengths = self.sensors.lengths_of(readings)
-            low, high = self.options.length_range
-            outside = (lengths < low * self._rest_lengths) | (lengths > high * self._rest_lengths)
+            outside = (lengths < self._length_bounds[0]) | (lengths > self._length_bounds[1])
             if outside.any():
                 names = ', '.join(n for n, o in zip(self.sensors.names, outside) if o)
                 reason = f'out_of_range: length of {names} outside the accepted range'
         if reason is not None:
             return self._rejected(reason, started)
-        stuck = self._stuck.update(lengths)
-        if pressures is not None:
-            # the prediction: the effective actuation moves as the measured pressures do
-            if self._last_pressures is not None:
-                self._increment[:self._m] = ((pressures - self._last_pressures)
-                                             * (1.0 + self.gain_error))
-            self._last_pressures = pressures
-        for _ in range(max(1, self.options.iterations)):
-            estimate = self._step(lengths, pressures, stuck)
-            if estimate is None:
+        data = self._data
+        data.stuck[:] = self._stuck.update(lengths)
+        data.measured[:] = lengths
+        measured = pressures is not None
+        data.pressures[:] = pressures if measured else 0.0
+        if self._measured is not None and measured != self._measured:
+            self._restart_actuation(measured)
+        self._measured = measured
+        if self._first:
+            data.pressure_rows[kernel.LAST_PRESSURE] = data.pressures
+            self._first = False
+            if not self._converge():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
-            if not (np.all(np.isfinite(estimate.effector_positions))
-                    and np.all(np.isfinite(self._x))):
+        data.scalars[kernel.GATE] = float(self._settled)
+        walk = self._walks[measured, self._settled]
+        self._snapshot()
+        iterations = max(1, self.options.iterations)
+        if not self._settled:
+            iterations = max(iterations, self.options.settle_iterations)
+        if iterations > 1:
+            prior = (data.z.copy(), data.covariance.copy(),
+                     data.pressure_rows[kernel.LAST_PRESSURE].copy())
+        for iteration in range(iterations):
+            if iteration:
+                # iterated update: the same prior, relinearised at the last posterior
+                data.z[:], data.covariance[:] = prior[0], prior[1]
+                data.pressure_rows[kernel.LAST_PRESSURE] = prior[2]
+            data.walk[:] = walk
+            if not self._step():
+                return self._rejected('not_positive_definite: no factor of the tangent', started)
+            if not math.isfinite(data.effector_positions.sum() + data.z.sum()):
                 # never a NaN estimate: start over from rest, the next readings settle it
                 self.reset()
                 return self._rejected('diverged: non-finite estimate, restarted at rest',
                                       started)
-        self._last = estimate._replace(seconds=time.perf_counter() - started)
+        dropped = self._used & ~data.active
+        if dropped.any() and self._snapshots[2][1] == len(self._snapshots[0]):
+            # a pot just dropped may have pulled the unknowns before: start again from them as
+            # they were before the stuck window, without it
+            self._restore_oldest()
+            data.stuck |= dropped
+            data.walk[:] = walk
+            if not self._step():
+                return self._rejected('not_positive_definite: no factor of the tangent', started)
+        self._used = data.active.copy()
+        self._last = self._estimate(lengths, time.perf_counter() - started)
         return self._last
+
+    def _restart_actuation(self, measured):
+        """
+        Start the actuation's unknowns again when pressures start or stop being measured.
+
+        ``λ = (1 + g) ∘ p + δ`` changes meaning: with pressures, gain and offset restart from
+        their prior about them; without, the offset is the current actuation. The payload is
+        kept; the next update is iterated as from far away.
+        """
+        data, m = self._data, self._m
+        data.z[:m] = 0.0
+        data.z[m:2 * m] = 0.0 if measured else data.actuation / _OFFSET_SCALE
+        stds = [self.options.gain_std] * m + [self.options.pressure_std if measured else
+                                              self.options.initial_actuation_std] * m
+        data.covariance[:2 * m, :] = 0.0
+        data.covariance[:, :2 * m] = 0.0
+        data.covariance[range(2 * m), range(2 * m)] = (np.asarray(stds)
+                                                       / self._scale[:2 * m]) ** 2
+        data.pressure_rows[kernel.LAST_PRESSURE] = data.pressures
+        self._settled = False
+
+    def _converge(self):
+        """
+        Take Newton steps at the prior's actuation and payload (no pot used) until converged.
+
+        The first update starts from the rest shape, far from the equilibrium of the measured
+        pressures; the pots' linear model is then taken near it. Returns False if no factor.
+        """
+        data = self._data
+        stuck = data.stuck.copy()
+        data.stuck[:] = True
+        for _ in range(self.options.initial_newton_steps):
+            data.walk[:] = 0.0
+            if not self._step():
+                return False
+            if (np.abs(data.moved[:, 0]) < data.noise).all():
+                break
+        data.stuck[:] = stuck
+        return True
+
+    def _snapshot(self):
+        """Keep the unknowns and their covariance before this update (a ring of the window)."""
+        z, covariance, counters = self._snapshots
+        slot = counters[0]
+        z[slot], covariance[slot] = self._data.z, self._data.covariance
+        counters[0] = (slot + 1) % len(z)
+        counters[1] = min(counters[1] + 1, len(z))
+
+    def _restore_oldest(self):
+        """Return the unknowns to the oldest snapshot of a full ring (which starts again)."""
+        z, covariance, counters = self._snapshots
+        self._data.z[:], self._data.covariance[:] = z[counters[0]], covariance[counters[0]]
+        counters[:] = [0, 0]
 
     def _rejected(self, reason, started):
         """Return a rejected update that keeps the previous estimate."""
         last = self._last
         c = self.sensors.n_sensors
-        positions = self.effectors.positions(self._positions, self._rotations)
+        data = self._data
+        positions = self.effectors.positions(data.positions, data.rotations)
         return ShapeEstimate(
             'rejected', reason, positions,
             np.full((3, 3), np.nan) if last is None else last.tip_covariance,
             np.full(c, np.nan), np.full(c, np.nan), np.zeros(c, dtype=bool),
-            0 if last is None else last.rank, self._x[:self._m].copy(), self._payload(),
+            0 if last is None else last.rank, data.actuation.copy(), self._payload(),
             time.perf_counter() - started)
 
     def _payload(self):
         """Return the estimated payload [kg]."""
-        return float(self._x[self._m]) if self._n_mass else 0.0
+        return float(self._data.scalars[kernel.MASS]) if self._n_mass else 0.0
 
-    def _learn_gain(self, actuation, pressures):
-        """
-        Follow the ratio of effective to measured actuation while every pot is in the fit.
-
-        A normalised least-mean-squares step on ``λ ≈ (1 + b) p`` (``gain_learning`` per
-        update, pressures below ``gain_pressure`` weigh less); the prior of the pressures is
-        ``(1 + b) p``, so a dropped pot leaves the gains learned before it.
-        """
-        rate, floor = self.options.gain_learning, self.options.gain_pressure
-        error = actuation - pressures * (1.0 + self.gain_error)
-        self.gain_error = np.clip(self.gain_error + rate * error * pressures
-                                  / (pressures ** 2 + floor ** 2), -0.5, 0.5)
-
-    def _rank(self, active, w_sz):
-        """Return the numerical rank of the active pots' whitened ``W_sz`` (cached per set)."""
+    def _rank(self, active):
+        """Return the numerical rank of the active pots' whitened ``W_sx`` (cached per set)."""
         key = active.tobytes()
         if key not in self._ranks:
-            whitened = w_sz[active] / self.sensors.noise_std[active, None]
+            m = self._m
+            w_sx = self._data.moved[:, 1:2 + m] if self._n_mass else self._data.moved[:, 1:1 + m]
+            whitened = (w_sx * np.concatenate([np.full(m, _OFFSET_SCALE),
+                                               np.full(self._n_mass, _MASS_SCALE)])
+                        )[active] / self.sensors.noise_std[active, None]
             self._ranks[key] = (int(np.linalg.matrix_rank(
                 whitened, tol=1e-9 * max(1.0, np.abs(whitened).max()))) if active.any() else 0)
         return self._ranks[key]
 
-    def _step(self, lengths, pressures, stuck):
-        """One linearisation, Kalman update and Newton step; None if nothing factors."""
-        m, x_previous = self._m, self._x
-        positions, rotations = self._positions, self._rotations
-        tangent, rhs = self._system.linearise(positions, rotations, x_previous[:m])
-        columns = self._columns
-        columns[:, :1 + m] = rhs
-        if self._n_mass:
-            columns[-6:-3, 0] += x_previous[m] * self._gravity
-        factor = self._system.factor(tangent)
+    def _step(self):
+        """Run one compiled update (the fallback chain if the band is not positive definite)."""
+        data = self._data
+        if kernel.estimate_tick(*data.arguments) == 0:
+            return True
+        system = self._system
+        factor = next(system.fallback_factors(data.positions, data.rotations, data.actuation,
+                                              evaluated=True), None)
         if factor is None:
-            factor = next(self._system.fallback_factors(positions, rotations, x_previous[:m],
-                                                        evaluated=True), None)
-            if factor is None:
-                return None
-        solved = factor.solve(columns)
-        ell0, jacobian = self.sensors.lengths_and_jacobian(positions, rotations)
-        measured = (self._no_pressure if pressures is None
-                    else pressures * (1.0 + self.gain_error) / _PRESSURE_SCALE)
-        z, covariance, predicted, ratio, active, w_sz = length_update(
-            jacobian @ solved, ell0, lengths, self.sensors.noise_std, self._scale,
-            x_previous / self._scale, (x_previous + self._increment) / self._scale,
-            self._covariance, self._walk if self._settled else self._settle_walk, measured,
-            self._pressure_weight, self.options.outlier_sigma, self._settled, stuck)
-        x = z * self._scale
-        self._increment = np.zeros_like(x)
-        w_ex, _, _, _ = project_effectors(solved, columns, positions, rotations,
-                                          self._effector_frames, self._effector_offsets,
-                                          x_previous)
-        w_tip = w_ex[-3:] * self._scale
-        apply_linear_step(positions, rotations, solved[:, 0], solved[:, 1:], x - x_previous,
-                          self.options.max_rotation_step)
-        # settled: every used pot within settle_sigma of its prediction (else the next update
-        # lets the actuation move by initial_actuation_std, as from far away)
-        self._settled = bool(np.all(ratio[active] < self.options.settle_sigma))
-        self._x, self._covariance = x, covariance
-        if pressures is not None and active.all() and self._settled:
-            self._learn_gain(x[:m], pressures)
-        rank = self._rank(active, w_sz)
+            return False
+        data.tick.solved[:] = factor.solve(data.tick.rhs)
+        fused.project_tick(*data.tick.project_arguments)
+        if self._n_mass:
+            column = np.zeros((system.size, 1))
+            column[-6:-3, 0] = data.gravity
+            data.mass_columns[:, 1:] = factor.solve(column)
+        data.scalars[kernel.SOLVE_MASS] = 0.0
+        kernel.estimate_from_linearisation(*data.from_linearisation_arguments)
+        data.scalars[kernel.SOLVE_MASS] = 1.0
+        return True
+
+    def _estimate(self, lengths, seconds):
+        """Return the :class:`ShapeEstimate` of the update just run."""
+        data, m = self._data, self._m
+        active = data.active.copy()
+        ratio = data.pots[kernel.RATIO]
+        # settled: most pots within settle_sigma of their prediction (else the next update lets
+        # the actuation's offset move by initial_actuation_std, as from far away, and gates no
+        # pot); one pot off is the outlier gate's
+        # and the Newton iteration converged (the residual moves no pot by as much)
+        sigma = self.options.settle_sigma
+        used = sorted(r for r, s in zip(ratio.tolist(), data.stuck.tolist()) if not s)
+        self._settled = (bool(used) and used[len(used) // 2] < sigma
+                         and bool((np.abs(data.moved[:, 0]) < sigma * data.noise).all()))
+        rank = self._rank(active)
         status, reason = 'ok', ''
         if not active.all():
-            names = self.sensors.names
+            names, stuck = self.sensors.names, data.stuck
             reason = '; '.join(
                 [f'{n} stuck' for n, s in zip(names, stuck) if s]
                 + [f'{n} {r:.0f} sigma off' for n, s, a, r in zip(names, stuck, active, ratio)
-                   if not (s or a)] + [f'rank {rank} of {x.size}'])
+                   if not (s or a)] + [f'rank {rank} of {m + self._n_mass}'])
             status = 'degraded'
-        return ShapeEstimate(status, reason, self.effectors.positions(positions, rotations),
-                             w_tip @ covariance @ w_tip.T, lengths, lengths - predicted, active,
-                             rank, x[:m].copy(), self._payload(), 0.0)
+        return ShapeEstimate(status, reason, data.effector_positions.copy(),
+                             data.tip_covariance.copy(), lengths,
+                             lengths - data.pots[kernel.PREDICTED], active, rank,
+                             data.actuation.copy(), self._payload(), seconds)

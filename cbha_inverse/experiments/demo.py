@@ -119,7 +119,7 @@ def parse_args(argv):
                         help='plant tip payload unknown to the controller [kg]')
     add_plant_pot_arguments(parser)
     parser.add_argument('--estimate-payload', type=float, default=0.0, metavar='STD',
-                        help='proprio runs: shape_estimator payload_std [kg] (0: none)')
+                        help='proprio: shape_estimator payload_std, solver tip load [kg], 0: none')
     parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
     parser.add_argument('--stereo-rig', default='cameras/demo_rig.yaml',
                         help='rig of the stereo runs (path, or relative to config/)')
@@ -384,7 +384,8 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         waited.append('stereo_tracker')
     if feedback == 'proprio':
         sim_extra = {'tip_output': 'none'}
-        solver_extra = {'feedback_topic': 'tip/estimated'}
+        solver_extra = {'feedback_topic': 'tip/estimated', 'payload_topic': (
+            'payload/estimated' if args.estimate_payload else '')}
         waited.append('shape_estimator')
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
         **_sim_overrides(args, valve_names), **sim_extra}, env)}

@@ -1,8 +1,8 @@
 """
 What ``cbha_demo`` adds for its camera-less runs (``--feedback proprio``).
 
-:func:`estimate_error` scores ``shape_estimator``'s ``tip/estimated`` against ``tip/true`` of the
-same stamps, the estimate's own accuracy beside the run's tracking error;
+:func:`estimate_error` scores ``shape_estimator``'s ``tip/estimated`` against ``tip/true``
+interpolated at its stamps, the estimate's own accuracy beside the run's tracking error;
 :func:`add_plant_pot_arguments` and :func:`plant_pot_parameters` give the plant's string pots
 their noise and a calibration of their own (which a scene then has to identify).
 """
@@ -12,7 +12,10 @@ import numpy as np
 
 def estimate_error(recorder, start, end):
     """
-    Return the RMS of ``tip/estimated`` against ``tip/true`` of the same stamp in a lap window.
+    Return the RMS of ``tip/estimated`` against ``tip/true`` at its stamps in a lap window.
+
+    ``tip/true`` is interpolated linearly at each estimate's stamp (the pots and the tip may be
+    published at different instants); estimates outside the span of ``tip/true`` are left out.
 
     Parameters
     ----------
@@ -27,14 +30,20 @@ def estimate_error(recorder, start, end):
         NaN without matching samples.
 
     """
-    if not recorder.targets:
+    if not recorder.targets or len(recorder.tips) < 2 or not recorder.estimated:
         return float('nan')
     first = min(t[0] for t in recorder.targets)
-    truth = {round(t[0], 6): np.array(t[1:]) for t in recorder.tips}
-    errors = [np.linalg.norm(np.array(e[1:]) - truth[round(e[0], 6)])
-              for e in recorder.estimated
-              if round(e[0], 6) in truth and start <= e[0] - first <= end]
-    return float(np.sqrt(np.mean(np.square(errors)))) if errors else float('nan')
+    truth = np.array(sorted(recorder.tips))
+    estimated = np.array(recorder.estimated)
+    stamps = estimated[:, 0]
+    keep = ((stamps - first >= start) & (stamps - first <= end) & (stamps >= truth[0, 0])
+            & (stamps <= truth[-1, 0]))
+    if not keep.any():
+        return float('nan')
+    reference = np.stack([np.interp(stamps[keep], truth[:, 0], truth[:, 1 + i])
+                          for i in range(3)], axis=1)
+    errors = np.linalg.norm(estimated[keep, 1:] - reference, axis=1)
+    return float(np.sqrt(np.mean(np.square(errors))))
 
 
 def add_plant_pot_arguments(parser):
@@ -56,3 +65,4 @@ def plant_pot_parameters(args):
         if text is not None:
             parameters[f'string_pot_{key}'] = [float(v) for v in text.split(',')]
     return parameters
+

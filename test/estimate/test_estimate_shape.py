@@ -153,3 +153,17 @@ def test_stuck_detector_needs_the_others_to_move():
 def test_a_scene_without_sensors_has_no_estimator():
     with pytest.raises(ValueError, match='sensors'):
         ShapeEstimator.from_scene(load_scene('tendon_6f_8c'))
+
+
+def test_stuck_detector_flags_a_minority_only():
+    """Half of the pots still while the others move: the arm holds a direction, none stuck."""
+    detector = StuckDetector(6, 4, 1e-5, 1e-3)
+    for k in range(8):
+        moving = 0.1 + 0.01 * k
+        stuck = detector.update(np.array([0.1, 0.1, 0.1, moving, moving, moving]))
+    assert not stuck.any()
+    detector.reset()
+    for k in range(8):
+        moving = 0.1 + 0.01 * k
+        stuck = detector.update(np.array([0.1, 0.1, moving, moving, moving, moving]))
+    assert stuck.tolist() == [True, True, False, False, False, False]

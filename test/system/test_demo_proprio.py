@@ -43,10 +43,11 @@ class _Recorded:
     targets = [(10.0, 0.0, 0.0, 0.0)]
     tips = [(10.0, 0.0, 0.0, 0.0), (11.0, 1.0, 0.0, 0.0), (12.0, 0.0, 0.0, 0.0)]
     estimated = [(10.0, 0.0, 0.0, 5.0), (11.0, 1.0, 0.003, 0.004), (12.0, 0.0, 0.0, 0.001),
-                 (11.5, 9.0, 9.0, 9.0)]
+                 (11.5, 0.5, 0.0, 0.002), (12.25, 9.0, 9.0, 9.0)]
 
 
-def test_estimate_error_matches_stamps_in_the_window():
-    # the sample at 10 s is before the window, the one at 11.5 s has no true tip
-    expected = ((0.005 ** 2 + 0.001 ** 2) / 2) ** 0.5
+def test_estimate_error_interpolates_the_true_tip_in_the_window():
+    # the sample at 10 s is before the window, the one at 12.25 s after the last true tip; at
+    # 11.5 s the true tip is halfway between those of 11 s and 12 s
+    expected = ((0.005 ** 2 + 0.001 ** 2 + 0.002 ** 2) / 3) ** 0.5
     assert abs(estimate_error(_Recorded, 0.5, 2.5) - expected) < 1e-12

@@ -166,24 +166,47 @@ def routing_lengths(positions, rotations, frames, offsets, span_start, span_end,
     (c,) ndarray  [m]
 
     """
-    n_points = frames.size
-    levers, _, units, span_lengths = routing_spans(positions, rotations, frames, offsets,
-                                                   span_start, span_end)
-    forces = routing_forces(units, np.ones(n_cables), span_start, span_end, span_owner,
-                            n_points)
-    lengths = np.zeros(n_cables)
-    for s in range(span_start.size):
+    n_points, n_spans = frames.size, span_start.size
+    lengths = np.empty(n_cables)
+    routing_lengths_into(positions, rotations, frames, offsets, span_start, span_end,
+                         span_owner, point_owner, lengths, jacobian,
+                         np.empty(routing_work_size(n_points, n_spans, n_cables)))
+    return lengths
+
+
+@numba.njit(cache=True)
+def routing_work_size(n_points, n_spans, n_cables):
+    """Return the length of the workspace of :func:`routing_lengths_into`."""
+    return 9 * n_points + 4 * n_spans + n_cables
+
+
+@numba.njit(cache=True)
+def routing_lengths_into(positions, rotations, frames, offsets, span_start, span_end,
+                         span_owner, point_owner, lengths, jacobian, work):
+    """:func:`routing_lengths` into ``lengths`` (c,), ``work``: :func:`routing_work_size`."""
+    n_points, n_spans = frames.size, span_start.size
+    end = 3 * n_points
+    levers = work[:end].reshape((n_points, 3))
+    points = work[end:2 * end].reshape((n_points, 3))
+    forces = work[2 * end:3 * end].reshape((n_points, 3))
+    units = work[3 * end:3 * end + 3 * n_spans].reshape((n_spans, 3))
+    span_lengths = work[3 * end + 3 * n_spans:3 * end + 4 * n_spans]
+    unit_gains = work[3 * end + 4 * n_spans:]
+    unit_gains[:] = 1.0
+    routing_spans_into(positions, rotations, frames, offsets, span_start, span_end, levers,
+                       points, units, span_lengths)
+    routing_forces_into(units, unit_gains, span_start, span_end, span_owner, forces)
+    lengths[:] = 0.0
+    for s in range(n_spans):
         lengths[span_owner[s]] += span_lengths[s]
     jacobian[:, :] = 0.0
     for p in range(n_points):
         if frames[p] > 0:
-            f, r = forces[p], levers[p]
+            wrench = point_wrench(forces[p], levers[p])
             row = point_owner[p]
             col = 6 * (frames[p] - 1)
-            wrench = point_wrench(f, r)
             for i in range(6):
                 jacobian[row, col + i] -= wrench[i]
-    return lengths
 
 
 @numba.njit(cache=True)

@@ -1,113 +1,364 @@
 """
-Compiled Kalman step of the shape estimator on string-potentiometer lengths.
+Compiled update of the shape estimator on string-potentiometer lengths, one entry per update.
 
-:func:`length_update` is the one implementation of the estimator's update
-(:mod:`cbha_inverse.estimate.shape`): the unknowns ``z`` (effective actuation and payload,
-scaled) follow a random walk; the prior is the previous estimate and, when measured, the
-pressures; the measurements are the pot lengths, linear in ``z`` through
-``W_sz = J_s K⁻¹ [J_aᵀ, J_μᵀ] diag(scale)`` of one linearisation of the equilibrium.
+The unknowns ``z`` (scaled: ``x = scale z``) are the effective actuation's gain and offset about
+the measured pressures, ``λ = (1 + g) ∘ p + δ``, and optionally a payload ``μ`` (a mass at the
+last frame); they follow a random walk. At the current frames one linearisation of the
+equilibrium (the control tick's :func:`cbha_inverse.core._kernels.tick.linearise_tick`) gives
+``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s``
+(:func:`cbha_inverse.core._kernels.cables.routing_lengths_into`) the lengths after the Newton
+step are linear in ``z``: ``ℓ = base + H z``, ``H = W_sa [diag(p), I] | W_sμ``,
+``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, paper eq. 11). :func:`kalman_lengths` is the Kalman
+update on them, :func:`estimate_tick` the whole update: linearisation, Kalman update, the Newton
+step of the same factorisation (:func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`)
+and the effector positions, over the preallocated buffers of
+:class:`cbha_inverse.estimate.data.EstimatorData` (rows below).
 """
 
 import math
 
+from cbha_inverse.core._kernels import tick
+from cbha_inverse.core._kernels.band import band_solve
+from cbha_inverse.core._kernels.cables import routing_lengths_into
+from cbha_inverse.core._kernels.projection import effector_points_into, project_effectors_into
+from cbha_inverse.core._kernels.retraction import apply_linear_step_into
 import numba
-import numpy as np
+
+# rows of the per-pot vectors (POT_ROWS, c)
+MEASURED, NOISE, LENGTH0, BASE, PREDICTED, RATIO = 0, 1, 2, 3, 4, 5
+POT_ROWS = 6
+# rows of the unknowns' vectors (STATE_ROWS, u)
+Z, WALK, SCALE, GAIN_OF = 0, 1, 2, 3
+STATE_ROWS = 4
+# rows of the actuator vectors (PRESSURE_ROWS, m): measured pressures, those of the last update
+PRESSURE, LAST_PRESSURE = 0, 1
+PRESSURE_ROWS = 2
+# entries of the scalars (SCALARS,): payload of the linearisation [kg], whether a payload is
+# estimated, relative walk of the offset per measured pressure change, outlier gate [sigma],
+# gate on (1) / off (0), payload column solved by the band factor (1) or given (0), largest
+# frame rotation of a step [rad]
+MASS, HAS_MASS, CHANGE_WALK, GATE_SIGMA, GATE, SOLVE_MASS, MAX_ROTATION = 0, 1, 2, 3, 4, 5, 6
+SCALARS = 7
+# positions in TickData.linearise_arguments (cbha_inverse.core.inverse.tick_data)
+ARG_EXTERNAL, ARG_BAND, ARG_RHS, ARG_SOLVED, ARG_EFFECTOR_MATRICES = 9, 21, 22, 23, 25
+ARG_EFFECTOR_FRAMES, ARG_EFFECTOR_OFFSETS = 28, 29
 
 
 @numba.njit(cache=True)
-def length_update(moved, ell0, lengths, noise, scale, z_previous, z_prior, covariance, walk,
-                  pressures,
-                  pressure_weight, outlier_sigma, gate, stuck):
+def kalman_lengths(h, pots, state, covariance, stuck, active, work):
     """
-    Return the posterior of one update and the pots' innovations.
+    Run the Kalman update of the unknowns on the pot lengths, in place.
+
+    The prior is ``state[Z]`` with ``covariance + diag(state[WALK])``; a pot's innovation
+    against it, over its standard deviation, is ``pots[RATIO]``; the pots not ``stuck`` and
+    within the gate ``work[u + 1]`` standard deviations of it (0: no gate; no gate either when
+    half of the pots or more are off) are ``active`` and update the mean
+    and the covariance one after the other (exact for independent noise).
 
     Parameters
     ----------
-    moved : (c, 1 + u) ndarray
-        ``J_s K⁻¹ [r, J_aᵀ, J_μᵀ]`` [m, m/Pa, m/kg].
-    ell0 : (c,) ndarray  [m]
-        Pot lengths at the linearisation.
-    lengths : (c,) ndarray  [m]
-        Measured lengths.
-    noise : (c,) ndarray  [m]
-        Their standard deviations.
-    scale : (u,) ndarray
-        Unit of every unknown (``x = scale z``).
-    z_previous : (u,) ndarray
-        The previous estimate (scaled), where the step starts.
-    z_prior : (u,) ndarray
-        The predicted mean (scaled): the previous estimate moved by the measured change of the
-        pressures since it.
+    h : (c, u) ndarray
+        ``dℓ/dz`` [m].
+    pots : (POT_ROWS, c) ndarray
+        Reads ``MEASURED``, ``NOISE`` [m] and ``BASE`` (``ℓ = base + H z``), writes ``RATIO``
+        and ``PREDICTED`` (``base + H z`` at the posterior).
+    state : (STATE_ROWS, u) ndarray
+        ``Z`` (prior mean in, posterior out) and ``WALK`` (variance per update).
     covariance : (u, u) ndarray
-        Its covariance (scaled).
-    walk : (u,) ndarray
-        Variance of the random walk per update (scaled).
-    pressures : (p,) ndarray
-        Measured first ``p`` unknowns, scaled (``p = 0``: none measured).
-    pressure_weight : float
-        Inverse variance of a scaled pressure measurement.
-    outlier_sigma : float
-        Drop a pot whose innovation exceeds this many standard deviations (when ``gate``).
-    gate : bool
-        Apply the innovation test.
+        Covariance of ``z`` (in and out).
     stuck : (c,) bool ndarray
         Pots left out whatever their innovation.
+    active : (c,) bool ndarray
+        Receives the pots used.
+    work : (u + 2,) ndarray
+        Workspace; ``work[u + 1]`` is the gate [sigma] (0: off).
+
+    """
+    c, u = h.shape
+    z = state[Z]
+    for j in range(u):
+        covariance[j, j] += state[WALK, j]
+    gain = work[:u]
+    sigma = work[u + 1]
+    for i in range(c):
+        innovation = pots[MEASURED, i] - pots[BASE, i]
+        spread = pots[NOISE, i] * pots[NOISE, i]
+        for j in range(u):
+            innovation -= h[i, j] * z[j]
+            acc = 0.0
+            for k in range(u):
+                acc += covariance[j, k] * h[i, k]
+            spread += h[i, j] * acc
+        pots[RATIO, i] = abs(innovation) / math.sqrt(spread)
+    # the gate drops a minority of pots: when more are off, the linear model is (a jump of the
+    # arm), not the pots
+    off = 0
+    for i in range(c):
+        off += not stuck[i] and sigma > 0.0 and pots[RATIO, i] > sigma
+    for i in range(c):
+        active[i] = not stuck[i] and not (2 * off < c and sigma > 0.0
+                                          and pots[RATIO, i] > sigma)
+    for i in range(c):
+        if not active[i]:
+            continue
+        innovation = pots[MEASURED, i] - pots[BASE, i]
+        spread = pots[NOISE, i] * pots[NOISE, i]
+        for j in range(u):
+            innovation -= h[i, j] * z[j]
+            acc = 0.0
+            for k in range(u):
+                acc += covariance[j, k] * h[i, k]
+            gain[j] = acc
+            spread += h[i, j] * acc
+        for j in range(u):
+            z[j] += gain[j] * innovation / spread
+        for j in range(u):
+            for k in range(u):
+                covariance[j, k] -= gain[j] * gain[k] / spread
+    for j in range(u):
+        for k in range(j):
+            mean = 0.5 * (covariance[j, k] + covariance[k, j])
+            covariance[j, k] = mean
+            covariance[k, j] = mean
+    for i in range(c):
+        acc = pots[BASE, i]
+        for j in range(u):
+            acc += h[i, j] * z[j]
+        pots[PREDICTED, i] = acc
+
+
+@numba.njit(cache=True)
+def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved, h, state,
+                  covariance, pressures, scalars, gravity, base_external, mass_columns,
+                  mass_rhs, mass_effectors, stuck, active, free_step, effector_w, effector_positions,
+                  tip_covariance, work):
+    """
+    Run one estimator update (linearise, Kalman update, Newton step), in place.
+
+    Parameters
+    ----------
+    linearise_arguments : tuple
+        :attr:`cbha_inverse.core.inverse.tick_data.TickData.linearise_arguments` of the
+        estimator's own tick data (frames, ``vectors[ACTUATION]`` = the actuation of the
+        linearisation, the model terms and buffers).
+    cholesky : bool
+        Factor the symmetric band (else return at once for the fallback chain).
+    routing : tuple
+        The pots' routing (frames, offsets, span start, end, owner, point owner) and its
+        workspace (:func:`~cbha_inverse.core._kernels.cables.routing_work_size`).
+    pots : (POT_ROWS, c) ndarray
+        Per-pot rows (see :func:`kalman_lengths`; ``LENGTH0`` receives ``ℓ0``).
+    jacobian : (c, 6n) ndarray
+        Receives ``J_s``.
+    moved : (c, m + 2) ndarray
+        Receives ``J_s K⁻¹ [r, J_aᵀ]`` and, last, ``J_s K⁻¹ J_μᵀ`` [m, m/Pa, m/kg].
+    h : (c, u) ndarray
+        Receives ``dℓ/dz``.
+    state : (STATE_ROWS, u) ndarray
+        ``Z``, ``WALK``, ``SCALE`` and ``GAIN_OF`` (1 for the gains, 0 otherwise) of the
+        unknowns ``(g, δ[, μ])``.
+    covariance : (u, u) ndarray
+        Covariance of ``z``.
+    pressures : (PRESSURE_ROWS, m) ndarray  [Pa]
+        Measured pressures (zero when none) and those of the previous update.
+    scalars : (SCALARS,) ndarray
+        See the module's rows.
+    gravity : (3,) ndarray  [m/s^2]
+        The payload's acceleration.
+    base_external : (6n,) ndarray  [N, N*m]
+        External wrenches without the payload.
+    mass_columns, mass_rhs : (6n, 2) ndarray
+        Workspace: ``K⁻¹ [r, J_μᵀ]`` (the payload column solved here with ``SOLVE_MASS``, else
+        given) and ``[r, J_μᵀ]``.
+    mass_effectors : tuple
+        Workspace of the payload's projection on the effectors: ``w`` (3k, 1), ``w_aa``
+        (1, 1), ``offset`` (3k,), ``moved`` (3k, 2), ``levers`` (k, 3), ``previous`` (1,).
+    stuck, active : (c,) bool ndarray
+        Pots left out; receives the pots used.
+    free_step : (6n,) ndarray
+        Workspace: ``K⁻¹ r + K⁻¹ J_μᵀ Δμ``.
+    effector_w : (3, u) ndarray
+        Receives the last effector's ``d p / dz`` [m].
+    effector_positions : (k, 3) ndarray  [m]
+        Receives the effector positions after the step.
+    tip_covariance : (3, 3) ndarray  [m^2]
+        Receives the last effector's covariance ``W P Wᵀ`` (``W = effector_w``, linear).
+    work : (max(u + 2, n * 6 + 21),) ndarray
+        Workspace.
 
     Returns
     -------
-    z : (u,) ndarray
-        Posterior mean (scaled).
-    posterior : (u, u) ndarray
-        Posterior covariance (scaled).
-    predicted : (c,) ndarray  [m]
-        Linear prediction of the lengths at ``z``.
-    ratio : (c,) ndarray
-        ``|innovation| / its standard deviation`` against the prior.
-    active : (c,) bool ndarray
-        Pots used.
-    w_sz : (c, u) ndarray  [m]
-        The pots' sensitivity to ``z``.
+    int
+        0 when the update ran, else the band Cholesky's code (nothing changed but the
+        evaluation, for the fallback chain; then run :func:`estimate_from_linearisation`).
 
     """
-    c, width = moved.shape
-    u = width - 1
-    w_sz = np.empty((c, u))
-    base = np.empty(c)
+    external = linearise_arguments[ARG_EXTERNAL]
+    size = external.size
+    for row in range(size):
+        external[row] = base_external[row]
+    if scalars[HAS_MASS] > 0.0:
+        for i in range(3):
+            external[size - 6 + i] += scalars[MASS] * gravity[i]
+    info, _ = tick.linearise_tick(*linearise_arguments, cholesky)
+    if info != 0:
+        return info
+    estimate_from_linearisation(linearise_arguments, routing, pots, jacobian, moved, h, state,
+                                covariance, pressures, scalars, gravity, mass_columns,
+                                mass_rhs, mass_effectors, stuck, active, free_step,
+                                effector_w, effector_positions, tip_covariance, work)
+    return 0
+
+
+@numba.njit(cache=True)
+def estimate_from_linearisation(linearise_arguments, routing, pots, jacobian, moved, h, state,
+                                covariance, pressures, scalars, gravity, mass_columns,
+                                mass_rhs, mass_effectors, stuck, active, free_step,
+                                effector_w, effector_positions, tip_covariance, work):
+    """:func:`estimate_tick` after its linearisation (the tick data hold a solved one)."""
+    positions, rotations = linearise_arguments[0], linearise_arguments[1]
+    vectors = linearise_arguments[2]
+    band, rhs = linearise_arguments[ARG_BAND], linearise_arguments[ARG_RHS]
+    solved = linearise_arguments[ARG_SOLVED]
+    w_ea = linearise_arguments[ARG_EFFECTOR_MATRICES][tick.W_EA]
+    effector_frames = linearise_arguments[ARG_EFFECTOR_FRAMES]
+    effector_offsets = linearise_arguments[ARG_EFFECTOR_OFFSETS]
+    size, m = solved.shape[0], solved.shape[1] - 1
+    c, u = h.shape
+    has_mass = scalars[HAS_MASS] > 0.0
+    routing_lengths_into(positions, rotations, routing[0], routing[1], routing[2], routing[3],
+                         routing[4], routing[5], pots[LENGTH0], jacobian, routing[6])
+    if has_mass:
+        for row in range(size):
+            mass_columns[row, 0] = solved[row, 0]
+            mass_rhs[row, 0] = rhs[row, 0]
+            mass_rhs[row, 1] = 0.0
+        for i in range(3):
+            mass_rhs[size - 6 + i, 1] = gravity[i]
+        if scalars[SOLVE_MASS] > 0.0:
+            for row in range(size):
+                mass_columns[row, 1] = mass_rhs[row, 1]
+            factor = band[:-1].reshape((size, (band.size - 1) // size))
+            band_solve(factor, mass_columns[:, 1:])
+        w_mass, w_aa, offset, levers_moved, levers, previous = mass_effectors
+        project_effectors_into(mass_columns, mass_rhs, positions, rotations, effector_frames,
+                               effector_offsets, previous, w_mass, w_aa, offset, levers_moved,
+                               levers)
     for i in range(c):
-        acc = ell0[i] + moved[i, 0]
-        for j in range(u):
-            w_sz[i, j] = moved[i, 1 + j] * scale[j]
-            acc -= w_sz[i, j] * z_previous[j]
-        base[i] = acc
-    grown = covariance.copy()
-    for j in range(u):
-        grown[j, j] += walk[j]
-    information = np.linalg.inv(grown)
-    vector = information @ z_prior
-    for j in range(pressures.size):
-        information[j, j] += pressure_weight
-        vector[j] += pressure_weight * pressures[j]
-    prior = np.linalg.inv(information)
-    prior_mean = prior @ vector
-    ratio = np.empty(c)
-    active = np.empty(c, dtype=np.bool_)
+        for j in range(m + 2):
+            acc = 0.0
+            if j <= m:
+                for row in range(size):
+                    acc += jacobian[i, row] * solved[row, j]
+            elif has_mass:
+                for row in range(size):
+                    acc += jacobian[i, row] * mass_columns[row, 1]
+            moved[i, j] = acc
+    # ℓ = ℓ0 + J_s K⁻¹ r + W_sa (λ(z) - λ_lin) + W_sμ (μ - μ_lin), λ(z) = (1 + g) ∘ p + δ
+    lam = vectors[tick.ACTUATION]
+    p = pressures[PRESSURE]
+    scale = state[SCALE]
     for i in range(c):
-        spread = noise[i] * noise[i]
-        innovation = lengths[i] - base[i]
-        for j in range(u):
-            innovation -= w_sz[i, j] * prior_mean[j]
-            for k in range(u):
-                spread += w_sz[i, j] * prior[j, k] * w_sz[i, k]
-        ratio[i] = abs(innovation) / math.sqrt(spread)
-        active[i] = not stuck[i] and not (gate and ratio[i] > outlier_sigma)
-    for i in range(c):
-        if active[i]:
-            weight = 1.0 / (noise[i] * noise[i])
+        acc = pots[LENGTH0, i] + moved[i, 0]
+        for j in range(m):
+            acc += moved[i, 1 + j] * (p[j] - lam[j])
+            h[i, j] = moved[i, 1 + j] * p[j] * scale[j]
+            h[i, m + j] = moved[i, 1 + j] * scale[m + j]
+        if has_mass:
+            acc -= moved[i, m + 1] * scalars[MASS]
+            h[i, 2 * m] = moved[i, m + 1] * scale[2 * m]
+        pots[BASE, i] = acc
+    # the offset's walk grows with the measured change of the pressures
+    for j in range(m):
+        change = scalars[CHANGE_WALK] * (p[j] - pressures[LAST_PRESSURE, j]) / scale[m + j]
+        state[WALK, m + j] += change * change
+        pressures[LAST_PRESSURE, j] = p[j]
+    work[u + 1] = scalars[GATE_SIGMA] if scalars[GATE] > 0.0 else 0.0
+    kalman_lengths(h, pots, state, covariance, stuck, active, work)
+    # the Newton step of the same factorisation to the new actuation and payload
+    change = vectors[tick.CHANGE]
+    z = state[Z]
+    for j in range(m):
+        new = (1.0 + z[j] * scale[j]) * p[j] + z[m + j] * scale[m + j]
+        change[j] = new - lam[j]
+        lam[j] = new
+    mass_change = z[2 * m] * scale[2 * m] - scalars[MASS] if has_mass else 0.0
+    for row in range(size):
+        free_step[row] = solved[row, 0] + (mass_columns[row, 1] * mass_change if has_mass
+                                           else 0.0)
+    n = size // 6
+    increments = work[:6 * n].reshape((n, 6))
+    rotation_work = work[6 * n:6 * n + 21].reshape((7, 3))
+    apply_linear_step_into(positions, rotations, free_step, solved[:, 1:], change,
+                           scalars[MAX_ROTATION], increments, rotation_work)
+    if has_mass:
+        scalars[MASS] += mass_change
+    effector_points_into(positions, rotations, effector_frames, effector_offsets,
+                         effector_positions)
+    last = w_ea.shape[0] - 3
+    for i in range(3):
+        for j in range(m):
+            effector_w[i, j] = w_ea[last + i, j] * p[j] * scale[j]
+            effector_w[i, m + j] = w_ea[last + i, j] * scale[m + j]
+        if has_mass:
+            effector_w[i, 2 * m] = mass_effectors[0][last + i, 0] * scale[2 * m]
+    for i in range(3):
+        for k in range(3):
+            acc = 0.0
             for j in range(u):
-                vector[j] += weight * w_sz[i, j] * (lengths[i] - base[i])
-                for k in range(u):
-                    information[j, k] += weight * w_sz[i, j] * w_sz[i, k]
-    posterior = np.linalg.inv(information)
-    z = posterior @ vector
-    predicted = base + w_sz @ z
-    return z, posterior, predicted, ratio, active, w_sz
+                for q in range(u):
+                    acc += effector_w[i, j] * covariance[j, q] * effector_w[k, q]
+            tip_covariance[i, k] = acc
+
+
+
+@numba.njit(cache=True)
+def stuck_pots(history, counters, lengths, stuck, tolerance, motion):
+    """
+    Add one reading to a window and update which pots are stuck, in place.
+
+    Over the window, a pot is stuck when its range (max - min) is below ``tolerance`` while the
+    median range of the other pots exceeds ``motion`` (more than half of them move more), and
+    fewer than half of the pots are; a stuck pot stays stuck until its own range exceeds
+    ``tolerance`` again.
+
+    Parameters
+    ----------
+    history : (window, c) ndarray  [m]
+        The last readings (a ring).
+    counters : (2,) int ndarray
+        Next slot of the ring and number of readings in it.
+    lengths : (c,) ndarray  [m]
+        The new reading.
+    stuck : (c,) bool ndarray
+        Stuck pots (in and out).
+    tolerance, motion : float  [m]
+        As above.
+
+    """
+    window, c = history.shape
+    history[counters[0]] = lengths
+    counters[0] = (counters[0] + 1) % window
+    counters[1] = min(counters[1] + 1, window)
+    if counters[1] < window:
+        return
+    moving = 0
+    for i in range(c):
+        low, high = history[0, i], history[0, i]
+        for k in range(1, window):
+            low, high = min(low, history[k, i]), max(high, history[k, i])
+        lengths_range = high - low
+        moving += lengths_range > motion
+        stuck[i] = stuck[i] and lengths_range < tolerance
+    count = 0
+    for i in range(c):
+        low, high = history[0, i], history[0, i]
+        for k in range(1, window):
+            low, high = min(low, history[k, i]), max(high, history[k, i])
+        if high - low < tolerance:
+            others = moving - (high - low > motion)
+            stuck[i] = stuck[i] or 2 * others > c - 1
+        count += stuck[i]
+    if 2 * count >= c:
+        # half of the pots or more still: the arm holds a direction, no pot is broken
+        stuck[:] = False

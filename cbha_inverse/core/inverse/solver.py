@@ -125,6 +125,9 @@ class InverseSolver:
                       else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
                                                     (m,))))
         self._external = external_wrenches(model, gravity=gravity).reshape(-1)
+        # the model's loads without a payload, and the payload's acceleration (set_payload)
+        self._unloaded = self._external.copy()
+        self._gravity = None if gravity is None else np.asarray(gravity, dtype=float)
         self._tick = EquilibriumSystem(model, actuators, self._external)
         self._active_set = ActiveSetQP(m)
         self._data = TickData(self._tick, effectors, self._scale, self.lower_bounds,
@@ -170,6 +173,36 @@ class InverseSolver:
         self._pending = False         # its linear step with the current actuation is not applied
         self._age = 0
         self._prepared = False
+
+    def set_payload(self, mass):
+        """
+        Add a known mass at the last frame to the model's loads (e.g. an estimated payload).
+
+        The tick's equilibrium then carries its weight (a load in ``f_ext`` of paper eq. 9, the
+        same as a scene's ``tip_payload_mass``), so the QP compensates it in the model instead
+        of leaving it to the closed loop's correction. It replaces the previous one; the next
+        linearisation uses it.
+
+        Parameters
+        ----------
+        mass : float  [kg]
+            The payload (0: none).
+
+        Raises
+        ------
+        ValueError
+            If ``mass`` is not finite, or the model has no gravity.
+
+        """
+        mass = float(mass)
+        if not math.isfinite(mass):
+            raise ValueError(f'payload must be finite, got {mass}')
+        if self._gravity is None:
+            raise ValueError('a payload needs the scene gravity')
+        size = self._external.size
+        self._external[size - 6:size - 3] = self._unloaded[size - 6:size - 3] + mass * (
+            self._gravity)
+        self._age = self.options.relinearize_every
 
     def warm_up(self):
         """

@@ -50,7 +50,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -89,6 +89,10 @@ class InverseSolverParams:
     frame_id: str = param('cbha_base', 'the only accepted frame_id of target and tip/measured')
     feedback_topic: str = param('tip/measured', 'closed loop: the measured tip (PointStamped); '
                                 'tip/estimated for the string-pot estimate of shape_estimator')
+    payload_topic: str = param('', 'a known tip payload (std_msgs/Float64, kg) in the model '
+                               'loads, e.g. payload/estimated of shape_estimator (empty: none)')
+    max_payload: float = param(1.0, 'payloads beyond +-this are rejected [kg]', low=0.0,
+                               high=100.0)
     workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected', live=True)
     workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]', live=True)
@@ -170,6 +174,8 @@ class InverseSolverNode(Node):
         self.tf = make_broadcaster(self)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
         self.create_subscription(PointStamped, p.feedback_topic, self._on_measured, MEASURED_QOS)
+        if p.payload_topic:
+            self.create_subscription(Float64, p.payload_topic, self._on_payload, MEASURED_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)
@@ -247,6 +253,13 @@ class InverseSolverNode(Node):
         self.rejected[key] = self.rejected.get(key, 0) + 1
         self.get_logger().warn(f'rejected {topic}: {detail} (total {self.rejected[key]})',
                                throttle_duration_sec=self.params.log_throttle)
+
+    def _on_payload(self, message):
+        mass = float(message.data)
+        if not abs(mass) <= self.params.max_payload:
+            self._count_rejected('payload', 'out_of_range', f'{mass} kg')
+            return
+        self.solver.set_payload(mass)
 
     def _on_target(self, message):
         received = time.perf_counter()

@@ -36,7 +36,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'shape_estimator'
@@ -55,11 +55,17 @@ class ShapeEstimatorParams:
                                     low=0.001, high=60.0, live=True)
     reading_timeout: float = param(0.5, 'a reading stamped older than this is rejected as stale '
                                    '[s] (0: never)', low=0.0, high=60.0, live=True)
-    pressure_std: float = param(10000.0, 'effective actuation about the measured pressure [Pa]',
-                                low=1.0, high=1.0e6)
-    actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update [Pa]',
-                                      low=1.0, high=1.0e6)
-    payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none)',
+    pressure_std: float = param(10000.0, 'prior std of the effective actuation about the '
+                                'measured pressure [Pa]', low=1.0, high=1.0e6)
+    gain_walk_std: float = param(1.0e-4, 'random walk per update of the gain of the effective '
+                                 'actuation about the measured pressure [-]', low=0.0, high=1.0)
+    offset_walk_std: float = param(10.0, 'random walk per update of the offset of the effective '
+                                   'actuation about the measured pressure [Pa]', low=0.0,
+                                   high=1.0e6)
+    actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update without '
+                                      'measured pressures [Pa]', low=1.0, high=1.0e6)
+    payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none); its '
+                               'estimate is published on payload/estimated',
                                low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
                                  low=1.0, high=1.0e6)
@@ -97,7 +103,8 @@ class ShapeEstimatorNode(Node):
             self.scene = load_scene(p.scene)
             self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
             self.estimator = ShapeEstimator.from_scene(self.scene, EstimatorOptions(
-                pressure_std=p.pressure_std, actuation_walk_std=p.actuation_walk_std,
+                pressure_std=p.pressure_std, gain_walk_std=p.gain_walk_std,
+                offset_walk_std=p.offset_walk_std, actuation_walk_std=p.actuation_walk_std,
                 payload_std=p.payload_std or None, outlier_sigma=p.outlier_sigma,
                 stuck_window=p.stuck_window))
         except (ValueError, FileNotFoundError, KeyError) as exc:
@@ -113,6 +120,8 @@ class ShapeEstimatorNode(Node):
         self.last = None
         self.estimate_times = TimingStats()
         self.tip_publisher = self.create_publisher(PointStamped, 'tip/estimated', MEASURED_QOS)
+        self.payload_publisher = (self.create_publisher(Float64, 'payload/estimated',
+                                                        MEASURED_QOS) if p.payload_std else None)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone_estimated',
                                                       MARKER_QOS)
         self.create_subscription(JointState, 'string_pots', self._on_pots, MEASURED_QOS)
@@ -169,6 +178,8 @@ class ShapeEstimatorNode(Node):
                                    throttle_duration_sec=p.log_throttle)
         self.tip_publisher.publish(point_stamped(estimate.tip, message.header.stamp,
                                                  p.frame_id))
+        if self.payload_publisher is not None:
+            self.payload_publisher.publish(Float64(data=estimate.payload))
         self.published += 1
 
     def _publish_markers(self):

@@ -1,0 +1,98 @@
+"""
+The buffers of the shape estimator's update, and the argument tuple of its compiled entry.
+
+:class:`EstimatorData` holds every array that
+:func:`cbha_inverse.core._kernels.estimation.estimate_tick` reads and writes: the estimator's
+own control-tick data (frames, actuation, the linearisation;
+:class:`cbha_inverse.core.inverse.tick_data.TickData`), the pots' routing and rows, the
+unknowns and their covariance. An update passes :attr:`EstimatorData.arguments`, built once; named
+attributes are views of the same memory.
+"""
+
+from cbha_inverse.core._kernels import estimation as rows
+from cbha_inverse.core._kernels.cables import routing_work_size
+from cbha_inverse.core.inverse.results import InverseOptions
+from cbha_inverse.core.inverse.tick_data import TickData
+import numpy as np
+
+
+class EstimatorData:
+    """
+    Preallocated buffers of one estimator's updates.
+
+    Parameters
+    ----------
+    system : cbha_inverse.core.system.EquilibriumSystem
+        The estimator's evaluator (with the fused linearisation).
+    effectors : cbha_inverse.core.actuation.effectors.PointEffectors
+        The effectors (``k``, the tip last).
+    sensors : cbha_inverse.core.sensors.StringPots
+        The pots (``c``).
+    scale : (u,) ndarray
+        Unit of every unknown ``(g, δ[, μ])`` (``x = scale z``).
+    gravity : (3,) ndarray  [m/s^2]
+        The payload's acceleration.
+    max_rotation_step : float  [rad]
+        Largest frame rotation of one step.
+
+    Raises
+    ------
+    ValueError
+        If the scene's actuators need the general evaluation (no fused linearisation).
+
+    """
+
+    def __init__(self, system, effectors, sensors, scale, gravity, max_rotation_step):
+        """Allocate every buffer and build the argument tuple."""
+        n, m, k, c = system.n, system.m, effectors.n_effectors, sensors.n_sensors
+        u = scale.size
+        zeros = np.zeros(m)
+        self.tick = TickData(system, effectors, np.ones(m), zeros, np.ones(m), None,
+                             InverseOptions(max_rotation_step=max_rotation_step), 1)
+        if not self.tick.fused:
+            raise ValueError('the shape estimator needs the fused linearisation (one cable '
+                             'group at most, no skinned-mesh cavities)')
+        arguments = self.tick.linearise_arguments
+        self.external = arguments[rows.ARG_EXTERNAL]
+        self.base_external = self.external.copy()
+        self.positions, self.rotations = self.tick.positions, self.tick.rotations
+        self.actuation = self.tick.actuation
+        self.pots = np.zeros((rows.POT_ROWS, c))
+        self.measured, self.noise = self.pots[rows.MEASURED], self.pots[rows.NOISE]
+        self.noise[:] = sensors.noise_std
+        self.state = np.zeros((rows.STATE_ROWS, u))
+        self.z, self.walk = self.state[rows.Z], self.state[rows.WALK]
+        self.state[rows.SCALE] = scale
+        self.covariance = np.zeros((u, u))
+        self.pressure_rows = np.zeros((rows.PRESSURE_ROWS, m))
+        self.pressures = self.pressure_rows[rows.PRESSURE]
+        self.scalars = np.zeros(rows.SCALARS)
+        self.scalars[rows.HAS_MASS] = float(u > 2 * m)
+        self.scalars[rows.MAX_ROTATION] = max_rotation_step
+        self.jacobian = np.zeros((c, 6 * n))
+        self.moved = np.zeros((c, m + 2))
+        self.h = np.zeros((c, u))
+        self.mass_columns, self.mass_rhs = np.zeros((6 * n, 2)), np.zeros((6 * n, 2))
+        self.mass_effectors = (np.zeros((3 * k, 1)), np.zeros((1, 1)), np.zeros(3 * k),
+                               np.zeros((3 * k, 2)), np.zeros((k, 3)), np.zeros(1))
+        self.stuck = np.zeros(c, dtype=np.bool_)
+        self.active = np.zeros(c, dtype=np.bool_)
+        self.effector_w = np.zeros((3, u))
+        self.effector_positions = np.zeros((k, 3))
+        self.tip_covariance = np.zeros((3, 3))
+        self.gravity = np.asarray(gravity, dtype=float)
+        routing = sensors.routing
+        work = np.zeros(routing_work_size(routing[0].size, routing[2].size, c))
+        self.arguments = (arguments, system.tick_cholesky, routing + (work,), self.pots,
+                          self.jacobian, self.moved, self.h, self.state, self.covariance,
+                          self.pressure_rows, self.scalars, self.gravity,
+                          self.base_external, self.mass_columns, self.mass_rhs,
+                          self.mass_effectors, self.stuck, self.active, np.zeros(6 * n),
+                          self.effector_w, self.effector_positions, self.tip_covariance,
+                          np.zeros(max(u + 2, 6 * n + 21)))
+
+    @property
+    def from_linearisation_arguments(self):
+        """Return the arguments of ``estimate_from_linearisation`` (after a fallback)."""
+        skip = (1, 12)   # cholesky, base_external
+        return tuple(a for i, a in enumerate(self.arguments) if i not in skip)
