@@ -65,4 +65,3 @@ def plant_pot_parameters(args):
         if text is not None:
             parameters[f'string_pot_{key}'] = [float(v) for v in text.split(',')]
     return parameters
-
