@@ -43,6 +43,19 @@ def build_and_load(workspace):
     started = time.perf_counter()
     prefix = build_robotino_msgs(workspace)
     print(f'robotino_msgs built with colcon in {time.perf_counter() - started:.1f} s')
+    return load(prefix)
+
+
+def load(prefix):
+    """
+    Make the ``robotino_msgs`` built under the install prefix ``prefix`` importable here.
+
+    Returns
+    -------
+    pathlib.Path
+        ``prefix``.
+
+    """
     for library in sorted((prefix / 'lib').glob('*.so')):
         ctypes.CDLL(str(library), mode=os.RTLD_GLOBAL)
     version = f'python{sys.version_info.major}.{sys.version_info.minor}'
