@@ -45,7 +45,7 @@ def pytest_configure(config):
     config.addinivalue_line('markers', 'flake8: ament_flake8')
     config.addinivalue_line('markers', 'pep257: ament_pep257')
     config.addinivalue_line(
-        'markers', 'timing: bounds on the timing of node processes; the isolated phase of make test')
+        'markers', 'timing: bounds on the timing of node processes (make test runs them alone)')
 
 
 # The timing phase of ``make test`` (``-m timing``, one process, after the rest ran on every
@@ -55,8 +55,8 @@ def pytest_configure(config):
 # - it is an end-to-end run: a file in test/system/ not in UNTIMED_SYSTEM_FILES (so a new system
 #   test is isolated without being listed);
 # - its module runs an in-process closed loop through the helpers of test/ros_helpers.py
-#   (CLOSED_LOOP_CALLS in its source); ``record_tracking`` also refuses to run on a pytest-xdist
-#   worker, so a loop reached some other way fails loudly instead of flaking.
+#   (CLOSED_LOOP_CALLS in its source); ``record_tracking`` also fails in a test that is not a
+#   timing test, so a loop reached some other way fails loudly instead of flaking.
 TIMING_FILES = (
     'test/ros/test_ros_excite.py', 'test/ros/test_ros_lifecycle.py',
     'test/ros/test_ros_robotino_bridge.py')
@@ -65,6 +65,9 @@ UNTIMED_SYSTEM_FILES = (
     'test/system/test_installed_executables.py', 'test/system/test_warmup.py')
 CLOSED_LOOP_CALLS = re.compile(r'\b(record_tracking|loop_lag_error)\(')
 _SOURCES = {}
+# pytest's cache key of the seconds each test file took in the last run that ran it
+DURATIONS_KEY = 'cbha_inverse/file_seconds'
+_FILE_SECONDS = {}
 
 
 def is_timing(item):
@@ -91,6 +94,26 @@ def pytest_collection_modifyitems(config, items):
         if is_timing(item):
             item.add_marker(pytest.mark.timing)
             item.add_marker(pytest.mark.xdist_group('timing'))
+    cache = getattr(config, 'cache', None)
+    if hasattr(config, 'workerinput') and cache is not None:
+        # on pytest-xdist workers the files that took longest in earlier runs go first (each
+        # file's tests together, in their order), so no long file starts last on one worker
+        # while the other has nothing left
+        seconds = cache.get(DURATIONS_KEY, {})
+        items.sort(key=lambda item: -seconds.get(item.nodeid.split('::', 1)[0], 0.0))
+
+
+def pytest_runtest_logreport(report):
+    """Add each test's set-up, call and teardown time to its file's (:data:`DURATIONS_KEY`)."""
+    path = report.nodeid.split('::', 1)[0]
+    _FILE_SECONDS[path] = _FILE_SECONDS.get(path, 0.0) + report.duration
+
+
+def pytest_sessionfinish(session):
+    """Store the files' durations of this run in pytest's cache (the main process only)."""
+    cache = getattr(session.config, 'cache', None)
+    if _FILE_SECONDS and cache is not None and not hasattr(session.config, 'workerinput'):
+        cache.set(DURATIONS_KEY, {**cache.get(DURATIONS_KEY, {}), **_FILE_SECONDS})
 
 
 def pytest_unconfigure(config):

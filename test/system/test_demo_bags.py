@@ -2,9 +2,9 @@
 ``cbha_demo`` records every run into a bag; ``cbha_bag eval`` on it gives the RMS the demo printed.
 
 One short demo (one small circle, open loop, then a short excitation: ~20 s), run as ``make demo``
-runs it, is shared by the tests: the lap's bag is evaluated by the ``cbha_bag eval`` command with the window the demo stored, and read by the
-independent ``mcap`` + ``mcap-ros2-support`` reader (every recorded topic, the plant's valve
-pressures among them).
+runs it, is shared by the tests: the lap's bag is evaluated by the ``cbha_bag eval`` command with
+the window the demo stored, and read by the independent ``mcap`` + ``mcap-ros2-support`` reader
+(every recorded topic, the plant's valve pressures among them); the excitation's bag is read too.
 """
 
 import json
