@@ -9,7 +9,7 @@ from cbha_inverse.paths import config_path
 # Run in a child process: the warm-up, then, for every kernel module, what its compiled functions
 # did in this process (signatures) and through numba's cache (hits: loaded, misses: compiled and
 # written), and whether their cache index is on disk.
-PROBE = '''
+PROBE = """
 import json, sys
 from pathlib import Path
 from numba.core.caching import FunctionCache
@@ -30,7 +30,7 @@ for module in kernel_modules():
         for value in vars(module).values()
         if isinstance(value, Dispatcher) and value.py_func.__module__ == module.__name__]
 print(json.dumps(report))
-'''
+"""
 
 
 def test_warmup_writes_the_numba_cache_of_every_kernel_module():
