@@ -94,13 +94,20 @@ def pytest_collection_modifyitems(config, items):
         if is_timing(item):
             item.add_marker(pytest.mark.timing)
             item.add_marker(pytest.mark.xdist_group('timing'))
-    cache = getattr(config, 'cache', None)
-    if hasattr(config, 'workerinput') and cache is not None:
+    seconds = getattr(config, 'workerinput', {}).get(DURATIONS_KEY)
+    if seconds:
         # on pytest-xdist workers the files that took longest in earlier runs go first (each
         # file's tests together, in their order), so no long file starts last on one worker
         # while the other has nothing left
-        seconds = cache.get(DURATIONS_KEY, {})
         items.sort(key=lambda item: -seconds.get(item.nodeid.split('::', 1)[0], 0.0))
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    """Give each pytest-xdist worker the same file durations (:data:`DURATIONS_KEY`)."""
+    cache = getattr(node.config, 'cache', None)
+    if cache is not None:
+        node.workerinput[DURATIONS_KEY] = cache.get(DURATIONS_KEY, {})
 
 
 def pytest_runtest_logreport(report):
