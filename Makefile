@@ -24,7 +24,8 @@ PYTEST_ARGS ?=
 # make test runs the suite in two phases (docs/design.md "Tests"): every test but the timing ones
 # on TEST_WORKERS pytest-xdist workers (each reserving its own ROS_DOMAIN_ID, test/conftest.py),
 # then the timing tests (`-m timing`: closed loops, lag, stop deadlines, replays, hosts) in one
-# process with the cores to themselves; coverage appends the second phase to the first.
+# process with the cores to themselves; coverage appends the second phase to the first. On 2
+# loaded cores: 498-509 s and 351-429 s (one process: ~14 min); ~4.5 + ~4 min when idle.
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
@@ -40,7 +41,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # Python: make cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases reuse (the
 # robotino_msgs build).
-test: install  ## the whole test suite with coverage (~9 min on 2 cores)
+test: install  ## the whole test suite with coverage (~8.5 min on 2 idle cores)
 	@shared=$$(mktemp -d); export CBHA_TEST_SHARED=$$shared; start=$$(date +%s); \
 	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \
 	  --durations=15 $(COVERAGE_ARGS) --cov-report= $(PYTEST_ARGS); first=$$?; \
