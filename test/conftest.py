@@ -9,6 +9,7 @@ import contextlib
 import fcntl
 import os
 from pathlib import Path
+import re
 import sys
 import tempfile
 
@@ -43,30 +44,97 @@ def pytest_configure(config):
     config.addinivalue_line('markers', 'linter: the ament linters')
     config.addinivalue_line('markers', 'flake8: ament_flake8')
     config.addinivalue_line('markers', 'pep257: ament_pep257')
+    config.addinivalue_line(
+        'markers', 'timing: bounds on the timing of node processes (make test runs them alone)')
 
 
-# Tests whose bounds include the timing of several node processes (closed-loop tracking, lag,
-# replays, hosts, start-up): under pytest-xdist they run one after the other on one worker
-# (--dist loadgroup), so two of them never share the cores; the rest runs beside them.
-CLOSED_LOOP_FILES = (
-    'test/ros/test_ros_excite.py', 'test/ros/test_ros_lifecycle.py',
-    'test/ros/test_ros_robotino_bridge.py', 'test/system/test_commands.py',
-    'test/system/test_demo_bags.py', 'test/system/test_demo_proprio.py',
-    'test/system/test_launch.py', 'test/system/test_network_hosts.py',
-    'test/system/test_own_robot_guide.py', 'test/system/test_replay_regression.py',
-    'test/system/test_ros_loop.py')
+# The timing phase of ``make test`` (``-m timing``, one process, after the rest ran on every
+# core): the tests whose bounds include the timing of several node processes or of a closed loop
+# (tracking RMS, lag, stop deadlines, replays, hosts, start-up). A test is in it when
+# - its file is one of TIMING_FILES, or it is marked ``@pytest.mark.timing``;
+# - it is an end-to-end run: a file in test/system/ not in UNTIMED_SYSTEM_FILES (so a new system
+#   test is isolated without being listed);
+# - its module runs an in-process closed loop through the helpers of test/ros_helpers.py
+#   (CLOSED_LOOP_CALLS in its source); ``record_tracking`` also fails in a test that is not a
+#   timing test, so a loop reached some other way fails loudly instead of flaking.
+TIMING_FILES = (
+    'test/ros/test_ros_excite.py', 'test/ros/test_ros_fault_relay.py',
+    'test/ros/test_ros_lifecycle.py', 'test/ros/test_ros_robotino_bridge.py')
+UNTIMED_SYSTEM_FILES = (
+    'test/system/test_colcon_layout.py', 'test/system/test_identify_check.py',
+    'test/system/test_installed_executables.py', 'test/system/test_warmup.py')
+CLOSED_LOOP_CALLS = re.compile(r'\b(record_tracking|loop_lag_error)\(')
+_SOURCES = {}
+# pytest's cache key of the seconds each test file took in the last run that ran it
+DURATIONS_KEY = 'cbha_inverse/file_seconds'
+_FILE_SECONDS = {}
 
 
+def is_timing(item):
+    """Return whether ``item`` belongs to the timing phase (see :data:`TIMING_FILES`)."""
+    path = item.nodeid.split('::', 1)[0]
+    if path in TIMING_FILES or item.get_closest_marker('timing') is not None:
+        return True
+    if path.startswith('test/system/') and path not in UNTIMED_SYSTEM_FILES:
+        return True
+    if path not in _SOURCES:
+        _SOURCES[path] = bool(CLOSED_LOOP_CALLS.search(Path(item.fspath).read_text()))
+    return _SOURCES[path]
+
+
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
-    """Put the closed-loop tests into one pytest-xdist group (:data:`CLOSED_LOOP_FILES`)."""
+    """
+    Mark the timing tests ``timing`` (:func:`is_timing`), before ``-m`` selects on the marks.
+
+    Run anyway under pytest-xdist (``pytest -n 2`` without ``-m``), they share one xdist group:
+    one after the other on one worker, though no longer alone on the cores.
+    """
     for item in items:
-        if item.nodeid.split('::', 1)[0] in CLOSED_LOOP_FILES:
-            item.add_marker(pytest.mark.xdist_group('closed_loop'))
+        if is_timing(item):
+            item.add_marker(pytest.mark.timing)
+            item.add_marker(pytest.mark.xdist_group('timing'))
+    seconds = getattr(config, 'workerinput', {}).get(DURATIONS_KEY)
+    if seconds:
+        # on pytest-xdist workers the files that took longest in earlier runs go first (each
+        # file's tests together, in their order), so no long file starts last on one worker
+        # while the other has nothing left
+        items.sort(key=lambda item: -seconds.get(item.nodeid.split('::', 1)[0], 0.0))
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    """Give each pytest-xdist worker the same file durations (:data:`DURATIONS_KEY`)."""
+    cache = getattr(node.config, 'cache', None)
+    if cache is not None:
+        node.workerinput[DURATIONS_KEY] = cache.get(DURATIONS_KEY, {})
+
+
+def pytest_runtest_logreport(report):
+    """Add each test's set-up, call and teardown time to its file's (:data:`DURATIONS_KEY`)."""
+    path = report.nodeid.split('::', 1)[0]
+    _FILE_SECONDS[path] = _FILE_SECONDS.get(path, 0.0) + report.duration
+
+
+def pytest_sessionfinish(session):
+    """Store the files' durations of this run in pytest's cache (the main process only)."""
+    cache = getattr(session.config, 'cache', None)
+    if _FILE_SECONDS and cache is not None and not hasattr(session.config, 'workerinput'):
+        cache.set(DURATIONS_KEY, {**cache.get(DURATIONS_KEY, {}), **_FILE_SECONDS})
 
 
 def pytest_unconfigure(config):
     """Release the reserved domain id."""
     _RESERVATION.close()
+
+
+@pytest.fixture(autouse=True)
+def _timing_phase(request, monkeypatch):
+    """Set ``CBHA_TEST_TIMING`` in a timing test (``ros_helpers.record_tracking`` checks it)."""
+    if request.node.get_closest_marker('timing') is not None:
+        monkeypatch.setenv('CBHA_TEST_TIMING', '1')
+    else:
+        monkeypatch.delenv('CBHA_TEST_TIMING', raising=False)
 
 
 @pytest.fixture
@@ -87,29 +155,41 @@ def rclpy_context():
         rclpy.try_shutdown(context=context)
 
 
-def _built_once(tmp_path_factory, package, build_and_load):
-    """Return ``build_and_load(workspace)``: one build per session, shared by xdist workers."""
-    if os.environ.get('PYTEST_XDIST_WORKER') is None:
-        return build_and_load(tmp_path_factory.mktemp(f'{package}_ws'))
-    # pytest-xdist: the workers share one build (their base temporary folders have one parent);
-    # the first to take the lock builds, the others load what it built
-    shared = tmp_path_factory.getbasetemp().parent
+def _built_once(tmp_path_factory, package, build):
+    """
+    Build an interface package once and load it here; return its install prefix.
+
+    ``build(workspace) -> prefix`` runs once per pytest run, or once per ``make test`` when
+    ``CBHA_TEST_SHARED`` names a folder that its phases share: the pytest-xdist workers and the
+    phases take a lock, the first builds, the others load what it built.
+    """
+    from ros_helpers import load_interface
+    shared = os.environ.get('CBHA_TEST_SHARED')
+    if shared is None and os.environ.get('PYTEST_XDIST_WORKER') is None:
+        return load_interface(build(tmp_path_factory.mktemp(f'{package}_ws')))
+    # the workers of one xdist run have base temporary folders with one parent
+    shared = Path(shared) if shared is not None else tmp_path_factory.getbasetemp().parent
+    built = shared / f'{package}_ws' / 'built'
     with open(shared / f'{package}_ws.lock', 'w') as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        return build_and_load(shared / f'{package}_ws')
+        if built.exists():
+            return load_interface(Path(built.read_text()))
+        prefix = build(shared / f'{package}_ws')
+        built.write_text(str(prefix))
+        return load_interface(prefix)
 
 
 @pytest.fixture(scope='session')
 def robotino_msgs(tmp_path_factory):
     """
-    Build the shipped ``robotino_msgs`` with colcon once per session and load it.
+    Build the shipped ``robotino_msgs`` with colcon once per run and load it.
 
     Returns the install prefix; ``from robotino_msgs.msg import ...`` works afterwards in this
     process, and ``robotino_helpers.robotino_child_env(prefix)`` gives child processes the
     environment of its ``install/setup.sh``.
     """
-    from robotino_helpers import build_and_load
-    return _built_once(tmp_path_factory, 'robotino_msgs', build_and_load)
+    from cbha_inverse.interfaces.robotino_msgs_build import build_robotino_msgs
+    return _built_once(tmp_path_factory, 'robotino_msgs', build_robotino_msgs)
 
 
 @pytest.fixture(scope='session')
@@ -124,6 +204,4 @@ def tf2_msgs(tmp_path_factory):
     if importlib.util.find_spec('tf2_msgs') is not None:
         return None
     from cbha_inverse.interfaces.tf2_msgs_build import build_tf2_msgs
-    from ros_helpers import load_interface
-    return _built_once(tmp_path_factory, 'tf2_msgs',
-                       lambda workspace: load_interface(build_tf2_msgs(workspace)))
+    return _built_once(tmp_path_factory, 'tf2_msgs', build_tf2_msgs)

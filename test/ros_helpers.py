@@ -12,6 +12,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -142,6 +144,9 @@ def record_tracking(context, nodes, duration, hold, settle, rate_hz):
         ``rms``, ``maximum`` and the ``errors`` [m].
 
     """
+    if os.environ.get('CBHA_TEST_TIMING') != '1':
+        pytest.fail('a closed loop in a test outside the timing phase: add its file to '
+                    'TIMING_FILES in test/conftest.py or mark the test @pytest.mark.timing')
     from cbha_inverse.metrics import tracking_errors
     from cbha_inverse.ros.common.qos import MEASURED_QOS, TARGET_QOS
     from geometry_msgs.msg import PointStamped

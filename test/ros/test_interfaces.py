@@ -116,3 +116,13 @@ def test_repair_command_line_on_a_prefix(tmp_path):
         [sys.executable, '-m', 'cbha_inverse.interfaces.rosidl_exports', str(tmp_path / 'no')],
         cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=60)
     assert missing.returncode == 2 and missing.stderr.strip().endswith('not a folder')
+
+
+def test_built_messages_have_the_fields_of_the_shipped_files(robotino_msgs):
+    """The colcon build's Python types carry exactly the fields of the ``.msg`` files."""
+    from robotino_helpers import messages
+    set_pressures, readings = messages()
+    assert set_pressures.get_fields_and_field_types() == {'pressures': 'sequence<float>'}
+    assert readings.get_fields_and_field_types() == {
+        'stamp': 'builtin_interfaces/Time', 'pressures': 'sequence<float>',
+        'cablepull': 'sequence<float>'}

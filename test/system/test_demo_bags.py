@@ -1,10 +1,10 @@
 """
 ``cbha_demo`` records every run into a bag; ``cbha_bag eval`` on it gives the RMS the demo printed.
 
-A short demo (one small circle, open loop: ~15 s) runs as ``make demo`` runs it; the bag is then
-evaluated by the ``cbha_bag eval`` command with the window the demo stored, and read by the
-independent ``mcap`` + ``mcap-ros2-support`` reader (every recorded topic, the plant's valve
-pressures among them).
+One short demo (one small circle, open loop, then a short excitation: ~20 s), run as ``make demo``
+runs it, is shared by the tests: the lap's bag is evaluated by the ``cbha_bag eval`` command with
+the window the demo stored, and read by the independent ``mcap`` + ``mcap-ros2-support`` reader
+(every recorded topic, the plant's valve pressures among them); the excitation's bag is read too.
 """
 
 import json
@@ -19,16 +19,34 @@ import pytest
 from ros_helpers import aborted_logs, child_env, REPO_ROOT
 
 
-def test_demo_bag_eval_gives_the_printed_rms(tmp_path):
-    """Same RMS and max to 1e-6 mm; the bag has every recorded topic and decodes elsewhere."""
-    output = tmp_path / 'demo'
-    demo = subprocess.run(
+@pytest.fixture(scope='module')
+def demo(tmp_path_factory):
+    """
+    Run ``cbha_demo``: one small open-loop circle, then the ``outer_bends`` excitation.
+
+    Returns
+    -------
+    output : pathlib.Path
+        The demo's ``--output`` folder.
+    stdout : str
+        What it printed.
+
+    """
+    output = tmp_path_factory.mktemp('demo_bags') / 'demo'
+    process = subprocess.run(
         [sys.executable, '-m', 'cbha_inverse.experiments.demo', '--output', str(output),
          '--shapes', 'circle', '--modes', 'open', '--feedback', 'direct', '--radius', '0.005',
-         '--start-hold', '0.5'],
+         '--start-hold', '0.5', '--excite', 'outer_bends', '--excite-hold-time', '0.3',
+         '--excite-ramp-time', '0.2'],
         cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=240)
-    assert demo.returncode == 0, demo.stdout + demo.stderr + aborted_logs(output)
-    printed = float(re.search(r'circle open  : RMS +([0-9.]+) mm', demo.stdout).group(1))
+    assert process.returncode == 0, process.stdout + process.stderr + aborted_logs(output)
+    return output, process.stdout
+
+
+def test_demo_bag_eval_gives_the_printed_rms(demo, tmp_path):
+    """Same RMS and max to 1e-6 mm; the bag has every recorded topic and decodes elsewhere."""
+    output, stdout = demo
+    printed = float(re.search(r'circle open  : RMS +([0-9.]+) mm', stdout).group(1))
     (run,) = json.loads((output / 'summary.json').read_text())['runs']
     assert run['rms_mm'] == pytest.approx(printed, abs=5e-4)  # printed with 3 decimals
     start, end = run['eval_window_s']
@@ -60,9 +78,9 @@ def test_demo_bag_eval_gives_the_printed_rms(tmp_path):
     assert topics['/cbha/target'][0].header.frame_id == 'cbha_base'
 
 
-def test_demo_excite_records_the_program_on_the_plant(tmp_path):
+def test_demo_excite_records_the_program_on_the_plant(demo):
     """
-    ``cbha_demo --excite``: after the lap, cbha_sim + cbha_excite alone, recorded (~16 s).
+    ``cbha_demo --excite``: after the lap, cbha_sim + cbha_excite alone, recorded (~6 s).
 
     The excitation bag holds exactly the four identification topics; the commands start and end
     at mid range and reach every hold of the program; the plant's valve pressures settle on every
@@ -71,21 +89,14 @@ def test_demo_excite_records_the_program_on_the_plant(tmp_path):
     from cbha_inverse.identify.excitation import make_program
     from cbha_inverse.ros.nodes.cbha_excite import ExciteParams
     from cbha_inverse.scene import load_scene
-    output = tmp_path / 'demo'
-    demo = subprocess.run(
-        [sys.executable, '-m', 'cbha_inverse.experiments.demo', '--output', str(output),
-         '--shapes', 'circle', '--modes', 'open', '--feedback', 'direct', '--radius', '0.005',
-         '--start-hold', '0.5', '--excite', 'outer_bends', '--excite-hold-time', '0.3',
-         '--excite-ramp-time', '0.2'],
-        cwd=REPO_ROOT, env=child_env(), capture_output=True, text=True, timeout=240)
-    assert demo.returncode == 0, demo.stdout + demo.stderr + aborted_logs(output)
+    output, stdout = demo
     summary = json.loads((output / 'summary.json').read_text())
     assert [run['shape'] for run in summary['runs']] == ['circle']
     excitation = summary['excitation']
     bag = output / 'excite_outer_bends' / 'bag'
     assert excitation['bag'] == str(bag) and excitation['holds'] == 3
     assert excitation['exit_codes'] == {'cbha_sim': 0, 'cbha_excite': 0, 'cbha_bag_record': 0}
-    assert 'excite outer_bends: 3 holds, 1.7 s' in demo.stdout
+    assert 'excite outer_bends: 3 holds, 1.7 s' in stdout
     topics, log_times = {}, {}
     for file in sorted(bag.glob('*.mcap')):
         with open(file, 'rb') as stream:
