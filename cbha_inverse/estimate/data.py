@@ -68,6 +68,9 @@ class EstimatorData:
         self.pressures = self.pressure_rows[rows.PRESSURE]
         self.scalars = np.zeros(rows.SCALARS)
         self.scalars[rows.HAS_MASS] = float(u > 2 * m)
+        # the compiled update solves the payload's column with its own factor (the fallback
+        # chain clears this while it hands over a column solved with another factor)
+        self.scalars[rows.SOLVE_MASS] = 1.0
         self.scalars[rows.MAX_ROTATION] = max_rotation_step
         self.jacobian = np.zeros((c, 6 * n))
         self.moved = np.zeros((c, m + 2))

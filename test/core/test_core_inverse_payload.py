@@ -40,3 +40,17 @@ def test_a_non_finite_payload_is_refused():
     solver = load_scene('cbha').make_inverse_solver()
     with pytest.raises(ValueError, match='finite'):
         solver.set_payload(float('nan'))
+
+
+def test_a_limited_change_moves_the_payload_in_steps_and_the_loads_with_it():
+    """max_change: the model's payload walks to the request; the loads are those of the mass."""
+    solver = load_scene('cbha').make_inverse_solver()
+    steps = [solver.set_payload(0.1, max_change=0.04) for _ in range(4)]
+    np.testing.assert_allclose(steps, [0.04, 0.08, 0.1, 0.1])
+    assert solver.payload == 0.1
+    assert solver.set_payload(-0.05, max_change=0.02) == pytest.approx(0.08)
+    exact = load_scene('cbha').make_inverse_solver()
+    exact.set_payload(0.08)
+    np.testing.assert_array_equal(solver._external, exact._external)
+    assert solver.set_payload(0.0) == 0.0
+    np.testing.assert_array_equal(solver._external, solver._unloaded)

@@ -3,6 +3,7 @@
 from cbha_inverse.core._kernels import estimation as kernel
 from cbha_inverse.estimate.shape import EstimatorOptions, ShapeEstimator
 from cbha_inverse.scene import load_scene
+from cbha_inverse.scene.calibration import Calibration
 import numpy as np
 import pytest
 
@@ -85,3 +86,34 @@ def test_the_filter_averages_the_pot_noise_at_a_held_pose(cbha):
     assert one_sample > 3e-4 and late < 0.1 * one_sample, (late, one_sample)
     # the reported spread follows the averaging
     assert estimate.confidence < 0.2 * one_sample
+
+
+@pytest.mark.parametrize('pressures', [np.zeros(6), PRESSURES], ids=['rest', 'bent'])
+def test_the_compiled_payload_column_is_the_lengths_derivative_in_the_mass(cbha, pressures):
+    """The pots' row of the payload (``h``'s last column) against a difference of equilibria."""
+    result = cbha.forward(pressures, strict=True)
+    lengths = cbha.sensors.lengths(result.state.positions, result.state.rotations)
+    estimator = ShapeEstimator.from_scene(cbha, EstimatorOptions(payload_std=0.1))
+    for _ in range(5):
+        estimator.update(cbha.sensors.readings(lengths), pressures)
+    data, step = estimator._data, 1e-3
+    loaded = load_scene('cbha', calibration=Calibration(tip_payload_mass=step)).forward(
+        pressures, initial_state=result.state, strict=True)
+    derivative = (cbha.sensors.lengths(loaded.state.positions, loaded.state.rotations)
+                  - lengths) / step
+    assert np.abs(derivative).max() > 1e-3  # a tip weight stretches and bends the pots
+    np.testing.assert_allclose(data.h[:, -1] / data.state[kernel.SCALE, -1], derivative,
+                               rtol=0.05, atol=0.02 * np.abs(derivative).max())
+
+
+def test_a_held_tip_payload_is_estimated_not_left_to_the_offsets(cbha):
+    """At rest with 0.1 kg at the plant's tip the payload takes a share of the sag."""
+    plant = load_scene('cbha', calibration=Calibration(tip_payload_mass=0.1))
+    result = plant.forward(np.zeros(6), strict=True)
+    lengths = plant.sensors.lengths(result.state.positions, result.state.rotations)
+    estimator = ShapeEstimator.from_scene(cbha, EstimatorOptions(payload_std=0.1))
+    for _ in range(20):
+        estimate = estimator.update(cbha.sensors.readings(lengths), np.zeros(6))
+    # (the offsets explain the rest: at one pose a tip weight bends the arm much as they do)
+    assert 0.02 < estimate.payload < 0.15, estimate.payload
+    np.testing.assert_allclose(estimate.tip, result.effector_positions[-1], atol=5e-3)

@@ -127,6 +127,7 @@ class InverseSolver:
         self._external = external_wrenches(model, gravity=gravity).reshape(-1)
         # the model's loads without a payload, and the payload's acceleration (set_payload)
         self._unloaded = self._external.copy()
+        self._payload = 0.0
         self._gravity = None if gravity is None else np.asarray(gravity, dtype=float)
         self._tick = EquilibriumSystem(model, actuators, self._external)
         self._active_set = ActiveSetQP(m)
@@ -174,19 +175,28 @@ class InverseSolver:
         self._age = 0
         self._prepared = False
 
-    def set_payload(self, mass):
+    def set_payload(self, mass, max_change=None):
         """
         Add a known mass at the last frame to the model's loads (e.g. an estimated payload).
 
         The tick's equilibrium then carries its weight (a load in ``f_ext`` of paper eq. 9, the
         same as a scene's ``tip_payload_mass``), so the QP compensates it in the model instead
         of leaving it to the closed loop's correction. It replaces the previous one; the next
-        linearisation uses it.
+        linearisation uses it. An estimated payload should come in small steps (``max_change``):
+        each change of the model's load is a step of the commanded actuation, and in a loop on
+        an estimate that step disturbs the estimate it came from.
 
         Parameters
         ----------
         mass : float  [kg]
             The payload (0: none).
+        max_change : float or None  [kg]
+            Move the model's payload toward ``mass`` by at most this (None: all the way).
+
+        Returns
+        -------
+        float  [kg]
+            The payload now in the model's loads.
 
         Raises
         ------
@@ -199,10 +209,19 @@ class InverseSolver:
             raise ValueError(f'payload must be finite, got {mass}')
         if self._gravity is None:
             raise ValueError('a payload needs the scene gravity')
+        if max_change is not None:
+            mass = self._payload + min(max(mass - self._payload, -max_change), max_change)
+        self._payload = mass
         size = self._external.size
         self._external[size - 6:size - 3] = self._unloaded[size - 6:size - 3] + mass * (
             self._gravity)
         self._age = self.options.relinearize_every
+        return mass
+
+    @property
+    def payload(self):
+        """Return the payload in the model's loads [kg] (:meth:`set_payload`)."""
+        return self._payload
 
     def warm_up(self):
         """

@@ -93,6 +93,9 @@ class InverseSolverParams:
                                'loads, e.g. payload/estimated of shape_estimator (empty: none)')
     max_payload: float = param(1.0, 'payloads beyond +-this are rejected [kg]', low=0.0,
                                high=100.0)
+    max_payload_change: float = param(5.0e-3, 'the model payload moves toward each payload '
+                                      'message by at most this [kg] (0: all the way)',
+                                      low=0.0, high=100.0, live=True)
     workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected', live=True)
     workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]', live=True)
@@ -259,7 +262,7 @@ class InverseSolverNode(Node):
         if not abs(mass) <= self.params.max_payload:
             self._count_rejected('payload', 'out_of_range', f'{mass} kg')
             return
-        self.solver.set_payload(mass)
+        self.solver.set_payload(mass, self.params.max_payload_change or None)
 
     def _on_target(self, message):
         received = time.perf_counter()
