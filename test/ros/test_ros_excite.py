@@ -54,10 +54,19 @@ def test_commands_follow_the_program_on_the_sim_clock(rclpy_context):
     clock = probe.create_publisher(Clock, '/clock', 10)
     step = {'now': START_NS}
     received = []
-    probe.create_subscription(Float64MultiArray, '/ex_sim/pressure_command',
-                              lambda m: received.append((step['now'], np.array(m.data))),
-                              COMMAND_QOS)
     with spinning(rclpy_context, node, probe) as executor:
+        def has_clock():
+            clock.publish(_clock(START_NS))
+            executor.spin_once(timeout_sec=0.05)
+            return node.get_clock().now().nanoseconds == START_NS
+        # the node gets its first /clock (the jump fires its sim-time timer) while it still waits
+        # for a subscriber, so it cannot be ready, and start, at that jump
+        assert spin_until(executor, has_clock, 20.0), node.phase
+        assert node.phase in ('discovery', 'waiting'), node.phase
+        probe.create_subscription(Float64MultiArray, '/ex_sim/pressure_command',
+                                  lambda m: received.append((step['now'], np.array(m.data))),
+                                  COMMAND_QOS)
+
         def ready():
             clock.publish(_clock(START_NS))
             executor.spin_once(timeout_sec=0.05)
