@@ -89,7 +89,10 @@ $(INSTALL_STAMP): $(PINS_STAMP) setup.py setup.cfg package.xml
 	$(VPY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .
 	@touch $@
 
+# numba's cache is keyed by each function's own source file: an entry that calls a changed
+# kernel of another file would load its stale machine code, so a kernel change drops the cache
 $(KERNELS_STAMP): $(INSTALL_STAMP) $(KERNEL_SOURCES)
+	rm -f cbha_inverse/core/_kernels/__pycache__/*.nbi cbha_inverse/core/_kernels/__pycache__/*.nbc
 	$(VPY) -m cbha_inverse.warmup
 	@touch $@
 
