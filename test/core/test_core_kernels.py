@@ -81,6 +81,26 @@ def test_band_cholesky_equals_dense_solve(size, kd):
     np.testing.assert_allclose(solved, np.linalg.solve(a, rhs), atol=1e-11)
 
 
+@pytest.mark.parametrize('size, n_rhs', [(96, 7), (96, 9), (12, 7), (36, 9), (96, 17), (96, 1)])
+def test_band_solve_at_every_column_count_equals_dense_solve(size, n_rhs):
+    # kd = 11 with 7 or 9 columns runs the constant-trip-count sweeps (SOLVE_COLUMN_COUNTS),
+    # the others the general loops: both solve the same system, a strided right-hand side too
+    kd = 11
+    rng = np.random.default_rng(size + n_rhs)
+    a = rng.standard_normal((size, size))
+    r, c = np.indices((size, size))
+    a = np.where(np.abs(r - c) <= kd, a @ a.T + size * np.eye(size), 0.0)
+    band = np.zeros((size, kd + 1))
+    for d in range(kd + 1):
+        band[:size - d, d] = np.diagonal(a, -d)
+    assert band_cholesky(band) == 0
+    rhs = rng.standard_normal((size, n_rhs + 1))
+    solved = rhs.copy()
+    band_solve(band, solved[:, 1:])
+    np.testing.assert_allclose(solved[:, 1:], np.linalg.solve(a, rhs[:, 1:]), atol=1e-11)
+    np.testing.assert_array_equal(solved[:, 0], rhs[:, 0])
+
+
 def test_band_cholesky_reports_the_first_bad_pivot():
     a = np.diag([2.0, 3.0, -1.0, 4.0])
     band = np.zeros((4, 2))
