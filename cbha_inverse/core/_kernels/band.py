@@ -139,7 +139,7 @@ def _solve_columns(factor, rhs, n_rhs, constant_width):
 
 @numba.njit(cache=True, inline='always')
 def _forward_row(factor, rhs, j, below, n_rhs):
-    """Row ``j`` of the forward sweep of :func:`band_solve` (``below`` rows under the diagonal)."""
+    """Row ``j`` of the forward sweep of :func:`band_solve` (``below`` rows below the diagonal)."""
     inverse = 1.0 / factor[j, 0]
     for col in range(n_rhs):
         rhs[j, col] *= inverse
@@ -151,7 +151,7 @@ def _forward_row(factor, rhs, j, below, n_rhs):
 
 @numba.njit(cache=True, inline='always')
 def _backward_row(factor, rhs, j, below, n_rhs):
-    """Row ``j`` of the backward sweep of :func:`band_solve` (``below`` rows under the diagonal)."""
+    """Row ``j`` of the backward sweep of :func:`band_solve` (``below`` rows under the pivot)."""
     for a in range(1, below + 1):
         weight = factor[j, a]
         for col in range(n_rhs):
