@@ -144,7 +144,7 @@ def test_deformation_is_the_wrenches_delta():
 
 
 def test_link_pass_skips_zero_cavity_columns_exactly():
-    """Listing only the nonzero cavity columns gives the same wrenches and tangents, bit for bit."""
+    """Listing only the nonzero cavity columns gives the same wrenches and tangents, bitwise."""
     rng = np.random.default_rng(13)
     n, c = 4, 3
     stiffness = np.stack([_random_link(rng)[0] for _ in range(n)])
