@@ -31,7 +31,7 @@ the band is then the full matrix.
 
 from cbha_inverse.core._kernels.band import band_cholesky, scatter_add
 from cbha_inverse.core._kernels.cables import cable_work_size
-from cbha_inverse.core._kernels.links import link_pass, link_work_size
+from cbha_inverse.core._kernels.links import link_pass, link_work_size, nonzero_cavity_columns
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import CableGroup, CableTerms
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
@@ -102,6 +102,7 @@ class EquilibriumSystem:
         # G0 and H of every actuator column per link (none without condensed cavities)
         self._cavity_wrench = g0 if has_cavities else np.zeros((n, 0, 6))
         self._cavity_stiffness = hess if has_cavities else np.zeros((n, 0, 6, 6))
+        self._cavity_columns = nonzero_cavity_columns(self._cavity_wrench, self._cavity_stiffness)
         self._rhs = np.zeros((6 * n, m + 1))
         # values of the assembly: link blocks, cable pair blocks, cable point moments
         rows, cols = [], []
@@ -181,7 +182,8 @@ class EquilibriumSystem:
         actuation = np.ascontiguousarray(actuation, dtype=float)
         rhs = self._rhs
         link_pass(positions, rotations, self.stiffness, self.rest_offsets, self._q0t, actuation,
-                  self._cavity_wrench, self._cavity_stiffness, rhs, self._link_values, material)
+                  self._cavity_wrench, self._cavity_stiffness, self._cavity_columns, rhs,
+                  self._link_values, material)
         for cab, pair_values, moment_values in self._cable_values:
             cab.evaluate(positions, rotations, actuation, rhs, pair_values, moment_values)
             if material:
@@ -234,7 +236,8 @@ class EquilibriumSystem:
             counts = (n_link, 0, 0)
         link_work = np.zeros(link_work_size(self._cavity_wrench.shape[1]))
         return ((self.stiffness, self.rest_offsets, self._q0t, self._cavity_wrench,
-                 self._cavity_stiffness, link_work, np.ascontiguousarray(self.external))
+                 self._cavity_stiffness, self._cavity_columns, link_work,
+                 np.ascontiguousarray(self.external))
                 + cable
                 + (self._index, self._weights, np.array(counts, dtype=np.int64), self._values,
                    self._band, self._rhs))

@@ -49,7 +49,8 @@ class TickShapes(NamedTuple):
     kd : int
         Half-bandwidth of the tangent.
     cavities : int
-        Condensed cavity columns of the link pass (0 without cavities).
+        Nonzero condensed cavity columns of the link pass, summed over the links (the pass skips
+        the zero ones; 0 without cavities).
     rest_rotations : bool
         Whether the links have rest rotations other than the identity.
     points, spans : int
@@ -88,10 +89,10 @@ def tick_shapes(solver):
 
     """
     system = solver._tick
-    (_, _, rest_rotations_t, cavity_wrench, _, _, _, _, _, frames, spans, _, _, _, _, _,
+    (_, _, rest_rotations_t, _, _, cavity_columns, _, _, _, _, frames, spans, _, _, _, _, _,
      _, values, _, rhs) = system.fused_terms()
     return TickShapes(system.n, system.m, len(solver.effector_names), system.kd,
-                      cavity_wrench.shape[1], rest_rotations_t.shape[0] > 0, frames.size,
+                      int((cavity_columns >= 0).sum()), rest_rotations_t.shape[0] > 0, frames.size,
                       spans.shape[1], values.size, int((rhs[:, 1:] != 0.0).sum()))
 
 
@@ -113,8 +114,8 @@ def tick_flops(shapes):
     """
     n, m, k, kd = shapes.n, shapes.m, shapes.k, shapes.kd
     size, rows, columns = 6 * n, 3 * shapes.k, m + 1
-    link = (_LINK_BASE + _LINK_REST_ROTATION * shapes.rest_rotations
-            + _LINK_PER_CAVITY * shapes.cavities + _LINK_PER_COLUMN * (1 + shapes.cavities))
+    links = (n * (_LINK_BASE + _LINK_REST_ROTATION * shapes.rest_rotations + _LINK_PER_COLUMN)
+             + (_LINK_PER_CAVITY + _LINK_PER_COLUMN) * shapes.cavities)
     # band Cholesky: per column a square root, `below` scalings and the rank-one update of the
     # trailing triangle; the solve: forward and backward sweeps over every right-hand side
     factor = sum(1 + below + below * (below + 1) for below in
@@ -128,7 +129,7 @@ def tick_flops(shapes):
     qp = (m * (2 * rows + 6) + (m ** 3) // 3 + 4 * m * m + 2 * m * m
           + (2 * rows * m + 4 * m + 5 * k) + 2 * m * m)
     update = size * 2 * m + n * _RETRACT_PER_FRAME + 18 * k
-    counts = {'links': n * link,
+    counts = {'links': links,
               'cables': _CABLE_PER_POINT * shapes.points + _CABLE_PER_SPAN * shapes.spans,
               'assembly': 2 * shapes.values + size, 'factor': factor, 'solve': solve,
               'projection': projection, 'qp': qp, 'update': update}

@@ -61,9 +61,13 @@ def test_rotation_log_inverts_exp_up_to_pi(angle):
         assert theta == pytest.approx(angle, abs=1e-12)
 
 
-@pytest.mark.parametrize('size, kd', [(1, 0), (12, 11), (36, 17), (96, 11), (20, 19)])
-def test_band_cholesky_equals_dense_solve(size, kd):
-    rng = np.random.default_rng(size + kd)
+# kd = 11 with 7 or 9 right-hand sides runs the constant-trip-count sweeps of band_solve
+# (SOLVE_COLUMN_COUNTS), the others its general loops
+@pytest.mark.parametrize('size, kd, n_rhs', [
+    (1, 0, 5), (12, 11, 5), (36, 17, 5), (96, 11, 5), (20, 19, 5), (96, 11, 7), (96, 11, 9),
+    (12, 11, 7), (36, 11, 9), (96, 11, 17), (96, 11, 1)])
+def test_band_cholesky_equals_dense_solve(size, kd, n_rhs):
+    rng = np.random.default_rng(size + kd + n_rhs)
     a = rng.standard_normal((size, size))
     r, c = np.indices((size, size))
     a = np.where(np.abs(r - c) <= kd, a @ a.T + size * np.eye(size), 0.0)
@@ -75,10 +79,12 @@ def test_band_cholesky_equals_dense_solve(size, kd):
     for d in range(kd + 1):
         lower += np.diag(band[:size - d, d], -d)
     np.testing.assert_allclose(lower, np.linalg.cholesky(a), atol=1e-12 * size)
-    rhs = rng.standard_normal((size, 5))
+    # a strided right-hand side (the columns after the first)
+    rhs = rng.standard_normal((size, n_rhs + 1))
     solved = rhs.copy()
-    band_solve(band, solved)
-    np.testing.assert_allclose(solved, np.linalg.solve(a, rhs), atol=1e-11)
+    band_solve(band, solved[:, 1:])
+    np.testing.assert_allclose(solved[:, 1:], np.linalg.solve(a, rhs[:, 1:]), atol=1e-11)
+    np.testing.assert_array_equal(solved[:, 0], rhs[:, 0])
 
 
 def test_band_cholesky_reports_the_first_bad_pivot():

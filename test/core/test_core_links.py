@@ -1,6 +1,7 @@
 """Tests of the compliance links: Timoshenko closed form, rigid motion, equilibrium, FD tangent."""
 
 from cbha_inverse.core import links, so3
+from cbha_inverse.core._kernels.links import link_pass, nonzero_cavity_columns
 import numpy as np
 from oracles import chain_forces
 import pytest
@@ -140,3 +141,36 @@ def test_deformation_is_the_wrenches_delta():
     np.testing.assert_allclose(so3.so3_exp(delta[3:]), r_a.T @ r_b @ q0.T, atol=1e-13)
     terms = chain_forces.link_terms(stiff, d0, q0, x_a, r_a, x_b, r_b)
     np.testing.assert_allclose(terms.stress, stiff @ delta, rtol=1e-12)
+
+
+def test_link_pass_skips_zero_cavity_columns_exactly():
+    """Listing only the nonzero cavity columns gives the same wrenches and tangents, bitwise."""
+    rng = np.random.default_rng(13)
+    n, c = 4, 3
+    stiffness = np.stack([_random_link(rng)[0] for _ in range(n)])
+    positions = np.cumsum(rng.normal(scale=0.02, size=(n + 1, 3)), axis=0)
+    rotations = so3.so3_exp(rng.normal(scale=0.2, size=(n + 1, 3)))
+    rest_offsets = rng.normal(scale=0.02, size=(n, 3))
+    wrench = rng.normal(size=(n, c, 6))
+    hessian = rng.normal(size=(n, c, 6, 6))
+    # link 0: cavity 1 only; link 1: none; link 2: G0 zero but H not; link 3: all three
+    for link, cav in ((0, 0), (0, 2), (1, 0), (1, 1), (1, 2)):
+        wrench[link, cav] = 0.0
+        hessian[link, cav] = 0.0
+    wrench[2, 0] = 0.0
+    columns = nonzero_cavity_columns(wrench, hessian)
+    np.testing.assert_array_equal(columns, [[1, -1, -1], [-1, -1, -1], [0, 1, 2], [0, 1, 2]])
+    actuation = rng.normal(size=c)
+    every = np.tile(np.arange(c), (n, 1))
+    results = []
+    for listed in (columns, every):
+        for material in (False, True):
+            rhs = np.full((6 * n, c + 1), np.nan)
+            blocks = np.full((n, 12, 12), np.nan)
+            link_pass(positions, rotations, stiffness, rest_offsets, np.zeros((0, 3, 3)),
+                      actuation, wrench, hessian, listed, rhs, blocks, material)
+            results.append((rhs, blocks))
+    for (rhs, blocks), (rhs_every, blocks_every) in zip(results[:2], results[2:]):
+        assert np.all(np.isfinite(rhs)) and np.all(np.isfinite(blocks))
+        np.testing.assert_array_equal(rhs, rhs_every)
+        np.testing.assert_array_equal(blocks, blocks_every)

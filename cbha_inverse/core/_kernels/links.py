@@ -23,7 +23,7 @@ import numpy as np
 
 @numba.njit(cache=True)
 def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-              cavity_wrench, cavity_stiffness, rhs, blocks, material):
+              cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material):
     """
     Write every link's wrenches into ``rhs`` and its world tangent into ``blocks``.
 
@@ -45,6 +45,9 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
         ``G0`` of every condensed cavity part per link (``c = m`` with cavities, else 0).
     cavity_stiffness : (n, c, 6, 6) ndarray
         ``H`` of the same parts (derivative of the local wrench per unit pressure).
+    cavity_columns : (n, c) int ndarray
+        Per link, the cavity columns whose ``G0`` or ``H`` is nonzero, then -1
+        (:func:`nonzero_cavity_columns`): only those are computed (the others add exact zeros).
     rhs : (6n, m + 1) ndarray
         Zeroed here; receives the link wrenches (column 0) and, with cavities, ``J_aᵀ``
         (columns ``1 + c``).
@@ -58,8 +61,35 @@ def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, a
 
     """
     link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-                   cavity_wrench, cavity_stiffness, rhs, blocks, material,
+                   cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material,
                    np.empty(link_work_size(cavity_wrench.shape[1])))
+
+
+def nonzero_cavity_columns(cavity_wrench, cavity_stiffness):
+    """
+    Return the cavity columns of every link whose ``G0`` or ``H`` is nonzero, padded with -1.
+
+    Parameters
+    ----------
+    cavity_wrench : (n, c, 6) ndarray  [N/Pa, N*m/Pa]
+        ``G0`` per link and cavity column.
+    cavity_stiffness : (n, c, 6, 6) ndarray
+        ``H`` per link and cavity column.
+
+    Returns
+    -------
+    (n, c) int64 ndarray
+        Per link, its nonzero cavity columns in increasing order, then -1.
+
+    """
+    n, c = cavity_wrench.shape[:2]
+    nonzero = (np.any(cavity_wrench != 0.0, axis=2)
+               | np.any(cavity_stiffness.reshape((n, c, 36)) != 0.0, axis=2))
+    columns = np.full((n, c), -1, dtype=np.int64)
+    for link in range(n):
+        active = np.flatnonzero(nonzero[link])
+        columns[link, :active.size] = active
+    return columns
 
 
 @numba.njit(cache=True)
@@ -70,7 +100,7 @@ def link_work_size(n_cavities):
 
 @numba.njit(cache=True)
 def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-                   cavity_wrench, cavity_stiffness, rhs, blocks, material, work):
+                   cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material, work):
     """:func:`link_pass` with its workspace given, ``work`` (:func:`link_work_size`,)."""
     n = stiffness.shape[0]
     n_cav = cavity_wrench.shape[1]
@@ -131,7 +161,12 @@ def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations
             for j in range(6):
                 acc += a[i, j] * delta[j]
             local[i, 0] = -acc
-        for cav in range(n_cav):
+        used = 0
+        for slot in range(n_cav):
+            cav = cavity_columns[link, slot]
+            if cav < 0:
+                break
+            used += 1
             p = actuation[cav]
             g0 = cavity_wrench[link, cav]
             h = cavity_stiffness[link, cav]
@@ -147,7 +182,8 @@ def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations
                     for j in range(6):
                         a[i, j] -= p * h[i, j]
         # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a)
-        for col in range(kc):
+        for slot in range(1 + used):
+            col = 0 if slot == 0 else 1 + cavity_columns[link, slot - 1]
             for part in range(2):
                 for i in range(3):
                     world[3 * part + i, col] = (ra[i, 0] * local[3 * part, col]
@@ -155,7 +191,8 @@ def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations
                                                 + ra[i, 2] * local[3 * part + 2, col])
         row_b = 6 * link
         row_a = 6 * (link - 1)
-        for col in range(kc):
+        for slot in range(1 + used):
+            col = 0 if slot == 0 else 1 + cavity_columns[link, slot - 1]
             for i in range(6):
                 rhs[row_b + i, col] += world[i, col]
             if link > 0:

@@ -45,7 +45,8 @@ REJECTED = -1
 
 @numba.njit(cache=True)
 def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
-                   cavity_wrench, cavity_stiffness, link_work, external, cable_gains,
+                   cavity_wrench, cavity_stiffness, cavity_columns, link_work, external,
+                   cable_gains,
                    cable_offsets, cable_frames, cable_spans, cable_points, cable_columns,
                    cable_work, index, slot_weights,
                    counts, values, band, rhs, solved, matrices, effector_matrices, gaps, moved,
@@ -69,6 +70,9 @@ def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_
         Actuator rows; reads ``ACTUATION`` (``λ_prev``) and ``SCALE``, writes ``LINEARISED``.
     stiffness, rest_offsets, rest_rotations_t, cavity_wrench, cavity_stiffness : ndarray
         The link terms of :func:`~cbha_inverse.core._kernels.links.link_pass`.
+    cavity_columns : (n, c) int ndarray
+        The nonzero cavity columns of every link
+        (:func:`~cbha_inverse.core._kernels.links.nonzero_cavity_columns`).
     link_work, cable_work : ndarray
         Workspace of the link and cable passes.
     external : (6n,) ndarray  [N, N*m]
@@ -123,8 +127,8 @@ def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_
     pair_end = link_end + counts[1]
     moment_end = pair_end + counts[2]
     link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-                   cavity_wrench, cavity_stiffness, rhs, values[:link_end].reshape((n, 12, 12)),
-                   False, link_work)
+                   cavity_wrench, cavity_stiffness, cavity_columns, rhs,
+                   values[:link_end].reshape((n, 12, 12)), False, link_work)
     if cable_frames.size > 0:
         cable_pass_into(positions, rotations, actuation, cable_gains, cable_frames,
                         cable_offsets, cable_spans[0], cable_spans[1], cable_spans[2],
