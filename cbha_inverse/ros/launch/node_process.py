@@ -37,7 +37,8 @@ def main(argv=None):
     -------
     int
         The node's exit status; 2 without a module name. A stop signal while the module loads
-        ends the process with status 0 (:func:`cbha_inverse.ros.common.loading.install_quiet_stop`).
+        ends the process with status 0
+        (:func:`cbha_inverse.ros.common.loading.install_quiet_stop`).
 
     """
     argv = list(sys.argv[1:] if argv is None else argv)
