@@ -236,13 +236,11 @@ def bounded_command(values, lower, upper):
         command (a NaN is never clipped into a plausible number).
 
     """
-    values = np.asarray(values, dtype=float).reshape(-1)
     lower = np.asarray(lower, dtype=float)
     upper = np.asarray(upper, dtype=float)
-    if values.shape != lower.shape:
-        raise ValueError(f'command has {values.size} values, expected {lower.size}')
-    if not np.all(np.isfinite(values)):
-        raise ValueError('command is not finite')
+    values, key, detail = vector_fault(values, lower.size, 'values')
+    if key is not None:
+        raise ValueError(f'command: {detail}')
     clipped = np.clip(values, lower, upper)
     assert np.all(np.isfinite(clipped)) and np.all(clipped >= lower) and np.all(clipped <= upper)
     return clipped
