@@ -51,7 +51,7 @@ from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_stat
                                                  TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
-from cbha_inverse.ros.common.rejections import Rejections
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration, finite_triple
@@ -174,7 +174,8 @@ class CbhaSimNode(Node):
                                 tip_noise=p.noise_std, pressure_noise=p.pressure_noise_std,
                                 seed=p.seed, tolerance=p.tolerance,
                                 max_iterations=p.max_iterations)
-        self.rejected = Rejections(self.get_logger(), lambda: self.params.log_throttle)
+        self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.rejected = Rejections(self.log)
         self.accepted = 0
         self.last_result = None
         self.last_stamp = None
@@ -270,8 +271,7 @@ class CbhaSimNode(Node):
             result, noisy = self.arm.update_plant()
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.failures += 1
-            self.get_logger().error(f'plant update failed, state kept: {exc!r}',
-                                    throttle_duration_sec=self.params.log_throttle)
+            self.log.error('plant_update', f'plant update failed, state kept: {exc!r}')
             return
         stamp = self.get_clock().now().to_msg()
         self.last_result, self.last_stamp = result, stamp

@@ -43,7 +43,7 @@ from cbha_inverse.ros.common.diagnostics import (
 from cbha_inverse.ros.common.params import (
     changes_text, declare_parameters, param, ParameterError)
 from cbha_inverse.ros.common.qos import COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
-from cbha_inverse.ros.common.rejections import Rejections
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
 from cbha_inverse.scene import load_scene
@@ -163,7 +163,8 @@ class InverseSolverNode(Node):
         self.target_stale = False
         self.last_result = None
         self._last_solve = -math.inf
-        self.rejected = Rejections(self.get_logger(), lambda: self.params.log_throttle)
+        self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.rejected = Rejections(self.log)
         self.published = 0
         self.ticks = 0
         self.statuses = {}
@@ -386,7 +387,7 @@ class InverseSolverNode(Node):
         self.last_result = result
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         for warning in result.warnings:
-            self.get_logger().warning(warning, throttle_duration_sec=self.params.log_throttle)
+            self.log.warning('solver_warning', warning)
         self._last_solve = self._node_seconds()
         self.ticks += 1
         try:
@@ -401,7 +402,7 @@ class InverseSolverNode(Node):
 
     def _count_failure(self, what, exc):
         self.statuses['exception'] = self.statuses.get('exception', 0) + 1
-        self.get_logger().error(f'{what}: {exc!r}', throttle_duration_sec=self.params.log_throttle)
+        self.log.error('exception', f'{what}: {exc!r}')
 
     def _publish(self, command):
         """Publish a command through the last gate; one that is not finite: the last again."""

@@ -45,7 +45,7 @@ from cbha_inverse.ros.common.diagnostics import (
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import (
     COMMAND_QOS, DRIVER_READINGS_QOS, DRIVER_SET_POINTS_QOS, MEASURED_QOS)
-from cbha_inverse.ros.common.rejections import Rejections
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 import numpy as np
 from rclpy.node import Node
@@ -183,7 +183,8 @@ class RobotinoBridgeNode(Node):
         self.sent = None
         self.measured = None
         self.decision = 'waiting'
-        self.rejected = Rejections(self.get_logger(), lambda: self.params.log_throttle)
+        log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.rejected = Rejections(log)
         self.forwarded = 0
         self.stale_published = 0
         self.readings = 0

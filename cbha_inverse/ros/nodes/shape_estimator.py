@@ -30,7 +30,7 @@ from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_stat
                                                  TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import MARKER_QOS, MEASURED_QOS
-from cbha_inverse.ros.common.rejections import Rejections
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
@@ -115,7 +115,8 @@ class ShapeEstimatorNode(Node):
         self.estimator.warm_up()
         self.pressures = None
         self.pressure_time = -np.inf
-        self.rejected = Rejections(self.get_logger(), lambda: self.params.log_throttle)
+        self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.rejected = Rejections(self.log)
         self.published = 0
         self.degraded = 0
         self.last = None
@@ -172,8 +173,7 @@ class ShapeEstimatorNode(Node):
         self.last = estimate
         if estimate.degraded:
             self.degraded += 1
-            self.get_logger().warn(f'degraded estimate: {estimate.reason}',
-                                   throttle_duration_sec=p.log_throttle)
+            self.log.warning('degraded', f'degraded estimate: {estimate.reason}')
         self.tip_publisher.publish(point_stamped(estimate.tip, message.header.stamp,
                                                  p.frame_id))
         if self.payload_publisher is not None:

@@ -33,7 +33,7 @@ from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_stat
 from cbha_inverse.ros.common.images import camera_from_info, image_array, ImageRejected
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import MEASURED_QOS
-from cbha_inverse.ros.common.rejections import Rejections
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import camera_frame, make_broadcaster
 from cbha_inverse.vision.camera import load_camera_yaml
@@ -200,7 +200,8 @@ class StereoTrackerNode(Node):
             raise ParameterError(str(exc)) from None
         self.pairer = StereoPairer(p.max_pair_dt, p.queue_size)
         self.drops = DropMonitor()
-        self.counts = Rejections(self.get_logger(), lambda: self.params.log_throttle)
+        self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.counts = Rejections(self.log)
         self.pairs = 0
         self.published = 0
         self.epipolar = collections.deque(maxlen=500)
@@ -285,9 +286,8 @@ class StereoTrackerNode(Node):
                                     'no_partner' else 'image dropped: a newer pair was complete')
         if self.drops.add(len(dropped)):
             events, total = self.drops.events, self.counts['dropped_unpaired']
-            self.get_logger().warn(
-                f'falling behind: {sum(events)} of the last {len(events)} images dropped '
-                f'unpaired (total {total})', throttle_duration_sec=self.params.log_throttle)
+            self.log.warning('falling_behind', f'falling behind: {sum(events)} of the last '
+                             f'{len(events)} images dropped unpaired (total {total})')
         if pair is not None:
             self._process(*pair)
 
