@@ -47,12 +47,7 @@ class StringPots:
         cables = [Cable(name, f, o) for name, f, o in zip(self.names, frames, offsets)]
         routes = CableGroup(cables, n_frames)
         self.n_frames = int(n_frames)
-        self._frames = np.ascontiguousarray(routes.frames, dtype=np.int64)
-        self._offsets = np.ascontiguousarray(routes.offsets, dtype=float)
-        self._start = np.ascontiguousarray(routes.segment_start, dtype=np.int64)
-        self._end = np.ascontiguousarray(routes.segment_end, dtype=np.int64)
-        self._span_owner = np.ascontiguousarray(routes.segment_owner, dtype=np.int64)
-        self._point_owner = np.ascontiguousarray(routes.point_owner, dtype=np.int64)
+        self._routing = routes.routing
         self.reading_offset = _per_sensor(reading_offset, c, 'offset')
         self.reading_gain = _per_sensor(reading_gain, c, 'gain')
         self.noise_std = _per_sensor(noise_std, c, 'noise_std')
@@ -74,8 +69,7 @@ class StringPots:
             arguments of :func:`cbha_inverse.core._kernels.cables.routing_lengths_into`.
 
         """
-        return (self._frames, self._offsets, self._start, self._end, self._span_owner,
-                self._point_owner)
+        return self._routing
 
     @property
     def n_sensors(self):

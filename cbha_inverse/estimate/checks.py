@@ -7,7 +7,10 @@ finds a pot that no longer moves while the others do (the compiled
 :func:`cbha_inverse.core._kernels.estimation.stuck_pots`).
 """
 
+import math
+
 from cbha_inverse.core._kernels.estimation import stuck_pots
+from cbha_inverse.core.input_checks import vector_fault
 import numpy as np
 
 
@@ -34,17 +37,9 @@ def check_vector(values, size, what, limit=None):
         ``out_of_range``; None when accepted.
 
     """
-    try:
-        array = np.asarray(values, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        return None, f'wrong_length: {what} are not numbers'
-    if array.size != size:
-        return None, f'wrong_length: {array.size} {what} for {size}'
-    if not np.isfinite(array).all():
-        return None, f'non_finite: {what} contain NaN or inf'
-    if limit is not None and np.abs(array).max() > limit:
-        return None, f'out_of_range: {what} beyond {limit:g}'
-    return array, None
+    bound = math.inf if limit is None else limit
+    array, key, detail = vector_fault(values, size, what, -bound, bound)
+    return array, None if key is None else f'{key}: {detail}'
 
 
 class StuckDetector:

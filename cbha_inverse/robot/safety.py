@@ -23,6 +23,7 @@ The nodes call these functions on every message and before every publication:
 from dataclasses import dataclass
 import math
 
+from cbha_inverse.core.input_checks import vector_fault
 import numpy as np
 
 ACTIONS = ('hold', 'vent')
@@ -208,15 +209,8 @@ def check_command(values, n_valves, max_pressure):
         Accepted, or why not (wrong length, non-finite, out of ``[0, p_max]``).
 
     """
-    values = np.asarray(values, dtype=float).reshape(-1)
-    if values.size != n_valves:
-        return Check(False, 'wrong_length', f'{values.size} values, expected {n_valves}')
-    if not np.all(np.isfinite(values)):
-        return Check(False, 'non_finite', 'non-finite pressure')
-    if np.any(values < 0.0) or np.any(values > max_pressure):
-        return Check(False, 'out_of_range', f'pressure outside [0, {max_pressure:g}] Pa: '
-                     f'{[float(f"{v:.6g}") for v in values]}')
-    return ACCEPTED
+    _, key, detail = vector_fault(values, n_valves, 'pressure', 0.0, max_pressure, ' Pa')
+    return ACCEPTED if key is None else Check(False, key, detail)
 
 
 def bounded_command(values, lower, upper):
@@ -242,13 +236,11 @@ def bounded_command(values, lower, upper):
         command (a NaN is never clipped into a plausible number).
 
     """
-    values = np.asarray(values, dtype=float).reshape(-1)
     lower = np.asarray(lower, dtype=float)
     upper = np.asarray(upper, dtype=float)
-    if values.shape != lower.shape:
-        raise ValueError(f'command has {values.size} values, expected {lower.size}')
-    if not np.all(np.isfinite(values)):
-        raise ValueError('command is not finite')
+    values, key, detail = vector_fault(values, lower.size, 'values')
+    if key is not None:
+        raise ValueError(f'command: {detail}')
     clipped = np.clip(values, lower, upper)
     assert np.all(np.isfinite(clipped)) and np.all(clipped >= lower) and np.all(clipped <= upper)
     return clipped

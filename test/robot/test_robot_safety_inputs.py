@@ -46,9 +46,9 @@ def test_rejections_say_what_is_wrong():
     assert check_command([1.0, math.nan, 1.0], 3, 10.0).detail == 'non-finite pressure'
     assert check_command([1.0, 11.0, 1.0], 3, 10.0).detail == (
         'pressure outside [0, 10] Pa: [1.0, 11.0, 1.0]')
-    with pytest.raises(ValueError, match='^command has 2 values, expected 3$'):
+    with pytest.raises(ValueError, match='^command: 2 values, expected 3$'):
         bounded_command([1.0, 2.0], np.zeros(3), np.ones(3))
-    with pytest.raises(ValueError, match='^command is not finite$'):
+    with pytest.raises(ValueError, match='^command: non-finite values$'):
         bounded_command([1.0, math.inf, 2.0], np.zeros(3), np.ones(3))
     with pytest.raises(ValueError, match=r'timeout must be a finite number > 0, got -1\.0'):
         StalenessWatch(-1.0)

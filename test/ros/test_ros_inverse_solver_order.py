@@ -8,6 +8,8 @@ correction must be ``4 g e`` (12 ``g e`` if every delivery were integrated) and 
 counted by reason in the diagnostics' rejection counts.
 """
 
+import math
+
 from cbha_inverse.ros.common.qos import MEASURED_QOS, TARGET_QOS
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
 from cbha_inverse.scene import load_scene
@@ -55,3 +57,21 @@ def test_duplicated_and_older_measurements_are_dropped_and_counted(rclpy_context
     values = {v.key: v.value for v in inputs.values}
     assert values['rejected.tip/measured.duplicate'] == '5'
     assert values['rejected.tip/measured.older'] == '3'
+
+
+def test_a_live_log_throttle_change_keeps_rejections_logged_and_counted(rclpy_context):
+    from rclpy.parameter import Parameter
+    names = list(load_scene(TENDON).actuator_names)
+    solver = make_node(InverseSolverNode, rclpy_context, scene=TENDON, valve_names=names,
+                       max_pressure=10.0, log_throttle=0.0)
+    client = Node('client', context=rclpy_context, namespace='/cbha')
+    target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    bad = target_point(np.array([math.nan, 0.0, 0.0]))
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0, 10.0)
+        target_pub.publish(bad)
+        assert spin_until(executor, lambda: sum(solver.rejected.values()) == 1, 5.0)
+        assert solver.set_parameters([Parameter('log_throttle', value=2.0)])[0].successful
+        target_pub.publish(bad)
+        assert spin_until(executor, lambda: sum(solver.rejected.values()) == 2, 5.0)
+    assert solver.rejected == {'target.non_finite': 2}

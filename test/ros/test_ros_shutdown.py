@@ -7,6 +7,7 @@ import sys
 import time
 
 from cbha_inverse.scene import load_scene
+import pytest
 from ros_helpers import child_env, REPO_ROOT, start_node
 
 SCENE = 'tendon_6f_8c'
@@ -104,3 +105,30 @@ def test_only_a_node_executable_gets_the_quiet_loading_stop(monkeypatch):
     assert node_executable('-m', names) == 'cbha_sim'
     monkeypatch.setattr(sys, 'orig_argv', ['python', '-m', 'pytest', 'test'])
     assert node_executable('-m', names) is None
+
+
+def test_the_quiet_stop_prints_one_line_exits_0_and_is_restored(capsys):
+    from cbha_inverse.ros.common.loading import install_quiet_stop, restore_handlers
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = install_quiet_stop('cbha_launch')
+    try:
+        assert previous == before
+        with pytest.raises(SystemExit) as stop:
+            signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None)
+        assert stop.value.code == 0
+        assert capsys.readouterr().err == 'cbha_launch: stopped by SIGTERM while loading\n'
+    finally:
+        restore_handlers(previous)
+    assert {sig: signal.getsignal(sig) for sig in before} == before
+
+
+def test_the_quiet_stop_keeps_a_handler_the_process_was_given():
+    from cbha_inverse.ros.common.loading import install_quiet_stop, restore_handlers
+    given = signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        previous = install_quiet_stop('x', keep_given=True)
+        restore_handlers(previous)
+        assert signal.SIGTERM not in previous
+        assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGTERM, given)

@@ -91,10 +91,10 @@ class CableGroup:
             owner.append(np.full(p, j))
             starts.append(count + np.arange(p - 1))
             count += p
-        self.frames = np.concatenate(frames)
-        self.offsets = np.concatenate(offsets)
-        owner = np.concatenate(owner)
-        self.segment_start = np.concatenate(starts)
+        self.frames = np.ascontiguousarray(np.concatenate(frames), dtype=np.int64)
+        self.offsets = np.ascontiguousarray(np.concatenate(offsets), dtype=float)
+        owner = np.concatenate(owner).astype(np.int64)
+        self.segment_start = np.concatenate(starts).astype(np.int64)
         self.segment_end = self.segment_start + 1
         self.segment_owner = owner[self.segment_start]
         self.point_owner = owner
@@ -106,6 +106,22 @@ class CableGroup:
     def n_actuators(self):
         """Return the number of cables."""
         return len(self.cables)
+
+    @property
+    def routing(self):
+        """
+        Return the routing arrays of the compiled cable kernels (C-contiguous, int64 indices).
+
+        Returns
+        -------
+        tuple of ndarray
+            Frames (P,), offsets (P, 3) [m], span start, end and owner (S,), point owner (P,):
+            the routing arguments of :func:`cbha_inverse.core._kernels.cables.cable_pass` and
+            :func:`cbha_inverse.core._kernels.cables.routing_lengths_into`.
+
+        """
+        return (self.frames, self.offsets, self.segment_start, self.segment_end,
+                self.segment_owner, self.point_owner)
 
 
 class CableTerms:
@@ -134,12 +150,8 @@ class CableTerms:
         """Precompute the routing and the block of every span and point."""
         self.n_frames = int(n_frames)
         self.columns = np.asarray(columns, dtype=np.int64)
-        self.frames = np.ascontiguousarray(group.frames, dtype=np.int64)
-        self.offsets = np.ascontiguousarray(group.offsets, dtype=float)
-        self.start = np.ascontiguousarray(group.segment_start, dtype=np.int64)
-        self.end = np.ascontiguousarray(group.segment_end, dtype=np.int64)
-        self.span_owner = np.ascontiguousarray(group.segment_owner, dtype=np.int64)
-        self.point_owner = np.ascontiguousarray(group.point_owner, dtype=np.int64)
+        (self.frames, self.offsets, self.start, self.end, self.span_owner,
+         self.point_owner) = group.routing
         self.gains = np.ascontiguousarray(group.gains, dtype=float)
         pairs = {}
         self.span_pair = np.array([

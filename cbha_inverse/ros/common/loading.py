@@ -78,14 +78,45 @@ def quiet_while_loading(node_names):
     executable = node_executable(sys.argv[0], node_names)
     if executable is None:
         return None
+    # a handler the process was given (an ignored SIGINT in a background job) stays
+    install_quiet_stop(executable, keep_given=True)
+    return executable
 
+
+def install_quiet_stop(executable, keep_given=False):
+    """
+    Make SIGINT and SIGTERM print :func:`stopped_message` and end the process with status 0.
+
+    The one quiet stop of a program that still loads: a node executable
+    (:func:`quiet_while_loading`), ``cbha_launch`` before it starts the nodes, and
+    :mod:`cbha_inverse.ros.launch.node_process` while it imports a node module.
+
+    Parameters
+    ----------
+    executable : str
+        The program's name, first word of the line.
+    keep_given : bool
+        Leave a signal alone whose handler is not Python's default (one the process was given).
+
+    Returns
+    -------
+    dict
+        The replaced handlers by signal, for :func:`restore_handlers`.
+
+    """
     def stop(signum, frame):
         print(stopped_message(executable, signal.Signals(signum).name), file=sys.stderr,
               flush=True)
         raise SystemExit(0)
 
+    previous = {}
     for sig in STOP_SIGNALS:
-        # a handler the process was given (an ignored SIGINT in a background job) stays
-        if signal.getsignal(sig) in (signal.default_int_handler, signal.SIG_DFL):
-            signal.signal(sig, stop)
-    return executable
+        if not keep_given or signal.getsignal(sig) in (signal.default_int_handler, signal.SIG_DFL):
+            previous[sig] = signal.signal(sig, stop)
+    return previous
+
+
+def restore_handlers(previous):
+    """Put back the handlers :func:`install_quiet_stop` replaced."""
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)

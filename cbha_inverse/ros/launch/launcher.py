@@ -15,17 +15,11 @@ composition's arguments (as ``ros2 launch ... --show-args``).
 import signal
 import sys
 
-
-def _stopped_while_loading(signum, frame):
-    """Leave quietly on a stop while this module still loads: no node has started yet."""
-    sys.stderr.write('cbha_launch: stopped before starting the nodes\n')
-    raise SystemExit(0)
-
+from cbha_inverse.ros.common.loading import install_quiet_stop, restore_handlers
 
 # a Ctrl-C right after the start lands in the imports below: one line and status 0, not a
 # KeyboardInterrupt traceback (restored once they are done)
-_LOADING = {sig: signal.signal(sig, _stopped_while_loading)
-            for sig in (signal.SIGINT, signal.SIGTERM)}
+_LOADING = install_quiet_stop('cbha_launch')
 
 import argparse  # noqa: E402, I100
 import os  # noqa: E402
@@ -43,8 +37,7 @@ from cbha_inverse.ros.launch.compositions import (  # noqa: E402
     ArgumentError, COMPOSITIONS, node_module, resolve)
 import yaml  # noqa: E402
 
-for _signal, _handler in _LOADING.items():
-    signal.signal(_signal, _handler)
+restore_handlers(_LOADING)
 
 PROGRAM = 'cbha_launch'
 STOP_TIMEOUT = 15.0

@@ -20,15 +20,8 @@ import importlib
 import signal
 import sys
 
-from cbha_inverse.ros.common.loading import STOP_SIGNALS, stopped_message
-
-
-class _StoppedWhileLoading(BaseException):
-    """Raised by the signal handler while the node module is imported."""
-
-
-def _on_stop_signal(signum, frame):
-    raise _StoppedWhileLoading(signal.Signals(signum).name)
+from cbha_inverse.ros.common.loading import (
+    install_quiet_stop, restore_handlers, STOP_SIGNALS)
 
 
 def main(argv=None):
@@ -43,8 +36,9 @@ def main(argv=None):
     Returns
     -------
     int
-        The node's exit status; 0 when stopped by a signal while it was loading; 2 without a
-        module name.
+        The node's exit status; 2 without a module name. A stop signal while the module loads
+        ends the process with status 0
+        (:func:`cbha_inverse.ros.common.loading.install_quiet_stop`).
 
     """
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -54,16 +48,12 @@ def main(argv=None):
         return 2
     module_name, node_args = argv[0], argv[1:]
     executable = module_name.rsplit('.', 1)[-1]
-    previous = {sig: signal.signal(sig, _on_stop_signal) for sig in STOP_SIGNALS}
+    previous = install_quiet_stop(executable)
     try:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
         module = importlib.import_module(module_name)
-    except _StoppedWhileLoading as stop:
-        print(stopped_message(executable, stop), file=sys.stderr)
-        return 0
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        restore_handlers(previous)
     return module.main([executable, *node_args])
 
 

@@ -51,6 +51,7 @@ from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_stat
                                                  TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration, finite_triple
@@ -173,7 +174,8 @@ class CbhaSimNode(Node):
                                 tip_noise=p.noise_std, pressure_noise=p.pressure_noise_std,
                                 seed=p.seed, tolerance=p.tolerance,
                                 max_iterations=p.max_iterations)
-        self.rejected = {}
+        self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.rejected = Rejections(self.log)
         self.accepted = 0
         self.last_result = None
         self.last_stamp = None
@@ -237,9 +239,7 @@ class CbhaSimNode(Node):
         values = command_array(message)
         check = check_command(values, len(self.order), self.params.max_pressure)
         if not check.ok:
-            self.rejected[check.reason] = self.rejected.get(check.reason, 0) + 1
-            self.get_logger().warn(f'rejected pressure_command: {check.detail}',
-                                   throttle_duration_sec=self.params.log_throttle)
+            self.rejected.count(check.reason, f'rejected pressure_command: {check.detail}')
             return
         self.arm.send(self._node_seconds(), values)
         self.accepted += 1
@@ -271,8 +271,7 @@ class CbhaSimNode(Node):
             result, noisy = self.arm.update_plant()
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self.failures += 1
-            self.get_logger().error(f'plant update failed, state kept: {exc!r}',
-                                    throttle_duration_sec=self.params.log_throttle)
+            self.log.error('plant_update', f'plant update failed, state kept: {exc!r}')
             return
         stamp = self.get_clock().now().to_msg()
         self.last_result, self.last_stamp = result, stamp
@@ -292,10 +291,9 @@ class CbhaSimNode(Node):
 
     def _statuses(self):
         result = self.last_result
-        total = sum(self.rejected.values())
-        values = {'accepted_commands': self.accepted, 'rejected_total': total,
-                  'resets': self.resets,
-                  **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
+        total = self.rejected.total
+        values = {'accepted_commands': self.accepted, 'resets': self.resets,
+                  **self.rejected.key_values(),
                   'valve_pressures_pa': ' '.join(f'{v:.0f}' for v in self.pressures[self.order]),
                   'newton_iterations': result.iterations if result else 0,
                   'residual_norm': result.residual_norm if result else math.nan,

@@ -43,6 +43,7 @@ from cbha_inverse.ros.common.diagnostics import (
 from cbha_inverse.ros.common.params import (
     changes_text, declare_parameters, param, ParameterError)
 from cbha_inverse.ros.common.qos import COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
 from cbha_inverse.scene import load_scene
@@ -165,7 +166,8 @@ class InverseSolverNode(Node):
         self.target_stale = False
         self.last_result = None
         self._last_solve = -math.inf
-        self.rejected = {}
+        self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.rejected = Rejections(self.log)
         self.published = 0
         self.ticks = 0
         self.statuses = {}
@@ -252,10 +254,7 @@ class InverseSolverNode(Node):
         return None
 
     def _count_rejected(self, topic, reason, detail):
-        key = f'{topic}.{reason}'
-        self.rejected[key] = self.rejected.get(key, 0) + 1
-        self.get_logger().warn(f'rejected {topic}: {detail} (total {self.rejected[key]})',
-                               throttle_duration_sec=self.params.log_throttle)
+        self.rejected.count(f'{topic}.{reason}', f'rejected {topic}: {detail}')
 
     def _on_payload(self, message):
         mass = float(message.data)
@@ -391,7 +390,7 @@ class InverseSolverNode(Node):
         self.last_result = result
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         for warning in result.warnings:
-            self.get_logger().warning(warning, throttle_duration_sec=self.params.log_throttle)
+            self.log.warning('solver_warning', warning)
         self._last_solve = self._node_seconds()
         self.ticks += 1
         try:
@@ -406,7 +405,7 @@ class InverseSolverNode(Node):
 
     def _count_failure(self, what, exc):
         self.statuses['exception'] = self.statuses.get('exception', 0) + 1
-        self.get_logger().error(f'{what}: {exc!r}', throttle_duration_sec=self.params.log_throttle)
+        self.log.error('exception', f'{what}: {exc!r}')
 
     def _publish(self, command):
         """Publish a command through the last gate; one that is not finite: the last again."""
@@ -414,9 +413,8 @@ class InverseSolverNode(Node):
             command = bounded_command(command, self.lower, self.upper)
         except ValueError as exc:
             # only a solver output can fail: hold, vent and the last command passed the gate
-            self.rejected['solver.non_finite'] = self.rejected.get('solver.non_finite', 0) + 1
-            self.get_logger().error(f'solver output rejected, holding: {exc}',
-                                    throttle_duration_sec=self.params.log_throttle)
+            self.rejected.count('solver.non_finite', f'solver output rejected, holding: {exc}',
+                                error=True)
             command = self.command
         self.command = command
         self.command_publisher.publish(command_message(command, self.valve_names))
@@ -464,11 +462,10 @@ class InverseSolverNode(Node):
             level, message = OK, 'no recent target: converging to the last one'
         else:
             level, message = OK, f'running ({result.status if result else "no tick yet"})'
-        total = sum(self.rejected.values())
+        total = self.rejected.total
         inputs = make_status(NODE_NAME, 'inputs', WARN if total else OK,
                              f'{total} rejected messages' if total else 'all inputs valid',
-                             {'rejected_total': total, **{f'rejected.{k}': v for k, v
-                                                          in sorted(self.rejected.items())}})
+                             self.rejected.key_values())
         return [make_status(NODE_NAME, 'control', level, message, values), inputs]
 
 

@@ -45,6 +45,7 @@ from cbha_inverse.ros.common.diagnostics import (
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import (
     COMMAND_QOS, DRIVER_READINGS_QOS, DRIVER_SET_POINTS_QOS, MEASURED_QOS)
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 import numpy as np
 from rclpy.node import Node
@@ -182,7 +183,8 @@ class RobotinoBridgeNode(Node):
         self.sent = None
         self.measured = None
         self.decision = 'waiting'
-        self.rejected = {}
+        log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.rejected = Rejections(log)
         self.forwarded = 0
         self.stale_published = 0
         self.readings = 0
@@ -231,17 +233,12 @@ class RobotinoBridgeNode(Node):
         self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
 
     # commands -------------------------------------------------------------------------------
-    def _reject(self, key, detail):
-        self.rejected[key] = self.rejected.get(key, 0) + 1
-        self.get_logger().warn(f'rejected {detail} (total {self.rejected[key]})',
-                               throttle_duration_sec=self.params.log_throttle)
-
     def _on_command(self, message):
         values = command_array(message)
         p = self.params
         check = check_command(values, len(p.valve_names), p.max_pressure)
         if not check.ok:
-            self._reject(check.reason, f'pressure_command: {check.detail}')
+            self.rejected.count(check.reason, f'rejected pressure_command: {check.detail}')
             return
         self.command_rate.add()
         self.command_watch.mark(time.monotonic())
@@ -284,10 +281,11 @@ class RobotinoBridgeNode(Node):
         try:
             pascal = robotino_pressures(message.pressures, p.valve_names)
         except ValueError as exc:
-            self._reject('readings.wrong_length', f'bha_readings: {exc}')
+            self.rejected.count('readings.wrong_length', f'rejected bha_readings: {exc}')
             return
         if not np.all(np.isfinite(pascal)):
-            self._reject('readings.non_finite', 'bha_readings: non-finite pressure')
+            self.rejected.count('readings.non_finite',
+                                'rejected bha_readings: non-finite pressure')
             return
         self.reading_rate.add()
         self.reading_watch.mark(time.monotonic())
@@ -302,14 +300,13 @@ class RobotinoBridgeNode(Node):
     def _statuses(self):
         now = time.monotonic()
         p = self.params
-        total = sum(self.rejected.values())
+        total = self.rejected.total
         values = {'decision': self.decision, 'forwarded_commands': self.forwarded,
                   'stale_set_points_published': self.stale_published,
                   'command_rate_hz': self.command_rate.rate(now),
                   'command_age_s': self.command_watch.age(now),
                   'readings': self.readings, 'reading_rate_hz': self.reading_rate.rate(now),
-                  'reading_age_s': self.reading_watch.age(now), 'rejected_total': total,
-                  **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
+                  'reading_age_s': self.reading_watch.age(now), **self.rejected.key_values(),
                   'sent_bar': ' '.join(f'{v:.3f}' for v in self.sent) if self.sent is not None
                   else ''}
         if self.sent is not None and self.measured is not None:

@@ -30,6 +30,7 @@ from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_stat
                                                  TimingStats, WARN)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import MARKER_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
@@ -114,7 +115,8 @@ class ShapeEstimatorNode(Node):
         self.estimator.warm_up()
         self.pressures = None
         self.pressure_time = -np.inf
-        self.rejected = {}
+        self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.rejected = Rejections(self.log)
         self.published = 0
         self.degraded = 0
         self.last = None
@@ -140,16 +142,13 @@ class ShapeEstimatorNode(Node):
         self.params = new
 
     def _reject(self, reason):
-        key = reason.split(':')[0]
-        self.rejected[key] = self.rejected.get(key, 0) + 1
-        self.get_logger().warn(f'rejected string_pots: {reason}',
-                               throttle_duration_sec=self.params.log_throttle)
+        self.rejected.count(reason.split(':')[0], f'rejected string_pots: {reason}')
 
     def _on_pressures(self, message):
         values = command_array(message)
         if values.size != self.order.size:
-            self.rejected['pressures.wrong_length'] = (
-                self.rejected.get('pressures.wrong_length', 0) + 1)
+            self.rejected.count('pressures.wrong_length', f'rejected pressures: {values.size} '
+                                f'values, expected {self.order.size}')
             return
         in_scene_order = np.empty(self.order.size)
         in_scene_order[self.order] = values
@@ -174,8 +173,7 @@ class ShapeEstimatorNode(Node):
         self.last = estimate
         if estimate.degraded:
             self.degraded += 1
-            self.get_logger().warn(f'degraded estimate: {estimate.reason}',
-                                   throttle_duration_sec=p.log_throttle)
+            self.log.warning('degraded', f'degraded estimate: {estimate.reason}')
         self.tip_publisher.publish(point_stamped(estimate.tip, message.header.stamp,
                                                  p.frame_id))
         if self.payload_publisher is not None:
@@ -190,10 +188,9 @@ class ShapeEstimatorNode(Node):
 
     def _statuses(self):
         last = self.last
-        total = sum(self.rejected.values())
+        total = self.rejected.total
         values = {'published': self.published, 'degraded_updates': self.degraded,
-                  'rejected_total': total,
-                  **{f'rejected.{k}': v for k, v in sorted(self.rejected.items())},
+                  **self.rejected.key_values(),
                   **self.estimate_times.summary('estimate')}
         if last is not None:
             values.update({f'residual_mm.{name}': float(r) * 1e3

@@ -33,6 +33,7 @@ from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_stat
 from cbha_inverse.ros.common.images import camera_from_info, image_array, ImageRejected
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import MEASURED_QOS
+from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import camera_frame, make_broadcaster
 from cbha_inverse.vision.camera import load_camera_yaml
@@ -199,7 +200,8 @@ class StereoTrackerNode(Node):
             raise ParameterError(str(exc)) from None
         self.pairer = StereoPairer(p.max_pair_dt, p.queue_size)
         self.drops = DropMonitor()
-        self.counts = collections.Counter()
+        self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
+        self.counts = Rejections(self.log)
         self.pairs = 0
         self.published = 0
         self.epipolar = collections.deque(maxlen=500)
@@ -227,11 +229,6 @@ class StereoTrackerNode(Node):
             f'{p.image_reliability}, camera models: {sources}')
 
     # inputs ---------------------------------------------------------------------------------
-    def _count(self, reason, detail):
-        self.counts[reason] += 1
-        self.get_logger().warn(f'{detail} (total {self.counts[reason]})',
-                               throttle_duration_sec=self.params.log_throttle)
-
     def _make_tracker(self, marker, limits):
         """Return the tracker of both camera models (None while one is missing)."""
         if not all(side in self.cameras for side in SIDES):
@@ -260,7 +257,7 @@ class StereoTrackerNode(Node):
         try:
             camera = camera_from_info(message)
         except ValueError as exc:
-            self._count('camera_info_invalid', f'rejected {side} camera_info: {exc}')
+            self.counts.count('camera_info_invalid', f'rejected {side} camera_info: {exc}')
             return
         current = self.cameras.get(side)
         if current is not None and current[1] == 'topic' and _same_camera(current[0], camera):
@@ -272,36 +269,36 @@ class StereoTrackerNode(Node):
         self.arrivals.append((side, time.monotonic()))
         camera = self.cameras.get(side)
         if camera is None:
-            self._count('no_camera_model', f'{side} image before any camera model')
+            self.counts.count('no_camera_model', f'{side} image before any camera model')
             return
         try:
             pixels, order = image_array(message, camera[0].width, camera[0].height)
         except ImageRejected as exc:
-            self._count(exc.reason, f'rejected {side} image: {exc}')
+            self.counts.count(exc.reason, f'rejected {side} image: {exc}')
             return
         pair, dropped = self.pairer.add(side, stamp_seconds(message.header.stamp),
                                         (pixels, order, message.header.stamp))
         # dropped images: counted (diagnostics), DEBUG; WARN only when the tracker falls behind
-        self.counts['dropped_unpaired'] += len(dropped)
+        self.counts.count('dropped_unpaired', None, len(dropped))
         for reason in dropped:
             self.get_logger().debug(f'{side} image dropped: no partner within '
                                     f'{self.params.max_pair_dt * 1e3:g} ms' if reason ==
                                     'no_partner' else 'image dropped: a newer pair was complete')
         if self.drops.add(len(dropped)):
             events, total = self.drops.events, self.counts['dropped_unpaired']
-            self.get_logger().warn(
-                f'falling behind: {sum(events)} of the last {len(events)} images dropped '
-                f'unpaired (total {total})', throttle_duration_sec=self.params.log_throttle)
+            self.log.warning('falling_behind', f'falling behind: {sum(events)} of the last '
+                             f'{len(events)} images dropped unpaired (total {total})')
         if pair is not None:
             self._process(*pair)
 
     def _process(self, left, right):
         start = time.perf_counter()
         if self.tracker is None:
-            self._count('no_camera_model', 'image pair before both camera models')
+            self.counts.count('no_camera_model', 'image pair before both camera models')
             return
         if left[1] != right[1]:
-            self._count('encoding_mismatch', 'left and right images have different encodings')
+            self.counts.count('encoding_mismatch',
+                              'left and right images have different encodings')
             return
         result = self.tracker.track(left[0], right[0], left[1])
         self.pairs += 1
@@ -313,7 +310,7 @@ class StereoTrackerNode(Node):
             self.publisher.publish(point_stamped(result.p_base, left[2], self.params.frame_id))
             self.published += 1
         else:
-            self._count(result.reason, f'no tip published: {result.reason}')
+            self.counts.count(result.reason, f'no tip published: {result.reason}')
         self.processing.add(time.perf_counter() - start)
 
     # diagnostics ----------------------------------------------------------------------------
@@ -324,11 +321,9 @@ class StereoTrackerNode(Node):
         return (len(stamps) - 1) / (stamps[-1] - stamps[0])
 
     def _statuses(self):
-        rejected = sum(self.counts.values())
         rate = self.published / self.pairs if self.pairs else math.nan
         values = {'pairs': self.pairs, 'published': self.published, 'detection_rate': rate,
-                  'rejected_total': rejected,
-                  **{f'rejected.{k}': v for k, v in sorted(self.counts.items())},
+                  **self.counts.key_values(),
                   'epipolar_error_median_px': (float(np.median(self.epipolar))
                                                if self.epipolar else math.nan),
                   'reprojection_error_median_px': (float(np.median(self.reprojection))
