@@ -184,12 +184,13 @@ class StereoTrackerNode(Node):
             p = self.params
             self.pose = check_pose(p.base_from_left)
             self.marker, self.limits = detection(p)
-            self.camera_tf = make_broadcaster(self, static=True) if p.publish_camera_tf else None
             self.cameras = {}
             for side, name in zip(SIDES, (p.left_camera_info_file, p.right_camera_info_file)):
                 path = _camera_file(name)
                 if path is not None:
                     self.cameras[side] = (load_camera_yaml(path), f'file {path}')
+            # after the camera files: a broken one is the only line, without TF's INFO before it
+            self.camera_tf = make_broadcaster(self, static=True) if p.publish_camera_tf else None
             self.tracker = None
             self._rebuild_tracker()
         except ConfigError:  # a camera file: its own one-line message names file and key
