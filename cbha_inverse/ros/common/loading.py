@@ -12,6 +12,7 @@ node's ``main`` takes them over. Any other process (a test importing a node clas
 ``cbha_launch``'s :mod:`cbha_inverse.ros.launch.node_process`) keeps its handlers.
 """
 
+import atexit
 import os
 import signal
 import sys
@@ -107,13 +108,39 @@ def install_quiet_stop(executable, keep_given=False):
     def stop(signum, frame):
         print(stopped_message(executable, signal.Signals(signum).name), file=sys.stderr,
               flush=True)
-        raise SystemExit(0)
+        # not SystemExit: raised while the interpreter compiles a module (``python -m`` compiles
+        # the node's own module), it is lost and the node would go on loading and run
+        end_process(0)
 
     previous = {}
     for sig in STOP_SIGNALS:
         if not keep_given or signal.getsignal(sig) in (signal.default_int_handler, signal.SIG_DFL):
             previous[sig] = signal.signal(sig, stop)
     return previous
+
+
+def end_process(code):
+    """
+    End this process with ``code`` after the ``atexit`` handlers, without finalizing Python.
+
+    For a node process whose node has been shut down, or stopped while it loads
+    (:func:`install_quiet_stop`): the handlers run (coverage's data file of
+    a measured run, rclpy's), the standard streams are flushed, and ``os._exit`` skips the
+    module teardown and final garbage collection of the interpreter.
+
+    Parameters
+    ----------
+    code : int
+        Exit status.
+
+    """
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed or broken pipe: nothing more to say there
+            pass
+    os._exit(code)
 
 
 def restore_handlers(previous):

@@ -18,14 +18,12 @@ interpreter, which would take seconds on a loaded machine and report the frozen 
 objects as leaks (proxsuite's nanobind prints ~30 lines of them).
 """
 
-import atexit
 import gc
-import os
 import signal
 import sys
 
 from cbha_inverse.errors import ConfigError, report_config_error
-from cbha_inverse.ros.common.loading import STOP_SIGNALS
+from cbha_inverse.ros.common.loading import end_process, STOP_SIGNALS
 from cbha_inverse.ros.common.params import check_params_files, parameter_help, ParameterError
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -104,29 +102,6 @@ def spin_until_stopped(node, stop, done=None):
         pass
     finally:
         executor.shutdown()
-
-
-def end_process(code):
-    """
-    End this process with ``code`` after the ``atexit`` handlers, without finalizing Python.
-
-    For a node process whose node has been shut down: the handlers run (coverage's data file of
-    a measured run, rclpy's), the standard streams are flushed, and ``os._exit`` skips the
-    module teardown and final garbage collection of the interpreter.
-
-    Parameters
-    ----------
-    code : int
-        Exit status.
-
-    """
-    atexit._run_exitfuncs()
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # a closed or broken pipe: nothing more to say there
-            pass
-    os._exit(code)
 
 
 def node_help(node_name, node_class, params_class, executable=None):
