@@ -42,6 +42,16 @@ class StereoRig:
     right: object
     base_from_left: np.ndarray
 
+    def __post_init__(self):
+        """Keep a read-only copy of the pose and its rotation (used for every tracked pair)."""
+        pose = np.array(self.base_from_left, dtype=float)
+        pose.setflags(write=False)
+        rotation = matrix_from_quat(pose[3:])
+        rotation.setflags(write=False)
+        # frozen dataclass: the two attributes are set once, here
+        object.__setattr__(self, 'base_from_left', pose)
+        object.__setattr__(self, '_rotation_base_left', rotation)
+
     @property
     def baseline(self):
         """Return the distance [m] between the optical centres, ``-Tx_right / fx_right``."""
@@ -49,8 +59,8 @@ class StereoRig:
 
     @property
     def rotation_base_left(self):
-        """Return ``R_base_left`` (3, 3): the left optical axes in ``cbha_base``."""
-        return matrix_from_quat(self.base_from_left[3:])
+        """Return ``R_base_left`` (3, 3, read-only): the left optical axes in ``cbha_base``."""
+        return self._rotation_base_left
 
     def left_from_base(self, p_base):
         """

@@ -141,6 +141,19 @@ def test_camera_poses_map_each_optical_frame_into_cbha_base():
                                atol=1e-14)
 
 
+def test_rig_keeps_its_own_read_only_pose():
+    """The rig copies its pose: changing the caller's array later moves no tracked point."""
+    pose = pose_vector(so3_exp([0.1, 0.2, -0.3]), [0.5, 0.0, 0.1])
+    rig = StereoRig(None, None, pose)
+    point = rig.base_from_left_points([0.0, 0.0, 1.0])
+    pose[:] = [9.0, 9.0, 9.0, 0.0, 0.0, 0.0, 1.0]
+    np.testing.assert_array_equal(rig.base_from_left_points([0.0, 0.0, 1.0]), point)
+    np.testing.assert_allclose(point[0], so3_exp([0.1, 0.2, -0.3])[:, 2] + [0.5, 0.0, 0.1],
+                               atol=1e-15)
+    with pytest.raises(ValueError):
+        rig.base_from_left[0] = 1.0
+
+
 def test_rig_round_trip_and_broken_pose(tmp_path):
     """save_rig -> load_rig is exact; a bad base_from_left names the key."""
     rig = load_rig(config_path('cameras', 'rig.yaml'))
