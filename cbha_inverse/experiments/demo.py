@@ -3,16 +3,12 @@
 
 For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
 tip/true, tip/measured, tip/estimated, pressure_command, pressure_measured, string_pots,
-/diagnostics), then ``cbha_sim``,
-``inverse_solver`` and ``trajectory`` as separate processes (as ``ros2 run`` would, with the
-installed params files plus a per-run override file written into the output folder), runs one
-lap, stops the nodes and the recorder with SIGINT and prints one summary line: tracking RMS and
-max error (tip of the plant vs target, moving part of the lap), computed from the run's bag by
-:func:`cbha_inverse.bag.evaluate.evaluate_bag` (what ``cbha_bag eval <bag> --start S --end E``
-prints, with the window stored in ``summary.json``), and the solver's tick time median / p99 and
-its target-to-command latency median and p99 (target callback entry to command published,
-measured in the node, from its diagnostics). It writes ``demo.png`` (target vs tip in the y-z
-plane) and ``summary.json``, and per run the params files used, the node logs and the bag.
+/diagnostics), then ``cbha_sim``, ``inverse_solver`` (``--realtime-priority``) and
+``trajectory`` as separate processes (as ``ros2 run`` would, with the installed params files
+plus a per-run override file), runs one lap, stops them with SIGINT and prints one line:
+tracking RMS and max (plant tip vs target, moving part: ``cbha_bag eval``), the solver's tick
+and target-to-command latency (callback entry to publish; its CPU time: the rest is waiting for
+a core), median / p99. It writes ``demo.png``, ``summary.json`` and per run params, logs, bag.
 
 Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
 centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
@@ -33,11 +29,10 @@ estimates the tip from the pots and the measured pressures (``docs/proprioceptio
 as the others, and its second line gives the estimate's own RMS against ``tip/true``.
 ``--plant-payload`` hangs a payload at the plant's tip that no model knows.
 
-``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``outer_bends``, ``extension``,
-``all``, ... or a YAML file of holds) adds, after the trajectory runs, an excitation run for
-identification: ``cbha_sim`` (the same plant) and ``cbha_excite`` alone (no solver, no
-trajectory), recorded (pressure_command, pressure_measured, tip/measured, tip/true) into
-``<output>/excite_<program>/bag`` and listed in ``summary.json`` under ``excitation``.
+``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``all``, ... or a YAML file of
+holds) adds an identification run: ``cbha_sim`` and ``cbha_excite`` alone, recorded
+(pressure_command, pressure_measured, tip/measured, tip/true) into
+``<output>/excite_<program>/bag``, listed in ``summary.json`` under ``excitation``.
 """
 
 import argparse
@@ -135,6 +130,8 @@ def parse_args(argv):
                         help='cbha_excite hold_time [s]')
     parser.add_argument('--excite-ramp-time', type=float, default=1.0,
                         help='cbha_excite ramp_time [s]')
+    parser.add_argument('--realtime-priority', type=int, default=50,
+                        help="inverse_solver's SCHED_FIFO priority (0: normal scheduler)")
     parser.add_argument('--domain', type=int, default=None,
                         help='ROS_DOMAIN_ID for the run (default: the environment, else a free '
                         'one from domain_coordinator)')
@@ -397,7 +394,8 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
             'payload_std': args.estimate_payload}, env)
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
         **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
-        'diagnostics_period': 0.5, **solver_extra}, env)
+        'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,
+        **solver_extra}, env)
     try:
         # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
         # clock at 0 until the solver, this recorder and the bag recorder subscribe to it
@@ -459,6 +457,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
             'tick_p99_ms': number(control, 'tick_p99_ms'),
             'latency_median_ms': number(control, 'latency_median_ms'),
             'latency_p99_ms': number(control, 'latency_p99_ms'),
+            'latency_cpu_p99_ms': number(control, 'latency_cpu_p99_ms'),
             'solver_ticks': number(control, 'ticks'),
             'solver_status': {k[len('status.'):]: v for k, v in control.items()
                               if k.startswith('status.')},
@@ -551,7 +550,8 @@ def main(argv=None):
                   f"{result['max_mm']:6.3f} mm | tick median {result['tick_median_ms']:.3f}"
                   f" ms, p99 {result['tick_p99_ms']:.3f} ms | target->command latency "
                   f"median {result['latency_median_ms']:.3f} ms, p99 "
-                  f"{result['latency_p99_ms']:.3f} ms", flush=True)
+                  f"{result['latency_p99_ms']:.3f} ms (CPU p99 {result['latency_cpu_p99_ms']:.3f}"
+                  ' ms)', flush=True)
             if feedback == 'stereo':
                 print(f"{'':6s} {'':6s}  closed loop through the cameras ({args.camera_rate:g}"
                       f' frames/s, {args.stereo_rig}): detection rate '

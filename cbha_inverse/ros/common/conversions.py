@@ -149,18 +149,37 @@ def command_message(values, valve_names):
     Returns
     -------
     std_msgs.msg.Float64MultiArray
-        ``data`` = the pressures (an ``array('d')`` filled from the values' bytes: no Python
-        float per value, no per-element check in the message's setter).
+        ``data`` = the pressures (:func:`command_data`).
 
     """
     message = Float64MultiArray()
     size = len(valve_names)
     message.layout.dim = [MultiArrayDimension(label=','.join(valve_names), size=size,
                                               stride=size)]
+    message.data = command_data(values)
+    return message
+
+
+def command_data(values):
+    """
+    Return pressures as the ``data`` of a ``Float64MultiArray``.
+
+    Parameters
+    ----------
+    values : (m,) array_like  [Pa]
+        Gauge pressures in valve order.
+
+    Returns
+    -------
+    array.array
+        An ``array('d')`` filled from the values' bytes: no Python float per value, no
+        per-element check in the message's setter (a node that publishes at the tick rate
+        keeps one message from :func:`command_message` and replaces only its ``data``).
+
+    """
     data = array('d')
     data.frombytes(np.asarray(values, dtype=np.float64).reshape(-1).tobytes())
-    message.data = data
-    return message
+    return data
 
 
 def command_array(message):

@@ -37,12 +37,13 @@ from cbha_inverse.robot.safety import (
     valve_order, watchdog_action, WorkspaceBox)
 from cbha_inverse.robot.targets import TargetHistory
 from cbha_inverse.ros.common.conversions import (
-    backbone_markers, command_message, point_array, stamp_ns)
+    backbone_markers, command_data, command_message, point_array, stamp_ns)
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
 from cbha_inverse.ros.common.params import (
     changes_text, declare_parameters, param, ParameterError)
 from cbha_inverse.ros.common.qos import COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.common.realtime import MAX_REALTIME_PRIORITY, set_realtime_priority
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
@@ -119,6 +120,10 @@ class InverseSolverParams:
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected inputs [s]',
                                 low=0.0, high=3600.0, live=True)
+    realtime_priority: int = param(0, 'SCHED_FIFO priority of the control thread (1-98, as '
+                                   'ros2_control thread_priority; refused without root or '
+                                   'CAP_SYS_NICE: a warning); 0 = the normal scheduler',
+                                   low=0, high=MAX_REALTIME_PRIORITY)
 
 
 class InverseSolverNode(Node):
@@ -173,8 +178,13 @@ class InverseSolverNode(Node):
         self.statuses = {}
         self.tick_times = TimingStats()
         self.latencies = TimingStats()
+        # the thread's CPU time over the same window: latency minus it is time spent waiting
+        # for a core (docs/nodes.md, "Latency")
+        self.latency_cpu = TimingStats()
         self.command_publisher = self.create_publisher(
             Float64MultiArray, 'pressure_command', COMMAND_WRITER_QOS)
+        # one message, its data replaced per command (publish() serialises it at once)
+        self.command_message = command_message(self.vent_command, self.valve_names)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
         self.tf = make_broadcaster(self)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
@@ -192,6 +202,12 @@ class InverseSolverNode(Node):
             f'scene {self.scene.name}: {len(self.valve_names)} valves {list(self.valve_names)}, '
             f'p_max {self.upper.max():g}, {p.mode} loop, trigger {p.trigger} at {p.rate_hz:g} Hz,'
             f' stale -> {p.stale_action}; {self.command_publisher.topic_name}')
+        refused = set_realtime_priority(p.realtime_priority)
+        if refused:
+            self.get_logger().warn(f'{refused}; the control thread stays under the normal '
+                                   'scheduler')
+        elif p.realtime_priority:
+            self.get_logger().info(f'control thread: SCHED_FIFO priority {p.realtime_priority}')
 
     def _setup_model(self):
         """Load the scene, build the solver and the command order and bounds."""
@@ -265,6 +281,7 @@ class InverseSolverNode(Node):
 
     def _on_target(self, message):
         received = time.perf_counter()
+        received_cpu = time.thread_time()
         point = self._accepted_point('target', message)
         if point is None:
             return
@@ -272,7 +289,9 @@ class InverseSolverNode(Node):
         self.target_history.add(stamp_ns(message.header.stamp), point)
         self.target_watch.mark(time.monotonic())
         if self.params.trigger == 'target' and self._decide() == 'run':
-            self.latencies.add(self._solve_and_publish() - received)
+            published, published_cpu = self._solve_and_publish()
+            self.latencies.add(published - received)
+            self.latency_cpu.add(published_cpu - received_cpu)
 
     def _on_measured(self, message):
         point = self._accepted_point('tip/measured', message)
@@ -373,7 +392,7 @@ class InverseSolverNode(Node):
         return response
 
     def _solve_and_publish(self):
-        """Tick the solver, publish the command, prepare the next tick; return the publish time."""
+        """Tick, publish, prepare the next tick; return perf_counter and thread_time at publish."""
         start = time.perf_counter()
         goal = self.corrector.update(self.target[None], None)
         try:
@@ -382,9 +401,9 @@ class InverseSolverNode(Node):
             # a numerical failure must not kill the controller: hold, count, report ERROR
             self._count_failure('solver failed, holding the last command', exc)
             self._publish(self.command)
-            return time.perf_counter()
+            return time.perf_counter(), time.thread_time()
         self._publish(result.actuation[self.order])
-        published = time.perf_counter()
+        published = time.perf_counter(), time.thread_time()
         # the bookkeeping and the linearisation for the next tick come after the publication,
         # off the target -> command path (``docs/design.md``)
         self.last_result = result
@@ -417,7 +436,8 @@ class InverseSolverNode(Node):
                                 error=True)
             command = self.command
         self.command = command
-        self.command_publisher.publish(command_message(command, self.valve_names))
+        self.command_message.data = command_data(command)
+        self.command_publisher.publish(self.command_message)
         self.published += 1
 
     # outputs --------------------------------------------------------------------------------
@@ -449,6 +469,7 @@ class InverseSolverNode(Node):
                   'measured_error_mm': 1e3 * self.target_error,
                   'command_pa': ' '.join(f'{v:.0f}' for v in self.command),
                   **self.tick_times.summary('tick'), **self.latencies.summary('latency'),
+                  **self.latency_cpu.summary('latency_cpu'),
                   **{f'status.{k}': v for k, v in sorted(self.statuses.items())}}
         if result is not None and result.status == 'not_positive_definite':
             level, message = ERROR, 'model tangent not positive definite: holding'
