@@ -332,6 +332,20 @@ def start_node(module, *ros_args):
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
+def wait_for_line(process, text, timeout):
+    """Read the merged output until a line contains ``text``; return all lines read."""
+    lines = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        line = process.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if text in line:
+            return True, lines
+    return False, lines
+
+
 def aborted_logs(folder, lines=60):
     """
     Return the end of every process log under ``folder`` that holds a faulthandler stack.

@@ -10,11 +10,10 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 
 from cbha_inverse.ros.common.realtime import MAX_REALTIME_PRIORITY, set_realtime_priority
 import pytest
-from ros_helpers import child_env, start_node
+from ros_helpers import child_env, start_node, wait_for_line
 
 # a thread started before and one started after the priority is set, and their policies
 THREADS = textwrap.dedent("""
@@ -90,14 +89,7 @@ def test_inverse_solver_runs_its_control_thread_under_fifo():
                          '-p', 'realtime_priority:=30')
     lines = []
     try:
-        deadline = time.monotonic() + 90
-        while time.monotonic() < deadline:
-            line = process.stdout.readline()
-            if not line:
-                break
-            lines.append(line)
-            if 'control thread:' in line:
-                break
+        _, lines = wait_for_line(process, 'control thread:', 90.0)
         assert lines and 'control thread: SCHED_FIFO priority 30' in lines[-1], ''.join(lines)
         # the node's main thread (its executor's), and none of the DDS threads it started
         # before the priority was set

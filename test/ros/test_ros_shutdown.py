@@ -7,23 +7,9 @@ import sys
 import time
 
 from cbha_inverse.scene import load_scene
-from ros_helpers import child_env, REPO_ROOT, start_node
+from ros_helpers import child_env, REPO_ROOT, start_node, wait_for_line
 
 SCENE = 'tendon_6f_8c'
-
-
-def _wait_for_line(process, text, timeout):
-    """Read the merged output until a line contains ``text``; return all lines read."""
-    lines = []
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        line = process.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if text in line:
-            return True, lines
-    return False, lines
 
 
 def test_nodes_exit_cleanly_on_sigint_and_sigterm():
@@ -47,7 +33,7 @@ def test_nodes_exit_cleanly_on_sigint_and_sigterm():
     try:
         for module, sig, process in processes:
             # every node logs one INFO line once its publishers and timers exist
-            ok, lines = _wait_for_line(process, '[INFO]', 60.0)
+            ok, lines = wait_for_line(process, '[INFO]', 60.0)
             assert ok, f'{module} did not start:\n{"".join(lines)}'
         time.sleep(0.5)
         for _, sig, process in processes:
