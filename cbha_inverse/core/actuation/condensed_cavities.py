@@ -40,16 +40,9 @@ class LinearCavityGroup:
         self.names = tuple(c.name for c in self.cavities)
         self.n_frames = int(n_frames)
         lower, owner, g0, hess, d0, q0, v0 = [], [], [], [], [], [], []
-        # the fit depends only on the part's geometry: the repeated segments of a section share
-        # it (the CBHA: 3 fits instead of 48, 0.13 s instead of 1.1 s per scene load)
-        fits = {}
         for j, cavity in enumerate(self.cavities):
             for part in cavity.parts:
-                key = tuple(np.ascontiguousarray(a, dtype=float).tobytes() for a in (
-                    part.points, part.triangles, part.rest_offset, part.rest_rotation))
-                if key not in fits:
-                    fits[key] = fit_linear_cavity(part, step)
-                g, h, vol = fits[key]
+                g, h, vol = _shared_fit(part, step)
                 lower.append(part.lower)
                 owner.append(j)
                 # the cavity's gain (calibration) scales its wrench per Pa and its volume
@@ -73,6 +66,33 @@ class LinearCavityGroup:
     def n_actuators(self):
         """Return the number of cavities."""
         return len(self.cavities)
+
+
+_FITS = {}
+"""Fits by part geometry and step (:func:`_shared_fit`)."""
+_MAX_FITS = 256
+
+
+def _shared_fit(part, step):
+    """
+    Return :func:`fit_linear_cavity` of the part, computed once per geometry and step.
+
+    The fit depends only on the part's geometry (not on its link, its cavity's gain or the
+    calibration): the repeated segments of a section share it (the CBHA: 3 fits instead of 48
+    per scene load), and so do the scene loads of one process, e.g. one per model evaluation of
+    ``cbha_identify`` (a load then takes 18 ms instead of 53 ms). The cached arrays are
+    read-only.
+    """
+    key = (float(step),) + tuple(np.ascontiguousarray(a, dtype=float).tobytes() for a in (
+        part.points, part.triangles, part.rest_offset, part.rest_rotation))
+    fit = _FITS.get(key)
+    if fit is None:
+        g, h, volume = fit_linear_cavity(part, step)
+        g.flags.writeable = h.flags.writeable = False
+        if len(_FITS) >= _MAX_FITS:
+            _FITS.clear()
+        fit = _FITS[key] = (g, h, volume)
+    return fit
 
 
 def fit_linear_cavity(part, step=1e-5):
