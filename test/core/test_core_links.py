@@ -158,6 +158,8 @@ def test_link_pass_skips_zero_cavity_columns_exactly():
         wrench[link, cav] = 0.0
         hessian[link, cav] = 0.0
     wrench[2, 0] = 0.0
+    # read-only as a scene holds them: the signature the warm-up compiled (no ~40 s compile)
+    stiffness.flags.writeable = rest_offsets.flags.writeable = False
     columns = nonzero_cavity_columns(wrench, hessian)
     np.testing.assert_array_equal(columns, [[1, -1, -1], [-1, -1, -1], [0, 1, 2], [0, 1, 2]])
     actuation = rng.normal(size=c)
