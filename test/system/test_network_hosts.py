@@ -231,8 +231,11 @@ def test_link_cut_holds_then_the_loop_resumes(capsys):
         time.sleep(cut_for)
         back = time.time()
         lab.set_link('robot', up=True)
-        time.sleep(3.0)
         solver = nodes['inverse_solver']
+        # until the loop resumed (3 s at most), then 1 s of commands and tips after it, in which
+        # a second hold or a burst would show
+        wait_for(lambda: [t for t in log_events(solver, r'^hold -> run') if t > back], 3.0)
+        time.sleep(1.0)
         alive = {name: p.poll() is None for name, p in nodes.items()}
         holds = log_messages(solver, r'^run -> hold')
         runs = log_events(solver, r'^hold -> run')
