@@ -80,7 +80,7 @@ def _shared_fit(part, step):
     The fit depends only on the part's geometry (not on its link, its cavity's gain or the
     calibration): the repeated segments of a section share it (the CBHA: 3 fits instead of 48
     per scene load), and so do the scene loads of one process, e.g. one per model evaluation of
-    ``cbha_identify`` (a load then takes 18 ms instead of 53 ms). The cached arrays are
+    ``cbha_identify`` (a CBHA load then takes 11 ms instead of 53 ms). The cached arrays are
     read-only.
     """
     key = (float(step),) + tuple(np.ascontiguousarray(a, dtype=float).tobytes() for a in (
