@@ -34,7 +34,10 @@ def test_estimated_tip_follows_the_true_tip(rclpy_context):
         Parameter('stiffness_scale', value=1.0), Parameter('cavity_gain_scale', value=GAINS),
         Parameter('rate_hz', value=50.0), Parameter('string_pot_rate_hz', value=50.0)])
     estimator = ShapeEstimatorNode(context=rclpy_context, namespace='/se')
+    # renamed, so that its diagnostics do not overwrite those of the estimator under test
     probe_target = ShapeEstimatorNode(context=rclpy_context, namespace='/se_probe',
+                                      cli_args=['--ros-args', '-r',
+                                                '__node:=shape_estimator_probe'],
                                       parameter_overrides=[Parameter('use_pressures',
                                                                      value=False)])
     probe = Node('probe', context=rclpy_context)

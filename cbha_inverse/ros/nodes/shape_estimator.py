@@ -201,7 +201,8 @@ class ShapeEstimatorNode(Node):
         message = (last.reason if last is not None and last.degraded else
                    f'{total} rejected readings' if total else
                    'ok' if last is not None else 'waiting for string_pots')
-        return [make_status(NODE_NAME, 'estimate', level, message, values)]
+        # the node's own name (a launch may rename it): two estimators on one /diagnostics
+        return [make_status(self.get_name(), 'estimate', level, message, values)]
 
 
 def main(argv=None):
