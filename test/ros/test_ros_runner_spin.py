@@ -97,3 +97,37 @@ def test_a_stop_signal_during_a_callback_lets_it_finish_then_ends_the_spin(rclpy
     finally:
         guard.cancel()
         node.destroy_node()
+
+
+def test_a_stop_signal_ends_the_spin_of_a_node_whose_callbacks_cannot_keep_up(rclpy_context):
+    """
+    A timer callback longer than its period: a timer event is always queued.
+
+    The events executor ends a spin slice at its timeout only when its queue is empty, so the
+    loop's poll of the stop flag between slices would never come: the stop must end the slice.
+    """
+    node = Node('overloaded_probe', context=rclpy_context)
+    ticks = []
+
+    def overloaded_callback():
+        ticks.append(time.monotonic())
+        if len(ticks) == 100:
+            # after 100 back-to-back callbacks (0.5 s, five spin slices); Python runs the
+            # handler in this thread before this callback's next line
+            os.kill(os.getpid(), signal.SIGINT)
+        deadline = time.monotonic() + 0.005
+        while time.monotonic() < deadline:
+            pass
+
+    node.create_timer(0.002, overloaded_callback)
+    guard = _guard(rclpy_context, seconds=10.0)
+    try:
+        with StopRequest() as stop:
+            spin_until_stopped(node, stop)
+        assert stop.signal_name == 'SIGINT'
+        assert rclpy_context.ok(), 'the stop, not the guard, must end the spin'
+        # the slice ends with the callback the signal landed in (a slice's worth is 20)
+        assert len(ticks) == 100, len(ticks)
+    finally:
+        guard.cancel()
+        node.destroy_node()

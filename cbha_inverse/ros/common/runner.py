@@ -49,6 +49,8 @@ class StopRequest:
 
     def __init__(self):
         self.signal_name = None
+        # completed (with the signal's name) by the first signal: it ends a spin at once
+        self.future = Future()
         self._previous = {}
 
     @property
@@ -60,6 +62,7 @@ class StopRequest:
         if self.requested:
             raise KeyboardInterrupt(signal.Signals(signum).name)
         self.signal_name = signal.Signals(signum).name
+        self.future.set_result(self.signal_name)
 
     def __enter__(self):
         self._previous = {sig: signal.signal(sig, self._on_signal) for sig in STOP_SIGNALS}
@@ -80,7 +83,11 @@ def spin_until_stopped(node, stop, done=None):
     message's arrival and its callback, and less CPU per callback (``docs/nodes.md``).
     Its callbacks run one at a time in this thread (one mutually exclusive group). It spins in
     slices of :data:`SPIN_POLL_S` (the events executor of rclpy 7.1 runs no callback when it
-    spins without a timeout), and ``stop`` is polled between them.
+    spins without a timeout), and ``stop`` is polled between them. A slice ends at its timeout
+    only when no event is queued: a node whose callbacks cannot keep up (a timer callback longer
+    than its period on a loaded machine) would spin one slice for ever. So the stop signal and
+    ``done`` also complete the future the slice waits for, which ends it after the callback that
+    runs (Python runs a signal handler in this thread, during that callback).
 
     Parameters
     ----------
@@ -94,7 +101,15 @@ def spin_until_stopped(node, stop, done=None):
     """
     executor = EventsExecutor(context=node.context)
     executor.add_node(node)
-    until = Future() if done is None else done
+    until = Future()
+
+    def end_the_slice(_):
+        if not until.done():
+            until.set_result(None)
+
+    stop.future.add_done_callback(end_the_slice)
+    if done is not None:
+        done.add_done_callback(end_the_slice)
     try:
         while not stop.requested and node.context.ok() and not until.done():
             executor.spin_until_future_complete(until, timeout_sec=SPIN_POLL_S)
