@@ -8,6 +8,7 @@ costs nothing for the tests that do not use them.
 import contextlib
 import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 import time
@@ -330,6 +331,37 @@ def start_node(module, *ros_args):
     return subprocess.Popen(
         [sys.executable, '-m', module, '--ros-args', *ros_args], cwd=REPO_ROOT, env=child_env(),
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def interrupt(process, timeout=30.0):
+    """
+    Send SIGINT (Ctrl-C) to a child process and wait for it to exit.
+
+    Returns
+    -------
+    tuple
+        ``process.communicate()``: its remaining output (stdout, stderr).
+
+    Raises
+    ------
+    subprocess.TimeoutExpired
+        When it still runs after ``timeout`` seconds (:func:`reaped` kills it).
+
+    """
+    process.send_signal(signal.SIGINT)
+    return process.communicate(timeout=timeout)
+
+
+@contextlib.contextmanager
+def reaped(*processes):
+    """Kill and reap every one of ``processes`` still running when the block ends."""
+    try:
+        yield processes
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+                process.communicate()
 
 
 def wait_for_line(process, text, timeout):

@@ -6,14 +6,13 @@ take a core from the other tests' nodes.
 """
 
 import os
-import signal
 import subprocess
 import sys
 import textwrap
 
 from cbha_inverse.ros.common.realtime import MAX_REALTIME_PRIORITY, set_realtime_priority
 import pytest
-from ros_helpers import child_env, start_node, wait_for_line
+from ros_helpers import child_env, interrupt, reaped, start_node, wait_for_line
 
 # a thread started before and one started after the priority is set, and their policies
 THREADS = textwrap.dedent("""
@@ -87,8 +86,7 @@ def test_the_calling_thread_and_the_threads_it_starts_run_under_fifo():
 def test_inverse_solver_runs_its_control_thread_under_fifo():
     process = start_node('cbha_inverse.ros.nodes.inverse_solver', '-r', '__ns:=/realtime',
                          '-p', 'realtime_priority:=30')
-    lines = []
-    try:
+    with reaped(process):
         _, lines = wait_for_line(process, 'control thread:', 90.0)
         assert lines and 'control thread: SCHED_FIFO priority 30' in lines[-1], ''.join(lines)
         # the node's main thread (its executor's), and none of the DDS threads it started
@@ -98,10 +96,5 @@ def test_inverse_solver_runs_its_control_thread_under_fifo():
         dds = [int(tid) for tid in os.listdir(f'/proc/{process.pid}/task')
                if open(f'/proc/{process.pid}/task/{tid}/comm').read().startswith('dds.')]
         assert dds and all(os.sched_getscheduler(tid) == os.SCHED_OTHER for tid in dds)
-        process.send_signal(signal.SIGINT)
-        output, _ = process.communicate(timeout=30)
-    finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
+        output, _ = interrupt(process)
     assert process.returncode == 0, ''.join(lines) + output

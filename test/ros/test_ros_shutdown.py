@@ -7,7 +7,7 @@ import sys
 import time
 
 from cbha_inverse.scene import load_scene
-from ros_helpers import child_env, REPO_ROOT, start_node, wait_for_line
+from ros_helpers import child_env, reaped, REPO_ROOT, start_node, wait_for_line
 
 SCENE = 'tendon_6f_8c'
 
@@ -30,7 +30,7 @@ def test_nodes_exit_cleanly_on_sigint_and_sigterm():
     ]
     processes = [(module, sig, start_node(module, '-r', f'__ns:=/shutdown{i}', *args))
                  for i, (module, sig, args) in enumerate(cases)]
-    try:
+    with reaped(*(process for _, _, process in processes)):
         for module, sig, process in processes:
             # every node logs one INFO line once its publishers and timers exist
             ok, lines = wait_for_line(process, '[INFO]', 60.0)
@@ -45,11 +45,6 @@ def test_nodes_exit_cleanly_on_sigint_and_sigterm():
             assert 'Traceback' not in output, output
             # the interpreter's finalization is skipped: no extension reports leaked objects
             assert 'leaked' not in output, output
-    finally:
-        for _, _, process in processes:
-            if process.poll() is None:
-                process.kill()
-                process.communicate()
 
 
 def _handles_sigterm(pid):

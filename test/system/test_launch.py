@@ -24,7 +24,7 @@ from cbha_inverse.ros.common.qos import MEASURED_QOS
 from cbha_inverse.ros.launch.compositions import (
     ArgumentError, COMPOSITIONS, node_module, resolve)
 import pytest
-from ros_helpers import child_env, loop_listener, REPO_ROOT, spin_until
+from ros_helpers import child_env, interrupt, loop_listener, reaped, REPO_ROOT, spin_until
 import yaml
 
 SCRIPTS = dict(re.findall(r"'(\w+) = ([\w.]+):main'", (REPO_ROOT / 'setup.py').read_text()))
@@ -121,15 +121,12 @@ def test_cbha_launch_sim_runs_the_nodes_and_stops_them_all_on_sigint(rclpy_conte
     executor, listener, commands, tips = loop_listener(rclpy_context)
     process = _launch('scene:=tendon_6f_8c', f'trajectory_params:={tendon_trajectory}')
     try:
-        running = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
-                             or process.poll() is not None, 60.0)
-        alive = process.poll() is None
-        process.send_signal(signal.SIGINT)
-        output, _ = process.communicate(timeout=30)
+        with reaped(process):
+            running = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
+                                 or process.poll() is not None, 60.0)
+            alive = process.poll() is None
+            output, _ = interrupt(process)
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
         executor.shutdown()
         listener.destroy_node()
     assert running and alive, f'{len(commands)} commands, {len(tips)} tips:\n{output}'

@@ -22,7 +22,7 @@ import threading
 
 from cbha_inverse.fem.segment_io import load_segment
 import numpy as np
-from ros_helpers import child_env, loop_listener, REPO_ROOT, spin_until
+from ros_helpers import child_env, interrupt, loop_listener, reaped, REPO_ROOT, spin_until
 import yaml
 
 GUIDE = REPO_ROOT / 'docs' / 'own-robot.md'
@@ -84,15 +84,12 @@ def test_guide_example_runs(tmp_path, rclpy_context):
     executor, listener, commands, tips = loop_listener(rclpy_context)
     process = _run(launch, work)
     try:
-        ran = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
-                         or process.poll() is not None, 90.0)
-        alive = process.poll() is None
-        process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=30)
+        with reaped(process):
+            ran = spin_until(executor, lambda: len(commands) >= 20 and len(tips) >= 20
+                             or process.poll() is not None, 90.0)
+            alive = process.poll() is None
+            out, err = interrupt(process)
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
         executor.shutdown()
         listener.destroy_node()
     assert ran and alive, f'{len(commands)} commands, {len(tips)} tips:\n{out}\n{err}'
