@@ -12,7 +12,7 @@ import sys
 from cbha_inverse.ros.console.status import status_lines
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
 from cbha_inverse.scene import load_scene
-from ros_helpers import child_env, make_node, spin_until, spinning
+from ros_helpers import child_env, spin_until, spinning
 
 SCENE = 'tendon_6f_8c'
 
@@ -24,9 +24,15 @@ def _status(*args):
 
 
 def test_status_shows_the_controller_and_the_missing_driver(rclpy_context):
+    from rclpy.parameter import Parameter
     names = list(load_scene(SCENE).actuator_names)
-    solver = make_node(InverseSolverNode, rclpy_context, scene=SCENE, valve_names=names,
-                       mode='closed', diagnostics_period=0.2)
+    # renamed (as a launch file may): its statuses carry the name it runs under
+    solver = InverseSolverNode(
+        context=rclpy_context, namespace='/cbha', cli_args=['--ros-args', '-r',
+                                                            '__node:=left_solver'],
+        parameter_overrides=[Parameter(name, value=value) for name, value in (
+            ('scene', SCENE), ('valve_names', names), ('mode', 'closed'),
+            ('diagnostics_period', 0.2))])
     with spinning(rclpy_context, solver) as executor:
         process = _status('--once', '--wait', '6')
         spin_until(executor, lambda: process.poll() is not None, 60.0)
@@ -34,7 +40,7 @@ def test_status_shows_the_controller_and_the_missing_driver(rclpy_context):
     assert process.returncode == 0, err
     assert 'controller  waiting (closed loop): waiting for a target' in out, out
     assert 'driver      none on /diagnostics' in out, out
-    assert 'OK    inverse_solver: control: waiting for a target (' in out, out
+    assert 'OK    left_solver: control: waiting for a target (' in out, out
 
 
 def test_status_without_diagnostics_exits_1():
@@ -59,3 +65,16 @@ def test_status_block_of_a_running_loop():
                         'the driver, readings inf s old')
     assert 'WARN  robotino_bridge: driver: no recent bha_readings from the driver (0.5 s ago)' \
         in lines
+
+
+def test_status_finds_renamed_nodes_by_their_task():
+    """A status is named '<node name>: <task>': a renamed controller and plant are still found."""
+    control = (0, 'waiting for a target', {'decision': 'waiting', 'mode': 'open'}, 9.0)
+    plant = (0, 'ok', {'accepted_commands': '3'}, 9.0)
+    others = {'trajectory: path': (0, 'running', {}, 9.0),
+              'other: control': (0, 'not a controller', {}, 9.0)}
+    lines = status_lines({**others, 'left_arm_solver: control': control,
+                          'left_arm_sim: plant': plant}, 10.0)
+    assert lines[0] == 'controller  waiting (open loop): waiting for a target'
+    drivers = [line for line in lines if line.startswith('driver')]
+    assert drivers == ['driver      left_arm_sim: plant: OK ok'], lines

@@ -46,8 +46,9 @@ def status_lines(statuses, now):
 
     """
     lines = []
+    # by task: a status is named '<node name>: <task>', and a node can be renamed
     control = next((status for name, status in statuses.items()
-                    if name.endswith('inverse_solver: control')), None)
+                    if name.endswith(': control') and 'decision' in status[2]), None)
     if control is None:
         lines.append('controller  no inverse_solver on /diagnostics')
     else:
@@ -64,7 +65,7 @@ def status_lines(statuses, now):
                      f"{_number(values, 'latency_median_ms', digits=3)} ms, p99 "
                      f"{_number(values, 'latency_p99_ms', digits=3)} ms")
     drivers = [(name, s) for name, s in statuses.items()
-               if name.startswith(('robotino_bridge', 'cbha_sim'))]
+               if name.endswith((': driver', ': plant'))]
     if not drivers:
         lines.append('driver      none on /diagnostics (no robotino_bridge, no cbha_sim)')
     for name, (level, message, values, _) in drivers:

@@ -283,7 +283,7 @@ class ExciteNode(Node):
     def _statuses(self):
         level = ERROR if self.phase == 'refused' else OK
         hold = self.current_hold + 1
-        return [make_status(NODE_NAME, 'program', level, self.reason or self.phase, {
+        return [make_status(self.get_name(), 'program', level, self.reason or self.phase, {
             'program': self.params.program, 'phase': self.phase,
             'hold': f'{hold} of {self.program.n_holds}', 'elapsed_s': self.elapsed,
             'duration_s': self.program.duration, 'published': self.published})]

@@ -303,7 +303,7 @@ class CbhaSimNode(Node):
         level = WARN if total or (result is not None and not result.converged) else OK
         message = (f'{total} rejected commands' if total else
                    'plant not converged' if level == WARN else 'ok')
-        return [make_status(NODE_NAME, 'plant', level, message, values)]
+        return [make_status(self.get_name(), 'plant', level, message, values)]
 
 
 def main(argv=None):

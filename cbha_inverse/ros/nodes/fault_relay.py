@@ -125,7 +125,7 @@ class FaultRelayNode(Node):
     def _statuses(self):
         values = {f'{source}.{key}': count for (source, _, _, _), (link, _)
                   in zip(self.table, self.links) for key, count in link.counts.items()}
-        return [make_status(NODE_NAME, 'links', OK, f'{len(self.links)} topics relayed',
+        return [make_status(self.get_name(), 'links', OK, f'{len(self.links)} topics relayed',
                             values)]
 
 

@@ -484,10 +484,10 @@ class InverseSolverNode(Node):
         else:
             level, message = OK, f'running ({result.status if result else "no tick yet"})'
         total = self.rejected.total
-        inputs = make_status(NODE_NAME, 'inputs', WARN if total else OK,
+        inputs = make_status(self.get_name(), 'inputs', WARN if total else OK,
                              f'{total} rejected messages' if total else 'all inputs valid',
                              self.rejected.key_values())
-        return [make_status(NODE_NAME, 'control', level, message, values), inputs]
+        return [make_status(self.get_name(), 'control', level, message, values), inputs]
 
 
 def main(argv=None):

@@ -321,7 +321,7 @@ class RobotinoBridgeNode(Node):
             level, message = WARN, f'{total} rejected messages'
         else:
             level, message = OK, 'forwarding' if self.decision == 'run' else 'waiting'
-        return [make_status(NODE_NAME, 'driver', level, message, values)]
+        return [make_status(self.get_name(), 'driver', level, message, values)]
 
 
 def main(argv=None):

@@ -338,7 +338,7 @@ class StereoTrackerNode(Node):
         message = ('no camera model' if self.tracker is None else
                    f'no marker: {self.last_reason}' if lost else
                    'waiting for images' if not self.pairs else 'tracking')
-        return [make_status(NODE_NAME, 'tracking', level, message, values)]
+        return [make_status(self.get_name(), 'tracking', level, message, values)]
 
 
 def _same_camera(first, second):

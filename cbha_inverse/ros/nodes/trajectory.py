@@ -115,7 +115,7 @@ class TrajectoryNode(Node):
     def _statuses(self):
         elapsed = 0.0 if self._start is None else self.elapsed()
         done = self.trajectory.finished(elapsed)
-        return [make_status(NODE_NAME, 'path', OK, 'finished, holding end point' if done
+        return [make_status(self.get_name(), 'path', OK, 'finished, holding end point' if done
                             else 'running', {'shape': self.params.shape,
                                              'published': self.published,
                                              'elapsed_s': elapsed})]
