@@ -39,16 +39,17 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # Coverage of every run (child processes included: coverage's patch = subprocess, setup.cfg) over
 # both phases, then the total of the non-compiled code (the numba kernels run as machine code, not
 # Python: make cover-kernels measures them with the JIT off). Both phases run even when the first
-# fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases reuse (the
-# robotino_msgs build).
+# fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
+# reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
 test: install  ## the whole test suite with coverage (~8.5 min on 2 idle cores)
-	@shared=$$(mktemp -d); export CBHA_TEST_SHARED=$$shared; start=$$(date +%s); \
+	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
+	start=$$(date +%s); \
 	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \
 	  --durations=15 $(COVERAGE_ARGS) --cov-report= $(PYTEST_ARGS); first=$$?; \
 	middle=$$(date +%s); \
 	$(VPY) -m pytest test -q -rs -m timing --durations=15 $(COVERAGE_ARGS) --cov-append \
 	  $(COVERAGE_REPORT) $(PYTEST_ARGS); second=$$?; \
-	end=$$(date +%s); rm -rf $$shared; \
+	end=$$(date +%s); \
 	echo "make test: $$((middle - start)) s on $(TEST_WORKERS) workers, $$((end - middle)) s of timing tests"; \
 	for status in $$first $$second; do [ $$status -eq 0 ] || [ $$status -eq 5 ] || exit $$status; done
 	@$(VPY) -m coverage report --omit='$(subst $(space),$(comma),$(KERNEL_SOURCES))' \

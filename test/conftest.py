@@ -7,6 +7,7 @@ localhost, so parallel runs on one host never cross-talk; ROS logs go to a tempo
 
 import contextlib
 import fcntl
+import hashlib
 import os
 from pathlib import Path
 import re
@@ -155,13 +156,33 @@ def rclpy_context():
         rclpy.try_shutdown(context=context)
 
 
+def _build_inputs(package):
+    """
+    Return a digest of what an interface build is made from.
+
+    The shipped package's files, the pins of the environment (requirements and constraints) and
+    the interpreter: a build made from the same inputs is the same build.
+    """
+    from cbha_inverse.interfaces.colcon_build import SHIPPED
+    digest = hashlib.sha256(sys.executable.encode())
+    source = SHIPPED / package
+    files = sorted(path for path in source.rglob('*') if path.is_file())
+    files += sorted(REPO_ROOT.glob('requirements*.txt')) + [REPO_ROOT / 'constraints.txt']
+    for path in files:
+        digest.update(str(path.relative_to(REPO_ROOT)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
 def _built_once(tmp_path_factory, package, build):
     """
     Build an interface package once and load it here; return its install prefix.
 
-    ``build(workspace) -> prefix`` runs once per pytest run, or once per ``make test`` when
-    ``CBHA_TEST_SHARED`` names a folder that its phases share: the pytest-xdist workers and the
-    phases take a lock, the first builds, the others load what it built.
+    ``build(workspace) -> prefix`` runs once per pytest run, or once per set of inputs
+    (:func:`_build_inputs`) when ``CBHA_TEST_SHARED`` names a folder that runs share (``make
+    test`` keeps it in the venv): the pytest-xdist workers and the phases take a lock, the first
+    builds, the others load what it built; a later ``make test`` loads it again unless the
+    package's files or the pins changed.
     """
     from ros_helpers import load_interface
     shared = os.environ.get('CBHA_TEST_SHARED')
@@ -170,12 +191,16 @@ def _built_once(tmp_path_factory, package, build):
     # the workers of one xdist run have base temporary folders with one parent
     shared = Path(shared) if shared is not None else tmp_path_factory.getbasetemp().parent
     built = shared / f'{package}_ws' / 'built'
+    inputs = _build_inputs(package)
     with open(shared / f'{package}_ws.lock', 'w') as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         if built.exists():
-            return load_interface(Path(built.read_text()))
+            prefix, _, made_from = built.read_text().partition('\n')
+            if made_from == inputs and Path(prefix).is_dir():
+                return load_interface(Path(prefix))
+            built.unlink()
         prefix = build(shared / f'{package}_ws')
-        built.write_text(str(prefix))
+        built.write_text(f'{prefix}\n{inputs}')
         return load_interface(prefix)
 
 
