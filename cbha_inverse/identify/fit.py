@@ -221,11 +221,12 @@ class TipPredictor:
         if self.sensor_lengths:
             self.lengths = np.empty((len(pressures), scene.sensors.n_sensors))
         for i, pressure in enumerate(pressures):
+            # the fit reads the shape only: no check of the equilibrium's warnings
             result = scene.forward(np.clip(pressure, scene.lower_bounds, scene.upper_bounds),
-                                   initial_state=self._states[i])
+                                   initial_state=self._states[i], check_warnings=False)
             if not result.converged:
                 result = scene.forward(np.clip(pressure, scene.lower_bounds,
-                                               scene.upper_bounds))
+                                               scene.upper_bounds), check_warnings=False)
             if not result.converged:
                 raise IdentificationError(f'the forward model does not converge at sample {i} '
                                           f'for {dict(zip(self.names, np.round(values, 4)))}')

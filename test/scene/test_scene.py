@@ -200,3 +200,15 @@ def test_prepare_moves_the_linearisation_off_the_step_without_changing_it(reline
         np.testing.assert_allclose(got.effector_positions, expected.effector_positions,
                                    rtol=0, atol=1e-12)
     assert got.timings['assembly'] == 0.0 and got.timings['factor'] == 0.0
+
+
+def test_forward_without_the_warning_check_solves_the_same_shape():
+    """The CBHA at mid pressure strains a link beyond the small-strain range: a warning."""
+    scene = load_scene('cbha')
+    actuation = 0.5 * (scene.lower_bounds + scene.upper_bounds)
+    checked = scene.forward(actuation, strict=True)
+    unchecked = scene.forward(actuation, strict=True, check_warnings=False)
+    assert any('strained' in text for text in checked.warnings), checked.warnings
+    assert unchecked.warnings == ()
+    np.testing.assert_array_equal(unchecked.positions, checked.positions)
+    np.testing.assert_array_equal(unchecked.effector_positions, checked.effector_positions)
