@@ -244,9 +244,23 @@ SEGMENT_KEYS = ('name', 'units', 'compliance', 'rest_offset', 'rest_rotation', '
 """The keys of a segment file, as :func:`write_segment` writes them."""
 
 
+_SEGMENTS = {}
+"""Loaded segments by resolved path: ``(file stamps, Segment)`` (:func:`load_segment`)."""
+_MAX_SEGMENTS = 64
+
+
+def _file_stamp(path):
+    """Return a digest of a file's bytes (reading them costs little beside parsing them)."""
+    return hashlib.blake2b(path.read_bytes(), digest_size=16).digest()
+
+
 def load_segment(path):
     """
-    Read a segment YAML (and its cavity surfaces) without gmsh.
+    Read a segment YAML (and its cavity surfaces) without gmsh, once per version of the files.
+
+    A process keeps what it read: a later call with the same path returns the same
+    :class:`Segment` while the bytes of the YAML and of its cavity files are unchanged, e.g. one
+    scene load per model evaluation of ``cbha_identify``. Its arrays are read-only.
 
     Parameters
     ----------
@@ -266,6 +280,28 @@ def load_segment(path):
 
     """
     path = Path(path)
+    key = path.resolve()
+    kept = _SEGMENTS.get(key)
+    if kept is not None:
+        files, stamps, segment = kept
+        try:
+            if stamps == tuple(_file_stamp(file) for file in files):
+                return segment
+        except OSError:
+            pass
+    files = [path]
+    segment = _read_segment(path, files)
+    for array in (segment.compliance, segment.rest_offset, segment.rest_rotation,
+                  *(a for cavity in segment.cavities for a in (cavity.points, cavity.triangles))):
+        array.flags.writeable = False
+    if len(_SEGMENTS) >= _MAX_SEGMENTS:
+        _SEGMENTS.clear()
+    _SEGMENTS[key] = (files, tuple(_file_stamp(file) for file in files), segment)
+    return segment
+
+
+def _read_segment(path, files):
+    """Read and check a segment YAML and its cavity surfaces; append the surfaces to ``files``."""
     data = read_yaml(path)
     check_keys(path, data, SEGMENT_KEYS)
     arrays = {}
@@ -298,6 +334,7 @@ def load_segment(path):
         surface = path.parent / item['file']
         if not surface.is_file():
             raise ConfigError(path, f'cavities[{i}].file', f'no cavity surface {surface}')
+        files.append(surface)
         cavities.append(Cavity(item['name'], *read_cavity(surface)))
     cavities = tuple(cavities)
     known = {'name', 'compliance', 'rest_offset', 'rest_rotation', 'mass_kg', 'cavities'}

@@ -130,3 +130,37 @@ def test_a_broken_geometry_exits_2_with_one_line_naming_file_and_key(tmp_path, c
     assert main([str(broken), '--output-dir', str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err == f'condense_segment: error: {broken}: mesh: missing\n'
+
+
+def test_a_loaded_segment_is_kept_until_its_files_change(tmp_path):
+    """load_segment reads a segment once per content of its YAML and its cavity files."""
+    import shutil
+    from cbha_inverse.paths import config_path
+    for file in config_path('segments').glob('cbha_segment*'):
+        shutil.copy(file, tmp_path / file.name)
+    path = tmp_path / 'cbha_segment.yaml'
+    first = load_segment(path)
+    assert load_segment(path) is first
+    assert not first.compliance.flags.writeable
+    assert not first.cavities[0].points.flags.writeable
+    with pytest.raises(ValueError):
+        first.compliance[0, 0] = 1.0
+    # the same bytes again (a new modification time): still the same segment
+    path.write_bytes(path.read_bytes())
+    assert load_segment(path) is first
+    # a stiffer segment (the compliance halved), the same file size or not: read again
+    data = yaml.safe_load(path.read_text())
+    data['compliance'] = (0.5 * np.array(data['compliance'])).tolist()
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    stiffer = load_segment(path)
+    np.testing.assert_allclose(stiffer.compliance, 0.5 * first.compliance, rtol=1e-15)
+    # a changed cavity surface: read again, with the new points
+    from cbha_inverse.fem.segment_io import read_cavity, write_cavity
+    surface = tmp_path / data['cavities'][0]['file']
+    points, triangles = read_cavity(surface)
+    write_cavity(surface, 1.01 * points, triangles)
+    moved = load_segment(path)
+    assert moved is not stiffer
+    np.testing.assert_allclose(moved.cavities[0].points, 1.01 * stiffer.cavities[0].points,
+                               rtol=1e-12)
+    np.testing.assert_array_equal(moved.cavities[1].points, stiffer.cavities[1].points)
