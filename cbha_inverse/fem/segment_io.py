@@ -245,11 +245,11 @@ SEGMENT_KEYS = ('name', 'units', 'compliance', 'rest_offset', 'rest_rotation', '
 
 
 _SEGMENTS = {}
-"""Loaded segments by resolved path: ``(file stamps, Segment)`` (:func:`load_segment`)."""
+"""Loaded segments by resolved path: ``(files, their digests, Segment)`` (:func:`load_segment`)."""
 _MAX_SEGMENTS = 64
 
 
-def _file_stamp(path):
+def _file_digest(path):
     """Return a digest of a file's bytes (reading them costs little beside parsing them)."""
     return hashlib.blake2b(path.read_bytes(), digest_size=16).digest()
 
@@ -283,9 +283,9 @@ def load_segment(path):
     key = path.resolve()
     kept = _SEGMENTS.get(key)
     if kept is not None:
-        files, stamps, segment = kept
+        files, digests, segment = kept
         try:
-            if stamps == tuple(_file_stamp(file) for file in files):
+            if digests == tuple(_file_digest(file) for file in files):
                 return segment
         except OSError:
             pass
@@ -296,7 +296,7 @@ def load_segment(path):
         array.flags.writeable = False
     if len(_SEGMENTS) >= _MAX_SEGMENTS:
         _SEGMENTS.clear()
-    _SEGMENTS[key] = (files, tuple(_file_stamp(file) for file in files), segment)
+    _SEGMENTS[key] = (files, tuple(_file_digest(file) for file in files), segment)
     return segment
 
 
