@@ -242,6 +242,9 @@ def marker_mask(image, params, order='bgr'):
         255 (mono: non-zero) on the marker's pixels, 0 elsewhere.
 
     """
+    # a crop of a frame that is not in the cache: numpy's copy loads all its rows at once, OpenCV
+    # converting row by row would wait on each row's memory (a full frame is not copied)
+    image = np.ascontiguousarray(image)
     if order == 'mono':
         return cv2.compare(image, params.mono_threshold, cv2.CMP_GE)
     hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV if order == 'bgr' else cv2.COLOR_RGB2HSV)
