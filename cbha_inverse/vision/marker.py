@@ -101,6 +101,7 @@ class Detection:
 NOT_FOUND = Detection(False, 'no_marker', np.full(2, np.nan), 0)
 
 GROW_KERNEL = np.ones((5, 5), np.uint8)
+GROW_KERNEL.flags.writeable = False
 """Structuring element that grows a blob by two pixels (its edge pixels' partial coverage)."""
 
 CHANNEL_ORDERS = ('bgr', 'rgb', 'mono')
@@ -314,7 +315,7 @@ def _decide(candidates, image, params, order, offset):
 
 
 def _weighted_centroid(contour, image, params, order):
-    """Return the weighted centroid [px] over the contour's blob grown by 2 px, or None."""
+    """Return the weighted centroid ``(u, v)`` [px] over the blob grown by 2 px, or None."""
     x0, y0, width, height = cv2.boundingRect(contour)
     pad = 3
     rows, cols = image.shape[:2]
