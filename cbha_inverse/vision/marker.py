@@ -176,7 +176,8 @@ def detect_sphere_coarse(image, params, order='bgr', step=2):
         left, top = max(x0 * step - pad, 0), max(y0 * step - pad, 0)
         right = min((x0 + width) * step + pad, cols)
         bottom = min((y0 + height) * step + pad, rows)
-        for score, fine in sphere_candidates(image[top:bottom, left:right], params, order):
+        for score, fine in sphere_candidates(copy_crop(image, top, bottom, left, right),
+                                             params, order):
             fine = fine + np.array([left, top], dtype=fine.dtype)
             key = tuple(cv2.boundingRect(fine))
             if key not in seen:
@@ -217,6 +218,30 @@ def subsample(image, step):
     return small
 
 
+def copy_crop(image, top, bottom, left, right):
+    """
+    Return a contiguous copy of ``image[top:bottom, left:right]``.
+
+    A search window of a frame that is not in the cache: numpy's copy loads all its rows at once,
+    where OpenCV's colour conversion of the view, row by row, would wait on each row's memory
+    (the conversion of a 97x97 window of a frame not in the cache: 35 instead of 60 us).
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) ndarray of uint8
+        The full image.
+    top, bottom, left, right : int  [px]
+        Rows ``top:bottom`` and columns ``left:right``.
+
+    Returns
+    -------
+    (bottom - top, right - left[, 3]) ndarray of uint8
+        The crop (C-contiguous).
+
+    """
+    return np.ascontiguousarray(image[top:bottom, left:right])
+
+
 def marker_mask(image, params, order='bgr'):
     """
     Return the pixels of the marker's colour (or brightness): non-zero inside.
@@ -243,9 +268,6 @@ def marker_mask(image, params, order='bgr'):
         255 (mono: non-zero) on the marker's pixels, 0 elsewhere.
 
     """
-    # a crop of a frame that is not in the cache: numpy's copy loads all its rows at once, OpenCV
-    # converting row by row would wait on each row's memory (a full frame is not copied)
-    image = np.ascontiguousarray(image)
     if order == 'mono':
         return cv2.compare(image, params.mono_threshold, cv2.CMP_GE)
     hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV if order == 'bgr' else cv2.COLOR_RGB2HSV)
@@ -451,7 +473,7 @@ class MarkerTracker:
             left, top = max(u - half, 0), max(v - half, 0)
             right, bottom = min(u + half + 1, cols), min(v + half + 1, rows)
             if right - left > 4 and bottom - top > 4:
-                crop = image[top:bottom, left:right]
+                crop = copy_crop(image, top, bottom, left, right)
                 found = self._detect(crop, order, (left, top), windowed=True)
                 if found.found:
                     self.last = found.centroid
