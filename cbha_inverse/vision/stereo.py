@@ -166,14 +166,16 @@ def triangulate(rig, left_pixel, right_pixel, limits=StereoLimits()):
     homogeneous = cv2.triangulatePoints(rig.left.projection, rig.right.projection,
                                         rect_left.reshape(2, 1), rect_right.reshape(2, 1))
     w = float(homogeneous[3, 0])
-    p_rect = homogeneous[:3, 0] / w if w != 0.0 else np.full(3, np.inf)
+    # (x, y, z, 1) of the point in the left rectified frame (w / w is exactly 1)
+    p_rect_h = homogeneous[:, 0] / w if w != 0.0 else np.array([np.inf, np.inf, np.inf, 1.0])
+    p_rect = p_rect_h[:3]
     epipolar = abs(float(rect_left[1] - rect_right[1]))
-    reprojection = max(_reprojection_error(rig.left.projection, p_rect, rect_left),
-                       _reprojection_error(rig.right.projection, p_rect, rect_right))
+    reprojection = max(_reprojection_error(rig.left.projection, p_rect_h, rect_left.tolist()),
+                       _reprojection_error(rig.right.projection, p_rect_h, rect_right.tolist()))
     p_left = rig.left.rectification.T @ p_rect
     p_base = rig.base_from_left_points(p_left)[0]
     depth = float(p_rect[2])
-    if not (np.all(np.isfinite(p_base)) and epipolar <= limits.max_epipolar_error):
+    if not (np.isfinite(p_base).all() and epipolar <= limits.max_epipolar_error):
         reason = 'epipolar'
     elif not reprojection <= limits.max_reprojection_error:
         reason = 'reprojection'
@@ -184,9 +186,9 @@ def triangulate(rig, left_pixel, right_pixel, limits=StereoLimits()):
     return StereoPoint(reason == 'ok', reason, p_base, p_rect, epipolar, reprojection)
 
 
-def _reprojection_error(projection, p_rect, pixel):
-    """Distance [px] between ``pixel`` and the projection of ``p_rect`` by ``projection``."""
-    image = projection @ np.append(p_rect, 1.0)
-    if not image[2] > 0.0:
+def _reprojection_error(projection, p_rect_h, pixel):
+    """Distance [px] between ``pixel`` and the projection of ``(x, y, z, 1)`` by ``projection``."""
+    u, v, scale = (projection @ p_rect_h).tolist()
+    if not scale > 0.0:
         return np.inf
-    return float(np.hypot(image[0] / image[2] - pixel[0], image[1] / image[2] - pixel[1]))
+    return float(np.hypot(u / scale - pixel[0], v / scale - pixel[1]))

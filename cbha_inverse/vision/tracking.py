@@ -17,6 +17,10 @@ REJECTION_REASONS = ('no_marker_left', 'no_marker_right', 'no_marker_both', 'amb
                      'epipolar', 'reprojection', 'depth')
 """Every reason :meth:`StereoTracker.track` can give for a rejected pair."""
 
+MISSING_POINT = np.full(3, np.nan)
+MISSING_POINT.flags.writeable = False
+"""``p_base`` of a rejected pair (read-only: shared by every such result)."""
+
 
 @dataclass(frozen=True)
 class TrackResult:
@@ -85,7 +89,7 @@ class StereoTracker:
         """
         found_left = self.trackers[0].detect(left, order)
         found_right = self.trackers[1].detect(right, order)
-        missing = np.nan * np.ones(3)
+        missing = MISSING_POINT
         if not (found_left.found and found_right.found):
             self.reset()
             if 'ambiguous' in (found_left.reason, found_right.reason):
