@@ -15,7 +15,10 @@ is a Kalman step that averages the pot noise over many updates (the compiled
 buffers of :class:`cbha_inverse.estimate.data.EstimatorData`). The offset's walk grows with the
 measured pressure change (the model's error shows when the arm moves); without measured pressures
 ``λ = δ`` with a large walk. The state then takes the Newton step of the same factorisation, so
-repeated updates converge to the equilibrium of the estimate.
+repeated updates converge to the equilibrium of the estimate; after a step of the measured
+pressures (``predict_pressure_change``) the state first takes Newton steps to the equilibrium of
+the prior at the new pressures (the prediction), so that the pots correct the unknowns against
+the right shape, not against one linearisation's error.
 
 Bad input (wrong length, non-finite or out-of-range readings or pressures) is rejected with a
 reason and changes nothing; a pot whose innovation is ``outlier_sigma`` standard deviations off,
@@ -61,6 +64,12 @@ class EstimatorOptions:
         ... plus this fraction of the measured pressure change since the previous update.
     actuation_walk_std : float  [Pa]
         Random walk of ``δ`` (the actuation itself) per update without measured pressures.
+    predict_pressure_change : float  [Pa]
+        An update whose measured pressures changed by more than this (any actuator) since the
+        previous one first takes Newton steps (at most ``initial_newton_steps``, no pot used)
+        to the equilibrium of the prior's actuation at them: a step of the pressures moves the
+        arm further than one linearisation predicts, and the pots would take the difference
+        for a gain or offset error.
     initial_actuation_std : float  [Pa]
         Random walk of ``δ`` of an update after one that was not settled (as from far away).
     settle_sigma : float
@@ -103,6 +112,7 @@ class EstimatorOptions:
     offset_walk_std: float = 10.0
     pressure_change_walk: float = 0.0
     actuation_walk_std: float = 20000.0
+    predict_pressure_change: float = 2000.0
     initial_actuation_std: float = 5.0e4
     settle_sigma: float = 4.0
     payload_std: float = None
@@ -364,6 +374,11 @@ class ShapeEstimator:
             self._first = False
             if not self._converge():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
+        elif measured and np.abs(data.pressures - data.pressure_rows[kernel.LAST_PRESSURE]
+                                 ).max() > self.options.predict_pressure_change:
+            # the prediction of the state at the new pressures, before the pots correct it
+            if not self._converge():
+                return self._rejected('not_positive_definite: no factor of the tangent', started)
         data.scalars[kernel.GATE] = float(self._settled)
         walk = self._walks[measured, self._settled]
         self._snapshot()
@@ -423,17 +438,20 @@ class ShapeEstimator:
         """
         Take Newton steps at the prior's actuation and payload (no pot used) until converged.
 
-        The first update starts from the rest shape, far from the equilibrium of the measured
-        pressures; the pots' linear model is then taken near it. Returns False if no factor.
+        The first update starts from the rest shape, and an update after a pressure step from
+        the equilibrium of the previous pressures, far from that of the measured ones; the pots'
+        linear model is then taken near it. Returns False if no factor.
         """
         data = self._data
         stuck = data.stuck.copy()
         data.stuck[:] = True
-        for _ in range(self.options.initial_newton_steps):
+        for step in range(self.options.initial_newton_steps):
             data.walk[:] = 0.0
             if not self._step():
                 return False
-            if (np.abs(data.moved[:, 0]) < data.noise).all():
+            # the residual is that before the step, at the previous actuation: the first step's
+            # says nothing about the equilibrium of the new one
+            if step and (np.abs(data.moved[:, 0]) < data.noise).all():
                 break
         data.stuck[:] = stuck
         return True
