@@ -5,7 +5,8 @@ Subscribes ``string_pots`` (sensor_msgs/JointState, raw readings by name, as ``r
 and ``cbha_sim`` publish them) and ``pressure_measured`` (Float64MultiArray, Pa in
 ``valve_names`` order); every accepted reading runs one update of
 :class:`cbha_inverse.estimate.shape.ShapeEstimator` (``docs/proprioception.md``), with the last
-pressures when they are at most ``pressure_timeout`` old, and publishes the estimated tip on
+pressures received when they are at most ``pressure_timeout`` old (those of the reading's
+instant: ``robotino_bridge`` and ``cbha_sim`` publish a sample's pressures before its pots), and publishes the estimated tip on
 ``tip/estimated`` (PointStamped, ``frame_id``, the stamp of the pot reading, sensor data QoS),
 which ``inverse_solver`` closes its loop on with ``feedback_topic: tip/estimated``. A reading
 that lacks a pot name, is malformed, non-finite or out of range, or is older than
@@ -65,6 +66,9 @@ class ShapeEstimatorParams:
                                    high=1.0e6)
     actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update without '
                                       'measured pressures [Pa]', low=1.0, high=1.0e6)
+    predict_pressure_change: float = param(2000.0, 'an update whose pressures changed by more '
+                                           'than this first moves the shape to the equilibrium '
+                                           'of the estimate at them [Pa]', low=0.0, high=1.0e6)
     payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none); its '
                                'estimate is published on payload/estimated',
                                low=0.0, high=10.0)
@@ -106,6 +110,7 @@ class ShapeEstimatorNode(Node):
             self.estimator = ShapeEstimator.from_scene(self.scene, EstimatorOptions(
                 pressure_std=p.pressure_std, gain_walk_std=p.gain_walk_std,
                 offset_walk_std=p.offset_walk_std, actuation_walk_std=p.actuation_walk_std,
+                predict_pressure_change=p.predict_pressure_change,
                 payload_std=p.payload_std or None, outlier_sigma=p.outlier_sigma,
                 stuck_window=p.stuck_window))
         except (ValueError, FileNotFoundError, KeyError) as exc:
