@@ -2,21 +2,21 @@
 ``shape_estimator``: the arm's shape and tip from its string potentiometers (``docs/nodes.md``).
 
 Subscribes ``string_pots`` (sensor_msgs/JointState, raw readings by name, as ``robotino_bridge``
-and ``cbha_sim`` publish them) and ``pressure_measured`` (Float64MultiArray, Pa in
-``valve_names`` order); every accepted reading runs one update of
+and ``cbha_sim`` publish them) and ``pressure_measured`` (Float64MultiArray, Pa in ``valve_names``
+order); every accepted reading runs one update of
 :class:`cbha_inverse.estimate.shape.ShapeEstimator` (``docs/proprioception.md``), with the last
-pressures received when they are at most ``pressure_timeout`` old (those of the reading's
-instant: ``robotino_bridge`` and ``cbha_sim`` publish a sample's pressures before its pots), and publishes the estimated tip on
-``tip/estimated`` (PointStamped, ``frame_id``, the stamp of the pot reading, sensor data QoS),
-which ``inverse_solver`` closes its loop on with ``feedback_topic: tip/estimated``. A reading
-that lacks a pot name, is malformed, non-finite or out of range, or is older than
-``reading_timeout`` is rejected, counted by reason and logged (throttled); nothing is published
-for it, so readings that stop or go stale stop ``tip/estimated`` and the solver's stale-feedback
-hold or vent acts. A pot dropped from the fit (stuck, or many sigma off) is a WARN and
-``degraded``. ``backbone_estimated`` (MarkerArray) draws the estimated backbone every
-``marker_period``; ``/diagnostics`` reports the residual per pot, the rank, the tip's standard
-deviation, the rejections by reason and the time per estimate. The timeouts and ``log_throttle``
-are live (``set_parameters``); the estimator's noise model is fixed at start.
+pressures received when they are at most ``pressure_timeout`` old (those of the reading's instant:
+``robotino_bridge`` and ``cbha_sim`` publish a sample's pressures before its pots), and publishes
+the estimated tip on ``tip/estimated`` (PointStamped, ``frame_id``, the stamp of the pot reading,
+sensor data QoS), which ``inverse_solver`` closes its loop on with
+``feedback_topic: tip/estimated``. A reading that lacks a pot name, is malformed, non-finite or out
+of range, or is older than ``reading_timeout`` is rejected, counted by reason and logged
+(throttled); nothing is published for it, so readings that stop or go stale stop ``tip/estimated``
+and the solver's stale-feedback hold or vent acts. A pot dropped from the fit (stuck, or many sigma
+off) is a WARN and ``degraded``. ``backbone_estimated`` (MarkerArray) draws the estimated backbone
+every ``marker_period``; ``/diagnostics`` reports the residual per pot, the rank, the tip's
+standard deviation, the rejections by reason and the time per estimate. The timeouts and
+``log_throttle`` are live (``set_parameters``); the estimator's noise model is fixed at start.
 """
 
 from dataclasses import dataclass
