@@ -402,14 +402,19 @@ class ShapeEstimator:
                 return self._rejected('diverged: non-finite estimate, restarted at rest',
                                       started)
         dropped = self._used & ~data.active
+        outliers = dropped & ~data.stuck
+        ratios = data.pots[kernel.RATIO].copy()
         if dropped.any() and self._snapshots[2][1] == len(self._snapshots[0]):
             # a pot just dropped may have pulled the unknowns before: start again from them as
-            # they were before the stuck window, without it
+            # they were before the stuck window, without it (left out as if stuck, reported as
+            # what it was)
             self._restore_oldest()
             data.stuck |= dropped
             data.walk[:] = walk
             if not self._step():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
+            data.stuck &= ~outliers
+            data.pots[kernel.RATIO, outliers] = ratios[outliers]
         self._used = data.active.copy()
         self._last = self._estimate(lengths, time.perf_counter() - started)
         return self._last
@@ -445,6 +450,8 @@ class ShapeEstimator:
         data = self._data
         stuck = data.stuck.copy()
         data.stuck[:] = True
+        # the pressure change is the next update's (the offset's walk), not these steps'
+        last_pressures = data.pressure_rows[kernel.LAST_PRESSURE].copy()
         for step in range(self.options.initial_newton_steps):
             data.walk[:] = 0.0
             if not self._step():
@@ -454,6 +461,7 @@ class ShapeEstimator:
             if step and (np.abs(data.moved[:, 0]) < data.noise).all():
                 break
         data.stuck[:] = stuck
+        data.pressure_rows[kernel.LAST_PRESSURE] = last_pressures
         return True
 
     def _snapshot(self):

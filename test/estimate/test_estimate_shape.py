@@ -109,6 +109,20 @@ def test_a_jump_many_sigma_off_is_dropped(cbha):
     assert np.linalg.norm(estimate.tip - tip) < 1e-3
 
 
+def test_an_outlier_after_a_full_window_is_reported_as_an_outlier(cbha):
+    """A jump once the window is full restarts from the older unknowns; it is not 'stuck'."""
+    tip, lengths = _truth(cbha, PRESSURES)
+    estimator = ShapeEstimator.from_scene(cbha)
+    _run(estimator, cbha, lengths, PRESSURES, 30)
+    broken = lengths.copy()
+    broken[4] += 0.02
+    estimate = _run(estimator, cbha, broken, PRESSURES, 1)
+    assert estimate.degraded and not estimate.active[4] and estimate.active.sum() == 5
+    assert 'string_pot_outer_right' in estimate.reason and 'sigma off' in estimate.reason
+    assert 'stuck' not in estimate.reason, estimate.reason
+    assert np.linalg.norm(estimate.tip - tip) < 1e-3
+
+
 def test_a_stuck_pot_is_dropped_and_the_estimate_continues(cbha, wrong_plant):
     """One pot freezes mid-lap: dropped after the window, degraded, rank 5, still tracking."""
     rng = np.random.default_rng(2)
