@@ -72,6 +72,9 @@ class ShapeEstimatorParams:
     payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none); its '
                                'estimate is published on payload/estimated',
                                low=0.0, high=10.0)
+    weight_std: float = param(0.02, "prior std of an error of the arm's own weight [kg] (a "
+                              'stiffness error sags the arm as a weight error does; 0: none; '
+                              'not with payload_std, which takes its place)', low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
                                  low=1.0, high=1.0e6)
     stuck_window: int = param(25, 'updates over which a stuck pot is looked for (0: never)',
@@ -111,7 +114,9 @@ class ShapeEstimatorNode(Node):
                 pressure_std=p.pressure_std, gain_walk_std=p.gain_walk_std,
                 offset_walk_std=p.offset_walk_std, actuation_walk_std=p.actuation_walk_std,
                 predict_pressure_change=p.predict_pressure_change,
-                payload_std=p.payload_std or None, outlier_sigma=p.outlier_sigma,
+                payload_std=p.payload_std or None,
+                weight_std=None if p.payload_std else (p.weight_std or None),
+                outlier_sigma=p.outlier_sigma,
                 stuck_window=p.stuck_window))
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
@@ -201,7 +206,8 @@ class ShapeEstimatorNode(Node):
             values.update({f'residual_mm.{name}': float(r) * 1e3
                            for name, r in zip(self.pot_names, last.residuals)})
             values.update({'rank': last.rank, 'degraded': last.degraded,
-                           'tip_std_mm': last.confidence * 1e3, 'payload_kg': last.payload})
+                           'tip_std_mm': last.confidence * 1e3, 'payload_kg': last.payload,
+                           'weight_error_kg': last.weight})
         level = WARN if (last is not None and last.degraded) or total else OK
         message = (last.reason if last is not None and last.degraded else
                    f'{total} rejected readings' if total else
