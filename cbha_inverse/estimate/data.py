@@ -30,8 +30,9 @@ class EstimatorData:
         The pots (``c``).
     scale : (u,) ndarray
         Unit of every unknown ``(g, δ[, μ])`` (``x = scale z``).
-    gravity : (3,) ndarray  [m/s^2]
-        The payload's acceleration.
+    load : (6n,) ndarray  [N/kg]
+        External wrench of one kg of the extra weight unknown (the payload at the last frame,
+        or the arm's own weight's distribution).
     max_rotation_step : float  [rad]
         Largest frame rotation of one step.
 
@@ -42,7 +43,7 @@ class EstimatorData:
 
     """
 
-    def __init__(self, system, effectors, sensors, scale, gravity, max_rotation_step):
+    def __init__(self, system, effectors, sensors, scale, load, max_rotation_step):
         """Allocate every buffer and build the argument tuple."""
         n, m, k, c = system.n, system.m, effectors.n_effectors, sensors.n_sensors
         u = scale.size
@@ -83,12 +84,12 @@ class EstimatorData:
         self.effector_w = np.zeros((3, u))
         self.effector_positions = np.zeros((k, 3))
         self.tip_covariance = np.zeros((3, 3))
-        self.gravity = np.asarray(gravity, dtype=float)
+        self.load = np.asarray(load, dtype=float)
         routing = sensors.routing
         work = np.zeros(routing_work_size(routing[0].size, routing[2].size, c))
         self.arguments = (arguments, system.tick_cholesky, routing + (work,), self.pots,
                           self.jacobian, self.moved, self.h, self.state, self.covariance,
-                          self.pressure_rows, self.scalars, self.gravity,
+                          self.pressure_rows, self.scalars, self.load,
                           self.base_external, self.mass_columns, self.mass_rhs,
                           self.mass_effectors, self.stuck, self.active, np.zeros(6 * n),
                           self.effector_w, self.effector_positions, self.tip_covariance,

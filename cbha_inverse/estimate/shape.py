@@ -1,21 +1,24 @@
 """
 The shape estimator: the equilibrium that reproduces the string-potentiometer lengths.
 
-The pots are effectors in length space (``docs/proprioception.md``): at the current estimate of
-the frames ``q`` and the effective actuation ``λ`` (and, optionally, an unknown payload ``μ``, a
-mass at the last frame), one linearisation of the equilibrium (paper eq. 9, the control tick's
-:func:`~cbha_inverse.core._kernels.tick.linearise_tick`) gives ``K⁻¹ [r, J_aᵀ]``; with the pots'
-``J_s`` (:class:`~cbha_inverse.core.sensors.StringPots`) the lengths after the Newton step are
-linear in the actuation through ``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, eq. 11). The
-unknowns are not the actuation itself but its error about the measured pressures,
-``λ = (1 + g) ∘ p + δ`` (a gain and an offset per actuator: the model's error in effective area
-and stiffness), and ``μ``; they change slowly, so they follow a small random walk and each update
-is a Kalman step that averages the pot noise over many updates (the compiled
-:func:`cbha_inverse.core._kernels.estimation.estimate_tick`, one call per update over the
-buffers of :class:`cbha_inverse.estimate.data.EstimatorData`). The offset's walk grows with the
-measured pressure change (the model's error shows when the arm moves); without measured pressures
-``λ = δ`` with a large walk. The state then takes the Newton step of the same factorisation, so
-repeated updates converge to the equilibrium of the estimate.
+The pots are effectors in length space (``docs/proprioception.md``): at the current estimate of the
+frames ``q`` and the effective actuation ``λ`` (and, optionally, an unknown weight ``μ``: a payload
+mass at the last frame, or an error of the arm's own weight), one linearisation of the equilibrium
+(paper eq. 9, the control tick's :func:`~cbha_inverse.core._kernels.tick.linearise_tick`) gives
+``K⁻¹ [r, J_aᵀ]``; with the pots' ``J_s`` (:class:`~cbha_inverse.core.sensors.StringPots`) the
+lengths after the Newton step are linear in the actuation through ``W_sa = J_s K⁻¹ J_aᵀ`` (the
+pots' ``W_ea``, eq. 11). The unknowns are not the actuation itself but its error about the measured
+pressures, ``λ = (1 + g) ∘ p + δ`` (a gain and an offset per actuator: the model's error in
+effective area and stiffness), and ``μ``; they change slowly, so they follow a small random walk
+and each update is a Kalman step that averages the pot noise over many updates (the compiled
+:func:`cbha_inverse.core._kernels.estimation.estimate_tick`, one call per update over the buffers
+of :class:`cbha_inverse.estimate.data.EstimatorData`). The offset's walk grows with the measured
+pressure change (the model's error shows when the arm moves); without measured pressures ``λ = δ``
+with a large walk. The state then takes the Newton step of the same factorisation, so repeated
+updates converge to the equilibrium of the estimate; after a step of the measured pressures
+(``predict_pressure_change``) the state first takes Newton steps to the equilibrium of the prior at
+the new pressures (the prediction), so that the pots correct the unknowns against the right shape,
+not against one linearisation's error.
 
 Bad input (wrong length, non-finite or out-of-range readings or pressures) is rejected with a
 reason and changes nothing; a pot whose innovation is ``outlier_sigma`` standard deviations off,
@@ -61,6 +64,12 @@ class EstimatorOptions:
         ... plus this fraction of the measured pressure change since the previous update.
     actuation_walk_std : float  [Pa]
         Random walk of ``δ`` (the actuation itself) per update without measured pressures.
+    predict_pressure_change : float  [Pa]
+        An update whose measured pressures changed by more than this (any actuator) since the
+        previous one first takes Newton steps (at most ``initial_newton_steps``, no pot used)
+        to the equilibrium of the prior's actuation at them: a step of the pressures moves the
+        arm further than one linearisation predicts, and the pots would take the difference
+        for a gain or offset error.
     initial_actuation_std : float  [Pa]
         Random walk of ``δ`` of an update after one that was not settled (as from far away).
     settle_sigma : float
@@ -72,6 +81,14 @@ class EstimatorOptions:
         along the scene's gravity); None: no such unknown.
     payload_walk_std : float  [kg]
         Random walk of the payload per update.
+    weight_std : float or None  [kg]
+        Prior standard deviation of an error of the arm's own weight, spread as its lumped
+        masses (one kg of it: the arm's weight over its mass): a plant softer than the model
+        sags under gravity as if heavier, which no gain or offset of the actuation reproduces
+        (the pots would fit and the tip stay off along gravity); None: no such unknown. One of
+        ``payload_std`` and ``weight_std`` at most.
+    weight_walk_std : float  [kg]
+        Random walk of the weight error per update.
     outlier_sigma : float
         A pot whose innovation exceeds this many standard deviations is dropped for the update.
     stuck_window : int
@@ -103,10 +120,13 @@ class EstimatorOptions:
     offset_walk_std: float = 10.0
     pressure_change_walk: float = 0.0
     actuation_walk_std: float = 20000.0
+    predict_pressure_change: float = 2000.0
     initial_actuation_std: float = 5.0e4
     settle_sigma: float = 4.0
     payload_std: float = None
     payload_walk_std: float = 1.0e-4
+    weight_std: float = None
+    weight_walk_std: float = 1.0e-6
     outlier_sigma: float = 8.0
     stuck_window: int = 25
     stuck_tolerance: float = 2.0e-5
@@ -146,6 +166,8 @@ class ShapeEstimate(NamedTuple):
         Estimated effective actuation.
     payload : float  [kg]
         Estimated payload at the last frame (0 without that unknown).
+    weight : float  [kg]
+        Estimated error of the arm's own weight (0 without that unknown).
     seconds : float
         Time of the update.
 
@@ -161,6 +183,7 @@ class ShapeEstimate(NamedTuple):
     rank: int
     actuation: np.ndarray
     payload: float
+    weight: float
     seconds: float
 
     @property
@@ -209,19 +232,29 @@ class ShapeEstimator:
         self._system = EquilibriumSystem(model, actuators,
                                          external_wrenches(model, gravity=gravity).reshape(-1))
         m = self._m = actuators.n_actuators
-        self._n_mass = 0 if opts.payload_std is None else 1
+        if opts.payload_std is not None and opts.weight_std is not None:
+            raise ValueError('payload_std and weight_std: one extra weight unknown at most')
+        # the extra unknown: a payload at the last frame, or the arm's own weight error
+        self._weight = opts.weight_std is not None
+        self._n_mass = int(opts.payload_std is not None or self._weight)
+        self._mass_stds = ((opts.weight_std, opts.weight_walk_std) if self._weight else
+                           (opts.payload_std, opts.payload_walk_std))
         if self._n_mass and gravity is None:
-            raise ValueError("a payload unknown needs the scene's gravity")
-        gravity = np.zeros(3) if gravity is None else np.asarray(gravity, dtype=float)
+            raise ValueError("a payload or weight unknown needs the scene's gravity")
+        load = np.zeros(self._system.size)
+        if self._weight:
+            load[:] = external_wrenches(model, gravity=gravity).reshape(-1) / model.masses.sum()
+        elif self._n_mass:
+            load[-6:-3] = gravity
         self._scale = np.concatenate([np.full(m, _GAIN_SCALE), np.full(m, _OFFSET_SCALE),
                                       np.full(self._n_mass, _MASS_SCALE)])
-        self._data = EstimatorData(self._system, effectors, sensors, self._scale, gravity,
+        self._data = EstimatorData(self._system, effectors, sensors, self._scale, load,
                                    opts.max_rotation_step)
         self._data.scalars[kernel.CHANGE_WALK] = opts.pressure_change_walk
         self._data.scalars[kernel.GATE_SIGMA] = opts.outlier_sigma
 
         def walk(offset):
-            stds = [opts.gain_walk_std] * m + [offset] * m + [opts.payload_walk_std] * (
+            stds = [opts.gain_walk_std] * m + [offset] * m + [self._mass_stds[1]] * (
                 self._n_mass)
             return (np.asarray(stds) / self._scale) ** 2
         # the walk per update: (pressures measured, settled) -> variances of z
@@ -286,7 +319,7 @@ class ShapeEstimator:
         data.z[:] = 0.0
         data.z[m:2 * m] = data.actuation / _OFFSET_SCALE
         stds = ([self.options.gain_std] * m + [self.options.pressure_std] * m
-                + [self.options.payload_std or 0.0] * self._n_mass)
+                + [self._mass_stds[0] or 0.0] * self._n_mass)
         data.covariance[:] = np.diag((np.asarray(stds) / self._scale) ** 2)
         data.scalars[kernel.MASS] = 0.0
         self._stuck.reset()
@@ -364,6 +397,11 @@ class ShapeEstimator:
             self._first = False
             if not self._converge():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
+        elif measured and np.abs(data.pressures - data.pressure_rows[kernel.LAST_PRESSURE]
+                                 ).max() > self.options.predict_pressure_change:
+            # the prediction of the state at the new pressures, before the pots correct it
+            if not self._converge():
+                return self._rejected('not_positive_definite: no factor of the tangent', started)
         data.scalars[kernel.GATE] = float(self._settled)
         walk = self._walks[measured, self._settled]
         self._snapshot()
@@ -387,14 +425,19 @@ class ShapeEstimator:
                 return self._rejected('diverged: non-finite estimate, restarted at rest',
                                       started)
         dropped = self._used & ~data.active
+        outliers = dropped & ~data.stuck
+        ratios = data.pots[kernel.RATIO].copy()
         if dropped.any() and self._snapshots[2][1] == len(self._snapshots[0]):
             # a pot just dropped may have pulled the unknowns before: start again from them as
-            # they were before the stuck window, without it
+            # they were before the stuck window, without it (left out as if stuck, reported as
+            # what it was)
             self._restore_oldest()
             data.stuck |= dropped
             data.walk[:] = walk
             if not self._step():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
+            data.stuck &= ~outliers
+            data.pots[kernel.RATIO, outliers] = ratios[outliers]
         self._used = data.active.copy()
         self._last = self._estimate(lengths, time.perf_counter() - started)
         return self._last
@@ -423,19 +466,25 @@ class ShapeEstimator:
         """
         Take Newton steps at the prior's actuation and payload (no pot used) until converged.
 
-        The first update starts from the rest shape, far from the equilibrium of the measured
-        pressures; the pots' linear model is then taken near it. Returns False if no factor.
+        The first update starts from the rest shape, and an update after a pressure step from
+        the equilibrium of the previous pressures, far from that of the measured ones; the pots'
+        linear model is then taken near it. Returns False if no factor.
         """
         data = self._data
         stuck = data.stuck.copy()
         data.stuck[:] = True
-        for _ in range(self.options.initial_newton_steps):
+        # the pressure change is the next update's (the offset's walk), not these steps'
+        last_pressures = data.pressure_rows[kernel.LAST_PRESSURE].copy()
+        for step in range(self.options.initial_newton_steps):
             data.walk[:] = 0.0
             if not self._step():
                 return False
-            if (np.abs(data.moved[:, 0]) < data.noise).all():
+            # the residual is that before the step, at the previous actuation: the first step's
+            # says nothing about the equilibrium of the new one
+            if step and (np.abs(data.moved[:, 0]) < data.noise).all():
                 break
         data.stuck[:] = stuck
+        data.pressure_rows[kernel.LAST_PRESSURE] = last_pressures
         return True
 
     def _snapshot(self):
@@ -463,11 +512,17 @@ class ShapeEstimator:
             np.full((3, 3), np.nan) if last is None else last.tip_covariance,
             np.full(c, np.nan), np.full(c, np.nan), np.zeros(c, dtype=bool),
             0 if last is None else last.rank, data.actuation.copy(), self._payload(),
+            self._weight_error(),
             time.perf_counter() - started)
 
     def _payload(self):
-        """Return the estimated payload [kg]."""
-        return float(self._data.scalars[kernel.MASS]) if self._n_mass else 0.0
+        """Return the estimated payload [kg] (0 without that unknown)."""
+        return float(self._data.scalars[kernel.MASS]) if self._n_mass and not self._weight \
+            else 0.0
+
+    def _weight_error(self):
+        """Return the estimated error of the arm's own weight [kg] (0 without that unknown)."""
+        return float(self._data.scalars[kernel.MASS]) if self._weight else 0.0
 
     def _rank(self, active):
         """Return the numerical rank of the active pots' whitened ``W_sx`` (cached per set)."""
@@ -496,7 +551,7 @@ class ShapeEstimator:
         fused.project_tick(*data.tick.project_arguments)
         if self._n_mass:
             column = np.zeros((system.size, 1))
-            column[-6:-3, 0] = data.gravity
+            column[:, 0] = data.load
             data.mass_columns[:, 1:] = factor.solve(column)
         data.scalars[kernel.SOLVE_MASS] = 0.0
         kernel.estimate_from_linearisation(*data.from_linearisation_arguments)
@@ -528,4 +583,5 @@ class ShapeEstimator:
         return ShapeEstimate(status, reason, data.effector_positions.copy(),
                              data.tip_covariance.copy(), lengths,
                              lengths - data.pots[kernel.PREDICTED], active, rank,
-                             data.actuation.copy(), self._payload(), seconds)
+                             data.actuation.copy(), self._payload(), self._weight_error(),
+                             seconds)

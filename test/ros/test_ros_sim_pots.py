@@ -7,8 +7,8 @@ lengths at the published true state, in the driver's names and order, with the p
 stamp; a ``payload_mass`` lowers the tip.
 """
 
-from cbha_inverse.ros.common.conversions import point_array
-from cbha_inverse.ros.common.qos import MEASURED_QOS
+from cbha_inverse.ros.common.conversions import command_array, command_message, point_array
+from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -16,6 +16,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from ros_helpers import spin_until, spinning
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
 
 OFFSET = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
 GAIN = 900.0
@@ -60,3 +61,58 @@ def test_sim_publishes_string_pots_and_no_tip_measurement(rclpy_context):
     assert _stamp(message) in {_stamp(m) for m in truth['bare']}
     drop = point_array(truth['bare'][-1])[2] - point_array(truth['loaded'][-1])[2]
     assert drop > 0.02, drop
+
+
+def test_each_pot_reading_is_of_the_last_pressures_published_before_it(rclpy_context):
+    """
+    A pot reading is of the equilibrium of the last pressures received before it.
+
+    During a valve step (50 ms, ticks of 20 ms: tens of kPa per tick), one reading per tick with
+    the tick's ``tip/true`` stamp, published after the tick's ``pressure_measured`` (as the
+    driver's one message carries both).
+    """
+    sim = CbhaSimNode(context=rclpy_context, namespace='/pair', parameter_overrides=[
+        Parameter(k, value=v) for k, v in {
+            'scene': 'cbha', 'tip_output': 'none', 'string_pot_noise_std': 0.0,
+            'stiffness_scale': 1.0, 'rate_hz': 50.0, 'string_pot_rate_hz': 50.0,
+            'valve_time_constant': 0.05, 'tolerance': 1e-9}.items()])
+    probe = Node('probe', context=rclpy_context)
+    received, truth = [], set()
+    probe.create_subscription(Float64MultiArray, '/pair/pressure_measured',
+                              lambda m: received.append(('pressures', command_array(m))),
+                              MEASURED_QOS)
+    probe.create_subscription(JointState, '/pair/string_pots',
+                              lambda m: received.append(('pots', m)), MEASURED_QOS)
+    probe.create_subscription(PointStamped, '/pair/tip/true',
+                              lambda m: truth.add(_stamp(m)), MEASURED_QOS)
+    command = probe.create_publisher(Float64MultiArray, '/pair/pressure_command', COMMAND_QOS)
+    step = np.array([1.2e5, 0.3e5, 0.0, 0.2e5, 0.9e5, 0.0])
+    with spinning(rclpy_context, sim, probe) as executor:
+        assert spin_until(executor, lambda: command.get_subscription_count() >= 1
+                          and any(kind == 'pots' for kind, _ in received), 20.0)
+        start = len(received)
+        command.publish(command_message(step, sim.valve_names))
+        assert spin_until(executor, lambda: sum(
+            kind == 'pots' for kind, _ in received[start:]) >= 12, 20.0)
+        spin_until(executor, lambda: False, 0.1)
+    pairs, last = [], None
+    for kind, value in received:
+        if kind == 'pressures':
+            last = value
+        elif last is not None:
+            pairs.append((last, value))
+    stamps = [_stamp(message) for _, message in pairs]
+    assert len(set(stamps)) == len(stamps) and set(stamps) <= truth
+    scene, sensors = sim.scene, sim.pots.sensors
+    moving, state = 0, None
+    for pressures, message in pairs:
+        in_scene_order = np.empty(pressures.size)
+        in_scene_order[sim.order] = pressures
+        moving += np.abs(in_scene_order - step[sim.order]).max() > 1e3
+        result = scene.forward(in_scene_order, initial_state=state, strict=True)
+        state = result.state
+        expected = sensors.readings(sensors.lengths(state.positions, state.rotations))
+        # a tick apart the readings differ by millimetres (gain 1 reading/m: 1e-3)
+        np.testing.assert_allclose(message.position, expected, atol=2e-5 * np.abs(
+            sensors.reading_gain).max())
+    assert moving >= 2, moving

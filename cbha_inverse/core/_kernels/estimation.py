@@ -2,8 +2,9 @@
 Compiled update of the shape estimator on string-potentiometer lengths, one entry per update.
 
 The unknowns ``z`` (scaled: ``x = scale z``) are the effective actuation's gain and offset about
-the measured pressures, ``λ = (1 + g) ∘ p + δ``, and optionally a payload ``μ`` (a mass at the
-last frame); they follow a random walk. At the current frames one linearisation of the
+the measured pressures, ``λ = (1 + g) ∘ p + δ``, and optionally a weight ``μ`` (a payload mass
+at the last frame, or an error of the arm's own weight spread as its lumped masses: the wrench
+of one kg is ``load``); they follow a random walk. At the current frames one linearisation of the
 equilibrium (the control tick's :func:`cbha_inverse.core._kernels.tick.linearise_tick`) gives
 ``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s``
 (:func:`cbha_inverse.core._kernels.cables.routing_lengths_into`) the lengths after the Newton
@@ -129,7 +130,7 @@ def kalman_lengths(h, pots, state, covariance, stuck, active, work):
 
 @numba.njit(cache=True)
 def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved, h, state,
-                  covariance, pressures, scalars, gravity, base_external, mass_columns,
+                  covariance, pressures, scalars, load, base_external, mass_columns,
                   mass_rhs, mass_effectors, stuck, active, free_step, effector_w, effector_positions,
                   tip_covariance, work):
     """
@@ -163,8 +164,9 @@ def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved,
         Measured pressures (zero when none) and those of the previous update.
     scalars : (SCALARS,) ndarray
         See the module's rows.
-    gravity : (3,) ndarray  [m/s^2]
-        The payload's acceleration.
+    load : (6n,) ndarray  [N/kg]
+        External wrench of one kg of the extra weight (the payload at the last frame, or the
+        arm's own weight's distribution).
     base_external : (6n,) ndarray  [N, N*m]
         External wrenches without the payload.
     mass_columns, mass_rhs : (6n, 2) ndarray
@@ -198,13 +200,13 @@ def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved,
     for row in range(size):
         external[row] = base_external[row]
     if scalars[HAS_MASS] > 0.0:
-        for i in range(3):
-            external[size - 6 + i] += scalars[MASS] * gravity[i]
+        for row in range(size):
+            external[row] += scalars[MASS] * load[row]
     info, _ = tick.linearise_tick(*linearise_arguments, cholesky)
     if info != 0:
         return info
     estimate_from_linearisation(linearise_arguments, routing, pots, jacobian, moved, h, state,
-                                covariance, pressures, scalars, gravity, mass_columns,
+                                covariance, pressures, scalars, load, mass_columns,
                                 mass_rhs, mass_effectors, stuck, active, free_step,
                                 effector_w, effector_positions, tip_covariance, work)
     return 0
@@ -212,7 +214,7 @@ def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved,
 
 @numba.njit(cache=True)
 def estimate_from_linearisation(linearise_arguments, routing, pots, jacobian, moved, h, state,
-                                covariance, pressures, scalars, gravity, mass_columns,
+                                covariance, pressures, scalars, load, mass_columns,
                                 mass_rhs, mass_effectors, stuck, active, free_step,
                                 effector_w, effector_positions, tip_covariance, work):
     """:func:`estimate_tick` after its linearisation (the tick data hold a solved one)."""
@@ -232,9 +234,7 @@ def estimate_from_linearisation(linearise_arguments, routing, pots, jacobian, mo
         for row in range(size):
             mass_columns[row, 0] = solved[row, 0]
             mass_rhs[row, 0] = rhs[row, 0]
-            mass_rhs[row, 1] = 0.0
-        for i in range(3):
-            mass_rhs[size - 6 + i, 1] = gravity[i]
+            mass_rhs[row, 1] = load[row]
         if scalars[SOLVE_MASS] > 0.0:
             for row in range(size):
                 mass_columns[row, 1] = mass_rhs[row, 1]

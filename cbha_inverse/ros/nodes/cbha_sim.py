@@ -31,9 +31,11 @@ publishes both, ``none`` no tip measurement at all (a camera-less arm; ``tip/tru
 OpenCV is imported only for stereo. ``payload_mass`` hangs a payload the controller does not
 know at the tip. A scene with a ``sensors`` block also gets ``string_pots`` (sensor_msgs/
 JointState, names and raw readings as ``robotino_bridge`` publishes them, the stamp of the plant
-state) at ``string_pot_rate_hz``, from the plant's true shape with ``string_pot_noise_std``
-[m] and the plant's own ``string_pot_offset`` / ``string_pot_gain``
-(:class:`cbha_inverse.sim.pots.SimulatedPots`).
+state) at ``string_pot_rate_hz`` (at most the tick rate), from the plant's true shape with
+``string_pot_noise_std`` [m] and the plant's own ``string_pot_offset`` / ``string_pot_gain``
+(:class:`cbha_inverse.sim.pots.SimulatedPots`): in the tick, after the ``pressure_measured`` the
+state is the equilibrium of, as the driver's one message carries both (a pot reading and the
+last pressures received before it are of the same instant).
 
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 """
@@ -123,7 +125,8 @@ class CbhaSimParams:
     string_pot_noise_std: float = param(0.0001, 'string-pot length noise [m]', low=0.0,
                                         high=0.01)
     string_pot_rate_hz: float = param(100.0, 'string_pots publication rate [Hz] (a scene with '
-                                      'sensors)', low=0.1, high=1000.0)
+                                      'sensors; at most rate_hz: published in the tick)',
+                                      low=0.1, high=1000.0)
     camera_rig: str = param('cameras/rig.yaml', 'stereo output: rig file (a path, or relative '
                             'to config/)')
     camera_rate_hz: float = param(30.0, 'stereo output: frame rate [Hz]', low=0.1, high=1000.0)
@@ -197,7 +200,7 @@ class CbhaSimNode(Node):
             self.cameras = self._start_cameras()
         if self.pots is not None:
             self.pots_publisher = self.create_publisher(JointState, 'string_pots', MEASURED_QOS)
-            self.pots_timer = self.create_timer(1.0 / p.string_pot_rate_hz, self._publish_pots)
+        self.pots_due = -math.inf
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
             f'plant {self.scene.name} x{p.stiffness_scale:g} stiffness (sections '
@@ -256,6 +259,7 @@ class CbhaSimNode(Node):
         """``~/reset``: plant at rest, valves vented, pending commands dropped."""
         self.arm.reset()
         self.last_result = None
+        self.pots_due = -math.inf
         self.resets += 1
         response.success = True
         response.message = 'plant at rest, valves at 0 Pa'
@@ -280,14 +284,21 @@ class CbhaSimNode(Node):
         if self.params.tip_output in ('point', 'both'):
             self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
         self.truth_publisher.publish(point_stamped(tip, stamp, self.params.frame_id))
+        if self.pots is not None:
+            self._publish_pots(result, stamp)
         self.tick_times.add(time.perf_counter() - start)
 
-    def _publish_pots(self):
-        result, stamp = self.last_result, self.last_stamp
-        if result is not None:
-            self.pots_publisher.publish(joint_state(
-                self.pots.names, self.pots.read(result.positions, result.rotations), stamp,
-                self.params.frame_id))
+    def _publish_pots(self, result, stamp):
+        """Publish the pots of this tick's state when a reading is due (``string_pot_rate_hz``)."""
+        p = self.params
+        now, period = stamp.sec + stamp.nanosec * 1e-9, 1.0 / p.string_pot_rate_hz
+        if now < self.pots_due <= now + period:  # (a clock that jumped back: due now)
+            return
+        # half a tick early: tick jitter does not drop a reading at rates up to the tick rate
+        self.pots_due = now + period - 0.5 / p.rate_hz
+        self.pots_publisher.publish(joint_state(
+            self.pots.names, self.pots.read(result.positions, result.rotations), stamp,
+            p.frame_id))
 
     def _statuses(self):
         result = self.last_result

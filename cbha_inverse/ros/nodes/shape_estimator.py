@@ -2,20 +2,21 @@
 ``shape_estimator``: the arm's shape and tip from its string potentiometers (``docs/nodes.md``).
 
 Subscribes ``string_pots`` (sensor_msgs/JointState, raw readings by name, as ``robotino_bridge``
-and ``cbha_sim`` publish them) and ``pressure_measured`` (Float64MultiArray, Pa in
-``valve_names`` order); every accepted reading runs one update of
+and ``cbha_sim`` publish them) and ``pressure_measured`` (Float64MultiArray, Pa in ``valve_names``
+order); every accepted reading runs one update of
 :class:`cbha_inverse.estimate.shape.ShapeEstimator` (``docs/proprioception.md``), with the last
-pressures when they are at most ``pressure_timeout`` old, and publishes the estimated tip on
-``tip/estimated`` (PointStamped, ``frame_id``, the stamp of the pot reading, sensor data QoS),
-which ``inverse_solver`` closes its loop on with ``feedback_topic: tip/estimated``. A reading
-that lacks a pot name, is malformed, non-finite or out of range, or is older than
-``reading_timeout`` is rejected, counted by reason and logged (throttled); nothing is published
-for it, so readings that stop or go stale stop ``tip/estimated`` and the solver's stale-feedback
-hold or vent acts. A pot dropped from the fit (stuck, or many sigma off) is a WARN and
-``degraded``. ``backbone_estimated`` (MarkerArray) draws the estimated backbone every
-``marker_period``; ``/diagnostics`` reports the residual per pot, the rank, the tip's standard
-deviation, the rejections by reason and the time per estimate. The timeouts and ``log_throttle``
-are live (``set_parameters``); the estimator's noise model is fixed at start.
+pressures received when they are at most ``pressure_timeout`` old (those of the reading's instant:
+``robotino_bridge`` and ``cbha_sim`` publish a sample's pressures before its pots), and publishes
+the estimated tip on ``tip/estimated`` (PointStamped, ``frame_id``, the stamp of the pot reading,
+sensor data QoS), which ``inverse_solver`` closes its loop on with
+``feedback_topic: tip/estimated``. A reading that lacks a pot name, is malformed, non-finite or out
+of range, or is older than ``reading_timeout`` is rejected, counted by reason and logged
+(throttled); nothing is published for it, so readings that stop or go stale stop ``tip/estimated``
+and the solver's stale-feedback hold or vent acts. A pot dropped from the fit (stuck, or many sigma
+off) is a WARN and ``degraded``. ``backbone_estimated`` (MarkerArray) draws the estimated backbone
+every ``marker_period``; ``/diagnostics`` reports the residual per pot, the rank, the tip's
+standard deviation, the rejections by reason and the time per estimate. The timeouts and
+``log_throttle`` are live (``set_parameters``); the estimator's noise model is fixed at start.
 """
 
 from dataclasses import dataclass
@@ -65,9 +66,15 @@ class ShapeEstimatorParams:
                                    high=1.0e6)
     actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update without '
                                       'measured pressures [Pa]', low=1.0, high=1.0e6)
+    predict_pressure_change: float = param(2000.0, 'an update whose pressures changed by more '
+                                           'than this first moves the shape to the equilibrium '
+                                           'of the estimate at them [Pa]', low=0.0, high=1.0e6)
     payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none); its '
                                'estimate is published on payload/estimated',
                                low=0.0, high=10.0)
+    weight_std: float = param(0.02, "prior std of an error of the arm's own weight [kg] (a "
+                              'stiffness error sags the arm as a weight error does; 0: none; '
+                              'not with payload_std, which takes its place)', low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
                                  low=1.0, high=1.0e6)
     stuck_window: int = param(25, 'updates over which a stuck pot is looked for (0: never)',
@@ -106,7 +113,10 @@ class ShapeEstimatorNode(Node):
             self.estimator = ShapeEstimator.from_scene(self.scene, EstimatorOptions(
                 pressure_std=p.pressure_std, gain_walk_std=p.gain_walk_std,
                 offset_walk_std=p.offset_walk_std, actuation_walk_std=p.actuation_walk_std,
-                payload_std=p.payload_std or None, outlier_sigma=p.outlier_sigma,
+                predict_pressure_change=p.predict_pressure_change,
+                payload_std=p.payload_std or None,
+                weight_std=None if p.payload_std else (p.weight_std or None),
+                outlier_sigma=p.outlier_sigma,
                 stuck_window=p.stuck_window))
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
@@ -196,7 +206,8 @@ class ShapeEstimatorNode(Node):
             values.update({f'residual_mm.{name}': float(r) * 1e3
                            for name, r in zip(self.pot_names, last.residuals)})
             values.update({'rank': last.rank, 'degraded': last.degraded,
-                           'tip_std_mm': last.confidence * 1e3, 'payload_kg': last.payload})
+                           'tip_std_mm': last.confidence * 1e3, 'payload_kg': last.payload,
+                           'weight_error_kg': last.weight})
         level = WARN if (last is not None and last.degraded) or total else OK
         message = (last.reason if last is not None and last.degraded else
                    f'{total} rejected readings' if total else
