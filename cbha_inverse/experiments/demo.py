@@ -217,10 +217,16 @@ def _stop(processes):
 
 
 class Recorder:
-    """Subscribe to target, tip/true, tip/measured and /diagnostics (one node in this process)."""
+    """
+    Subscribe to tip/true, tip/measured, tip/estimated, /diagnostics (one node in this process).
+
+    Its subscriptions to ``target`` and ``pressure_command`` are the gates of a run
+    (:meth:`open_gate`): the trajectory and ``cbha_excite`` start with the other nodes and wait
+    for one subscriber more than they have, this recorder, which subscribes once the nodes are up.
+    """
 
     def __init__(self, context):
-        from cbha_inverse.ros.common.qos import DIAGNOSTICS_QOS, MEASURED_QOS, TARGET_QOS
+        from cbha_inverse.ros.common.qos import DIAGNOSTICS_QOS, MEASURED_QOS
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PointStamped
         from rclpy.executors import SingleThreadedExecutor
@@ -229,10 +235,9 @@ class Recorder:
         self.node = Node('cbha_demo_recorder', context=context, namespace=NAMESPACE)
         self.targets, self.tips, self.measured, self.diagnostics = [], [], [], {}
         self.estimated = []
+        self._gate = None
         self.node.create_subscription(PointStamped, 'tip/estimated', self._point(self.estimated),
                                       MEASURED_QOS)
-        self.node.create_subscription(PointStamped, 'target', self._point(self.targets),
-                                      TARGET_QOS)
         self.node.create_subscription(PointStamped, 'tip/true', self._point(self.tips),
                                       MEASURED_QOS)
         self.node.create_subscription(PointStamped, 'tip/measured', self._point(self.measured),
@@ -253,6 +258,29 @@ class Recorder:
         for status in message.status:
             self.diagnostics[status.name] = ({v.key: v.value for v in status.values},
                                              time.monotonic())
+
+    def open_gate(self, topic):
+        """
+        Subscribe to ``target`` (record it) or ``pressure_command`` (only counted).
+
+        A trajectory or ``cbha_excite`` started with ``wait_for_subscribers`` one more than its
+        other subscribers publishes nothing until then.
+        """
+        from cbha_inverse.ros.common.qos import COMMAND_QOS, TARGET_QOS
+        from geometry_msgs.msg import PointStamped
+        from std_msgs.msg import Float64MultiArray
+        if topic == 'target':
+            self._gate = self.node.create_subscription(
+                PointStamped, 'target', self._point(self.targets), TARGET_QOS)
+        else:
+            self._gate = self.node.create_subscription(
+                Float64MultiArray, topic, lambda message: None, COMMAND_QOS)
+
+    def close_gate(self):
+        """Destroy the gate's subscription (the next run's nodes wait for a new one)."""
+        if self._gate is not None:
+            self.node.destroy_subscription(self._gate)
+            self._gate = None
 
     def spin_until(self, predicate, timeout):
         """Spin until ``predicate()`` or ``timeout`` seconds; return the predicate."""
@@ -304,7 +332,8 @@ def _sim_overrides(args, valve_names):
             'section_stiffness_scale': _floats(args.plant_section_scale),
             'cavity_gain_scale': _floats(args.plant_gain_scale),
             'base_offset': _floats(args.plant_base_offset), 'seed': args.plant_seed,
-            'payload_mass': args.plant_payload, **plant_pot_parameters(args)}
+            'payload_mass': args.plant_payload, 'diagnostics_period': 0.5,
+            **plant_pot_parameters(args)}
 
 
 def excite_run_name(program):
@@ -340,21 +369,25 @@ def run_excitation(recorder, run_dir, args, program, valve_names, env):
     run_dir.mkdir(parents=True, exist_ok=True)
     recorder.clear()
     recorder_process = {'cbha_bag_record': _start_recorder(run_dir, env, EXCITE_RECORDED)}
-    processes = {'cbha_sim': _start('cbha_sim', run_dir, _sim_overrides(args, valve_names), env)}
+    # cbha_excite starts with the plant; its program starts once the plant, the bag recorder
+    # and this recorder's gate, opened when the plant publishes diagnostics (it spins),
+    # subscribe to its commands
+    processes = {'cbha_sim': _start('cbha_sim', run_dir, _sim_overrides(args, valve_names), env),
+                 'cbha_excite': _start('cbha_excite', run_dir, {
+                     'scene': args.scene, 'valve_names': list(valve_names),
+                     'program': args.excite, 'hold_time': args.excite_hold_time,
+                     'ramp_time': args.excite_ramp_time, 'wait_for_subscribers': 3}, env)}
     try:
         if not recorder.spin_until(lambda: any(
                 name.startswith('cbha_sim:') for name in recorder.diagnostics), 120.0):
             raise RuntimeError(f'cbha_sim did not start, see the logs in {run_dir}')
-        # the program starts once the plant and the bag recorder subscribe to its commands
-        processes['cbha_excite'] = _start('cbha_excite', run_dir, {
-            'scene': args.scene, 'valve_names': list(valve_names), 'program': args.excite,
-            'hold_time': args.excite_hold_time, 'ramp_time': args.excite_ramp_time,
-            'wait_for_subscribers': 2}, env)
+        recorder.open_gate('pressure_command')
         excite = processes['cbha_excite']
         if not recorder.spin_until(lambda: excite.poll() is not None, program.duration + 120.0):
             raise RuntimeError(f'cbha_excite did not finish, see the logs in {run_dir}')
         time.sleep(0.3)     # the plant's response to the last command reaches the bag
     finally:
+        recorder.close_gate()
         codes = _stop(processes)
         codes.update(_stop(recorder_process))
     with open_bag(run_dir / 'bag') as bag:
@@ -396,18 +429,20 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
         'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,
         **solver_extra}, env)
+    # the trajectory starts with the nodes and keeps its clock at 0 until the solver, the bag
+    # recorder and this recorder subscribe to it; this one does once the nodes publish
+    # diagnostics (they spin)
+    processes['trajectory'] = _start('trajectory', run_dir, {
+        'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
+        'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
+        'start_hold': args.start_hold, 'wait_for_subscribers': 3}, env)
     try:
-        # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
-        # clock at 0 until the solver, this recorder and the bag recorder subscribe to it
         if not recorder.spin_until(lambda: all(
                 any(name.startswith(f'{node}:') for name in recorder.diagnostics)
                 for node in waited), 120.0):
             raise RuntimeError(f'nodes did not start, see the logs in {run_dir}')
         launched = time.time()  # targets stamped earlier are late messages of a previous run
-        processes['trajectory'] = _start('trajectory', run_dir, {
-            'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
-            'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
-            'start_hold': args.start_hold, 'wait_for_subscribers': 3}, env)
+        recorder.open_gate('target')
         if not recorder.spin_until(lambda: any(t[0] >= launched for t in recorder.targets),
                                    60.0):
             raise RuntimeError(f'no target received, see the logs in {run_dir}')
@@ -418,6 +453,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         recorder.spin_until(lambda: recorder.diagnostics.get(
             'inverse_solver: control', ({}, 0.0))[1] > fresh, 2.0)
     finally:
+        recorder.close_gate()
         codes = _stop(processes)
         codes.update(_stop(recorder_process))
     evaluation = evaluate_bag(run_dir / 'bag', namespace=NAMESPACE, tip='true',
