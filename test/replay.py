@@ -17,7 +17,9 @@ never ticks between the 50 Hz targets: every command answers exactly one target,
 Where the OS allows, the player and, once its warm-up is done, every thread of the solver (its
 executor and its DDS receive threads) run with SCHED_RR priority 10: both sleep between messages,
 and other test suites on the shared cores must not delay a target past the next measurement (a
-reordering the closed loop would see). Several replays of one bag run at once
+reordering the closed loop would see). The recorder's threads do too, once it subscribed: the
+solver's command writer keeps 10 samples, and a recorder starved by the other processes for as
+long loses one. Several replays of one bag run at once
 (:func:`replays`), each in a DDS domain of its own: their solvers and recorders start together
 (the start-up is most of a replay's CPU time), then their players play together (a replay is
 real time: 3.5 s mostly asleep).
@@ -292,7 +294,7 @@ def replay(mode, workdir):
         See :func:`answers`.
 
     """
-    (commands,) = replays(mode, [workdir])
+    (commands,) = replays([(mode, workdir)])
     return commands
 
 
@@ -320,12 +322,13 @@ class _Replay:
         return '\n'.join(self.solver_log.lines + self.recorder_log.lines)
 
     def wait_ready(self):
-        """Wait for the solver's warm-up (then raise its priority) and the recorder."""
+        """Wait for the solver's warm-up and the recorder's subscription; raise their priority."""
         assert self.solver_log.wait_for(lambda line: 'warm-up' in line, 120.0), \
             '\n'.join(self.solver_log.lines)
         _real_time_threads(self.solver.pid)
         assert self.recorder_log.wait_for(lambda line: 'Subscribed to topic' in line, 120.0), \
             self.logs()
+        _real_time_threads(self.recorder.pid)
 
     def play(self, bag):
         """Start ``cbha_bag play --clock`` of ``bag`` (real-time priority where allowed)."""
@@ -362,9 +365,9 @@ def _stop_all(processes):
     return [_wait(process) for process in processes]
 
 
-def replays(mode, workdirs):
+def replays(jobs):
     """
-    Replay one input bag several times at once, each replay in a DDS domain of its own.
+    Replay input bags, several at once, each replay in a DDS domain of its own.
 
     Every replay has its own solver, recorder and player (and ``/clock``) in a domain reserved
     from ``domain_coordinator`` (so nothing crosses between them or other tests); the solvers
@@ -373,31 +376,33 @@ def replays(mode, workdirs):
 
     Parameters
     ----------
-    mode : {'open', 'closed'}
-        Solver mode, and which input bag.
-    workdirs : sequence of pathlib.Path
-        One fresh folder per replay (see :func:`replay`).
+    jobs : sequence of (str, pathlib.Path)
+        Per replay: the solver mode and input bag (``'open'`` or ``'closed'``) and a fresh
+        folder (see :func:`replay`).
 
     Returns
     -------
     list of (K, m) ndarray  [Pa]
-        The answered commands of each replay (see :func:`answers`).
+        The answered commands of each replay, in the order of ``jobs`` (see :func:`answers`).
 
     """
     from domain_coordinator import domain_id
-    with open_bag(INPUTS[mode]) as bag:
-        targets = next(t.count for t in bag.summary.topics if t.name == '/cbha/target')
+    targets = {}
+    for mode in {mode for mode, _ in jobs}:
+        with open_bag(INPUTS[mode]) as bag:
+            targets[mode] = next(
+                t.count for t in bag.summary.topics if t.name == '/cbha/target')
     with contextlib.ExitStack() as domains:
         runs = []
         try:
-            for workdir in workdirs:
+            for mode, workdir in jobs:
                 runs.append(_Replay(mode, workdir, domains.enter_context(domain_id())))
             for run in runs:
                 run.wait_ready()
-            for run in runs:
+            for run, (mode, _) in zip(runs, jobs):
                 run.play(INPUTS[mode])
-            for run in runs:
-                run.wait_recorded(targets)
+            for run, (mode, _) in zip(runs, jobs):
+                run.wait_recorded(targets[mode])
         finally:
             for run in runs:
                 run.stop_player()

@@ -24,7 +24,7 @@ def test_three_replays_match_the_goldens(mode, tmp_path):
     assert golden.shape == (int(DURATION * RATE), 6)
     assert np.all((golden >= 0.0) & (golden <= InverseSolverParams.max_pressure))
     assert np.all(golden.max(axis=1) > 0)
-    replayed = replays(mode, [tmp_path / f'replay_{i}' for i in range(3)])
+    replayed = replays([(mode, tmp_path / f'replay_{i}') for i in range(3)])
     deviations = [float(np.max(np.abs(r - golden))) if r.shape == golden.shape else np.inf
                   for r in replayed]
     print(f'{mode} loop ({INPUTS[mode].name}): {golden.shape[0]} commands, largest deviation '
