@@ -276,6 +276,11 @@ class Recorder:
             self._gate = self.node.create_subscription(
                 Float64MultiArray, topic, lambda message: None, COMMAND_QOS)
 
+    def subscribed(self, node, topic):
+        """Return whether the node named ``node`` subscribes to ``topic`` (as discovered here)."""
+        return any(info.node_name == node
+                   for info in self.node.get_subscriptions_info_by_topic(topic))
+
     def close_gate(self):
         """Destroy the gate's subscription (the next run's nodes wait for a new one)."""
         if self._gate is not None:
@@ -441,6 +446,11 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
                 any(name.startswith(f'{node}:') for name in recorder.diagnostics)
                 for node in waited), 120.0):
             raise RuntimeError(f'nodes did not start, see the logs in {run_dir}')
+        # the bag holds the lap's commands from the first one: the bag recorder subscribes to
+        # them once it sees the solver's publisher, before the trajectory's gate opens
+        if not recorder.spin_until(lambda: recorder.subscribed(
+                'cbha_bag_record', f'{NAMESPACE}/pressure_command'), 60.0):
+            raise RuntimeError(f'cbha_bag record did not subscribe, see the logs in {run_dir}')
         launched = time.time()  # targets stamped earlier are late messages of a previous run
         recorder.open_gate('target')
         if not recorder.spin_until(lambda: any(t[0] >= launched for t in recorder.targets),
