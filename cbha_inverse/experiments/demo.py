@@ -343,14 +343,10 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
         'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,
         **solver_extra}, env)
-    # the trajectory starts with the nodes and keeps its clock at 0 until the solver, the bag
-    # recorder and this recorder subscribe to it; this one does once the nodes publish
-    # diagnostics (they spin)
-    processes['trajectory'] = _start('trajectory', run_dir, {
-        'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
-        'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
-        'start_hold': args.start_hold, 'wait_for_subscribers': 3}, env)
     try:
+        # the trajectory starts once the nodes publish diagnostics (they spin; its start-up
+        # leaves the loop's nodes the time to match one another), and keeps its clock at 0 until
+        # the solver, this recorder and the bag recorder subscribe to it
         if not recorder.spin_until(lambda: all(
                 any(name.startswith(f'{node}:') for name in recorder.diagnostics)
                 for node in waited), 120.0):
@@ -362,6 +358,10 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
             raise RuntimeError(f'cbha_bag record did not subscribe, see the logs in {run_dir}')
         launched = time.time()  # targets stamped earlier are late messages of a previous run
         recorder.open_gate('target')
+        processes['trajectory'] = _start('trajectory', run_dir, {
+            'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
+            'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
+            'start_hold': args.start_hold, 'wait_for_subscribers': 3}, env)
         if not recorder.spin_until(lambda: any(t[0] >= launched for t in recorder.targets),
                                    60.0):
             raise RuntimeError(f'no target received, see the logs in {run_dir}')

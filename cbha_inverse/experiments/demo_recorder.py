@@ -13,8 +13,9 @@ class Recorder:
     Subscribe to tip/true, tip/measured, tip/estimated, /diagnostics (one node in this process).
 
     Its subscriptions to ``target`` and ``pressure_command`` are the gates of a run
-    (:meth:`open_gate`): the trajectory and ``cbha_excite`` start with the other nodes and wait
-    for one subscriber more than they have, this recorder, which subscribes once the nodes are up.
+    (:meth:`open_gate`): the trajectory and ``cbha_excite`` wait for one subscriber more than
+    they have, this recorder, which subscribes once the nodes are up (``cbha_excite`` starts with
+    the plant).
     """
 
     def __init__(self, context, namespace):
