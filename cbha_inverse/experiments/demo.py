@@ -49,7 +49,6 @@ from cbha_inverse.bag.evaluate import evaluate_bag
 from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
-from cbha_inverse.experiments.demo_recorder import Recorder
 from cbha_inverse.experiments.proprio import (add_plant_pot_arguments, estimate_error,
                                               plant_pot_parameters)
 from cbha_inverse.identify.excitation import make_program
@@ -217,6 +216,65 @@ def _stop(processes):
     return codes
 
 
+class Recorder:
+    """Subscribe to target, tip/true, tip/measured and /diagnostics (one node in this process)."""
+
+    def __init__(self, context):
+        from cbha_inverse.ros.common.qos import DIAGNOSTICS_QOS, MEASURED_QOS, TARGET_QOS
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PointStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        self.node = Node('cbha_demo_recorder', context=context, namespace=NAMESPACE)
+        self.targets, self.tips, self.measured, self.diagnostics = [], [], [], {}
+        self.estimated = []
+        self.node.create_subscription(PointStamped, 'tip/estimated', self._point(self.estimated),
+                                      MEASURED_QOS)
+        self.node.create_subscription(PointStamped, 'target', self._point(self.targets),
+                                      TARGET_QOS)
+        self.node.create_subscription(PointStamped, 'tip/true', self._point(self.tips),
+                                      MEASURED_QOS)
+        self.node.create_subscription(PointStamped, 'tip/measured', self._point(self.measured),
+                                      MEASURED_QOS)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
+                                      DIAGNOSTICS_QOS)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+
+    @staticmethod
+    def _point(store):
+        def callback(message):
+            stamp = message.header.stamp.sec + 1e-9 * message.header.stamp.nanosec
+            store.append((stamp, message.point.x, message.point.y, message.point.z))
+        return callback
+
+    def _on_diagnostics(self, message):
+        for status in message.status:
+            self.diagnostics[status.name] = ({v.key: v.value for v in status.values},
+                                             time.monotonic())
+
+    def spin_until(self, predicate, timeout):
+        """Spin until ``predicate()`` or ``timeout`` seconds; return the predicate."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and not predicate():
+            self.executor.spin_once(timeout_sec=0.05)
+        return predicate()
+
+    def clear(self):
+        """Forget what was recorded."""
+        self.targets.clear()
+        self.tips.clear()
+        self.measured.clear()
+        self.estimated.clear()
+        self.diagnostics.clear()
+
+    def close(self):
+        """Destroy the node."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
 def _stereo_overrides(args):
     """Return the cbha_sim and stereo_tracker overrides of a run through the cameras."""
     from cbha_inverse.vision.rig import load_rig
@@ -246,8 +304,7 @@ def _sim_overrides(args, valve_names):
             'section_stiffness_scale': _floats(args.plant_section_scale),
             'cavity_gain_scale': _floats(args.plant_gain_scale),
             'base_offset': _floats(args.plant_base_offset), 'seed': args.plant_seed,
-            'payload_mass': args.plant_payload, 'diagnostics_period': 0.5,
-            **plant_pot_parameters(args)}
+            'payload_mass': args.plant_payload, **plant_pot_parameters(args)}
 
 
 def excite_run_name(program):
@@ -283,25 +340,21 @@ def run_excitation(recorder, run_dir, args, program, valve_names, env):
     run_dir.mkdir(parents=True, exist_ok=True)
     recorder.clear()
     recorder_process = {'cbha_bag_record': _start_recorder(run_dir, env, EXCITE_RECORDED)}
-    # cbha_excite starts with the plant; its program starts once the plant, the bag recorder
-    # and this recorder's gate, opened when the plant publishes diagnostics (it spins),
-    # subscribe to its commands
-    processes = {'cbha_sim': _start('cbha_sim', run_dir, _sim_overrides(args, valve_names), env),
-                 'cbha_excite': _start('cbha_excite', run_dir, {
-                     'scene': args.scene, 'valve_names': list(valve_names),
-                     'program': args.excite, 'hold_time': args.excite_hold_time,
-                     'ramp_time': args.excite_ramp_time, 'wait_for_subscribers': 3}, env)}
+    processes = {'cbha_sim': _start('cbha_sim', run_dir, _sim_overrides(args, valve_names), env)}
     try:
         if not recorder.spin_until(lambda: any(
                 name.startswith('cbha_sim:') for name in recorder.diagnostics), 120.0):
             raise RuntimeError(f'cbha_sim did not start, see the logs in {run_dir}')
-        recorder.open_gate('pressure_command')
+        # the program starts once the plant and the bag recorder subscribe to its commands
+        processes['cbha_excite'] = _start('cbha_excite', run_dir, {
+            'scene': args.scene, 'valve_names': list(valve_names), 'program': args.excite,
+            'hold_time': args.excite_hold_time, 'ramp_time': args.excite_ramp_time,
+            'wait_for_subscribers': 2}, env)
         excite = processes['cbha_excite']
         if not recorder.spin_until(lambda: excite.poll() is not None, program.duration + 120.0):
             raise RuntimeError(f'cbha_excite did not finish, see the logs in {run_dir}')
         time.sleep(0.3)     # the plant's response to the last command reaches the bag
     finally:
-        recorder.close_gate()
         codes = _stop(processes)
         codes.update(_stop(recorder_process))
     with open_bag(run_dir / 'bag') as bag:
@@ -344,20 +397,13 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,
         **solver_extra}, env)
     try:
-        # the trajectory starts once the nodes publish diagnostics (they spin; its start-up
-        # leaves the loop's nodes the time to match one another), and keeps its clock at 0 until
-        # the solver, this recorder and the bag recorder subscribe to it
+        # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
+        # clock at 0 until the solver, this recorder and the bag recorder subscribe to it
         if not recorder.spin_until(lambda: all(
                 any(name.startswith(f'{node}:') for name in recorder.diagnostics)
                 for node in waited), 120.0):
             raise RuntimeError(f'nodes did not start, see the logs in {run_dir}')
-        # the bag holds the lap's commands from the first one: the bag recorder subscribes to
-        # them once it sees the solver's publisher, before the trajectory's gate opens
-        if not recorder.spin_until(lambda: recorder.subscribed(
-                'cbha_bag_record', f'{NAMESPACE}/pressure_command'), 60.0):
-            raise RuntimeError(f'cbha_bag record did not subscribe, see the logs in {run_dir}')
         launched = time.time()  # targets stamped earlier are late messages of a previous run
-        recorder.open_gate('target')
         processes['trajectory'] = _start('trajectory', run_dir, {
             'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
             'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
@@ -372,7 +418,6 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         recorder.spin_until(lambda: recorder.diagnostics.get(
             'inverse_solver: control', ({}, 0.0))[1] > fresh, 2.0)
     finally:
-        recorder.close_gate()
         codes = _stop(processes)
         codes.update(_stop(recorder_process))
     evaluation = evaluate_bag(run_dir / 'bag', namespace=NAMESPACE, tip='true',
@@ -485,7 +530,7 @@ def main(argv=None):
     from rclpy.signals import SignalHandlerOptions
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    recorder = Recorder(context, NAMESPACE)
+    recorder = Recorder(context)
     results = []
     feedbacks = args.feedback.split(',')
     runs = [(shape, mode, 'direct') for shape in args.shapes.split(',')
