@@ -99,10 +99,9 @@ class NetworkLab:
         return self
 
     def __exit__(self, *exc):
-        for process in self._processes:
-            _end_group(process)
-        for process, _ in self._holders.values():
-            _end_group(process)
+        # every node stops at once (SIGINT to all, then the waits), then the namespaces' holders
+        _end_groups(self._processes)
+        _end_groups([process for process, _ in self._holders.values()])
         self._holders.clear()
 
     @staticmethod
@@ -193,25 +192,33 @@ class NetworkLab:
                                '--ros-args', *ros_args], env)
 
 
-def _end_group(process, grace=5.0):
-    """End the process group of ``process``: SIGINT, then SIGKILL after ``grace`` s."""
-    if process.poll() is None:
+def _end_groups(processes, grace=5.0):
+    """
+    End the process groups of ``processes``: SIGINT to all, then SIGKILL after ``grace`` s.
+
+    Each group gets SIGINT first, so they all stop at the same time; a group not ended
+    ``grace`` s after its SIGINT gets SIGKILL (as what is left of an ended group does).
+    """
+    for process in processes:
+        if process.poll() is None:
+            try:
+                os.killpg(process.pid, signal.SIGINT)
+            except ProcessLookupError:
+                pass
+    deadline = time.monotonic() + grace
+    for process in processes:
         try:
-            os.killpg(process.pid, signal.SIGINT)
-        except ProcessLookupError:
-            pass
-        try:
-            process.wait(grace)
+            process.wait(max(deadline - time.monotonic(), 0.0))
         except subprocess.TimeoutExpired:
             pass
-    try:
-        os.killpg(process.pid, signal.SIGKILL)     # what is left of the group
-    except (ProcessLookupError, PermissionError):
-        pass
-    process.wait()
-    reader = getattr(process, 'reader', None)
-    if reader is not None:
-        reader.join(2.0)
+        try:
+            os.killpg(process.pid, signal.SIGKILL)     # what is left of the group
+        except (ProcessLookupError, PermissionError):
+            pass
+        process.wait()
+        reader = getattr(process, 'reader', None)
+        if reader is not None:
+            reader.join(2.0)
 
 
 def wait_for(predicate, timeout, poll=0.05):

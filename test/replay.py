@@ -17,7 +17,12 @@ never ticks between the 50 Hz targets: every command answers exactly one target,
 Where the OS allows, the player and, once its warm-up is done, every thread of the solver (its
 executor and its DDS receive threads) run with SCHED_RR priority 10: both sleep between messages,
 and other test suites on the shared cores must not delay a target past the next measurement (a
-reordering the closed loop would see).
+reordering the closed loop would see). The recorder's threads do too, once it subscribed: the
+solver's command writer keeps 10 samples, and a recorder starved by the other processes for as
+long loses one. Several replays of one bag run at once
+(:func:`replays`), each in a DDS domain of its own: their solvers and recorders start together
+(the start-up is most of a replay's CPU time), then their players play together (a replay is
+real time: 3.5 s mostly asleep).
 The recorded commands, without the leading vent commands and consecutive repeats (the watchdog's
 holds before the first and after the last target), are compared with the goldens.
 
@@ -162,7 +167,7 @@ def _real_time_threads(pid):
                                   os.sched_param(REAL_TIME_PRIORITY))
 
 
-def _environment():
+def _environment(domain=None):
     env = dict(os.environ)
     env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
     # untraced: coverage's tracing of the solver and player processes (``make test`` measures
@@ -171,6 +176,8 @@ def _environment():
     env.pop('COVERAGE_PROCESS_CONFIG', None)
     env.pop('COVERAGE_PROCESS_START', None)
     env['PYTHONUNBUFFERED'] = '1'
+    if domain is not None:
+        env['ROS_DOMAIN_ID'] = str(domain)
     return env
 
 
@@ -195,15 +202,14 @@ class _Lines:
         return any(predicate(line) for line in list(self.lines))
 
 
-def _start(command):
-    process = subprocess.Popen([str(c) for c in command], env=_environment(),
+def _start(command, env):
+    process = subprocess.Popen([str(c) for c in command], env=env,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     return process, _Lines(process)
 
 
-def _stop(process):
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
+def _wait(process):
+    """Wait for a process (SIGINT sent) to end; kill it after 20 s; return its exit code."""
     try:
         return process.wait(timeout=20)
     except subprocess.TimeoutExpired:
@@ -288,37 +294,122 @@ def replay(mode, workdir):
         See :func:`answers`.
 
     """
-    workdir.mkdir(parents=True, exist_ok=True)
-    override = workdir / 'override.yaml'
-    override.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
-        'use_sim_time': True, 'mode': mode, 'rate_hz': 1.0}}}))
-    qos = workdir / 'qos.yaml'
-    qos.write_text(yaml.safe_dump({'/cbha/tip/measured': {'reliability': 'reliable'}}))
-    with open_bag(INPUTS[mode]) as bag:
-        targets = next(t.count for t in bag.summary.topics if t.name == '/cbha/target')
-    solver, solver_log = _start([
-        BIN / 'inverse_solver', '--ros-args', '-r', '__ns:=/cbha', '--params-file',
-        config_path('inverse_solver.yaml'), '--params-file', override])
-    recorder, recorder_log = _start([
-        BIN / 'cbha_bag', 'record', '--use-sim-time', '-o', workdir / 'commands',
-        '/cbha/pressure_command'])
-    try:
-        assert solver_log.wait_for(lambda line: 'warm-up' in line, 120.0), \
-            '\n'.join(solver_log.lines)
-        _real_time_threads(solver.pid)
-        assert recorder_log.wait_for(lambda line: 'Subscribed to topic' in line, 120.0), \
-            '\n'.join(solver_log.lines + recorder_log.lines)
-        player = subprocess.run(
-            [str(c) for c in (BIN / 'cbha_bag', 'play', INPUTS[mode], '--clock', 100,
+    (commands,) = replays([(mode, workdir)])
+    return commands
+
+
+class _Replay:
+    """One replay's solver and recorder (started at construction) in its own DDS domain."""
+
+    def __init__(self, mode, workdir, domain):
+        workdir.mkdir(parents=True, exist_ok=True)
+        self.workdir = workdir
+        self.env = _environment(domain)
+        override = workdir / 'override.yaml'
+        override.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+            'use_sim_time': True, 'mode': mode, 'rate_hz': 1.0}}}))
+        self.qos = workdir / 'qos.yaml'
+        self.qos.write_text(yaml.safe_dump({'/cbha/tip/measured': {'reliability': 'reliable'}}))
+        self.solver, self.solver_log = _start([
+            BIN / 'inverse_solver', '--ros-args', '-r', '__ns:=/cbha', '--params-file',
+            config_path('inverse_solver.yaml'), '--params-file', override], self.env)
+        self.recorder, self.recorder_log = _start([
+            BIN / 'cbha_bag', 'record', '--use-sim-time', '-o', workdir / 'commands',
+            '/cbha/pressure_command'], self.env)
+        self.player = None
+
+    def logs(self):
+        return '\n'.join(self.solver_log.lines + self.recorder_log.lines)
+
+    def wait_ready(self):
+        """Wait for the solver's warm-up and the recorder's subscription; raise their priority."""
+        assert self.solver_log.wait_for(lambda line: 'warm-up' in line, 120.0), \
+            '\n'.join(self.solver_log.lines)
+        _real_time_threads(self.solver.pid)
+        assert self.recorder_log.wait_for(lambda line: 'Subscribed to topic' in line, 120.0), \
+            self.logs()
+        _real_time_threads(self.recorder.pid)
+
+    def play(self, bag):
+        """Start ``cbha_bag play --clock`` of ``bag`` (real-time priority where allowed)."""
+        self.player = subprocess.Popen(
+            [str(c) for c in (BIN / 'cbha_bag', 'play', bag, '--clock', 100,
                               '--wait-for-subscribers', 60, '--delay', 0.5,
-                              '--qos-profile-overrides-path', qos)],
-            env=_environment(), capture_output=True, text=True, timeout=120,
+                              '--qos-profile-overrides-path', self.qos)],
+            env=self.env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
             preexec_fn=_real_time_priority)
-        assert player.returncode == 0, player.stderr
-        assert recorder_log.wait_for(lambda line: line.startswith('recording ') and int(
-            line.split()[1]) >= targets, 30.0), '\n'.join(recorder_log.lines)
-    finally:
-        codes = _stop(recorder), _stop(solver)
-    (workdir / 'inverse_solver.log').write_text('\n'.join(solver_log.lines))
-    assert codes == (0, 0), '\n'.join(solver_log.lines + recorder_log.lines)
-    return answers(_commands(workdir / 'commands'))
+
+    def wait_recorded(self, targets):
+        """Wait for the player's end (exit 0) and for ``targets`` recorded commands."""
+        try:
+            _, errors = self.player.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            self.player.kill()
+            _, errors = self.player.communicate()
+        assert self.player.returncode == 0, errors
+        assert self.recorder_log.wait_for(lambda line: line.startswith('recording ') and int(
+            line.split()[1]) >= targets, 30.0), '\n'.join(self.recorder_log.lines)
+
+    def stop_player(self):
+        """Kill the player if it still runs (a failed replay)."""
+        if self.player is not None and self.player.poll() is None:
+            self.player.kill()
+            self.player.wait()
+
+
+def _stop_all(processes):
+    """SIGINT every process once, then wait for each (:func:`_wait`); return the exit codes."""
+    for process in processes:
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+    return [_wait(process) for process in processes]
+
+
+def replays(jobs):
+    """
+    Replay input bags, several at once, each replay in a DDS domain of its own.
+
+    Every replay has its own solver, recorder and player (and ``/clock``) in a domain reserved
+    from ``domain_coordinator`` (so nothing crosses between them or other tests); the solvers
+    and recorders start together, then the players play together. The solvers' and players'
+    real-time priority keeps the other replays' processes from delaying a target.
+
+    Parameters
+    ----------
+    jobs : sequence of (str, pathlib.Path)
+        Per replay: the solver mode and input bag (``'open'`` or ``'closed'``) and a fresh
+        folder (see :func:`replay`).
+
+    Returns
+    -------
+    list of (K, m) ndarray  [Pa]
+        The answered commands of each replay, in the order of ``jobs`` (see :func:`answers`).
+
+    """
+    from domain_coordinator import domain_id
+    targets = {}
+    for mode in {mode for mode, _ in jobs}:
+        with open_bag(INPUTS[mode]) as bag:
+            targets[mode] = next(
+                t.count for t in bag.summary.topics if t.name == '/cbha/target')
+    with contextlib.ExitStack() as domains:
+        runs = []
+        try:
+            for mode, workdir in jobs:
+                runs.append(_Replay(mode, workdir, domains.enter_context(domain_id())))
+            for run in runs:
+                run.wait_ready()
+            for run, (mode, _) in zip(runs, jobs):
+                run.play(INPUTS[mode])
+            for run, (mode, _) in zip(runs, jobs):
+                run.wait_recorded(targets[mode])
+        finally:
+            for run in runs:
+                run.stop_player()
+            # the recorders first: a solver's last commands as it stops are not recorded
+            codes = list(zip(_stop_all([run.recorder for run in runs]),
+                             _stop_all([run.solver for run in runs])))
+    for run, code in zip(runs, codes):
+        (run.workdir / 'inverse_solver.log').write_text('\n'.join(run.solver_log.lines))
+        assert code == (0, 0), f'exit codes (recorder, solver) {code}\n{run.logs()}'
+    return [answers(_commands(run.workdir / 'commands')) for run in runs]

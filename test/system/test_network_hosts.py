@@ -65,11 +65,20 @@ def start_arm(lab, env, namespace='/cbha', robot=('robot', ()), control=('contro
 
 
 def start_probe(lab, host, env, namespace='/cbha'):
-    """Start test/netns_probe.py in ``host``; return the process once it is ready."""
-    probe = lab.run(host, [sys.executable, 'test/netns_probe.py', namespace], env)
-    assert wait_for(lambda: any(line == 'probe ready' for _, line in probe.lines), 30.0), (
-        '\n'.join(line for _, line in probe.lines))
-    return probe
+    """
+    Start test/netns_probe.py in ``host``; return the process (:func:`probes_ready` waits).
+
+    The arm may start before the probe is ready: its trajectory publishes nothing until the
+    solver and the probe subscribe (``wait_for_subscribers`` 2), so the probe sees every target.
+    """
+    return lab.run(host, [sys.executable, 'test/netns_probe.py', namespace], env)
+
+
+def probes_ready(*probes):
+    """Wait until every probe subscribed (it prints ``probe ready``)."""
+    for probe in probes:
+        assert wait_for(lambda: any(line == 'probe ready' for _, line in probe.lines), 30.0), (
+            '\n'.join(line for _, line in probe.lines))
 
 
 def recorded(probe):
@@ -161,6 +170,7 @@ def test_closed_loop_circle_across_three_hosts(discovery, capsys):
         env = lab.ros_env(static_peers=static)
         probe = start_probe(lab, 'cameras', env)
         nodes = start_arm(lab, env)
+        probes_ready(probe)
         running_since(probe, nodes['inverse_solver'])
         before, started = lab.traffic('robot'), time.monotonic()
         timed, cross, cross_max = run_scored(probe, nodes['inverse_solver'])
@@ -196,6 +206,7 @@ def test_loss_and_jitter_on_feedback_and_commands(capsys):
                          '-p', 'seed:=3', env=env)
         nodes = start_arm(lab, env, robot=('robot', ('-r', 'tip/measured:=tip/measured/wire')),
                           control=('control', ('-r', 'pressure_command:=pressure_command/wire')))
+        probes_ready(probe)
         timed, cross, cross_max = run_scored(probe, nodes['inverse_solver'])
         _, _, commands = recorded(probe)
         alive = {name: p.poll() is None for name, p in {**nodes, 'relay': relay}.items()}
@@ -224,6 +235,7 @@ def test_link_cut_holds_then_the_loop_resumes(capsys):
         env = lab.ros_env()
         probe = start_probe(lab, 'robot', env)
         nodes = start_arm(lab, env, control=('control', ('-p', f'feedback_timeout:={timeout}')))
+        probes_ready(probe)
         settled = scored_start(probe, nodes['inverse_solver'])
         time.sleep(max(settled + 0.5 - time.time(), 0.0))
         cut = time.time()
@@ -316,6 +328,7 @@ def test_two_arms_on_one_domain_do_not_cross_talk(capsys):
         probes = {ns: start_probe(lab, 'robot', env, ns) for ns in radii}
         nodes = {ns: start_arm(lab, env, ns, trajectory=('-p', f'radius:={r}'))
                  for ns, r in radii.items()}
+        probes_ready(*probes.values())
         starts = {ns: scored_start(p, nodes[ns]['inverse_solver']) for ns, p in probes.items()}
         time.sleep(max(max(starts.values()) + SCORED - time.time(), 0.0))
         runs = {ns: recorded(p) for ns, p in probes.items()}

@@ -3,15 +3,16 @@ The own-robot guide (docs/own-robot.md) runs as written.
 
 The test copies the guide's example, ``docs/examples/rod_robot/``, to a temporary folder, checks
 that the YAML shown in the guide is the files' content, and runs the guide's commands there:
-``condense_segment`` (real gmsh and FEM), ``cbha_scene check`` and ``cbha_launch sim``, the last
-over real DDS until the controller commands the simulated rod, then SIGINT; and step 5's commands
-(``cbha_launch robot driver:=none``, ``trajectory``, the ``cbha_sim`` stand-in for the user's
-driver and sensor), without a Robotino: the controller waits (at WARN, the line the guide
-quotes) and commands nothing until the stand-in's first measurement, the closed loop runs, and
-the guide's ``ros2 param set`` (through rclpy's parameter client: no ``ros2`` CLI here) tunes it
-live.
+``condense_segment`` (real gmsh and FEM; once, each test gets a copy of its result),
+``cbha_scene check`` and ``cbha_launch sim``, the last over real DDS until the controller commands
+the simulated rod, then SIGINT; and step 5's commands (``cbha_launch robot driver:=none``,
+``trajectory``, the ``cbha_sim`` stand-in for the user's driver and sensor), without a Robotino:
+the controller waits (at WARN, the line the guide quotes) and commands nothing until the
+stand-in's first measurement, the closed loop runs, and the guide's ``ros2 param set`` (through
+rclpy's parameter client: no ``ros2`` CLI here) tunes it live.
 """
 
+from pathlib import Path
 import re
 import shlex
 import shutil
@@ -22,6 +23,7 @@ import threading
 
 from cbha_inverse.fem.segment_io import load_segment
 import numpy as np
+import pytest
 from ros_helpers import child_env, interrupt, loop_listener, reaped, REPO_ROOT, spin_until
 import yaml
 
@@ -52,6 +54,33 @@ def _run(command, cwd, **kwargs):
                             text=True, **kwargs)
 
 
+@pytest.fixture(scope='module')
+def condensed(tmp_path_factory):
+    """
+    Run the guide's first command, ``condense_segment``, once in a copy of the example.
+
+    Returns
+    -------
+    work : pathlib.Path
+        The copy, with the condensed segment (the tests copy it again: each its own folder).
+    result : tuple
+        ``condense_segment``'s exit code and stderr.
+
+    """
+    work = tmp_path_factory.mktemp('guide') / 'my_robot'
+    shutil.copytree(EXAMPLE, work)
+    process = _run(_commands()[0], work)
+    _, err = process.communicate(timeout=300)
+    return work, (process.returncode, err)
+
+
+def _copy(condensed, tmp_path):
+    """Return a fresh copy of the condensed example in ``tmp_path``; assert the condensing."""
+    work, (returncode, err) = condensed
+    assert returncode == 0, err
+    return Path(shutil.copytree(work, tmp_path / 'my_robot'))
+
+
 def test_guide_shows_the_example_files():
     shown = {block.splitlines()[0]: block for block in _blocks('yaml')}
     for path in sorted(EXAMPLE.iterdir()):
@@ -61,14 +90,10 @@ def test_guide_shows_the_example_files():
         assert block == path.read_text(), f'the guide shows another {path.name}'
 
 
-def test_guide_example_runs(tmp_path, rclpy_context):
-    work = tmp_path / 'my_robot'
-    shutil.copytree(EXAMPLE, work)
-    condense, check, launch = _commands()
-
-    process = _run(condense, work)
-    out, err = process.communicate(timeout=300)
-    assert process.returncode == 0, err
+def test_guide_example_runs(condensed, tmp_path, rclpy_context):
+    # the guide's first command, condense_segment, ran in the fixture
+    work = _copy(condensed, tmp_path)
+    _, check, launch = _commands()
     segment = load_segment(work / 'segments' / 'rod_segment.yaml')
     assert np.allclose(segment.rest_offset, [0.02, 0.0, 0.0])
 
@@ -101,11 +126,8 @@ def test_guide_example_runs(tmp_path, rclpy_context):
     assert all(len(c.data) == 4 for c in commands)
 
 
-def test_guide_error_example_is_what_the_command_prints(tmp_path):
-    work = tmp_path / 'my_robot'
-    shutil.copytree(EXAMPLE, work)
-    process = _run(_commands()[0], work)
-    assert process.communicate(timeout=300) and process.returncode == 0
+def test_guide_error_example_is_what_the_command_prints(condensed, tmp_path):
+    work = _copy(condensed, tmp_path)
     scene = work / 'rod_robot.yaml'
     text = scene.read_text()
     second = text.index('name: tendon_90')
@@ -146,14 +168,11 @@ def _guide_claims():
     return waiting.group(1), node, name, yaml.safe_load(value)
 
 
-def test_guide_own_driver_step_runs_without_a_robotino(tmp_path, rclpy_context):
+def test_guide_own_driver_step_runs_without_a_robotino(condensed, tmp_path, rclpy_context):
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
     waiting, node, name, value = _guide_claims()
-    work = tmp_path / 'my_robot'
-    shutil.copytree(EXAMPLE, work)
-    process = _run(_commands()[0], work)
-    assert process.communicate(timeout=300) and process.returncode == 0
+    work = _copy(condensed, tmp_path)
     executor, listener, commands, tips = loop_listener(rclpy_context)
     launch, trajectory, stand_in = _commands(1)
     # the controller and the targets first: it waits, at WARN, and commands nothing
