@@ -51,9 +51,10 @@ def test_duplicated_and_older_measurements_are_dropped_and_counted(rclpy_context
             spin_for(executor, 0.02)
         assert spin_until(executor, lambda: solver.rejected.get('tip/measured.older') == 3, 5.0)
         spin_for(executor, 0.05)
+        # while the node exists (its statuses carry its name)
+        inputs = solver._statuses()[1]
     assert solver.rejected == {'tip/measured.duplicate': 5, 'tip/measured.older': 3}
     np.testing.assert_allclose(solver.corrector.correction[0], 4 * gain * error, atol=1e-12)
-    inputs = solver._statuses()[1]
     values = {v.key: v.value for v in inputs.values}
     assert values['rejected.tip/measured.duplicate'] == '5'
     assert values['rejected.tip/measured.older'] == '3'

@@ -19,6 +19,9 @@ from std_msgs.msg import Float64MultiArray
 CBHA = 'cbha'
 
 
+# the plant's tick rate is what is measured (samples on the rise, the start within 30 ms):
+# beside the other worker's multi-process tests it fell to ~20 Hz once
+@pytest.mark.timing
 def test_simulator_latency_and_first_order_valves_from_a_step(rclpy_context):
     """
     A step command: the tip does not move for ``latency``, then follows ``1 - exp(-t / tau)``.

@@ -72,7 +72,7 @@ class ShapeEstimatorParams:
     payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none); its '
                                'estimate is published on payload/estimated',
                                low=0.0, high=10.0)
-    weight_std: float = param(0.02, "prior std of an error of the arm's own weight [kg] (a "
+    weight_std: float = param(0.0, "prior std of an error of the arm's own weight [kg] (a "
                               'stiffness error sags the arm as a weight error does; 0: none; '
                               'not with payload_std, which takes its place)', low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
