@@ -425,9 +425,9 @@ class ShapeEstimator:
                 return self._rejected('diverged: non-finite estimate, restarted at rest',
                                       started)
         dropped = self._used & ~data.active
-        outliers = dropped & ~data.stuck
-        ratios = data.pots[kernel.RATIO].copy()
         if dropped.any() and self._snapshots[2][1] == len(self._snapshots[0]):
+            outliers = dropped & ~data.stuck
+            ratios = data.pots[kernel.RATIO].copy()
             # a pot just dropped may have pulled the unknowns before: start again from them as
             # they were before the stuck window, without it (left out as if stuck, reported as
             # what it was)
