@@ -11,8 +11,8 @@ The nodes call these functions on every message and before every publication:
   bounds within ``[0, max_pressure]``;
 - :func:`check_command` is what a real valve driver does with an incoming command (exact length,
   finite, within ``[0, p_max]``);
-- :func:`bounded_command` is the last gate before a command is published: it never lets a NaN
-  or an out-of-range pressure through;
+- :func:`bounded_command` (:class:`CommandGate` for fixed bounds) is the last gate before a
+  command is published: it never lets a NaN or an out-of-range pressure through;
 - :class:`StalenessWatch`, :func:`stale_action` and :func:`controller_decision` decide when to
   hold or vent (stale feedback; a stale target stays the set-point), on a steady clock
   (``time.monotonic``) passed in by the caller, so that a bag replay or ``use_sim_time`` cannot
@@ -85,11 +85,35 @@ class WorkspaceBox:
 
     def contains(self, point):
         """Return whether a (3,) point lies inside the closed box (NaN: outside)."""
-        values = np.asarray(point, dtype=float).tolist()
-        if len(values) != 3:
-            raise ValueError(f'a workspace point has 3 components, not {len(values)}')
+        values = point_floats(point)
+        if values is None:
+            raise ValueError(f'a workspace point has 3 components: {point!r}')
         return all(low <= value <= high
                    for low, value, high in zip(self.lower, values, self.upper))
+
+
+def point_floats(point):
+    """
+    Return a point as three Python floats, or None when it is not three numbers.
+
+    Parameters
+    ----------
+    point : (3,) array_like  [m]
+        The point; a ``list`` of three ``float`` (a message's fields, as the nodes pass them)
+        is returned as it is, without an array.
+
+    Returns
+    -------
+    list of 3 float or None
+
+    """
+    if type(point) is list and len(point) == 3 and all(type(v) is float for v in point):
+        return point
+    try:
+        array = np.asarray(point, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return array.tolist() if array.shape == (3,) else None
 
 
 def check_point(point, frame_id, expected_frame, box):
@@ -113,16 +137,18 @@ def check_point(point, frame_id, expected_frame, box):
         Accepted, or the first reason for rejection (non-finite, wrong frame, outside box).
 
     """
-    point = np.asarray(point, dtype=float)
-    # three Python floats per message: fewer calls than numpy's reductions
-    if point.shape != (3,) or not all(map(math.isfinite, point.tolist())):
-        return Check(False, 'non_finite', f'non-finite point {point.tolist()}')
+    # three Python floats per message, no array: this runs on every target and measurement, where
+    # each numpy call costs tens of microseconds with the caches cold (docs/nodes.md, "Latency")
+    values = point_floats(point)
+    if values is None or not all(map(math.isfinite, values)):
+        shown = point if values is None else values
+        return Check(False, 'non_finite', f'non-finite point {shown}')
     if frame_id != expected_frame:
         return Check(False, 'wrong_frame',
                      f'frame {frame_id!r} is not the expected {expected_frame!r}')
-    if not box.contains(point):
+    if not box.contains(values):
         return Check(False, 'outside_workspace',
-                     f'point {[float(f"{v:.6g}") for v in point]} outside the workspace box '
+                     f'point {[float(f"{v:.6g}") for v in values]} outside the workspace box '
                      f'{list(box.lower)}..{list(box.upper)}')
     return ACCEPTED
 
@@ -236,19 +262,78 @@ def bounded_command(values, lower, upper):
     Raises
     ------
     ValueError
-        If ``values`` is not finite or not of length m: the caller must keep its last valid
-        command (a NaN is never clipped into a plausible number).
+        If ``values`` is not finite or not of length m (the caller must keep its last valid
+        command: a NaN is never clipped into a plausible number), or the bounds are not finite
+        with ``lower <= upper``.
 
     """
-    lower = np.asarray(lower, dtype=float)
-    upper = np.asarray(upper, dtype=float)
-    values, key, detail = vector_fault(values, lower.size, 'values')
-    if key is not None:
-        raise ValueError(f'command: {detail}')
-    # maximum/minimum: np.clip's argument handling costs more than the clip of a few values
-    clipped = np.minimum(np.maximum(values, lower), upper)
-    assert np.isfinite(clipped).all() and (clipped >= lower).all() and (clipped <= upper).all()
-    return clipped
+    return CommandGate(lower, upper)(values)
+
+
+class CommandGate:
+    """
+    The last gate before publication, for fixed bounds: :func:`bounded_command` per command.
+
+    A node that publishes at the tick rate builds one gate: the bounds are checked once, and a
+    command (an (m,) float array) is checked and clipped as m Python floats, a few microseconds
+    even with the caches cold where numpy's calls cost tens each (``docs/nodes.md``, "Latency").
+
+    Parameters
+    ----------
+    lower, upper : (m,) array_like  [Pa]
+        Bounds: finite, ``lower <= upper``.
+
+    Raises
+    ------
+    ValueError
+        On bounds of different lengths, not finite, or with ``lower > upper``.
+
+    """
+
+    def __init__(self, lower, upper):
+        """Check the bounds once."""
+        lower = np.asarray(lower, dtype=float).reshape(-1)
+        upper = np.asarray(upper, dtype=float).reshape(-1)
+        if lower.shape != upper.shape:
+            raise ValueError(f'command bounds of {lower.size} and {upper.size} values')
+        if not (np.isfinite(lower).all() and np.isfinite(upper).all() and (lower <= upper).all()):
+            raise ValueError(f'command bounds must be finite with lower <= upper: '
+                             f'{lower.tolist()}..{upper.tolist()}')
+        self.size = lower.size
+        self._lower = lower.tolist()
+        self._upper = upper.tolist()
+
+    def __call__(self, values):
+        """
+        Return the command clipped to the bounds.
+
+        Parameters
+        ----------
+        values : (m,) array_like  [Pa]
+            Proposed command.
+
+        Returns
+        -------
+        (m,) float ndarray  [Pa]
+            Finite, within the bounds.
+
+        Raises
+        ------
+        ValueError
+            If ``values`` is not finite or not of length m.
+
+        """
+        floats = None
+        if type(values) is np.ndarray and values.dtype == np.float64 and values.ndim == 1:
+            floats = values.tolist()
+        if floats is None or len(floats) != self.size or not all(map(math.isfinite, floats)):
+            # any other input, and every fault: the checks and words of the other inputs
+            array, key, detail = vector_fault(values, self.size, 'values')
+            if key is not None:
+                raise ValueError(f'command: {detail}')
+            floats = array.tolist()
+        return np.array([low if value < low else high if value > high else value
+                         for low, value, high in zip(self._lower, floats, self._upper)])
 
 
 class StalenessWatch:

@@ -15,11 +15,12 @@ from cbha_inverse.core.inverse.qp import (ActiveSetQP, projected_gauss_seidel, P
                                           QPProblem)
 from cbha_inverse.robot.robotino import CHANNELS, MAX_BAR, robotino_bar_command
 from cbha_inverse.robot.safety import (
-    bounded_command, check_command, check_point, stale_action, StalenessWatch, WorkspaceBox)
+    bounded_command, check_command, check_point, CommandGate, stale_action, StalenessWatch,
+    WorkspaceBox)
 from cbha_inverse.robot.trajectory import (
     circle_trajectory, PLANES, polyline_points, square_trajectory, waypoint_trajectory)
 from cbha_inverse.ros.common.conversions import (
-    command_array, command_message, point_array, point_stamped)
+    command_array, command_message, point_array, point_stamped, point_values, SerializedCommand)
 from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
@@ -130,6 +131,10 @@ FRAMES = st.sampled_from(['cbha_base', 'cbha_base ', '', 'world', 'CBHA_BASE', '
 def test_check_point_accepts_exactly_the_valid_points(values, frame):
     check = check_point(values, frame, 'cbha_base', BOX)
     point = np.asarray(values, dtype=float)
+    # a list of floats (the nodes' path), a tuple and an array: the same verdict
+    for same in (tuple(values), point):
+        other = check_point(same, frame, 'cbha_base', BOX)
+        assert (other.ok, other.reason) == (check.ok, check.reason)
     valid = (point.shape == (3,) and bool(np.all(np.isfinite(point)))
              and frame == 'cbha_base'
              and all(lo <= v <= hi for v, lo, hi in zip(point, BOX.lower, BOX.upper)))
@@ -158,12 +163,17 @@ def test_check_command_accepts_exactly_the_valid_commands(values, n_valves, max_
 def test_bounded_command_never_lets_a_bad_value_through(values, m):
     lower = np.linspace(0.0, 10.0, m)
     upper = lower + 1e5
-    if len(values) == m and all(math.isfinite(v) for v in values):
-        out = bounded_command(values, lower, upper)
-        np.testing.assert_array_equal(out, np.minimum(np.maximum(values, lower), upper))
-    else:
-        with pytest.raises(ValueError):
-            bounded_command(values, lower, upper)
+    gate = CommandGate(lower, upper)
+    # a list, and a float array (the nodes' path through the gate)
+    for given in (values, np.array(values, dtype=float)):
+        if len(values) == m and all(math.isfinite(v) for v in values):
+            for out in (bounded_command(given, lower, upper), gate(given)):
+                assert out.dtype == np.float64 and out.shape == (m,)
+                np.testing.assert_array_equal(out, np.minimum(np.maximum(values, lower), upper))
+        else:
+            for gated in (lambda: bounded_command(given, lower, upper), lambda: gate(given)):
+                with pytest.raises(ValueError):
+                    gated()
 
 
 @PROPERTY
@@ -379,6 +389,7 @@ def test_point_message_round_trip(point, frame, sec, nanosec):
     assert message.header.frame_id == frame
     assert (message.header.stamp.sec, message.header.stamp.nanosec) == (sec, nanosec)
     np.testing.assert_array_equal(point_array(message), np.array(point, dtype=float))
+    np.testing.assert_array_equal(point_values(message), np.array(point, dtype=float))
 
 
 @PROPERTY
@@ -392,3 +403,13 @@ def test_command_message_round_trip(values, data):
     assert dim.label == ','.join(names) and dim.size == len(names) == dim.stride
     np.testing.assert_array_equal(command_array(message), np.array(values, dtype=float))
     assert command_array(message).shape == (len(values),)
+    # the serialized command is rclpy's serialization of that message (bytes equal), and reads
+    # back as it
+    if values:
+        from rclpy.serialization import deserialize_message, serialize_message
+        from std_msgs.msg import Float64MultiArray
+        serialized = SerializedCommand(names).serialize(np.array(values, dtype=float))
+        assert serialized == serialize_message(message)
+        decoded = deserialize_message(serialized, Float64MultiArray)
+        assert decoded.layout == message.layout
+        np.testing.assert_array_equal(np.array(decoded.data), np.array(values, dtype=float))

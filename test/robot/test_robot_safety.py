@@ -3,8 +3,8 @@
 import math
 
 from cbha_inverse.robot.safety import (
-    bounded_command, check_command, check_point, command_bounds, stale_action, StalenessWatch,
-    valve_order, WorkspaceBox)
+    bounded_command, check_command, check_point, command_bounds, CommandGate, stale_action,
+    StalenessWatch, valve_order, WorkspaceBox)
 from cbha_inverse.scene import load_scene
 import numpy as np
 import pytest
@@ -42,6 +42,21 @@ def test_check_point(point, frame, reason):
 ])
 def test_check_command(values, reason):
     assert check_command(values, 3, 1.5e5).reason == reason
+
+
+def test_command_gate_refuses_bounds_it_cannot_keep():
+    for lower, upper in (([0.0, 0.0], [1.0]), ([0.0, math.nan], [1.0, 1.0]),
+                         ([0.0, 0.0], [1.0, math.inf]), ([0.0, 2.0], [1.0, 1.0])):
+        with pytest.raises(ValueError, match='command bounds'):
+            CommandGate(lower, upper)
+    gate = CommandGate([0.0, 0.0], [1.0, 1.0])
+    # not the gate's float path: an int array, a (1, 2) row, strings
+    np.testing.assert_array_equal(gate(np.array([3, -1])), [1.0, 0.0])
+    np.testing.assert_array_equal(gate(np.array([[0.5, 2.0]])), [0.5, 1.0])
+    with pytest.raises(ValueError, match='not numbers'):
+        gate(['a', 'b'])
+    with pytest.raises(ValueError, match='3 values, expected 2'):
+        gate(np.zeros(3))
 
 
 def test_bounded_command_clips_and_refuses_nan():

@@ -4,6 +4,7 @@ from array import array
 
 from geometry_msgs.msg import Point, PointStamped, TransformStamped
 import numpy as np
+from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from visualization_msgs.msg import Marker, MarkerArray
@@ -13,6 +14,12 @@ def point_array(message):
     """Return the (3,) point [m] of a ``PointStamped`` (NaN/inf pass through for validation)."""
     point = message.point
     return np.array([point.x, point.y, point.z], dtype=float)
+
+
+def point_values(message):
+    """Return the point of a ``PointStamped`` as a list of three floats [m] (unchecked)."""
+    point = message.point
+    return [point.x, point.y, point.z]
 
 
 def stamp_ns(stamp):
@@ -180,6 +187,69 @@ def command_data(values):
     data = array('d')
     data.frombytes(np.asarray(values, dtype=np.float64).reshape(-1).tobytes())
     return data
+
+
+class SerializedCommand:
+    """
+    A pressure command as its serialized ``Float64MultiArray``, the pressures replaced in place.
+
+    ``Publisher.publish`` takes the CDR bytes of a message as they are: the command's layout
+    (:func:`command_message`) is serialized once, by rclpy, and each command only overwrites
+    the m doubles at the end of those bytes. This skips the conversion of a Python message
+    into its C struct on every publication (tens of microseconds with the caches cold, the
+    usual case at a 100 Hz tick: ``docs/nodes.md``, "Latency"). The layout is checked at
+    construction: a probe command must deserialize to itself.
+
+    Parameters
+    ----------
+    valve_names : sequence of str
+        The valves, in command order (the layout's label).
+
+    Raises
+    ------
+    RuntimeError
+        If the serialized message does not end with its m doubles in this machine's byte order
+        (then publish :func:`command_message` instead).
+
+    """
+
+    def __init__(self, valve_names):
+        """Serialize the layout once and check where the pressures lie."""
+        self.size = len(valve_names)
+        probe = np.arange(1.0, self.size + 1.0)
+        template = command_message(probe, valve_names)
+        self._buffer = bytearray(serialize_message(template))
+        self._offset = len(self._buffer) - 8 * self.size
+        decoded = deserialize_message(self.serialize(probe), Float64MultiArray)
+        if decoded.layout != template.layout or list(decoded.data) != probe.tolist():
+            raise RuntimeError('a Float64MultiArray does not serialize with its data last, '
+                               'in native byte order')
+
+    def serialize(self, values):
+        """
+        Return the serialized command of m pressures.
+
+        Parameters
+        ----------
+        values : (m,) float64 ndarray  [Pa]
+            Gauge pressures in valve order (already through the command gate).
+
+        Returns
+        -------
+        bytes
+            For ``Publisher.publish`` of a ``Float64MultiArray`` publisher.
+
+        Raises
+        ------
+        ValueError
+            If ``values`` is not m float64 values.
+
+        """
+        if (type(values) is not np.ndarray or values.dtype != np.float64
+                or values.shape != (self.size,)):
+            raise ValueError(f'a command of {self.size} float64 values, not {values!r}')
+        self._buffer[self._offset:] = values.tobytes()
+        return bytes(self._buffer)
 
 
 def command_array(message):

@@ -20,7 +20,7 @@ resume) and ``~/reset`` (std_srvs/Trigger: model state and closed-loop correctio
 the set-point stays). Every input passes
 :mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
 the last valid command stays. Every command passes
-:func:`cbha_inverse.robot.safety.bounded_command`: never NaN, never outside ``[0, p_max]``.
+:class:`cbha_inverse.robot.safety.CommandGate`: never NaN, never outside ``[0, p_max]``.
 """
 
 from dataclasses import dataclass
@@ -33,11 +33,11 @@ from cbha_inverse.core.inverse.solver import TargetCorrector
 from cbha_inverse.robot.ordering import DROPPED, StampOrder
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
-    bounded_command, check_point, command_bounds, controller_decision, StalenessWatch,
-    valve_order, watchdog_action, WorkspaceBox)
+    check_point, command_bounds, CommandGate, controller_decision, StalenessWatch, valve_order,
+    watchdog_action, WorkspaceBox)
 from cbha_inverse.robot.targets import TargetHistory
 from cbha_inverse.ros.common.conversions import (
-    backbone_markers, command_data, command_message, point_array, stamp_ns)
+    backbone_markers, point_values, SerializedCommand, stamp_ns)
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
 from cbha_inverse.ros.common.params import (
@@ -183,8 +183,8 @@ class InverseSolverNode(Node):
         self.latency_cpu = TimingStats()
         self.command_publisher = self.create_publisher(
             Float64MultiArray, 'pressure_command', COMMAND_WRITER_QOS)
-        # one message, its data replaced per command (publish() serialises it at once)
-        self.command_message = command_message(self.vent_command, self.valve_names)
+        # the command's serialized message, its pressures replaced per command
+        self.command_bytes = SerializedCommand(self.valve_names)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
         self.tf = make_broadcaster(self)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
@@ -217,7 +217,7 @@ class InverseSolverNode(Node):
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
-        self.lower, self.upper, self.vent_command, self.box = self._limits(p)
+        self.upper, self.gate, self.vent_command, self.box = self._limits(p)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
                                                      qp_solver=p.qp_solver)
@@ -232,11 +232,12 @@ class InverseSolverNode(Node):
                                          max_correction=p.max_correction)
 
     def _limits(self, p):
-        """Return the command bounds, the vent command and the workspace box of parameters p."""
+        """Return the upper bounds, command gate, vent command and workspace box of p."""
         lower, upper = command_bounds(self.scene.lower_bounds[self.order],
                                       self.scene.upper_bounds[self.order], p.max_pressure)
-        vent = bounded_command(np.full(len(self.valve_names), p.vent_pressure), lower, upper)
-        return lower, upper, vent, WorkspaceBox(p.workspace_min, p.workspace_max)
+        gate = CommandGate(lower, upper)
+        vent = gate(np.full(len(self.valve_names), float(p.vent_pressure)))
+        return upper, gate, vent, WorkspaceBox(p.workspace_min, p.workspace_max)
 
     def _apply_parameters(self, old, new):
         """Apply a change of the live parameters (checked; a ``ValueError`` refuses it)."""
@@ -247,7 +248,7 @@ class InverseSolverNode(Node):
 
     def _retune_model(self, new):
         """Live parameters of what ``_setup_model`` built (a ``ValueError`` refuses them)."""
-        self.lower, self.upper, self.vent_command, self.box = self._limits(new)
+        self.upper, self.gate, self.vent_command, self.box = self._limits(new)
         self.corrector.gain = new.loop_gain if new.mode == 'closed' else 0.0
         self.corrector.max_correction = new.max_correction
 
@@ -262,10 +263,11 @@ class InverseSolverNode(Node):
     # inputs ---------------------------------------------------------------------------------
     def _accepted_point(self, topic, message):
         """Return the checked point of a message, or None (rejection counted and logged)."""
-        point = point_array(message)
-        check = check_point(point, message.header.frame_id, self.params.frame_id, self.box)
+        # the message's three floats, an array only once accepted (docs/nodes.md, "Latency")
+        values = point_values(message)
+        check = check_point(values, message.header.frame_id, self.params.frame_id, self.box)
         if check.ok:
-            return point
+            return np.array(values)
         self._count_rejected(topic, check.reason, check.detail)
         return None
 
@@ -429,15 +431,14 @@ class InverseSolverNode(Node):
     def _publish(self, command):
         """Publish a command through the last gate; one that is not finite: the last again."""
         try:
-            command = bounded_command(command, self.lower, self.upper)
+            command = self.gate(command)
         except ValueError as exc:
             # only a solver output can fail: hold, vent and the last command passed the gate
             self.rejected.count('solver.non_finite', f'solver output rejected, holding: {exc}',
                                 error=True)
             command = self.command
         self.command = command
-        self.command_message.data = command_data(command)
-        self.command_publisher.publish(self.command_message)
+        self.command_publisher.publish(self.command_bytes.serialize(command))
         self.published += 1
 
     # outputs --------------------------------------------------------------------------------
