@@ -42,6 +42,7 @@ CONSOLE_SCRIPTS = [
     'cbha_scene = cbha_inverse.scene.cli:main',
     'stereo_calibrate = cbha_inverse.vision.calibrate_cli:main',
     'cbha_bench_stereo = cbha_inverse.report.bench_stereo:main',
+    'cbha_bench_node = cbha_inverse.report.bench_node:main',
     'robotino_bridge = cbha_inverse.ros.nodes.robotino_bridge:main',
     'fault_relay = cbha_inverse.ros.nodes.fault_relay:main',
     'inverse_solver_managed = cbha_inverse.ros.nodes.inverse_solver_managed:main',

@@ -165,13 +165,13 @@ def test_bounded_command_never_lets_a_bad_value_through(values, m):
     upper = lower + 1e5
     gate = CommandGate(lower, upper)
     # a list, and a float array (the nodes' path through the gate)
-    for given in (values, np.array(values, dtype=float)):
+    for command in (values, np.array(values, dtype=float)):
         if len(values) == m and all(math.isfinite(v) for v in values):
-            for out in (bounded_command(given, lower, upper), gate(given)):
+            for out in (bounded_command(command, lower, upper), gate(command)):
                 assert out.dtype == np.float64 and out.shape == (m,)
                 np.testing.assert_array_equal(out, np.minimum(np.maximum(values, lower), upper))
         else:
-            for gated in (lambda: bounded_command(given, lower, upper), lambda: gate(given)):
+            for gated in (lambda: bounded_command(command, lower, upper), lambda: gate(command)):
                 with pytest.raises(ValueError):
                     gated()
 

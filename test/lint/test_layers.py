@@ -37,7 +37,7 @@ MAX_LINES = 600
 NUMBA_HOMES = ('core/_kernels/',)
 """Where numba may be imported (relative to the package folder; a folder ends with /)."""
 
-ROS_HOMES = ('ros/', 'report/bench_bag.py', 'experiments/')
+ROS_HOMES = ('ros/', 'report/bench_bag.py', 'report/bench_node.py', 'experiments/')
 """Where rclpy and ROS message packages may be imported."""
 
 ROS_PACKAGE = re.compile(r'^(rclpy|builtin_interfaces|rosidl_\w+|\w+_msgs|\w+_srvs)$')
