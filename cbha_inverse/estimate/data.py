@@ -53,8 +53,7 @@ class EstimatorData:
         if not self.tick.fused:
             raise ValueError('the shape estimator needs the fused linearisation (one cable '
                              'group at most, no skinned-mesh cavities)')
-        arguments = self.tick.linearise_arguments
-        self.external = arguments[rows.ARG_EXTERNAL]
+        self.external = self.tick.external
         self.base_external = self.external.copy()
         self.positions, self.rotations = self.tick.positions, self.tick.rotations
         self.actuation = self.tick.actuation
@@ -87,7 +86,7 @@ class EstimatorData:
         self.load = np.asarray(load, dtype=float)
         routing = sensors.routing
         work = np.zeros(routing_work_size(routing[0].size, routing[2].size, c))
-        self.arguments = (arguments, system.tick_cholesky, routing + (work,), self.pots,
+        self.arguments = (self.tick.buffers, system.tick_cholesky, routing + (work,), self.pots,
                           self.jacobian, self.moved, self.h, self.state, self.covariance,
                           self.pressure_rows, self.scalars, self.load,
                           self.base_external, self.mass_columns, self.mass_rhs,

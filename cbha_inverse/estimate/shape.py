@@ -548,7 +548,7 @@ class ShapeEstimator:
         if factor is None:
             return False
         data.tick.solved[:] = factor.solve(data.tick.rhs)
-        fused.project_tick(*data.tick.project_arguments)
+        fused.project_tick(data.tick.buffers)
         if self._n_mass:
             column = np.zeros((system.size, 1))
             column[:, 0] = data.load

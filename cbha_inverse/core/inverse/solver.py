@@ -237,16 +237,15 @@ class InverseSolver:
         self.prepare()
         self.step(targets)
         # the compiled projection that follows a fallback factorization (reset forgets it)
-        fused.project_tick(*self._data.project_arguments)
+        fused.project_tick(self._data.buffers)
         self.reset(state, actuation)
 
-    def _current(self, in_place=False):
-        """Return the frames with the pending linear step applied (stored if ``in_place``)."""
+    def _current(self):
+        """Return the frames with the pending linear step applied (a copy when one is pending)."""
         if not self._pending:
             return self._positions, self._rotations
         data = self._data
-        positions, rotations = ((self._positions, self._rotations) if in_place
-                                else (self._positions.copy(), self._rotations.copy()))
+        positions, rotations = self._positions.copy(), self._rotations.copy()
         apply_linear_step_into(positions, rotations, *data.step_arguments[2:4], data.change(),
                                *data.step_arguments[5:])
         return positions, rotations
@@ -254,7 +253,7 @@ class InverseSolver:
     def _materialise(self):
         """Apply the pending linear step to the stored frames."""
         if self._pending:
-            self._current(in_place=True)
+            self._data.step_entry(self._data.buffers)
             self._pending = False
 
     @property
@@ -354,8 +353,8 @@ class InverseSolver:
         apply_step = self.options.relinearize_every == 1
         data = self._data
         if self.options.qp_solver == 'active_set':
-            code, iterations, largest_gap, largest_move, binding = fused.solve_tick(
-                targets, *data.solve_arguments, apply_step)
+            code, iterations, largest_gap, largest_move, binding = data.solve_entry(
+                targets, data.buffers, apply_step)
             if code == fused.REJECTED:
                 return self._rejected(t_start, 'solved', warnings)
             if code == SOLVED:
@@ -383,8 +382,7 @@ class InverseSolver:
         self.actuation[:] = actuation
         data.gap[:] = gap
         if apply_step:
-            apply_linear_step_into(*data.step_arguments[:4], data.change(),
-                                   *data.step_arguments[5:])
+            data.step_entry(data.buffers)
         return self._finish(targets, status, solution.status, solution.iterations, saturated,
                             largest_gap, largest_move, False, warnings, t_start, t_linearised)
 
@@ -490,7 +488,7 @@ class InverseSolver:
         """
         data, system = self._data, self._tick
         if data.fused:
-            info, residual_norm = fused.linearise_tick(*data.linearise_arguments,
+            info, residual_norm = data.linearise_entry(data.buffers,
                                                        system.tick_cholesky)
             if info == 0:
                 self._residual_norm = residual_norm
@@ -512,7 +510,7 @@ class InverseSolver:
         if factor is None:
             return False
         data.solved[:] = factor.solve(data.rhs)
-        self._residual_norm = fused.project_tick(*data.project_arguments)
+        self._residual_norm = fused.project_tick(data.buffers)
         return True
 
     def _newton_step(self):
