@@ -139,3 +139,22 @@ def test_a_result_of_the_tick_is_the_constructors_result():
     with pytest.raises(dataclasses.FrozenInstanceError):
         fast.status = 'rejected'
     assert dataclasses.replace(fast, status='saturated').status == 'saturated'
+
+
+def test_targets_of_any_layout_give_the_same_tick():
+    """The compiled entries take C-ordered floats unchecked: step converts any other layout."""
+    scene = load_scene('tendon_10f_16c')
+    solver = scene.make_inverse_solver()
+    target = _circle(scene, 1, radius=0.01)[0]
+    read_only = target.copy()
+    read_only.flags.writeable = False
+    layouts = [target, read_only, np.asfortranarray(target), target.astype('>f8'),
+               target.tolist(), np.repeat(target, 2, axis=1)[:, ::2]]
+    results = []
+    for layout in layouts:
+        solver.reset()
+        results.append(solver.step(layout))
+    assert results[0].status == 'solved'
+    for result in results[1:]:
+        np.testing.assert_array_equal(result.actuation, results[0].actuation)
+        np.testing.assert_array_equal(result.effector_positions, results[0].effector_positions)

@@ -144,6 +144,9 @@ class InverseSolver:
         self._base = np.array(model.base_position, dtype=float)
         self._reach = _REACH_FACTOR * (model.length + np.linalg.norm(
             self._effector_offsets, axis=1))
+        # the compiled check without numba's per-call dispatch (step passes (k, 3) C floats)
+        self._target_status = fused.compiled_entry(target_status, self._data.effector_positions,
+                                                   self._base, self._reach)
         # the frames and the actuation live in the tick data (the compiled tick updates them)
         self._positions, self._rotations = self._data.positions, self._data.rotations
         self.actuation = self._data.actuation
@@ -332,9 +335,11 @@ class InverseSolver:
                 targets = targets.reshape(1, 3)
             else:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
-        if not targets.flags.c_contiguous:
-            targets = np.ascontiguousarray(targets)
-        checked = target_status(targets, self._base, self._reach)
+        flags = targets.flags
+        if not (flags.c_contiguous and flags.writeable and flags.aligned):
+            # the compiled entries take exactly this type (they do not check it)
+            targets = np.array(targets, order='C')
+        checked = self._target_status(targets, self._base, self._reach)
         if checked == 1:
             return self._held('rejected', t_start, warnings=('non-finite target rejected',))
         targets, warnings = self._reachable(targets) if checked == 2 else (targets, ())
