@@ -65,8 +65,11 @@ def compiled_entry(dispatcher, *arguments):
     Returns
     -------
     callable
+        The entry itself with numba's JIT off (``NUMBA_DISABLE_JIT=1``).
 
     """
+    if numba.config.DISABLE_JIT:
+        return dispatcher
     signature = tuple(numba.typeof(argument) for argument in arguments)
     dispatcher.compile(signature)
     return dispatcher.get_overload(signature)

@@ -47,6 +47,8 @@ Fields (:data:`FIELDS`, in the order of :func:`make_tick_buffers`; stacked rows 
     max_rotation float [rad]                               largest frame rotation of a step
 """
 
+from types import SimpleNamespace
+
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.core.extending import box, NativeValue, unbox
@@ -141,8 +143,30 @@ def _unbox_tick_buffers(typ, obj, c):
     return NativeValue(value._getvalue())
 
 
+def make_tick_buffers(*values):
+    """
+    Return a :class:`TickBuffers` of the given arrays (no copy) and scalars.
+
+    With numba's JIT off (``NUMBA_DISABLE_JIT=1``, the kernels' coverage run) the kernels run as
+    Python and read the same fields of a plain namespace instead.
+
+    Parameters
+    ----------
+    *values
+        The fields of the module docstring, in the order of :data:`FIELDS`.
+
+    Returns
+    -------
+    TickBuffers or types.SimpleNamespace
+
+    """
+    if numba.config.DISABLE_JIT:
+        return SimpleNamespace(**dict(zip(FIELDS, values, strict=True)))
+    return _new_tick_buffers(*values)
+
+
 @numba.njit(cache=True)
-def make_tick_buffers(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
+def _new_tick_buffers(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
                       cavity_wrench, cavity_stiffness, cavity_columns, link_work, external,
                       cable_gains, cable_offsets, cable_frames, cable_spans, cable_points,
                       cable_columns, cable_work, index, slot_weights, counts, values, band, rhs,
@@ -150,19 +174,7 @@ def make_tick_buffers(positions, rotations, vectors, stiffness, rest_offsets, re
                       effector_offsets, levers, weights, flags, free, qp_index, increments,
                       rotation_work, effector_positions, max_iterations, tolerance,
                       max_rotation):
-    """
-    Return a :class:`TickBuffers` of the given arrays (no copy) and scalars.
-
-    Parameters
-    ----------
-    positions, rotations, vectors, ..., max_rotation
-        The fields of the module docstring, in its order.
-
-    Returns
-    -------
-    TickBuffers
-
-    """
+    """Build the compiled object of :func:`make_tick_buffers`."""
     return TickBuffers(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
                        cavity_wrench, cavity_stiffness, cavity_columns, link_work, external,
                        cable_gains, cable_offsets, cable_frames, cable_spans, cable_points,
