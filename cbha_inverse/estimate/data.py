@@ -9,8 +9,11 @@ unknowns and their covariance. An update passes :attr:`EstimatorData.arguments`,
 attributes are views of the same memory.
 """
 
+import functools
+
 from cbha_inverse.core._kernels import estimation as rows
 from cbha_inverse.core._kernels.cables import routing_work_size
+from cbha_inverse.core._kernels.tick import compiled_entry
 from cbha_inverse.core.inverse.results import InverseOptions
 from cbha_inverse.core.inverse.tick_data import TickData
 import numpy as np
@@ -93,6 +96,16 @@ class EstimatorData:
                           self.mass_effectors, self.stuck, self.active, np.zeros(6 * n),
                           self.effector_w, self.effector_positions, self.tip_covariance,
                           np.zeros(max(u + 2, 6 * n + 21)))
+
+    @functools.cached_property
+    def update_entry(self):
+        """
+        Return the compiled ``estimate_tick`` for :attr:`arguments` (no per-call dispatch).
+
+        See :func:`cbha_inverse.core._kernels.tick.compiled_entry`; call it with
+        :attr:`arguments`.
+        """
+        return compiled_entry(rows.estimate_tick, *self.arguments)
 
     @property
     def from_linearisation_arguments(self):
