@@ -206,8 +206,9 @@ class EquilibriumSystem:
         """
         Return the model arrays and buffers of the fused linearisation, or None.
 
-        The arguments ``stiffness`` ... ``rhs`` of
-        :func:`cbha_inverse.core._kernels.tick.linearise_tick`, in its order: the constant
+        The fields ``stiffness`` ... ``rhs`` of the tick's buffers
+        (:data:`cbha_inverse.core._kernels.tick_buffers.EVALUATION_FIELDS`), in their order
+        (:func:`cbha_inverse.core._kernels.tick.linearise_tick` reads them): the constant
         terms of the links and of the cable group, the assembly index of the symmetric band and
         this object's buffers (so :meth:`fallback_factors` with ``evaluated=True`` reuses the
         blocks it leaves). ``None`` when the fused entry cannot evaluate the actuators (more

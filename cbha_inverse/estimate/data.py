@@ -9,8 +9,11 @@ unknowns and their covariance. An update passes :attr:`EstimatorData.arguments`,
 attributes are views of the same memory.
 """
 
+import functools
+
 from cbha_inverse.core._kernels import estimation as rows
 from cbha_inverse.core._kernels.cables import routing_work_size
+from cbha_inverse.core._kernels.tick import compiled_entry
 from cbha_inverse.core.inverse.results import InverseOptions
 from cbha_inverse.core.inverse.tick_data import TickData
 import numpy as np
@@ -53,8 +56,7 @@ class EstimatorData:
         if not self.tick.fused:
             raise ValueError('the shape estimator needs the fused linearisation (one cable '
                              'group at most, no skinned-mesh cavities)')
-        arguments = self.tick.linearise_arguments
-        self.external = arguments[rows.ARG_EXTERNAL]
+        self.external = self.tick.external
         self.base_external = self.external.copy()
         self.positions, self.rotations = self.tick.positions, self.tick.rotations
         self.actuation = self.tick.actuation
@@ -87,13 +89,23 @@ class EstimatorData:
         self.load = np.asarray(load, dtype=float)
         routing = sensors.routing
         work = np.zeros(routing_work_size(routing[0].size, routing[2].size, c))
-        self.arguments = (arguments, system.tick_cholesky, routing + (work,), self.pots,
+        self.arguments = (self.tick.buffers, system.tick_cholesky, routing + (work,), self.pots,
                           self.jacobian, self.moved, self.h, self.state, self.covariance,
                           self.pressure_rows, self.scalars, self.load,
                           self.base_external, self.mass_columns, self.mass_rhs,
                           self.mass_effectors, self.stuck, self.active, np.zeros(6 * n),
                           self.effector_w, self.effector_positions, self.tip_covariance,
                           np.zeros(max(u + 2, 6 * n + 21)))
+
+    @functools.cached_property
+    def update_entry(self):
+        """
+        Return the compiled ``estimate_tick`` for :attr:`arguments` (no per-call dispatch).
+
+        See :func:`cbha_inverse.core._kernels.tick.compiled_entry`; call it with
+        :attr:`arguments`.
+        """
+        return compiled_entry(rows.estimate_tick, *self.arguments)
 
     @property
     def from_linearisation_arguments(self):

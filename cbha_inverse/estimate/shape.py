@@ -540,7 +540,7 @@ class ShapeEstimator:
     def _step(self):
         """Run one compiled update (the fallback chain if the band is not positive definite)."""
         data = self._data
-        if kernel.estimate_tick(*data.arguments) == 0:
+        if data.update_entry(*data.arguments) == 0:
             return True
         system = self._system
         factor = next(system.fallback_factors(data.positions, data.rotations, data.actuation,
@@ -548,7 +548,7 @@ class ShapeEstimator:
         if factor is None:
             return False
         data.tick.solved[:] = factor.solve(data.tick.rhs)
-        fused.project_tick(*data.tick.project_arguments)
+        fused.project_tick(data.tick.buffers)
         if self._n_mass:
             column = np.zeros((system.size, 1))
             column[:, 0] = data.load

@@ -4,6 +4,7 @@ from cbha_inverse.core._kernels import estimation as kernel
 from cbha_inverse.estimate.shape import EstimatorOptions, ShapeEstimator
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration
+import numba
 import numpy as np
 import pytest
 
@@ -51,17 +52,27 @@ def test_the_sequential_update_is_the_batch_information_form():
     np.testing.assert_allclose(pots[kernel.RATIO], np.abs(innovation) / spread)
 
 
+@numba.njit
+def _estimator_fields(buffers):
+    """Return the fields of the tick's buffers the compiled update reads beside the tick's."""
+    return (buffers.external, buffers.solved, buffers.rhs, buffers.effector_matrices,
+            buffers.effector_frames, buffers.band)
+
+
 def test_the_buffers_are_the_tick_data_and_the_system(cbha):
-    """The compiled entry reads the argument positions it names."""
+    """The compiled entry reads the tick data's own arrays (the same objects, not copies)."""
     estimator = ShapeEstimator.from_scene(cbha, EstimatorOptions(payload_std=0.1))
     data = estimator._data
-    arguments = data.tick.linearise_arguments
-    assert arguments[kernel.ARG_EXTERNAL] is data.external
+    assert data.arguments[0] is data.tick.buffers
+    external, solved, rhs, effector_matrices, frames, band = _estimator_fields(
+        data.tick.buffers)
+    assert external is data.external
     np.testing.assert_array_equal(data.external, estimator._system.external)
-    assert arguments[kernel.ARG_SOLVED] is data.tick.solved
-    assert arguments[kernel.ARG_RHS] is data.tick.rhs
-    assert arguments[kernel.ARG_EFFECTOR_MATRICES] is data.tick.effector_matrices
-    np.testing.assert_array_equal(arguments[kernel.ARG_EFFECTOR_FRAMES], cbha.effectors.frames)
+    assert solved is data.tick.solved
+    assert rhs is data.tick.rhs
+    assert effector_matrices is data.tick.effector_matrices
+    assert band is data.tick.band
+    np.testing.assert_array_equal(frames, cbha.effectors.frames)
 
 
 def test_the_filter_averages_the_pot_noise_at_a_held_pose(cbha):

@@ -40,9 +40,6 @@ PRESSURE_ROWS = 2
 # frame rotation of a step [rad]
 MASS, HAS_MASS, CHANGE_WALK, GATE_SIGMA, GATE, SOLVE_MASS, MAX_ROTATION = 0, 1, 2, 3, 4, 5, 6
 SCALARS = 7
-# positions in TickData.linearise_arguments (cbha_inverse.core.inverse.tick_data)
-ARG_EXTERNAL, ARG_BAND, ARG_RHS, ARG_SOLVED, ARG_EFFECTOR_MATRICES = 10, 22, 23, 24, 26
-ARG_EFFECTOR_FRAMES, ARG_EFFECTOR_OFFSETS = 29, 30
 
 
 @numba.njit(cache=True)
@@ -129,7 +126,7 @@ def kalman_lengths(h, pots, state, covariance, stuck, active, work):
 
 
 @numba.njit(cache=True)
-def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved, h, state,
+def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
                   covariance, pressures, scalars, load, base_external, mass_columns,
                   mass_rhs, mass_effectors, stuck, active, free_step, effector_w, effector_positions,
                   tip_covariance, work):
@@ -138,10 +135,10 @@ def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved,
 
     Parameters
     ----------
-    linearise_arguments : tuple
-        :attr:`cbha_inverse.core.inverse.tick_data.TickData.linearise_arguments` of the
-        estimator's own tick data (frames, ``vectors[ACTUATION]`` = the actuation of the
-        linearisation, the model terms and buffers).
+    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+        :attr:`cbha_inverse.core.inverse.tick_data.TickData.buffers` of the estimator's own
+        tick data (frames, ``vectors[ACTUATION]`` = the actuation of the linearisation, the
+        model terms and buffers).
     cholesky : bool
         Factor the symmetric band (else return at once for the fallback chain).
     routing : tuple
@@ -195,17 +192,17 @@ def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved,
         evaluation, for the fallback chain; then run :func:`estimate_from_linearisation`).
 
     """
-    external = linearise_arguments[ARG_EXTERNAL]
+    external = buffers.external
     size = external.size
     for row in range(size):
         external[row] = base_external[row]
     if scalars[HAS_MASS] > 0.0:
         for row in range(size):
             external[row] += scalars[MASS] * load[row]
-    info, _ = tick.linearise_tick(*linearise_arguments, cholesky)
+    info, _ = tick.linearise_tick(buffers, cholesky)
     if info != 0:
         return info
-    estimate_from_linearisation(linearise_arguments, routing, pots, jacobian, moved, h, state,
+    estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, state,
                                 covariance, pressures, scalars, load, mass_columns,
                                 mass_rhs, mass_effectors, stuck, active, free_step,
                                 effector_w, effector_positions, tip_covariance, work)
@@ -213,18 +210,15 @@ def estimate_tick(linearise_arguments, cholesky, routing, pots, jacobian, moved,
 
 
 @numba.njit(cache=True)
-def estimate_from_linearisation(linearise_arguments, routing, pots, jacobian, moved, h, state,
+def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, state,
                                 covariance, pressures, scalars, load, mass_columns,
                                 mass_rhs, mass_effectors, stuck, active, free_step,
                                 effector_w, effector_positions, tip_covariance, work):
     """:func:`estimate_tick` after its linearisation (the tick data hold a solved one)."""
-    positions, rotations = linearise_arguments[0], linearise_arguments[1]
-    vectors = linearise_arguments[2]
-    band, rhs = linearise_arguments[ARG_BAND], linearise_arguments[ARG_RHS]
-    solved = linearise_arguments[ARG_SOLVED]
-    w_ea = linearise_arguments[ARG_EFFECTOR_MATRICES][tick.W_EA]
-    effector_frames = linearise_arguments[ARG_EFFECTOR_FRAMES]
-    effector_offsets = linearise_arguments[ARG_EFFECTOR_OFFSETS]
+    positions, rotations, vectors = buffers.positions, buffers.rotations, buffers.vectors
+    band, rhs, solved = buffers.band, buffers.rhs, buffers.solved
+    w_ea = buffers.effector_matrices[tick.W_EA]
+    effector_frames, effector_offsets = buffers.effector_frames, buffers.effector_offsets
     size, m = solved.shape[0], solved.shape[1] - 1
     c, u = h.shape
     has_mass = scalars[HAS_MASS] > 0.0

@@ -9,8 +9,9 @@ effector positions). Each calls the kernels of this folder that hold the equatio
 compiles them into the entry): nothing here is a second copy of their arithmetic. Python crosses
 into compiled code once per step instead of once per kernel, and no array is allocated: the
 buffers are those of :class:`cbha_inverse.core.inverse.tick_data.TickData`, grouped by shape
-into a few stacked arrays so that an entry takes few arguments (numba unboxes every argument at
-every call, ~0.1 us each). The rows of the stacks are the constants below.
+into a few stacked arrays, held by one
+:class:`~cbha_inverse.core._kernels.tick_buffers.TickBuffers`: an entry takes it as one argument
+(numba unboxes every argument at every call). The rows of the stacks are the constants below.
 """
 
 from cbha_inverse.core._kernels.band import band_cholesky, band_solve, scatter_add
@@ -43,16 +44,41 @@ REJECTED = -1
 """The QP returned a non-finite actuation: the actuation and the state are unchanged."""
 
 
-@numba.njit(cache=True)
-def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
-                   cavity_wrench, cavity_stiffness, cavity_columns, link_work, external,
-                   cable_gains,
-                   cable_offsets, cable_frames, cable_spans, cable_points, cable_columns,
-                   cable_work, index, slot_weights,
-                   counts, values, band, rhs, solved, matrices, effector_matrices, gaps, moved,
-                   effector_frames, effector_offsets, levers, weights, cholesky):
+def compiled_entry(dispatcher, *arguments):
     """
-    Linearise, factor and project at the given state (steps 1-2 of the tick), in place.
+    Return the compiled wrapper of an entry for the types of the given arguments.
+
+    Compiles the entry for them, or loads it from numba's on-disk cache. Calling the wrapper
+    skips numba's type dispatch, which types a :class:`TickBuffers
+    <cbha_inverse.core._kernels.tick_buffers.TickBuffers>` on its slow path at every call (a
+    few tenths of a microsecond per call, the argument's unboxing aside); the caller passes
+    arguments of exactly these types (the wrapper does not check them).
+
+    Parameters
+    ----------
+    dispatcher : numba dispatcher
+        :func:`linearise_tick`, :func:`solve_tick`, :func:`apply_pending_step` or
+        :func:`project_tick`.
+    *arguments
+        Example arguments (their numba types are the signature).
+
+    Returns
+    -------
+    callable
+        The entry itself with numba's JIT off (``NUMBA_DISABLE_JIT=1``).
+
+    """
+    if numba.config.DISABLE_JIT:
+        return dispatcher
+    signature = tuple(numba.typeof(argument) for argument in arguments)
+    dispatcher.compile(signature)
+    return dispatcher.get_overload(signature)
+
+
+@numba.njit(cache=True)
+def linearise_tick(buffers, cholesky):
+    """
+    Linearise, factor and project at the buffers' state (steps 1-2 of the tick), in place.
 
     Runs :func:`~cbha_inverse.core._kernels.links.link_pass_into`,
     :func:`~cbha_inverse.core._kernels.cables.cable_pass_into` (one cable group, or none),
@@ -62,52 +88,12 @@ def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_
 
     Parameters
     ----------
-    positions : (n + 1, 3) ndarray  [m]
-        Frame origins.
-    rotations : (n + 1, 3, 3) ndarray
-        Frame rotations.
-    vectors : (ACTUATOR_ROWS, m) ndarray
-        Actuator rows; reads ``ACTUATION`` (``λ_prev``) and ``SCALE``, writes ``LINEARISED``.
-    stiffness, rest_offsets, rest_rotations_t, cavity_wrench, cavity_stiffness : ndarray
-        The link terms of :func:`~cbha_inverse.core._kernels.links.link_pass`.
-    cavity_columns : (n, c) int ndarray
-        The nonzero cavity columns of every link
-        (:func:`~cbha_inverse.core._kernels.links.nonzero_cavity_columns`).
-    link_work, cable_work : ndarray
-        Workspace of the link and cable passes.
-    external : (6n,) ndarray  [N, N*m]
-        Constant external wrenches.
-    cable_gains, cable_offsets, cable_frames, cable_columns : ndarray
-        The cable group's gains (m_c,), routing points (P, 3) and their frames (P,), actuator
-        columns (m_c,) (empty without cables).
-    cable_spans : (4, S) int ndarray
-        Start point, end point, cable and frame pair of every span.
-    cable_points : (2, P) int ndarray
-        Cable and moment slot of every routing point.
-    index, slot_weights : (V,) ndarray
-        The symmetric band's slot and weight of every value.
-    counts : (3,) int ndarray
-        Numbers of link, cable pair and cable moment values.
-    values : (V,) ndarray
-        Receives the blocks (links, cable pairs, cable moments).
-    band : (6n (kd + 1) + 1,) ndarray
-        Receives the symmetric lower band (last slot: the base frame's trash), then its factor.
-    rhs : (6n, m + 1) ndarray
-        Receives ``[r, J_aᵀ]``.
-    solved : (6n, m + 1) ndarray
-        Receives ``K⁻¹ [r, J_aᵀ]`` (only when the Cholesky succeeds).
-    matrices, effector_matrices, gaps : ndarray
-        Receive the projection and the QP matrices (:func:`project_tick`).
-    moved : (3k, m + 1) ndarray
-        Workspace.
-    effector_frames : (k,) int ndarray
-        Frame of every effector.
-    effector_offsets : (k, 3) ndarray  [m]
-        Effector points in their frame's axes.
-    levers : (k, 3) ndarray
-        Workspace.
-    weights : (2,) ndarray
-        ``ε_E``, ``ε_P``.
+    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+        The tick's buffers. Reads the frames, ``vectors[ACTUATION]`` (``λ_prev``) and
+        ``vectors[SCALE]``, the evaluation's terms, ``external`` and the effectors; writes
+        ``values``, ``band`` (the symmetric lower band, last slot: the base frame's trash, then
+        its factor), ``rhs`` (``[r, J_aᵀ]``), ``vectors[LINEARISED]`` and, when the Cholesky
+        succeeds, ``solved`` (``K⁻¹ [r, J_aᵀ]``) and the projection (:func:`project_tick`).
     cholesky : bool
         Factor the symmetric band (else the caller takes the fallback chain at once).
 
@@ -121,23 +107,29 @@ def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_
         ``|r|`` (NaN unless ``info`` is 0).
 
     """
+    positions, rotations, vectors = buffers.positions, buffers.rotations, buffers.vectors
+    stiffness, counts, values = buffers.stiffness, buffers.counts, buffers.values
+    rhs, band, external = buffers.rhs, buffers.band, buffers.external
+    cable_frames, cable_spans = buffers.cable_frames, buffers.cable_spans
+    cable_points = buffers.cable_points
     actuation = vectors[ACTUATION]
     n = stiffness.shape[0]
     link_end = counts[0]
     pair_end = link_end + counts[1]
     moment_end = pair_end + counts[2]
-    link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-                   cavity_wrench, cavity_stiffness, cavity_columns, rhs,
-                   values[:link_end].reshape((n, 12, 12)), False, link_work)
+    link_pass_into(positions, rotations, stiffness, buffers.rest_offsets,
+                   buffers.rest_rotations_t, actuation, buffers.cavity_wrench,
+                   buffers.cavity_stiffness, buffers.cavity_columns, rhs,
+                   values[:link_end].reshape((n, 12, 12)), False, buffers.link_work)
     if cable_frames.size > 0:
-        cable_pass_into(positions, rotations, actuation, cable_gains, cable_frames,
-                        cable_offsets, cable_spans[0], cable_spans[1], cable_spans[2],
-                        cable_points[0], cable_columns, cable_spans[3], cable_points[1], rhs,
-                        values[link_end:pair_end].reshape((-1, 12, 12)),
-                        values[pair_end:moment_end].reshape((-1, 3, 3)), cable_work)
+        cable_pass_into(positions, rotations, actuation, buffers.cable_gains, cable_frames,
+                        buffers.cable_offsets, cable_spans[0], cable_spans[1], cable_spans[2],
+                        cable_points[0], buffers.cable_columns, cable_spans[3], cable_points[1],
+                        rhs, values[link_end:pair_end].reshape((-1, 12, 12)),
+                        values[pair_end:moment_end].reshape((-1, 3, 3)), buffers.cable_work)
     for row in range(rhs.shape[0]):
         rhs[row, 0] += external[row]
-    scatter_add(index, values, slot_weights, band)
+    scatter_add(buffers.index, values, buffers.slot_weights, band)
     size = rhs.shape[0]
     factor = band[:-1].reshape((size, (band.size - 1) // size))
     vectors[LINEARISED, :] = actuation
@@ -146,23 +138,22 @@ def linearise_tick(positions, rotations, vectors, stiffness, rest_offsets, rest_
     info = band_cholesky(factor)
     if info != 0:
         return info, float('nan')
+    solved = buffers.solved
     solved[:, :] = rhs
     band_solve(factor, solved)
-    return 0, project_tick(positions, rotations, vectors, rhs, solved, matrices,
-                           effector_matrices, gaps, moved, effector_frames, effector_offsets,
-                           levers, weights)
+    return 0, project_tick(buffers)
 
 
 @numba.njit(cache=True)
-def project_tick(positions, rotations, vectors, rhs, solved, matrices, effector_matrices, gaps,
-                 moved, effector_frames, effector_offsets, levers, weights):
+def project_tick(buffers):
     """
     Project a solved linearisation and form the QP matrices (the end of step 2), in place.
 
     :func:`~cbha_inverse.core._kernels.projection.project_effectors_into` then
-    :func:`~cbha_inverse.core._kernels.qp.qp_hessians_into`. Arguments as
-    :func:`linearise_tick` (``vectors[LINEARISED]`` is ``λ_prev``); writes ``W_EA``,
-    ``WEIGHTED_W``, ``W_AA``, ``HESSIAN``, ``TRACKING`` and ``OFFSET``.
+    :func:`~cbha_inverse.core._kernels.qp.qp_hessians_into` on the buffers
+    (:class:`~cbha_inverse.core._kernels.tick_buffers.TickBuffers`; ``solved``, ``rhs`` and
+    ``vectors[LINEARISED]`` = ``λ_prev`` are read); writes ``W_EA``, ``WEIGHTED_W``, ``W_AA``,
+    ``HESSIAN``, ``TRACKING`` and ``OFFSET``.
 
     Returns
     -------
@@ -170,21 +161,21 @@ def project_tick(positions, rotations, vectors, rhs, solved, matrices, effector_
         ``|r|``.
 
     """
+    vectors, matrices = buffers.vectors, buffers.matrices
+    effector_matrices, weights = buffers.effector_matrices, buffers.weights
     w_ea = effector_matrices[W_EA]
     w_aa = matrices[W_AA]
     residual_norm = project_effectors_into(
-        solved, rhs, positions, rotations, effector_frames, effector_offsets,
-        vectors[LINEARISED], w_ea, w_aa, gaps[OFFSET], moved, levers)
+        buffers.solved, buffers.rhs, buffers.positions, buffers.rotations,
+        buffers.effector_frames, buffers.effector_offsets, vectors[LINEARISED], w_ea, w_aa,
+        buffers.gaps[OFFSET], buffers.moved, buffers.levers)
     qp_hessians_into(w_ea, w_aa, vectors[SCALE], weights[0], weights[1], matrices[HESSIAN],
                      matrices[TRACKING], effector_matrices[WEIGHTED_W])
     return residual_norm
 
 
 @numba.njit(cache=True)
-def solve_tick(targets, vectors, matrices, effector_matrices, gaps, flags, free,
-               index, proximal_weight, max_iterations, tolerance, positions, rotations, solved,
-               increments, work, effector_frames, effector_offsets, effector_positions,
-               max_rotation, apply_step):
+def solve_tick(targets, buffers, apply_step):
     """
     Solve a tick's QP on a linearisation and apply it (steps 3-4 of the tick), in place.
 
@@ -195,46 +186,19 @@ def solve_tick(targets, vectors, matrices, effector_matrices, gaps, flags, free,
     ``flags[STATE]``), then the outcome
     (:func:`~cbha_inverse.core._kernels.projection.tick_outcome_into`) and the binding bounds
     (:func:`~cbha_inverse.core._kernels.qp.bounds_binding_into`). With ``apply_step`` the
-    Newton step of the factorization
-    (:func:`~cbha_inverse.core._kernels.retraction.apply_linear_step_into`) moves the frames
-    and the effector positions of the new state are written.
+    Newton step of the factorization (:func:`apply_pending_step`) moves the frames and the
+    effector positions of the new state are written.
 
     Parameters
     ----------
     targets : (k, 3) ndarray  [m]
         Finite effector targets within reach.
-    vectors, matrices, effector_matrices, gaps, flags : ndarray
-        The stacks of the module docstring, as :func:`linearise_tick` left them. Writes
-        ``DELTA_FREE``, the QP vectors, ``X``, ``PROPOSED``, ``GAP``, ``STATE`` and, unless the
-        code is :data:`REJECTED` or the QP failed, ``ACTUATION``.
-    free : (m,) bool ndarray
-        Workspace; on return, the binding bounds (``saturated``) when the QP is solved.
-    index : (m,) int64 ndarray
-        Workspace.
-    proximal_weight : float
-        ``ε_P``.
-    max_iterations : int
-        Active-set iteration limit.
-    tolerance : float
-        Of the binding bounds.
-    positions : (n + 1, 3) ndarray  [m]
-        Frame origins (updated with ``apply_step``).
-    rotations : (n + 1, 3, 3) ndarray
-        Frame rotations (updated with ``apply_step``).
-    solved : (6n, m + 1) ndarray
-        ``K⁻¹ [r, J_aᵀ]`` of the linearisation.
-    increments : (n, 6) ndarray
-        Workspace.
-    work : (7, 3) ndarray
-        Workspace.
-    effector_frames : (k,) int ndarray
-        Frame of every effector.
-    effector_offsets : (k, 3) ndarray  [m]
-        Effector points in their frame's axes.
-    effector_positions : (k, 3) ndarray  [m]
-        Receives the effector positions of the new state (with ``apply_step``).
-    max_rotation : float  [rad]
-        Largest frame rotation of the step.
+    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+        The tick's buffers as :func:`linearise_tick` left them. Writes ``DELTA_FREE``, the QP
+        vectors, ``X``, ``PROPOSED``, ``GAP``, ``STATE``, ``free`` (on return the binding
+        bounds, ``saturated``, when the QP is solved) and, unless the code is
+        :data:`REJECTED` or the QP failed, ``ACTUATION``; with ``apply_step`` the frames and
+        ``effector_positions``.
     apply_step : bool
         Apply the linear step now (``relinearize_every`` 1).
 
@@ -254,6 +218,8 @@ def solve_tick(targets, vectors, matrices, effector_matrices, gaps, flags, free,
         Whether some bound binds (the QP is solved and the tick saturated).
 
     """
+    vectors, matrices, gaps = buffers.vectors, buffers.matrices, buffers.gaps
+    effector_matrices, flags, free = buffers.effector_matrices, buffers.flags, buffers.free
     k = targets.shape[0]
     offset, delta_free, gap = gaps[OFFSET], gaps[DELTA_FREE], gaps[GAP]
     for e in range(k):
@@ -261,14 +227,14 @@ def solve_tick(targets, vectors, matrices, effector_matrices, gaps, flags, free,
             delta_free[3 * e + i] = offset[3 * e + i] - targets[e, i]
     weighted_w = effector_matrices[WEIGHTED_W]
     rate = vectors[RATE]
-    qp_vectors_into(weighted_w, proximal_weight, vectors[SCALE], delta_free, vectors[ACTUATION],
-                    vectors[LOWER], vectors[UPPER], rate, vectors[GRADIENT:])
+    qp_vectors_into(weighted_w, buffers.weights[1], vectors[SCALE], delta_free,
+                    vectors[ACTUATION], vectors[LOWER], vectors[UPPER], rate, vectors[GRADIENT:])
     hessian = matrices[HESSIAN]
     lower, upper = vectors[BOX_LOWER], vectors[BOX_UPPER]
     x = vectors[X]
     code, iterations = active_set_box_qp_into(
-        hessian, vectors[GRADIENT], lower, upper, flags[STATE], max_iterations, x, free,
-        flags[PIVOT], index, matrices[FACTOR], vectors[SOLVE])
+        hessian, vectors[GRADIENT], lower, upper, flags[STATE], buffers.max_iterations, x, free,
+        flags[PIVOT], buffers.qp_index, matrices[FACTOR], vectors[SOLVE])
     if code != SOLVED:
         return code, iterations, 0.0, 0.0, False
     proposed = vectors[PROPOSED]
@@ -278,18 +244,38 @@ def solve_tick(targets, vectors, matrices, effector_matrices, gaps, flags, free,
     if not finite:
         return REJECTED, iterations, largest_gap, largest_move, False
     bounds_binding_into(matrices[TRACKING], vectors[TRACKING_GRADIENT], lower, upper, x,
-                        tolerance, free)
+                        buffers.tolerance, free)
     binding = False
     for j in range(free.size):
         binding = binding or free[j]
     vectors[ACTUATION, :] = proposed
     if apply_step:
-        change = vectors[CHANGE]
-        linearised = vectors[LINEARISED]
-        for j in range(change.size):
-            change[j] = proposed[j] - linearised[j]
-        apply_linear_step_into(positions, rotations, solved[:, 0], solved[:, 1:], change,
-                               max_rotation, increments, work)
-        effector_points_into(positions, rotations, effector_frames, effector_offsets,
-                             effector_positions)
+        apply_pending_step(buffers)
+        effector_points_into(buffers.positions, buffers.rotations, buffers.effector_frames,
+                             buffers.effector_offsets, buffers.effector_positions)
     return SOLVED, iterations, largest_gap, largest_move, binding
+
+
+@numba.njit(cache=True)
+def apply_pending_step(buffers):
+    """
+    Apply the Newton step of the linearisation to the actuation, in place.
+
+    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)``
+    (:func:`~cbha_inverse.core._kernels.retraction.apply_linear_step_into`) with ``λ`` and
+    ``λ_prev`` the buffers' ``vectors[ACTUATION]`` and ``vectors[LINEARISED]`` (their
+    difference is written to ``vectors[CHANGE]``) moves the frames of the buffers.
+
+    Parameters
+    ----------
+    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+        The tick's buffers (a solved linearisation).
+
+    """
+    vectors, solved = buffers.vectors, buffers.solved
+    change, actuation, linearised = vectors[CHANGE], vectors[ACTUATION], vectors[LINEARISED]
+    for j in range(change.size):
+        change[j] = actuation[j] - linearised[j]
+    apply_linear_step_into(buffers.positions, buffers.rotations, solved[:, 0], solved[:, 1:],
+                           change, buffers.max_rotation, buffers.increments,
+                           buffers.rotation_work)

@@ -144,6 +144,9 @@ class InverseSolver:
         self._base = np.array(model.base_position, dtype=float)
         self._reach = _REACH_FACTOR * (model.length + np.linalg.norm(
             self._effector_offsets, axis=1))
+        # the compiled check without numba's per-call dispatch (step passes (k, 3) C floats)
+        self._target_status = fused.compiled_entry(target_status, self._data.effector_positions,
+                                                   self._base, self._reach)
         # the frames and the actuation live in the tick data (the compiled tick updates them)
         self._positions, self._rotations = self._data.positions, self._data.rotations
         self.actuation = self._data.actuation
@@ -237,16 +240,15 @@ class InverseSolver:
         self.prepare()
         self.step(targets)
         # the compiled projection that follows a fallback factorization (reset forgets it)
-        fused.project_tick(*self._data.project_arguments)
+        fused.project_tick(self._data.buffers)
         self.reset(state, actuation)
 
-    def _current(self, in_place=False):
-        """Return the frames with the pending linear step applied (stored if ``in_place``)."""
+    def _current(self):
+        """Return the frames with the pending linear step applied (a copy when one is pending)."""
         if not self._pending:
             return self._positions, self._rotations
         data = self._data
-        positions, rotations = ((self._positions, self._rotations) if in_place
-                                else (self._positions.copy(), self._rotations.copy()))
+        positions, rotations = self._positions.copy(), self._rotations.copy()
         apply_linear_step_into(positions, rotations, *data.step_arguments[2:4], data.change(),
                                *data.step_arguments[5:])
         return positions, rotations
@@ -254,7 +256,7 @@ class InverseSolver:
     def _materialise(self):
         """Apply the pending linear step to the stored frames."""
         if self._pending:
-            self._current(in_place=True)
+            self._data.step_entry(self._data.buffers)
             self._pending = False
 
     @property
@@ -333,9 +335,11 @@ class InverseSolver:
                 targets = targets.reshape(1, 3)
             else:
                 raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
-        if not targets.flags.c_contiguous:
-            targets = np.ascontiguousarray(targets)
-        checked = target_status(targets, self._base, self._reach)
+        flags = targets.flags
+        if not (flags.c_contiguous and flags.writeable and flags.aligned):
+            # the compiled entries take exactly this type (they do not check it)
+            targets = np.array(targets, order='C')
+        checked = self._target_status(targets, self._base, self._reach)
         if checked == 1:
             return self._held('rejected', t_start, warnings=('non-finite target rejected',))
         targets, warnings = self._reachable(targets) if checked == 2 else (targets, ())
@@ -354,8 +358,8 @@ class InverseSolver:
         apply_step = self.options.relinearize_every == 1
         data = self._data
         if self.options.qp_solver == 'active_set':
-            code, iterations, largest_gap, largest_move, binding = fused.solve_tick(
-                targets, *data.solve_arguments, apply_step)
+            code, iterations, largest_gap, largest_move, binding = data.solve_entry(
+                targets, data.buffers, apply_step)
             if code == fused.REJECTED:
                 return self._rejected(t_start, 'solved', warnings)
             if code == SOLVED:
@@ -383,8 +387,7 @@ class InverseSolver:
         self.actuation[:] = actuation
         data.gap[:] = gap
         if apply_step:
-            apply_linear_step_into(*data.step_arguments[:4], data.change(),
-                                   *data.step_arguments[5:])
+            data.step_entry(data.buffers)
         return self._finish(targets, status, solution.status, solution.iterations, saturated,
                             largest_gap, largest_move, False, warnings, t_start, t_linearised)
 
@@ -490,7 +493,7 @@ class InverseSolver:
         """
         data, system = self._data, self._tick
         if data.fused:
-            info, residual_norm = fused.linearise_tick(*data.linearise_arguments,
+            info, residual_norm = data.linearise_entry(data.buffers,
                                                        system.tick_cholesky)
             if info == 0:
                 self._residual_norm = residual_norm
@@ -512,7 +515,7 @@ class InverseSolver:
         if factor is None:
             return False
         data.solved[:] = factor.solve(data.rhs)
-        self._residual_norm = fused.project_tick(*data.project_arguments)
+        self._residual_norm = fused.project_tick(data.buffers)
         return True
 
     def _newton_step(self):

@@ -4,23 +4,28 @@ The buffers of the control tick: the data half of the solver's model / data spli
 :class:`TickData` holds every array the two compiled entries of a tick write
 (:func:`cbha_inverse.core._kernels.tick.linearise_tick` and
 :func:`~cbha_inverse.core._kernels.tick.solve_tick`) next to the constant arrays of the model
-they read, and their argument tuples, built once: a tick passes them without building anything.
+they read, held by one compiled object built once
+(:class:`cbha_inverse.core._kernels.tick_buffers.TickBuffers`, :attr:`TickData.buffers`): a tick
+passes it without building anything.
 The solver (:class:`cbha_inverse.core.inverse.solver.InverseSolver`) owns one; the model
 (chain, actuators, effectors, options) never changes, the data changes every tick. Named
 attributes are views of the stacked arrays (rows in :mod:`cbha_inverse.core._kernels.tick`),
 so the Python side and the compiled side read the same memory.
 """
 
+import functools
 import math
 
 from cbha_inverse.core._kernels import tick as rows
+from cbha_inverse.core._kernels.tick_buffers import (EVALUATION_FIELDS, make_tick_buffers,
+                                                     placeholder_evaluation)
 from cbha_inverse.core.inverse.qp import QPMatrices
 import numpy as np
 
 
 class TickData:
     """
-    Preallocated buffers of one solver's ticks, and the entries' argument tuples.
+    Preallocated buffers of one solver's ticks, and the compiled object that holds them.
 
     Parameters
     ----------
@@ -63,15 +68,28 @@ class TickData:
         Effector positions of the state after a compiled tick that applied its step.
     matrices : cbha_inverse.core.inverse.qp.QPMatrices
         The current QP matrices, as views.
+    rhs : (6n, m + 1) ndarray
+        ``[r, J_aᵀ]`` (the evaluator's buffer).
+    external : (6n,) ndarray  [N, N*m]
+        The external wrenches the fused linearisation adds to ``r``.
+    band : (6n (kd + 1) + 1,) ndarray
+        The symmetric lower band, then its factor, of the fused linearisation.
     fused : bool
         Whether the linearisation runs as one compiled entry (see
-        :meth:`cbha_inverse.core.system.EquilibriumSystem.fused_terms`).
+        :meth:`cbha_inverse.core.system.EquilibriumSystem.fused_terms`; without it the
+        evaluation's fields of :attr:`buffers` are empty placeholders).
+    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+        Every array above and the model's constant arrays, the one argument of the compiled
+        entries (:mod:`cbha_inverse.core._kernels.tick`).
+    step_arguments : tuple
+        The arguments of :func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`
+        for the pending step (frames, ``K⁻¹ r``, ``K⁻¹ J_aᵀ``, the change, workspace).
 
     """
 
     def __init__(self, system, effectors, scale, lower_bounds, upper_bounds, rate_limit,
                  options, max_iterations):
-        """Allocate every buffer and build the argument tuples."""
+        """Allocate every buffer and build the compiled object."""
         n, m, k = system.n, system.m, effectors.n_effectors
         self.positions = np.zeros((n + 1, 3))
         self.rotations = np.zeros((n + 1, 3, 3))
@@ -99,29 +117,46 @@ class TickData:
                                    self.vectors[rows.SCALE], options.proximal_weight)
         frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
         offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
-        moved, levers = np.zeros((3 * k, m + 1)), np.zeros((k, 3))
         weights = np.array([options.energy_weight, options.proximal_weight], dtype=float)
         max_rotation = (math.inf if options.max_rotation_step is None
                         else float(options.max_rotation_step))
         self.max_rotation = max_rotation
-        self.project_arguments = (self.positions, self.rotations, self.vectors, self.rhs,
-                                  self.solved, self.matrices_stack, self.effector_matrices,
-                                  self.gaps, moved, frames, offsets, levers, weights)
         terms = system.fused_terms()
         self.fused = terms is not None
-        self.linearise_arguments = None if terms is None else (
-            (self.positions, self.rotations, self.vectors) + terms
-            + (self.solved, self.matrices_stack, self.effector_matrices, self.gaps, moved, frames,
-               offsets, levers, weights))
-        self.solve_arguments = (
-            self.vectors, self.matrices_stack, self.effector_matrices, self.gaps, self.flags,
-            self.mask, np.zeros(m, dtype=np.int64), float(options.proximal_weight),
-            int(max_iterations), 1e-6, self.positions, self.rotations, self.solved,
-            np.zeros((n, 6)), np.zeros((7, 3)), frames, offsets, self.effector_positions,
-            max_rotation)
+        if terms is None:
+            terms = placeholder_evaluation(self.rhs)
+        self.external = terms[EVALUATION_FIELDS.index('external')]
+        self.band = terms[EVALUATION_FIELDS.index('band')]
+        self.increments, rotation_work = np.zeros((n, 6)), np.zeros((7, 3))
+        self.buffers = make_tick_buffers(
+            self.positions, self.rotations, self.vectors, *terms, self.solved,
+            self.matrices_stack, self.effector_matrices, self.gaps, np.zeros((3 * k, m + 1)),
+            frames, offsets, np.zeros((k, 3)), weights, self.flags, self.mask,
+            np.zeros(m, dtype=np.int64), self.increments, rotation_work,
+            self.effector_positions, int(max_iterations), 1e-6, max_rotation)
         self.step_arguments = (self.positions, self.rotations, self.solved[:, 0],
                                self.solved[:, 1:], self.vectors[rows.CHANGE], max_rotation,
-                               np.zeros((n, 6)), np.zeros((7, 3)))
+                               self.increments, rotation_work)
+
+    @functools.cached_property
+    def linearise_entry(self):
+        """Return the compiled ``linearise_tick(buffers, cholesky)`` (``tick.compiled_entry``)."""
+        return rows.compiled_entry(rows.linearise_tick, self.buffers, True)
+
+    @functools.cached_property
+    def solve_entry(self):
+        """
+        Return the compiled ``solve_tick(targets, buffers, apply_step)``.
+
+        The targets must be a C-contiguous float (k, 3) array
+        (:func:`cbha_inverse.core._kernels.tick.compiled_entry`).
+        """
+        return rows.compiled_entry(rows.solve_tick, self.effector_positions, self.buffers, True)
+
+    @functools.cached_property
+    def step_entry(self):
+        """Return the compiled ``apply_pending_step(buffers)`` (``tick.compiled_entry``)."""
+        return rows.compiled_entry(rows.apply_pending_step, self.buffers)
 
     def change(self):
         """Write and return ``λ - λ_prev`` of the current linearisation (the pending step)."""
