@@ -63,7 +63,7 @@ class ShapeEstimatorParams:
                                 'measured pressure [Pa]', low=1.0, high=1.0e6)
     gain_walk_std: float = param(1.0e-4, 'random walk per update of the gain of the effective '
                                  'actuation about the measured pressure [-]', low=0.0, high=1.0)
-    offset_walk_std: float = param(10.0, 'random walk per update of the offset of the effective '
+    offset_walk_std: float = param(3.0, 'random walk per update of the offset of the effective '
                                    'actuation about the measured pressure [Pa]', low=0.0,
                                    high=1.0e6)
     actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update without '
@@ -74,7 +74,7 @@ class ShapeEstimatorParams:
     payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none); its '
                                'estimate is published on payload/estimated',
                                low=0.0, high=10.0)
-    weight_std: float = param(0.0, "prior std of an error of the arm's own weight [kg] (a "
+    weight_std: float = param(0.01, "prior std of an error of the arm's own weight [kg] (a "
                               'stiffness error sags the arm as a weight error does; 0: none; '
                               'not with payload_std, which takes its place)', low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
