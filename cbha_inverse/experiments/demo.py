@@ -2,8 +2,8 @@
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
 For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
-tip/true, tip/measured, tip/estimated, pressure_command, pressure_measured, string_pots,
-/diagnostics), then ``cbha_sim``, ``inverse_solver`` (``--realtime-priority``) and
+tip/true, tip/measured, tip/estimated, payload/estimated, pressure_command, pressure_measured,
+string_pots, /diagnostics), then ``cbha_sim``, ``inverse_solver`` (``--realtime-priority``) and
 ``trajectory`` as separate processes (as ``ros2 run`` would, with the installed params files
 plus a per-run override file), runs one lap, stops them with SIGINT and prints one line:
 tracking RMS and max (plant tip vs target, moving part: ``cbha_bag eval``), the solver's tick
@@ -68,7 +68,8 @@ MODULES = {'cbha_sim': 'cbha_inverse.ros.nodes.cbha_sim',
            'cbha_excite': 'cbha_inverse.ros.nodes.cbha_excite',
            'shape_estimator': 'cbha_inverse.ros.nodes.shape_estimator'}
 NAMESPACE = '/cbha'
-RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'pressure_command',
+RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'payload/estimated',
+            'pressure_command',
             'pressure_measured', 'string_pots', '/diagnostics')
 EXCITE_RECORDED = ('pressure_command', 'pressure_measured', 'tip/measured', 'tip/true')
 
