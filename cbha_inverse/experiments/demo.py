@@ -69,8 +69,7 @@ MODULES = {'cbha_sim': 'cbha_inverse.ros.nodes.cbha_sim',
            'shape_estimator': 'cbha_inverse.ros.nodes.shape_estimator'}
 NAMESPACE = '/cbha'
 RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'payload/estimated',
-            'pressure_command',
-            'pressure_measured', 'string_pots', '/diagnostics')
+            'pressure_command', 'pressure_measured', 'string_pots', '/diagnostics')
 EXCITE_RECORDED = ('pressure_command', 'pressure_measured', 'tip/measured', 'tip/true')
 
 
