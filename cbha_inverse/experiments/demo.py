@@ -2,8 +2,8 @@
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
 For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
-tip/true, tip/measured, tip/estimated, pressure_command, pressure_measured, string_pots,
-/diagnostics), then ``cbha_sim``, ``inverse_solver`` (``--realtime-priority``) and
+tip/true, tip/measured, tip/estimated, payload/estimated, pressure_command, pressure_measured,
+string_pots, /diagnostics), then ``cbha_sim``, ``inverse_solver`` (``--realtime-priority``) and
 ``trajectory`` as separate processes (as ``ros2 run`` would, with the installed params files
 plus a per-run override file), runs one lap, stops them with SIGINT and prints one line:
 tracking RMS and max (plant tip vs target, moving part: ``cbha_bag eval``), the solver's tick
@@ -49,8 +49,8 @@ from cbha_inverse.bag.evaluate import evaluate_bag
 from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
-from cbha_inverse.experiments.proprio import (add_plant_pot_arguments, estimate_error,
-                                              plant_pot_parameters)
+from cbha_inverse.experiments.proprio import (add_plant_pot_arguments, bag_points,
+                                              estimate_error, plant_pot_parameters)
 from cbha_inverse.identify.excitation import make_program
 from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
@@ -68,8 +68,8 @@ MODULES = {'cbha_sim': 'cbha_inverse.ros.nodes.cbha_sim',
            'cbha_excite': 'cbha_inverse.ros.nodes.cbha_excite',
            'shape_estimator': 'cbha_inverse.ros.nodes.shape_estimator'}
 NAMESPACE = '/cbha'
-RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'pressure_command',
-            'pressure_measured', 'string_pots', '/diagnostics')
+RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'payload/estimated',
+            'pressure_command', 'pressure_measured', 'string_pots', '/diagnostics')
 EXCITE_RECORDED = ('pressure_command', 'pressure_measured', 'tip/measured', 'tip/true')
 
 
@@ -228,9 +228,6 @@ class Recorder:
 
         self.node = Node('cbha_demo_recorder', context=context, namespace=NAMESPACE)
         self.targets, self.tips, self.measured, self.diagnostics = [], [], [], {}
-        self.estimated = []
-        self.node.create_subscription(PointStamped, 'tip/estimated', self._point(self.estimated),
-                                      MEASURED_QOS)
         self.node.create_subscription(PointStamped, 'target', self._point(self.targets),
                                       TARGET_QOS)
         self.node.create_subscription(PointStamped, 'tip/true', self._point(self.tips),
@@ -266,7 +263,6 @@ class Recorder:
         self.targets.clear()
         self.tips.clear()
         self.measured.clear()
-        self.estimated.clear()
         self.diagnostics.clear()
 
     def close(self):
@@ -447,8 +443,8 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         'estimate_p99_ms': number(estimating, 'estimate_p99_ms'),
         'estimate_degraded': number(estimating, 'degraded_updates'),
         'estimate_rejected': number(estimating, 'rejected_total'),
-        'estimate_tip_rms_mm': estimate_error(recorder, args.start_hold,
-                                              trajectory.duration) * 1e3}
+        'estimate_tip_rms_mm': estimate_error(bag_points(run_dir / 'bag', NAMESPACE),
+                                              args.start_hold, trajectory.duration) * 1e3}
     return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo, **proprio,
             'speed_m_s': speed, 'lap_s': trajectory.lap_time,
             'rms_mm': errors.rms * 1e3, 'max_mm': errors.maximum * 1e3,

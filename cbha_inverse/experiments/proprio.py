@@ -2,12 +2,44 @@
 What ``cbha_demo`` adds for its camera-less runs (``--feedback proprio``).
 
 :func:`estimate_error` scores ``shape_estimator``'s ``tip/estimated`` against ``tip/true``
-interpolated at its stamps, the estimate's own accuracy beside the run's tracking error;
+interpolated at its stamps, the estimate's own accuracy beside the run's tracking error, on the
+points of the run's bag (:func:`bag_points`: the demo's in-process subscriber may miss messages
+on a loaded machine, the recorder's bag is what the tracking error is scored on too);
 :func:`add_plant_pot_arguments` and :func:`plant_pot_parameters` give the plant's string pots
 their noise and a calibration of their own (which a scene then has to identify).
 """
 
+from types import SimpleNamespace
+
+from cbha_inverse.bag.evaluate import point_series
+from cbha_inverse.bag.storage import open_bag
 import numpy as np
+
+
+def bag_points(path, namespace):
+    """
+    Return a run bag's ``target``, ``tip/true`` and ``tip/estimated`` for :func:`estimate_error`.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag folder.
+    namespace : str
+        The topics' namespace (``/cbha``).
+
+    Returns
+    -------
+    types.SimpleNamespace
+        ``targets``, ``tips`` and ``estimated``: lists of ``(stamp [s], x, y, z [m])``.
+
+    """
+    series = {}
+    with open_bag(path) as bag:
+        for name, topic in (('targets', 'target'), ('tips', 'tip/true'),
+                            ('estimated', 'tip/estimated')):
+            _, stamps, points = point_series(bag, f'{namespace}/{topic}')
+            series[name] = [(float(t), *map(float, p)) for t, p in zip(stamps, points)]
+    return SimpleNamespace(**series)
 
 
 def estimate_error(recorder, start, end):
@@ -19,8 +51,9 @@ def estimate_error(recorder, start, end):
 
     Parameters
     ----------
-    recorder : Recorder
-        What the run received.
+    recorder : Recorder or types.SimpleNamespace
+        What the run received or recorded (:func:`bag_points`): ``targets``, ``tips`` and
+        ``estimated`` as ``(stamp, x, y, z)``.
     start, end : float  [s]
         Window from the first target's stamp.
 

@@ -6,7 +6,9 @@ and ``cbha_sim`` publish them) and ``pressure_measured`` (Float64MultiArray, Pa 
 order); every accepted reading runs one update of
 :class:`cbha_inverse.estimate.shape.ShapeEstimator` (``docs/proprioception.md``), with the last
 pressures received when they are at most ``pressure_timeout`` old (those of the reading's instant:
-``robotino_bridge`` and ``cbha_sim`` publish a sample's pressures before its pots), and publishes
+``robotino_bridge`` and ``cbha_sim`` publish a sample's pressures before its pots, and the
+pressures' subscription is created first, so an executor that finds both waiting takes the
+pressures first), and publishes
 the estimated tip on ``tip/estimated`` (PointStamped, ``frame_id``, the stamp of the pot reading,
 sensor data QoS), which ``inverse_solver`` closes its loop on with
 ``feedback_topic: tip/estimated``. A reading that lacks a pot name, is malformed, non-finite or out
@@ -61,7 +63,7 @@ class ShapeEstimatorParams:
                                 'measured pressure [Pa]', low=1.0, high=1.0e6)
     gain_walk_std: float = param(1.0e-4, 'random walk per update of the gain of the effective '
                                  'actuation about the measured pressure [-]', low=0.0, high=1.0)
-    offset_walk_std: float = param(10.0, 'random walk per update of the offset of the effective '
+    offset_walk_std: float = param(3.0, 'random walk per update of the offset of the effective '
                                    'actuation about the measured pressure [Pa]', low=0.0,
                                    high=1.0e6)
     actuation_walk_std: float = param(20000.0, 'random walk of the actuation per update without '
@@ -72,7 +74,7 @@ class ShapeEstimatorParams:
     payload_std: float = param(0.0, 'prior std of an unknown tip payload [kg] (0: none); its '
                                'estimate is published on payload/estimated',
                                low=0.0, high=10.0)
-    weight_std: float = param(0.0, "prior std of an error of the arm's own weight [kg] (a "
+    weight_std: float = param(0.01, "prior std of an error of the arm's own weight [kg] (a "
                               'stiffness error sags the arm as a weight error does; 0: none; '
                               'not with payload_std, which takes its place)', low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
@@ -136,10 +138,15 @@ class ShapeEstimatorNode(Node):
                                                         MEASURED_QOS) if p.payload_std else None)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone_estimated',
                                                       MARKER_QOS)
-        self.create_subscription(JointState, 'string_pots', self._on_pots, MEASURED_QOS)
         if p.use_pressures:
+            # created first: rclpy's wait-set executors run the ready callbacks in the order the
+            # subscriptions were created, and a sample's pots paired with the previous sample's
+            # pressures (every reading, on a plant spun in the same executor) are a pressure
+            # step the pots see before the pressures, which the estimator takes for a gain,
+            # offset or weight error (docs/proprioception.md)
             self.create_subscription(Float64MultiArray, 'pressure_measured', self._on_pressures,
                                      MEASURED_QOS)
+        self.create_subscription(JointState, 'string_pots', self._on_pots, MEASURED_QOS)
         self.marker_timer = self.create_timer(p.marker_period, self._publish_markers)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
