@@ -2,7 +2,8 @@
 Shared test set-up: import path and DDS isolation for every test process.
 
 Each pytest process reserves its own ``ROS_DOMAIN_ID`` (domain_coordinator) and keeps discovery on
-localhost, so parallel runs on one host never cross-talk; ROS logs go to a temporary directory.
+localhost (participants announced every 0.2 s: ``test/data/fastdds_discovery.xml``), so parallel
+runs on one host never cross-talk; ROS logs go to a temporary directory.
 """
 
 import contextlib
@@ -34,6 +35,10 @@ def _isolate_dds():
     os.environ['ROS_DOMAIN_ID'] = str(_RESERVATION.enter_context(domain_id()))
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
+    # participants announce themselves every 0.2 s instead of 3 s: one that missed the initial
+    # exchange waits that long for its peers (test/data/fastdds_discovery.xml)
+    os.environ.setdefault('FASTRTPS_DEFAULT_PROFILES_FILE',
+                          str(REPO_ROOT / 'test' / 'data' / 'fastdds_discovery.xml'))
     os.environ['ROS_LOG_DIR'] = tempfile.mkdtemp(prefix='cbha_ros_log_')
     os.environ.pop('RMW_IMPLEMENTATION', None)
 
