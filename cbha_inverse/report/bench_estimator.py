@@ -101,7 +101,8 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
     -------
     dict
         ``median``, ``p99`` [s], ``tick_median`` [s] (inverse solver), ``rms`` and
-        ``open_loop_rms`` [m], ``degraded`` (count), ``updates``.
+        ``open_loop_rms`` [m], ``degraded`` (count), ``updates``, ``payload`` and ``weight``
+        [kg] (the estimate's at the end of the lap).
 
     """
     nominal = load_scene('cbha')
@@ -143,6 +144,7 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
             'rms': float(np.sqrt(np.mean(np.square(errors)))),
             'open_loop_rms': float(np.sqrt(np.mean(np.square(open_errors)))),
             'degraded': int(degraded), 'updates': len(times),
+            'payload': float(estimate.payload), 'weight': float(estimate.weight),
             'finite': bool(np.all(np.isfinite(errors)))}
 
 
@@ -169,6 +171,8 @@ def main(argv=None):
     parser.add_argument('--payload', type=float, default=0.0, help='plant tip payload [kg]')
     parser.add_argument('--estimate-payload', type=float, default=None, metavar='STD',
                         help='estimate the payload with this prior std [kg]')
+    parser.add_argument('--weight-std', type=float, default=None, metavar='STD',
+                        help="estimate an error of the arm's own weight with this prior std [kg]")
     parser.add_argument('--stuck-pot', type=int, default=None, metavar='INDEX',
                         help='freeze this pot from the middle of the measured lap on')
     parser.add_argument('--json', help='write the row to this JSON file')
@@ -176,7 +180,8 @@ def main(argv=None):
     started = time.perf_counter()
     row = bench(args.poses, noise=args.noise, stiffness_error=args.stiffness_error,
                 gain_error=args.gain_error, payload=args.payload,
-                options=EstimatorOptions(payload_std=args.estimate_payload),
+                options=EstimatorOptions(payload_std=args.estimate_payload,
+                                         weight_std=args.weight_std),
                 stuck_pot=args.stuck_pot)
     verdict = 'ok' if row['median'] <= GOAL else 'over'
     median, p99, tick = (row[key] * 1e6 for key in ('median', 'p99', 'tick_median'))
@@ -187,7 +192,8 @@ def main(argv=None):
     print(f'plant: stiffness +-{args.stiffness_error:.0%}, gains +-{args.gain_error:.0%}, '
           f'payload {args.payload:g} kg, pot noise {args.noise * 1e3:g} mm: estimated tip RMS '
           f'{rms:.2f} mm, open-loop model RMS {open_rms:.2f} mm, {row["degraded"]} of '
-          f'{row["updates"]} updates degraded ({time.perf_counter() - started:.0f} s)')
+          f'{row["updates"]} updates degraded, payload {row["payload"]:.4f} kg, weight error '
+          f'{row["weight"]:.4f} kg ({time.perf_counter() - started:.0f} s)')
     if args.json:
         with open(args.json, 'w') as handle:
             json.dump(row, handle, indent=1)
