@@ -3,9 +3,10 @@ The shape estimator: the equilibrium that reproduces the string-potentiometer le
 
 The pots are effectors in length space (``docs/proprioception.md``): at the current estimate of the
 frames ``q`` and the effective actuation ``λ`` (and, optionally, unknown weights ``μ``: an error of
-the arm's own weight, a payload mass at the last frame, or both), one linearisation of the equilibrium
-(paper eq. 9, the control tick's :func:`~cbha_inverse.core._kernels.tick.linearise_tick`) gives
-``K⁻¹ [r, J_aᵀ]``; with the pots' ``J_s`` (:class:`~cbha_inverse.core.sensors.StringPots`) the
+the arm's own weight, a payload mass at the last frame, or both), one linearisation of the
+equilibrium (paper eq. 9, the control tick's
+:func:`~cbha_inverse.core._kernels.tick.linearise_tick`) gives ``K⁻¹ [r, J_aᵀ]``; with the pots'
+``J_s`` (:class:`~cbha_inverse.core.sensors.StringPots`) the
 lengths after the Newton step are linear in the actuation through ``W_sa = J_s K⁻¹ J_aᵀ`` (the
 pots' ``W_ea``, eq. 11). The unknowns are not the actuation itself but its error about the measured
 pressures, ``λ = (1 + g) ∘ p + δ`` (a gain and an offset per actuator: the model's error in
