@@ -228,7 +228,8 @@ def main(argv=None):
     args = parser.parse_args(argv)
     started = time.perf_counter()
     lap, measured = bag_lap(args.pressures_bag) if args.pressures_bag else (None, None)
-    row = bench(args.poses, laps=1 if args.pressures_bag else 2, noise=args.noise, stiffness_error=args.stiffness_error,
+    row = bench(args.poses, laps=1 if args.pressures_bag else 2, noise=args.noise,
+                stiffness_error=args.stiffness_error,
                 gain_error=args.gain_error, payload=args.payload,
                 options=EstimatorOptions(payload_std=args.estimate_payload,
                                          weight_std=args.weight_std),
