@@ -32,10 +32,10 @@ class EstimatorData:
     sensors : cbha_inverse.core.sensors.StringPots
         The pots (``c``).
     scale : (u,) ndarray
-        Unit of every unknown ``(g, δ[, μ])`` (``x = scale z``).
-    load : (6n,) ndarray  [N/kg]
-        External wrench of one kg of the extra weight unknown (the payload at the last frame,
-        or the arm's own weight's distribution).
+        Unit of every unknown ``(g, δ, μ)`` (``x = scale z``, ``u = 2 m + w``).
+    load : (w, 6n) ndarray  [N/kg]
+        External wrench of one kg of each weight unknown (0-2: the arm's own weight's
+        distribution, the payload at the last frame).
     max_rotation_step : float  [rad]
         Largest frame rotation of one step.
 
@@ -70,28 +70,33 @@ class EstimatorData:
         self.pressure_rows = np.zeros((rows.PRESSURE_ROWS, m))
         self.pressures = self.pressure_rows[rows.PRESSURE]
         self.scalars = np.zeros(rows.SCALARS)
-        self.scalars[rows.HAS_MASS] = float(u > 2 * m)
-        # the compiled update solves the payload's column with its own factor (the fallback
-        # chain clears this while it hands over a column solved with another factor)
+        self.load = np.ascontiguousarray(load, dtype=float).reshape(-1, 6 * n)
+        w = self.load.shape[0]
+        if u != 2 * m + w:
+            raise ValueError(f'{u} unknowns for {m} actuators and {w} weights')
+        # the weights of the linearisation [kg]
+        self.masses = np.zeros(w)
+        # the compiled update solves the weights' columns with its own factor (the fallback
+        # chain clears this while it hands over columns solved with another factor)
         self.scalars[rows.SOLVE_MASS] = 1.0
         self.scalars[rows.MAX_ROTATION] = max_rotation_step
         self.jacobian = np.zeros((c, 6 * n))
-        self.moved = np.zeros((c, m + 2))
+        self.moved = np.zeros((c, m + 1 + w))
         self.h = np.zeros((c, u))
-        self.mass_columns, self.mass_rhs = np.zeros((6 * n, 2)), np.zeros((6 * n, 2))
-        self.mass_effectors = (np.zeros((3 * k, 1)), np.zeros((1, 1)), np.zeros(3 * k),
-                               np.zeros((3 * k, 2)), np.zeros((k, 3)), np.zeros(1))
+        self.mass_columns = np.zeros((6 * n, 1 + w))
+        self.mass_rhs = np.zeros((6 * n, 1 + w))
+        self.mass_effectors = (np.zeros((3 * k, w)), np.zeros((w, w)), np.zeros(3 * k),
+                               np.zeros((3 * k, 1 + w)), np.zeros((k, 3)), np.zeros(w))
         self.stuck = np.zeros(c, dtype=np.bool_)
         self.active = np.zeros(c, dtype=np.bool_)
         self.effector_w = np.zeros((3, u))
         self.effector_positions = np.zeros((k, 3))
         self.tip_covariance = np.zeros((3, 3))
-        self.load = np.asarray(load, dtype=float)
         routing = sensors.routing
         work = np.zeros(routing_work_size(routing[0].size, routing[2].size, c))
         self.arguments = (self.tick.buffers, system.tick_cholesky, routing + (work,), self.pots,
                           self.jacobian, self.moved, self.h, self.state, self.covariance,
-                          self.pressure_rows, self.scalars, self.load,
+                          self.pressure_rows, self.scalars, self.masses, self.load,
                           self.base_external, self.mass_columns, self.mass_rhs,
                           self.mass_effectors, self.stuck, self.active, np.zeros(6 * n),
                           self.effector_w, self.effector_positions, self.tip_covariance,
@@ -110,5 +115,5 @@ class EstimatorData:
     @property
     def from_linearisation_arguments(self):
         """Return the arguments of ``estimate_from_linearisation`` (after a fallback)."""
-        skip = (1, 12)   # cholesky, base_external
+        skip = (1, 13)   # cholesky, base_external
         return tuple(a for i, a in enumerate(self.arguments) if i not in skip)

@@ -2,10 +2,11 @@
 The shape estimator: the equilibrium that reproduces the string-potentiometer lengths.
 
 The pots are effectors in length space (``docs/proprioception.md``): at the current estimate of the
-frames ``q`` and the effective actuation ``λ`` (and, optionally, an unknown weight ``μ``: a payload
-mass at the last frame, or an error of the arm's own weight), one linearisation of the equilibrium
-(paper eq. 9, the control tick's :func:`~cbha_inverse.core._kernels.tick.linearise_tick`) gives
-``K⁻¹ [r, J_aᵀ]``; with the pots' ``J_s`` (:class:`~cbha_inverse.core.sensors.StringPots`) the
+frames ``q`` and the effective actuation ``λ`` (and, optionally, unknown weights ``μ``: an error of
+the arm's own weight, a payload mass at the last frame, or both), one linearisation of the
+equilibrium (paper eq. 9, the control tick's
+:func:`~cbha_inverse.core._kernels.tick.linearise_tick`) gives ``K⁻¹ [r, J_aᵀ]``; with the pots'
+``J_s`` (:class:`~cbha_inverse.core.sensors.StringPots`) the
 lengths after the Newton step are linear in the actuation through ``W_sa = J_s K⁻¹ J_aᵀ`` (the
 pots' ``W_ea``, eq. 11). The unknowns are not the actuation itself but its error about the measured
 pressures, ``λ = (1 + g) ∘ p + δ`` (a gain and an offset per actuator: the model's error in
@@ -85,8 +86,9 @@ class EstimatorOptions:
         Prior standard deviation of an error of the arm's own weight, spread as its lumped
         masses (one kg of it: the arm's weight over its mass): a plant softer than the model
         sags under gravity as if heavier, which no gain or offset of the actuation reproduces
-        (the pots would fit and the tip stay off along gravity); None: no such unknown. One of
-        ``payload_std`` and ``weight_std`` at most.
+        (the pots would fit and the tip stay off along gravity); None: no such unknown. With
+        ``payload_std`` too, both are unknowns: the pots see a weight spread along the arm
+        and one at its tip differently as the pose changes.
     weight_walk_std : float  [kg]
         Random walk of the weight error per update.
     outlier_sigma : float
@@ -232,20 +234,26 @@ class ShapeEstimator:
         self._system = EquilibriumSystem(model, actuators,
                                          external_wrenches(model, gravity=gravity).reshape(-1))
         m = self._m = actuators.n_actuators
-        if opts.payload_std is not None and opts.weight_std is not None:
-            raise ValueError('payload_std and weight_std: one extra weight unknown at most')
-        # the extra unknown: a payload at the last frame, or the arm's own weight error
-        self._weight = opts.weight_std is not None
-        self._n_mass = int(opts.payload_std is not None or self._weight)
-        self._mass_stds = ((opts.weight_std, opts.weight_walk_std) if self._weight else
-                           (opts.payload_std, opts.payload_walk_std))
-        if self._n_mass and gravity is None:
-            raise ValueError("a payload or weight unknown needs the scene's gravity")
-        load = np.zeros(self._system.size)
-        if self._weight:
-            load[:] = external_wrenches(model, gravity=gravity).reshape(-1) / model.masses.sum()
-        elif self._n_mass:
-            load[-6:-3] = gravity
+        # the weight unknowns, in this order: the arm's own weight error, a payload at the last
+        # frame (the wrench of one kg of each, its prior and walk std)
+        loads, self._mass_stds, self._mass_index = [], [], {}
+        for name, std, walk in (('weight', opts.weight_std, opts.weight_walk_std),
+                                ('payload', opts.payload_std, opts.payload_walk_std)):
+            if std is None:
+                continue
+            if gravity is None:
+                raise ValueError("a payload or weight unknown needs the scene's gravity")
+            load = np.zeros(self._system.size)
+            if name == 'weight':
+                load[:] = (external_wrenches(model, gravity=gravity).reshape(-1)
+                           / model.masses.sum())
+            else:
+                load[-6:-3] = gravity
+            self._mass_index[name] = len(loads)
+            loads.append(load)
+            self._mass_stds.append((std, walk))
+        self._n_mass = len(loads)
+        load = np.array(loads).reshape(self._n_mass, self._system.size)
         self._scale = np.concatenate([np.full(m, _GAIN_SCALE), np.full(m, _OFFSET_SCALE),
                                       np.full(self._n_mass, _MASS_SCALE)])
         self._data = EstimatorData(self._system, effectors, sensors, self._scale, load,
@@ -254,8 +262,7 @@ class ShapeEstimator:
         self._data.scalars[kernel.GATE_SIGMA] = opts.outlier_sigma
 
         def walk(offset):
-            stds = [opts.gain_walk_std] * m + [offset] * m + [self._mass_stds[1]] * (
-                self._n_mass)
+            stds = [opts.gain_walk_std] * m + [offset] * m + [w for _, w in self._mass_stds]
             return (np.asarray(stds) / self._scale) ** 2
         # the walk per update: (pressures measured, settled) -> variances of z
         self._walks = {(True, True): walk(opts.offset_walk_std),
@@ -319,9 +326,9 @@ class ShapeEstimator:
         data.z[:] = 0.0
         data.z[m:2 * m] = data.actuation / _OFFSET_SCALE
         stds = ([self.options.gain_std] * m + [self.options.pressure_std] * m
-                + [self._mass_stds[0] or 0.0] * self._n_mass)
+                + [std for std, _ in self._mass_stds])
         data.covariance[:] = np.diag((np.asarray(stds) / self._scale) ** 2)
-        data.scalars[kernel.MASS] = 0.0
+        data.masses[:] = 0.0
         self._stuck.reset()
         self._ranks = {}
         self._settled = False
@@ -515,21 +522,25 @@ class ShapeEstimator:
             self._weight_error(),
             time.perf_counter() - started)
 
+    def _mass(self, name):
+        """Return the estimated weight unknown ``name`` [kg] (0 without it)."""
+        index = self._mass_index.get(name)
+        return 0.0 if index is None else float(self._data.masses[index])
+
     def _payload(self):
         """Return the estimated payload [kg] (0 without that unknown)."""
-        return float(self._data.scalars[kernel.MASS]) if self._n_mass and not self._weight \
-            else 0.0
+        return self._mass('payload')
 
     def _weight_error(self):
         """Return the estimated error of the arm's own weight [kg] (0 without that unknown)."""
-        return float(self._data.scalars[kernel.MASS]) if self._weight else 0.0
+        return self._mass('weight')
 
     def _rank(self, active):
         """Return the numerical rank of the active pots' whitened ``W_sx`` (cached per set)."""
         key = active.tobytes()
         if key not in self._ranks:
             m = self._m
-            w_sx = self._data.moved[:, 1:2 + m] if self._n_mass else self._data.moved[:, 1:1 + m]
+            w_sx = self._data.moved[:, 1:1 + m + self._n_mass]
             whitened = (w_sx * np.concatenate([np.full(m, _OFFSET_SCALE),
                                                np.full(self._n_mass, _MASS_SCALE)])
                         )[active] / self.sensors.noise_std[active, None]
@@ -550,9 +561,7 @@ class ShapeEstimator:
         data.tick.solved[:] = factor.solve(data.tick.rhs)
         fused.project_tick(data.tick.buffers)
         if self._n_mass:
-            column = np.zeros((system.size, 1))
-            column[:, 0] = data.load
-            data.mass_columns[:, 1:] = factor.solve(column)
+            data.mass_columns[:, 1:] = factor.solve(np.ascontiguousarray(data.load.T))
         data.scalars[kernel.SOLVE_MASS] = 0.0
         kernel.estimate_from_linearisation(*data.from_linearisation_arguments)
         data.scalars[kernel.SOLVE_MASS] = 1.0

@@ -9,7 +9,8 @@ table gives the update time (median and p99; goal: median <= 100 us), the invers
 on the same scene in the same run (for the ratio on a loaded machine), the estimated tip's RMS
 error against the plant's true tip and the open-loop model's (the nominal forward solve at the
 same pressures), and how many updates were degraded (``--stuck-pot`` freezes one pot from the
-middle of the lap on).
+middle of the lap on). ``--pressures-bag`` replays the measured pressures of a ``cbha_demo`` run's
+bag instead of the lap (its poses, the payload's included), measured over the run's lap window.
 """
 
 import argparse
@@ -17,6 +18,8 @@ import json
 import sys
 import time
 
+from cbha_inverse.bag.evaluate import command_series, point_series
+from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.estimate.shape import EstimatorOptions, ShapeEstimator
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration
@@ -50,6 +53,41 @@ def pressure_lap(n_poses, mean=6.0e4, amplitude=4.0e4):
     return np.concatenate([inner, outer], axis=1)
 
 
+def bag_lap(path, namespace='/cbha', start=1.5):
+    """
+    Return the measured pressures of a ``cbha_demo`` run's bag and its lap window.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The bag folder.
+    namespace : str
+        The topics' namespace.
+    start : float  [s]
+        The window starts this long after the first ``target`` (as the demo's score).
+
+    Returns
+    -------
+    pressures : (N, 6) ndarray  [Pa]
+        ``pressure_measured`` in the order received.
+    measured : (N,) bool ndarray
+        The pressures received from ``start`` after the first target to the last target.
+
+    Raises
+    ------
+    ValueError
+        If the bag holds no pressures or no targets.
+
+    """
+    with open_bag(path) as bag:
+        received, pressures = command_series(bag, f'{namespace}/pressure_measured')
+        targets = point_series(bag, f'{namespace}/target')[0]
+    if not len(pressures) or not targets.size:
+        raise ValueError(f'{path}: no {namespace}/pressure_measured or {namespace}/target')
+    measured = (received >= targets[0] + int(start * 1e9)) & (received <= targets[-1])
+    return np.array(pressures, dtype=float), measured
+
+
 def plant_calibration(stiffness_error, gain_error, payload):
     """
     Return the plant's deliberate errors: sections and cavities alternately above and below.
@@ -76,7 +114,7 @@ def plant_calibration(stiffness_error, gain_error, payload):
 
 
 def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10, payload=0.0,
-          seed=0, options=None, stuck_pot=None):
+          seed=0, options=None, stuck_pot=None, lap=None, measured=None):
     """
     Run the lap and collect the timings and errors.
 
@@ -96,12 +134,17 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
         The estimator's options.
     stuck_pot : int, optional
         This pot keeps its reading from the middle of the measured lap on.
+    lap : (N, 6) array_like, optional  [Pa]
+        The pressures of a lap (default: :func:`pressure_lap` of ``n_poses``).
+    measured : (N,) array_like of bool, optional
+        The updates of the last lap that are measured (default: all).
 
     Returns
     -------
     dict
         ``median``, ``p99`` [s], ``tick_median`` [s] (inverse solver), ``rms`` and
-        ``open_loop_rms`` [m], ``degraded`` (count), ``updates``.
+        ``open_loop_rms`` [m], ``bias`` (the mean tip error, 3 values) [m], ``degraded``
+        (count), ``updates``, ``payload`` and ``weight`` [kg] (the estimate's at the end).
 
     """
     nominal = load_scene('cbha')
@@ -110,7 +153,9 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
     estimator = ShapeEstimator.from_scene(nominal, options)
     solver = nominal.make_inverse_solver()
     rng = np.random.default_rng(seed)
-    lap = pressure_lap(n_poses)
+    lap = pressure_lap(n_poses) if lap is None else np.asarray(lap, dtype=float)
+    measured = (np.ones(len(lap), dtype=bool) if measured is None
+                else np.asarray(measured, dtype=bool))
     truth, model = [], []
     state = nominal_state = None
     for pressures in lap:
@@ -121,28 +166,31 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
         open_loop = nominal.forward(pressures, initial_state=nominal_state, strict=True)
         nominal_state = open_loop.state
         model.append(open_loop.effector_positions[-1])
-    times, ticks, errors, open_errors, degraded = [], [], [], [], 0
+    times, ticks, errors, open_errors, biases, degraded = [], [], [], [], [], 0
     frozen = None
     for k in range(laps):
         for i, (pressures, (tip, lengths), open_tip) in enumerate(zip(lap, truth, model)):
             readings = nominal.sensors.readings(lengths + noise * rng.standard_normal(6))
-            if stuck_pot is not None and k == laps - 1 and i >= n_poses // 2:
+            if stuck_pot is not None and k == laps - 1 and i >= len(lap) // 2:
                 frozen = readings[stuck_pot] if frozen is None else frozen
                 readings[stuck_pot] = frozen
             estimate = estimator.update(readings, pressures)
             tick = solver.step(tip)
-            if k == 0:
+            if k < laps - 1 or not measured[i]:
                 continue
             times.append(estimate.seconds)
             ticks.append(tick.timings['total'])
             errors.append(np.linalg.norm(estimate.tip - tip))
+            biases.append(estimate.tip - tip)
             open_errors.append(np.linalg.norm(open_tip - tip))
             degraded += estimate.status != 'ok'
     return {'median': float(np.median(times)), 'p99': float(np.percentile(times, 99)),
             'tick_median': float(np.median(ticks)),
             'rms': float(np.sqrt(np.mean(np.square(errors)))),
             'open_loop_rms': float(np.sqrt(np.mean(np.square(open_errors)))),
+            'bias': [float(v) for v in np.mean(biases, axis=0)],
             'degraded': int(degraded), 'updates': len(times),
+            'payload': float(estimate.payload), 'weight': float(estimate.weight),
             'finite': bool(np.all(np.isfinite(errors)))}
 
 
@@ -169,25 +217,36 @@ def main(argv=None):
     parser.add_argument('--payload', type=float, default=0.0, help='plant tip payload [kg]')
     parser.add_argument('--estimate-payload', type=float, default=None, metavar='STD',
                         help='estimate the payload with this prior std [kg]')
+    parser.add_argument('--weight-std', type=float, default=None, metavar='STD',
+                        help="estimate an error of the arm's own weight with this prior std [kg]")
     parser.add_argument('--stuck-pot', type=int, default=None, metavar='INDEX',
                         help='freeze this pot from the middle of the measured lap on')
+    parser.add_argument('--pressures-bag', metavar='BAG',
+                        help="replay a cbha_demo run's measured pressures (one pass, its lap "
+                             'window measured) instead of the lap')
     parser.add_argument('--json', help='write the row to this JSON file')
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    row = bench(args.poses, noise=args.noise, stiffness_error=args.stiffness_error,
+    lap, measured = bag_lap(args.pressures_bag) if args.pressures_bag else (None, None)
+    row = bench(args.poses, laps=1 if args.pressures_bag else 2, noise=args.noise,
+                stiffness_error=args.stiffness_error,
                 gain_error=args.gain_error, payload=args.payload,
-                options=EstimatorOptions(payload_std=args.estimate_payload),
-                stuck_pot=args.stuck_pot)
+                options=EstimatorOptions(payload_std=args.estimate_payload,
+                                         weight_std=args.weight_std),
+                stuck_pot=args.stuck_pot, lap=lap, measured=measured)
     verdict = 'ok' if row['median'] <= GOAL else 'over'
     median, p99, tick = (row[key] * 1e6 for key in ('median', 'p99', 'tick_median'))
     print(f'cbha: estimator update median {median:.0f} us, p99 {p99:.0f} us (goal '
           f'{GOAL * 1e6:.0f} us: {verdict}); inverse tick median {tick:.0f} us '
           f'(ratio {median / tick:.2f})')
     rms, open_rms = row['rms'] * 1e3, row['open_loop_rms'] * 1e3
+    bias = ', '.join(f'{v * 1e3:.2f}' for v in row['bias'])
     print(f'plant: stiffness +-{args.stiffness_error:.0%}, gains +-{args.gain_error:.0%}, '
           f'payload {args.payload:g} kg, pot noise {args.noise * 1e3:g} mm: estimated tip RMS '
-          f'{rms:.2f} mm, open-loop model RMS {open_rms:.2f} mm, {row["degraded"]} of '
-          f'{row["updates"]} updates degraded ({time.perf_counter() - started:.0f} s)')
+          f'{rms:.2f} mm (mean error {bias} mm), open-loop model RMS {open_rms:.2f} mm, '
+          f'{row["degraded"]} of '
+          f'{row["updates"]} updates degraded, payload {row["payload"]:.4f} kg, weight error '
+          f'{row["weight"]:.4f} kg ({time.perf_counter() - started:.0f} s)')
     if args.json:
         with open(args.json, 'w') as handle:
             json.dump(row, handle, indent=1)

@@ -2,9 +2,9 @@
 Compiled update of the shape estimator on string-potentiometer lengths, one entry per update.
 
 The unknowns ``z`` (scaled: ``x = scale z``) are the effective actuation's gain and offset about
-the measured pressures, ``λ = (1 + g) ∘ p + δ``, and optionally a weight ``μ`` (a payload mass
-at the last frame, or an error of the arm's own weight spread as its lumped masses: the wrench
-of one kg is ``load``); they follow a random walk. At the current frames one linearisation of the
+the measured pressures, ``λ = (1 + g) ∘ p + δ``, and optionally up to two weights ``μ`` (an
+error of the arm's own weight spread as its lumped masses, a payload mass at the last frame: the
+wrench of one kg of each is a row of ``load``); they follow a random walk. At the current frames one linearisation of the
 equilibrium (the control tick's :func:`cbha_inverse.core._kernels.tick.linearise_tick`) gives
 ``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s``
 (:func:`cbha_inverse.core._kernels.cables.routing_lengths_into`) the lengths after the Newton
@@ -34,12 +34,11 @@ STATE_ROWS = 4
 # rows of the actuator vectors (PRESSURE_ROWS, m): measured pressures, those of the last update
 PRESSURE, LAST_PRESSURE = 0, 1
 PRESSURE_ROWS = 2
-# entries of the scalars (SCALARS,): payload of the linearisation [kg], whether a payload is
-# estimated, relative walk of the offset per measured pressure change, outlier gate [sigma],
-# gate on (1) / off (0), payload column solved by the band factor (1) or given (0), largest
-# frame rotation of a step [rad]
-MASS, HAS_MASS, CHANGE_WALK, GATE_SIGMA, GATE, SOLVE_MASS, MAX_ROTATION = 0, 1, 2, 3, 4, 5, 6
-SCALARS = 7
+# entries of the scalars (SCALARS,): relative walk of the offset per measured pressure change,
+# outlier gate [sigma], gate on (1) / off (0), mass columns solved by the band factor (1) or
+# given (0), largest frame rotation of a step [rad]
+CHANGE_WALK, GATE_SIGMA, GATE, SOLVE_MASS, MAX_ROTATION = 0, 1, 2, 3, 4
+SCALARS = 5
 
 
 @numba.njit(cache=True)
@@ -127,7 +126,7 @@ def kalman_lengths(h, pots, state, covariance, stuck, active, work):
 
 @numba.njit(cache=True)
 def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
-                  covariance, pressures, scalars, load, base_external, mass_columns,
+                  covariance, pressures, scalars, masses, load, base_external, mass_columns,
                   mass_rhs, mass_effectors, stuck, active, free_step, effector_w, effector_positions,
                   tip_covariance, work):
     """
@@ -148,30 +147,33 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
         Per-pot rows (see :func:`kalman_lengths`; ``LENGTH0`` receives ``ℓ0``).
     jacobian : (c, 6n) ndarray
         Receives ``J_s``.
-    moved : (c, m + 2) ndarray
-        Receives ``J_s K⁻¹ [r, J_aᵀ]`` and, last, ``J_s K⁻¹ J_μᵀ`` [m, m/Pa, m/kg].
+    moved : (c, m + 1 + w) ndarray
+        Receives ``J_s K⁻¹ [r, J_aᵀ, J_μᵀ]`` [m, m/Pa, m/kg] (``w`` weight unknowns, 0-2).
     h : (c, u) ndarray
         Receives ``dℓ/dz``.
     state : (STATE_ROWS, u) ndarray
         ``Z``, ``WALK``, ``SCALE`` and ``GAIN_OF`` (1 for the gains, 0 otherwise) of the
-        unknowns ``(g, δ[, μ])``.
+        unknowns ``(g, δ, μ)`` (``u = 2 m + w``).
     covariance : (u, u) ndarray
         Covariance of ``z``.
     pressures : (PRESSURE_ROWS, m) ndarray  [Pa]
         Measured pressures (zero when none) and those of the previous update.
     scalars : (SCALARS,) ndarray
         See the module's rows.
-    load : (6n,) ndarray  [N/kg]
-        External wrench of one kg of the extra weight (the payload at the last frame, or the
-        arm's own weight's distribution).
+    masses : (w,) ndarray  [kg]
+        The weights of the linearisation (in and out: those after the step).
+    load : (w, 6n) ndarray  [N/kg]
+        External wrench of one kg of each weight unknown (the arm's own weight's distribution,
+        the payload at the last frame).
     base_external : (6n,) ndarray  [N, N*m]
-        External wrenches without the payload.
-    mass_columns, mass_rhs : (6n, 2) ndarray
-        Workspace: ``K⁻¹ [r, J_μᵀ]`` (the payload column solved here with ``SOLVE_MASS``, else
+        External wrenches without the weight unknowns.
+    mass_columns, mass_rhs : (6n, 1 + w) ndarray
+        Workspace: ``K⁻¹ [r, J_μᵀ]`` (the weight columns solved here with ``SOLVE_MASS``, else
         given) and ``[r, J_μᵀ]``.
     mass_effectors : tuple
-        Workspace of the payload's projection on the effectors: ``w`` (3k, 1), ``w_aa``
-        (1, 1), ``offset`` (3k,), ``moved`` (3k, 2), ``levers`` (k, 3), ``previous`` (1,).
+        Workspace of the weights' projection on the effectors: ``w`` (3k, w), ``w_aa``
+        (w, w), ``offset`` (3k,), ``moved`` (3k, 1 + w), ``levers`` (k, 3), ``previous``
+        (w,).
     stuck, active : (c,) bool ndarray
         Pots left out; receives the pots used.
     free_step : (6n,) ndarray
@@ -196,14 +198,14 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
     size = external.size
     for row in range(size):
         external[row] = base_external[row]
-    if scalars[HAS_MASS] > 0.0:
+    for a in range(masses.size):
         for row in range(size):
-            external[row] += scalars[MASS] * load[row]
+            external[row] += masses[a] * load[a, row]
     info, _ = tick.linearise_tick(buffers, cholesky)
     if info != 0:
         return info
     estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, state,
-                                covariance, pressures, scalars, load, mass_columns,
+                                covariance, pressures, scalars, masses, load, mass_columns,
                                 mass_rhs, mass_effectors, stuck, active, free_step,
                                 effector_w, effector_positions, tip_covariance, work)
     return 0
@@ -211,7 +213,7 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
 
 @numba.njit(cache=True)
 def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, state,
-                                covariance, pressures, scalars, load, mass_columns,
+                                covariance, pressures, scalars, masses, load, mass_columns,
                                 mass_rhs, mass_effectors, stuck, active, free_step,
                                 effector_w, effector_positions, tip_covariance, work):
     """:func:`estimate_tick` after its linearisation (the tick data hold a solved one)."""
@@ -221,17 +223,19 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
     effector_frames, effector_offsets = buffers.effector_frames, buffers.effector_offsets
     size, m = solved.shape[0], solved.shape[1] - 1
     c, u = h.shape
-    has_mass = scalars[HAS_MASS] > 0.0
+    n_mass = masses.size
     routing_lengths_into(positions, rotations, routing[0], routing[1], routing[2], routing[3],
                          routing[4], routing[5], pots[LENGTH0], jacobian, routing[6])
-    if has_mass:
+    if n_mass:
         for row in range(size):
             mass_columns[row, 0] = solved[row, 0]
             mass_rhs[row, 0] = rhs[row, 0]
-            mass_rhs[row, 1] = load[row]
+            for a in range(n_mass):
+                mass_rhs[row, 1 + a] = load[a, row]
         if scalars[SOLVE_MASS] > 0.0:
             for row in range(size):
-                mass_columns[row, 1] = mass_rhs[row, 1]
+                for a in range(n_mass):
+                    mass_columns[row, 1 + a] = mass_rhs[row, 1 + a]
             factor = band[:-1].reshape((size, (band.size - 1) // size))
             band_solve(factor, mass_columns[:, 1:])
         w_mass, w_aa, offset, levers_moved, levers, previous = mass_effectors
@@ -239,14 +243,14 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
                                effector_offsets, previous, w_mass, w_aa, offset, levers_moved,
                                levers)
     for i in range(c):
-        for j in range(m + 2):
+        for j in range(m + 1 + n_mass):
             acc = 0.0
             if j <= m:
                 for row in range(size):
                     acc += jacobian[i, row] * solved[row, j]
-            elif has_mass:
+            else:
                 for row in range(size):
-                    acc += jacobian[i, row] * mass_columns[row, 1]
+                    acc += jacobian[i, row] * mass_columns[row, j - m]
             moved[i, j] = acc
     # ℓ = ℓ0 + J_s K⁻¹ r + W_sa (λ(z) - λ_lin) + W_sμ (μ - μ_lin), λ(z) = (1 + g) ∘ p + δ
     lam = vectors[tick.ACTUATION]
@@ -258,9 +262,9 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
             acc += moved[i, 1 + j] * (p[j] - lam[j])
             h[i, j] = moved[i, 1 + j] * p[j] * scale[j]
             h[i, m + j] = moved[i, 1 + j] * scale[m + j]
-        if has_mass:
-            acc -= moved[i, m + 1] * scalars[MASS]
-            h[i, 2 * m] = moved[i, m + 1] * scale[2 * m]
+        for a in range(n_mass):
+            acc -= moved[i, m + 1 + a] * masses[a]
+            h[i, 2 * m + a] = moved[i, m + 1 + a] * scale[2 * m + a]
         pots[BASE, i] = acc
     # the offset's walk grows with the measured change of the pressures
     for j in range(m):
@@ -269,24 +273,25 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
         pressures[LAST_PRESSURE, j] = p[j]
     work[u + 1] = scalars[GATE_SIGMA] if scalars[GATE] > 0.0 else 0.0
     kalman_lengths(h, pots, state, covariance, stuck, active, work)
-    # the Newton step of the same factorisation to the new actuation and payload
+    # the Newton step of the same factorisation to the new actuation and weights
     change = vectors[tick.CHANGE]
     z = state[Z]
     for j in range(m):
         new = (1.0 + z[j] * scale[j]) * p[j] + z[m + j] * scale[m + j]
         change[j] = new - lam[j]
         lam[j] = new
-    mass_change = z[2 * m] * scale[2 * m] - scalars[MASS] if has_mass else 0.0
     for row in range(size):
-        free_step[row] = solved[row, 0] + (mass_columns[row, 1] * mass_change if has_mass
-                                           else 0.0)
+        acc = solved[row, 0]
+        for a in range(n_mass):
+            acc += mass_columns[row, 1 + a] * (z[2 * m + a] * scale[2 * m + a] - masses[a])
+        free_step[row] = acc
     n = size // 6
     increments = work[:6 * n].reshape((n, 6))
     rotation_work = work[6 * n:6 * n + 21].reshape((7, 3))
     apply_linear_step_into(positions, rotations, free_step, solved[:, 1:], change,
                            scalars[MAX_ROTATION], increments, rotation_work)
-    if has_mass:
-        scalars[MASS] += mass_change
+    for a in range(n_mass):
+        masses[a] = z[2 * m + a] * scale[2 * m + a]
     effector_points_into(positions, rotations, effector_frames, effector_offsets,
                          effector_positions)
     last = w_ea.shape[0] - 3
@@ -294,8 +299,8 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
         for j in range(m):
             effector_w[i, j] = w_ea[last + i, j] * p[j] * scale[j]
             effector_w[i, m + j] = w_ea[last + i, j] * scale[m + j]
-        if has_mass:
-            effector_w[i, 2 * m] = mass_effectors[0][last + i, 0] * scale[2 * m]
+        for a in range(n_mass):
+            effector_w[i, 2 * m + a] = mass_effectors[0][last + i, a] * scale[2 * m + a]
     for i in range(3):
         for k in range(3):
             acc = 0.0

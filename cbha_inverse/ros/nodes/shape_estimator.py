@@ -76,7 +76,10 @@ class ShapeEstimatorParams:
                                low=0.0, high=10.0)
     weight_std: float = param(0.01, "prior std of an error of the arm's own weight [kg] (a "
                               'stiffness error sags the arm as a weight error does; 0: none; '
-                              'not with payload_std, which takes its place)', low=0.0, high=10.0)
+                              'not with payload_std: see payload_weight_std)', low=0.0, high=10.0)
+    payload_weight_std: float = param(0.0, "with payload_std: prior std of the arm's own weight "
+                                      'error estimated with the payload [kg] (0: none)',
+                                      low=0.0, high=10.0)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
                                  low=1.0, high=1.0e6)
     stuck_window: int = param(25, 'updates over which a stuck pot is looked for (0: never)',
@@ -117,7 +120,7 @@ class ShapeEstimatorNode(Node):
                 offset_walk_std=p.offset_walk_std, actuation_walk_std=p.actuation_walk_std,
                 predict_pressure_change=p.predict_pressure_change,
                 payload_std=p.payload_std or None,
-                weight_std=None if p.payload_std else (p.weight_std or None),
+                weight_std=(p.payload_weight_std if p.payload_std else p.weight_std) or None,
                 outlier_sigma=p.outlier_sigma,
                 stuck_window=p.stuck_window))
         except (ValueError, FileNotFoundError, KeyError) as exc:
