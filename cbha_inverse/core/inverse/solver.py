@@ -249,8 +249,9 @@ class InverseSolver:
             return self._positions, self._rotations
         data = self._data
         positions, rotations = self._positions.copy(), self._rotations.copy()
-        apply_linear_step_into(positions, rotations, *data.step_arguments[2:4], data.change(),
-                               *data.step_arguments[5:])
+        apply_linear_step_into(positions, rotations, data.solved[:, 0], data.solved[:, 1:],
+                               data.change(), data.max_rotation, data.increments,
+                               data.rotation_work)
         return positions, rotations
 
     def _materialise(self):

@@ -81,9 +81,8 @@ class TickData:
     buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
         Every array above and the model's constant arrays, the one argument of the compiled
         entries (:mod:`cbha_inverse.core._kernels.tick`).
-    step_arguments : tuple
-        The arguments of :func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`
-        for the pending step (frames, ``K⁻¹ r``, ``K⁻¹ J_aᵀ``, the change, workspace).
+    increments, rotation_work : ndarray
+        Workspace of :func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`.
 
     """
 
@@ -127,16 +126,13 @@ class TickData:
             terms = placeholder_evaluation(self.rhs)
         self.external = terms[EVALUATION_FIELDS.index('external')]
         self.band = terms[EVALUATION_FIELDS.index('band')]
-        self.increments, rotation_work = np.zeros((n, 6)), np.zeros((7, 3))
+        self.increments, self.rotation_work = np.zeros((n, 6)), np.zeros((7, 3))
         self.buffers = make_tick_buffers(
             self.positions, self.rotations, self.vectors, *terms, self.solved,
             self.matrices_stack, self.effector_matrices, self.gaps, np.zeros((3 * k, m + 1)),
             frames, offsets, np.zeros((k, 3)), weights, self.flags, self.mask,
-            np.zeros(m, dtype=np.int64), self.increments, rotation_work,
+            np.zeros(m, dtype=np.int64), self.increments, self.rotation_work,
             self.effector_positions, int(max_iterations), 1e-6, max_rotation)
-        self.step_arguments = (self.positions, self.rotations, self.solved[:, 0],
-                               self.solved[:, 1:], self.vectors[rows.CHANGE], max_rotation,
-                               self.increments, rotation_work)
 
     @functools.cached_property
     def linearise_entry(self):
