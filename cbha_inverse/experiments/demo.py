@@ -27,7 +27,8 @@ beside the direct-feedback runs.
 estimates the tip from the pots and the measured pressures (``docs/proprioception.md``) and
 ``inverse_solver`` closes the loop on ``tip/estimated``; the run is scored against ``tip/true``
 as the others, and its second line gives the estimate's own RMS against ``tip/true``.
-``--plant-payload`` hangs a payload at the plant's tip that no model knows.
+``--plant-payload`` hangs a payload at the plant's tip that no model knows; ``--stuck-pot``
+freezes one plant pot halfway through the lap (the estimator drops it: ``degraded``).
 
 ``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``all``, ... or a YAML file of
 holds) adds an identification run: ``cbha_sim`` and ``cbha_excite`` alone, recorded
@@ -50,7 +51,8 @@ from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.experiments.proprio import (add_plant_pot_arguments, bag_points,
-                                              estimate_error, plant_pot_parameters)
+                                              estimate_error, plant_pot_parameters,
+                                              proprio_sim_parameters)
 from cbha_inverse.identify.excitation import make_program
 from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
@@ -378,7 +380,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         solver_extra = {'loop_gain': args.stereo_loop_gain}
         waited.append('stereo_tracker')
     if feedback == 'proprio':
-        sim_extra = {'tip_output': 'none'}
+        sim_extra = proprio_sim_parameters(args, trajectory)
         solver_extra = {'feedback_topic': 'tip/estimated', 'payload_topic': (
             'payload/estimated' if args.estimate_payload else '')}
         waited.append('shape_estimator')
