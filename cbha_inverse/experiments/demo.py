@@ -5,7 +5,8 @@ For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: t
 tip/true, tip/measured, tip/estimated, payload/estimated, pressure_command, pressure_measured,
 string_pots, /diagnostics), then ``cbha_sim``, ``inverse_solver`` (``--realtime-priority``) and
 ``trajectory`` as separate processes (as ``ros2 run`` would, with the installed params files
-plus a per-run override file), runs one lap, stops them with SIGINT and prints one line:
+plus a per-run override file; the solver over UDP on 127.0.0.1, ``--solver-transport``:
+``cbha_inverse.ros.common.transport``), runs one lap, stops them with SIGINT and prints one line:
 tracking RMS and max (plant tip vs target, moving part: ``cbha_bag eval``), the solver's tick
 and target-to-command latency (callback entry to publish; its CPU time: the rest is waiting for
 a core), median / p99. It writes ``demo.png``, ``summary.json`` and per run params, logs, bag.
@@ -58,6 +59,7 @@ from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
 from cbha_inverse.robot.safety import command_bounds
 from cbha_inverse.robot.trajectory import make_trajectory
+from cbha_inverse.ros.common.transport import loopback_udp_environment, node_environment
 from cbha_inverse.scene import load_scene
 import numpy as np
 import yaml
@@ -136,25 +138,14 @@ def parse_args(argv):
                         help='cbha_excite ramp_time [s]')
     parser.add_argument('--realtime-priority', type=int, default=50,
                         help="inverse_solver's SCHED_FIFO priority (0: normal scheduler)")
+    parser.add_argument('--solver-transport', choices=('udp-loopback', 'default'),
+                        default='udp-loopback', help="inverse_solver's DDS transport: UDP on "
+                        '127.0.0.1 alone (config/fastdds/udp_loopback.xml), or the default '
+                        '(shared memory and UDP)')
     parser.add_argument('--domain', type=int, default=None,
                         help='ROS_DOMAIN_ID for the run (default: the environment, else a free '
                         'one from domain_coordinator)')
     return parser.parse_args(argv)
-
-
-def _environment(domain):
-    """Return the children's environment: isolated DDS, no wheel bootstrap flag."""
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    if domain is not None:
-        env['ROS_DOMAIN_ID'] = str(domain)
-    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
-    env['PYTHONUNBUFFERED'] = '1'
-    # a node that does not stop is sent SIGABRT before SIGKILL (_stop): its log then ends
-    # with the Python stack of every thread
-    env['PYTHONFAULTHANDLER'] = '1'
-    return env
 
 
 def _write_params(path, values):
@@ -163,9 +154,10 @@ def _write_params(path, values):
     return path
 
 
-def _start(node, run_dir, overrides, env):
+def _start(node, run_dir, overrides, env, transport='default'):
     """Start one node process with its installed params file and the run's overrides."""
     params = _write_params(run_dir / f'{node}.yaml', overrides)
+    env = loopback_udp_environment(env) if transport == 'udp-loopback' else env
     log = open(run_dir / f'{node}.log', 'w')
     process = subprocess.Popen(
         [sys.executable, '-m', MODULES[node], '--ros-args', '-r', f'__ns:={NAMESPACE}',
@@ -395,7 +387,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
         **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
         'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,
-        **solver_extra}, env)
+        **solver_extra}, env, args.solver_transport)
     try:
         # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
         # clock at 0 until the solver, this recorder and the bag recorder subscribe to it
@@ -517,7 +509,7 @@ def main(argv=None):
             domain = reservation.__enter__()
         except ImportError:
             domain = None
-    env = _environment(domain)
+    env = node_environment(domain)
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE',
                                            'FASTDDS_BUILTIN_TRANSPORTS')})
     if domain is not None:
