@@ -129,19 +129,6 @@ def test_the_kernels_one_by_one_give_the_fused_ticks(name, every, monkeypatch):
         assert got.residual_norm == pytest.approx(expected.residual_norm, rel=1e-9)
 
 
-def test_between_linearisations_the_effector_positions_are_the_linear_prediction():
-    """relinearize_every 5: the compiled tick writes targets + the predicted gap (paper eq. 11)."""
-    scene = load_scene('cbha')
-    solver = scene.make_inverse_solver(relinearize_every=5)
-    for target in _circle(scene, 12, radius=0.002):
-        result = solver.step(target)
-        assert result.status in ('solved', 'saturated')
-        np.testing.assert_array_equal(result.effector_positions,
-                                      target + solver._data.gap.reshape(-1, 3))
-        # the result's own copy, not the tick data's buffer
-        assert not np.shares_memory(result.effector_positions, solver._data.effector_positions)
-
-
 def test_a_result_of_the_tick_is_the_constructors_result():
     """TickResult.of_tick builds the same frozen result as TickResult(...)."""
     fields = (np.arange(3.0), np.ones((1, 3)), 'solved', 'solved', 1, np.zeros(3, dtype=bool),
