@@ -197,3 +197,18 @@ def test_a_tick_without_any_factorization_holds_the_actuation(monkeypatch):
     np.testing.assert_array_equal(held.actuation, first.actuation)
     np.testing.assert_array_equal(solver.state.positions, state.positions)
     assert np.isfinite(held.effector_positions).all()
+
+
+def test_between_linearisations_the_effector_positions_are_the_linear_prediction():
+    """relinearize_every 5: the compiled tick writes targets + the predicted gap (paper eq. 11)."""
+    scene = load_scene('cbha')
+    solver = scene.make_inverse_solver(relinearize_every=5)
+    phase = 2.0 * np.pi * np.arange(8) / 200
+    for c, s in zip(np.cos(phase), np.sin(phase)):
+        target = scene.workspace_center + np.array([0.0, 0.002 * c, 0.002 * s])
+        result = solver.step(target)
+        assert result.status in ('solved', 'saturated')
+        np.testing.assert_array_equal(result.effector_positions,
+                                      target + solver._data.gap.reshape(-1, 3))
+        # the result's own copy, not the tick data's buffer
+        assert not np.shares_memory(result.effector_positions, solver._data.effector_positions)

@@ -187,7 +187,8 @@ def solve_tick(targets, buffers, apply_step):
     (:func:`~cbha_inverse.core._kernels.projection.tick_outcome_into`) and the binding bounds
     (:func:`~cbha_inverse.core._kernels.qp.bounds_binding_into`). With ``apply_step`` the
     Newton step of the factorization (:func:`apply_pending_step`) moves the frames and the
-    effector positions of the new state are written.
+    effector positions of the new state are written; without it, those the linear model
+    predicts (the targets plus the predicted gaps).
 
     Parameters
     ----------
@@ -197,8 +198,8 @@ def solve_tick(targets, buffers, apply_step):
         The tick's buffers as :func:`linearise_tick` left them. Writes ``DELTA_FREE``, the QP
         vectors, ``X``, ``PROPOSED``, ``GAP``, ``STATE``, ``free`` (on return the binding
         bounds, ``saturated``, when the QP is solved) and, unless the code is
-        :data:`REJECTED` or the QP failed, ``ACTUATION``; with ``apply_step`` the frames and
-        ``effector_positions``.
+        :data:`REJECTED` or the QP failed, ``ACTUATION`` and ``effector_positions``; with
+        ``apply_step`` the frames.
     apply_step : bool
         Apply the linear step now (``relinearize_every`` 1).
 
@@ -249,10 +250,16 @@ def solve_tick(targets, buffers, apply_step):
     for j in range(free.size):
         binding = binding or free[j]
     vectors[ACTUATION, :] = proposed
+    effector_positions = buffers.effector_positions
     if apply_step:
         apply_pending_step(buffers)
         effector_points_into(buffers.positions, buffers.rotations, buffers.effector_frames,
-                             buffers.effector_offsets, buffers.effector_positions)
+                             buffers.effector_offsets, effector_positions)
+    else:
+        # the linear model's prediction (paper eq. 11): the targets plus the predicted gaps
+        for e in range(k):
+            for i in range(3):
+                effector_positions[e, i] = targets[e, i] + gap[3 * e + i]
     return SOLVED, iterations, largest_gap, largest_move, binding
 
 

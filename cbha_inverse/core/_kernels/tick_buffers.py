@@ -42,7 +42,7 @@ Fields (:data:`FIELDS`, in the order of :func:`make_tick_buffers`; stacked rows 
     free (m,) bool                                         QP workspace, then the binding bounds
     qp_index (m,) int                                      QP workspace
     increments (n, 6), rotation_work (7, 3)                workspace of the Newton step
-    effector_positions (k, 3) [m]                          effector positions after the step
+    effector_positions (k, 3) [m]                          effector positions after the tick
     max_iterations int, tolerance float                    active-set limit, binding tolerance
     max_rotation float [rad]                               largest frame rotation of a step
 """

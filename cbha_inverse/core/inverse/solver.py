@@ -366,7 +366,7 @@ class InverseSolver:
             if code == SOLVED:
                 return self._finish(targets, 'saturated' if binding else 'solved',
                                     'solved', iterations, data.mask.copy(), largest_gap,
-                                    largest_move, apply_step, warnings, t_start, t_linearised)
+                                    largest_move, True, warnings, t_start, t_linearised)
             # the active set did not converge: proxsuite (status checked) takes over; it has
             # not seen this Hessian
             self._active_set.reset()
@@ -405,8 +405,8 @@ class InverseSolver:
         """
         Close a solved tick: age of the linearisation, Newton steps, effector positions, result.
 
-        ``positions_written``: the compiled tick applied the step and wrote the effector
-        positions into the tick data.
+        ``positions_written``: the compiled tick wrote the effector positions into the tick
+        data (of the new state, or between linearisations the linear model's prediction).
         """
         data = self._data
         if self._age < self.options.relinearize_every and largest_move > _FAST_MOVE:
@@ -426,7 +426,8 @@ class InverseSolver:
         else:
             # between linearisations the tick is the linear model of paper eq. 11
             self._pending = True
-            effector_positions = targets + data.gap.reshape(-1, 3)
+            effector_positions = (data.effector_positions.copy() if positions_written
+                                  else targets + data.gap.reshape(-1, 3))
         t_end = time.perf_counter()
         timings = {'assembly': t_linearised - t_start, 'factor': 0.0, 'projection': 0.0,
                    'qp': t_qp - t_linearised, 'update': t_end - t_qp, 'total': t_end - t_start}

@@ -65,7 +65,8 @@ class TickData:
     state : (m,) int8 ndarray
         The active set (warm start of the exact QP).
     effector_positions : (k, 3) ndarray  [m]
-        Effector positions of the state after a compiled tick that applied its step.
+        Effector positions after a solved compiled tick: of the state when it applied its
+        step, else the linear model's prediction.
     matrices : cbha_inverse.core.inverse.qp.QPMatrices
         The current QP matrices, as views.
     rhs : (6n, m + 1) ndarray
