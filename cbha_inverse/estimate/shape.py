@@ -10,7 +10,9 @@ equilibrium (paper eq. 9, the control tick's
 lengths after the Newton step are linear in the actuation through ``W_sa = J_s K⁻¹ J_aᵀ`` (the
 pots' ``W_ea``, eq. 11). The unknowns are not the actuation itself but its error about the measured
 pressures, ``λ = (1 + g) ∘ p + δ`` (a gain and an offset per actuator: the model's error in
-effective area and stiffness), and ``μ``; they change slowly, so they follow a small random walk
+effective area and stiffness), and ``μ`` (optionally also a stiffness error ``σ_j`` per chain
+section, which scales that section's links in the linearisation itself, as a scene's
+``calibration.section_stiffness`` does); they change slowly, so they follow a small random walk
 and each update is a Kalman step that averages the pot noise over many updates (the compiled
 :func:`cbha_inverse.core._kernels.estimation.estimate_tick`, one call per update over the buffers
 of :class:`cbha_inverse.estimate.data.EstimatorData`). The offset's walk grows with the measured
@@ -38,12 +40,15 @@ from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.estimate.checks import check_vector, StuckDetector
 from cbha_inverse.estimate.data import EstimatorData
+from cbha_inverse.scene.segments import link_sections
 import numpy as np
 
-# scale of the unknowns inside the filter: a gain of 1, 10 kPa of offset, 0.1 kg of payload
+# scale of the unknowns inside the filter: a gain of 1, 10 kPa of offset, 0.1 kg of payload,
+# a tenth of a section's stiffness
 _GAIN_SCALE = 1.0
 _OFFSET_SCALE = 1.0e4
 _MASS_SCALE = 0.1
+_SECTION_SCALE = 0.1
 
 
 @dataclass(frozen=True)
@@ -91,6 +96,15 @@ class EstimatorOptions:
         and one at its tip differently as the pose changes.
     weight_walk_std : float  [kg]
         Random walk of the weight error per update.
+    section_stiffness_std : float or None  [-]
+        Prior standard deviation of a relative stiffness error ``σ_j`` of every chain section
+        (the links of section ``j`` are ``1 + σ_j`` times as stiff as the model's): a
+        stiffer inner and a softer outer section distribute the sag between and within the
+        sections in a way no weight or tip mass reproduces. The linearisation is that of the
+        scaled chain (the residual's link forces and the tangent), the pots' column of
+        ``σ_j`` is ``J_s K⁻¹ ∂r/∂σ_j``; None: no such unknown. Needs the scene's sections.
+    section_stiffness_walk_std : float  [-]
+        Random walk of each ``σ_j`` per update.
     outlier_sigma : float
         A pot whose innovation exceeds this many standard deviations is dropped for the update.
     stuck_window : int
@@ -129,6 +143,8 @@ class EstimatorOptions:
     payload_walk_std: float = 1.0e-4
     weight_std: float = None
     weight_walk_std: float = 1.0e-6
+    section_stiffness_std: float = None
+    section_stiffness_walk_std: float = 1.0e-5
     outlier_sigma: float = 8.0
     stuck_window: int = 25
     stuck_tolerance: float = 2.0e-5
@@ -172,6 +188,9 @@ class ShapeEstimate(NamedTuple):
         Estimated error of the arm's own weight (0 without that unknown).
     seconds : float
         Time of the update.
+    section_stiffness : (s,) ndarray  [-]
+        Estimated stiffness factor ``1 + σ_j`` of every chain section, the estimator's
+        ``section_names`` order (empty without that unknown).
 
     """
 
@@ -187,6 +206,7 @@ class ShapeEstimate(NamedTuple):
     payload: float
     weight: float
     seconds: float
+    section_stiffness: np.ndarray
 
     @property
     def degraded(self):
@@ -222,20 +242,46 @@ class ShapeEstimator:
         Gravity on the lumped masses.
     options : EstimatorOptions, optional
         The options.
+    sections : dict, optional
+        The chain's sections, ``name -> (first link index, count)`` in chain order
+        (:attr:`cbha_inverse.scene.scene.Scene.section_links`); needed by
+        ``section_stiffness_std``.
+
+    Attributes
+    ----------
+    section_names : tuple of str
+        The sections with a stiffness unknown (empty without).
 
     """
 
-    def __init__(self, model, actuators, effectors, sensors, gravity=None, options=None):
+    def __init__(self, model, actuators, effectors, sensors, gravity=None, options=None,
+                 sections=None):
         """Precompute the evaluator and the buffers, and start at rest."""
         self.options = options or EstimatorOptions()
         opts = self.options
         self.model, self.actuators, self.effectors, self.sensors = (model, actuators, effectors,
                                                                     sensors)
-        self._system = EquilibriumSystem(model, actuators,
-                                         external_wrenches(model, gravity=gravity).reshape(-1))
+        external = external_wrenches(model, gravity=gravity).reshape(-1)
+        self.section_names, section_arguments = (), None
+        if opts.section_stiffness_std is None:
+            self._system = EquilibriumSystem(model, actuators, external)
+        else:
+            if not sections:
+                raise ValueError('a section stiffness unknown needs the chain sections (a '
+                                 'segments scene)')
+            self.section_names = tuple(sections)
+            # the links' stiffness the linearisation reads: the model's scaled by 1 + σ_j of
+            # each link's section before every update (a read-only view for the kernels)
+            stiffness = np.array(model.stiffnesses, dtype=float)
+            view = stiffness.view()
+            view.setflags(write=False)
+            self._system = EquilibriumSystem(model, actuators, external, stiffness=view)
+            section_arguments = (link_sections(sections, model.n_links), model.stiffnesses,
+                                 stiffness)
         m = self._m = actuators.n_actuators
-        # the weight unknowns, in this order: the arm's own weight error, a payload at the last
-        # frame (the wrench of one kg of each, its prior and walk std)
+        # the load unknowns, in this order: the arm's own weight error, a payload at the last
+        # frame (the wrench of one kg of each), the sections' stiffness errors (rows the update
+        # writes); their prior and walk std
         loads, self._mass_stds, self._mass_index = [], [], {}
         for name, std, walk in (('weight', opts.weight_std, opts.weight_walk_std),
                                 ('payload', opts.payload_std, opts.payload_walk_std)):
@@ -252,12 +298,18 @@ class ShapeEstimator:
             self._mass_index[name] = len(loads)
             loads.append(load)
             self._mass_stds.append((std, walk))
+        n_weights = len(loads)
+        for _ in self.section_names:
+            loads.append(np.zeros(self._system.size))
+            self._mass_stds.append((opts.section_stiffness_std,
+                                    opts.section_stiffness_walk_std))
         self._n_mass = len(loads)
         load = np.array(loads).reshape(self._n_mass, self._system.size)
         self._scale = np.concatenate([np.full(m, _GAIN_SCALE), np.full(m, _OFFSET_SCALE),
-                                      np.full(self._n_mass, _MASS_SCALE)])
+                                      np.full(n_weights, _MASS_SCALE),
+                                      np.full(len(self.section_names), _SECTION_SCALE)])
         self._data = EstimatorData(self._system, effectors, sensors, self._scale, load,
-                                   opts.max_rotation_step)
+                                   opts.max_rotation_step, section_arguments)
         self._data.scalars[kernel.CHANGE_WALK] = opts.pressure_change_walk
         self._data.scalars[kernel.GATE_SIGMA] = opts.outlier_sigma
 
@@ -304,7 +356,7 @@ class ShapeEstimator:
         if scene.sensors is None:
             raise ValueError(f'scene {scene.name!r} declares no sensors (a `sensors` block)')
         return cls(scene.model, scene.actuators, scene.effectors, scene.sensors,
-                   gravity=scene.gravity, options=options)
+                   gravity=scene.gravity, options=options, sections=scene.section_links)
 
     def reset(self, state=None, actuation=None):
         """
@@ -519,8 +571,7 @@ class ShapeEstimator:
             np.full((3, 3), np.nan) if last is None else last.tip_covariance,
             np.full(c, np.nan), np.full(c, np.nan), np.zeros(c, dtype=bool),
             0 if last is None else last.rank, data.actuation.copy(), self._payload(),
-            self._weight_error(),
-            time.perf_counter() - started)
+            self._weight_error(), time.perf_counter() - started, self._section_stiffness())
 
     def _mass(self, name):
         """Return the estimated weight unknown ``name`` [kg] (0 without it)."""
@@ -535,15 +586,17 @@ class ShapeEstimator:
         """Return the estimated error of the arm's own weight [kg] (0 without that unknown)."""
         return self._mass('weight')
 
+    def _section_stiffness(self):
+        """Return the estimated stiffness factor ``1 + σ_j`` of every section, (s,) [-]."""
+        return 1.0 + self._data.masses[self._n_mass - len(self.section_names):]
+
     def _rank(self, active):
         """Return the numerical rank of the active pots' whitened ``W_sx`` (cached per set)."""
         key = active.tobytes()
         if key not in self._ranks:
             m = self._m
             w_sx = self._data.moved[:, 1:1 + m + self._n_mass]
-            whitened = (w_sx * np.concatenate([np.full(m, _OFFSET_SCALE),
-                                               np.full(self._n_mass, _MASS_SCALE)])
-                        )[active] / self.sensors.noise_std[active, None]
+            whitened = (w_sx * self._scale[m:])[active] / self.sensors.noise_std[active, None]
             self._ranks[key] = (int(np.linalg.matrix_rank(
                 whitened, tol=1e-9 * max(1.0, np.abs(whitened).max()))) if active.any() else 0)
         return self._ranks[key]
@@ -593,4 +646,4 @@ class ShapeEstimator:
                              data.tip_covariance.copy(), lengths,
                              lengths - data.pots[kernel.PREDICTED], active, rank,
                              data.actuation.copy(), self._payload(), self._weight_error(),
-                             seconds)
+                             seconds, self._section_stiffness())
