@@ -80,6 +80,9 @@ class ShapeEstimatorParams:
     payload_weight_std: float = param(0.0, "with payload_std: prior std of the arm's own weight "
                                       'error estimated with the payload [kg] (0: none)',
                                       low=0.0, high=10.0)
+    section_stiffness_std: float = param(0.0, "prior std of each chain section's relative "
+                                         'stiffness error, which scales its links in the '
+                                         'estimate (0: none)', low=0.0, high=0.9)
     outlier_sigma: float = param(8.0, 'a pot this many sigma off is dropped for the update',
                                  low=1.0, high=1.0e6)
     stuck_window: int = param(25, 'updates over which a stuck pot is looked for (0: never)',
@@ -121,6 +124,7 @@ class ShapeEstimatorNode(Node):
                 predict_pressure_change=p.predict_pressure_change,
                 payload_std=p.payload_std or None,
                 weight_std=(p.payload_weight_std if p.payload_std else p.weight_std) or None,
+                section_stiffness_std=p.section_stiffness_std or None,
                 outlier_sigma=p.outlier_sigma,
                 stuck_window=p.stuck_window))
         except (ValueError, FileNotFoundError, KeyError) as exc:
@@ -218,6 +222,8 @@ class ShapeEstimatorNode(Node):
             values.update({'rank': last.rank, 'degraded': last.degraded,
                            'tip_std_mm': last.confidence * 1e3, 'payload_kg': last.payload,
                            'weight_error_kg': last.weight})
+            values.update({f'section_stiffness.{name}': float(v) for name, v in
+                           zip(self.estimator.section_names, last.section_stiffness)})
         level = WARN if (last is not None and last.degraded) or total else OK
         message = (last.reason if last is not None and last.degraded else
                    f'{total} rejected readings' if total else
