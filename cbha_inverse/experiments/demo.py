@@ -99,9 +99,8 @@ def parse_args(argv):
                         'registration error; cbha_sim base_offset)')
     parser.add_argument('--plant-seed', type=int, default=0,
                         help='seed of the plant measurement noise (cbha_sim seed)')
-    parser.add_argument('--model-scene', default=None,
-                        help="inverse_solver's scene (default --scene), e.g. a cbha_identify "
-                        'result')
+    parser.add_argument('--model-scene', default=None, help="inverse_solver's and "
+                        "shape_estimator's scene (default --scene), e.g. cbha_identify's")
     parser.add_argument('--feedback', default='direct,stereo,proprio',
                         help='comma-separated: direct (tip/measured from the plant: every shape '
                         'and mode) and/or stereo (closed loop through rendered cameras and '
@@ -118,8 +117,7 @@ def parse_args(argv):
     parser.add_argument('--estimate-weight', type=float, default=0.0, metavar='STD',
                         help="with --estimate-payload: prior of the arm's weight error [kg]")
     parser.add_argument('--estimate-sections', type=float, default=0.0, metavar='STD',
-                        help="proprio: shape_estimator section_stiffness_std, each section's "
-                        'relative stiffness error [-], 0: none')
+                        help='proprio: shape_estimator section_stiffness_std [-], 0: none')
     parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
     parser.add_argument('--stereo-rig', default='cameras/demo_rig.yaml',
                         help='rig of the stereo runs (path, or relative to config/)')
