@@ -1,12 +1,11 @@
-"""
-The shape estimator's options and the result of one update (:mod:`cbha_inverse.estimate.shape`).
-"""
+"""The shape estimator's options and the result of one update (:mod:`~.estimate.shape`)."""
 
 from dataclasses import dataclass
 import math
 from typing import NamedTuple
 
 import numpy as np
+
 
 @dataclass(frozen=True)
 class EstimatorOptions:

@@ -61,6 +61,8 @@ class ShapeEstimatorParams:
                                    '[s] (0: never)', low=0.0, high=60.0, live=True)
     pressure_std: float = param(10000.0, 'prior std of the effective actuation about the '
                                 'measured pressure [Pa]', low=1.0, high=1.0e6)
+    gain_std: float = param(0.2, 'prior std of the gain of the effective actuation about the '
+                            'measured pressure [-]', low=1.0e-6, high=10.0)
     gain_walk_std: float = param(1.0e-4, 'random walk per update of the gain of the effective '
                                  'actuation about the measured pressure [-]', low=0.0, high=1.0)
     offset_walk_std: float = param(3.0, 'random walk per update of the offset of the effective '
@@ -119,7 +121,7 @@ class ShapeEstimatorNode(Node):
             self.scene = load_scene(p.scene)
             self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
             self.estimator = ShapeEstimator.from_scene(self.scene, EstimatorOptions(
-                pressure_std=p.pressure_std, gain_walk_std=p.gain_walk_std,
+                pressure_std=p.pressure_std, gain_std=p.gain_std, gain_walk_std=p.gain_walk_std,
                 offset_walk_std=p.offset_walk_std, actuation_walk_std=p.actuation_walk_std,
                 predict_pressure_change=p.predict_pressure_change,
                 payload_std=p.payload_std or None,
