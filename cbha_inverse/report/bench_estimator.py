@@ -223,6 +223,8 @@ def main(argv=None):
     parser.add_argument('--section-stiffness-std', type=float, default=None, metavar='STD',
                         help="estimate each chain section's relative stiffness error with this "
                         'prior std [-]')
+    parser.add_argument('--gain-std', type=float, default=EstimatorOptions.gain_std,
+                        metavar='STD', help="prior std of the actuation's gain errors [-]")
     parser.add_argument('--stuck-pot', type=int, default=None, metavar='INDEX',
                         help='freeze this pot from the middle of the measured lap on')
     parser.add_argument('--pressures-bag', metavar='BAG',
@@ -236,7 +238,7 @@ def main(argv=None):
                 stiffness_error=args.stiffness_error,
                 gain_error=args.gain_error, payload=args.payload,
                 options=EstimatorOptions(payload_std=args.estimate_payload,
-                                         weight_std=args.weight_std,
+                                         weight_std=args.weight_std, gain_std=args.gain_std,
                                          section_stiffness_std=args.section_stiffness_std),
                 stuck_pot=args.stuck_pot, lap=lap, measured=measured)
     verdict = 'ok' if row['median'] <= GOAL else 'over'
