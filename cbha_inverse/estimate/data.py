@@ -140,17 +140,21 @@ class EstimatorData:
                 raise ValueError("the system's stiffness must view the scaled stiffness")
             count = int(link_section.max()) + 1
         per_section = np.zeros((count, n, 6, 6))
+        ranges = np.zeros((count, 2), dtype=np.int64)
         for index in range(count):
             members = link_section == index
             per_section[index, members] = nominal[members]
+            links = np.flatnonzero(members)
+            if links.size != links[-1] - links[0] + 1:
+                raise ValueError(f'the links of section {index} are not consecutive')
+            ranges[index] = links[0], links.size
         # read-only as the tick's own stiffness (one compiled type of the link pass)
         nominal = np.array(nominal, dtype=float)
         for array in (nominal, per_section):
             array.setflags(write=False)
-        return (link_section, nominal, stiffness,
-                per_section, np.zeros(0), np.zeros((n, 0, 6)), np.zeros((n, 0, 6, 6)),
-                np.zeros((n, 0), dtype=np.int64), np.zeros((6 * n, 1)), np.zeros((n, 12, 12)),
-                np.zeros(link_work_size(0)))
+        return (link_section, nominal, stiffness, per_section, ranges, np.zeros(0),
+                np.zeros((n, 0, 6)), np.zeros((n, 0, 6, 6)), np.zeros((n, 0), dtype=np.int64),
+                np.zeros((6 * n, 1)), np.zeros((n, 12, 12)), np.zeros(link_work_size(0)))
 
     @functools.cached_property
     def update_entry(self):

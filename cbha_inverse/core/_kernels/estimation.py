@@ -141,7 +141,9 @@ def section_loads(buffers, sections, masses, load):
     ``1 + σ`` of each link's section, so the linearisation is that of the scaled chain (as a
     scene's ``calibration.section_stiffness`` builds it); row ``w - s + j`` of ``load`` becomes
     the elastic force of section ``j``'s links at the current frames, their model stiffness
-    alone (the link pass at zero actuation, no cavity: ``-Dᵀ Bᵀ K δ``, paper eq. 4-7).
+    alone (the link pass at zero actuation, no cavity: ``-Dᵀ Bᵀ K δ``, paper eq. 4-7), over
+    the section's links and the link before it (zero in ``section_stiffness``: its frame ``a``
+    is the section's first frame, which the pass skips for a chain's first link).
 
     Parameters
     ----------
@@ -151,16 +153,17 @@ def section_loads(buffers, sections, masses, load):
         ``link_section`` (n,) int (a link's section, -1: none), ``nominal`` (n, 6, 6) (the
         model's link stiffness), ``stiffness`` (n, 6, 6) (receives the scaled one),
         ``section_stiffness`` (s, n, 6, 6) (the model's stiffness of section ``j``'s links,
-        zero elsewhere), then the link pass's arguments without cavities and its workspaces:
-        ``actuation`` (0,), ``cavity_wrench`` (n, 0, 6), ``cavity_stiffness`` (n, 0, 6, 6),
-        ``cavity_columns`` (n, 0), ``rhs`` (6n, 1), ``blocks`` (n, 12, 12), ``work``.
+        zero elsewhere), ``ranges`` (s, 2) int (first link and count of each section), then
+        the link pass's arguments without cavities and its workspaces: ``actuation`` (0,),
+        ``cavity_wrench`` (n, 0, 6), ``cavity_stiffness`` (n, 0, 6, 6), ``cavity_columns``
+        (n, 0), ``rhs`` (6n, 1), ``blocks`` (n, 12, 12), ``work``.
     masses : (w,) ndarray
         The load unknowns of the linearisation (weights [kg], then the sections' ``σ`` [-]).
     load : (w, 6n) ndarray
         Its last ``s`` rows receive ``∂r/∂σ_j`` [N, N*m].
 
     """
-    (link_section, nominal, stiffness, section_stiffness, actuation, cavity_wrench,
+    (link_section, nominal, stiffness, section_stiffness, ranges, actuation, cavity_wrench,
      cavity_stiffness, cavity_columns, rhs, blocks, work) = sections
     n_sections = section_stiffness.shape[0]
     if n_sections == 0:
@@ -172,12 +175,21 @@ def section_loads(buffers, sections, masses, load):
         for i in range(6):
             for j in range(6):
                 stiffness[link, i, j] = factor * nominal[link, i, j]
+    rest_rotations_t = buffers.rest_rotations_t
     for section in range(n_sections):
-        link_pass_into(buffers.positions, buffers.rotations, section_stiffness[section],
-                       buffers.rest_offsets, buffers.rest_rotations_t, actuation, cavity_wrench,
-                       cavity_stiffness, cavity_columns, rhs, blocks, True, work)
-        for row in range(rhs.shape[0]):
-            load[first + section, row] = rhs[row, 0]
+        low = max(ranges[section, 0] - 1, 0)
+        high = ranges[section, 0] + ranges[section, 1]
+        rotations_t = (rest_rotations_t[low:high] if rest_rotations_t.shape[0] > 0
+                       else rest_rotations_t)
+        link_pass_into(buffers.positions[low:high + 1], buffers.rotations[low:high + 1],
+                       section_stiffness[section, low:high], buffers.rest_offsets[low:high],
+                       rotations_t, actuation, cavity_wrench[low:high],
+                       cavity_stiffness[low:high], cavity_columns[low:high],
+                       rhs[6 * low:6 * high], blocks[low:high], True, work)
+        row = first + section
+        load[row, :] = 0.0
+        for k in range(6 * low, 6 * high):
+            load[row, k] = rhs[k, 0]
 
 
 @numba.njit(cache=True)
