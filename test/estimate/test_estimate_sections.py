@@ -39,8 +39,7 @@ def test_the_sections_scale_the_links_the_scene_names(cbha):
 
 
 @pytest.mark.parametrize('pressures', [np.full(6, 2e4), PRESSURES], ids=['straight', 'bent'])
-def test_the_estimate_is_the_scaled_chain_and_its_columns_the_lengths_derivative(cbha,
-                                                                                  pressures):
+def test_the_estimate_is_the_scaled_chain_and_its_columns_are_the_derivative(cbha, pressures):
     """
     Held pose of a plant with section errors: the estimate is the scaled scene's equilibrium.
 
