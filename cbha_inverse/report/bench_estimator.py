@@ -230,13 +230,14 @@ def main(argv=None):
     parser.add_argument('--pressures-bag', metavar='BAG',
                         help="replay a cbha_demo run's measured pressures (one pass, its lap "
                              'window measured) instead of the lap')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the pot noise')
     parser.add_argument('--json', help='write the row to this JSON file')
     args = parser.parse_args(argv)
     started = time.perf_counter()
     lap, measured = bag_lap(args.pressures_bag) if args.pressures_bag else (None, None)
     row = bench(args.poses, laps=1 if args.pressures_bag else 2, noise=args.noise,
                 stiffness_error=args.stiffness_error,
-                gain_error=args.gain_error, payload=args.payload,
+                gain_error=args.gain_error, payload=args.payload, seed=args.seed,
                 options=EstimatorOptions(payload_std=args.estimate_payload,
                                          weight_std=args.weight_std, gain_std=args.gain_std,
                                          section_stiffness_std=args.section_stiffness_std),
