@@ -5,7 +5,8 @@ For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: t
 tip/true, tip/measured, tip/estimated, payload/estimated, pressure_command, pressure_measured,
 string_pots, /diagnostics), then ``cbha_sim``, ``inverse_solver`` (``--realtime-priority``) and
 ``trajectory`` as separate processes (as ``ros2 run`` would, with the installed params files
-plus a per-run override file), runs one lap, stops them with SIGINT and prints one line:
+plus a per-run override file; the solver over UDP on 127.0.0.1, ``--solver-transport``:
+``cbha_inverse.ros.common.transport``), runs one lap, stops them with SIGINT and prints one line:
 tracking RMS and max (plant tip vs target, moving part: ``cbha_bag eval``), the solver's tick
 and target-to-command latency (callback entry to publish; its CPU time: the rest is waiting for
 a core), median / p99. It writes ``demo.png``, ``summary.json`` and per run params, logs, bag.
@@ -27,7 +28,8 @@ beside the direct-feedback runs.
 estimates the tip from the pots and the measured pressures (``docs/proprioception.md``) and
 ``inverse_solver`` closes the loop on ``tip/estimated``; the run is scored against ``tip/true``
 as the others, and its second line gives the estimate's own RMS against ``tip/true``.
-``--plant-payload`` hangs a payload at the plant's tip that no model knows.
+``--plant-payload`` hangs a payload at the plant's tip that no model knows; ``--stuck-pot``
+freezes one plant pot halfway through the lap (the estimator drops it: ``degraded``).
 
 ``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``all``, ... or a YAML file of
 holds) adds an identification run: ``cbha_sim`` and ``cbha_excite`` alone, recorded
@@ -50,12 +52,14 @@ from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.experiments.proprio import (add_plant_pot_arguments, bag_points,
-                                              estimate_error, plant_pot_parameters)
+                                              estimate_error, plant_pot_parameters,
+                                              proprio_sim_parameters)
 from cbha_inverse.identify.excitation import make_program
 from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
 from cbha_inverse.robot.safety import command_bounds
 from cbha_inverse.robot.trajectory import make_trajectory
+from cbha_inverse.ros.common.transport import loopback_udp_environment, node_environment
 from cbha_inverse.scene import load_scene
 import numpy as np
 import yaml
@@ -134,25 +138,14 @@ def parse_args(argv):
                         help='cbha_excite ramp_time [s]')
     parser.add_argument('--realtime-priority', type=int, default=50,
                         help="inverse_solver's SCHED_FIFO priority (0: normal scheduler)")
+    parser.add_argument('--solver-transport', choices=('udp-loopback', 'default'),
+                        default='udp-loopback', help="inverse_solver's DDS transport: UDP on "
+                        '127.0.0.1 alone (config/fastdds/udp_loopback.xml), or the default '
+                        '(shared memory and UDP)')
     parser.add_argument('--domain', type=int, default=None,
                         help='ROS_DOMAIN_ID for the run (default: the environment, else a free '
                         'one from domain_coordinator)')
     return parser.parse_args(argv)
-
-
-def _environment(domain):
-    """Return the children's environment: isolated DDS, no wheel bootstrap flag."""
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    if domain is not None:
-        env['ROS_DOMAIN_ID'] = str(domain)
-    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    env.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'UDPv4')
-    env['PYTHONUNBUFFERED'] = '1'
-    # a node that does not stop is sent SIGABRT before SIGKILL (_stop): its log then ends
-    # with the Python stack of every thread
-    env['PYTHONFAULTHANDLER'] = '1'
-    return env
 
 
 def _write_params(path, values):
@@ -161,9 +154,10 @@ def _write_params(path, values):
     return path
 
 
-def _start(node, run_dir, overrides, env):
+def _start(node, run_dir, overrides, env, transport='default'):
     """Start one node process with its installed params file and the run's overrides."""
     params = _write_params(run_dir / f'{node}.yaml', overrides)
+    env = loopback_udp_environment(env) if transport == 'udp-loopback' else env
     log = open(run_dir / f'{node}.log', 'w')
     process = subprocess.Popen(
         [sys.executable, '-m', MODULES[node], '--ros-args', '-r', f'__ns:={NAMESPACE}',
@@ -378,7 +372,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         solver_extra = {'loop_gain': args.stereo_loop_gain}
         waited.append('stereo_tracker')
     if feedback == 'proprio':
-        sim_extra = {'tip_output': 'none'}
+        sim_extra = proprio_sim_parameters(args, trajectory)
         solver_extra = {'feedback_topic': 'tip/estimated', 'payload_topic': (
             'payload/estimated' if args.estimate_payload else '')}
         waited.append('shape_estimator')
@@ -395,7 +389,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
         **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
         'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,
-        **solver_extra}, env)
+        **solver_extra}, env, args.solver_transport)
     try:
         # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
         # clock at 0 until the solver, this recorder and the bag recorder subscribe to it
@@ -517,7 +511,7 @@ def main(argv=None):
             domain = reservation.__enter__()
         except ImportError:
             domain = None
-    env = _environment(domain)
+    env = node_environment(domain)
     os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE',
                                            'FASTDDS_BUILTIN_TRANSPORTS')})
     if domain is not None:

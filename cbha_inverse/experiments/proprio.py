@@ -89,6 +89,9 @@ def add_plant_pot_arguments(parser):
     parser.add_argument('--plant-pot-gain', default=None,
                         help='comma-separated plant string-pot gains [reading/m] (1 or one per '
                         "pot; cbha_sim string_pot_gain; default: the scene's)")
+    parser.add_argument('--stuck-pot', type=int, default=None, metavar='INDEX',
+                        help='proprio: the plant pot of this index (string_pots order) sticks '
+                        'halfway through the lap (cbha_sim string_pot_stuck)')
 
 
 def plant_pot_parameters(args):
@@ -97,4 +100,27 @@ def plant_pot_parameters(args):
     for key, text in (('offset', args.plant_pot_offset), ('gain', args.plant_pot_gain)):
         if text is not None:
             parameters[f'string_pot_{key}'] = [float(v) for v in text.split(',')]
+    return parameters
+
+
+def proprio_sim_parameters(args, trajectory):
+    """
+    Return ``cbha_sim``'s parameters of a run closed on the pots: no tip, the stuck-pot fault.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``cbha_demo``'s options (``--stuck-pot``, ``--start-hold``).
+    trajectory : cbha_inverse.robot.trajectory.Trajectory
+        The run's trajectory: the stuck pot freezes halfway through its lap.
+
+    Returns
+    -------
+    dict
+
+    """
+    parameters = {'tip_output': 'none'}
+    if args.stuck_pot is not None:  # the first command comes with the start point
+        parameters.update(string_pot_stuck=args.stuck_pot, string_pot_stuck_after=(
+            args.start_hold + 0.5 * trajectory.lap_time))
     return parameters

@@ -17,6 +17,7 @@ from rclpy.parameter import Parameter
 from ros_helpers import spin_until, spinning
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 
 OFFSET = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
 GAIN = 900.0
@@ -116,3 +117,34 @@ def test_each_pot_reading_is_of_the_last_pressures_published_before_it(rclpy_con
         np.testing.assert_allclose(message.position, expected, atol=2e-5 * np.abs(
             sensors.reading_gain).max())
     assert moving >= 2, moving
+
+
+def test_a_stuck_pot_freezes_after_the_first_command_and_reset_frees_it(rclpy_context):
+    """``string_pot_stuck``: one pot keeps its last reading from 0.1 s after the first command."""
+    sim = CbhaSimNode(context=rclpy_context, namespace='/stuck', parameter_overrides=[
+        Parameter(k, value=v) for k, v in {
+            'scene': 'cbha', 'tip_output': 'none', 'string_pot_noise_std': 0.0,
+            'rate_hz': 50.0, 'string_pot_rate_hz': 50.0, 'valve_time_constant': 0.05,
+            'string_pot_stuck': 3, 'string_pot_stuck_after': 0.1}.items()])
+    probe = Node('probe', context=rclpy_context)
+    readings = []
+    probe.create_subscription(JointState, '/stuck/string_pots',
+                              lambda m: readings.append(np.array(m.position)), MEASURED_QOS)
+    command = probe.create_publisher(Float64MultiArray, '/stuck/pressure_command', COMMAND_QOS)
+    with spinning(rclpy_context, sim, probe) as executor:
+        assert spin_until(executor, lambda: command.get_subscription_count() >= 1
+                          and len(readings) >= 2, 20.0)
+        start = len(readings)
+        command.publish(command_message([0.0, 0.0, 0.0, 1.2e5, 0.0, 0.0], sim.valve_names))
+        assert spin_until(executor, lambda: len(readings) >= start + 20, 20.0)
+        moved = np.array(readings[start:])
+        sim._on_reset(Trigger.Request(), Trigger.Response())
+        freed = len(readings)
+        assert spin_until(executor, lambda: len(readings) >= freed + 20, 20.0)
+    lengths = sim.scene.sensors.lengths(sim.last_result.positions, sim.last_result.rotations)
+    # pot 3 (outer_over, the inflated tube's) moves first, then holds for the last 10 readings
+    # (0.2 s) while the others still follow the 50 ms valve lag
+    assert np.ptp(moved[:4, 3]) > 1e-4 and np.ptp(moved[-10:, 3]) == 0.0
+    assert np.ptp(moved[-10:, 4]) > 1e-6
+    # after the reset the plant is at rest and pot 3 reads its true length again
+    np.testing.assert_allclose(readings[-1], sim.scene.sensors.readings(lengths), rtol=1e-9)

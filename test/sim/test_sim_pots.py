@@ -44,3 +44,24 @@ def test_bad_parameters_are_refused(bent, kwargs, match):
 
 def test_per_pot_broadcasts_one_value():
     np.testing.assert_array_equal(per_pot('x', [2.0], 3), [2.0, 2.0, 2.0])
+
+
+def test_a_stuck_pot_keeps_its_last_reading_while_the_others_move(bent):
+    scene, result = bent
+    rest = scene.forward(np.zeros(6), strict=True)
+    pots = SimulatedPots(scene.sensors, noise_std=0.0, stuck_pot=2)
+    before = pots.read(rest.positions, rest.rotations)
+    stuck = pots.read(result.positions, result.rotations, stuck=True)
+    truth = 1000.0 * scene.sensors.lengths(result.positions, result.rotations)
+    # the stuck pot reads what it read at rest; the others read the bent shape
+    assert stuck[2] == before[2] and abs(truth[2] - before[2]) > 1.0
+    np.testing.assert_allclose(np.delete(stuck, 2), np.delete(truth, 2), rtol=1e-14)
+    again = pots.read(rest.positions, rest.rotations, stuck=True)
+    assert again[2] == before[2]
+    pots.unstick()
+    np.testing.assert_allclose(pots.read(result.positions, result.rotations), truth, rtol=1e-14)
+
+
+def test_a_stuck_pot_needs_an_index_of_the_scene(bent):
+    with pytest.raises(ValueError, match='string_pot_stuck'):
+        SimulatedPots(bent[0].sensors, stuck_pot=6)

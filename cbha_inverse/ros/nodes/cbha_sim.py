@@ -35,7 +35,10 @@ state) at ``string_pot_rate_hz`` (at most the tick rate), from the plant's true 
 ``string_pot_noise_std`` [m] and the plant's own ``string_pot_offset`` / ``string_pot_gain``
 (:class:`cbha_inverse.sim.pots.SimulatedPots`): in the tick, after the ``pressure_measured`` the
 state is the equilibrium of, as the driver's one message carries both (a pot reading and the
-last pressures received before it are of the same instant).
+last pressures received before it are of the same instant). A fault for tests and demos:
+``string_pot_stuck`` (a pot index, -1: none) freezes that pot's reading
+``string_pot_stuck_after`` seconds after the first accepted command (after a ``~/reset``: the
+next one).
 
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 """
@@ -127,6 +130,11 @@ class CbhaSimParams:
     string_pot_rate_hz: float = param(100.0, 'string_pots publication rate [Hz] (a scene with '
                                       'sensors; at most rate_hz: published in the tick)',
                                       low=0.1, high=1000.0)
+    string_pot_stuck: int = param(-1, 'fault: index of the pot (string_pots order) whose '
+                                  'reading freezes, -1: none', low=-1, high=63)
+    string_pot_stuck_after: float = param(0.0, 'fault: the stuck pot freezes this long after '
+                                          'the first accepted pressure_command [s]', low=0.0,
+                                          high=1.0e6)
     camera_rig: str = param('cameras/rig.yaml', 'stereo output: rig file (a path, or relative '
                             'to config/)')
     camera_rate_hz: float = param(30.0, 'stereo output: frame rate [Hz]', low=0.1, high=1000.0)
@@ -168,7 +176,8 @@ class CbhaSimNode(Node):
                                     gravity=p.gravity, calibration=errors)
             self.pots = (None if self.scene.sensors is None else SimulatedPots(
                 self.scene.sensors, p.string_pot_offset, p.string_pot_gain,
-                p.string_pot_noise_std, p.seed))
+                p.string_pot_noise_std, p.seed,
+                stuck_pot=None if p.string_pot_stuck < 0 else p.string_pot_stuck))
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
@@ -180,6 +189,7 @@ class CbhaSimNode(Node):
         self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
         self.rejected = Rejections(self.log)
         self.accepted = 0
+        self.first_command_time = None
         self.last_result = None
         self.last_stamp = None
         self.not_converged = 0
@@ -244,8 +254,11 @@ class CbhaSimNode(Node):
         if not check.ok:
             self.rejected.count(check.reason, f'rejected pressure_command: {check.detail}')
             return
-        self.arm.send(self._node_seconds(), values)
+        now = self._node_seconds()
+        self.arm.send(now, values)
         self.accepted += 1
+        if self.first_command_time is None:
+            self.first_command_time = now
 
     @property
     def pressures(self):
@@ -260,6 +273,9 @@ class CbhaSimNode(Node):
         self.arm.reset()
         self.last_result = None
         self.pots_due = -math.inf
+        self.first_command_time = None
+        if self.pots is not None:
+            self.pots.unstick()
         self.resets += 1
         response.success = True
         response.message = 'plant at rest, valves at 0 Pa'
@@ -296,8 +312,10 @@ class CbhaSimNode(Node):
             return
         # half a tick early: tick jitter does not drop a reading at rates up to the tick rate
         self.pots_due = now + period - 0.5 / p.rate_hz
+        stuck = (self.first_command_time is not None
+                 and now - self.first_command_time >= p.string_pot_stuck_after)
         self.pots_publisher.publish(joint_state(
-            self.pots.names, self.pots.read(result.positions, result.rotations), stamp,
+            self.pots.names, self.pots.read(result.positions, result.rotations, stuck), stamp,
             p.frame_id))
 
     def _statuses(self):
