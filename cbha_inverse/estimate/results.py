@@ -58,7 +58,9 @@ class EstimatorOptions:
         stiffer inner and a softer outer section distribute the sag between and within the
         sections in a way no weight or tip mass reproduces. The linearisation is that of the
         scaled chain (the residual's link forces and the tangent), the pots' column of
-        ``σ_j`` is ``J_s K⁻¹ ∂r/∂σ_j``; None: no such unknown. Needs the scene's sections.
+        ``σ_j`` is ``J_s K⁻¹ ∂r/∂σ_j``; the factors ``1 + σ_j`` are kept within 0.5-2 (an
+        update far from the equilibrium can drive one toward a chain without stiffness).
+        None: no such unknown. Needs the scene's sections.
     section_stiffness_walk_std : float  [-]
         Random walk of each ``σ_j`` per update.
     outlier_sigma : float

@@ -48,6 +48,8 @@ _GAIN_SCALE = 1.0
 _OFFSET_SCALE = 1.0e4
 _MASS_SCALE = 0.1
 _SECTION_SCALE = 0.1
+# the section stiffness factors 1 + σ_j are kept within these
+_SECTION_BOUNDS = (0.5, 2.0)
 
 
 class ShapeEstimator:
@@ -431,6 +433,7 @@ class ShapeEstimator:
         """Run one compiled update (the fallback chain if the band is not positive definite)."""
         data = self._data
         if data.update_entry(*data.arguments) == 0:
+            self._bound_sections()
             return True
         system = self._system
         factor = next(system.fallback_factors(data.positions, data.rotations, data.actuation,
@@ -444,7 +447,22 @@ class ShapeEstimator:
         data.scalars[kernel.SOLVE_MASS] = 0.0
         kernel.estimate_from_linearisation(*data.from_linearisation_arguments)
         data.scalars[kernel.SOLVE_MASS] = 1.0
+        self._bound_sections()
         return True
+
+    def _bound_sections(self):
+        """
+        Keep every section's stiffness factor within ``_SECTION_BOUNDS`` (state and step).
+
+        An update far from the equilibrium (iterated from one prior) can drive a factor toward
+        zero, a chain without stiffness; the next update relinearises at the bounded factor.
+        """
+        data, low, high = self._data, _SECTION_BOUNDS[0] - 1.0, _SECTION_BOUNDS[1] - 1.0
+        for index in range(len(data.masses) - len(self.section_names), len(data.masses)):
+            sigma = data.masses[index]
+            if not low <= sigma <= high:
+                data.masses[index] = min(max(sigma, low), high)
+                data.z[2 * self._m + index] = data.masses[index] / _SECTION_SCALE
 
     def _estimate(self, lengths, seconds):
         """Return the :class:`ShapeEstimate` of the update just run."""

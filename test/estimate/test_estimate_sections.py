@@ -125,6 +125,20 @@ def test_with_cavity_gain_errors_too_the_tip_improves():
     assert np.all(np.abs(estimate.section_stiffness - 1.0) < 0.3)
 
 
+def test_the_factors_stay_within_their_bounds(cbha):
+    """A factor driven toward zero (or far up) is held within 0.5-2: the chain keeps a stiffness."""
+    state = cbha.forward(PRESSURES, strict=True).state
+    lengths = cbha.sensors.lengths(state.positions, state.rotations)
+    estimator = ShapeEstimator.from_scene(cbha, EstimatorOptions(section_stiffness_std=0.2))
+    estimator.update(cbha.sensors.readings(lengths), PRESSURES)
+    data = estimator._data
+    data.masses[-2:] = [-0.95, 4.0]
+    data.z[-2:] = data.masses[-2:] / data.state[kernel.SCALE, -2:]
+    estimate = estimator.update(cbha.sensors.readings(lengths), PRESSURES)
+    assert np.all(np.isfinite(estimate.tip)), estimate
+    np.testing.assert_allclose(estimate.section_stiffness, [0.5, 2.0])
+
+
 def test_the_unknown_needs_the_scene_sections(cbha):
     with pytest.raises(ValueError, match='sections'):
         ShapeEstimator(cbha.model, cbha.actuators, cbha.effectors, cbha.sensors,
