@@ -126,7 +126,7 @@ def test_with_cavity_gain_errors_too_the_tip_improves():
 
 
 def test_the_factors_stay_within_their_bounds(cbha):
-    """A factor driven toward zero (or far up) is held within 0.5-2: the chain keeps a stiffness."""
+    """A factor driven toward zero (or far up) is held within 0.5-2: the chain stays stiff."""
     state = cbha.forward(PRESSURES, strict=True).state
     lengths = cbha.sensors.lengths(state.positions, state.rotations)
     estimator = ShapeEstimator.from_scene(cbha, EstimatorOptions(section_stiffness_std=0.2))
