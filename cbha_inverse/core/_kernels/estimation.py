@@ -14,10 +14,11 @@ gives ``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s
 (:func:`cbha_inverse.core._kernels.cables.routing_lengths_into`) the lengths after the Newton
 step are linear in ``z``: ``ℓ = base + H z``, ``H = W_sa [diag(p), I] | W_sμ``,
 ``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, paper eq. 11), ``W_sμ = J_s K⁻¹ ∂r/∂μ`` (by the
-implicit function theorem, the lengths' derivative along the equilibrium). :func:`kalman_lengths` is the Kalman
-update on them, :func:`estimate_tick` the whole update: linearisation, Kalman update, the Newton
-step of the same factorisation (:func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`)
-and the effector positions, over the preallocated buffers of
+implicit function theorem, the lengths' derivative along the equilibrium).
+:func:`kalman_lengths` is the Kalman update on them, :func:`estimate_tick` the whole update:
+linearisation, Kalman update, the Newton step of the same factorisation
+(:func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`) and the effector
+positions, over the preallocated buffers of
 :class:`cbha_inverse.estimate.data.EstimatorData` (rows below).
 """
 
