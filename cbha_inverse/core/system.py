@@ -53,6 +53,10 @@ class EquilibriumSystem:
         The actuators (``m``).
     external : (6n,) ndarray  [N, N*m]
         Constant external wrenches on frames 1..n (gravity).
+    stiffness : (n, 6, 6) ndarray, optional
+        The links' stiffness the evaluations read (default: the model's); the shape
+        estimator passes a read-only view of its own array, which it scales by its section
+        stiffness unknowns before each linearisation.
 
     Attributes
     ----------
@@ -66,12 +70,16 @@ class EquilibriumSystem:
 
     tick_cholesky = True
 
-    def __init__(self, model, actuators, external):
+    def __init__(self, model, actuators, external, stiffness=None):
         """Precompute constants, buffers and the assembly index."""
         n = model.n_links
         m = actuators.n_actuators
         self.n, self.m, self.size = n, m, 6 * n
-        self.stiffness = np.ascontiguousarray(model.stiffnesses, dtype=float)
+        self.stiffness = np.ascontiguousarray(model.stiffnesses if stiffness is None
+                                              else stiffness, dtype=float)
+        if self.stiffness.shape != (n, 6, 6):
+            raise ValueError(f'stiffness must have shape ({n}, 6, 6), got '
+                             f'{self.stiffness.shape}')
         self.rest_offsets = np.ascontiguousarray(model.rest_offsets, dtype=float)
         q0 = np.asarray(model.rest_rotations, dtype=float)
         identity = np.array_equal(q0, np.broadcast_to(np.eye(3), q0.shape))

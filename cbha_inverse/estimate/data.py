@@ -13,6 +13,7 @@ import functools
 
 from cbha_inverse.core._kernels import estimation as rows
 from cbha_inverse.core._kernels.cables import routing_work_size
+from cbha_inverse.core._kernels.links import link_work_size
 from cbha_inverse.core._kernels.tick import compiled_entry
 from cbha_inverse.core.inverse.results import InverseOptions
 from cbha_inverse.core.inverse.tick_data import TickData
@@ -35,9 +36,15 @@ class EstimatorData:
         Unit of every unknown ``(g, δ, μ)`` (``x = scale z``, ``u = 2 m + w``).
     load : (w, 6n) ndarray  [N/kg]
         External wrench of one kg of each weight unknown (0-2: the arm's own weight's
-        distribution, the payload at the last frame).
+        distribution, the payload at the last frame), then one row per section stiffness
+        unknown (any values: the update writes them).
     max_rotation_step : float  [rad]
         Largest frame rotation of one step.
+    sections : tuple, optional
+        The section stiffness unknowns: ``link_section`` (n,) int (each link's section, -1:
+        none; :func:`cbha_inverse.scene.segments.link_sections`), ``nominal`` (n, 6, 6) (the
+        model's link stiffness) and ``stiffness`` (n, 6, 6), the writable array of which
+        ``system.stiffness`` is a read-only view; default: none.
 
     Raises
     ------
@@ -46,7 +53,8 @@ class EstimatorData:
 
     """
 
-    def __init__(self, system, effectors, sensors, scale, load, max_rotation_step):
+    def __init__(self, system, effectors, sensors, scale, load, max_rotation_step,
+                 sections=None):
         """Allocate every buffer and build the argument tuple."""
         n, m, k, c = system.n, system.m, effectors.n_effectors, sensors.n_sensors
         u = scale.size
@@ -90,6 +98,7 @@ class EstimatorData:
         self.stuck = np.zeros(c, dtype=np.bool_)
         self.active = np.zeros(c, dtype=np.bool_)
         self.effector_w = np.zeros((3, u))
+        self.sections = self._section_arguments(system, sections)
         self.effector_positions = np.zeros((k, 3))
         self.tip_covariance = np.zeros((3, 3))
         routing = sensors.routing
@@ -100,7 +109,52 @@ class EstimatorData:
                           self.base_external, self.mass_columns, self.mass_rhs,
                           self.mass_effectors, self.stuck, self.active, np.zeros(6 * n),
                           self.effector_w, self.effector_positions, self.tip_covariance,
-                          np.zeros(max(u + 2, 6 * n + 21)))
+                          np.zeros(max(u + 2, 6 * n + 21)), self.sections)
+
+    @staticmethod
+    def _section_arguments(system, sections):
+        """
+        Return the ``sections`` argument of ``estimate_tick`` (``section_loads``).
+
+        Parameters
+        ----------
+        system : cbha_inverse.core.system.EquilibriumSystem
+            The evaluator (``system.stiffness`` must view ``sections[2]``).
+        sections : tuple or None
+            ``(link_section, nominal, stiffness)`` of the constructor.
+
+        Returns
+        -------
+        tuple
+
+        """
+        n = system.n
+        if sections is None:
+            link_section = np.full(n, -1, dtype=np.int64)
+            nominal, stiffness = np.zeros((n, 6, 6)), np.zeros((n, 6, 6))
+            count = 0
+        else:
+            link_section, nominal, stiffness = sections
+            link_section = np.ascontiguousarray(link_section, dtype=np.int64)
+            if not np.shares_memory(system.stiffness, stiffness):
+                raise ValueError("the system's stiffness must view the scaled stiffness")
+            count = int(link_section.max()) + 1
+        per_section = np.zeros((count, n, 6, 6))
+        ranges = np.zeros((count, 2), dtype=np.int64)
+        for index in range(count):
+            members = link_section == index
+            per_section[index, members] = nominal[members]
+            links = np.flatnonzero(members)
+            if links.size != links[-1] - links[0] + 1:
+                raise ValueError(f'the links of section {index} are not consecutive')
+            ranges[index] = links[0], links.size
+        # read-only as the tick's own stiffness (one compiled type of the link pass)
+        nominal = np.array(nominal, dtype=float)
+        for array in (nominal, per_section):
+            array.setflags(write=False)
+        return (link_section, nominal, stiffness, per_section, ranges, np.zeros(0),
+                np.zeros((n, 0, 6)), np.zeros((n, 0, 6, 6)), np.zeros((n, 0), dtype=np.int64),
+                np.zeros((6 * n, 1)), np.zeros((n, 12, 12)), np.zeros(link_work_size(0)))
 
     @functools.cached_property
     def update_entry(self):
@@ -115,5 +169,5 @@ class EstimatorData:
     @property
     def from_linearisation_arguments(self):
         """Return the arguments of ``estimate_from_linearisation`` (after a fallback)."""
-        skip = (1, 13)   # cholesky, base_external
+        skip = (1, 13, 24)   # cholesky, base_external, sections
         return tuple(a for i, a in enumerate(self.arguments) if i not in skip)

@@ -10,7 +10,9 @@ equilibrium (paper eq. 9, the control tick's
 lengths after the Newton step are linear in the actuation through ``W_sa = J_s K⁻¹ J_aᵀ`` (the
 pots' ``W_ea``, eq. 11). The unknowns are not the actuation itself but its error about the measured
 pressures, ``λ = (1 + g) ∘ p + δ`` (a gain and an offset per actuator: the model's error in
-effective area and stiffness), and ``μ``; they change slowly, so they follow a small random walk
+effective area and stiffness), and ``μ`` (optionally also a stiffness error ``σ_j`` per chain
+section, which scales that section's links in the linearisation itself, as a scene's
+``calibration.section_stiffness`` does); they change slowly, so they follow a small random walk
 and each update is a Kalman step that averages the pot noise over many updates (the compiled
 :func:`cbha_inverse.core._kernels.estimation.estimate_tick`, one call per update over the buffers
 of :class:`cbha_inverse.estimate.data.EstimatorData`). The offset's walk grows with the measured
@@ -27,10 +29,8 @@ or that is stuck (:class:`cbha_inverse.estimate.checks.StuckDetector`), is dropp
 and the estimate is ``degraded``; ``rank`` says how many directions the remaining pots determine.
 """
 
-from dataclasses import dataclass
 import math
 import time
-from typing import NamedTuple
 
 from cbha_inverse.core._kernels import estimation as kernel
 from cbha_inverse.core._kernels import tick as fused
@@ -38,170 +38,18 @@ from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.estimate.checks import check_vector, StuckDetector
 from cbha_inverse.estimate.data import EstimatorData
+from cbha_inverse.estimate.results import EstimatorOptions, ShapeEstimate
+from cbha_inverse.scene.segments import link_sections
 import numpy as np
 
-# scale of the unknowns inside the filter: a gain of 1, 10 kPa of offset, 0.1 kg of payload
+# scale of the unknowns inside the filter: a gain of 1, 10 kPa of offset, 0.1 kg of payload,
+# a tenth of a section's stiffness
 _GAIN_SCALE = 1.0
 _OFFSET_SCALE = 1.0e4
 _MASS_SCALE = 0.1
-
-
-@dataclass(frozen=True)
-class EstimatorOptions:
-    """
-    Options of :class:`ShapeEstimator` (SI units).
-
-    Attributes
-    ----------
-    pressure_std : float  [Pa]
-        Prior standard deviation of the actuation's offset ``δ`` about the measured pressure.
-    gain_std : float  [-]
-        Prior standard deviation of the actuation's gain error ``g``.
-    gain_walk_std : float  [-]
-        Random walk of ``g`` per update.
-    offset_walk_std : float  [Pa]
-        Random walk of ``δ`` per update, with measured pressures.
-    pressure_change_walk : float  [-]
-        ... plus this fraction of the measured pressure change since the previous update.
-    actuation_walk_std : float  [Pa]
-        Random walk of ``δ`` (the actuation itself) per update without measured pressures.
-    predict_pressure_change : float  [Pa]
-        An update whose measured pressures changed by more than this (any actuator) since the
-        previous one first takes Newton steps (at most ``initial_newton_steps``, no pot used)
-        to the equilibrium of the prior's actuation at them: a step of the pressures moves the
-        arm further than one linearisation predicts, and the pots would take the difference
-        for a gain or offset error.
-    initial_actuation_std : float  [Pa]
-        Random walk of ``δ`` of an update after one that was not settled (as from far away).
-    settle_sigma : float
-        An update is settled when the median pot (of those not stuck) is within this many
-        standard deviations of its prediction; only after a settled update is the outlier test
-        applied and the walk the small one.
-    payload_std : float or None  [kg]
-        Prior standard deviation of an unknown mass at the last frame (a payload, its weight
-        along the scene's gravity); None: no such unknown.
-    payload_walk_std : float  [kg]
-        Random walk of the payload per update.
-    weight_std : float or None  [kg]
-        Prior standard deviation of an error of the arm's own weight, spread as its lumped
-        masses (one kg of it: the arm's weight over its mass): a plant softer than the model
-        sags under gravity as if heavier, which no gain or offset of the actuation reproduces
-        (the pots would fit and the tip stay off along gravity); None: no such unknown. With
-        ``payload_std`` too, both are unknowns: the pots see a weight spread along the arm
-        and one at its tip differently as the pose changes.
-    weight_walk_std : float  [kg]
-        Random walk of the weight error per update.
-    outlier_sigma : float
-        A pot whose innovation exceeds this many standard deviations is dropped for the update.
-    stuck_window : int
-        Updates over which a stuck pot is looked for (0: never).
-    stuck_tolerance : float  [m]
-        A pot that moved less than this over the window is stuck ...
-    motion_threshold : float  [m]
-        ... while the median of the others moved more than this.
-    length_range : (float, float)
-        Accepted lengths, as factors of each pot's rest length.
-    max_pressure : float  [Pa]
-        Measured pressures above this (or below ``-max_pressure``) are rejected.
-    iterations : int
-        Linearisations per settled update (iterated Kalman update from the same prior).
-    settle_iterations : int
-        ... per update after one that was not settled (from far away: the pots' linear model
-        is not yet that of the equilibrium).
-    initial_newton_steps : int
-        Largest number of Newton steps of the first update toward the equilibrium of the
-        prior's actuation, before the pots are used.
-    max_rotation_step : float  [rad]
-        Largest frame rotation of one step (the control tick's limit).
-
-    """
-
-    pressure_std: float = 1.0e4
-    gain_std: float = 0.2
-    gain_walk_std: float = 1.0e-4
-    offset_walk_std: float = 10.0
-    pressure_change_walk: float = 0.0
-    actuation_walk_std: float = 20000.0
-    predict_pressure_change: float = 2000.0
-    initial_actuation_std: float = 5.0e4
-    settle_sigma: float = 4.0
-    payload_std: float = None
-    payload_walk_std: float = 1.0e-4
-    weight_std: float = None
-    weight_walk_std: float = 1.0e-6
-    outlier_sigma: float = 8.0
-    stuck_window: int = 25
-    stuck_tolerance: float = 2.0e-5
-    motion_threshold: float = 2.0e-3
-    length_range: tuple = (0.5, 1.5)
-    max_pressure: float = 1.0e6
-    iterations: int = 1
-    settle_iterations: int = 5
-    initial_newton_steps: int = 20
-    max_rotation_step: float = 0.2
-
-
-class ShapeEstimate(NamedTuple):
-    """
-    One update of :class:`ShapeEstimator`.
-
-    Attributes
-    ----------
-    status : str
-        ``'ok'``, ``'degraded'`` (a pot dropped) or ``'rejected'`` (the input; nothing changed).
-    reason : str
-        Why it was rejected or degraded (empty when ``'ok'``).
-    effector_positions : (k, 3) ndarray  [m]
-        The scene's effectors (the tip last) at the estimated equilibrium.
-    tip_covariance : (3, 3) ndarray  [m^2]
-        Of the last effector, from the posterior of ``x`` (linear).
-    lengths : (c,) ndarray  [m]
-        Measured pot lengths.
-    residuals : (c,) ndarray  [m]
-        Measured minus estimated length of every pot (the dropped ones too).
-    active : (c,) ndarray of bool
-        The pots used.
-    rank : int
-        Directions of ``x`` the active pots determine (the numerical rank of their whitened
-        ``W_sx``).
-    actuation : (m,) ndarray  [Pa, N]
-        Estimated effective actuation.
-    payload : float  [kg]
-        Estimated payload at the last frame (0 without that unknown).
-    weight : float  [kg]
-        Estimated error of the arm's own weight (0 without that unknown).
-    seconds : float
-        Time of the update.
-
-    """
-
-    status: str
-    reason: str
-    effector_positions: np.ndarray
-    tip_covariance: np.ndarray
-    lengths: np.ndarray
-    residuals: np.ndarray
-    active: np.ndarray
-    rank: int
-    actuation: np.ndarray
-    payload: float
-    weight: float
-    seconds: float
-
-    @property
-    def degraded(self):
-        """Return whether a pot was dropped from the fit."""
-        return self.status == 'degraded'
-
-    @property
-    def tip(self):
-        """Return the last effector's position (3,) [m]."""
-        return self.effector_positions[-1]
-
-    @property
-    def confidence(self):
-        """Return the tip's standard deviation ``sqrt(trace(tip_covariance))`` [m]."""
-        return math.sqrt(max(float(np.trace(self.tip_covariance)), 0.0))
+_SECTION_SCALE = 0.1
+# the section stiffness factors 1 + σ_j are kept within these
+_SECTION_BOUNDS = (0.5, 2.0)
 
 
 class ShapeEstimator:
@@ -222,20 +70,46 @@ class ShapeEstimator:
         Gravity on the lumped masses.
     options : EstimatorOptions, optional
         The options.
+    sections : dict, optional
+        The chain's sections, ``name -> (first link index, count)`` in chain order
+        (:attr:`cbha_inverse.scene.scene.Scene.section_links`); needed by
+        ``section_stiffness_std``.
+
+    Attributes
+    ----------
+    section_names : tuple of str
+        The sections with a stiffness unknown (empty without).
 
     """
 
-    def __init__(self, model, actuators, effectors, sensors, gravity=None, options=None):
+    def __init__(self, model, actuators, effectors, sensors, gravity=None, options=None,
+                 sections=None):
         """Precompute the evaluator and the buffers, and start at rest."""
         self.options = options or EstimatorOptions()
         opts = self.options
         self.model, self.actuators, self.effectors, self.sensors = (model, actuators, effectors,
                                                                     sensors)
-        self._system = EquilibriumSystem(model, actuators,
-                                         external_wrenches(model, gravity=gravity).reshape(-1))
+        external = external_wrenches(model, gravity=gravity).reshape(-1)
+        self.section_names, section_arguments = (), None
+        if opts.section_stiffness_std is None:
+            self._system = EquilibriumSystem(model, actuators, external)
+        else:
+            if not sections:
+                raise ValueError('a section stiffness unknown needs the chain sections (a '
+                                 'segments scene)')
+            self.section_names = tuple(sections)
+            # the links' stiffness the linearisation reads: the model's scaled by 1 + σ_j of
+            # each link's section before every update (a read-only view for the kernels)
+            stiffness = np.array(model.stiffnesses, dtype=float)
+            view = stiffness.view()
+            view.setflags(write=False)
+            self._system = EquilibriumSystem(model, actuators, external, stiffness=view)
+            section_arguments = (link_sections(sections, model.n_links), model.stiffnesses,
+                                 stiffness)
         m = self._m = actuators.n_actuators
-        # the weight unknowns, in this order: the arm's own weight error, a payload at the last
-        # frame (the wrench of one kg of each, its prior and walk std)
+        # the load unknowns, in this order: the arm's own weight error, a payload at the last
+        # frame (the wrench of one kg of each), the sections' stiffness errors (rows the update
+        # writes); their prior and walk std
         loads, self._mass_stds, self._mass_index = [], [], {}
         for name, std, walk in (('weight', opts.weight_std, opts.weight_walk_std),
                                 ('payload', opts.payload_std, opts.payload_walk_std)):
@@ -252,12 +126,18 @@ class ShapeEstimator:
             self._mass_index[name] = len(loads)
             loads.append(load)
             self._mass_stds.append((std, walk))
+        n_weights = len(loads)
+        for _ in self.section_names:
+            loads.append(np.zeros(self._system.size))
+            self._mass_stds.append((opts.section_stiffness_std,
+                                    opts.section_stiffness_walk_std))
         self._n_mass = len(loads)
         load = np.array(loads).reshape(self._n_mass, self._system.size)
         self._scale = np.concatenate([np.full(m, _GAIN_SCALE), np.full(m, _OFFSET_SCALE),
-                                      np.full(self._n_mass, _MASS_SCALE)])
+                                      np.full(n_weights, _MASS_SCALE),
+                                      np.full(len(self.section_names), _SECTION_SCALE)])
         self._data = EstimatorData(self._system, effectors, sensors, self._scale, load,
-                                   opts.max_rotation_step)
+                                   opts.max_rotation_step, section_arguments)
         self._data.scalars[kernel.CHANGE_WALK] = opts.pressure_change_walk
         self._data.scalars[kernel.GATE_SIGMA] = opts.outlier_sigma
 
@@ -304,7 +184,7 @@ class ShapeEstimator:
         if scene.sensors is None:
             raise ValueError(f'scene {scene.name!r} declares no sensors (a `sensors` block)')
         return cls(scene.model, scene.actuators, scene.effectors, scene.sensors,
-                   gravity=scene.gravity, options=options)
+                   gravity=scene.gravity, options=options, sections=scene.section_links)
 
     def reset(self, state=None, actuation=None):
         """
@@ -519,8 +399,7 @@ class ShapeEstimator:
             np.full((3, 3), np.nan) if last is None else last.tip_covariance,
             np.full(c, np.nan), np.full(c, np.nan), np.zeros(c, dtype=bool),
             0 if last is None else last.rank, data.actuation.copy(), self._payload(),
-            self._weight_error(),
-            time.perf_counter() - started)
+            self._weight_error(), time.perf_counter() - started, self._section_stiffness())
 
     def _mass(self, name):
         """Return the estimated weight unknown ``name`` [kg] (0 without it)."""
@@ -535,15 +414,17 @@ class ShapeEstimator:
         """Return the estimated error of the arm's own weight [kg] (0 without that unknown)."""
         return self._mass('weight')
 
+    def _section_stiffness(self):
+        """Return the estimated stiffness factor ``1 + σ_j`` of every section, (s,) [-]."""
+        return 1.0 + self._data.masses[self._n_mass - len(self.section_names):]
+
     def _rank(self, active):
         """Return the numerical rank of the active pots' whitened ``W_sx`` (cached per set)."""
         key = active.tobytes()
         if key not in self._ranks:
             m = self._m
             w_sx = self._data.moved[:, 1:1 + m + self._n_mass]
-            whitened = (w_sx * np.concatenate([np.full(m, _OFFSET_SCALE),
-                                               np.full(self._n_mass, _MASS_SCALE)])
-                        )[active] / self.sensors.noise_std[active, None]
+            whitened = (w_sx * self._scale[m:])[active] / self.sensors.noise_std[active, None]
             self._ranks[key] = (int(np.linalg.matrix_rank(
                 whitened, tol=1e-9 * max(1.0, np.abs(whitened).max()))) if active.any() else 0)
         return self._ranks[key]
@@ -552,6 +433,7 @@ class ShapeEstimator:
         """Run one compiled update (the fallback chain if the band is not positive definite)."""
         data = self._data
         if data.update_entry(*data.arguments) == 0:
+            self._bound_sections()
             return True
         system = self._system
         factor = next(system.fallback_factors(data.positions, data.rotations, data.actuation,
@@ -565,7 +447,22 @@ class ShapeEstimator:
         data.scalars[kernel.SOLVE_MASS] = 0.0
         kernel.estimate_from_linearisation(*data.from_linearisation_arguments)
         data.scalars[kernel.SOLVE_MASS] = 1.0
+        self._bound_sections()
         return True
+
+    def _bound_sections(self):
+        """
+        Keep every section's stiffness factor within ``_SECTION_BOUNDS`` (state and step).
+
+        An update far from the equilibrium (iterated from one prior) can drive a factor toward
+        zero, a chain without stiffness; the next update relinearises at the bounded factor.
+        """
+        data, low, high = self._data, _SECTION_BOUNDS[0] - 1.0, _SECTION_BOUNDS[1] - 1.0
+        for index in range(len(data.masses) - len(self.section_names), len(data.masses)):
+            sigma = data.masses[index]
+            if not low <= sigma <= high:
+                data.masses[index] = min(max(sigma, low), high)
+                data.z[2 * self._m + index] = data.masses[index] / _SECTION_SCALE
 
     def _estimate(self, lengths, seconds):
         """Return the :class:`ShapeEstimate` of the update just run."""
@@ -593,4 +490,4 @@ class ShapeEstimator:
                              data.tip_covariance.copy(), lengths,
                              lengths - data.pots[kernel.PREDICTED], active, rank,
                              data.actuation.copy(), self._payload(), self._weight_error(),
-                             seconds)
+                             seconds, self._section_stiffness())

@@ -103,17 +103,15 @@ def parse_args(argv):
                         'registration error; cbha_sim base_offset)')
     parser.add_argument('--plant-seed', type=int, default=0,
                         help='seed of the plant measurement noise (cbha_sim seed)')
-    parser.add_argument('--model-scene', default=None,
-                        help="inverse_solver's scene (default --scene), e.g. a cbha_identify "
-                        'result')
+    parser.add_argument('--model-scene', default=None, help="inverse_solver's and "
+                        "shape_estimator's scene (default --scene), e.g. cbha_identify's")
     parser.add_argument('--feedback', default='direct,stereo,proprio',
                         help='comma-separated: direct (tip/measured from the plant: every shape '
                         'and mode) and/or stereo (closed loop through rendered cameras and '
                         'stereo_tracker, for --stereo-shapes) and/or proprio (closed loop on '
                         'the string-pot estimate of shape_estimator, no tip measurement, for '
                         '--proprio-shapes)')
-    parser.add_argument('--proprio-shapes', default='circle',
-                        help='shapes of the proprio runs')
+    parser.add_argument('--proprio-shapes', default='circle', help='shapes of the proprio runs')
     parser.add_argument('--plant-payload', type=float, default=0.0,
                         help='plant tip payload unknown to the controller [kg]')
     add_plant_pot_arguments(parser)
@@ -121,6 +119,8 @@ def parse_args(argv):
                         help='proprio: shape_estimator payload_std, solver tip load [kg], 0: none')
     parser.add_argument('--estimate-weight', type=float, default=0.0, metavar='STD',
                         help="with --estimate-payload: prior of the arm's weight error [kg]")
+    parser.add_argument('--estimate-sections', default='0', metavar='STD[,GAIN_STD]', help=(
+        'proprio: shape_estimator section_stiffness_std [-] (0: none) and gain_std'))
     parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
     parser.add_argument('--stereo-rig', default='cameras/demo_rig.yaml',
                         help='rig of the stereo runs (path, or relative to config/)')
@@ -383,7 +383,9 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     if feedback == 'proprio':
         processes['shape_estimator'] = _start('shape_estimator', run_dir, {
             **common, 'scene': str(args.model_scene or args.scene), 'diagnostics_period': 0.5,
-            'payload_std': args.estimate_payload, 'payload_weight_std': args.estimate_weight}, env)
+            'payload_std': args.estimate_payload, 'payload_weight_std': args.estimate_weight,
+            **dict(zip(('section_stiffness_std', 'gain_std'), _floats(args.estimate_sections)))},
+            env)
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
         **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
         'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,

@@ -191,6 +191,7 @@ def bench(n_poses=300, laps=2, noise=1e-4, stiffness_error=0.15, gain_error=0.10
             'bias': [float(v) for v in np.mean(biases, axis=0)],
             'degraded': int(degraded), 'updates': len(times),
             'payload': float(estimate.payload), 'weight': float(estimate.weight),
+            'section_stiffness': [float(v) for v in estimate.section_stiffness],
             'finite': bool(np.all(np.isfinite(errors)))}
 
 
@@ -219,20 +220,27 @@ def main(argv=None):
                         help='estimate the payload with this prior std [kg]')
     parser.add_argument('--weight-std', type=float, default=None, metavar='STD',
                         help="estimate an error of the arm's own weight with this prior std [kg]")
+    parser.add_argument('--section-stiffness-std', type=float, default=None, metavar='STD',
+                        help="estimate each chain section's relative stiffness error with this "
+                        'prior std [-]')
+    parser.add_argument('--gain-std', type=float, default=EstimatorOptions.gain_std,
+                        metavar='STD', help="prior std of the actuation's gain errors [-]")
     parser.add_argument('--stuck-pot', type=int, default=None, metavar='INDEX',
                         help='freeze this pot from the middle of the measured lap on')
     parser.add_argument('--pressures-bag', metavar='BAG',
                         help="replay a cbha_demo run's measured pressures (one pass, its lap "
                              'window measured) instead of the lap')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the pot noise')
     parser.add_argument('--json', help='write the row to this JSON file')
     args = parser.parse_args(argv)
     started = time.perf_counter()
     lap, measured = bag_lap(args.pressures_bag) if args.pressures_bag else (None, None)
     row = bench(args.poses, laps=1 if args.pressures_bag else 2, noise=args.noise,
                 stiffness_error=args.stiffness_error,
-                gain_error=args.gain_error, payload=args.payload,
+                gain_error=args.gain_error, payload=args.payload, seed=args.seed,
                 options=EstimatorOptions(payload_std=args.estimate_payload,
-                                         weight_std=args.weight_std),
+                                         weight_std=args.weight_std, gain_std=args.gain_std,
+                                         section_stiffness_std=args.section_stiffness_std),
                 stuck_pot=args.stuck_pot, lap=lap, measured=measured)
     verdict = 'ok' if row['median'] <= GOAL else 'over'
     median, p99, tick = (row[key] * 1e6 for key in ('median', 'p99', 'tick_median'))
@@ -241,12 +249,14 @@ def main(argv=None):
           f'(ratio {median / tick:.2f})')
     rms, open_rms = row['rms'] * 1e3, row['open_loop_rms'] * 1e3
     bias = ', '.join(f'{v * 1e3:.2f}' for v in row['bias'])
+    sections = (', section stiffness ' + ', '.join(f'{v:.3f}' for v in row['section_stiffness'])
+                if row['section_stiffness'] else '')
     print(f'plant: stiffness +-{args.stiffness_error:.0%}, gains +-{args.gain_error:.0%}, '
           f'payload {args.payload:g} kg, pot noise {args.noise * 1e3:g} mm: estimated tip RMS '
           f'{rms:.2f} mm (mean error {bias} mm), open-loop model RMS {open_rms:.2f} mm, '
           f'{row["degraded"]} of '
           f'{row["updates"]} updates degraded, payload {row["payload"]:.4f} kg, weight error '
-          f'{row["weight"]:.4f} kg ({time.perf_counter() - started:.0f} s)')
+          f'{row["weight"]:.4f} kg{sections} ({time.perf_counter() - started:.0f} s)')
     if args.json:
         with open(args.json, 'w') as handle:
             json.dump(row, handle, indent=1)

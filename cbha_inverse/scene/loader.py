@@ -162,7 +162,7 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
                  description=spec.text('description', ''),
                  base_frame=spec.text('base_frame', 'cbha_base'),
                  workspace=workspace, solver_defaults=_solver_defaults(spec),
-                 section_names=tuple(sections),
+                 section_names=tuple(sections), section_links=sections,
                  actuator_sections=tuple(section_of.get(n) for n in actuators.names),
                  calibration=calibrated, sensors=sensors, path=path)
 

@@ -35,6 +35,10 @@ class Scene:
     lower_bounds, upper_bounds : (m,) ndarray  [N or Pa]
     section_names : tuple of str
         Chain sections of a ``segments`` chain, in chain order (empty for beams).
+    section_links : dict
+        ``name -> (first link index, count)`` of those sections, in chain order: the links a
+        section's stiffness factor scales
+        (:func:`cbha_inverse.scene.segments.link_sections`).
     actuator_sections : tuple of (str or None)
         The chain section of each actuator, scene actuator order: a cavity's ``section``, None
         for a cable.
@@ -51,7 +55,7 @@ class Scene:
     def __init__(self, name, model, actuators, effectors, gravity, *, description='',
                  base_frame='cbha_base', workspace=None, solver_defaults=None,
                  section_names=(), actuator_sections=None, calibration=None, sensors=None,
-                 path=None):
+                 path=None, section_links=None):
         """Store the parts (use :func:`cbha_inverse.scene.load_scene`)."""
         self.name = name
         self.description = description
@@ -65,6 +69,9 @@ class Scene:
         self.lower_bounds = np.array(actuators.lower_bounds, dtype=float)
         self.upper_bounds = np.array(actuators.upper_bounds, dtype=float)
         self.section_names = tuple(section_names)
+        self.section_links = dict(section_links or {})
+        if set(self.section_links) - set(self.section_names):
+            raise ValueError('section_links names a section not in section_names')
         self.actuator_sections = (tuple(actuator_sections) if actuator_sections is not None
                                   else (None,) * len(self.actuator_names))
         if len(self.actuator_sections) != len(self.actuator_names):

@@ -59,18 +59,69 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0, calibration=None):
             raise item.error('name', f'section {name!r} named twice')
         sections[name] = (len(compliances), count)
         parts[name] = segment
-        scale = stiffness_scale * factors.get(name, 1.0)
         for _ in range(count):
-            compliances.append(np.asarray(segment.compliance, dtype=float) / scale)
+            compliances.append(np.asarray(segment.compliance, dtype=float))
             offsets.append(np.asarray(segment.rest_offset, dtype=float))
             rotations.append(np.asarray(segment.rest_rotation, dtype=float))
             masses.append(float(segment.mass))
     if calibration is not None:
         masses[-1] += calibration.tip_payload_mass
-    model = ChainModel.from_compliances(np.array(compliances), np.array(offsets),
+    scales = stiffness_scale * section_link_factors(sections, factors, len(compliances))
+    model = ChainModel.from_compliances(np.array(compliances) / scales[:, None, None],
+                                        np.array(offsets),
                                         masses=np.array(masses),
                                         rest_rotations=np.array(rotations))
     return model, sections, parts
+
+
+def link_sections(sections, n_links):
+    """
+    Return the chain section of every link: the membership a section's stiffness factor acts on.
+
+    The scene's ``calibration.section_stiffness`` (:func:`segment_chain`, through
+    :func:`section_link_factors`) and the shape estimator's section stiffness unknowns
+    (:class:`cbha_inverse.estimate.shape.ShapeEstimator`) both scale the links this gives.
+
+    Parameters
+    ----------
+    sections : dict
+        ``name -> (first link index, count)`` (:func:`segment_chain`,
+        :attr:`cbha_inverse.scene.scene.Scene.section_links`), in chain order.
+    n_links : int
+        Links of the chain.
+
+    Returns
+    -------
+    (n_links,) int ndarray
+        Index of each link's section in ``sections``' order, -1 for a link of none.
+
+    """
+    out = np.full(n_links, -1, dtype=np.int64)
+    for index, (first, count) in enumerate(sections.values()):
+        out[first:first + count] = index
+    return out
+
+
+def section_link_factors(sections, factors, n_links):
+    """
+    Return the stiffness factor of every link: its section's entry of ``factors``, else 1.
+
+    Parameters
+    ----------
+    sections : dict
+        ``name -> (first link index, count)``, as :func:`link_sections`.
+    factors : dict of str to float
+        Section name -> factor on its links' stiffness (a name not given: 1).
+    n_links : int
+        Links of the chain.
+
+    Returns
+    -------
+    (n_links,) ndarray  [-]
+
+    """
+    per_section = np.array([factors.get(name, 1.0) for name in sections] + [1.0])
+    return per_section[link_sections(sections, n_links)]
 
 
 def cavity_surfaces(segment):

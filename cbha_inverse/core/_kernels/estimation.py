@@ -2,17 +2,23 @@
 Compiled update of the shape estimator on string-potentiometer lengths, one entry per update.
 
 The unknowns ``z`` (scaled: ``x = scale z``) are the effective actuation's gain and offset about
-the measured pressures, ``λ = (1 + g) ∘ p + δ``, and optionally up to two weights ``μ`` (an
-error of the arm's own weight spread as its lumped masses, a payload mass at the last frame: the
-wrench of one kg of each is a row of ``load``); they follow a random walk. At the current frames one linearisation of the
-equilibrium (the control tick's :func:`cbha_inverse.core._kernels.tick.linearise_tick`) gives
-``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s``
+the measured pressures, ``λ = (1 + g) ∘ p + δ``, and optionally load unknowns ``μ``: up to two
+weights (an error of the arm's own weight spread as its lumped masses, a payload mass at the
+last frame: the wrench of one kg of each is a row of ``load``) and a stiffness error ``σ_j`` per
+chain section (its links' stiffness is ``(1 + σ_j)`` times the model's, in the linearisation
+itself; the row of ``load`` is ``∂r/∂σ_j``, the elastic force of the section's links at the
+current frames, evaluated by :func:`cbha_inverse.core._kernels.links.link_pass_into` with their
+model stiffness alone); they follow a random walk. At the current frames one linearisation of
+the equilibrium (the control tick's :func:`cbha_inverse.core._kernels.tick.linearise_tick`)
+gives ``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s``
 (:func:`cbha_inverse.core._kernels.cables.routing_lengths_into`) the lengths after the Newton
 step are linear in ``z``: ``ℓ = base + H z``, ``H = W_sa [diag(p), I] | W_sμ``,
-``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, paper eq. 11). :func:`kalman_lengths` is the Kalman
-update on them, :func:`estimate_tick` the whole update: linearisation, Kalman update, the Newton
-step of the same factorisation (:func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`)
-and the effector positions, over the preallocated buffers of
+``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, paper eq. 11), ``W_sμ = J_s K⁻¹ ∂r/∂μ`` (by the
+implicit function theorem, the lengths' derivative along the equilibrium).
+:func:`kalman_lengths` is the Kalman update on them, :func:`estimate_tick` the whole update:
+linearisation, Kalman update, the Newton step of the same factorisation
+(:func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`) and the effector
+positions, over the preallocated buffers of
 :class:`cbha_inverse.estimate.data.EstimatorData` (rows below).
 """
 
@@ -21,6 +27,7 @@ import math
 from cbha_inverse.core._kernels import tick
 from cbha_inverse.core._kernels.band import band_solve
 from cbha_inverse.core._kernels.cables import routing_lengths_into
+from cbha_inverse.core._kernels.links import link_pass_into
 from cbha_inverse.core._kernels.projection import effector_points_into, project_effectors_into
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into
 import numba
@@ -125,10 +132,72 @@ def kalman_lengths(h, pots, state, covariance, stuck, active, work):
 
 
 @numba.njit(cache=True)
+def section_loads(buffers, sections, masses, load):
+    """
+    Scale the sections' link stiffness by ``1 + σ_j`` and write ``∂r/∂σ_j``, in place.
+
+    The last ``s`` entries of ``masses`` are the sections' ``σ`` at the linearisation (``s``
+    the first dimension of ``sections[3]``; none: nothing to do). The tick's link stiffness
+    (``buffers.stiffness``, a read-only view of ``sections[2]``) becomes the model's times
+    ``1 + σ`` of each link's section, so the linearisation is that of the scaled chain (as a
+    scene's ``calibration.section_stiffness`` builds it); row ``w - s + j`` of ``load`` becomes
+    the elastic force of section ``j``'s links at the current frames, their model stiffness
+    alone (the link pass at zero actuation, no cavity: ``-Dᵀ Bᵀ K δ``, paper eq. 4-7), over
+    the section's links and the link before it (zero in ``section_stiffness``: its frame ``a``
+    is the section's first frame, which the pass skips for a chain's first link).
+
+    Parameters
+    ----------
+    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+        The estimator's tick buffers (frames, rest terms).
+    sections : tuple
+        ``link_section`` (n,) int (a link's section, -1: none), ``nominal`` (n, 6, 6) (the
+        model's link stiffness), ``stiffness`` (n, 6, 6) (receives the scaled one),
+        ``section_stiffness`` (s, n, 6, 6) (the model's stiffness of section ``j``'s links,
+        zero elsewhere), ``ranges`` (s, 2) int (first link and count of each section), then
+        the link pass's arguments without cavities and its workspaces: ``actuation`` (0,),
+        ``cavity_wrench`` (n, 0, 6), ``cavity_stiffness`` (n, 0, 6, 6), ``cavity_columns``
+        (n, 0), ``rhs`` (6n, 1), ``blocks`` (n, 12, 12), ``work``.
+    masses : (w,) ndarray
+        The load unknowns of the linearisation (weights [kg], then the sections' ``σ`` [-]).
+    load : (w, 6n) ndarray
+        Its last ``s`` rows receive ``∂r/∂σ_j`` [N, N*m].
+
+    """
+    (link_section, nominal, stiffness, section_stiffness, ranges, actuation, cavity_wrench,
+     cavity_stiffness, cavity_columns, rhs, blocks, work) = sections
+    n_sections = section_stiffness.shape[0]
+    if n_sections == 0:
+        return
+    first = masses.size - n_sections
+    for link in range(link_section.size):
+        section = link_section[link]
+        factor = 1.0 if section < 0 else 1.0 + masses[first + section]
+        for i in range(6):
+            for j in range(6):
+                stiffness[link, i, j] = factor * nominal[link, i, j]
+    rest_rotations_t = buffers.rest_rotations_t
+    for section in range(n_sections):
+        low = max(ranges[section, 0] - 1, 0)
+        high = ranges[section, 0] + ranges[section, 1]
+        rotations_t = (rest_rotations_t[low:high] if rest_rotations_t.shape[0] > 0
+                       else rest_rotations_t)
+        link_pass_into(buffers.positions[low:high + 1], buffers.rotations[low:high + 1],
+                       section_stiffness[section, low:high], buffers.rest_offsets[low:high],
+                       rotations_t, actuation, cavity_wrench[low:high],
+                       cavity_stiffness[low:high], cavity_columns[low:high],
+                       rhs[6 * low:6 * high], blocks[low:high], True, work)
+        row = first + section
+        load[row, :] = 0.0
+        for k in range(6 * low, 6 * high):
+            load[row, k] = rhs[k, 0]
+
+
+@numba.njit(cache=True)
 def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
                   covariance, pressures, scalars, masses, load, base_external, mass_columns,
                   mass_rhs, mass_effectors, stuck, active, free_step, effector_w, effector_positions,
-                  tip_covariance, work):
+                  tip_covariance, work, sections):
     """
     Run one estimator update (linearise, Kalman update, Newton step), in place.
 
@@ -148,7 +217,8 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
     jacobian : (c, 6n) ndarray
         Receives ``J_s``.
     moved : (c, m + 1 + w) ndarray
-        Receives ``J_s K⁻¹ [r, J_aᵀ, J_μᵀ]`` [m, m/Pa, m/kg] (``w`` weight unknowns, 0-2).
+        Receives ``J_s K⁻¹ [r, J_aᵀ, J_μᵀ]`` [m, m/Pa, m/kg or m] (``w`` load unknowns: 0-2
+        weights, then the sections' stiffness errors).
     h : (c, u) ndarray
         Receives ``dℓ/dz``.
     state : (STATE_ROWS, u) ndarray
@@ -160,18 +230,20 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
         Measured pressures (zero when none) and those of the previous update.
     scalars : (SCALARS,) ndarray
         See the module's rows.
-    masses : (w,) ndarray  [kg]
-        The weights of the linearisation (in and out: those after the step).
-    load : (w, 6n) ndarray  [N/kg]
-        External wrench of one kg of each weight unknown (the arm's own weight's distribution,
-        the payload at the last frame).
+    masses : (w,) ndarray  [kg, -]
+        The load unknowns of the linearisation (in and out: those after the step): the
+        weights, then the sections' stiffness errors ``σ``.
+    load : (w, 6n) ndarray  [N/kg, N]
+        ``J_μᵀ``: the external wrench of one kg of each weight unknown (the arm's own weight's
+        distribution, the payload at the last frame), then ``∂r/∂σ_j`` of each section (written
+        here, :func:`section_loads`).
     base_external : (6n,) ndarray  [N, N*m]
         External wrenches without the weight unknowns.
     mass_columns, mass_rhs : (6n, 1 + w) ndarray
-        Workspace: ``K⁻¹ [r, J_μᵀ]`` (the weight columns solved here with ``SOLVE_MASS``, else
+        Workspace: ``K⁻¹ [r, J_μᵀ]`` (the load columns solved here with ``SOLVE_MASS``, else
         given) and ``[r, J_μᵀ]``.
     mass_effectors : tuple
-        Workspace of the weights' projection on the effectors: ``w`` (3k, w), ``w_aa``
+        Workspace of the load unknowns' projection on the effectors: ``w`` (3k, w), ``w_aa``
         (w, w), ``offset`` (3k,), ``moved`` (3k, 1 + w), ``levers`` (k, 3), ``previous``
         (w,).
     stuck, active : (c,) bool ndarray
@@ -186,6 +258,9 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
         Receives the last effector's covariance ``W P Wᵀ`` (``W = effector_w``, linear).
     work : (max(u + 2, n * 6 + 21),) ndarray
         Workspace.
+    sections : tuple
+        The sections' stiffness unknowns (:func:`section_loads`; none: ``section_stiffness``
+        of shape (0, n, 6, 6)).
 
     Returns
     -------
@@ -198,9 +273,10 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
     size = external.size
     for row in range(size):
         external[row] = base_external[row]
-    for a in range(masses.size):
+    for a in range(masses.size - sections[3].shape[0]):
         for row in range(size):
             external[row] += masses[a] * load[a, row]
+    section_loads(buffers, sections, masses, load)
     info, _ = tick.linearise_tick(buffers, cholesky)
     if info != 0:
         return info
