@@ -25,8 +25,8 @@ PYTEST_ARGS ?=
 # on TEST_WORKERS pytest-xdist workers (each reserving its own ROS_DOMAIN_ID, test/conftest.py),
 # then the timing tests (`-m timing`: closed loops, lag, stop deadlines, replays, hosts) in one
 # process with the cores to themselves; coverage appends the second phase to the first. On 2
-# cores beside other jobs: 238 s and 276 s from a warm venv at load 1-9; 499-1016 s and 221-662 s
-# from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests").
+# cores beside other jobs: 238-260 s and 246-276 s from a warm venv at load 1-9; 499-1016 s and
+# 221-662 s from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests").
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
