@@ -25,7 +25,8 @@ PYTEST_ARGS ?=
 # on TEST_WORKERS pytest-xdist workers (each reserving its own ROS_DOMAIN_ID, test/conftest.py),
 # then the timing tests (`-m timing`: closed loops, lag, stop deadlines, replays, hosts) in one
 # process with the cores to themselves; coverage appends the second phase to the first. On 2
-# loaded cores: 498-509 s and 351-429 s (one process: ~14 min); ~4.5 + ~4 min when idle.
+# cores beside other jobs: 238-260 s and 246-276 s from a warm venv at load 1-9; 499-1016 s and
+# 221-662 s from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests").
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
@@ -41,7 +42,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # Python: make cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
-test: install  ## the whole test suite with coverage (~8.5 min on 2 idle cores)
+test: install  ## the whole test suite with coverage (~8.5 min on 2 lightly loaded cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	start=$$(date +%s); \
 	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \

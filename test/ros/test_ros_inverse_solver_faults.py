@@ -24,6 +24,10 @@ TENDON_CENTER = (0.117, 0.0, -0.005)
 """A tip position well in the tendon trunk's reach (near its workspace centre) [m]."""
 
 
+# its windows are a few 10 ms ticks after the feedback turns stale (receive times): beside the
+# other worker's tests a command solved before that moment arrived after it (hold failed in 2 of
+# 3 first phases on 2 workers at load 2-12)
+@pytest.mark.timing
 @pytest.mark.parametrize('action', ['hold', 'vent'])
 def test_stale_feedback_holds_the_last_solved_command_or_vents(rclpy_context, action):
     """
