@@ -31,7 +31,9 @@ def point_wrench(force, lever):
     Parameters
     ----------
     force : (3,) ndarray  [N]
+        The force.
     lever : (3,) ndarray  [m]
+        Its point of application relative to the frame's origin.
 
     Returns
     -------

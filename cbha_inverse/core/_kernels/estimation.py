@@ -196,8 +196,8 @@ def section_loads(buffers, sections, masses, load):
 @numba.njit(cache=True)
 def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
                   covariance, pressures, scalars, masses, load, base_external, mass_columns,
-                  mass_rhs, mass_effectors, stuck, active, free_step, effector_w, effector_positions,
-                  tip_covariance, work, sections):
+                  mass_rhs, mass_effectors, stuck, active, free_step, effector_w,
+                  effector_positions, tip_covariance, work, sections):
     """
     Run one estimator update (linearise, Kalman update, Newton step), in place.
 
@@ -384,7 +384,6 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
                 for q in range(u):
                     acc += effector_w[i, j] * covariance[j, q] * effector_w[k, q]
             tip_covariance[i, k] = acc
-
 
 
 @numba.njit(cache=True)

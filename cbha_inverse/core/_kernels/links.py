@@ -13,10 +13,8 @@ it (through :class:`cbha_inverse.core.system.EquilibriumSystem`); the readable n
 a test oracle (``test/oracles/chain_forces.py``).
 """
 
-import math
-
 from cbha_inverse.core._kernels.so3 import (_add_scaled_hat, hat_into, jl_coefficient,
-                                           left_jacobian_inverse_into, rotation_log)
+                                            left_jacobian_inverse_into, rotation_log)
 import numba
 import numpy as np
 

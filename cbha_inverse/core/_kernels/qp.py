@@ -204,9 +204,10 @@ def solve_free_block(h, g, x, free):
 @numba.njit(cache=True)
 def solve_free_block_into(h, g, x, free, index, a, y):
     """
-    :func:`solve_free_block` with its workspace given: ``index`` (m,) int64, ``a`` (m, m), ``y`` (m,).
+    Solve as :func:`solve_free_block` does, with its workspace given.
 
-    The free block ``H_ff`` and its factor use the top-left ``n x n`` corner of ``a``.
+    The workspace: ``index`` (m,) int64, ``a`` (m, m), ``y`` (m,). The free block ``H_ff`` and
+    its factor use the top-left ``n x n`` corner of ``a``.
     """
     m = x.size
     n = 0

@@ -9,7 +9,7 @@ apply an increment in the links' deformation coordinates (the static solver's li
 import math
 
 from cbha_inverse.core._kernels.so3 import (jl_coefficient, left_jacobian_inverse_into,
-                                           rotation_exp, rotation_log)
+                                            rotation_exp, rotation_log)
 import numba
 import numpy as np
 

@@ -239,7 +239,7 @@ def exp_batch(rotvecs):
 
 @numba.njit(cache=True)
 def log_batch(rotations):
-    """Return rotation vectors (N, 3) and angles (N,) of (N, 3, 3) rotations (:func:`rotation_log`)."""
+    """Return rotation vectors (N, 3) and angles (N,) of rotations (N, 3, 3) (rotation_log)."""
     vectors = np.empty((rotations.shape[0], 3))
     angles = np.empty(rotations.shape[0])
     for k in range(rotations.shape[0]):

@@ -50,10 +50,10 @@ Fields (:data:`FIELDS`, in the order of :func:`make_tick_buffers`; stacked rows 
 from types import SimpleNamespace
 
 from llvmlite import ir
+import numba
 from numba.core import cgutils, types
 from numba.core.extending import box, NativeValue, unbox
 from numba.experimental import structref
-import numba
 import numpy as np
 
 FIELDS = ('positions', 'rotations', 'vectors', 'stiffness', 'rest_offsets', 'rest_rotations_t',
