@@ -17,6 +17,7 @@ from cbha_inverse.core._kernels.links import link_work_size
 from cbha_inverse.core._kernels.tick import compiled_entry
 from cbha_inverse.core.inverse.results import InverseOptions
 from cbha_inverse.core.inverse.tick_data import TickData
+from cbha_inverse.scene.segments import link_sections
 import numpy as np
 
 
@@ -41,10 +42,10 @@ class EstimatorData:
     max_rotation_step : float  [rad]
         Largest frame rotation of one step.
     sections : tuple, optional
-        The section stiffness unknowns: ``link_section`` (n,) int (each link's section, -1:
-        none; :func:`cbha_inverse.scene.segments.link_sections`), ``nominal`` (n, 6, 6) (the
-        model's link stiffness) and ``stiffness`` (n, 6, 6), the writable array of which
-        ``system.stiffness`` is a read-only view; default: none.
+        The section stiffness unknowns: ``section_links`` (dict ``name -> (first link index,
+        count)`` in chain order, :attr:`cbha_inverse.scene.scene.Scene.section_links`),
+        ``nominal`` (n, 6, 6) (the model's link stiffness) and ``stiffness`` (n, 6, 6), the
+        writable array of which ``system.stiffness`` is a read-only view; default: none.
 
     Raises
     ------
@@ -121,7 +122,7 @@ class EstimatorData:
         system : cbha_inverse.core.system.EquilibriumSystem
             The evaluator (``system.stiffness`` must view ``sections[2]``).
         sections : tuple or None
-            ``(link_section, nominal, stiffness)`` of the constructor.
+            ``(section_links, nominal, stiffness)`` of the constructor.
 
         Returns
         -------
@@ -130,24 +131,17 @@ class EstimatorData:
         """
         n = system.n
         if sections is None:
-            link_section = np.full(n, -1, dtype=np.int64)
-            nominal, stiffness = np.zeros((n, 6, 6)), np.zeros((n, 6, 6))
-            count = 0
+            section_links, nominal, stiffness = {}, np.zeros((n, 6, 6)), np.zeros((n, 6, 6))
         else:
-            link_section, nominal, stiffness = sections
-            link_section = np.ascontiguousarray(link_section, dtype=np.int64)
+            section_links, nominal, stiffness = sections
             if not np.shares_memory(system.stiffness, stiffness):
                 raise ValueError("the system's stiffness must view the scaled stiffness")
-            count = int(link_section.max()) + 1
-        per_section = np.zeros((count, n, 6, 6))
-        ranges = np.zeros((count, 2), dtype=np.int64)
-        for index in range(count):
-            members = link_section == index
-            per_section[index, members] = nominal[members]
-            links = np.flatnonzero(members)
-            if links.size != links[-1] - links[0] + 1:
-                raise ValueError(f'the links of section {index} are not consecutive')
-            ranges[index] = links[0], links.size
+        link_section = link_sections(section_links, n)
+        # first link and count of each section; the model's stiffness of its links alone
+        ranges = np.array(list(section_links.values()), dtype=np.int64).reshape(-1, 2)
+        per_section = np.zeros((len(ranges), n, 6, 6))
+        for index, (first, count) in enumerate(ranges):
+            per_section[index, first:first + count] = nominal[first:first + count]
         # read-only as the tick's own stiffness (one compiled type of the link pass)
         nominal = np.array(nominal, dtype=float)
         for array in (nominal, per_section):

@@ -39,7 +39,6 @@ from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.estimate.checks import check_vector, StuckDetector
 from cbha_inverse.estimate.data import EstimatorData
 from cbha_inverse.estimate.results import EstimatorOptions, ShapeEstimate
-from cbha_inverse.scene.segments import link_sections
 import numpy as np
 
 # scale of the unknowns inside the filter: a gain of 1, 10 kPa of offset, 0.1 kg of payload,
@@ -104,8 +103,7 @@ class ShapeEstimator:
             view = stiffness.view()
             view.setflags(write=False)
             self._system = EquilibriumSystem(model, actuators, external, stiffness=view)
-            section_arguments = (link_sections(sections, model.n_links), model.stiffnesses,
-                                 stiffness)
+            section_arguments = (sections, model.stiffnesses, stiffness)
         m = self._m = actuators.n_actuators
         # the load unknowns, in this order: the arm's own weight error, a payload at the last
         # frame (the wrench of one kg of each), the sections' stiffness errors (rows the update
