@@ -65,7 +65,8 @@ def pytest_configure(config):
 #   timing test, so a loop reached some other way fails loudly instead of flaking.
 TIMING_FILES = (
     'test/ros/test_ros_excite.py', 'test/ros/test_ros_fault_relay.py',
-    'test/ros/test_ros_lifecycle.py', 'test/ros/test_ros_robotino_bridge.py')
+    'test/ros/test_ros_lifecycle.py', 'test/ros/test_ros_robotino_bridge.py',
+    'test/ros/test_ros_trajectory_timing.py')
 UNTIMED_SYSTEM_FILES = (
     'test/system/test_colcon_layout.py', 'test/system/test_identify_check.py',
     'test/system/test_installed_executables.py', 'test/system/test_warmup.py')
