@@ -23,7 +23,8 @@ def _nodes(context):
               for argument in COMPOSITION.all_arguments()}
     return [Node(package='cbha_inverse', executable=process.executable,
                  name=process.executable, namespace=process.namespace,
-                 parameters=[*process.params_files, process.parameters], output='screen')
+                 parameters=[*process.params_files, process.parameters],
+                 additional_env=process.environment or None, output='screen')
             for process in resolve(COMPOSITION, values)]
 
 

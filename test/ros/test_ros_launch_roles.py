@@ -2,7 +2,9 @@
 
 import re
 
+from cbha_inverse.ros.common.transport import LOOPBACK_UDP_PROFILE
 from cbha_inverse.ros.launch.compositions import ArgumentError, COMPOSITIONS, resolve, ROLES
+from cbha_inverse.ros.launch.launcher import command_lines
 import pytest
 
 EXPECTED = {
@@ -39,3 +41,25 @@ def test_an_unknown_role_is_refused():
     message = 'role:=lab is not one of robot|control|cameras|all'
     with pytest.raises(ArgumentError, match=re.escape(message)):
         resolve(COMPOSITIONS['sim'], {'role': 'lab'})
+
+
+@pytest.mark.parametrize('name', sorted(COMPOSITIONS))
+def test_solver_transport_is_the_solvers_alone(name, tmp_path):
+    composition = COMPOSITIONS[name]
+    assert all(p.environment == {} for p in resolve(composition, {}))
+    processes = resolve(composition, {'solver_transport': 'udp-loopback'})
+    environments = {p.executable: p.environment for p in processes}
+    solver = environments.pop('inverse_solver')
+    assert solver['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'SUBNET'
+    assert solver['FASTRTPS_DEFAULT_PROFILES_FILE'].endswith(LOOPBACK_UDP_PROFILE)
+    assert set(solver) == {'ROS_AUTOMATIC_DISCOVERY_RANGE', 'FASTRTPS_DEFAULT_PROFILES_FILE'}
+    assert environments and all(env == {} for env in environments.values())
+    # cbha_launch sets them through env(1), for that node alone
+    lines = dict(command_lines(processes, tmp_path))
+    assert lines['inverse_solver'][:3] == ['env', *(f'{k}={v}' for k, v in solver.items())]
+    assert all(argv[0] != 'env' for node, argv in lines.items() if node != 'inverse_solver')
+    # loopback only: a controller on a machine of its own would hear no other machine
+    for role in ROLES:
+        with pytest.raises(ArgumentError, match=re.escape(
+                f'it needs every node on this host (role:=all), not role:={role}')):
+            resolve(composition, {'solver_transport': 'udp-loopback', 'role': role})

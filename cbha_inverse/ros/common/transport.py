@@ -56,6 +56,25 @@ def node_environment(domain=None, environment=None):
     return env
 
 
+def loopback_udp_variables():
+    """
+    Return the environment variables that put one process on UDP on 127.0.0.1 alone.
+
+    ``FASTRTPS_DEFAULT_PROFILES_FILE`` names ``config/fastdds/udp_loopback.xml`` and
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is ``SUBNET`` (see :func:`loopback_udp_environment`). The
+    profile's transports win over ``FASTDDS_BUILTIN_TRANSPORTS`` (a process with both binds
+    127.0.0.1 alone), so a launcher that can only add variables (``launch_ros``'s
+    ``additional_env``) needs no more.
+
+    Returns
+    -------
+    dict of str to str
+
+    """
+    return {'FASTRTPS_DEFAULT_PROFILES_FILE': str(config_path(LOOPBACK_UDP_PROFILE)),
+            'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
+
+
 def loopback_udp_environment(environment):
     """
     Return a copy of a process environment whose DDS participant uses UDP on 127.0.0.1 alone.
@@ -76,7 +95,6 @@ def loopback_udp_environment(environment):
 
     """
     env = dict(environment)
-    env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(config_path(LOOPBACK_UDP_PROFILE))
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'SUBNET'
+    env.update(loopback_udp_variables())
     env.pop('FASTDDS_BUILTIN_TRANSPORTS', None)
     return env

@@ -23,6 +23,12 @@ a ``parameters=[file, {...}]`` list does in a launch file. The overrides of a *y
 (``scene``, ``mode``) are weaker: given explicitly, they apply; not given, the composition's
 default applies only where no ``<node>_params`` file of the user sets the parameter; given and set
 otherwise by such a file, that is a conflict (:func:`resolve` raises).
+
+``solver_transport:=udp-loopback`` starts ``inverse_solver`` with the environment of
+:func:`cbha_inverse.ros.common.transport.loopback_udp_variables`: UDP on 127.0.0.1 alone, no
+shared memory, the shortest target -> command tail when every node runs on this host
+(``docs/nodes.md``, "Latency"). It needs ``role:=all``: on a split cell the controller would
+hear no other machine.
 """
 
 from dataclasses import dataclass, field
@@ -31,6 +37,7 @@ from string import Formatter
 
 from cbha_inverse.paths import config_path
 from cbha_inverse.ros.common.params_files import node_values
+from cbha_inverse.ros.common.transport import loopback_udp_variables
 
 
 @dataclass(frozen=True)
@@ -153,6 +160,8 @@ class NodeProcess:
         In order; later files win.
     parameters : dict
         Overrides (string values), applied after the files.
+    environment : dict
+        Environment variables set for this node only (str to str; empty: the launcher's).
 
     """
 
@@ -160,6 +169,7 @@ class NodeProcess:
     namespace: str
     params_files: tuple
     parameters: dict
+    environment: dict = field(default_factory=dict)
 
 
 ROLES = ('robot', 'control', 'cameras')
@@ -179,9 +189,15 @@ def _common(feedback_default, feedback_choices, mode_default):
                  ('open', 'closed'), yielding=True),
         Argument('feedback', feedback_default, 'source of the tip feedback (proprio: the '
                  'string-pot estimate tip/estimated)', feedback_choices),
+        Argument('solver_transport', 'default', "inverse_solver's DDS transport: default (the "
+                 "environment's), or udp-loopback: UDP on 127.0.0.1 alone, no shared memory "
+                 '(config/fastdds/udp_loopback.xml; the shortest latency tail with every node on '
+                 'this host, role:=all)', ('default', 'udp-loopback')),
     )
 
 
+SOLVER = 'inverse_solver'
+"""The node ``solver_transport`` applies to."""
 SCENE = Override('scene', '{scene}')
 STEREO = ('feedback', 'stereo')
 PROPRIO = ('feedback', 'proprio')
@@ -308,15 +324,23 @@ def resolve(composition, values):
     def applies(when):
         return when is None or chosen[when[0]] == when[1]
 
+    loopback = chosen['solver_transport'] == 'udp-loopback'
+    if loopback and chosen['role'] != 'all':
+        raise ArgumentError(f"solver_transport:=udp-loopback keeps inverse_solver's traffic on "
+                            '127.0.0.1: it needs every node on this host (role:=all), not '
+                            f"role:={chosen['role']}")
+
     processes = []
     for node in composition.nodes:
         if not applies(node.when) or chosen['role'] not in ('all', node.role):
             continue
         given = chosen[f'{node.executable}_params']
         params = given or str(config_path(f'{node.executable}.yaml'))
+        environment = (loopback_udp_variables()
+                       if loopback and node.executable == SOLVER else {})
         processes.append(NodeProcess(
             node.executable, chosen['namespace'], (str(Path(params)),),
-            _yielding_overrides(node, chosen, arguments, given)))
+            _yielding_overrides(node, chosen, arguments, given), environment))
     return processes
 
 

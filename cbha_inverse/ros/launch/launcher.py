@@ -136,7 +136,10 @@ def command_lines(processes, overrides_dir):
     for process in processes:
         for params in process.params_files:
             read_yaml(params)
-        argv = [sys.executable, '-m', NODE_PROCESS, node_module(process.executable),
+        # a node's own variables through env(1): the dry run shows them on its line
+        prefix = (['env', *(f'{name}={value}' for name, value in process.environment.items())]
+                  if process.environment else [])
+        argv = [*prefix, sys.executable, '-m', NODE_PROCESS, node_module(process.executable),
                 '--ros-args', '-r', f'__ns:={process.namespace}',
                 '-r', f'__node:={process.executable}']
         for params in process.params_files:
