@@ -54,3 +54,28 @@ def test_a_limited_change_moves_the_payload_in_steps_and_the_loads_with_it():
     np.testing.assert_array_equal(solver._external, exact._external)
     assert solver.set_payload(0.0) == 0.0
     np.testing.assert_array_equal(solver._external, solver._unloaded)
+
+
+def test_a_payload_prepared_off_the_tick_gives_the_ticks_own_linearisation():
+    """set_payload then prepare: the next step does not linearise and equals one that does."""
+    scene = load_scene('cbha')
+    target = scene.forward(np.array([6e4, 4e4, 2e4, 3e4, 5e4, 4e4]),
+                           strict=True).effector_positions[-1][None]
+    prepared, inside = scene.make_inverse_solver(), scene.make_inverse_solver()
+    for solver in (prepared, inside):
+        _settle(solver, target[0], ticks=5)
+        solver.prepare()
+    prepared.set_payload(0.05)
+    inside.set_payload(0.05)
+    prepared.prepare()
+    ahead, own = prepared.step(target), inside.step(target)
+    # the prepared tick only solved; the other one linearised inside its step
+    assert ahead.timings['assembly'] == 0.0 and own.timings['assembly'] > 0.0
+    np.testing.assert_array_equal(ahead.actuation, own.actuation)
+    # an unchanged payload keeps the prepared linearisation; a changed one drops it
+    for solver in (prepared, inside):
+        solver.prepare()
+    prepared.set_payload(0.05)
+    inside.set_payload(0.06)
+    assert prepared.step(target).timings['assembly'] == 0.0
+    assert inside.step(target).timings['assembly'] > 0.0

@@ -185,7 +185,8 @@ class InverseSolver:
         The tick's equilibrium then carries its weight (a load in ``f_ext`` of paper eq. 9, the
         same as a scene's ``tip_payload_mass``), so the QP compensates it in the model instead
         of leaving it to the closed loop's correction. It replaces the previous one; the next
-        linearisation uses it. An estimated payload should come in small steps (``max_change``):
+        linearisation uses it (a node calls :meth:`prepare` right after, so that the target ->
+        command path does not pay for it; an unchanged payload keeps the linearisation). An estimated payload should come in small steps (``max_change``):
         each change of the model's load is a step of the commanded actuation, and in a loop on
         an estimate that step disturbs the estimate it came from.
 
@@ -214,6 +215,9 @@ class InverseSolver:
             raise ValueError('a payload needs the scene gravity')
         if max_change is not None:
             mass = self._payload + min(max(mass - self._payload, -max_change), max_change)
+        if mass == self._payload:
+            # the loads already carry it: the linearisation (prepared or not) stays valid
+            return mass
         self._payload = mass
         size = self._external.size
         self._external[size - 6:size - 3] = self._unloaded[size - 6:size - 3] + mass * (

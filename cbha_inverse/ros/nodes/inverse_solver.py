@@ -280,6 +280,12 @@ class InverseSolverNode(Node):
             self._count_rejected('payload', 'out_of_range', f'{mass} kg')
             return
         self.solver.set_payload(mass, self.params.max_payload_change or None)
+        # the new load's linearisation now, off the target -> command path (an unchanged
+        # payload keeps the prepared one)
+        try:
+            self.solver.prepare()
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            self._count_failure('linearisation failed (the next tick retries)', exc)
 
     def _on_target(self, message):
         received = time.perf_counter()
