@@ -186,9 +186,10 @@ class InverseSolver:
         same as a scene's ``tip_payload_mass``), so the QP compensates it in the model instead
         of leaving it to the closed loop's correction. It replaces the previous one; the next
         linearisation uses it (a node calls :meth:`prepare` right after, so that the target ->
-        command path does not pay for it; an unchanged payload keeps the linearisation). An estimated payload should come in small steps (``max_change``):
-        each change of the model's load is a step of the commanded actuation, and in a loop on
-        an estimate that step disturbs the estimate it came from.
+        command path does not pay for it; an unchanged payload keeps the linearisation). An
+        estimated payload should come in small steps (``max_change``): each change of the
+        model's load is a step of the commanded actuation, and in a loop on an estimate that
+        step disturbs the estimate it came from.
 
         Parameters
         ----------
