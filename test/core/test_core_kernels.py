@@ -62,11 +62,13 @@ def test_rotation_log_inverts_exp_up_to_pi(angle):
         assert theta == pytest.approx(angle, abs=1e-12)
 
 
-# kd = 11 with 7 or 9 right-hand sides runs the constant-trip-count sweeps of band_solve
-# (SOLVE_COLUMN_COUNTS), the others its general loops
+# kd = 11 with 7 or 9 right-hand sides and kd = 17 with 9 run the constant-trip-count sweeps of
+# band_solve (SOLVE_COLUMN_COUNTS), the others its general loops; kd = 11 and 17 the
+# constant-trip-count Cholesky
 @pytest.mark.parametrize('size, kd, n_rhs', [
     (1, 0, 5), (12, 11, 5), (36, 17, 5), (96, 11, 5), (20, 19, 5), (96, 11, 7), (96, 11, 9),
-    (12, 11, 7), (36, 11, 9), (96, 11, 17), (96, 11, 1)])
+    (12, 11, 7), (36, 11, 9), (96, 11, 17), (96, 11, 1), (36, 17, 9), (60, 17, 17),
+    (18, 17, 9)])
 def test_band_cholesky_equals_dense_solve(size, kd, n_rhs):
     rng = np.random.default_rng(size + kd + n_rhs)
     a = rng.standard_normal((size, size))
@@ -109,7 +111,7 @@ def test_band_kernels_on_the_frame_profile_equal_the_full_band(n_rhs):
     rhs = rng.standard_normal((size, n_rhs))
     solved, expected = rhs.copy(), rhs.copy()
     band_solve(band, solved)
-    _solve_columns(full, expected, n_rhs, True)
+    _solve_columns(full, expected, n_rhs, 12)
     np.testing.assert_array_equal(solved, expected)
     np.testing.assert_allclose(solved, np.linalg.solve(a, rhs), atol=1e-11)
     # one entry outside the profile (or a NaN) and the full band runs

@@ -23,7 +23,8 @@ def band_cholesky(band):
     Right-looking: each column of ``L`` is scaled, then the trailing block takes its rank-one
     update; the innermost loop is an axpy over contiguous memory (no loop-carried dependency).
     Half-bandwidth 11 (a block-tridiagonal frame chain) runs :func:`_cholesky_width12`, the same
-    arithmetic with constant trip counts (~1.7x faster, identical result), or, when the band
+    arithmetic with constant trip counts (~1.7x faster, identical result; also half-bandwidth 17,
+    :data:`CABLE_BAND_WIDTH`, ~2x faster), or, when the band
     has the profile of 6 x 6 blocks (:func:`frame_profile`), :func:`_cholesky_frames`, which
     also skips the zeros outside it (~25 % faster again, identical result for finite values).
 
@@ -45,6 +46,8 @@ def band_cholesky(band):
         if frame_profile(band):
             return _cholesky_frames(band)
         return _cholesky_width12(band)
+    if band.shape[1] == CABLE_BAND_WIDTH:
+        return _cholesky_constant_width(band, CABLE_BAND_WIDTH)
     return _cholesky_columns(band, 0)
 
 
@@ -114,17 +117,21 @@ def band_solve(factor, rhs):
                 _solve_frames(factor, rhs, n_rhs)
             return
         if n_rhs == SOLVE_COLUMN_COUNTS[0]:
-            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[0], True)
+            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[0], FRAME_BAND_WIDTH)
             return
         if n_rhs == SOLVE_COLUMN_COUNTS[1]:
-            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[1], True)
+            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[1], FRAME_BAND_WIDTH)
             return
-    _solve_columns(factor, rhs, n_rhs, False)
+    elif factor.shape[1] == CABLE_BAND_WIDTH and n_rhs == SOLVE_COLUMN_COUNTS[1]:
+        _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[1], CABLE_BAND_WIDTH)
+        return
+    _solve_columns(factor, rhs, n_rhs, 0)
 
 
 #: right-hand side counts ``m + 1`` that :func:`band_solve` compiles with a constant trip count
 #: at half-bandwidth 11 (the CBHA's 6 cavities and 8 actuators; at 17 columns the specialisation
-#: measured slower)
+#: measured slower), and 9 at half-bandwidth 17 (``tendon_6f_8c``: 4.3 -> 3.0 µs; 17 columns,
+#: ``tendon_10f_16c``, slower there too)
 SOLVE_COLUMN_COUNTS = (7, 9)
 
 
@@ -133,21 +140,21 @@ def _solve_columns(factor, rhs, n_rhs, constant_width):
     """
     Run the sweeps of :func:`band_solve` over ``n_rhs`` columns.
 
-    Inlined into :func:`band_solve`, so a literal ``n_rhs`` and, with ``constant_width``
-    (half-bandwidth 11), a literal row count below the diagonal for all but the last 11 rows
-    give loops of constant trip count.
+    Inlined into :func:`band_solve`, so a literal ``n_rhs`` and a literal band width
+    ``constant_width`` (0: none; else the factor's) give loops of constant trip count for all
+    but the last ``constant_width - 1`` rows.
     """
     size, width = factor.shape
     kd = width - 1
-    full = max(size - FRAME_BAND_WIDTH + 1, 0) if constant_width else 0
+    full = max(size - constant_width + 1, 0) if constant_width > 0 else 0
     for j in range(full):
-        _forward_row(factor, rhs, j, FRAME_BAND_WIDTH - 1, n_rhs)
+        _forward_row(factor, rhs, j, constant_width - 1, n_rhs)
     for j in range(full, size):
         _forward_row(factor, rhs, j, min(kd, size - 1 - j), n_rhs)
     for j in range(size - 1, full - 1, -1):
         _backward_row(factor, rhs, j, min(kd, size - 1 - j), n_rhs)
     for j in range(full - 1, -1, -1):
-        _backward_row(factor, rhs, j, FRAME_BAND_WIDTH - 1, n_rhs)
+        _backward_row(factor, rhs, j, constant_width - 1, n_rhs)
 
 
 @numba.njit(cache=True, inline='always')
@@ -177,6 +184,9 @@ def _backward_row(factor, rhs, j, below, n_rhs):
 #: band width 2b of the frame chain's block-tridiagonal matrices (b = 6), a compile-time constant
 #: of :func:`_cholesky_width12`
 FRAME_BAND_WIDTH = 12
+#: band width with cables whose routing points sit on frames two links apart (pair blocks two
+#: frames apart: ``kd = 17``, the tendon scenes), compiled with constant trip counts too
+CABLE_BAND_WIDTH = 18
 
 
 @numba.njit(cache=True)
@@ -189,12 +199,23 @@ def _cholesky_width12(band):
     faster than the envelope-length loops at n = 6 ... 1000 blocks; the last 11 columns use
     :func:`_cholesky_columns`.
     """
+    return _cholesky_constant_width(band, FRAME_BAND_WIDTH)
+
+
+@numba.njit(cache=True, inline='always')
+def _cholesky_constant_width(band, width):
+    """
+    :func:`band_cholesky` for a literal band ``width``, constant trip counts away from the end.
+
+    The columns at least ``width`` rows from the end run their loops over the whole width; the
+    last ``width - 1`` columns use :func:`_cholesky_columns`.
+    """
     size = band.shape[0]
-    full = max(size - FRAME_BAND_WIDTH + 1, 0)
+    full = max(size - width + 1, 0)
     for j in range(full):
-        if not _factor_column(band, j, FRAME_BAND_WIDTH - 1):
+        if not _factor_column(band, j, width - 1):
             return j + 1
-    # the last 11 columns: the envelope ends at the matrix end
+    # the last columns: the envelope ends at the matrix end
     return _cholesky_columns(band, full)
 
 
