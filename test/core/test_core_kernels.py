@@ -1,6 +1,7 @@
 """Kernels (Jl⁻¹, log/exp, retraction, band Cholesky), band LU and the solver's fallbacks."""
 
-from cbha_inverse.core._kernels.band import band_cholesky, band_solve
+from cbha_inverse.core._kernels.band import (_cholesky_width12, _solve_columns, band_cholesky,
+                                             band_solve, frame_profile)
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core._kernels.so3 import jl_coefficient, rotation_exp, rotation_log
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
@@ -61,11 +62,13 @@ def test_rotation_log_inverts_exp_up_to_pi(angle):
         assert theta == pytest.approx(angle, abs=1e-12)
 
 
-# kd = 11 with 7 or 9 right-hand sides runs the constant-trip-count sweeps of band_solve
-# (SOLVE_COLUMN_COUNTS), the others its general loops
+# kd = 11 with 7 or 9 right-hand sides and kd = 17 with 9 run the constant-trip-count sweeps of
+# band_solve (SOLVE_COLUMN_COUNTS), the others its general loops; kd = 11 and 17 the
+# constant-trip-count Cholesky
 @pytest.mark.parametrize('size, kd, n_rhs', [
     (1, 0, 5), (12, 11, 5), (36, 17, 5), (96, 11, 5), (20, 19, 5), (96, 11, 7), (96, 11, 9),
-    (12, 11, 7), (36, 11, 9), (96, 11, 17), (96, 11, 1)])
+    (12, 11, 7), (36, 11, 9), (96, 11, 17), (96, 11, 1), (36, 17, 9), (60, 17, 17),
+    (18, 17, 9)])
 def test_band_cholesky_equals_dense_solve(size, kd, n_rhs):
     rng = np.random.default_rng(size + kd + n_rhs)
     a = rng.standard_normal((size, size))
@@ -85,6 +88,38 @@ def test_band_cholesky_equals_dense_solve(size, kd, n_rhs):
     band_solve(band, solved[:, 1:])
     np.testing.assert_allclose(solved[:, 1:], np.linalg.solve(a, rhs[:, 1:]), atol=1e-11)
     np.testing.assert_array_equal(solved[:, 0], rhs[:, 0])
+
+
+@pytest.mark.parametrize('n_rhs', [7, 9, 5])
+def test_band_kernels_on_the_frame_profile_equal_the_full_band(n_rhs):
+    # a block-tridiagonal matrix of 6 x 6 blocks: band_cholesky and band_solve skip the zeros
+    # outside its profile (frame_profile); the result is that of the full-band loops, bit for bit
+    rng = np.random.default_rng(n_rhs)
+    size = 48
+    r, c = np.indices((size, size))
+    a = rng.standard_normal((size, size))
+    a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)
+    band = np.zeros((size, 12))
+    for d in range(12):
+        band[:size - d, d] = np.diagonal(a, -d)
+    assert frame_profile(band)
+    full = band.copy()
+    assert _cholesky_width12(full) == 0
+    assert band_cholesky(band) == 0
+    np.testing.assert_array_equal(band, full)
+    assert frame_profile(band)
+    rhs = rng.standard_normal((size, n_rhs))
+    solved, expected = rhs.copy(), rhs.copy()
+    band_solve(band, solved)
+    _solve_columns(full, expected, n_rhs, 12)
+    np.testing.assert_array_equal(solved, expected)
+    np.testing.assert_allclose(solved, np.linalg.solve(a, rhs), atol=1e-11)
+    # one entry outside the profile (or a NaN) and the full band runs
+    band[1, 11] = 1e-3
+    assert not frame_profile(band)
+    band[1, 11] = np.nan
+    assert not frame_profile(band)
+    assert not frame_profile(np.zeros((42, 11)))
 
 
 def test_band_cholesky_reports_the_first_bad_pivot():

@@ -23,7 +23,10 @@ def band_cholesky(band):
     Right-looking: each column of ``L`` is scaled, then the trailing block takes its rank-one
     update; the innermost loop is an axpy over contiguous memory (no loop-carried dependency).
     Half-bandwidth 11 (a block-tridiagonal frame chain) runs :func:`_cholesky_width12`, the same
-    arithmetic with constant trip counts (~1.7x faster, identical result).
+    arithmetic with constant trip counts (~1.7x faster, identical result; also half-bandwidth 17,
+    :data:`CABLE_BAND_WIDTH`, ~2x faster), or, when the band
+    has the profile of 6 x 6 blocks (:func:`frame_profile`), :func:`_cholesky_frames`, which
+    also skips the zeros outside it (~25 % faster again, identical result for finite values).
 
     Parameters
     ----------
@@ -40,7 +43,11 @@ def band_cholesky(band):
 
     """
     if band.shape[1] == FRAME_BAND_WIDTH:
+        if frame_profile(band):
+            return _cholesky_frames(band)
         return _cholesky_width12(band)
+    if band.shape[1] == CABLE_BAND_WIDTH:
+        return _cholesky_constant_width(band, CABLE_BAND_WIDTH)
     return _cholesky_columns(band, 0)
 
 
@@ -87,7 +94,8 @@ def band_solve(factor, rhs):
 
     Half-bandwidth 11 with :data:`SOLVE_COLUMN_COUNTS` right-hand sides runs the rows at least
     12 from the end with constant trip counts (the same arithmetic in the same order; LLVM
-    unrolls and vectorises the loops over the columns, ~1.4x faster at 7 columns).
+    unrolls the loops over the columns, ~1.4x faster at 7 columns); a factor with the profile of
+    6 x 6 blocks (:func:`frame_profile`) also skips the zeros outside it (:func:`_solve_frames`).
 
     Parameters
     ----------
@@ -99,19 +107,31 @@ def band_solve(factor, rhs):
     """
     n_rhs = rhs.shape[1]
     if factor.shape[1] == FRAME_BAND_WIDTH:
-        # literal column counts: one compiled specialisation each
+        if frame_profile(factor):
+            # literal column counts: one compiled specialisation each
+            if n_rhs == SOLVE_COLUMN_COUNTS[0]:
+                _solve_frames(factor, rhs, SOLVE_COLUMN_COUNTS[0])
+            elif n_rhs == SOLVE_COLUMN_COUNTS[1]:
+                _solve_frames(factor, rhs, SOLVE_COLUMN_COUNTS[1])
+            else:
+                _solve_frames(factor, rhs, n_rhs)
+            return
         if n_rhs == SOLVE_COLUMN_COUNTS[0]:
-            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[0], True)
+            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[0], FRAME_BAND_WIDTH)
             return
         if n_rhs == SOLVE_COLUMN_COUNTS[1]:
-            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[1], True)
+            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[1], FRAME_BAND_WIDTH)
             return
-    _solve_columns(factor, rhs, n_rhs, False)
+    elif factor.shape[1] == CABLE_BAND_WIDTH and n_rhs == SOLVE_COLUMN_COUNTS[1]:
+        _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[1], CABLE_BAND_WIDTH)
+        return
+    _solve_columns(factor, rhs, n_rhs, 0)
 
 
 #: right-hand side counts ``m + 1`` that :func:`band_solve` compiles with a constant trip count
 #: at half-bandwidth 11 (the CBHA's 6 cavities and 8 actuators; at 17 columns the specialisation
-#: measured slower)
+#: measured slower), and 9 at half-bandwidth 17 (``tendon_6f_8c``: 4.3 -> 3.0 µs; 17 columns,
+#: ``tendon_10f_16c``, slower there too)
 SOLVE_COLUMN_COUNTS = (7, 9)
 
 
@@ -120,21 +140,21 @@ def _solve_columns(factor, rhs, n_rhs, constant_width):
     """
     Run the sweeps of :func:`band_solve` over ``n_rhs`` columns.
 
-    Inlined into :func:`band_solve`, so a literal ``n_rhs`` and, with ``constant_width``
-    (half-bandwidth 11), a literal row count below the diagonal for all but the last 11 rows
-    give loops of constant trip count.
+    Inlined into :func:`band_solve`, so a literal ``n_rhs`` and a literal band width
+    ``constant_width`` (0: none; else the factor's) give loops of constant trip count for all
+    but the last ``constant_width - 1`` rows.
     """
     size, width = factor.shape
     kd = width - 1
-    full = max(size - FRAME_BAND_WIDTH + 1, 0) if constant_width else 0
+    full = max(size - constant_width + 1, 0) if constant_width > 0 else 0
     for j in range(full):
-        _forward_row(factor, rhs, j, FRAME_BAND_WIDTH - 1, n_rhs)
+        _forward_row(factor, rhs, j, constant_width - 1, n_rhs)
     for j in range(full, size):
         _forward_row(factor, rhs, j, min(kd, size - 1 - j), n_rhs)
     for j in range(size - 1, full - 1, -1):
         _backward_row(factor, rhs, j, min(kd, size - 1 - j), n_rhs)
     for j in range(full - 1, -1, -1):
-        _backward_row(factor, rhs, j, FRAME_BAND_WIDTH - 1, n_rhs)
+        _backward_row(factor, rhs, j, constant_width - 1, n_rhs)
 
 
 @numba.njit(cache=True, inline='always')
@@ -164,6 +184,9 @@ def _backward_row(factor, rhs, j, below, n_rhs):
 #: band width 2b of the frame chain's block-tridiagonal matrices (b = 6), a compile-time constant
 #: of :func:`_cholesky_width12`
 FRAME_BAND_WIDTH = 12
+#: band width with cables whose routing points sit on frames two links apart (pair blocks two
+#: frames apart: ``kd = 17``, the tendon scenes), compiled with constant trip counts too
+CABLE_BAND_WIDTH = 18
 
 
 @numba.njit(cache=True)
@@ -176,13 +199,138 @@ def _cholesky_width12(band):
     faster than the envelope-length loops at n = 6 ... 1000 blocks; the last 11 columns use
     :func:`_cholesky_columns`.
     """
+    return _cholesky_constant_width(band, FRAME_BAND_WIDTH)
+
+
+@numba.njit(cache=True, inline='always')
+def _cholesky_constant_width(band, width):
+    """
+    :func:`band_cholesky` for a literal band ``width``, constant trip counts away from the end.
+
+    The columns at least ``width`` rows from the end run their loops over the whole width; the
+    last ``width - 1`` columns use :func:`_cholesky_columns`.
+    """
     size = band.shape[0]
-    full = max(size - FRAME_BAND_WIDTH + 1, 0)
+    full = max(size - width + 1, 0)
     for j in range(full):
-        if not _factor_column(band, j, FRAME_BAND_WIDTH - 1):
+        if not _factor_column(band, j, width - 1):
             return j + 1
-    # the last 11 columns: the envelope ends at the matrix end
+    # the last columns: the envelope ends at the matrix end
     return _cholesky_columns(band, full)
+
+
+@numba.njit(cache=True)
+def frame_profile(band):
+    """
+    Return whether a band of half-bandwidth 11 has the profile of a chain of 6 x 6 blocks.
+
+    Row ``c = 6 k + i`` of a block-tridiagonal matrix (blocks of 6) has no entry past row
+    ``6 (k + 2) - 1``: its band slots ``12 - i ... 11`` are zero, and the Cholesky factor keeps
+    them zero (it keeps every row's envelope). Checks them all (a NaN is not zero).
+
+    Parameters
+    ----------
+    band : (N, kd + 1) ndarray
+        Lower band storage of :func:`band_cholesky`, or its factor.
+
+    Returns
+    -------
+    bool
+        ``kd + 1 = 12``, N a multiple of 6 (at least 12) and every slot outside the profile 0.
+
+    """
+    size, width = band.shape
+    if width != FRAME_BAND_WIDTH or size % FRAME_BLOCK != 0 or size < FRAME_BAND_WIDTH:
+        return False
+    for c in range(size):
+        row = band[c]
+        for d in range(FRAME_BAND_WIDTH - c % FRAME_BLOCK, FRAME_BAND_WIDTH):
+            if row[d] != 0.0:
+                return False
+    return True
+
+
+#: block size of the frame chain's block-tridiagonal matrices (:func:`frame_profile`)
+FRAME_BLOCK = 6
+
+
+@numba.njit(cache=True, inline='always')
+def _factor_frame_block(band, j, last):
+    """
+    Factor the six columns ``j ... j + 5`` of a block of :func:`_cholesky_frames`.
+
+    Column ``j + i`` reaches ``11 - i`` rows below the diagonal (``5 - i`` in the ``last``
+    block), a literal for each (constant trip counts). Returns 0, or the failing column + 1.
+    """
+    extra = 0 if last else FRAME_BLOCK
+    if not _factor_column(band, j, extra + 5):
+        return j + 1
+    if not _factor_column(band, j + 1, extra + 4):
+        return j + 2
+    if not _factor_column(band, j + 2, extra + 3):
+        return j + 3
+    if not _factor_column(band, j + 3, extra + 2):
+        return j + 4
+    if not _factor_column(band, j + 4, extra + 1):
+        return j + 5
+    if not _factor_column(band, j + 5, extra):
+        return j + 6
+    return 0
+
+
+@numba.njit(cache=True)
+def _cholesky_frames(band):
+    """
+    :func:`band_cholesky` of a band with the 6 x 6 block profile (:func:`frame_profile`).
+
+    The arithmetic of :func:`_cholesky_width12` without the updates by the zeros outside the
+    profile (``x - 0 y = x`` for a finite ``y``: the same factor).
+    """
+    size = band.shape[0]
+    for j in range(0, size - FRAME_BLOCK, FRAME_BLOCK):
+        info = _factor_frame_block(band, j, False)
+        if info != 0:
+            return info
+    return _factor_frame_block(band, size - FRAME_BLOCK, True)
+
+
+@numba.njit(cache=True, inline='always')
+def _solve_frames(factor, rhs, n_rhs):
+    """
+    Run the sweeps of :func:`band_solve` on a factor with the 6 x 6 block profile.
+
+    Row ``j + i`` of a block reaches ``11 - i`` rows (``5 - i`` in the last block), literals
+    (:func:`_cholesky_frames`): the arithmetic of :func:`_solve_columns` without the zeros.
+    """
+    last = factor.shape[0] - FRAME_BLOCK
+    for j in range(0, last, FRAME_BLOCK):
+        _forward_frame_block(factor, rhs, j, FRAME_BLOCK, n_rhs)
+    _forward_frame_block(factor, rhs, last, 0, n_rhs)
+    _backward_frame_block(factor, rhs, last, 0, n_rhs)
+    for j in range(last - FRAME_BLOCK, -1, -FRAME_BLOCK):
+        _backward_frame_block(factor, rhs, j, FRAME_BLOCK, n_rhs)
+
+
+@numba.njit(cache=True, inline='always')
+def _forward_frame_block(factor, rhs, j, extra, n_rhs):
+    """Forward rows ``j ... j + 5`` of :func:`_solve_frames` (``extra + 5 - i`` rows below)."""
+    _forward_row(factor, rhs, j, extra + 5, n_rhs)
+    _forward_row(factor, rhs, j + 1, extra + 4, n_rhs)
+    _forward_row(factor, rhs, j + 2, extra + 3, n_rhs)
+    _forward_row(factor, rhs, j + 3, extra + 2, n_rhs)
+    _forward_row(factor, rhs, j + 4, extra + 1, n_rhs)
+    _forward_row(factor, rhs, j + 5, extra, n_rhs)
+
+
+@numba.njit(cache=True, inline='always')
+def _backward_frame_block(factor, rhs, j, extra, n_rhs):
+    """Backward rows ``j + 5 ... j`` of :func:`_solve_frames` (``extra + 5 - i`` rows below)."""
+    _backward_row(factor, rhs, j + 5, extra, n_rhs)
+    _backward_row(factor, rhs, j + 4, extra + 1, n_rhs)
+    _backward_row(factor, rhs, j + 3, extra + 2, n_rhs)
+    _backward_row(factor, rhs, j + 2, extra + 3, n_rhs)
+    _backward_row(factor, rhs, j + 1, extra + 4, n_rhs)
+    _backward_row(factor, rhs, j, extra + 5, n_rhs)
 
 
 @numba.njit(cache=True)
