@@ -41,6 +41,7 @@ from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected
                                           ProxsuiteQP, qp_problem)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
+from cbha_inverse.core.sections import SectionStiffness
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
@@ -69,11 +70,17 @@ class InverseSolver:
     scale : (m,) array_like, optional
         Actuator scales ``σ`` (default: ``upper - lower``; an actuator with zero range is
         fixed at its bound and scaled like the widest one, see :attr:`warnings`).
+    sections : dict, optional
+        The chain's sections, ``name -> (first link index, count)`` in chain order
+        (:attr:`cbha_inverse.scene.scene.Scene.section_links`): their stiffness factors can be
+        set (:meth:`set_section_stiffness`).
 
     Attributes
     ----------
     warnings : tuple of str
         What the user should know about the set-up (zero-range actuators); a node logs them.
+    section_names : tuple of str
+        The sections of ``sections`` (empty without).
 
     Raises
     ------
@@ -92,7 +99,8 @@ class InverseSolver:
 
     """
 
-    def __init__(self, model, actuators, effectors, gravity=None, options=None, scale=None):
+    def __init__(self, model, actuators, effectors, gravity=None, options=None, scale=None,
+                 sections=None):
         """Precompute the constant parts and start from rest."""
         self.model = model
         self.actuators = actuators
@@ -129,7 +137,11 @@ class InverseSolver:
         self._unloaded = self._external.copy()
         self._payload = 0.0
         self._gravity = None if gravity is None else np.asarray(gravity, dtype=float)
-        self._tick = EquilibriumSystem(model, actuators, self._external)
+        # the links' stiffness the tick reads, scaled by the sections' factors
+        self._sections = SectionStiffness(model.stiffnesses, sections or {})
+        self.section_names = self._sections.names
+        self._tick = EquilibriumSystem(model, actuators, self._external,
+                                       stiffness=self._sections.stiffness)
         self._active_set = ActiveSetQP(m)
         self._data = TickData(self._tick, effectors, self._scale, self.lower_bounds,
                               self.upper_bounds, self._rate, self.options,
@@ -225,6 +237,45 @@ class InverseSolver:
     def payload(self):
         """Return the payload in the model's loads [kg] (:meth:`set_payload`)."""
         return self._payload
+
+    def set_section_stiffness(self, factors, max_change=None):
+        """
+        Scale each chain section's link stiffness in the model (e.g. estimated factors).
+
+        The links of section ``j`` become ``factors[j]`` times as stiff as the model's (as a
+        scene's ``calibration.section_stiffness`` builds them), so the QP compensates a
+        section's stiffness error in the model instead of leaving it to the closed loop's
+        correction. It replaces the previous factors; the next linearisation uses them. As for
+        :meth:`set_payload`, estimated factors should come in small steps (``max_change``).
+
+        Parameters
+        ----------
+        factors : (s,) array_like  [-]
+            One factor per section, :attr:`section_names` order (1: the model's stiffness).
+        max_change : float or None  [-]
+            Move each factor toward ``factors`` by at most this (None: all the way).
+
+        Returns
+        -------
+        (s,) ndarray  [-]
+            The factors now in the model.
+
+        Raises
+        ------
+        ValueError
+            If ``factors`` is not one finite value per section within
+            :data:`cbha_inverse.core.sections.SECTION_FACTOR_BOUNDS` (a model without
+            sections takes none), or ``max_change`` is negative or not finite.
+
+        """
+        applied = self._sections.apply(factors, max_change)
+        self._age = self.options.relinearize_every
+        return applied
+
+    @property
+    def section_stiffness(self):
+        """Return the sections' stiffness factors in the model, (s,) [-]."""
+        return self._sections.factors
 
     def warm_up(self):
         """
