@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 SECTION_FACTOR_BOUNDS = (0.5, 2.0)
-"""The least and the largest section stiffness factor an estimate or a model takes [-]."""
+"""The least and the largest section stiffness (or actuator gain) factor a model takes [-]."""
 
 
 def link_sections(sections, n_links):
@@ -66,16 +66,18 @@ def section_link_factors(sections, factors, n_links):
     return per_section[link_sections(sections, n_links)]
 
 
-def check_section_factors(factors, n_sections):
+def check_section_factors(factors, n_sections, what='section'):
     """
-    Check a vector of section stiffness factors; return why it is refused, or None.
+    Check a vector of section stiffness (or actuator gain) factors; return why it is refused.
 
     Parameters
     ----------
     factors : array_like
-        One factor per section [-], in the sections' chain order.
+        One factor per section [-], in the sections' chain order (or one per actuator).
     n_sections : int
-        Sections of the chain.
+        Sections of the chain (or actuators).
+    what : str
+        What the factors scale, for the detail (``'section'``, ``'actuator gain'``).
 
     Returns
     -------
@@ -86,12 +88,12 @@ def check_section_factors(factors, n_sections):
     """
     values = np.asarray(factors, dtype=float).reshape(-1)
     if values.size != n_sections or np.ndim(factors) > 1:
-        return 'wrong_length', f'{values.size} section factors, expected {n_sections}'
+        return 'wrong_length', f'{values.size} {what} factors, expected {n_sections}'
     if not np.all(np.isfinite(values)):
-        return 'not_finite', f'section factors {values.tolist()} are not finite'
+        return 'not_finite', f'{what} factors {values.tolist()} are not finite'
     low, high = SECTION_FACTOR_BOUNDS
     if np.any(values < low) or np.any(values > high):
-        return 'out_of_range', (f'section factors {values.tolist()} outside '
+        return 'out_of_range', (f'{what} factors {values.tolist()} outside '
                                 f'[{low:g}, {high:g}]')
     return None
 

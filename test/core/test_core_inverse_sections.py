@@ -115,3 +115,46 @@ def test_a_chain_without_sections_takes_no_factor():
     assert solver.section_names == ()
     with pytest.raises(ValueError, match='expected 0'):
         solver.set_section_stiffness([1.0])
+
+
+GAINS = {'inner_over': 1.1, 'inner_right': 0.9, 'inner_left': 1.05, 'outer_over': 0.92,
+         'outer_right': 1.08, 'outer_left': 0.95}
+
+
+def test_gains_set_equal_a_solver_built_on_the_scene_with_those_gains(scenes):
+    """Same ticks, to round-off, as the scene whose cavities are built with the gains."""
+    nominal = scenes[0]
+    target = nominal.forward(TARGET_ACTUATION, strict=True).effector_positions[-1]
+    gains = [GAINS[name] for name in nominal.actuator_names]
+    solver = nominal.make_inverse_solver()
+    np.testing.assert_array_equal(solver.set_actuator_gain(gains), gains)
+    oracle = load_scene('cbha', calibration=Calibration(actuator_gain=GAINS)).make_inverse_solver()
+    got, expected = _ticks(solver, target, 25), _ticks(oracle, target, 25)
+    np.testing.assert_allclose(got[0], expected[0], rtol=1e-7, atol=1e-3)   # [Pa]
+    np.testing.assert_allclose(got[1], expected[1], rtol=0.0, atol=1e-9)    # [m]
+    unaware = _ticks(nominal.make_inverse_solver(), target, 25)[0]
+    assert np.abs(unaware[-1] - expected[0][-1]).max() > 1e3
+    # rate-limited, and back to the scene's
+    steps = solver.set_actuator_gain(np.ones(6), max_change=0.04)
+    np.testing.assert_allclose(steps, [1.06, 0.94, 1.01, 0.96, 1.04, 0.99])
+    solver.set_actuator_gain(np.ones(6))
+    solver.reset()
+    np.testing.assert_allclose(_ticks(solver, target, 25)[0][-1],
+                               _ticks(nominal.make_inverse_solver(), target, 25)[0][-1],
+                               rtol=1e-7, atol=1e-3)
+
+
+@pytest.mark.parametrize('gains, match', [
+    ([1.0] * 5, 'expected 6'), ([np.nan] + [1.0] * 5, 'not finite'),
+    ([2.5] + [1.0] * 5, 'outside')])
+def test_bad_gains_are_refused_and_change_nothing(scenes, gains, match):
+    solver = scenes[0].make_inverse_solver()
+    with pytest.raises(ValueError, match=match):
+        solver.set_actuator_gain(gains)
+    np.testing.assert_array_equal(solver.actuator_gain, np.ones(6))
+
+
+def test_cables_take_no_gain():
+    solver = load_scene('tendon_6f_8c').make_inverse_solver()
+    with pytest.raises(ValueError, match='condensed cavities'):
+        solver.set_actuator_gain(np.ones(len(solver.actuator_names)))

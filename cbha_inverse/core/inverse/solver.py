@@ -37,6 +37,7 @@ from cbha_inverse.core._kernels.qp import SOLVED
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into, retract_frames
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
+from cbha_inverse.core.inverse.model_terms import ModelTerms
 from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
                                           ProxsuiteQP, qp_problem)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
@@ -51,7 +52,7 @@ _REACH_FACTOR = 2.0
 _FAST_MOVE = 0.02
 
 
-class InverseSolver:
+class InverseSolver(ModelTerms):
     """
     The per-tick controller of the module docstring (pure numerics, no ROS).
 
@@ -140,6 +141,7 @@ class InverseSolver:
         # the links' stiffness the tick reads, scaled by the sections' factors
         self._sections = SectionStiffness(model.stiffnesses, sections or {})
         self.section_names = self._sections.names
+        self._gains = np.ones(m)
         self._tick = EquilibriumSystem(model, actuators, self._external,
                                        stiffness=self._sections.stiffness)
         self._active_set = ActiveSetQP(m)
@@ -189,93 +191,6 @@ class InverseSolver:
         self._pending = False         # its linear step with the current actuation is not applied
         self._age = 0
         self._prepared = False
-
-    def set_payload(self, mass, max_change=None):
-        """
-        Add a known mass at the last frame to the model's loads (e.g. an estimated payload).
-
-        The tick's equilibrium then carries its weight (a load in ``f_ext`` of paper eq. 9, the
-        same as a scene's ``tip_payload_mass``), so the QP compensates it in the model instead
-        of leaving it to the closed loop's correction. It replaces the previous one; the next
-        linearisation uses it. An estimated payload should come in small steps (``max_change``):
-        each change of the model's load is a step of the commanded actuation, and in a loop on
-        an estimate that step disturbs the estimate it came from.
-
-        Parameters
-        ----------
-        mass : float  [kg]
-            The payload (0: none).
-        max_change : float or None  [kg]
-            Move the model's payload toward ``mass`` by at most this (None: all the way).
-
-        Returns
-        -------
-        float  [kg]
-            The payload now in the model's loads.
-
-        Raises
-        ------
-        ValueError
-            If ``mass`` is not finite, or the model has no gravity.
-
-        """
-        mass = float(mass)
-        if not math.isfinite(mass):
-            raise ValueError(f'payload must be finite, got {mass}')
-        if self._gravity is None:
-            raise ValueError('a payload needs the scene gravity')
-        if max_change is not None:
-            mass = self._payload + min(max(mass - self._payload, -max_change), max_change)
-        self._payload = mass
-        size = self._external.size
-        self._external[size - 6:size - 3] = self._unloaded[size - 6:size - 3] + mass * (
-            self._gravity)
-        self._age = self.options.relinearize_every
-        return mass
-
-    @property
-    def payload(self):
-        """Return the payload in the model's loads [kg] (:meth:`set_payload`)."""
-        return self._payload
-
-    def set_section_stiffness(self, factors, max_change=None):
-        """
-        Scale each chain section's link stiffness in the model (e.g. estimated factors).
-
-        The links of section ``j`` become ``factors[j]`` times as stiff as the model's (as a
-        scene's ``calibration.section_stiffness`` builds them), so the QP compensates a
-        section's stiffness error in the model instead of leaving it to the closed loop's
-        correction. It replaces the previous factors; the next linearisation uses them. As for
-        :meth:`set_payload`, estimated factors should come in small steps (``max_change``).
-
-        Parameters
-        ----------
-        factors : (s,) array_like  [-]
-            One factor per section, :attr:`section_names` order (1: the model's stiffness).
-        max_change : float or None  [-]
-            Move each factor toward ``factors`` by at most this (None: all the way).
-
-        Returns
-        -------
-        (s,) ndarray  [-]
-            The factors now in the model.
-
-        Raises
-        ------
-        ValueError
-            If ``factors`` is not one finite value per section within
-            :data:`cbha_inverse.core.sections.SECTION_FACTOR_BOUNDS` (a model without
-            sections takes none), or ``max_change`` is negative or not finite.
-
-        """
-        applied = self._sections.apply(factors, max_change)
-        self._age = self.options.relinearize_every
-        return applied
-
-    @property
-    def section_stiffness(self):
-        """Return the sections' stiffness factors in the model, (s,) [-]."""
-        return self._sections.factors
 
     def warm_up(self):
         """
