@@ -118,6 +118,9 @@ def add_estimator_arguments(parser):
     parser.add_argument('--feed-sections', action=argparse.BooleanOptionalAction, default=True,
                         help="with --estimate-sections: inverse_solver's section_stiffness_topic "
                         'takes the estimated factors (--no-feed-sections: the estimate alone)')
+    parser.add_argument('--feed-gains', action=argparse.BooleanOptionalAction, default=False,
+                        help="shape_estimator's publish_gains, inverse_solver's "
+                        'actuator_gain_topic: the estimated cavity gains into the model')
     parser.add_argument('--max-section-change', type=float, default=None, metavar='FACTOR',
                         help="inverse_solver's max_section_change (default: its params file)")
 
@@ -134,9 +137,10 @@ def proprio_node_parameters(args):
     Returns
     -------
     estimator : dict
-        Its unknowns: payload, weight, sections and gains.
+        Its unknowns: payload, weight, sections and gains (published with ``--feed-gains``).
     solver : dict
-        The closed loop on ``tip/estimated``, the payload and sections topics when estimated.
+        The closed loop on ``tip/estimated``, the payload, sections and gains topics when
+        estimated and fed.
 
     """
     sections = dict(zip(('section_stiffness_std', 'gain_std'),
@@ -147,6 +151,9 @@ def proprio_node_parameters(args):
     solver = {'feedback_topic': 'tip/estimated',
               'payload_topic': 'payload/estimated' if args.estimate_payload else '',
               'section_stiffness_topic': 'sections/estimated' if fed else ''}
+    if args.feed_gains:
+        estimator['publish_gains'] = True
+        solver['actuator_gain_topic'] = 'gains/estimated'
     if args.max_section_change is not None:
         solver['max_section_change'] = args.max_section_change
     return estimator, solver

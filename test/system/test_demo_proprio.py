@@ -66,3 +66,5 @@ def test_the_estimated_sections_go_into_the_solver_unless_told_not():
     assert solver['section_stiffness_topic'] == ''
     _, solver = proprio_node_parameters(parse_args(['--max-section-change', '0.01']))
     assert solver['section_stiffness_topic'] == '' and solver['max_section_change'] == 0.01
+    estimator, solver = proprio_node_parameters(parse_args(['--feed-gains']))
+    assert estimator['publish_gains'] and solver['actuator_gain_topic'] == 'gains/estimated'

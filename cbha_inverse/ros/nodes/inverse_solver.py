@@ -3,8 +3,9 @@
 
 Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/measured``
 (PointStamped, sensor data; ``feedback_topic``: e.g. ``tip/estimated`` of ``shape_estimator``)
-and, when set, ``payload_topic`` (Float64, kg) and ``section_stiffness_topic``
-(Float64MultiArray, one stiffness factor per scene section) into the model's loads and links;
+and, when set, ``payload_topic`` (Float64, kg), ``section_stiffness_topic`` (Float64MultiArray,
+one stiffness factor per scene section) and ``actuator_gain_topic`` (Float64MultiArray, one gain
+per valve) into the model's loads, links and cavities;
 publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable),
 ``/diagnostics`` (~1 Hz), ``backbone`` (MarkerArray) and, every ``tf_every_n_ticks`` ticks, the
 model frames and the tip on ``/tf`` (:mod:`cbha_inverse.ros.common.tf`; needs tf2_msgs).
@@ -108,6 +109,13 @@ class InverseSolverParams:
     max_section_change: float = param(2.0e-3, 'each model section factor moves toward each '
                                       'message by at most this [-] (0: all the way)',
                                       low=0.0, high=10.0, live=True)
+    actuator_gain_topic: str = param('', "the cavities' gains on their effective area "
+                                     '(std_msgs/Float64MultiArray, valve_names order) in the '
+                                     'model, e.g. gains/estimated of shape_estimator (empty: '
+                                     'none)')
+    max_gain_change: float = param(2.0e-3, 'each model gain moves toward each message by at '
+                                   'most this [-] (0: all the way)', low=0.0, high=10.0,
+                                   live=True)
     workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected', live=True)
     workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]', live=True)
@@ -204,6 +212,9 @@ class InverseSolverNode(Node):
         if p.section_stiffness_topic:
             self.create_subscription(Float64MultiArray, p.section_stiffness_topic,
                                      self._on_sections, MEASURED_QOS)
+        if p.actuator_gain_topic:
+            self.create_subscription(Float64MultiArray, p.actuator_gain_topic,
+                                     self._on_gains, MEASURED_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)
@@ -301,6 +312,16 @@ class InverseSolverNode(Node):
             self._count_rejected('sections', *refused)
             return
         self.solver.set_section_stiffness(factors, self.params.max_section_change or None)
+
+    def _on_gains(self, message):
+        gains = np.array(message.data, dtype=float)
+        refused = check_section_factors(gains, self.order.size, 'actuator gain')
+        if refused is not None:
+            self._count_rejected('gains', *refused)
+            return
+        in_scene_order = np.empty(self.order.size)
+        in_scene_order[self.order] = gains
+        self.solver.set_actuator_gain(in_scene_order, self.params.max_gain_change or None)
 
     def _on_target(self, message):
         received = time.perf_counter()
@@ -496,6 +517,9 @@ class InverseSolverNode(Node):
         if self.params.section_stiffness_topic:
             values.update({f'section_stiffness.{name}': float(v) for name, v in
                            zip(self.solver.section_names, self.solver.section_stiffness)})
+        if self.params.actuator_gain_topic:
+            values.update({f'actuator_gain.{name}': float(v) for name, v in
+                           zip(self.scene.actuator_names, self.solver.actuator_gain)})
         if result is not None and result.status == 'not_positive_definite':
             level, message = ERROR, 'model tangent not positive definite: holding'
         elif self.decision in ('hold', 'vent'):
