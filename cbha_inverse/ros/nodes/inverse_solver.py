@@ -106,7 +106,7 @@ class InverseSolverParams:
                                          '(std_msgs/Float64MultiArray, one per scene section, '
                                          'chain order) in the model, e.g. sections/estimated '
                                          'of shape_estimator (empty: none)')
-    max_section_change: float = param(2.0e-3, 'each model section factor moves toward each '
+    max_section_change: float = param(5.0e-4, 'each model section factor moves toward each '
                                       'message by at most this [-] (0: all the way)',
                                       low=0.0, high=10.0, live=True)
     actuator_gain_topic: str = param('', "the cavities' gains on their effective area "
