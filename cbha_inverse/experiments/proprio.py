@@ -121,6 +121,9 @@ def add_estimator_arguments(parser):
     parser.add_argument('--feed-gains', action=argparse.BooleanOptionalAction, default=False,
                         help="shape_estimator's publish_gains, inverse_solver's "
                         'actuator_gain_topic: the estimated cavity gains into the model')
+    parser.add_argument('--proprio-max-correction', type=float, default=None, metavar='M',
+                        help="inverse_solver's max_correction in the proprio runs [m] (default: "
+                        'its params file)')
     parser.add_argument('--max-section-change', type=float, default=None, metavar='FACTOR',
                         help="inverse_solver's max_section_change (default: its params file)")
 
@@ -154,6 +157,8 @@ def proprio_node_parameters(args):
     if args.feed_gains:
         estimator['publish_gains'] = True
         solver['actuator_gain_topic'] = 'gains/estimated'
+    if args.proprio_max_correction is not None:
+        solver['max_correction'] = args.proprio_max_correction
     if args.max_section_change is not None:
         solver['max_section_change'] = args.max_section_change
     return estimator, solver

@@ -68,3 +68,5 @@ def test_the_estimated_sections_go_into_the_solver_unless_told_not():
     assert solver['section_stiffness_topic'] == '' and solver['max_section_change'] == 0.01
     estimator, solver = proprio_node_parameters(parse_args(['--feed-gains']))
     assert estimator['publish_gains'] and solver['actuator_gain_topic'] == 'gains/estimated'
+    _, solver = proprio_node_parameters(parse_args(['--proprio-max-correction', '0.06']))
+    assert solver['max_correction'] == 0.06
