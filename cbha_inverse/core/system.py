@@ -251,6 +251,36 @@ class EquilibriumSystem:
                 + (self._index, self._weights, np.array(counts, dtype=np.int64), self._values,
                    self._band, self._rhs))
 
+    def scale_cavities(self, gains):
+        """
+        Scale each condensed cavity's wrench and load stiffness by a gain, in place.
+
+        The evaluations (and the fused tick, which holds the same arrays) then see cavity ``j``
+        with ``gains[j]`` times the effective area it was built with, as a scene's
+        ``calibration.actuator_gain`` builds it.
+
+        Parameters
+        ----------
+        gains : (m,) ndarray  [-]
+            Gain of each actuator relative to the built one (1: unchanged).
+
+        Raises
+        ------
+        ValueError
+            If the actuators are not condensed cavities, or ``gains`` does not have shape (m,).
+
+        """
+        if not self.has_cavities or self._generic or self._cables:
+            raise ValueError('actuator gains need condensed cavities alone')
+        gains = np.asarray(gains, dtype=float)
+        if gains.shape != (self.m,):
+            raise ValueError(f'gains must have shape ({self.m},), got {gains.shape}')
+        if not hasattr(self, '_built_cavities'):
+            self._built_cavities = (self._cavity_wrench.copy(), self._cavity_stiffness.copy())
+        wrench, stiffness = self._built_cavities
+        np.multiply(wrench, gains[None, :, None], out=self._cavity_wrench)
+        np.multiply(stiffness, gains[None, :, None, None], out=self._cavity_stiffness)
+
     def linearise(self, positions, rotations, actuation):
         """
         Return the symmetric tangent (lower band) and the right-hand sides of a tick.

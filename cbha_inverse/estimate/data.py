@@ -17,7 +17,7 @@ from cbha_inverse.core._kernels.links import link_work_size
 from cbha_inverse.core._kernels.tick import compiled_entry
 from cbha_inverse.core.inverse.results import InverseOptions
 from cbha_inverse.core.inverse.tick_data import TickData
-from cbha_inverse.scene.segments import link_sections
+from cbha_inverse.core.sections import link_sections
 import numpy as np
 
 

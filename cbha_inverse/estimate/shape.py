@@ -35,6 +35,7 @@ import time
 from cbha_inverse.core._kernels import estimation as kernel
 from cbha_inverse.core._kernels import tick as fused
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
+from cbha_inverse.core.sections import SECTION_FACTOR_BOUNDS
 from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.estimate.checks import check_vector, StuckDetector
 from cbha_inverse.estimate.data import EstimatorData
@@ -48,7 +49,7 @@ _OFFSET_SCALE = 1.0e4
 _MASS_SCALE = 0.1
 _SECTION_SCALE = 0.1
 # the section stiffness factors 1 + σ_j are kept within these
-_SECTION_BOUNDS = (0.5, 2.0)
+_SECTION_BOUNDS = SECTION_FACTOR_BOUNDS
 
 
 class ShapeEstimator:

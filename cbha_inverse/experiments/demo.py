@@ -1,15 +1,16 @@
 """
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
-For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target,
-tip/true, tip/measured, tip/estimated, payload/estimated, pressure_command, pressure_measured,
-string_pots, /diagnostics), then ``cbha_sim``, ``inverse_solver`` (``--realtime-priority``) and
-``trajectory`` as separate processes (as ``ros2 run`` would, with the installed params files
-plus a per-run override file; the solver over UDP on 127.0.0.1, ``--solver-transport``:
-``cbha_inverse.ros.common.transport``), runs one lap, stops them with SIGINT and prints one line:
-tracking RMS and max (plant tip vs target, moving part: ``cbha_bag eval``), the solver's tick
-and target-to-command latency (callback entry to publish; its CPU time: the rest is waiting for
-a core), median / p99. It writes ``demo.png``, ``summary.json`` and per run params, logs, bag.
+For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target, tip/true,
+tip/measured, tip/estimated, payload/estimated, sections/estimated, pressure_command,
+pressure_measured, string_pots, /diagnostics), then ``cbha_sim``, ``inverse_solver``
+(``--realtime-priority``) and ``trajectory`` as separate processes (as ``ros2 run`` would, with the
+installed params files plus a per-run override file; the solver over UDP on 127.0.0.1,
+``--solver-transport``: ``cbha_inverse.ros.common.transport``), runs one lap, stops them with
+SIGINT and prints one line: tracking RMS and max (plant tip vs target, moving part: ``cbha_bag
+eval``), the solver's tick and target-to-command latency (callback entry to publish; its CPU time:
+the rest is waiting for a core), median / p99. It writes ``demo.png``, ``summary.json`` and per run
+params, logs, bag.
 
 Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
 centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
@@ -51,9 +52,9 @@ from cbha_inverse.bag.evaluate import evaluate_bag
 from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.errors import ConfigError, report_config_error
-from cbha_inverse.experiments.proprio import (add_plant_pot_arguments, bag_points,
-                                              estimate_error, plant_pot_parameters,
-                                              proprio_sim_parameters)
+from cbha_inverse.experiments.proprio import (add_estimator_arguments, add_plant_pot_arguments,
+                                              bag_points, estimate_error, plant_pot_parameters,
+                                              proprio_node_parameters, proprio_sim_parameters)
 from cbha_inverse.identify.excitation import make_program
 from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
@@ -73,7 +74,8 @@ MODULES = {'cbha_sim': 'cbha_inverse.ros.nodes.cbha_sim',
            'shape_estimator': 'cbha_inverse.ros.nodes.shape_estimator'}
 NAMESPACE = '/cbha'
 RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'payload/estimated',
-            'pressure_command', 'pressure_measured', 'string_pots', '/diagnostics')
+            'sections/estimated', 'pressure_command', 'pressure_measured', 'string_pots',
+            '/diagnostics')
 EXCITE_RECORDED = ('pressure_command', 'pressure_measured', 'tip/measured', 'tip/true')
 
 
@@ -115,12 +117,7 @@ def parse_args(argv):
     parser.add_argument('--plant-payload', type=float, default=0.0,
                         help='plant tip payload unknown to the controller [kg]')
     add_plant_pot_arguments(parser)
-    parser.add_argument('--estimate-payload', type=float, default=0.0, metavar='STD',
-                        help='proprio: shape_estimator payload_std, solver tip load [kg], 0: none')
-    parser.add_argument('--estimate-weight', type=float, default=0.0, metavar='STD',
-                        help="with --estimate-payload: prior of the arm's weight error [kg]")
-    parser.add_argument('--estimate-sections', default='0', metavar='STD[,GAIN_STD]', help=(
-        'proprio: shape_estimator section_stiffness_std [-] (0: none) and gain_std'))
+    add_estimator_arguments(parser)
     parser.add_argument('--stereo-shapes', default='circle', help='shapes of the stereo runs')
     parser.add_argument('--stereo-rig', default='cameras/demo_rig.yaml',
                         help='rig of the stereo runs (path, or relative to config/)')
@@ -373,8 +370,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         waited.append('stereo_tracker')
     if feedback == 'proprio':
         sim_extra = proprio_sim_parameters(args, trajectory)
-        solver_extra = {'feedback_topic': 'tip/estimated', 'payload_topic': (
-            'payload/estimated' if args.estimate_payload else '')}
+        estimator_extra, solver_extra = proprio_node_parameters(args)
         waited.append('shape_estimator')
     processes = {'cbha_sim': _start('cbha_sim', run_dir, {
         **_sim_overrides(args, valve_names), **sim_extra}, env)}
@@ -383,9 +379,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     if feedback == 'proprio':
         processes['shape_estimator'] = _start('shape_estimator', run_dir, {
             **common, 'scene': str(args.model_scene or args.scene), 'diagnostics_period': 0.5,
-            'payload_std': args.estimate_payload, 'payload_weight_std': args.estimate_weight,
-            **dict(zip(('section_stiffness_std', 'gain_std'), _floats(args.estimate_sections)))},
-            env)
+            **estimator_extra}, env)
     processes['inverse_solver'] = _start('inverse_solver', run_dir, {
         **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
         'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,
@@ -441,6 +435,11 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         'estimate_p99_ms': number(estimating, 'estimate_p99_ms'),
         'estimate_degraded': number(estimating, 'degraded_updates'),
         'estimate_rejected': number(estimating, 'rejected_total'),
+        'estimate_payload_kg': number(estimating, 'payload_kg'),
+        'estimate_sections': {k: number(estimating, k) for k in estimating
+                              if k.startswith('section_stiffness.')},
+        'solver_sections': {k: number(control, k) for k in control
+                            if k.startswith('section_stiffness.')},
         'estimate_tip_rms_mm': estimate_error(bag_points(run_dir / 'bag', NAMESPACE),
                                               args.start_hold, trajectory.duration) * 1e3}
     return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo, **proprio,

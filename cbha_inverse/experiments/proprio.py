@@ -6,9 +6,12 @@ interpolated at its stamps, the estimate's own accuracy beside the run's trackin
 points of the run's bag (:func:`bag_points`: the demo's in-process subscriber may miss messages
 on a loaded machine, the recorder's bag is what the tracking error is scored on too);
 :func:`add_plant_pot_arguments` and :func:`plant_pot_parameters` give the plant's string pots
-their noise and a calibration of their own (which a scene then has to identify).
+their noise and a calibration of their own (which a scene then has to identify);
+:func:`add_estimator_arguments` and :func:`proprio_node_parameters` the estimator's unknowns and
+what of them the solver takes into its model (the payload, the sections' stiffness).
 """
 
+import argparse
 from types import SimpleNamespace
 
 from cbha_inverse.bag.evaluate import point_series
@@ -101,6 +104,64 @@ def plant_pot_parameters(args):
         if text is not None:
             parameters[f'string_pot_{key}'] = [float(v) for v in text.split(',')]
     return parameters
+
+
+def add_estimator_arguments(parser):
+    """Add the options of ``shape_estimator``'s unknowns (and what the solver takes of them)."""
+    parser.add_argument('--estimate-payload', type=float, default=0.0, metavar='STD',
+                        help='proprio: shape_estimator payload_std, solver tip load [kg], 0: none')
+    parser.add_argument('--estimate-weight', type=float, default=0.0, metavar='STD',
+                        help="with --estimate-payload: prior of the arm's weight error [kg]")
+    parser.add_argument('--estimate-sections', default='0', metavar='STD[,GAIN_STD]', help=(
+        'proprio: shape_estimator section_stiffness_std [-] (0: none) and gain_std; the '
+        "estimated section factors go into the solver's model (see --feed-sections)"))
+    parser.add_argument('--feed-sections', action=argparse.BooleanOptionalAction, default=True,
+                        help="with --estimate-sections: inverse_solver's section_stiffness_topic "
+                        'takes the estimated factors (--no-feed-sections: the estimate alone)')
+    parser.add_argument('--feed-gains', action=argparse.BooleanOptionalAction, default=False,
+                        help="shape_estimator's publish_gains, inverse_solver's "
+                        'actuator_gain_topic: the estimated cavity gains into the model')
+    parser.add_argument('--proprio-max-correction', type=float, default=None, metavar='M',
+                        help="inverse_solver's max_correction in the proprio runs [m] (default: "
+                        'its params file)')
+    parser.add_argument('--max-section-change', type=float, default=None, metavar='FACTOR',
+                        help="inverse_solver's max_section_change (default: its params file)")
+
+
+def proprio_node_parameters(args):
+    """
+    Return the parameters of ``shape_estimator`` and ``inverse_solver`` in a run on the pots.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``cbha_demo``'s options (:func:`add_estimator_arguments`).
+
+    Returns
+    -------
+    estimator : dict
+        Its unknowns: payload, weight, sections and gains (published with ``--feed-gains``).
+    solver : dict
+        The closed loop on ``tip/estimated``, the payload, sections and gains topics when
+        estimated and fed.
+
+    """
+    sections = dict(zip(('section_stiffness_std', 'gain_std'),
+                        (float(v) for v in args.estimate_sections.split(','))))
+    estimator = {'payload_std': args.estimate_payload, 'payload_weight_std': args.estimate_weight,
+                 **sections}
+    fed = bool(sections['section_stiffness_std']) and args.feed_sections
+    solver = {'feedback_topic': 'tip/estimated',
+              'payload_topic': 'payload/estimated' if args.estimate_payload else '',
+              'section_stiffness_topic': 'sections/estimated' if fed else ''}
+    if args.feed_gains:
+        estimator['publish_gains'] = True
+        solver['actuator_gain_topic'] = 'gains/estimated'
+    if args.proprio_max_correction is not None:
+        solver['max_correction'] = args.proprio_max_correction
+    if args.max_section_change is not None:
+        solver['max_section_change'] = args.max_section_change
+    return estimator, solver
 
 
 def proprio_sim_parameters(args, trajectory):

@@ -38,7 +38,7 @@ class Scene:
     section_links : dict
         ``name -> (first link index, count)`` of those sections, in chain order: the links a
         section's stiffness factor scales
-        (:func:`cbha_inverse.scene.segments.link_sections`).
+        (:func:`cbha_inverse.core.sections.link_sections`).
     actuator_sections : tuple of (str or None)
         The chain section of each actuator, scene actuator order: a cavity's ``section``, None
         for a cable.
@@ -173,7 +173,8 @@ class Scene:
         Returns
         -------
         cbha_inverse.core.inverse.solver.InverseSolver
-            Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult``.
+            Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult``; its
+            ``set_section_stiffness`` takes one factor per entry of :attr:`section_links`.
 
         """
         merged = {**self._solver_defaults, **options}
@@ -181,4 +182,4 @@ class Scene:
             merged['rate_limit'] = tuple(np.broadcast_to(
                 np.asarray(merged['rate_limit'], dtype=float), (len(self.actuator_names),)))
         return InverseSolver(self.model, self.actuators, self.effectors, gravity=self.gravity,
-                             options=InverseOptions(**merged))
+                             options=InverseOptions(**merged), sections=self.section_links)

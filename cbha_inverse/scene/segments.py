@@ -10,6 +10,7 @@ from pathlib import Path
 from cbha_inverse.core.actuation.cavities import Cavity, CavityGroup, CavityPart
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 from cbha_inverse.core.chain import ChainModel
+from cbha_inverse.core.sections import section_link_factors
 import numpy as np
 
 
@@ -72,56 +73,6 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0, calibration=None):
                                         masses=np.array(masses),
                                         rest_rotations=np.array(rotations))
     return model, sections, parts
-
-
-def link_sections(sections, n_links):
-    """
-    Return the chain section of every link: the membership a section's stiffness factor acts on.
-
-    The scene's ``calibration.section_stiffness`` (:func:`segment_chain`, through
-    :func:`section_link_factors`) and the shape estimator's section stiffness unknowns
-    (:class:`cbha_inverse.estimate.shape.ShapeEstimator`) both scale the links this gives.
-
-    Parameters
-    ----------
-    sections : dict
-        ``name -> (first link index, count)`` (:func:`segment_chain`,
-        :attr:`cbha_inverse.scene.scene.Scene.section_links`), in chain order.
-    n_links : int
-        Links of the chain.
-
-    Returns
-    -------
-    (n_links,) int ndarray
-        Index of each link's section in ``sections``' order, -1 for a link of none.
-
-    """
-    out = np.full(n_links, -1, dtype=np.int64)
-    for index, (first, count) in enumerate(sections.values()):
-        out[first:first + count] = index
-    return out
-
-
-def section_link_factors(sections, factors, n_links):
-    """
-    Return the stiffness factor of every link: its section's entry of ``factors``, else 1.
-
-    Parameters
-    ----------
-    sections : dict
-        ``name -> (first link index, count)``, as :func:`link_sections`.
-    factors : dict of str to float
-        Section name -> factor on its links' stiffness (a name not given: 1).
-    n_links : int
-        Links of the chain.
-
-    Returns
-    -------
-    (n_links,) ndarray  [-]
-
-    """
-    per_section = np.array([factors.get(name, 1.0) for name in sections] + [1.0])
-    return per_section[link_sections(sections, n_links)]
 
 
 def cavity_surfaces(segment):

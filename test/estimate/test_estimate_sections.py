@@ -1,10 +1,10 @@
 """The shape estimator's section stiffness unknowns against the scaled scene's equilibria."""
 
 from cbha_inverse.core._kernels import estimation as kernel
+from cbha_inverse.core.sections import link_sections, section_link_factors
 from cbha_inverse.estimate.shape import EstimatorOptions, ShapeEstimator
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration
-from cbha_inverse.scene.segments import link_sections, section_link_factors
 import numpy as np
 import pytest
 

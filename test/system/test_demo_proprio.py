@@ -51,3 +51,22 @@ def test_estimate_error_interpolates_the_true_tip_in_the_window():
     # 11.5 s the true tip is halfway between those of 11 s and 12 s
     expected = ((0.005 ** 2 + 0.001 ** 2 + 0.002 ** 2) / 3) ** 0.5
     assert abs(estimate_error(_Recorded, 0.5, 2.5) - expected) < 1e-12
+
+
+def test_the_estimated_sections_go_into_the_solver_unless_told_not():
+    """--estimate-sections sets the estimator's priors and the solver's section topic."""
+    from cbha_inverse.experiments.demo import parse_args
+    from cbha_inverse.experiments.proprio import proprio_node_parameters
+    estimator, solver = proprio_node_parameters(parse_args(['--estimate-sections', '0.2,0.1']))
+    assert estimator['section_stiffness_std'] == 0.2 and estimator['gain_std'] == 0.1
+    assert solver['section_stiffness_topic'] == 'sections/estimated'
+    assert solver['payload_topic'] == '' and 'max_section_change' not in solver
+    _, solver = proprio_node_parameters(parse_args(['--estimate-sections', '0.2',
+                                                    '--no-feed-sections']))
+    assert solver['section_stiffness_topic'] == ''
+    _, solver = proprio_node_parameters(parse_args(['--max-section-change', '0.01']))
+    assert solver['section_stiffness_topic'] == '' and solver['max_section_change'] == 0.01
+    estimator, solver = proprio_node_parameters(parse_args(['--feed-gains']))
+    assert estimator['publish_gains'] and solver['actuator_gain_topic'] == 'gains/estimated'
+    _, solver = proprio_node_parameters(parse_args(['--proprio-max-correction', '0.06']))
+    assert solver['max_correction'] == 0.06

@@ -37,10 +37,12 @@ from cbha_inverse.core._kernels.qp import SOLVED
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into, retract_frames
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
+from cbha_inverse.core.inverse.model_terms import ModelTerms
 from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
                                           ProxsuiteQP, qp_problem)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
+from cbha_inverse.core.sections import SectionStiffness
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
@@ -50,7 +52,7 @@ _REACH_FACTOR = 2.0
 _FAST_MOVE = 0.02
 
 
-class InverseSolver:
+class InverseSolver(ModelTerms):
     """
     The per-tick controller of the module docstring (pure numerics, no ROS).
 
@@ -69,11 +71,17 @@ class InverseSolver:
     scale : (m,) array_like, optional
         Actuator scales ``σ`` (default: ``upper - lower``; an actuator with zero range is
         fixed at its bound and scaled like the widest one, see :attr:`warnings`).
+    sections : dict, optional
+        The chain's sections, ``name -> (first link index, count)`` in chain order
+        (:attr:`cbha_inverse.scene.scene.Scene.section_links`): their stiffness factors can be
+        set (:meth:`set_section_stiffness`).
 
     Attributes
     ----------
     warnings : tuple of str
         What the user should know about the set-up (zero-range actuators); a node logs them.
+    section_names : tuple of str
+        The sections of ``sections`` (empty without).
 
     Raises
     ------
@@ -92,7 +100,8 @@ class InverseSolver:
 
     """
 
-    def __init__(self, model, actuators, effectors, gravity=None, options=None, scale=None):
+    def __init__(self, model, actuators, effectors, gravity=None, options=None, scale=None,
+                 sections=None):
         """Precompute the constant parts and start from rest."""
         self.model = model
         self.actuators = actuators
@@ -129,7 +138,12 @@ class InverseSolver:
         self._unloaded = self._external.copy()
         self._payload = 0.0
         self._gravity = None if gravity is None else np.asarray(gravity, dtype=float)
-        self._tick = EquilibriumSystem(model, actuators, self._external)
+        # the links' stiffness the tick reads, scaled by the sections' factors
+        self._sections = SectionStiffness(model.stiffnesses, sections or {})
+        self.section_names = self._sections.names
+        self._gains = np.ones(m)
+        self._tick = EquilibriumSystem(model, actuators, self._external,
+                                       stiffness=self._sections.stiffness)
         self._active_set = ActiveSetQP(m)
         self._data = TickData(self._tick, effectors, self._scale, self.lower_bounds,
                               self.upper_bounds, self._rate, self.options,
@@ -177,59 +191,6 @@ class InverseSolver:
         self._pending = False         # its linear step with the current actuation is not applied
         self._age = 0
         self._prepared = False
-
-    def set_payload(self, mass, max_change=None):
-        """
-        Add a known mass at the last frame to the model's loads (e.g. an estimated payload).
-
-        The tick's equilibrium then carries its weight (a load in ``f_ext`` of paper eq. 9, the
-        same as a scene's ``tip_payload_mass``), so the QP compensates it in the model instead
-        of leaving it to the closed loop's correction. It replaces the previous one; the next
-        linearisation uses it (a node calls :meth:`prepare` right after, so that the target ->
-        command path does not pay for it; an unchanged payload keeps the linearisation). An
-        estimated payload should come in small steps (``max_change``): each change of the
-        model's load is a step of the commanded actuation, and in a loop on an estimate that
-        step disturbs the estimate it came from.
-
-        Parameters
-        ----------
-        mass : float  [kg]
-            The payload (0: none).
-        max_change : float or None  [kg]
-            Move the model's payload toward ``mass`` by at most this (None: all the way).
-
-        Returns
-        -------
-        float  [kg]
-            The payload now in the model's loads.
-
-        Raises
-        ------
-        ValueError
-            If ``mass`` is not finite, or the model has no gravity.
-
-        """
-        mass = float(mass)
-        if not math.isfinite(mass):
-            raise ValueError(f'payload must be finite, got {mass}')
-        if self._gravity is None:
-            raise ValueError('a payload needs the scene gravity')
-        if max_change is not None:
-            mass = self._payload + min(max(mass - self._payload, -max_change), max_change)
-        if mass == self._payload:
-            # the loads already carry it: the linearisation (prepared or not) stays valid
-            return mass
-        self._payload = mass
-        size = self._external.size
-        self._external[size - 6:size - 3] = self._unloaded[size - 6:size - 3] + mass * (
-            self._gravity)
-        self._age = self.options.relinearize_every
-        return mass
-
-    @property
-    def payload(self):
-        """Return the payload in the model's loads [kg] (:meth:`set_payload`)."""
-        return self._payload
 
     def warm_up(self):
         """

@@ -2,7 +2,10 @@
 ``inverse_solver``: the controller node (``docs/nodes.md``; the tick: ``docs/design.md``).
 
 Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/measured``
-(PointStamped, sensor data; ``feedback_topic``: e.g. ``tip/estimated`` of ``shape_estimator``);
+(PointStamped, sensor data; ``feedback_topic``: e.g. ``tip/estimated`` of ``shape_estimator``)
+and, when set, ``payload_topic`` (Float64, kg), ``section_stiffness_topic`` (Float64MultiArray,
+one stiffness factor per scene section) and ``actuator_gain_topic`` (Float64MultiArray, one gain
+per valve) into the model's loads, links and cavities;
 publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable),
 ``/diagnostics`` (~1 Hz), ``backbone`` (MarkerArray) and, every ``tf_every_n_ticks`` ticks, the
 model frames and the tip on ``/tf`` (:mod:`cbha_inverse.ros.common.tf`; needs tf2_msgs).
@@ -30,6 +33,7 @@ import time
 
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.inverse.solver import TargetCorrector
+from cbha_inverse.core.sections import check_section_factors
 from cbha_inverse.robot.ordering import DROPPED, StampOrder
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
@@ -98,6 +102,20 @@ class InverseSolverParams:
     max_payload_change: float = param(5.0e-3, 'the model payload moves toward each payload '
                                       'message by at most this [kg] (0: all the way)',
                                       low=0.0, high=100.0, live=True)
+    section_stiffness_topic: str = param('', "the chain sections' stiffness factors "
+                                         '(std_msgs/Float64MultiArray, one per scene section, '
+                                         'chain order) in the model, e.g. sections/estimated '
+                                         'of shape_estimator (empty: none)')
+    max_section_change: float = param(5.0e-4, 'each model section factor moves toward each '
+                                      'message by at most this [-] (0: all the way)',
+                                      low=0.0, high=10.0, live=True)
+    actuator_gain_topic: str = param('', "the cavities' gains on their effective area "
+                                     '(std_msgs/Float64MultiArray, valve_names order) in the '
+                                     'model, e.g. gains/estimated of shape_estimator (empty: '
+                                     'none)')
+    max_gain_change: float = param(2.0e-3, 'each model gain moves toward each message by at '
+                                   'most this [-] (0: all the way)', low=0.0, high=10.0,
+                                   live=True)
     workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected', live=True)
     workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]', live=True)
@@ -191,6 +209,12 @@ class InverseSolverNode(Node):
         self.create_subscription(PointStamped, p.feedback_topic, self._on_measured, MEASURED_QOS)
         if p.payload_topic:
             self.create_subscription(Float64, p.payload_topic, self._on_payload, MEASURED_QOS)
+        if p.section_stiffness_topic:
+            self.create_subscription(Float64MultiArray, p.section_stiffness_topic,
+                                     self._on_sections, MEASURED_QOS)
+        if p.actuator_gain_topic:
+            self.create_subscription(Float64MultiArray, p.actuator_gain_topic,
+                                     self._on_gains, MEASURED_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)
@@ -280,12 +304,35 @@ class InverseSolverNode(Node):
             self._count_rejected('payload', 'out_of_range', f'{mass} kg')
             return
         self.solver.set_payload(mass, self.params.max_payload_change or None)
-        # the new load's linearisation now, off the target -> command path (an unchanged
-        # payload keeps the prepared one)
+        self._prepare()
+
+    def _prepare(self):
+        """Linearise the changed model now, off the target -> command path."""
+        # (an unchanged payload keeps the prepared linearisation: then this does nothing)
         try:
             self.solver.prepare()
         except (ValueError, ArithmeticError, RuntimeError) as exc:
             self._count_failure('linearisation failed (the next tick retries)', exc)
+
+    def _on_sections(self, message):
+        factors = np.array(message.data, dtype=float)
+        refused = check_section_factors(factors, len(self.solver.section_names))
+        if refused is not None:
+            self._count_rejected('sections', *refused)
+            return
+        self.solver.set_section_stiffness(factors, self.params.max_section_change or None)
+        self._prepare()
+
+    def _on_gains(self, message):
+        gains = np.array(message.data, dtype=float)
+        refused = check_section_factors(gains, self.order.size, 'actuator gain')
+        if refused is not None:
+            self._count_rejected('gains', *refused)
+            return
+        in_scene_order = np.empty(self.order.size)
+        in_scene_order[self.order] = gains
+        self.solver.set_actuator_gain(in_scene_order, self.params.max_gain_change or None)
+        self._prepare()
 
     def _on_target(self, message):
         received = time.perf_counter()
@@ -478,6 +525,12 @@ class InverseSolverNode(Node):
                   **self.tick_times.summary('tick'), **self.latencies.summary('latency'),
                   **self.latency_cpu.summary('latency_cpu'),
                   **{f'status.{k}': v for k, v in sorted(self.statuses.items())}}
+        if self.params.section_stiffness_topic:
+            values.update({f'section_stiffness.{name}': float(v) for name, v in
+                           zip(self.solver.section_names, self.solver.section_stiffness)})
+        if self.params.actuator_gain_topic:
+            values.update({f'actuator_gain.{name}': float(v) for name, v in
+                           zip(self.scene.actuator_names, self.solver.actuator_gain)})
         if result is not None and result.status == 'not_positive_definite':
             level, message = ERROR, 'model tangent not positive definite: holding'
         elif self.decision in ('hold', 'vent'):

@@ -8,17 +8,21 @@ order); every accepted reading runs one update of
 pressures received when they are at most ``pressure_timeout`` old (those of the reading's instant:
 ``robotino_bridge`` and ``cbha_sim`` publish a sample's pressures before its pots, and the
 pressures' subscription is created first, so an executor that finds both waiting takes the
-pressures first), and publishes
-the estimated tip on ``tip/estimated`` (PointStamped, ``frame_id``, the stamp of the pot reading,
-sensor data QoS), which ``inverse_solver`` closes its loop on with
-``feedback_topic: tip/estimated``. A reading that lacks a pot name, is malformed, non-finite or out
-of range, or is older than ``reading_timeout`` is rejected, counted by reason and logged
-(throttled); nothing is published for it, so readings that stop or go stale stop ``tip/estimated``
-and the solver's stale-feedback hold or vent acts. A pot dropped from the fit (stuck, or many sigma
-off) is a WARN and ``degraded``. ``backbone_estimated`` (MarkerArray) draws the estimated backbone
-every ``marker_period``; ``/diagnostics`` reports the residual per pot, the rank, the tip's
-standard deviation, the rejections by reason and the time per estimate. The timeouts and
-``log_throttle`` are live (``set_parameters``); the estimator's noise model is fixed at start.
+pressures first), and publishes the estimated tip on ``tip/estimated`` (PointStamped, ``frame_id``,
+the stamp of the pot reading, sensor data QoS), which ``inverse_solver`` closes its loop on with
+``feedback_topic: tip/estimated``; with ``payload_std`` and ``section_stiffness_std``, also the
+estimated payload on ``payload/estimated`` (Float64, kg) and the sections' stiffness factors on
+``sections/estimated`` (Float64MultiArray, one per scene section in chain order), for the solver's
+``payload_topic`` and ``section_stiffness_topic``; with ``publish_gains``, the gains of the
+effective actuation on ``gains/estimated`` (one per valve, for ``actuator_gain_topic``). A reading
+that lacks a pot name, is malformed, non-finite or out of range, or is older than
+``reading_timeout`` is rejected, counted by reason and logged (throttled); nothing is published for
+it, so readings that stop or go stale stop ``tip/estimated`` and the solver's stale-feedback hold
+or vent acts. A pot dropped from the fit (stuck, or many sigma off) is a WARN and ``degraded``.
+``backbone_estimated`` (MarkerArray) draws the estimated backbone every ``marker_period``;
+``/diagnostics`` reports the residual per pot, the rank, the tip's standard deviation, the
+rejections by reason and the time per estimate. The timeouts and ``log_throttle`` are live
+(``set_parameters``); the estimator's noise model is fixed at start.
 """
 
 from dataclasses import dataclass
@@ -96,7 +100,11 @@ class ShapeEstimatorParams:
                                       low=0.0, high=10.0)
     section_stiffness_std: float = param(0.0, "prior std of each chain section's relative "
                                          'stiffness error, which scales its links in the '
-                                         'estimate (0: none)', low=0.0, high=0.9)
+                                         'estimate (0: none); the factors are published on '
+                                         'sections/estimated', low=0.0, high=0.9)
+    publish_gains: bool = param(False, 'publish the estimated gains 1 + g of the effective '
+                                'actuation about the measured pressures on gains/estimated '
+                                '(valve_names order; updates with fresh pressures alone)')
     outlier_sigma: float = param(_DEFAULTS.outlier_sigma, 'a pot this many sigma off is '
                                  'dropped for the update', low=1.0, high=1.0e6)
     stuck_window: int = param(_DEFAULTS.stuck_window, 'updates over which a stuck pot is '
@@ -157,6 +165,14 @@ class ShapeEstimatorNode(Node):
         self.tip_publisher = self.create_publisher(PointStamped, 'tip/estimated', MEASURED_QOS)
         self.payload_publisher = (self.create_publisher(Float64, 'payload/estimated',
                                                         MEASURED_QOS) if p.payload_std else None)
+        # one stiffness factor per scene section, chain order (inverse_solver's
+        # section_stiffness_topic)
+        self.sections_publisher = (self.create_publisher(
+            Float64MultiArray, 'sections/estimated', MEASURED_QOS)
+            if p.section_stiffness_std else None)
+        self.gains_publisher = (self.create_publisher(
+            Float64MultiArray, 'gains/estimated', MEASURED_QOS)
+            if p.publish_gains and p.use_pressures else None)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone_estimated',
                                                       MARKER_QOS)
         if p.use_pressures:
@@ -216,6 +232,13 @@ class ShapeEstimatorNode(Node):
                                                  p.frame_id))
         if self.payload_publisher is not None:
             self.payload_publisher.publish(Float64(data=estimate.payload))
+        if self.gains_publisher is not None and fresh:
+            gains = 1.0 + self.estimator.gain_error
+            self.gains_publisher.publish(Float64MultiArray(
+                data=[float(v) for v in gains[self.order]]))
+        if self.sections_publisher is not None:
+            self.sections_publisher.publish(Float64MultiArray(
+                data=[float(v) for v in estimate.section_stiffness]))
         self.published += 1
 
     def _publish_markers(self):
