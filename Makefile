@@ -16,6 +16,8 @@ EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
 KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py test/core/test_core_linalg_btd.py
 COVERAGE_ARGS ?= --cov=cbha_inverse
+# the timing phase measures the pytest process only (test/coverage_timing.cfg: no patch = subprocess)
+TIMING_COVERAGE_ARGS ?= $(COVERAGE_ARGS) --cov-config=test/coverage_timing.cfg
 COVERAGE_REPORT ?= --cov-report=term:skip-covered
 comma := ,
 space := $(subst ,, )
@@ -48,7 +50,7 @@ test: install  ## the whole test suite with coverage (~8.5 min on 2 lightly load
 	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \
 	  --durations=15 $(COVERAGE_ARGS) --cov-report= $(PYTEST_ARGS); first=$$?; \
 	middle=$$(date +%s); \
-	$(VPY) -m pytest test -q -rs -m timing --durations=15 $(COVERAGE_ARGS) --cov-append \
+	$(VPY) -m pytest test -q -rs -m timing --durations=15 $(TIMING_COVERAGE_ARGS) --cov-append \
 	  $(COVERAGE_REPORT) $(PYTEST_ARGS); second=$$?; \
 	end=$$(date +%s); \
 	echo "make test: $$((middle - start)) s on $(TEST_WORKERS) workers, $$((end - middle)) s of timing tests"; \
