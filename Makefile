@@ -16,7 +16,7 @@ EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
 KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py test/core/test_core_linalg_btd.py
 COVERAGE_ARGS ?= --cov=cbha_inverse
-# the timing phase measures the pytest process only (test/coverage_timing.cfg: no patch = subprocess)
+# the timing phase measures its pytest process only (test/coverage_timing.cfg: no subprocess patch)
 TIMING_COVERAGE_ARGS ?= $(COVERAGE_ARGS) --cov-config=test/coverage_timing.cfg
 COVERAGE_REPORT ?= --cov-report=term:skip-covered
 comma := ,
