@@ -16,6 +16,8 @@ EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
 KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py test/core/test_core_linalg_btd.py
 COVERAGE_ARGS ?= --cov=cbha_inverse
+# the timing phase measures its pytest process only (test/coverage_timing.cfg: no subprocess patch)
+TIMING_COVERAGE_ARGS ?= $(COVERAGE_ARGS) --cov-config=test/coverage_timing.cfg
 COVERAGE_REPORT ?= --cov-report=term:skip-covered
 comma := ,
 space := $(subst ,, )
@@ -24,9 +26,11 @@ PYTEST_ARGS ?=
 # make test runs the suite in two phases (docs/design.md "Tests"): every test but the timing ones
 # on TEST_WORKERS pytest-xdist workers (each reserving its own ROS_DOMAIN_ID, test/conftest.py),
 # then the timing tests (`-m timing`: closed loops, lag, stop deadlines, replays, hosts) in one
-# process with the cores to themselves; coverage appends the second phase to the first. On 2
-# cores beside other jobs: 238-260 s and 246-276 s from a warm venv at load 1-9; 499-1016 s and
-# 221-662 s from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests").
+# process with the cores to themselves; coverage appends the second phase to the first (its node
+# processes untraced: test/coverage_timing.cfg). On 2 cores beside other jobs: 238-260 s and
+# 246-276 s from a warm venv at load 1-9 before that; after it 197 s + 197 s at load 0.4-3,
+# 396 + 212 s and 734 + 273 s beside two other jobs (load 2-7, 5-17); 499-1016 s and 221-662 s
+# from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests").
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
@@ -37,18 +41,19 @@ export OMP_NUM_THREADS ?= 1
 demo: install  ## the closed-loop CBHA scene in simulation: tracking error and timing (~2 min)
 	$(VPY) -m cbha_inverse.experiments.demo --output $(DEMO_OUT)
 
-# Coverage of every run (child processes included: coverage's patch = subprocess, setup.cfg) over
-# both phases, then the total of the non-compiled code (the numba kernels run as machine code, not
-# Python: make cover-kernels measures them with the JIT off). Both phases run even when the first
+# Coverage over both phases (the first phase's child processes included: coverage's patch =
+# subprocess, setup.cfg; the timing phase's pytest process only, test/coverage_timing.cfg), then
+# the total of the non-compiled code (the numba kernels run as machine code, not Python: make
+# cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
-test: install  ## the whole test suite with coverage (~8.5 min on 2 lightly loaded cores)
+test: install  ## the whole test suite with coverage (~6.5 min on 2 quiet cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	start=$$(date +%s); \
 	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \
 	  --durations=15 $(COVERAGE_ARGS) --cov-report= $(PYTEST_ARGS); first=$$?; \
 	middle=$$(date +%s); \
-	$(VPY) -m pytest test -q -rs -m timing --durations=15 $(COVERAGE_ARGS) --cov-append \
+	$(VPY) -m pytest test -q -rs -m timing --durations=15 $(TIMING_COVERAGE_ARGS) --cov-append \
 	  $(COVERAGE_REPORT) $(PYTEST_ARGS); second=$$?; \
 	end=$$(date +%s); \
 	echo "make test: $$((middle - start)) s on $(TEST_WORKERS) workers, $$((end - middle)) s of timing tests"; \

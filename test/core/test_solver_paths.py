@@ -114,6 +114,9 @@ def _point(point, stamp_ns=0):
     return message
 
 
+# timing: the burst must take less than one timer period (in make test's first phase, beside the
+# other worker at load ~17, 3 timer ticks came during it)
+@pytest.mark.timing
 @pytest.mark.parametrize('trigger', ['target', 'timer'])
 def test_target_trigger_solves_each_target_timer_trigger_per_period(rclpy_context, trigger):
     """A burst of 20 targets in ~0.1 s: 20 ticks when triggered by targets, ~1 at 5 Hz."""
