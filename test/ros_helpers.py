@@ -246,13 +246,41 @@ def child_env():
 
     The rclpy wheels re-exec Python once with their LD_LIBRARY_PATH; a child that inherits the
     bootstrap flag without that path cannot import rclpy, so the flag is dropped (the child
-    bootstraps itself). The DDS isolation variables of test/conftest.py are inherited.
+    bootstraps itself). The DDS isolation variables of test/conftest.py are inherited. A child
+    stopped by SIGABRT (or another fatal signal) prints the stack of every thread
+    (``PYTHONFAULTHANDLER``): what a test that finds a child hung sends it (:func:`stack_dump`).
     """
     env = dict(os.environ)
     env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
     env['PYTHONPATH'] = os.pathsep.join(p for p in [str(REPO_ROOT), env.get('PYTHONPATH')] if p)
     env['PYTHONUNBUFFERED'] = '1'
+    env['PYTHONFAULTHANDLER'] = '1'
     return env
+
+
+def stack_dump(process, timeout=10.0):
+    """
+    Stop a hung child with SIGABRT and return its remaining output: its threads' stacks.
+
+    Parameters
+    ----------
+    process : subprocess.Popen
+        A child started with :func:`child_env` (text output with stderr merged).
+    timeout : float  [s]
+        How long to wait for it after the signal (then it is killed).
+
+    Returns
+    -------
+    str
+
+    """
+    process.send_signal(signal.SIGABRT)
+    try:
+        output, _ = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        output, _ = process.communicate()
+    return output or ''
 
 
 def load_interface(prefix):

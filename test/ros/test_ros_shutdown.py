@@ -8,7 +8,7 @@ import time
 
 from cbha_inverse.scene import load_scene
 import pytest
-from ros_helpers import child_env, reaped, REPO_ROOT, start_node, wait_for_line
+from ros_helpers import child_env, reaped, REPO_ROOT, stack_dump, start_node, wait_for_line
 
 SCENE = 'tendon_6f_8c'
 
@@ -43,7 +43,12 @@ def test_nodes_exit_cleanly_on_sigint_and_sigterm():
         for _, sig, process in processes:
             process.send_signal(sig)
         for module, sig, process in processes:
-            output, _ = process.communicate(timeout=20)
+            try:
+                output, _ = process.communicate(timeout=20)
+            except subprocess.TimeoutExpired:
+                # once in a quiet make test a node ignored its stop: show where it hangs
+                pytest.fail(f'{module} still runs 20 s after {sig.name}; its stacks:\n'
+                            f'{stack_dump(process)}')
             assert process.returncode == 0, (
                 f'{module} exited {process.returncode} on {sig.name}:\n{output}')
             assert 'Traceback' not in output, output
