@@ -28,7 +28,8 @@ PYTEST_ARGS ?=
 # then the timing tests (`-m timing`: closed loops, lag, stop deadlines, replays, hosts) in one
 # process with the cores to themselves; coverage appends the second phase to the first (its node
 # processes untraced: test/coverage_timing.cfg). On 2 cores beside other jobs: 238-260 s and
-# 246-276 s from a warm venv at load 1-9 before that; after it 197 s + 197 s at load 0.4-3,
+# 246-276 s from a warm venv at load 1-9 before that; after it 164 s + 183 s (5.8 min in all),
+# 193-194 s + 214-220 s and 197 s + 197 s at load 0.4-3,
 # 396 + 212 s and 734 + 273 s beside two other jobs (load 2-7, 5-17); 499-1016 s and 221-662 s
 # from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests").
 TEST_WORKERS ?= 2
@@ -47,7 +48,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
-test: install  ## the whole test suite with coverage (~6.5 min on 2 quiet cores)
+test: install  ## the whole test suite with coverage (~6 min on 2 quiet cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	start=$$(date +%s); \
 	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \
