@@ -48,7 +48,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
-test: install  ## the whole test suite with coverage (~6 min on 2 quiet cores)
+test: install  ## the whole test suite with coverage (~6-7 min on 2 quiet cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	start=$$(date +%s); \
 	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \
