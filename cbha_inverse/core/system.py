@@ -111,6 +111,8 @@ class EquilibriumSystem:
         self._cavity_wrench = g0 if has_cavities else np.zeros((n, 0, 6))
         self._cavity_stiffness = hess if has_cavities else np.zeros((n, 0, 6, 6))
         self._cavity_columns = nonzero_cavity_columns(self._cavity_wrench, self._cavity_stiffness)
+        # the cavities as built, kept by the first scale_cavities (which overwrites them)
+        self._built_cavities = None
         self._rhs = np.zeros((6 * n, m + 1))
         # values of the assembly: link blocks, cable pair blocks, cable point moments
         rows, cols = [], []
@@ -275,7 +277,7 @@ class EquilibriumSystem:
         gains = np.asarray(gains, dtype=float)
         if gains.shape != (self.m,):
             raise ValueError(f'gains must have shape ({self.m},), got {gains.shape}')
-        if not hasattr(self, '_built_cavities'):
+        if self._built_cavities is None:
             self._built_cavities = (self._cavity_wrench.copy(), self._cavity_stiffness.copy())
         wrench, stiffness = self._built_cavities
         np.multiply(wrench, gains[None, :, None], out=self._cavity_wrench)

@@ -12,6 +12,7 @@ what of them the solver takes into its model (the payload, the sections' stiffne
 """
 
 import argparse
+import math
 from types import SimpleNamespace
 
 from cbha_inverse.bag.evaluate import point_series
@@ -106,13 +107,25 @@ def plant_pot_parameters(args):
     return parameters
 
 
+def _section_stds(text):
+    """Parse ``--estimate-sections``: ``STD`` or ``STD,GAIN_STD``, finite, not negative."""
+    try:
+        values = tuple(float(v) for v in text.split(','))
+    except ValueError:
+        values = ()
+    if not 1 <= len(values) <= 2 or not all(math.isfinite(v) and v >= 0.0 for v in values):
+        raise argparse.ArgumentTypeError(f'{text!r} is not STD or STD,GAIN_STD (numbers >= 0)')
+    return values
+
+
 def add_estimator_arguments(parser):
     """Add the options of ``shape_estimator``'s unknowns (and what the solver takes of them)."""
     parser.add_argument('--estimate-payload', type=float, default=0.0, metavar='STD',
                         help='proprio: shape_estimator payload_std, solver tip load [kg], 0: none')
     parser.add_argument('--estimate-weight', type=float, default=0.0, metavar='STD',
                         help="with --estimate-payload: prior of the arm's weight error [kg]")
-    parser.add_argument('--estimate-sections', default='0', metavar='STD[,GAIN_STD]', help=(
+    parser.add_argument('--estimate-sections', type=_section_stds, default=(0.0,),
+                        metavar='STD[,GAIN_STD]', help=(
         'proprio: shape_estimator section_stiffness_std [-] (0: none) and gain_std; the '
         "estimated section factors go into the solver's model (see --feed-sections)"))
     parser.add_argument('--feed-sections', action=argparse.BooleanOptionalAction, default=True,
@@ -146,8 +159,7 @@ def proprio_node_parameters(args):
         estimated and fed.
 
     """
-    sections = dict(zip(('section_stiffness_std', 'gain_std'),
-                        (float(v) for v in args.estimate_sections.split(','))))
+    sections = dict(zip(('section_stiffness_std', 'gain_std'), args.estimate_sections))
     estimator = {'payload_std': args.estimate_payload, 'payload_weight_std': args.estimate_weight,
                  **sections}
     fed = bool(sections['section_stiffness_std']) and args.feed_sections
