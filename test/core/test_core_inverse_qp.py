@@ -125,7 +125,6 @@ def test_target_corrector_integrates_clamps_and_stops_winding_up():
     np.testing.assert_array_equal(TargetCorrector(1, gain=0.0).update(target, target + 1), target)
 
 
-
 def test_corrected_target_adds_the_integral_without_integrating():
     corr = TargetCorrector(2, gain=0.5, max_correction=0.01)
     target = np.array([[0.1, 0.0, 0.0], [0.2, 0.05, 0.0]])
@@ -141,6 +140,7 @@ def test_corrected_target_adds_the_integral_without_integrating():
     one = TargetCorrector(1, gain=0.5)
     one.update(target[:1], target[:1] - [[0.0, 0.0, 0.004]])
     np.testing.assert_allclose(one.corrected(target[0]), [[0.1, 0.0, 0.002]])
+
 
 def test_active_set_qp_is_exact_and_agrees_with_proxsuite():
     rng = np.random.default_rng(6)
