@@ -374,6 +374,29 @@ def btd_band_cholesky(diagonal, upper):
 
 
 @numba.njit(cache=True)
+def band_rows(band, size):
+    """
+    Return the lower band storage of an assembly buffer without its trash row (a view).
+
+    Parameters
+    ----------
+    band : ((size + 1) (kd + 1),) ndarray
+        The symmetric lower band of ``size`` rows in C order, then one row of ``kd + 1`` slots
+        that the assembly's base-frame entries are added into (``scatter_add``'s trash).
+    size : int
+        Unknowns ``N``.
+
+    Returns
+    -------
+    (N, kd + 1) ndarray
+        ``band[c, r - c] = K[r, c]`` (:func:`band_cholesky`), sharing ``band``'s memory.
+
+    """
+    width = band.size // (size + 1)
+    return band[:size * width].reshape((size, width))
+
+
+@numba.njit(cache=True)
 def scatter_add(index, values, weights, out):
     """
     Zero ``out`` and add ``weights * values`` at ``index`` (a compiled ``np.bincount``).
