@@ -25,7 +25,7 @@ positions, over the preallocated buffers of
 import math
 
 from cbha_inverse.core._kernels import tick
-from cbha_inverse.core._kernels.band import band_solve
+from cbha_inverse.core._kernels.band import band_rows, band_solve
 from cbha_inverse.core._kernels.cables import routing_lengths_into
 from cbha_inverse.core._kernels.links import link_pass_into
 from cbha_inverse.core._kernels.projection import effector_points_into, project_effectors_into
@@ -312,7 +312,7 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
             for row in range(size):
                 for a in range(n_mass):
                     mass_columns[row, 1 + a] = mass_rhs[row, 1 + a]
-            factor = band[:-1].reshape((size, (band.size - 1) // size))
+            factor = band_rows(band, size)
             band_solve(factor, mass_columns[:, 1:])
         w_mass, w_aa, offset, levers_moved, levers, previous = mass_effectors
         project_effectors_into(mass_columns, mass_rhs, positions, rotations, effector_frames,

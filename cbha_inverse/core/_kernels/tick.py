@@ -14,7 +14,7 @@ into a few stacked arrays, held by one
 (numba unboxes every argument at every call). The rows of the stacks are the constants below.
 """
 
-from cbha_inverse.core._kernels.band import band_cholesky, band_solve, scatter_add
+from cbha_inverse.core._kernels.band import band_cholesky, band_rows, band_solve, scatter_add
 from cbha_inverse.core._kernels.cables import cable_pass_into
 from cbha_inverse.core._kernels.links import link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_points_into, project_effectors_into,
@@ -91,7 +91,7 @@ def linearise_tick(buffers, cholesky):
     buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
         The tick's buffers. Reads the frames, ``vectors[ACTUATION]`` (``λ_prev``) and
         ``vectors[SCALE]``, the evaluation's terms, ``external`` and the effectors; writes
-        ``values``, ``band`` (the symmetric lower band, last slot: the base frame's trash, then
+        ``values``, ``band`` (the symmetric lower band, last row: the base frame's trash, then
         its factor), ``rhs`` (``[r, J_aᵀ]``), ``vectors[LINEARISED]`` and, when the Cholesky
         succeeds, ``solved`` (``K⁻¹ [r, J_aᵀ]``) and the projection (:func:`project_tick`).
     cholesky : bool
@@ -131,7 +131,7 @@ def linearise_tick(buffers, cholesky):
         rhs[row, 0] += external[row]
     scatter_add(buffers.index, values, buffers.slot_weights, band)
     size = rhs.shape[0]
-    factor = band[:-1].reshape((size, (band.size - 1) // size))
+    factor = band_rows(band, size)
     vectors[LINEARISED, :] = actuation
     if not cholesky:
         return -1, float('nan')
