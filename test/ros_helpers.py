@@ -240,18 +240,57 @@ def spin_for(executor, duration):
         executor.spin_once(timeout_sec=0.01)
 
 
+BOOTSTRAP_FLAG = '_ROS_WHEELS_BOOTSTRAP_COMPLETE'
+"""Set by the ROS wheels' start-up hook once it re-executed Python with their library path."""
+
+
+def keep_wheels_bootstrap(env):
+    """
+    Return ``env`` with the wheels' bootstrap flag kept only if it already has their library path.
+
+    Every Python of the venv starts with ``ros_wheels_bootstrapper`` (a ``.pth`` hook): without
+    :data:`BOOTSTRAP_FLAG` it adds the venv's ``lib`` and the wheels' ``ros_*.libs`` folders to
+    ``LD_LIBRARY_PATH`` and re-executes the interpreter (a second start: ~0.1 s, more when
+    coverage starts in both). A child whose ``LD_LIBRARY_PATH`` already names every one of those
+    folders (this bootstrapped process's own, inherited) needs no second start and keeps the
+    flag; any other environment loses it and bootstraps itself.
+
+    Parameters
+    ----------
+    env : dict
+        A child's environment (changed in place).
+
+    Returns
+    -------
+    dict
+        ``env``.
+
+    """
+    try:
+        from ros_wheels_bootstrapper import get_ros_paths
+    except ImportError:
+        env.pop(BOOTSTRAP_FLAG, None)
+        return env
+    needed = {path for path in get_ros_paths().split(os.pathsep) if path}
+    present = set(env.get('LD_LIBRARY_PATH', '').split(os.pathsep))
+    if env.get(BOOTSTRAP_FLAG) != '1' or not needed <= present:
+        env.pop(BOOTSTRAP_FLAG, None)
+    return env
+
+
 def child_env():
     """
     Return an environment for a Python child process that imports rclpy.
 
     The rclpy wheels re-exec Python once with their LD_LIBRARY_PATH; a child that inherits the
-    bootstrap flag without that path cannot import rclpy, so the flag is dropped (the child
-    bootstraps itself). The DDS isolation variables of test/conftest.py are inherited. A child
+    bootstrap flag without that path cannot import rclpy, so the flag is kept only when the
+    environment already has that path (:func:`keep_wheels_bootstrap`: the child then starts once,
+    not twice), else dropped (the child bootstraps itself). The DDS isolation variables of
+    test/conftest.py are inherited. A child
     stopped by SIGABRT (or another fatal signal) prints the stack of every thread
     (``PYTHONFAULTHANDLER``): what a test that finds a child hung sends it (:func:`stack_dump`).
     """
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    env = keep_wheels_bootstrap(dict(os.environ))
     env['PYTHONPATH'] = os.pathsep.join(p for p in [str(REPO_ROOT), env.get('PYTHONPATH')] if p)
     env['PYTHONUNBUFFERED'] = '1'
     env['PYTHONFAULTHANDLER'] = '1'
@@ -335,10 +374,9 @@ def install_env(prefix):
     Return the environment ``install/setup.sh`` gives, for a child of the installed package.
 
     The package's site-packages and ``prefix`` go first on ``PYTHONPATH`` and
-    ``AMENT_PREFIX_PATH``; the wheels' bootstrap flag is dropped as in :func:`child_env`.
+    ``AMENT_PREFIX_PATH``; the wheels' bootstrap flag is kept or dropped as in :func:`child_env`.
     """
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    env = keep_wheels_bootstrap(dict(os.environ))
     site = prefix / 'lib' / f'python{sys.version_info.major}.{sys.version_info.minor}'
     env['PYTHONPATH'] = os.pathsep.join([str(site / 'site-packages'), env.get('PYTHONPATH', '')])
     env['AMENT_PREFIX_PATH'] = os.pathsep.join([str(prefix), env.get('AMENT_PREFIX_PATH', '')])

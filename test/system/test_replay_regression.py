@@ -35,6 +35,7 @@ def test_three_replays_match_the_goldens(mode, tmp_path):
         assert compare(commands, replayed[0], mode) == ''
 
 
+@pytest.mark.untimed
 def test_compare_allows_only_one_short_closed_loop_transient():
     """The comparison itself: 1 Pa everywhere, one short transient in closed loop only."""
     golden = np.load(GOLDENS)['closed']
@@ -49,6 +50,7 @@ def test_compare_allows_only_one_short_closed_loop_transient():
     assert 'goldens have' in compare(golden[1:], golden, 'closed')
 
 
+@pytest.mark.untimed
 def test_closed_loop_goldens_differ_from_open_loop():
     """The recorded measurements change the commands: the closed-loop replay is not vacuous."""
     goldens = np.load(GOLDENS)
