@@ -203,6 +203,17 @@ def real_time_priority():
                 os.sched_setscheduler(tid, policy, param)
 
 
+def real_time_child():
+    """
+    Switch a child process to SCHED_RR :data:`REAL_TIME_PRIORITY` where allowed (a preexec_fn).
+
+    Its threads (the DDS receive threads too) inherit the policy: a process that must keep up
+    with a stream (a bag recorder) is then not starved by the other jobs on the shared cores.
+    """
+    with contextlib.suppress(OSError):
+        os.sched_setscheduler(0, os.SCHED_RR, os.sched_param(REAL_TIME_PRIORITY))
+
+
 def spin_until(executor, predicate, timeout):
     """
     Spin ``executor`` until ``predicate()`` is true or ``timeout`` seconds passed.
