@@ -31,7 +31,10 @@ PYTEST_ARGS ?=
 # 246-276 s from a warm venv at load 1-9 before that; after it 164 s + 183 s (5.8 min in all),
 # 193-194 s + 214-220 s and 197 s + 197 s at load 0.4-3,
 # 396 + 212 s and 734 + 273 s beside two other jobs (load 2-7, 5-17); 499-1016 s and 221-662 s
-# from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests").
+# from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests"). With 37 untimed
+# tests moved to the first phase, the replays batched and the children started once: beside two
+# other helpers compiling numba kernels, 310 s + 223 s (load 4-9) and 313 s + 195 s (load 3-6;
+# before: 528 s + 254 s at load 4-11); 3 workers once 447 s + 233 s (load 3-11): not kept.
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1

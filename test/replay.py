@@ -58,6 +58,7 @@ from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.scene import load_scene
 from cbha_inverse.sim.plant import StaticPlant
 import numpy as np
+from ros_helpers import keep_wheels_bootstrap
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime
 from rosbags.typesys import get_typestore, Stores
@@ -168,8 +169,7 @@ def _real_time_threads(pid):
 
 
 def _environment(domain=None):
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    env = keep_wheels_bootstrap(dict(os.environ))
     # untraced: coverage's tracing of the solver and player processes (``make test`` measures
     # child processes) makes their callbacks several times slower, and a stall past the 10 ms
     # between a measurement and the next target is the reordering described above

@@ -163,6 +163,7 @@ def test_runs_to_the_end_and_refuses_to_fight_a_controller(rclpy_context, tmp_pa
         in outputs['broken'], outputs['broken']
 
 
+@pytest.mark.untimed
 @pytest.mark.parametrize('overrides, match', [
     ({'start_pressure': [75e3] * 5}, 'start_pressure needs 6 values'),
     ({'end_pressure': [75e3] * 5 + [2e5]}, 'end_pressure: 200000 Pa for outer_left is outside '

@@ -63,6 +63,7 @@ def test_the_relay_delivers_what_its_seeded_link_would(rclpy_context):
     assert len(points) > len({i for i, _ in points})
 
 
+@pytest.mark.untimed
 @pytest.mark.parametrize('bad, match', [
     ({'inputs': ['a'], 'outputs': ['b', 'c'], 'types': ['std_msgs/msg/Empty']}, 'same length'),
     ({'inputs': ['a'], 'outputs': ['b'], 'types': ['no_msgs/msg/Nothing']}, 'not installed'),

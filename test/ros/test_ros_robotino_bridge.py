@@ -243,6 +243,7 @@ def test_bridge_process_from_the_params_file_with_the_built_messages(rclpy_conte
         np.testing.assert_array_equal(values, np.zeros(8))
 
 
+@pytest.mark.untimed
 def test_missing_robotino_msgs_stops_with_one_line_and_exit_2():
     process = start_node('cbha_inverse.ros.nodes.robotino_bridge')
     output = process.communicate(timeout=60)[0]
@@ -313,6 +314,7 @@ def test_closed_loop_through_bridge_and_driver_tracks_like_the_direct_loop(rclpy
     assert bridged_rms < direct_rms + BRIDGE_RMS_MARGIN
 
 
+@pytest.mark.untimed
 @pytest.mark.parametrize('overrides, match', [
     ({'valve_names': ['inner_over', 'elbow']}, 'unknown valve names'),
     ({'valve_names': ['inner_over', 'inner_over']}, 'duplicate'),

@@ -165,10 +165,13 @@ def test_inverse_solver_publishes_the_model_frames_on_tf_decimated(rclpy_context
         # stop on a tick that published (one callback per spin: the predicate sees each tick)
         assert spin_until(executor, lambda: solver.ticks >= 100 and markers
                           and solver.ticks % EVERY == 0, 10.0)
-        # ticks stop with the solver's spinning; what is in flight still arrives
+        # ticks stop with the solver's spinning; what is in flight still arrives (waited for: a
+        # fixed 0.3 s was too short for a listener starved by a loaded machine), and nothing more
         executor.remove_node(solver)
+        ticks = solver.ticks
+        spin_until(executor, lambda: len(tf_messages) >= ticks // EVERY, 10.0)
         spin_for(executor, 0.3)
-        ticks, count = solver.ticks, len(tf_messages)
+        count = len(tf_messages)
         state = solver.solver.state
         assert count == ticks // EVERY, (count, ticks)
         frames = _transforms(tf_messages[-1])

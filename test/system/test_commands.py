@@ -43,6 +43,7 @@ def test_demo_runs_a_short_closed_loop_lap(tmp_path):
     assert 'circle closed: RMS' in result.stdout
 
 
+@pytest.mark.untimed
 def test_core_report_static_solves_match_their_closed_forms(capsys):
     assert report_main(['core', '--sizes', '4', '8', '--rhs', '1', '--budget', '0.002']) == 0
     out = capsys.readouterr().out
@@ -59,6 +60,7 @@ def test_core_report_static_solves_match_their_closed_forms(capsys):
     assert all(row[-2] < 1e-6 for row in rows.values()), 'a residual above 1e-6 N'
 
 
+@pytest.mark.untimed
 def test_inverse_report_ticks_reach_the_target(tmp_path, capsys):
     path = tmp_path / 'rows.json'
     assert report_main(['inverse', '--scenes', 'tendon_6f_8c', '--ticks', '20', '--warmup', '2',
@@ -75,6 +77,7 @@ def test_inverse_report_ticks_reach_the_target(tmp_path, capsys):
         report_main(['no_such_report'])
 
 
+@pytest.mark.untimed
 @pytest.mark.parametrize('group', ['all', 'bench'])
 def test_a_report_groups_help_runs_no_report(capsys, group):
     assert report_main([group, '--help']) == 0
@@ -86,6 +89,7 @@ def test_a_report_groups_help_runs_no_report(capsys, group):
         assert f'  {name}: ' in out
 
 
+@pytest.mark.untimed
 def test_cbha_launch_show_args_lists_every_argument():
     from cbha_inverse.ros.launch.compositions import COMPOSITIONS
     for name, composition in COMPOSITIONS.items():

@@ -13,6 +13,7 @@ import sys
 
 from cbha_inverse.experiments.proprio import estimate_error
 from mcap.reader import make_reader
+import pytest
 from ros_helpers import child_env, REPO_ROOT
 
 
@@ -46,6 +47,7 @@ class _Recorded:
                  (11.5, 0.5, 0.0, 0.002), (12.25, 9.0, 9.0, 9.0)]
 
 
+@pytest.mark.untimed
 def test_estimate_error_interpolates_the_true_tip_in_the_window():
     # the sample at 10 s is before the window, the one at 12.25 s after the last true tip; at
     # 11.5 s the true tip is halfway between those of 11 s and 12 s
@@ -53,6 +55,7 @@ def test_estimate_error_interpolates_the_true_tip_in_the_window():
     assert abs(estimate_error(_Recorded, 0.5, 2.5) - expected) < 1e-12
 
 
+@pytest.mark.untimed
 def test_the_estimated_sections_go_into_the_solver_unless_told_not():
     """--estimate-sections sets the estimator's priors and the solver's section topic."""
     from cbha_inverse.experiments.demo import parse_args

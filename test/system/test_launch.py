@@ -55,6 +55,7 @@ def _declared_parameters(executable):
     return {spec.metadata.get('ros_name') or spec.name for spec in fields(params[0])}
 
 
+@pytest.mark.untimed
 @pytest.mark.parametrize('name', sorted(COMPOSITIONS))
 def test_every_executable_params_file_and_parameter_of_a_composition_exists(name):
     composition = COMPOSITIONS[name]
@@ -73,6 +74,7 @@ def test_every_executable_params_file_and_parameter_of_a_composition_exists(name
     assert started == named, f'never started: {named - started}'
 
 
+@pytest.mark.untimed
 @pytest.mark.parametrize('name', sorted(COMPOSITIONS))
 def test_launch_file_reads_its_composition_and_names_only_the_launch_api(name):
     path = REPO_ROOT / 'launch' / f'{name}.launch.py'
@@ -91,6 +93,7 @@ def test_launch_file_reads_its_composition_and_names_only_the_launch_api(name):
                for node in tree.body)
 
 
+@pytest.mark.untimed
 def test_bad_arguments_exit_2_with_one_line():
     for args, message in ((['sim', 'bogus:=1'], "unknown argument 'bogus'"),
                           (['sim', 'mode:=half'], 'mode:=half is not one of open|closed'),
@@ -181,6 +184,7 @@ def test_cbha_launch_stops_every_node_when_one_fails(tmp_path):
     assert time.monotonic() - start < 45.0
 
 
+@pytest.mark.untimed
 def test_rviz_view_shows_what_the_nodes_publish_with_matching_qos():
     from cbha_inverse.ros.nodes.inverse_solver import InverseSolverParams
     from cbha_inverse.ros.common.qos import MARKER_QOS, TARGET_QOS
@@ -211,6 +215,7 @@ def _solver(processes):
     return next(p for p in processes if p.executable == 'inverse_solver')
 
 
+@pytest.mark.untimed
 def test_robot_driver_none_starts_no_bridge():
     robot = COMPOSITIONS['robot']
     assert 'robotino_bridge' in [p.executable for p in resolve(robot, {})]
@@ -220,6 +225,7 @@ def test_robot_driver_none_starts_no_bridge():
         resolve(robot, {'driver': 'ros'})
 
 
+@pytest.mark.untimed
 def test_a_users_params_file_wins_over_the_compositions_defaults(tmp_path):
     sim = COMPOSITIONS['sim']
     # the installed params file: the composition's defaults apply over it
@@ -239,6 +245,7 @@ def test_a_users_params_file_wins_over_the_compositions_defaults(tmp_path):
     assert plant.parameters == {'scene': 'cbha.yaml'}
 
 
+@pytest.mark.untimed
 def test_an_explicit_argument_that_contradicts_the_users_params_file_is_a_conflict(tmp_path):
     sim = COMPOSITIONS['sim']
     params = _user_params(tmp_path, scene='identified.yaml', mode='open')
@@ -256,6 +263,7 @@ def test_an_explicit_argument_that_contradicts_the_users_params_file_is_a_confli
                              f'{params} (give one of them)\n')
 
 
+@pytest.mark.untimed
 def test_dry_run_names_overrides_files_that_exist():
     result = subprocess.run([sys.executable, '-m', 'cbha_inverse.ros.launch.launcher', 'sim',
                              '--dry-run', 'mode:=open'],

@@ -81,6 +81,7 @@ def _copy(condensed, tmp_path):
     return Path(shutil.copytree(work, tmp_path / 'my_robot'))
 
 
+@pytest.mark.untimed
 def test_guide_shows_the_example_files():
     shown = {block.splitlines()[0]: block for block in _blocks('yaml')}
     for path in sorted(EXAMPLE.iterdir()):
