@@ -254,8 +254,15 @@ def _backward_row(factor, rhs, j, below, n_rhs):
     Row ``j`` of the backward sweep (``below`` rows under the pivot).
 
     The farthest row first: the nearest, ``j + 1``, solved just before, enters last (one
-    column's sweep waits on one multiply-add per row, not ``below``).
+    column's sweep waits on one multiply-add per row, not ``below``). One literal column sums in
+    a register (the same operations in the same order).
     """
+    if n_rhs == 1:
+        acc = rhs[j, 0]
+        for a in range(below, 0, -1):
+            acc -= factor[j, a] * rhs[j + a, 0]
+        rhs[j, 0] = acc * (1.0 / factor[j, 0])
+        return
     for a in range(below, 0, -1):
         weight = factor[j, a]
         for col in range(n_rhs):
