@@ -88,8 +88,11 @@ class WorkspaceBox:
         values = point_floats(point)
         if values is None:
             raise ValueError(f'a workspace point has 3 components: {point!r}')
-        return all(low <= value <= high
-                   for low, value, high in zip(self.lower, values, self.upper))
+        # unpacked, no generator: this runs on every target and measurement (docs/nodes.md,
+        # "Latency")
+        x, y, z = values
+        (x_low, y_low, z_low), (x_high, y_high, z_high) = self.lower, self.upper
+        return x_low <= x <= x_high and y_low <= y <= y_high and z_low <= z <= z_high
 
 
 def point_floats(point):
@@ -107,8 +110,10 @@ def point_floats(point):
     list of 3 float or None
 
     """
-    if type(point) is list and len(point) == 3 and all(type(v) is float for v in point):
-        return point
+    if type(point) is list and len(point) == 3:
+        x, y, z = point
+        if type(x) is float and type(y) is float and type(z) is float:
+            return point
     try:
         array = np.asarray(point, dtype=float)
     except (TypeError, ValueError):

@@ -125,6 +125,23 @@ def test_target_corrector_integrates_clamps_and_stops_winding_up():
     np.testing.assert_array_equal(TargetCorrector(1, gain=0.0).update(target, target + 1), target)
 
 
+def test_corrected_target_adds_the_integral_without_integrating():
+    corr = TargetCorrector(2, gain=0.5, max_correction=0.01)
+    target = np.array([[0.1, 0.0, 0.0], [0.2, 0.05, 0.0]])
+    corr.update(target, target - [[0.0, 0.002, 0.0], [0.001, 0.0, -0.003]])
+    integral = corr.correction.copy()
+    np.testing.assert_allclose(corr.corrected(target), target + [[0.0, 0.001, 0.0],
+                                                                 [0.0005, 0.0, -0.0015]])
+    np.testing.assert_array_equal(corr.correction, integral)
+    # a single point is not spread over two effectors, a transposed target is not read
+    for wrong in (np.zeros(3), np.zeros((3, 2))):
+        with pytest.raises(ValueError, match='shape'):
+            corr.corrected(wrong)
+    one = TargetCorrector(1, gain=0.5)
+    one.update(target[:1], target[:1] - [[0.0, 0.0, 0.004]])
+    np.testing.assert_allclose(one.corrected(target[0]), [[0.1, 0.0, 0.002]])
+
+
 def test_active_set_qp_is_exact_and_agrees_with_proxsuite():
     rng = np.random.default_rng(6)
     for k, m, gap in ((1, 6, 0.01), (2, 16, 0.01), (1, 8, 100.0), (3, 8, 0.001)):

@@ -333,11 +333,14 @@ def frame_profile(band):
     size, width = band.shape
     if width != FRAME_BAND_WIDTH or size % FRAME_BLOCK != 0 or size < FRAME_BAND_WIDTH:
         return False
-    for c in range(size):
-        row = band[c]
-        for d in range(FRAME_BAND_WIDTH - c % FRAME_BLOCK, FRAME_BAND_WIDTH):
-            if row[d] != 0.0:
-                return False
+    # block by block, component i = 1 ... 5 (row 6k has none): literal trip counts (~25 % faster
+    # than a loop over the rows, whose inner trip count varies with c % 6)
+    for k in range(0, size, FRAME_BLOCK):
+        for i in range(1, FRAME_BLOCK):
+            row = band[k + i]
+            for d in range(FRAME_BAND_WIDTH - i, FRAME_BAND_WIDTH):
+                if row[d] != 0.0:
+                    return False
     return True
 
 
@@ -469,6 +472,29 @@ def btd_band_cholesky(diagonal, upper):
                 for m in range(b):
                     row[b - i + m] = upper[k, i, m]
     return band, band_cholesky(band)
+
+
+@numba.njit(cache=True)
+def band_rows(band, size):
+    """
+    Return the lower band storage of an assembly buffer without its trash row (a view).
+
+    Parameters
+    ----------
+    band : ((size + 1) (kd + 1),) ndarray
+        The symmetric lower band of ``size`` rows in C order, then one row of ``kd + 1`` slots
+        that the assembly's base-frame entries are added into (``scatter_add``'s trash).
+    size : int
+        Unknowns ``N``.
+
+    Returns
+    -------
+    (N, kd + 1) ndarray
+        ``band[c, r - c] = K[r, c]`` (:func:`band_cholesky`), sharing ``band``'s memory.
+
+    """
+    width = band.size // (size + 1)
+    return band[:size * width].reshape((size, width))
 
 
 @numba.njit(cache=True)

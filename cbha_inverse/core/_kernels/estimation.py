@@ -26,7 +26,7 @@ positions, over the preallocated buffers of
 import math
 
 from cbha_inverse.core._kernels import tick
-from cbha_inverse.core._kernels.band import band_backward, band_solve
+from cbha_inverse.core._kernels.band import band_backward, band_rows, band_solve
 from cbha_inverse.core._kernels.cables import routing_lengths_into
 from cbha_inverse.core._kernels.links import link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
@@ -303,7 +303,7 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
     positions, rotations, vectors = buffers.positions, buffers.rotations, buffers.vectors
     band, rhs, solved = buffers.band, buffers.rhs, buffers.solved
     size = solved.shape[0]
-    factor = band[:-1].reshape((size, (band.size - 1) // size))
+    factor = band_rows(band, size)
     if buffers.half_solved[0]:
         band_backward(factor, solved)
         buffers.half_solved[0] = False

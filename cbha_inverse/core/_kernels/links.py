@@ -216,48 +216,65 @@ def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations
         # [E_a^T M E_a, E_a^T M; M E_a, M] for M = R mat R^T
         # the hat matrices as locals (LLVM keeps them in registers)
         d0, d1, d2 = diff[0], diff[1], diff[2]
-        diff_hat = ((0.0, -d2, d1), (d2, 0.0, -d0), (-d1, d0, 0.0))
         out = blocks[link]
         # M = R mat R^T straight into its block of out, read back there
         for p in range(2):
             for q in range(2):
                 _rotate_block(mat, ra, out, 3 * p, 3 * q)
+        # the products with d^ written out term by term (the zero terms of the hat matrix
+        # dropped: x + 0 y = x for finite y), no tuple indexed by a loop variable
         for i in range(6):
-            for j in range(3):
-                # M E_a
-                out[6 + i, j] = -out[6 + i, 6 + j]
-                out[6 + i, 3 + j] = (out[6 + i, 6] * diff_hat[0][j]
-                                     + out[6 + i, 7] * diff_hat[1][j]
-                                     + out[6 + i, 8] * diff_hat[2][j] - out[6 + i, 9 + j])
-        for j in range(6):
-            for i in range(3):
-                # E_a^T M and E_a^T (M E_a)
-                out[i, 6 + j] = -out[6 + i, 6 + j]
-                out[3 + i, 6 + j] = -(diff_hat[i][0] * out[6, 6 + j]
-                                      + diff_hat[i][1] * out[7, 6 + j]
-                                      + diff_hat[i][2] * out[8, 6 + j]) - out[9 + i, 6 + j]
-                out[i, j] = -out[6 + i, j]
-                out[3 + i, j] = -(diff_hat[i][0] * out[6, j] + diff_hat[i][1] * out[7, j]
-                                  + diff_hat[i][2] * out[8, j]) - out[9 + i, j]
+            # M E_a
+            r = 6 + i
+            x0, x1, x2 = out[r, 6], out[r, 7], out[r, 8]
+            out[r, 0] = -x0
+            out[r, 1] = -x1
+            out[r, 2] = -x2
+            out[r, 3] = x1 * d2 - x2 * d1 - out[r, 9]
+            out[r, 4] = x2 * d0 - x0 * d2 - out[r, 10]
+            out[r, 5] = x0 * d1 - x1 * d0 - out[r, 11]
+        for c in range(12):
+            # E_a^T M and E_a^T (M E_a), column c
+            y0, y1, y2 = out[6, c], out[7, c], out[8, c]
+            out[0, c] = -y0
+            out[1, c] = -y1
+            out[2, c] = -y2
+            out[3, c] = -(y2 * d1 - d2 * y1) - out[9, c]
+            out[4, c] = -(d2 * y0 - d0 * y2) - out[10, c]
+            out[5, c] = -(d0 * y1 - d1 * y0) - out[11, c]
         if material:
             continue
         # geometric terms of the b-side world wrench (F, M) = R_a L: turning frame a turns it
         # (dF = -F^ dθ_a, dM = -M^ dθ_a) and the lever d = x_b - x_a of the a-side moment
-        # -M - d x F moves with x_a, x_b
+        # -M - d x F moves with x_a, x_b: the blocks -F^ at (0, 3), F^ at (3, 0), -F^ at
+        # (3, 6), F^ at (6, 3), M^ at (9, 3) and -(M^ + d^ F^) at (3, 3)
         f0, f1, f2 = world[0, 0], world[1, 0], world[2, 0]
         m0, m1, m2 = world[3, 0], world[4, 0], world[5, 0]
-        f_hat = ((0.0, -f2, f1), (f2, 0.0, -f0), (-f1, f0, 0.0))
-        m_hat = ((0.0, -m2, m1), (m2, 0.0, -m0), (-m1, m0, 0.0))
-        for i in range(3):
-            for j in range(3):
-                out[i, 3 + j] -= f_hat[i][j]
-                out[3 + i, j] += f_hat[i][j]
-                out[3 + i, 6 + j] -= f_hat[i][j]
-                out[6 + i, 3 + j] += f_hat[i][j]
-                out[9 + i, 3 + j] += m_hat[i][j]
-                out[3 + i, 3 + j] -= m_hat[i][j] + (diff_hat[i][0] * f_hat[0][j]
-                                                    + diff_hat[i][1] * f_hat[1][j]
-                                                    + diff_hat[i][2] * f_hat[2][j])
+        _add_hat(out, 0, 3, -f0, -f1, -f2)
+        _add_hat(out, 3, 0, f0, f1, f2)
+        _add_hat(out, 3, 6, -f0, -f1, -f2)
+        _add_hat(out, 6, 3, f0, f1, f2)
+        _add_hat(out, 9, 3, m0, m1, m2)
+        out[3, 3] -= -(d2 * f2) - d1 * f1
+        out[3, 4] -= d1 * f0 - m2
+        out[3, 5] -= m1 + d2 * f0
+        out[4, 3] -= m2 + d0 * f1
+        out[4, 4] -= -(d2 * f2) - d0 * f0
+        out[4, 5] -= d2 * f1 - m0
+        out[5, 3] -= d0 * f2 - m1
+        out[5, 4] -= m0 + d1 * f2
+        out[5, 5] -= -(d1 * f1) - d0 * f0
+
+
+@numba.njit(cache=True, inline='always')
+def _add_hat(out, r0, c0, v0, v1, v2):
+    """Add ``hat(v)`` to the 3 x 3 block of ``out`` at ``(r0, c0)`` (its diagonal is zero)."""
+    out[r0, c0 + 1] -= v2
+    out[r0, c0 + 2] += v1
+    out[r0 + 1, c0] += v2
+    out[r0 + 1, c0 + 2] -= v0
+    out[r0 + 2, c0] -= v1
+    out[r0 + 2, c0 + 1] += v0
 
 
 @numba.njit(cache=True, inline='always')

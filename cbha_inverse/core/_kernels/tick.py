@@ -15,7 +15,7 @@ into a few stacked arrays, held by one
 (numba unboxes every argument at every call). The rows of the stacks are the constants below.
 """
 
-from cbha_inverse.core._kernels.band import band_cholesky, band_forward, scatter_add
+from cbha_inverse.core._kernels.band import band_cholesky, band_forward, band_rows, scatter_add
 from cbha_inverse.core._kernels.cables import cable_pass_into
 from cbha_inverse.core._kernels.links import link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
@@ -95,7 +95,7 @@ def linearise_tick(buffers, cholesky):
     buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
         The tick's buffers. Reads the frames, ``vectors[ACTUATION]`` (``λ_prev``) and
         ``vectors[SCALE]``, the evaluation's terms, ``external`` and the effectors; writes
-        ``values``, ``band`` (the symmetric lower band, last slot: the base frame's trash, then
+        ``values``, ``band`` (the symmetric lower band, last row: the base frame's trash, then
         its factor), ``rhs`` (``[r, J_aᵀ]``), ``vectors[LINEARISED]`` and, when the Cholesky
         succeeds, ``solved`` (``L⁻¹ [r, J_aᵀ]``), ``effector_columns`` (``L⁻¹ J_eᵀ``),
         ``half_solved`` (True) and the projection (:func:`project_tick`).
@@ -135,7 +135,7 @@ def linearise_tick(buffers, cholesky):
     for row in range(rhs.shape[0]):
         rhs[row, 0] += external[row]
     scatter_add(buffers.index, values, buffers.slot_weights, band)
-    factor = _band_factor(buffers)
+    factor = band_rows(band, rhs.shape[0])
     vectors[LINEARISED, :] = actuation
     buffers.half_solved[0] = False
     if not cholesky:
@@ -151,14 +151,6 @@ def linearise_tick(buffers, cholesky):
     band_forward(factor, columns, first)
     buffers.half_solved[0] = True
     return 0, project_tick(buffers)
-
-
-@numba.njit(cache=True, inline='always')
-def _band_factor(buffers):
-    """Return the band storage (N, kd + 1) of ``buffers.band`` (its last slot left out)."""
-    band = buffers.band
-    size = buffers.rhs.shape[0]
-    return band[:-1].reshape((size, (band.size - 1) // size))
 
 
 @numba.njit(cache=True)
@@ -329,4 +321,5 @@ def pending_step_into(buffers, positions, rotations):
         change[j] = actuation[j] - linearised[j]
     apply_linear_step_into(positions, rotations, solved[:, 0], solved[:, 1:], change,
                            buffers.max_rotation, buffers.increments, buffers.rotation_work,
-                           _band_factor(buffers), buffers.half_solved[0])
+                           band_rows(buffers.band, buffers.rhs.shape[0]),
+                           buffers.half_solved[0])

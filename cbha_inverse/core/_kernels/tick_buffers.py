@@ -29,7 +29,8 @@ Fields (:data:`FIELDS`, in the order of :func:`make_tick_buffers`; stacked rows 
     index (V,) int, slot_weights (V,)                      band slot and weight of every value
     counts (3,) int                                        link, cable pair, cable moment values
     values (V,)                                            the blocks of the evaluation
-    band (6n (kd + 1) + 1,)                                symmetric lower band, then its factor
+    band ((6n + 1) (kd + 1),)                              symmetric lower band (and a trash
+                                                             row), then its factor
     rhs (6n, m + 1)                                        [r, J_aᵀ]
     solved (6n, m + 1)                                     L⁻¹ [r, J_aᵀ] (half_solved) or
                                                              K⁻¹ [r, J_aᵀ]

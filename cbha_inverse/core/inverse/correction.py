@@ -67,4 +67,31 @@ class TargetCorrector:
                 grows = np.linalg.norm(proposal, axis=1) > np.linalg.norm(self.correction, axis=1)
                 proposal[grows] = self.correction[grows]
             self.correction = proposal
-        return target + self.correction
+        return self.corrected(target)
+
+    def corrected(self, target):
+        """
+        Return the corrected target ``target + c`` without integrating anything.
+
+        One numpy operation: the set-point of every tick between two measurements.
+
+        Parameters
+        ----------
+        target : (k, 3) ndarray, or (3,) for one effector  [m]
+            Desired effector positions (float).
+
+        Returns
+        -------
+        (k, 3) ndarray  [m]
+
+        Raises
+        ------
+        ValueError
+            If ``target`` has another shape (a (3,) target is not spread over k > 1 effectors).
+
+        """
+        correction = self.correction
+        shape = target.shape
+        if shape != correction.shape and not (shape == (3,) and correction.shape[0] == 1):
+            raise ValueError(f'target must have shape {correction.shape}, got {shape}')
+        return correction + target

@@ -77,7 +77,7 @@ class TickData:
         ``[r, J_aᵀ]`` (the evaluator's buffer).
     external : (6n,) ndarray  [N, N*m]
         The external wrenches the fused linearisation adds to ``r``.
-    band : (6n (kd + 1) + 1,) ndarray
+    band : ((6n + 1) (kd + 1),) ndarray
         The symmetric lower band, then its factor, of the fused linearisation.
     fused : bool
         Whether the linearisation runs as one compiled entry (see

@@ -449,7 +449,7 @@ class InverseSolverNode(Node):
     def _solve_and_publish(self):
         """Tick, publish, prepare the next tick; return perf_counter and thread_time at publish."""
         start = time.perf_counter()
-        goal = self.corrector.update(self.target[None], None)
+        goal = self.corrector.corrected(self.target)
         try:
             result = self.solver.step(goal)
         except (ValueError, ArithmeticError, RuntimeError) as exc:
