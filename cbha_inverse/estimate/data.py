@@ -95,7 +95,8 @@ class EstimatorData:
         self.mass_columns = np.zeros((6 * n, 1 + w))
         self.mass_rhs = np.zeros((6 * n, 1 + w))
         self.mass_effectors = (np.zeros((3 * k, w)), np.zeros((w, w)), np.zeros(3 * k),
-                               np.zeros((3 * k, 1 + w)), np.zeros((k, 3)), np.zeros(w))
+                               np.zeros((3 * k, 1 + w)), np.zeros((k, 3)), np.zeros(w),
+                               np.zeros((6 * n, 3 * k)))
         self.stuck = np.zeros(c, dtype=np.bool_)
         self.active = np.zeros(c, dtype=np.bool_)
         self.effector_w = np.zeros((3, u))

@@ -439,6 +439,8 @@ class ShapeEstimator:
                                               evaluated=True), None)
         if factor is None:
             return False
+        # K⁻¹ [r, J_aᵀ] of this factor, not the band factor's half-solves
+        data.tick.half_solved[0] = False
         data.tick.solved[:] = factor.solve(data.tick.rhs)
         fused.project_tick(data.tick.buffers)
         if self._n_mass:

@@ -59,7 +59,10 @@ class TickShapes(NamedTuple):
     values : int
         Assembled tangent values (link and cable blocks).
     jacobian_entries : int
-        Nonzero entries of ``J_aᵀ`` (the ``W_aa`` product skips the zeros).
+        Nonzero entries of ``J_aᵀ``.
+    effector_frames : tuple of int
+        Frame (1..n) of every effector: ``J_eᵀ`` is zero above its rows, where its forward sweep
+        and its products start.
 
     """
 
@@ -73,6 +76,7 @@ class TickShapes(NamedTuple):
     spans: int
     values: int
     jacobian_entries: int
+    effector_frames: tuple
 
 
 def tick_shapes(solver):
@@ -94,7 +98,8 @@ def tick_shapes(solver):
      _, values, _, rhs) = system.fused_terms()
     return TickShapes(system.n, system.m, len(solver.effector_names), system.kd,
                       int((cavity_columns >= 0).sum()), rest_rotations_t.shape[0] > 0, frames.size,
-                      spans.shape[1], values.size, int((rhs[:, 1:] != 0.0).sum()))
+                      spans.shape[1], values.size, int((rhs[:, 1:] != 0.0).sum()),
+                      tuple(int(f) for f in solver.effectors.frames))
 
 
 def tick_flops(shapes):
@@ -118,18 +123,27 @@ def tick_flops(shapes):
     links = (n * (_LINK_BASE + _LINK_REST_ROTATION * shapes.rest_rotations + _LINK_PER_COLUMN)
              + (_LINK_PER_CAVITY + _LINK_PER_COLUMN) * shapes.cavities)
     # band Cholesky: per column a square root, `below` scalings and the rank-one update of the
-    # trailing triangle; the solve: forward and backward sweeps over every right-hand side
+    # trailing triangle; the solve: the forward sweeps of [r, J_aᵀ] (every row) and of J_eᵀ
+    # (3 columns per effector, from the first effector frame's rows on: zero above them)
     factor = sum(1 + below + below * (below + 1) for below in
                  (min(kd, size - 1 - j) for j in range(size)))
-    solve = sum(2 * columns * (1 + 2 * min(kd, size - 1 - j)) for j in range(size))
-    projection = (rows * columns * 12 + rows * m * 2 + shapes.jacobian_entries * m * 2 + size * 2
+    first = 6 * (min(shapes.effector_frames) - 1) if shapes.effector_frames else size
+    solve = sum((columns + (rows if j >= first else 0)) * (1 + 2 * min(kd, size - 1 - j))
+                for j in range(size))
+    # the products of the half-solves: L⁻¹ J_eᵀ with L⁻¹ [r, J_aᵀ] from each effector's frame
+    # on, the offset, the lower triangle of W_aa = (L⁻¹ J_aᵀ)ᵀ L⁻¹ J_aᵀ, |r|
+    effector_rows = sum(size - 6 * (frame - 1) for frame in shapes.effector_frames)
+    projection = (3 * effector_rows * columns * 2 + rows * m * 2 + size * m * (m + 1) + size * 2
                   # the QP matrices: W σ, Wᵀ W (upper triangle), normalisation, Hessian
                   + rows * m * 2 + rows * m * (m + 1) + m * m * 6)
     # QP vectors, one active-set iteration (free-block Cholesky, its solves, the multiplier
     # checks), the outcome and the binding bounds
     qp = (m * (2 * rows + 6) + (m ** 3) // 3 + 4 * m * m + 2 * m * m
           + (2 * rows * m + 4 * m + 5 * k) + 2 * m * m)
-    update = size * 2 * m + n * _RETRACT_PER_FRAME + 18 * k
+    # the step L⁻¹ r + L⁻¹ J_aᵀ Δλ, its backward sweep (one column), the retraction, the
+    # effector positions
+    back = sum(1 + 2 * min(kd, size - 1 - j) for j in range(size))
+    update = size * 2 * m + back + n * _RETRACT_PER_FRAME + 18 * k
     counts = {'links': links,
               'cables': _CABLE_PER_POINT * shapes.points + _CABLE_PER_SPAN * shapes.spans,
               'assembly': 2 * shapes.values + size, 'factor': factor, 'solve': solve,

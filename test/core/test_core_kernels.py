@@ -1,7 +1,8 @@
 """Kernels (Jl⁻¹, log/exp, retraction, band Cholesky), band LU and the solver's fallbacks."""
 
-from cbha_inverse.core._kernels.band import (_cholesky_width12, _solve_columns, band_cholesky,
-                                             band_solve, frame_profile)
+from cbha_inverse.core._kernels.band import (_backward_columns, _cholesky_width12,
+                                             _forward_columns, band_cholesky, band_solve,
+                                             frame_profile)
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core._kernels.so3 import jl_coefficient, rotation_exp, rotation_log
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
@@ -63,8 +64,8 @@ def test_rotation_log_inverts_exp_up_to_pi(angle):
 
 
 # kd = 11 with 7 or 9 right-hand sides and kd = 17 with 9 run the constant-trip-count sweeps of
-# band_solve (SOLVE_COLUMN_COUNTS), the others its general loops; kd = 11 and 17 the
-# constant-trip-count Cholesky
+# band_solve (FORWARD_COLUMN_COUNTS, BACKWARD_COLUMN_COUNTS), the others its general loops;
+# kd = 11 and 17 the constant-trip-count Cholesky
 @pytest.mark.parametrize('size, kd, n_rhs', [
     (1, 0, 5), (12, 11, 5), (36, 17, 5), (96, 11, 5), (20, 19, 5), (96, 11, 7), (96, 11, 9),
     (12, 11, 7), (36, 11, 9), (96, 11, 17), (96, 11, 1), (36, 17, 9), (60, 17, 17),
@@ -111,7 +112,8 @@ def test_band_kernels_on_the_frame_profile_equal_the_full_band(n_rhs):
     rhs = rng.standard_normal((size, n_rhs))
     solved, expected = rhs.copy(), rhs.copy()
     band_solve(band, solved)
-    _solve_columns(full, expected, n_rhs, 12)
+    _forward_columns(full, expected, n_rhs, 12, 0)
+    _backward_columns(full, expected, n_rhs, 12)
     np.testing.assert_array_equal(solved, expected)
     np.testing.assert_allclose(solved, np.linalg.solve(a, rhs), atol=1e-11)
     # one entry outside the profile (or a NaN) and the full band runs

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 
-def _counted_band_cholesky_and_solve(size, kd, n_rhs):
-    """Count the flops of a plain band Cholesky and its solve, operation by operation."""
+def _counted_band_cholesky_and_solve(size, kd, n_rhs, first, effector_columns):
+    """Count the flops of a plain band Cholesky and the tick's forward sweeps, one by one."""
     flops = {'factor': 0, 'solve': 0}
     for j in range(size):
         below = min(kd, size - 1 - j)
@@ -20,19 +20,24 @@ def _counted_band_cholesky_and_solve(size, kd, n_rhs):
         for b in range(1, below + 1):
             for _ in range(b, below + 1):
                 flops['factor'] += 2                      # target -= column * weight
-        for _ in range(n_rhs):
-            flops['solve'] += 2 * (1 + 2 * below)         # forward and backward, every RHS
+        # forward sweep of [r, J_aᵀ], and of J_eᵀ from its first nonzero row on
+        for _ in range(n_rhs + (effector_columns if j >= first else 0)):
+            flops['solve'] += 1 + 2 * below
     return flops
 
 
-@pytest.mark.parametrize('size, kd, n_rhs', [(96, 11, 7), (36, 11, 9), (30, 29, 3)])
-def test_band_counts_equal_an_operation_by_operation_count(size, kd, n_rhs):
-    counted = _counted_band_cholesky_and_solve(size, kd, n_rhs)
-    shapes = TickShapes(size // 6, n_rhs - 1, 1, kd, 0, False, 0, 0, 0, 0)
+@pytest.mark.parametrize('size, kd, n_rhs, frames', [
+    (96, 11, 7, (16,)), (36, 11, 9, (3, 6)), (30, 29, 3, (5,))])
+def test_band_counts_equal_an_operation_by_operation_count(size, kd, n_rhs, frames):
+    counted = _counted_band_cholesky_and_solve(size, kd, n_rhs, 6 * (min(frames) - 1),
+                                               3 * len(frames))
+    shapes = TickShapes(size // 6, n_rhs - 1, len(frames), kd, 0, False, 0, 0, 0, 0, frames)
     flops = tick_flops(shapes)
     assert flops['factor'] == counted['factor']
     assert flops['solve'] == counted['solve']
     assert flops['total'] == sum(v for key, v in flops.items() if key != 'total')
+    # the Newton step's one-column backward sweep is in the update
+    assert flops['update'] > sum(1 + 2 * min(kd, size - 1 - j) for j in range(size))
 
 
 def test_the_cbha_tick_counts_its_links_cavities_and_band():
@@ -43,7 +48,7 @@ def test_the_cbha_tick_counts_its_links_cavities_and_band():
     assert (shapes.n, shapes.m, shapes.k, shapes.kd) == (16, 6, 1, 11)
     # every link lies in one section: 3 of its 6 cavity columns are nonzero
     assert (shapes.cavities, shapes.points, shapes.spans) == (16 * 3, 0, 0)
-    assert shapes.values == 16 * 144
+    assert shapes.values == 16 * 144 and shapes.effector_frames == (16,)
     flops = tick_flops(shapes)
     # the band of N = 96, kd = 11 with 7 right-hand sides: N (kd² + 2kd + 1) minus the end
     assert 0.8 * 96 * 144 < flops['factor'] < 96 * 144

@@ -92,10 +92,7 @@ def band_solve(factor, rhs):
     """
     Solve ``L Lᵀ X = rhs`` in place with a factor of :func:`band_cholesky`.
 
-    Half-bandwidth 11 with :data:`SOLVE_COLUMN_COUNTS` right-hand sides runs the rows at least
-    12 from the end with constant trip counts (the same arithmetic in the same order; LLVM
-    unrolls the loops over the columns, ~1.4x faster at 7 columns); a factor with the profile of
-    6 x 6 blocks (:func:`frame_profile`) also skips the zeros outside it (:func:`_solve_frames`).
+    :func:`band_forward` then :func:`band_backward`.
 
     Parameters
     ----------
@@ -105,52 +102,134 @@ def band_solve(factor, rhs):
         Right-hand sides (C order), overwritten by ``X``.
 
     """
+    band_forward(factor, rhs, 0)
+    band_backward(factor, rhs)
+
+
+@numba.njit(cache=True)
+def band_forward(factor, rhs, first):
+    """
+    Solve ``L Y = rhs`` in place with a factor of :func:`band_cholesky` (the forward sweep).
+
+    With ``K = L Lᵀ`` the control tick needs only these half-solves for its projection
+    (``(L⁻¹ a)ᵀ (L⁻¹ b) = aᵀ K⁻¹ b``, `docs/design.md`); :func:`band_backward` completes a
+    solve. Half-bandwidth 11 with :data:`FORWARD_COLUMN_COUNTS` right-hand sides runs the rows
+    at least 12 from the end with constant trip counts (LLVM unrolls the loops over the
+    columns); a factor with the profile of 6 x 6 blocks (:func:`frame_profile`) also skips the
+    zeros outside it.
+
+    Parameters
+    ----------
+    factor : (N, kd + 1) ndarray
+        ``L`` in lower band storage.
+    rhs : (N, c) ndarray
+        Right-hand sides (C order), overwritten by ``Y``.
+    first : int
+        Rows ``0 ... first - 1`` of ``rhs`` are zero (so are those of ``Y``): the sweep starts
+        at ``first`` (rounded down to a block of 6 on the block profile).
+
+    """
     n_rhs = rhs.shape[1]
+    counts = FORWARD_COLUMN_COUNTS
     if factor.shape[1] == FRAME_BAND_WIDTH:
         if frame_profile(factor):
             # literal column counts: one compiled specialisation each
-            if n_rhs == SOLVE_COLUMN_COUNTS[0]:
-                _solve_frames(factor, rhs, SOLVE_COLUMN_COUNTS[0])
-            elif n_rhs == SOLVE_COLUMN_COUNTS[1]:
-                _solve_frames(factor, rhs, SOLVE_COLUMN_COUNTS[1])
+            if n_rhs == counts[0]:
+                _forward_frames(factor, rhs, counts[0], first)
+            elif n_rhs == counts[1]:
+                _forward_frames(factor, rhs, counts[1], first)
+            elif n_rhs == counts[2]:
+                _forward_frames(factor, rhs, counts[2], first)
             else:
-                _solve_frames(factor, rhs, n_rhs)
+                _forward_frames(factor, rhs, n_rhs, first)
             return
-        if n_rhs == SOLVE_COLUMN_COUNTS[0]:
-            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[0], FRAME_BAND_WIDTH)
+        if n_rhs == counts[0]:
+            _forward_columns(factor, rhs, counts[0], FRAME_BAND_WIDTH, first)
             return
-        if n_rhs == SOLVE_COLUMN_COUNTS[1]:
-            _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[1], FRAME_BAND_WIDTH)
+        if n_rhs == counts[1]:
+            _forward_columns(factor, rhs, counts[1], FRAME_BAND_WIDTH, first)
             return
-    elif factor.shape[1] == CABLE_BAND_WIDTH and n_rhs == SOLVE_COLUMN_COUNTS[1]:
-        _solve_columns(factor, rhs, SOLVE_COLUMN_COUNTS[1], CABLE_BAND_WIDTH)
+    elif factor.shape[1] == CABLE_BAND_WIDTH and n_rhs == counts[1]:
+        _forward_columns(factor, rhs, counts[1], CABLE_BAND_WIDTH, first)
         return
-    _solve_columns(factor, rhs, n_rhs, 0)
+    _forward_columns(factor, rhs, n_rhs, 0, first)
 
 
-#: right-hand side counts ``m + 1`` that :func:`band_solve` compiles with a constant trip count
-#: at half-bandwidth 11 (the CBHA's 6 cavities and 8 actuators; at 17 columns the specialisation
-#: measured slower), and 9 at half-bandwidth 17 (``tendon_6f_8c``: 4.3 -> 3.0 µs; 17 columns,
-#: ``tendon_10f_16c``, slower there too)
-SOLVE_COLUMN_COUNTS = (7, 9)
+@numba.njit(cache=True)
+def band_backward(factor, rhs):
+    """
+    Solve ``Lᵀ X = rhs`` in place with a factor of :func:`band_cholesky` (the backward sweep).
+
+    Completes :func:`band_forward`: ``X = K⁻¹ b`` from ``rhs = L⁻¹ b``. The loops of
+    :func:`band_forward`, with the column counts :data:`BACKWARD_COLUMN_COUNTS`.
+
+    Parameters
+    ----------
+    factor : (N, kd + 1) ndarray
+        ``L`` in lower band storage.
+    rhs : (N, c) ndarray
+        ``L⁻¹ b`` (C order), overwritten by ``X``.
+
+    """
+    n_rhs = rhs.shape[1]
+    counts = BACKWARD_COLUMN_COUNTS
+    if factor.shape[1] == FRAME_BAND_WIDTH:
+        if frame_profile(factor):
+            if n_rhs == counts[0]:
+                _backward_frames(factor, rhs, counts[0])
+            elif n_rhs == counts[1]:
+                _backward_frames(factor, rhs, counts[1])
+            elif n_rhs == counts[2]:
+                _backward_frames(factor, rhs, counts[2])
+            else:
+                _backward_frames(factor, rhs, n_rhs)
+            return
+        if n_rhs == counts[0]:
+            _backward_columns(factor, rhs, counts[0], FRAME_BAND_WIDTH)
+            return
+        if n_rhs == counts[1]:
+            _backward_columns(factor, rhs, counts[1], FRAME_BAND_WIDTH)
+            return
+    elif factor.shape[1] == CABLE_BAND_WIDTH and n_rhs == counts[1]:
+        _backward_columns(factor, rhs, counts[1], CABLE_BAND_WIDTH)
+        return
+    _backward_columns(factor, rhs, n_rhs, 0)
+
+
+#: right-hand side counts that :func:`band_forward` compiles with a constant trip count at
+#: half-bandwidth 11: ``m + 1`` for the CBHA's 6 cavities and 8 actuators (at 17 columns the
+#: specialisation measured slower), then on the block profile the three columns of one
+#: effector's ``J_eᵀ``; 9 at half-bandwidth 17 (``tendon_6f_8c``: 4.3 -> 3.0 µs for both
+#: sweeps; 17 columns, ``tendon_10f_16c``, slower there too)
+FORWARD_COLUMN_COUNTS = (7, 9, 3)
+#: the same for :func:`band_backward`, with the one column of the tick's Newton step
+BACKWARD_COLUMN_COUNTS = (7, 9, 1)
 
 
 @numba.njit(cache=True, inline='always')
-def _solve_columns(factor, rhs, n_rhs, constant_width):
+def _forward_columns(factor, rhs, n_rhs, constant_width, first):
     """
-    Run the sweeps of :func:`band_solve` over ``n_rhs`` columns.
+    Run the forward sweep of :func:`band_forward` over ``n_rhs`` columns from row ``first``.
 
-    Inlined into :func:`band_solve`, so a literal ``n_rhs`` and a literal band width
-    ``constant_width`` (0: none; else the factor's) give loops of constant trip count for all
-    but the last ``constant_width - 1`` rows.
+    Inlined, so a literal ``n_rhs`` and a literal band width ``constant_width`` (0: none; else
+    the factor's) give loops of constant trip count for all but the last
+    ``constant_width - 1`` rows.
     """
     size, width = factor.shape
     kd = width - 1
     full = max(size - constant_width + 1, 0) if constant_width > 0 else 0
-    for j in range(full):
+    for j in range(min(first, full), full):
         _forward_row(factor, rhs, j, constant_width - 1, n_rhs)
-    for j in range(full, size):
+    for j in range(max(first, full), size):
         _forward_row(factor, rhs, j, min(kd, size - 1 - j), n_rhs)
+
+
+@numba.njit(cache=True, inline='always')
+def _backward_columns(factor, rhs, n_rhs, constant_width):
+    """Run the backward sweep of :func:`band_backward` (the loops of :func:`_forward_columns`)."""
+    size, width = factor.shape
+    kd = width - 1
+    full = max(size - constant_width + 1, 0) if constant_width > 0 else 0
     for j in range(size - 1, full - 1, -1):
         _backward_row(factor, rhs, j, min(kd, size - 1 - j), n_rhs)
     for j in range(full - 1, -1, -1):
@@ -159,7 +238,7 @@ def _solve_columns(factor, rhs, n_rhs, constant_width):
 
 @numba.njit(cache=True, inline='always')
 def _forward_row(factor, rhs, j, below, n_rhs):
-    """Row ``j`` of the forward sweep of :func:`band_solve` (``below`` rows below the diagonal)."""
+    """Row ``j`` of the forward sweep (``below`` rows below the diagonal)."""
     inverse = 1.0 / factor[j, 0]
     for col in range(n_rhs):
         rhs[j, col] *= inverse
@@ -171,8 +250,20 @@ def _forward_row(factor, rhs, j, below, n_rhs):
 
 @numba.njit(cache=True, inline='always')
 def _backward_row(factor, rhs, j, below, n_rhs):
-    """Row ``j`` of the backward sweep of :func:`band_solve` (``below`` rows under the pivot)."""
-    for a in range(1, below + 1):
+    """
+    Row ``j`` of the backward sweep (``below`` rows under the pivot).
+
+    The farthest row first: the nearest, ``j + 1``, solved just before, enters last (one
+    column's sweep waits on one multiply-add per row, not ``below``). One literal column sums in
+    a register (the same operations in the same order).
+    """
+    if n_rhs == 1:
+        acc = rhs[j, 0]
+        for a in range(below, 0, -1):
+            acc -= factor[j, a] * rhs[j + a, 0]
+        rhs[j, 0] = acc * (1.0 / factor[j, 0])
+        return
+    for a in range(below, 0, -1):
         weight = factor[j, a]
         for col in range(n_rhs):
             rhs[j, col] -= weight * rhs[j + a, col]
@@ -298,17 +389,24 @@ def _cholesky_frames(band):
 
 
 @numba.njit(cache=True, inline='always')
-def _solve_frames(factor, rhs, n_rhs):
+def _forward_frames(factor, rhs, n_rhs, first):
     """
-    Run the sweeps of :func:`band_solve` on a factor with the 6 x 6 block profile.
+    Run the forward sweep of :func:`band_forward` on a factor with the 6 x 6 block profile.
 
     Row ``j + i`` of a block reaches ``11 - i`` rows (``5 - i`` in the last block), literals
-    (:func:`_cholesky_frames`): the arithmetic of :func:`_solve_columns` without the zeros.
+    (:func:`_cholesky_frames`): the arithmetic of :func:`_forward_columns` without the zeros,
+    from the block of row ``first``.
     """
     last = factor.shape[0] - FRAME_BLOCK
-    for j in range(0, last, FRAME_BLOCK):
+    for j in range(first - first % FRAME_BLOCK, last, FRAME_BLOCK):
         _forward_frame_block(factor, rhs, j, FRAME_BLOCK, n_rhs)
     _forward_frame_block(factor, rhs, last, 0, n_rhs)
+
+
+@numba.njit(cache=True, inline='always')
+def _backward_frames(factor, rhs, n_rhs):
+    """Run the backward sweep of :func:`band_backward` on the 6 x 6 block profile."""
+    last = factor.shape[0] - FRAME_BLOCK
     _backward_frame_block(factor, rhs, last, 0, n_rhs)
     for j in range(last - FRAME_BLOCK, -1, -FRAME_BLOCK):
         _backward_frame_block(factor, rhs, j, FRAME_BLOCK, n_rhs)
@@ -316,7 +414,7 @@ def _solve_frames(factor, rhs, n_rhs):
 
 @numba.njit(cache=True, inline='always')
 def _forward_frame_block(factor, rhs, j, extra, n_rhs):
-    """Forward rows ``j ... j + 5`` of :func:`_solve_frames` (``extra + 5 - i`` rows below)."""
+    """Forward rows ``j ... j + 5`` of :func:`_forward_frames` (``extra + 5 - i`` rows below)."""
     _forward_row(factor, rhs, j, extra + 5, n_rhs)
     _forward_row(factor, rhs, j + 1, extra + 4, n_rhs)
     _forward_row(factor, rhs, j + 2, extra + 3, n_rhs)
@@ -327,7 +425,7 @@ def _forward_frame_block(factor, rhs, j, extra, n_rhs):
 
 @numba.njit(cache=True, inline='always')
 def _backward_frame_block(factor, rhs, j, extra, n_rhs):
-    """Backward rows ``j + 5 ... j`` of :func:`_solve_frames` (``extra + 5 - i`` rows below)."""
+    """Backward rows ``j + 5 ... j`` of :func:`_backward_frames` (``extra + 5 - i`` rows below)."""
     _backward_row(factor, rhs, j + 5, extra, n_rhs)
     _backward_row(factor, rhs, j + 4, extra + 1, n_rhs)
     _backward_row(factor, rhs, j + 3, extra + 2, n_rhs)

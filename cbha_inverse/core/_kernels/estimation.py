@@ -9,8 +9,9 @@ chain section (its links' stiffness is ``(1 + σ_j)`` times the model's, in the 
 itself; the row of ``load`` is ``∂r/∂σ_j``, the elastic force of the section's links at the
 current frames, evaluated by :func:`cbha_inverse.core._kernels.links.link_pass_into` with their
 model stiffness alone); they follow a random walk. At the current frames one linearisation of
-the equilibrium (the control tick's :func:`cbha_inverse.core._kernels.tick.linearise_tick`)
-gives ``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s``
+the equilibrium (the control tick's :func:`cbha_inverse.core._kernels.tick.linearise_tick`,
+completed by the backward sweep of its band factor) gives ``K⁻¹ [r, J_aᵀ]``; with the pots'
+lengths ``ℓ0`` and gradient ``J_s``
 (:func:`cbha_inverse.core._kernels.cables.routing_lengths_into`) the lengths after the Newton
 step are linear in ``z``: ``ℓ = base + H z``, ``H = W_sa [diag(p), I] | W_sμ``,
 ``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, paper eq. 11), ``W_sμ = J_s K⁻¹ ∂r/∂μ`` (by the
@@ -25,10 +26,11 @@ positions, over the preallocated buffers of
 import math
 
 from cbha_inverse.core._kernels import tick
-from cbha_inverse.core._kernels.band import band_rows, band_solve
+from cbha_inverse.core._kernels.band import band_backward, band_rows, band_solve
 from cbha_inverse.core._kernels.cables import routing_lengths_into
 from cbha_inverse.core._kernels.links import link_pass_into
-from cbha_inverse.core._kernels.projection import effector_points_into, project_effectors_into
+from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
+                                                   project_effectors_into)
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into
 import numba
 
@@ -245,7 +247,7 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
     mass_effectors : tuple
         Workspace of the load unknowns' projection on the effectors: ``w`` (3k, w), ``w_aa``
         (w, w), ``offset`` (3k,), ``moved`` (3k, 1 + w), ``levers`` (k, 3), ``previous``
-        (w,).
+        (w,), ``columns`` (6n, 3k) (``J_eᵀ``).
     stuck, active : (c,) bool ndarray
         Pots left out; receives the pots used.
     free_step : (6n,) ndarray
@@ -292,12 +294,22 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
                                 covariance, pressures, scalars, masses, load, mass_columns,
                                 mass_rhs, mass_effectors, stuck, active, free_step,
                                 effector_w, effector_positions, tip_covariance, work):
-    """:func:`estimate_tick` after its linearisation (the tick data hold a solved one)."""
+    """
+    :func:`estimate_tick` after its linearisation (the tick data hold a solved one).
+
+    The tick's half-solves ``L⁻¹ [r, J_aᵀ]`` (``half_solved``) are completed to
+    ``K⁻¹ [r, J_aᵀ]`` by the backward sweep of the band factor first.
+    """
     positions, rotations, vectors = buffers.positions, buffers.rotations, buffers.vectors
     band, rhs, solved = buffers.band, buffers.rhs, buffers.solved
+    size = solved.shape[0]
+    factor = band_rows(band, size)
+    if buffers.half_solved[0]:
+        band_backward(factor, solved)
+        buffers.half_solved[0] = False
     w_ea = buffers.effector_matrices[tick.W_EA]
     effector_frames, effector_offsets = buffers.effector_frames, buffers.effector_offsets
-    size, m = solved.shape[0], solved.shape[1] - 1
+    m = solved.shape[1] - 1
     c, u = h.shape
     n_mass = masses.size
     routing_lengths_into(positions, rotations, routing[0], routing[1], routing[2], routing[3],
@@ -312,12 +324,12 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
             for row in range(size):
                 for a in range(n_mass):
                     mass_columns[row, 1 + a] = mass_rhs[row, 1 + a]
-            factor = band_rows(band, size)
             band_solve(factor, mass_columns[:, 1:])
-        w_mass, w_aa, offset, levers_moved, levers, previous = mass_effectors
-        project_effectors_into(mass_columns, mass_rhs, positions, rotations, effector_frames,
-                               effector_offsets, previous, w_mass, w_aa, offset, levers_moved,
-                               levers)
+        w_mass, w_aa, offset, levers_moved, levers, previous, columns = mass_effectors
+        effector_columns_into(rotations, effector_frames, effector_offsets, levers, columns)
+        project_effectors_into(mass_columns, mass_rhs, columns, False, positions, rotations,
+                               effector_frames, effector_offsets, previous, w_mass, w_aa, offset,
+                               levers_moved)
     for i in range(c):
         for j in range(m + 1 + n_mass):
             acc = 0.0
@@ -365,7 +377,7 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
     increments = work[:6 * n].reshape((n, 6))
     rotation_work = work[6 * n:6 * n + 21].reshape((7, 3))
     apply_linear_step_into(positions, rotations, free_step, solved[:, 1:], change,
-                           scalars[MAX_ROTATION], increments, rotation_work)
+                           scalars[MAX_ROTATION], increments, rotation_work, factor, False)
     for a in range(n_mass):
         masses[a] = z[2 * m + a] * scale[2 * m + a]
     effector_points_into(positions, rotations, effector_frames, effector_offsets,

@@ -2,8 +2,9 @@
 Compiled projection of a solved linearisation onto effectors and actuators (paper eq. 11-12).
 
 :func:`effector_levers` and :func:`effector_points` are the one implementation of the effector
-levers ``r = R_f o`` and points ``p = x_f + R_f o``; :func:`project_effectors` forms ``W_ea``,
-``W_aa`` and the free effector positions from ``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the
+levers ``r = R_f o`` and points ``p = x_f + R_f o``, :func:`effector_columns_into` of ``J_eᵀ``;
+:func:`project_effectors_into` forms ``W_ea``, ``W_aa`` and the free effector positions from
+the half-solves of the band factor or from ``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the
 actuation and remaining gap of a QP solution; :func:`target_status` checks the targets of a tick.
 """
 
@@ -88,16 +89,63 @@ def effector_points_into(positions, rotations, effector_frames, effector_offsets
 
 
 @numba.njit(cache=True)
+def effector_columns_into(rotations, effector_frames, effector_offsets, levers, columns):
+    """
+    Write ``J_eᵀ`` of effector points (paper Sec. IV) and return its first nonzero row.
+
+    Effector ``e`` on frame ``f`` moves by ``dp = dx_f + dθ_f x r = [I, -r^] [dx_f; dθ_f]``
+    (``r = R_f o``, :func:`effector_levers`): its columns ``3e ... 3e + 2`` of ``J_eᵀ`` are
+    ``[I; r^]`` in rows ``6 (f - 1) ... 6 f - 1``, zero elsewhere.
+
+    Parameters
+    ----------
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (frame axes → world).
+    effector_frames : (k,) int ndarray
+        Frame of every effector (1..n).
+    effector_offsets : (k, 3) ndarray  [m]
+        Effector points in their frame's axes.
+    levers : (k, 3) ndarray  [m]
+        Receives ``R_f o``.
+    columns : (6n, 3k) ndarray  [1, m]
+        Receives ``J_eᵀ``.
+
+    Returns
+    -------
+    int
+        ``6 (min f - 1)``: the rows above it are zero.
+
+    """
+    effector_levers_into(rotations, effector_frames, effector_offsets, levers)
+    columns[:, :] = 0.0
+    first = columns.shape[0]
+    for e in range(effector_frames.size):
+        base = 6 * (effector_frames[e] - 1)
+        first = min(first, base)
+        rx, ry, rz = levers[e, 0], levers[e, 1], levers[e, 2]
+        for i in range(3):
+            columns[base + i, 3 * e + i] = 1.0
+        # r^ = [[0, -rz, ry], [rz, 0, -rx], [-ry, rx, 0]]
+        columns[base + 3, 3 * e + 1] = -rz
+        columns[base + 3, 3 * e + 2] = ry
+        columns[base + 4, 3 * e] = rz
+        columns[base + 4, 3 * e + 2] = -rx
+        columns[base + 5, 3 * e] = -ry
+        columns[base + 5, 3 * e + 1] = rx
+    return first
+
+
+@numba.njit(cache=True)
 def project_effectors(solved, rhs, positions, rotations, effector_frames, effector_offsets,
                       previous):
     """
     Project a solved tick onto the effectors and actuators (paper eq. 11-12).
 
     With ``solved = K⁻¹ [r, J_aᵀ]`` and the effector Jacobian ``J_e`` (block ``[I, -r^]`` on
-    the effector's frame, ``r = R_f o``, :mod:`cbha_inverse.core.actuation.effectors`):
+    the effector's frame, ``r = R_f o``, :func:`effector_columns_into`):
     ``W_ea = J_e K⁻¹ J_aᵀ``, ``W_aa = J_a K⁻¹ J_aᵀ`` and the free effector positions
     ``p_e + J_e K⁻¹ r``, returned relative to the previous actuation so that
-    ``δ_free = offset - target``.
+    ``δ_free = offset - target`` (:func:`project_effectors_into` on full solves).
 
     Parameters
     ----------
@@ -126,39 +174,85 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
         ``|r|``.
 
     """
-    width = solved.shape[1]
+    size, width = solved.shape
     k = effector_frames.size
     w_ea, w_aa, offset = np.empty((3 * k, width - 1)), np.empty((width - 1, width - 1)), np.empty(
         3 * k)
+    columns = np.empty((size, 3 * k))
+    effector_columns_into(rotations, effector_frames, effector_offsets, np.empty((k, 3)),
+                          columns)
     residual_norm = project_effectors_into(
-        solved, rhs, positions, rotations, effector_frames, effector_offsets, previous, w_ea,
-        w_aa, offset, np.empty((3 * k, width)), np.empty((k, 3)))
+        solved, rhs, columns, False, positions, rotations, effector_frames, effector_offsets,
+        previous, w_ea, w_aa, offset, np.empty((3 * k, width)))
     return w_ea, w_aa, offset, residual_norm
 
 
 @numba.njit(cache=True)
-def project_effectors_into(solved, rhs, positions, rotations, effector_frames, effector_offsets,
-                           previous, w_ea, w_aa, offset, moved, levers):
+def project_effectors_into(solved, rhs, columns, half, positions, rotations, effector_frames,
+                           effector_offsets, previous, w_ea, w_aa, offset, moved):
     """
-    :func:`project_effectors` into preallocated ``w_ea``, ``w_aa`` and ``offset``.
+    Project onto the effectors and actuators into preallocated ``w_ea``, ``w_aa``, ``offset``.
 
-    ``moved`` (3k, m + 1) and ``levers`` (k, 3) are its workspace. Returns ``|r|``.
+    The one implementation of paper eq. 11-12, on either operands of ``K⁻¹`` (`docs/design.md`):
+
+    - ``half``: the half-solves of the band factor ``K = L Lᵀ``, ``solved = L⁻¹ [r, J_aᵀ]``
+      and ``columns = L⁻¹ J_eᵀ`` (:func:`~cbha_inverse.core._kernels.band.band_forward`):
+      ``W_ea = columnsᵀ solved_a``, ``J_e K⁻¹ r = columnsᵀ solved_r`` over the rows from the
+      effector's frame to the end, ``W_aa = solved_aᵀ solved_a`` (symmetric: its lower
+      triangle, mirrored);
+    - else full solves by another factor, ``solved = K⁻¹ [r, J_aᵀ]`` and ``columns = J_eᵀ``
+      (:func:`effector_columns_into`): the same products over the effector frame's six rows,
+      ``W_aa = J_a solved_a`` (``K`` need not be symmetric).
+
+    Parameters
+    ----------
+    solved : (6n, m + 1) ndarray
+        ``L⁻¹ [r, J_aᵀ]`` or ``K⁻¹ [r, J_aᵀ]``.
+    rhs : (6n, m + 1) ndarray
+        ``[r, J_aᵀ]``.
+    columns : (6n, 3k) ndarray
+        ``L⁻¹ J_eᵀ`` or ``J_eᵀ``.
+    half : bool
+        Which operands.
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    effector_frames : (k,) int ndarray
+        Frame of every effector (1..n).
+    effector_offsets : (k, 3) ndarray  [m]
+        Effector points in their frame's axes.
+    previous : (m,) ndarray
+        ``λ_prev``.
+    w_ea : (3k, m) ndarray  [m/N, m/Pa]
+        Receives ``J_e K⁻¹ J_aᵀ``.
+    w_aa : (m, m) ndarray
+        Receives ``J_a K⁻¹ J_aᵀ``.
+    offset : (3k,) ndarray  [m]
+        Receives ``p_e + J_e K⁻¹ r - W_ea λ_prev``.
+    moved : (3k, m + 1) ndarray
+        Workspace: ``J_e K⁻¹ [r, J_aᵀ]``.
+
+    Returns
+    -------
+    float  [N, N*m]
+        ``|r|``.
+
     """
     size, width = solved.shape
     m = width - 1
     k = effector_frames.size
-    effector_levers_into(rotations, effector_frames, effector_offsets, levers)
+    effector_points_into(positions, rotations, effector_frames, effector_offsets,
+                         offset.reshape((k, 3)))
+    moved[:, :] = 0.0
     for e in range(k):
-        lever = levers[e]
-        for i in range(3):
-            offset[3 * e + i] = positions[effector_frames[e], i] + lever[i]
         base = 6 * (effector_frames[e] - 1)
-        for col in range(width):
-            rx, ry, rz = solved[base + 3, col], solved[base + 4, col], solved[base + 5, col]
-            # dp = dx + dθ x r
-            moved[3 * e, col] = solved[base, col] + ry * lever[2] - rz * lever[1]
-            moved[3 * e + 1, col] = solved[base + 1, col] + rz * lever[0] - rx * lever[2]
-            moved[3 * e + 2, col] = solved[base + 2, col] + rx * lever[1] - ry * lever[0]
+        end = size if half else base + 6
+        for q in range(base, end):
+            for c in range(3 * e, 3 * e + 3):
+                weight = columns[q, c]
+                for col in range(width):
+                    moved[c, col] += weight * solved[q, col]
     for row in range(3 * k):
         acc = offset[row] + moved[row, 0]
         for j in range(m):
@@ -169,12 +263,76 @@ def project_effectors_into(solved, rhs, positions, rotations, effector_frames, e
     residual = 0.0
     for q in range(size):
         residual += rhs[q, 0] * rhs[q, 0]
-        for i in range(m):
-            weight = rhs[q, 1 + i]
-            if weight != 0.0:
+    if half:
+        _gram_into(solved, w_aa)
+    else:
+        for q in range(size):
+            for i in range(m):
+                weight = rhs[q, 1 + i]
                 for j in range(m):
                     w_aa[i, j] += weight * solved[q, 1 + j]
     return math.sqrt(residual)
+
+
+@numba.njit(cache=True)
+def _gram_into(solved, w_aa):
+    """
+    Write ``w_aa = Yᵀ Y`` of the columns ``Y = solved[:, 1:]`` (symmetric: its lower triangle).
+
+    By 2 x 2 blocks of ``w_aa``, two rows at a time: eight independent sums in registers
+    (`docs/design.md`, step 2). A block starts at the first row where both of its column
+    pairs have a nonzero entry: ``L⁻¹ J_aᵀ`` is zero above the first nonzero row of ``J_aᵀ``
+    (an actuator of a later section), and those zeros add nothing.
+    """
+    size, width = solved.shape
+    m = width - 1
+    for i in range(0, m, 2):
+        i1 = min(i + 1, m - 1)
+        start_i = min(_first_nonzero(solved, 1 + i), _first_nonzero(solved, 1 + i1))
+        for j in range(0, i + 1, 2):
+            j1 = min(j + 1, m - 1)
+            start = max(start_i, min(_first_nonzero(solved, 1 + j),
+                                     _first_nonzero(solved, 1 + j1)))
+            a00 = a01 = a10 = a11 = 0.0
+            b00 = b01 = b10 = b11 = 0.0
+            q = start
+            while q + 1 < size:
+                yi0, yi1 = solved[q, 1 + i], solved[q, 1 + i1]
+                yj0, yj1 = solved[q, 1 + j], solved[q, 1 + j1]
+                a00 += yi0 * yj0
+                a01 += yi0 * yj1
+                a10 += yi1 * yj0
+                a11 += yi1 * yj1
+                yi0, yi1 = solved[q + 1, 1 + i], solved[q + 1, 1 + i1]
+                yj0, yj1 = solved[q + 1, 1 + j], solved[q + 1, 1 + j1]
+                b00 += yi0 * yj0
+                b01 += yi0 * yj1
+                b10 += yi1 * yj0
+                b11 += yi1 * yj1
+                q += 2
+            if q < size:
+                yi0, yi1 = solved[q, 1 + i], solved[q, 1 + i1]
+                yj0, yj1 = solved[q, 1 + j], solved[q, 1 + j1]
+                a00 += yi0 * yj0
+                a01 += yi0 * yj1
+                a10 += yi1 * yj0
+                a11 += yi1 * yj1
+            w_aa[i, j] = a00 + b00
+            w_aa[i, j1] = a01 + b01
+            w_aa[i1, j] = a10 + b10
+            w_aa[i1, j1] = a11 + b11
+    for i in range(m):
+        for j in range(i):
+            w_aa[j, i] = w_aa[i, j]
+
+
+@numba.njit(cache=True, inline='always')
+def _first_nonzero(solved, col):
+    """Return the first row of ``solved[:, col]`` that is not zero (its length if none)."""
+    for q in range(solved.shape[0]):
+        if solved[q, col] != 0.0:
+            return q
+    return solved.shape[0]
 
 
 @numba.njit(cache=True)

@@ -2,12 +2,14 @@
 Compiled updates of the frames: world-axis retraction and the chain's deformation coordinates.
 
 :func:`retract_frames` (``x += dx``, ``R ← exp(dθ) R``, `docs/design.md`) and the Newton step of a
-factored tick (:func:`apply_linear_step`); :func:`deformation_step` and :func:`deformed_poses`
+factored tick (:func:`apply_linear_step_into`, on full solves or on the band factor's
+half-solves); :func:`deformation_step` and :func:`deformed_poses`
 apply an increment in the links' deformation coordinates (the static solver's line search).
 """
 
 import math
 
+from cbha_inverse.core._kernels.band import band_backward
 from cbha_inverse.core._kernels.so3 import (jl_coefficient, left_jacobian_inverse_into,
                                             rotation_exp, rotation_log)
 import numba
@@ -70,16 +72,37 @@ def apply_linear_step(positions, rotations, free_step, solved_actuators, change,
     """
     size = solved_actuators.shape[0]
     apply_linear_step_into(positions, rotations, free_step, solved_actuators, change,
-                           max_rotation, np.empty((size // 6, 6)), np.empty((7, 3)))
+                           max_rotation, np.empty((size // 6, 6)), np.empty((7, 3)),
+                           np.empty((0, 1)), False)
 
 
 @numba.njit(cache=True)
 def apply_linear_step_into(positions, rotations, free_step, solved_actuators, change,
-                           max_rotation, increments, work):
+                           max_rotation, increments, work, factor, half):
     """
-    :func:`apply_linear_step` with its workspace given: ``increments`` (n, 6), ``work`` (7, 3).
+    :func:`apply_linear_step` with its workspace given, on full solves or on half-solves.
 
-    ``change`` may be a buffer of the caller (read before anything is written).
+    The step is ``free_step + solved_actuators Δλ``; with ``half`` the operands are the
+    half-solves of the band factor ``K = L Lᵀ`` (``L⁻¹ r``, ``L⁻¹ J_aᵀ``,
+    :func:`~cbha_inverse.core._kernels.band.band_forward`) and one backward sweep
+    (:func:`~cbha_inverse.core._kernels.band.band_backward`) gives
+    ``dq = L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ) = K⁻¹ (r + J_aᵀ Δλ)`` (`docs/design.md`, step 4).
+
+    Parameters
+    ----------
+    positions, rotations, free_step, solved_actuators, change, max_rotation
+        As :func:`apply_linear_step` (``free_step`` and ``solved_actuators`` the half-solves
+        with ``half``); ``change`` may be a buffer of the caller (read before anything is
+        written).
+    increments : (n, 6) ndarray
+        Workspace (C order): the step.
+    work : (7, 3) ndarray
+        Workspace of :func:`retract_in_place`.
+    factor : (6n, kd + 1) ndarray
+        ``L`` in lower band storage (read only with ``half``).
+    half : bool
+        Whether the operands are half-solves.
+
     """
     size, m = solved_actuators.shape
     for row in range(size):
@@ -87,6 +110,8 @@ def apply_linear_step_into(positions, rotations, free_step, solved_actuators, ch
         for j in range(m):
             acc += solved_actuators[row, j] * change[j]
         increments[row // 6, row % 6] = acc
+    if half:
+        band_backward(factor, increments.reshape((size, 1)))
     retract_in_place(positions, rotations, increments, max_rotation, work)
 
 

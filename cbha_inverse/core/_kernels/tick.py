@@ -2,10 +2,11 @@
 The control tick as two compiled entry points over preallocated buffers (`docs/design.md`).
 
 :func:`linearise_tick` is steps 1-2 of :class:`cbha_inverse.core.inverse.solver.InverseSolver`
-(links and cables, band assembly, band Cholesky, the multi-RHS solve, the projection onto the
-effectors and actuators and the QP matrices); :func:`solve_tick` is steps 3-4 (the QP vectors
-from the targets, the active-set box QP, the outcome, the binding bounds, the linear step and the
-effector positions). Each calls the kernels of this folder that hold the equations (numba
+(links and cables, band assembly, band Cholesky, the forward sweeps of ``[r, J_aᵀ]`` and
+``J_eᵀ``, the projection onto the effectors and actuators and the QP matrices);
+:func:`solve_tick` is steps 3-4 (the QP vectors from the targets, the active-set box QP, the
+outcome, the binding bounds, the linear step with its backward sweep and the effector
+positions). Each calls the kernels of this folder that hold the equations (numba
 compiles them into the entry): nothing here is a second copy of their arithmetic. Python crosses
 into compiled code once per step instead of once per kernel, and no array is allocated: the
 buffers are those of :class:`cbha_inverse.core.inverse.tick_data.TickData`, grouped by shape
@@ -14,11 +15,11 @@ into a few stacked arrays, held by one
 (numba unboxes every argument at every call). The rows of the stacks are the constants below.
 """
 
-from cbha_inverse.core._kernels.band import band_cholesky, band_rows, band_solve, scatter_add
+from cbha_inverse.core._kernels.band import band_cholesky, band_forward, band_rows, scatter_add
 from cbha_inverse.core._kernels.cables import cable_pass_into
 from cbha_inverse.core._kernels.links import link_pass_into
-from cbha_inverse.core._kernels.projection import (effector_points_into, project_effectors_into,
-                                                   tick_outcome_into)
+from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
+                                                   project_effectors_into, tick_outcome_into)
 from cbha_inverse.core._kernels.qp import (active_set_box_qp_into, bounds_binding_into,
                                            qp_hessians_into, qp_vectors_into, SOLVED)
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into
@@ -57,8 +58,8 @@ def compiled_entry(dispatcher, *arguments):
     Parameters
     ----------
     dispatcher : numba dispatcher
-        :func:`linearise_tick`, :func:`solve_tick`, :func:`apply_pending_step` or
-        :func:`project_tick`.
+        :func:`linearise_tick`, :func:`solve_tick`, :func:`apply_pending_step`,
+        :func:`pending_step_into` or :func:`project_tick`.
     *arguments
         Example arguments (their numba types are the signature).
 
@@ -83,8 +84,11 @@ def linearise_tick(buffers, cholesky):
     Runs :func:`~cbha_inverse.core._kernels.links.link_pass_into`,
     :func:`~cbha_inverse.core._kernels.cables.cable_pass_into` (one cable group, or none),
     :func:`~cbha_inverse.core._kernels.band.scatter_add` into the symmetric lower band,
-    :func:`~cbha_inverse.core._kernels.band.band_cholesky` and, when it succeeds,
-    :func:`project_tick`.
+    :func:`~cbha_inverse.core._kernels.band.band_cholesky` (``K = L Lᵀ``) and, when it
+    succeeds, the forward sweeps (:func:`~cbha_inverse.core._kernels.band.band_forward`)
+    ``L⁻¹ [r, J_aᵀ]`` and ``L⁻¹ J_eᵀ`` (from the effector frame's rows on: ``J_eᵀ`` is zero
+    above them) and :func:`project_tick`. The backward sweep waits for the step
+    (:func:`apply_pending_step`): one column, ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``.
 
     Parameters
     ----------
@@ -93,7 +97,8 @@ def linearise_tick(buffers, cholesky):
         ``vectors[SCALE]``, the evaluation's terms, ``external`` and the effectors; writes
         ``values``, ``band`` (the symmetric lower band, last row: the base frame's trash, then
         its factor), ``rhs`` (``[r, J_aᵀ]``), ``vectors[LINEARISED]`` and, when the Cholesky
-        succeeds, ``solved`` (``K⁻¹ [r, J_aᵀ]``) and the projection (:func:`project_tick`).
+        succeeds, ``solved`` (``L⁻¹ [r, J_aᵀ]``), ``effector_columns`` (``L⁻¹ J_eᵀ``),
+        ``half_solved`` (True) and the projection (:func:`project_tick`).
     cholesky : bool
         Factor the symmetric band (else the caller takes the fallback chain at once).
 
@@ -130,17 +135,21 @@ def linearise_tick(buffers, cholesky):
     for row in range(rhs.shape[0]):
         rhs[row, 0] += external[row]
     scatter_add(buffers.index, values, buffers.slot_weights, band)
-    size = rhs.shape[0]
-    factor = band_rows(band, size)
+    factor = band_rows(band, rhs.shape[0])
     vectors[LINEARISED, :] = actuation
+    buffers.half_solved[0] = False
     if not cholesky:
         return -1, float('nan')
     info = band_cholesky(factor)
     if info != 0:
         return info, float('nan')
-    solved = buffers.solved
+    solved, columns = buffers.solved, buffers.effector_columns
     solved[:, :] = rhs
-    band_solve(factor, solved)
+    band_forward(factor, solved, 0)
+    first = effector_columns_into(rotations, buffers.effector_frames, buffers.effector_offsets,
+                                  buffers.levers, columns)
+    band_forward(factor, columns, first)
+    buffers.half_solved[0] = True
     return 0, project_tick(buffers)
 
 
@@ -151,9 +160,11 @@ def project_tick(buffers):
 
     :func:`~cbha_inverse.core._kernels.projection.project_effectors_into` then
     :func:`~cbha_inverse.core._kernels.qp.qp_hessians_into` on the buffers
-    (:class:`~cbha_inverse.core._kernels.tick_buffers.TickBuffers`; ``solved``, ``rhs`` and
-    ``vectors[LINEARISED]`` = ``λ_prev`` are read); writes ``W_EA``, ``WEIGHTED_W``, ``W_AA``,
-    ``HESSIAN``, ``TRACKING`` and ``OFFSET``.
+    (:class:`~cbha_inverse.core._kernels.tick_buffers.TickBuffers`; ``solved``, ``rhs``,
+    ``effector_columns``, ``half_solved`` and ``vectors[LINEARISED]`` = ``λ_prev`` are read);
+    writes ``W_EA``, ``WEIGHTED_W``, ``W_AA``, ``HESSIAN``, ``TRACKING`` and ``OFFSET``. Without
+    ``half_solved`` (``solved`` holds ``K⁻¹ [r, J_aᵀ]`` of another factor: the fallback
+    chain) it first writes ``J_eᵀ`` into ``effector_columns``.
 
     Returns
     -------
@@ -165,10 +176,14 @@ def project_tick(buffers):
     effector_matrices, weights = buffers.effector_matrices, buffers.weights
     w_ea = effector_matrices[W_EA]
     w_aa = matrices[W_AA]
+    half = buffers.half_solved[0]
+    if not half:
+        effector_columns_into(buffers.rotations, buffers.effector_frames,
+                              buffers.effector_offsets, buffers.levers, buffers.effector_columns)
     residual_norm = project_effectors_into(
-        buffers.solved, buffers.rhs, buffers.positions, buffers.rotations,
-        buffers.effector_frames, buffers.effector_offsets, vectors[LINEARISED], w_ea, w_aa,
-        buffers.gaps[OFFSET], buffers.moved, buffers.levers)
+        buffers.solved, buffers.rhs, buffers.effector_columns, half, buffers.positions,
+        buffers.rotations, buffers.effector_frames, buffers.effector_offsets, vectors[LINEARISED],
+        w_ea, w_aa, buffers.gaps[OFFSET], buffers.moved)
     qp_hessians_into(w_ea, w_aa, vectors[SCALE], weights[0], weights[1], matrices[HESSIAN],
                      matrices[TRACKING], effector_matrices[WEIGHTED_W])
     return residual_norm
@@ -266,12 +281,9 @@ def solve_tick(targets, buffers, apply_step):
 @numba.njit(cache=True)
 def apply_pending_step(buffers):
     """
-    Apply the Newton step of the linearisation to the actuation, in place.
+    Apply the Newton step of the linearisation to the buffers' frames, in place.
 
-    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)``
-    (:func:`~cbha_inverse.core._kernels.retraction.apply_linear_step_into`) with ``λ`` and
-    ``λ_prev`` the buffers' ``vectors[ACTUATION]`` and ``vectors[LINEARISED]`` (their
-    difference is written to ``vectors[CHANGE]``) moves the frames of the buffers.
+    :func:`pending_step_into` on ``buffers.positions`` and ``buffers.rotations``.
 
     Parameters
     ----------
@@ -279,10 +291,35 @@ def apply_pending_step(buffers):
         The tick's buffers (a solved linearisation).
 
     """
+    pending_step_into(buffers, buffers.positions, buffers.rotations)
+
+
+@numba.njit(cache=True)
+def pending_step_into(buffers, positions, rotations):
+    """
+    Apply the Newton step of the buffers' linearisation to given frames, in place.
+
+    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` with ``λ`` and ``λ_prev`` the buffers'
+    ``vectors[ACTUATION]`` and ``vectors[LINEARISED]`` (their difference is written to
+    ``vectors[CHANGE]``), by
+    :func:`~cbha_inverse.core._kernels.retraction.apply_linear_step_into` on ``solved``: with
+    ``half_solved`` the half-solves, then one backward sweep of the band factor.
+
+    Parameters
+    ----------
+    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+        The tick's buffers (a solved linearisation).
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins (updated; the buffers' or a copy).
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (updated).
+
+    """
     vectors, solved = buffers.vectors, buffers.solved
     change, actuation, linearised = vectors[CHANGE], vectors[ACTUATION], vectors[LINEARISED]
     for j in range(change.size):
         change[j] = actuation[j] - linearised[j]
-    apply_linear_step_into(buffers.positions, buffers.rotations, solved[:, 0], solved[:, 1:],
-                           change, buffers.max_rotation, buffers.increments,
-                           buffers.rotation_work)
+    apply_linear_step_into(positions, rotations, solved[:, 0], solved[:, 1:], change,
+                           buffers.max_rotation, buffers.increments, buffers.rotation_work,
+                           band_rows(buffers.band, buffers.rhs.shape[0]),
+                           buffers.half_solved[0])

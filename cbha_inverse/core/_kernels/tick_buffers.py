@@ -32,11 +32,15 @@ Fields (:data:`FIELDS`, in the order of :func:`make_tick_buffers`; stacked rows 
     band ((6n + 1) (kd + 1),)                              symmetric lower band (and a trash
                                                              row), then its factor
     rhs (6n, m + 1)                                        [r, J_aᵀ]
-    solved (6n, m + 1)                                     K⁻¹ [r, J_aᵀ]
+    solved (6n, m + 1)                                     L⁻¹ [r, J_aᵀ] (half_solved) or
+                                                             K⁻¹ [r, J_aᵀ]
     matrices (MATRIX_ROWS, m, m)                           QP Hessians, W_aa, the QP's factor
     effector_matrices (2, 3k, m)                           W_ea, W_ea σ / ν
     gaps (3, 3k) [m]                                       offset, δ_free, predicted gap
     moved (3k, m + 1), levers (k, 3)                       workspace of the projection
+    effector_columns (6n, 3k)                              L⁻¹ J_eᵀ (half_solved) or J_eᵀ
+    half_solved (1,) bool                                  whether solved and effector_columns
+                                                             hold half-solves by the band factor
     effector_frames (k,) int, effector_offsets (k, 3) [m]  the effector points
     weights (2,)                                           ε_E, ε_P
     flags (2, m) int8                                      active set (warm start), pivots
@@ -61,9 +65,10 @@ FIELDS = ('positions', 'rotations', 'vectors', 'stiffness', 'rest_offsets', 'res
           'cavity_wrench', 'cavity_stiffness', 'cavity_columns', 'link_work', 'external',
           'cable_gains', 'cable_offsets', 'cable_frames', 'cable_spans', 'cable_points',
           'cable_columns', 'cable_work', 'index', 'slot_weights', 'counts', 'values', 'band',
-          'rhs', 'solved', 'matrices', 'effector_matrices', 'gaps', 'moved', 'effector_frames',
-          'effector_offsets', 'levers', 'weights', 'flags', 'free', 'qp_index', 'increments',
-          'rotation_work', 'effector_positions', 'max_iterations', 'tolerance', 'max_rotation')
+          'rhs', 'solved', 'matrices', 'effector_matrices', 'gaps', 'moved', 'effector_columns',
+          'half_solved', 'effector_frames', 'effector_offsets', 'levers', 'weights', 'flags',
+          'free', 'qp_index', 'increments', 'rotation_work', 'effector_positions',
+          'max_iterations', 'tolerance', 'max_rotation')
 """Field names, in the order of :func:`make_tick_buffers`."""
 
 EVALUATION_FIELDS = FIELDS[3:24]
@@ -171,19 +176,19 @@ def _new_tick_buffers(positions, rotations, vectors, stiffness, rest_offsets, re
                       cavity_wrench, cavity_stiffness, cavity_columns, link_work, external,
                       cable_gains, cable_offsets, cable_frames, cable_spans, cable_points,
                       cable_columns, cable_work, index, slot_weights, counts, values, band, rhs,
-                      solved, matrices, effector_matrices, gaps, moved, effector_frames,
-                      effector_offsets, levers, weights, flags, free, qp_index, increments,
-                      rotation_work, effector_positions, max_iterations, tolerance,
-                      max_rotation):
+                      solved, matrices, effector_matrices, gaps, moved, effector_columns,
+                      half_solved, effector_frames, effector_offsets, levers, weights, flags, free,
+                      qp_index, increments, rotation_work, effector_positions, max_iterations,
+                      tolerance, max_rotation):
     """Build the compiled object of :func:`make_tick_buffers`."""
     return TickBuffers(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
                        cavity_wrench, cavity_stiffness, cavity_columns, link_work, external,
                        cable_gains, cable_offsets, cable_frames, cable_spans, cable_points,
                        cable_columns, cable_work, index, slot_weights, counts, values, band, rhs,
-                       solved, matrices, effector_matrices, gaps, moved, effector_frames,
-                       effector_offsets, levers, weights, flags, free, qp_index, increments,
-                       rotation_work, effector_positions, max_iterations, tolerance,
-                       max_rotation)
+                       solved, matrices, effector_matrices, gaps, moved, effector_columns,
+                       half_solved, effector_frames, effector_offsets, levers, weights, flags,
+                       free, qp_index, increments, rotation_work, effector_positions,
+                       max_iterations, tolerance, max_rotation)
 
 
 def placeholder_evaluation(rhs):

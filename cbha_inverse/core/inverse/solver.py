@@ -8,14 +8,17 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    (:class:`cbha_inverse.core.system.EquilibriumSystem`, the static solver's evaluation too):
    tangent stiffness ``K`` (symmetric part of structure + load stiffness), actuator columns
    ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
-2. factor ``K`` (compiled band Cholesky; if it is not positive definite, the fallback chain
-   :meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`) and solve
-   ``K⁻¹ [r, J_aᵀ]`` in one multi-RHS pass, giving ``W_ea``, ``W_aa`` and ``δ_e^free``
-   (:func:`cbha_inverse.core._kernels.projection.project_effectors`);
+2. factor ``K = L Lᵀ`` (compiled band Cholesky) and sweep ``L⁻¹ [r, J_aᵀ]`` and ``L⁻¹ J_eᵀ``
+   forward, giving ``W_ea``, ``W_aa`` and ``δ_e^free`` as products of these half-solves
+   (:func:`cbha_inverse.core._kernels.projection.project_effectors_into`); if ``K`` is not
+   positive definite, the fallback chain
+   (:meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`) solves
+   ``K⁻¹ [r, J_aᵀ]`` and the same projection takes ``J_eᵀ`` and ``J_aᵀ`` as its left operands;
 3. solve the regularised box QP (proxsuite, warm-started, or the exact active-set solver; projected
    Gauss-Seidel on request or as a fallback if proxsuite reports a failure);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
-   ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (no second solve), followed by ``newton_steps - 1``
+   ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (one backward sweep of one column,
+   ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``), followed by ``newton_steps - 1``
    further full Newton steps at fixed ``λ`` if requested (or, with ``relinearize_every > 1``,
    keep the linear model for a few ticks; see :class:`InverseOptions`).
 
@@ -34,7 +37,7 @@ import time
 from cbha_inverse.core._kernels import tick as fused
 from cbha_inverse.core._kernels.projection import target_status, tick_outcome
 from cbha_inverse.core._kernels.qp import SOLVED
-from cbha_inverse.core._kernels.retraction import apply_linear_step_into, retract_frames
+from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
 from cbha_inverse.core.inverse.model_terms import ModelTerms
@@ -213,11 +216,8 @@ class InverseSolver(ModelTerms):
         """Return the frames with the pending linear step applied (a copy when one is pending)."""
         if not self._pending:
             return self._positions, self._rotations
-        data = self._data
         positions, rotations = self._positions.copy(), self._rotations.copy()
-        apply_linear_step_into(positions, rotations, data.solved[:, 0], data.solved[:, 1:],
-                               data.change(), data.max_rotation, data.increments,
-                               data.rotation_work)
+        self._data.pending_entry(self._data.buffers, positions, rotations)
         return positions, rotations
 
     def _materialise(self):
@@ -482,6 +482,8 @@ class InverseSolver(ModelTerms):
                                                   self.actuation, evaluated=True), None)
         if factor is None:
             return False
+        # K⁻¹ [r, J_aᵀ] of this factor, not the band factor's half-solves
+        data.half_solved[0] = False
         data.solved[:] = factor.solve(data.rhs)
         self._residual_norm = fused.project_tick(data.buffers)
         return True

@@ -53,7 +53,11 @@ class TickData:
     linearised : (m,) ndarray
         ``λ_prev`` of the current linearisation.
     solved : (6n, m + 1) ndarray
-        ``K⁻¹ [r, J_aᵀ]`` of the current linearisation.
+        ``L⁻¹ [r, J_aᵀ]`` of the current linearisation (the forward sweep of its band factor
+        ``K = L Lᵀ``), or ``K⁻¹ [r, J_aᵀ]`` after the fallback chain (:attr:`half_solved`).
+    half_solved : (1,) bool ndarray
+        Whether :attr:`solved` holds the band factor's half-solves (the compiled entries read
+        it; the fallback chain clears it before it writes ``K⁻¹ [r, J_aᵀ]``).
     offset : (3k,) ndarray  [m]
         ``p_e + J_e K⁻¹ r - W_ea λ_prev`` (so ``δ_free = offset - target``).
     w_ea : (3k, m) ndarray
@@ -101,6 +105,7 @@ class TickData:
         self.actuation = self.vectors[rows.ACTUATION]
         self.linearised = self.vectors[rows.LINEARISED]
         self.solved = np.zeros((6 * n, m + 1))
+        self.half_solved = np.zeros(1, dtype=np.bool_)
         self.rhs = system.rhs
         self.matrices_stack = np.zeros((rows.MATRIX_ROWS, m, m))
         self.effector_matrices = np.zeros((2, 3 * k, m))
@@ -131,9 +136,9 @@ class TickData:
         self.buffers = make_tick_buffers(
             self.positions, self.rotations, self.vectors, *terms, self.solved,
             self.matrices_stack, self.effector_matrices, self.gaps, np.zeros((3 * k, m + 1)),
-            frames, offsets, np.zeros((k, 3)), weights, self.flags, self.mask,
-            np.zeros(m, dtype=np.int64), self.increments, self.rotation_work,
-            self.effector_positions, int(max_iterations), 1e-6, max_rotation)
+            np.zeros((6 * n, 3 * k)), self.half_solved, frames, offsets, np.zeros((k, 3)),
+            weights, self.flags, self.mask, np.zeros(m, dtype=np.int64), self.increments,
+            self.rotation_work, self.effector_positions, int(max_iterations), 1e-6, max_rotation)
 
     @functools.cached_property
     def linearise_entry(self):
@@ -155,8 +160,13 @@ class TickData:
         """Return the compiled ``apply_pending_step(buffers)`` (``tick.compiled_entry``)."""
         return rows.compiled_entry(rows.apply_pending_step, self.buffers)
 
-    def change(self):
-        """Write and return ``λ - λ_prev`` of the current linearisation (the pending step)."""
-        change = self.vectors[rows.CHANGE]
-        np.subtract(self.actuation, self.linearised, out=change)
-        return change
+    @functools.cached_property
+    def pending_entry(self):
+        """
+        Return the compiled ``pending_step_into(buffers, positions, rotations)``.
+
+        The frames must be C-contiguous float arrays of the shapes of :attr:`positions` and
+        :attr:`rotations` (``tick.compiled_entry``).
+        """
+        return rows.compiled_entry(rows.pending_step_into, self.buffers, self.positions,
+                                   self.rotations)
