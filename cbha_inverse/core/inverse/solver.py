@@ -210,6 +210,10 @@ class InverseSolver(ModelTerms):
         self.step(targets)
         # the compiled projection that follows a fallback factorization (reset forgets it)
         fused.project_tick(self._data.buffers)
+        # the pending step on copies of the frames (state and effector positions between
+        # linearisations, ``relinearize_every`` > 1)
+        self._data.pending_entry(self._data.buffers, self._positions.copy(),
+                                 self._rotations.copy())
         self.reset(state, actuation)
 
     def _current(self):
