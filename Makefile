@@ -33,8 +33,10 @@ PYTEST_ARGS ?=
 # 396 + 212 s and 734 + 273 s beside two other jobs (load 2-7, 5-17); 499-1016 s and 221-662 s
 # from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests"). With 37 untimed
 # tests moved to the first phase, the replays batched and the children started once: beside two
-# other helpers compiling numba kernels, 310 s + 223 s (load 4-9) and 313 s + 195 s (load 3-6;
+# other jobs compiling numba kernels, 310 s + 223 s (load 4-9) and 313 s + 195 s (load 3-6;
 # before: 528 s + 254 s at load 4-11); 3 workers once 447 s + 233 s (load 3-11): not kept.
+# Alone (load 1.8-2.7), three consecutive runs, all passed: 193 s + 194 s, 182 s + 189 s,
+# 201 s + 187 s (6.2-6.5 min from the command to its last line).
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
