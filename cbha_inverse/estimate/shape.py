@@ -33,7 +33,6 @@ import math
 import time
 
 from cbha_inverse.core._kernels import estimation as kernel
-from cbha_inverse.core._kernels import tick as fused
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.sections import SECTION_FACTOR_BOUNDS
 from cbha_inverse.core.system import EquilibriumSystem
@@ -439,10 +438,7 @@ class ShapeEstimator:
                                               evaluated=True), None)
         if factor is None:
             return False
-        # K⁻¹ [r, J_aᵀ] of this factor, not the band factor's half-solves
-        data.tick.half_solved[0] = False
-        data.tick.solved[:] = factor.solve(data.tick.rhs)
-        fused.project_tick(data.tick.buffers)
+        data.tick.project_factor(factor)
         if self._n_mass:
             data.mass_columns[:, 1:] = factor.solve(np.ascontiguousarray(data.load.T))
         data.scalars[kernel.SOLVE_MASS] = 0.0

@@ -486,10 +486,7 @@ class InverseSolver(ModelTerms):
                                                   self.actuation, evaluated=True), None)
         if factor is None:
             return False
-        # K⁻¹ [r, J_aᵀ] of this factor, not the band factor's half-solves
-        data.half_solved[0] = False
-        data.solved[:] = factor.solve(data.rhs)
-        self._residual_norm = fused.project_tick(data.buffers)
+        self._residual_norm = data.project_factor(factor)
         return True
 
     def _newton_step(self):

@@ -170,3 +170,27 @@ class TickData:
         """
         return rows.compiled_entry(rows.pending_step_into, self.buffers, self.positions,
                                    self.rotations)
+
+    def project_factor(self, factor):
+        """
+        Solve ``K⁻¹ [r, J_aᵀ]`` by a factor of the fallback chain and project it.
+
+        The solves are then full solves, not the band factor's half-solves (:attr:`half_solved`
+        cleared), and :func:`cbha_inverse.core._kernels.tick.project_tick` forms ``W_ea``,
+        ``W_aa`` and the QP matrices from them.
+
+        Parameters
+        ----------
+        factor : object
+            A factor of
+            :meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors` (``solve``).
+
+        Returns
+        -------
+        float  [N, N*m]
+            ``|r|``.
+
+        """
+        self.half_solved[0] = False
+        self.solved[:] = factor.solve(self.rhs)
+        return rows.project_tick(self.buffers)
