@@ -1,12 +1,14 @@
 """
-The control tick as two compiled entry points over preallocated buffers (`docs/design.md`).
+The control tick as compiled entry points over preallocated buffers (`docs/design.md`).
 
 :func:`linearise_tick` is steps 1-2 of :class:`cbha_inverse.core.inverse.solver.InverseSolver`
 (links and cables, band assembly, band Cholesky, the forward sweeps of ``[r, J_aᵀ]`` and
 ``J_eᵀ``, the projection onto the effectors and actuators and the QP matrices);
 :func:`solve_tick` is steps 3-4 (the QP vectors from the targets, the active-set box QP, the
 outcome, the binding bounds, the linear step with its backward sweep and the effector
-positions). Each calls the kernels of this folder that hold the equations (numba
+positions). :func:`control_tick` runs a whole tick of the active set in one call: the targets'
+check, :func:`linearise_tick` (when the tick linearises) and :func:`solve_tick`. Each calls the
+kernels of this folder that hold the equations (numba
 compiles them into the entry): nothing here is a second copy of their arithmetic. Python crosses
 into compiled code once per step instead of once per kernel, and no array is allocated: the
 buffers are those of :class:`cbha_inverse.core.inverse.tick_data.TickData`, grouped by shape
@@ -19,7 +21,8 @@ from cbha_inverse.core._kernels.band import band_cholesky, band_forward, band_ro
 from cbha_inverse.core._kernels.cables import cable_pass_into
 from cbha_inverse.core._kernels.links import link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
-                                                   project_effectors_into, tick_outcome_into)
+                                                   project_effectors_into, target_status,
+                                                   tick_outcome_into)
 from cbha_inverse.core._kernels.qp import (active_set_box_qp_into, bounds_binding_into,
                                            qp_hessians_into, qp_vectors_into, SOLVED)
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into
@@ -43,6 +46,14 @@ STATE, PIVOT = 0, 1
 # code of solve_tick beside the QP's own (SOLVED, MAX_ITERATIONS, SINGULAR)
 REJECTED = -1
 """The QP returned a non-finite actuation: the actuation and the state are unchanged."""
+# codes of control_tick beside solve_tick's: it returned before the QP
+TARGET_NOT_FINITE = -2
+"""Some target is not finite: nothing was done."""
+BEYOND_REACH = -3
+"""Some target is beyond reach (the caller clamps it): nothing was done."""
+NOT_FACTORED = -4
+"""The band Cholesky failed (or was not asked for): the evaluation is written, for the fallback
+chain (:meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors`)."""
 
 
 def compiled_entry(dispatcher, *arguments):
@@ -58,8 +69,8 @@ def compiled_entry(dispatcher, *arguments):
     Parameters
     ----------
     dispatcher : numba dispatcher
-        :func:`linearise_tick`, :func:`solve_tick`, :func:`apply_pending_step`,
-        :func:`pending_step_into` or :func:`project_tick`.
+        :func:`control_tick`, :func:`linearise_tick`, :func:`solve_tick`,
+        :func:`apply_pending_step`, :func:`pending_step_into` or :func:`project_tick`.
     *arguments
         Example arguments (their numba types are the signature).
 
@@ -74,6 +85,69 @@ def compiled_entry(dispatcher, *arguments):
     signature = tuple(numba.typeof(argument) for argument in arguments)
     dispatcher.compile(signature)
     return dispatcher.get_overload(signature)
+
+
+@numba.njit(cache=True)
+def control_tick(targets, buffers, materialise, linearise, cholesky, apply_step):
+    """
+    Run one tick of the active set: check the targets, linearise if asked, solve and step.
+
+    :func:`~cbha_inverse.core._kernels.projection.target_status` on ``buffers.base`` and
+    ``buffers.reach``; when the targets are finite and within reach, :func:`apply_pending_step`
+    (``materialise``), :func:`linearise_tick` (``linearise``) and, when it factored the band
+    (or the tick keeps a linearisation), :func:`solve_tick`. The calls of the three entries one
+    by one, in one crossing into compiled code: the same arithmetic, the same results.
+
+    Parameters
+    ----------
+    targets : (k, 3) ndarray  [m]
+        Effector targets.
+    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+        The tick's buffers (as :func:`linearise_tick` and :func:`solve_tick` read and write
+        them).
+    materialise : bool
+        Apply the kept linearisation's pending step to the frames before linearising.
+    linearise : bool
+        Linearise at the frames (else solve on the kept linearisation).
+    cholesky : bool
+        Factor the band (:func:`linearise_tick`).
+    apply_step : bool
+        Apply the linear step after the QP (:func:`solve_tick`).
+
+    Returns
+    -------
+    code : int
+        :data:`TARGET_NOT_FINITE` or :data:`BEYOND_REACH` (nothing done), :data:`NOT_FACTORED`
+        (the pending step applied if asked, the evaluation written, nothing solved), else the
+        code of :func:`solve_tick`.
+    iterations : int
+        Active-set iterations (0 unless the QP ran).
+    largest_gap : float  [m]
+        Largest predicted effector gap (:func:`solve_tick`).
+    largest_move : float
+        Largest dimensionless actuation change (:func:`solve_tick`).
+    binding : bool
+        Whether some bound binds (:func:`solve_tick`).
+    residual_norm : float  [N, N*m]
+        ``|r|`` of the linearisation (NaN unless the tick linearised and factored).
+
+    """
+    nan = float('nan')
+    checked = target_status(targets, buffers.base, buffers.reach)
+    if checked == 1:
+        return TARGET_NOT_FINITE, 0, nan, nan, False, nan
+    if checked == 2:
+        return BEYOND_REACH, 0, nan, nan, False, nan
+    if materialise:
+        apply_pending_step(buffers)
+    residual_norm = nan
+    if linearise:
+        info, residual_norm = linearise_tick(buffers, cholesky)
+        if info != 0:
+            return NOT_FACTORED, 0, nan, nan, False, nan
+    code, iterations, largest_gap, largest_move, binding = solve_tick(targets, buffers,
+                                                                      apply_step)
+    return code, iterations, largest_gap, largest_move, binding, residual_norm
 
 
 @numba.njit(cache=True)

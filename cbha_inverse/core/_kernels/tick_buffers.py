@@ -48,6 +48,8 @@ Fields (:data:`FIELDS`, in the order of :func:`make_tick_buffers`; stacked rows 
     qp_index (m,) int                                      QP workspace
     increments (n, 6), rotation_work (7, 3)                workspace of the Newton step
     effector_positions (k, 3) [m]                          effector positions after the tick
+    base (3,) [m], reach (k,) [m]                          the targets' check (base position,
+                                                             largest reach of each effector)
     max_iterations int, tolerance float                    active-set limit, binding tolerance
     max_rotation float [rad]                               largest frame rotation of a step
 """
@@ -67,8 +69,8 @@ FIELDS = ('positions', 'rotations', 'vectors', 'stiffness', 'rest_offsets', 'res
           'cable_columns', 'cable_work', 'index', 'slot_weights', 'counts', 'values', 'band',
           'rhs', 'solved', 'matrices', 'effector_matrices', 'gaps', 'moved', 'effector_columns',
           'half_solved', 'effector_frames', 'effector_offsets', 'levers', 'weights', 'flags',
-          'free', 'qp_index', 'increments', 'rotation_work', 'effector_positions',
-          'max_iterations', 'tolerance', 'max_rotation')
+          'free', 'qp_index', 'increments', 'rotation_work', 'effector_positions', 'base',
+          'reach', 'max_iterations', 'tolerance', 'max_rotation')
 """Field names, in the order of :func:`make_tick_buffers`."""
 
 EVALUATION_FIELDS = FIELDS[3:24]
@@ -178,8 +180,8 @@ def _new_tick_buffers(positions, rotations, vectors, stiffness, rest_offsets, re
                       cable_columns, cable_work, index, slot_weights, counts, values, band, rhs,
                       solved, matrices, effector_matrices, gaps, moved, effector_columns,
                       half_solved, effector_frames, effector_offsets, levers, weights, flags, free,
-                      qp_index, increments, rotation_work, effector_positions, max_iterations,
-                      tolerance, max_rotation):
+                      qp_index, increments, rotation_work, effector_positions, base, reach,
+                      max_iterations, tolerance, max_rotation):
     """Build the compiled object of :func:`make_tick_buffers`."""
     return TickBuffers(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
                        cavity_wrench, cavity_stiffness, cavity_columns, link_work, external,
@@ -187,8 +189,8 @@ def _new_tick_buffers(positions, rotations, vectors, stiffness, rest_offsets, re
                        cable_columns, cable_work, index, slot_weights, counts, values, band, rhs,
                        solved, matrices, effector_matrices, gaps, moved, effector_columns,
                        half_solved, effector_frames, effector_offsets, levers, weights, flags,
-                       free, qp_index, increments, rotation_work, effector_positions,
-                       max_iterations, tolerance, max_rotation)
+                       free, qp_index, increments, rotation_work, effector_positions, base,
+                       reach, max_iterations, tolerance, max_rotation)
 
 
 def placeholder_evaluation(rhs):

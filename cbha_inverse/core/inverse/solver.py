@@ -35,27 +35,29 @@ import math
 import time
 
 from cbha_inverse.core._kernels import tick as fused
-from cbha_inverse.core._kernels.projection import target_status, tick_outcome
+from cbha_inverse.core._kernels.projection import target_status
 from cbha_inverse.core._kernels.qp import SOLVED
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
 from cbha_inverse.core.inverse.model_terms import ModelTerms
-from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
-                                          ProxsuiteQP, qp_problem)
+from cbha_inverse.core.inverse.qp import ActiveSetQP, ProxsuiteQP
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
+from cbha_inverse.core.inverse.tick_paths import FAST_MOVE, TickPaths
 from cbha_inverse.core.sections import SectionStiffness
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
 # targets farther from the base than this many chain lengths are clamped onto that sphere
 _REACH_FACTOR = 2.0
-# an actuator moving more than this fraction of its range in one tick ends a kept linearisation
-_FAST_MOVE = 0.02
+# the tick's globals, one lookup each
+_perf_counter = time.perf_counter
+_asarray = np.asarray
+_FLOAT = np.dtype(float)
 
 
-class InverseSolver(ModelTerms):
+class InverseSolver(TickPaths, ModelTerms):
     """
     The per-tick controller of the module docstring (pure numerics, no ROS).
 
@@ -147,23 +149,32 @@ class InverseSolver(ModelTerms):
         self._gains = np.ones(m)
         self._tick = EquilibriumSystem(model, actuators, self._external,
                                        stiffness=self._sections.stiffness)
-        self._active_set = ActiveSetQP(m)
-        self._data = TickData(self._tick, effectors, self._scale, self.lower_bounds,
-                              self.upper_bounds, self._rate, self.options,
-                              self._active_set.max_iterations)
-        self._active_set = ActiveSetQP(m, state=self._data.state)
-        self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
-        self._m, self._k = m, effectors.n_effectors
-        self._max_rotation = self._data.max_rotation
         self._effector_frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
         self._effector_offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
         # no effector can be farther from the base than this (overflow-safe targets)
         self._base = np.array(model.base_position, dtype=float)
         self._reach = _REACH_FACTOR * (model.length + np.linalg.norm(
             self._effector_offsets, axis=1))
+        self._active_set = ActiveSetQP(m)
+        self._data = TickData(self._tick, effectors, self._scale, self.lower_bounds,
+                              self.upper_bounds, self._rate, self.options,
+                              self._active_set.max_iterations, self._base, self._reach)
+        self._active_set = ActiveSetQP(m, state=self._data.state)
+        self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
+        self._m, self._k = m, effectors.n_effectors
+        self._target_shape = (self._k, 3)
+        self._max_rotation = self._data.max_rotation
         # the compiled check without numba's per-call dispatch (step passes (k, 3) C floats)
         self._target_status = fused.compiled_entry(target_status, self._data.effector_positions,
                                                    self._base, self._reach)
+        # the whole tick as one compiled call (fused linearisation, active set, one Newton
+        # step per tick); otherwise the target check, the linearisation and the QP one by one
+        self._buffers = self._data.buffers
+        self._every = self.options.relinearize_every
+        self._apply_step = self._every == 1
+        self._tick_entry = (self._data.tick_entry if self._data.fused
+                            and self.options.qp_solver == 'active_set'
+                            and self.options.newton_steps == 1 else None)
         # the frames and the actuation live in the tick data (the compiled tick updates them)
         self._positions, self._rotations = self._data.positions, self._data.rotations
         self.actuation = self._data.actuation
@@ -210,6 +221,10 @@ class InverseSolver(ModelTerms):
         self.step(targets)
         # the compiled projection that follows a fallback factorization (reset forgets it)
         fused.project_tick(self._data.buffers)
+        # the entries of the ticks that leave the one compiled call (a target beyond reach, a
+        # failed band Cholesky, prepare), compiled or loaded, not run
+        for entry in ('linearise_entry', 'solve_entry', 'step_entry'):
+            getattr(self._data, entry)
         # the pending step on copies of the frames (state and effector positions between
         # linearisations, ``relinearize_every`` > 1)
         self._data.pending_entry(self._data.buffers, self._positions.copy(),
@@ -240,43 +255,6 @@ class InverseSolver(ModelTerms):
         """Return the effector positions (k, 3) of the current model state."""
         return self.effectors.positions(*self._current())
 
-    def _held(self, status, started, qp_status='not_run', warnings=()):
-        """Return a tick result that keeps the actuation and the state."""
-        m = self.actuation.size
-        elapsed = time.perf_counter() - started
-        timings = {'assembly': 0.0, 'factor': 0.0, 'projection': 0.0, 'qp': 0.0, 'update': 0.0,
-                   'total': elapsed}
-        return TickResult(self.actuation.copy(), self.effector_positions(), status, qp_status, 0,
-                          np.zeros(m, dtype=bool), float('nan'), float('nan'), timings,
-                          tuple(warnings))
-
-    def _reachable(self, targets):
-        """
-        Return the targets moved onto the reach sphere when beyond it, and the warnings.
-
-        Parameters
-        ----------
-        targets : (k, 3) ndarray  [m]
-            Finite effector targets.
-
-        Returns
-        -------
-        targets : (k, 3) ndarray  [m]
-        warnings : tuple of str
-
-        """
-        away = targets - self._base
-        largest = np.abs(away).max(axis=1)
-        far = largest > self._reach
-        # direction without overflow: divide by the largest component before the norm
-        unit = away[far] / largest[far, None]
-        unit /= np.linalg.norm(unit, axis=1)[:, None]
-        clamped = targets.copy()
-        clamped[far] = self._base + self._reach[far, None] * unit
-        names = ', '.join(name for name, f in zip(self.effector_names, far) if f)
-        return clamped, (f'target of {names} is beyond any reach of the chain: clamped to '
-                         f'{self._reach[far].max():.3g} m from the base',)
-
     def step(self, targets):
         """
         Run one control tick toward the effector targets.
@@ -298,136 +276,52 @@ class InverseSolver(ModelTerms):
             shape, e.g. a transposed (3, k) array, is reinterpreted.
 
         """
-        t_start = time.perf_counter()
-        targets = np.asarray(targets, dtype=float)
-        k = self._k
-        if targets.shape != (k, 3):
-            if k == 1 and targets.shape == (3,):
+        t_start = _perf_counter()
+        targets = _asarray(targets, _FLOAT)
+        if targets.shape != self._target_shape:
+            if self._k == 1 and targets.shape == (3,):
                 targets = targets.reshape(1, 3)
             else:
-                raise ValueError(f'targets must have shape ({k}, 3), got {targets.shape}')
+                raise ValueError(f'targets must have shape ({self._k}, 3), got {targets.shape}')
         flags = targets.flags
         if not (flags.c_contiguous and flags.writeable and flags.aligned):
             # the compiled entries take exactly this type (they do not check it)
             targets = np.array(targets, order='C')
-        checked = self._target_status(targets, self._base, self._reach)
-        if checked == 1:
-            return self._held('rejected', t_start, warnings=('non-finite target rejected',))
-        targets, warnings = self._reachable(targets) if checked == 2 else (targets, ())
-        prepared, self._prepared = self._prepared, False
-        fresh = not self._linearised or self._age >= self.options.relinearize_every
+        tick = self._tick_entry
+        if tick is None:
+            checked = self._target_status(targets, self._base, self._reach)
+            if checked == 1:
+                return self._held('rejected', t_start, warnings=('non-finite target rejected',))
+            return self._step(targets, checked, t_start)
+        # the whole tick in one compiled call: the target check, the linearisation (when due)
+        # and the active-set QP with its step
+        fresh = not self._linearised or self._age >= self._every
+        code, iterations, largest_gap, largest_move, binding, residual_norm = tick(
+            targets, self._buffers, fresh and self._pending, fresh, self._tick.tick_cholesky,
+            self._apply_step)
+        if code != SOLVED:
+            return self._after_tick(code, targets, fresh, residual_norm, t_start)
         if fresh:
-            self._materialise()
-            self._linearised = self._linearise()
-            if not self._linearised:
-                return self._held('not_positive_definite', t_start)
-            self._age = 1
-            t_linearised = time.perf_counter()
+            self._linearised, self._residual_norm, self._age = True, residual_norm, 1
         else:
-            self._age = 1 if prepared else self._age + 1
-            t_linearised = t_start
-        apply_step = self.options.relinearize_every == 1
-        data = self._data
-        if self.options.qp_solver == 'active_set':
-            code, iterations, largest_gap, largest_move, binding = data.solve_entry(
-                targets, data.buffers, apply_step)
-            if code == fused.REJECTED:
-                return self._rejected(t_start, 'solved', warnings)
-            if code == SOLVED:
-                return self._finish(targets, 'saturated' if binding else 'solved',
-                                    'solved', iterations, data.mask.copy(), largest_gap,
-                                    largest_move, True, warnings, t_start, t_linearised)
-            # the active set did not converge: proxsuite (status checked) takes over; it has
-            # not seen this Hessian
-            self._active_set.reset()
-            qp_solver, same_hessian = 'proxsuite', False
-        else:
-            qp_solver, same_hessian = self.options.qp_solver, not (fresh or prepared)
-        delta_free = data.offset - targets.reshape(-1)
-        problem = qp_problem(data.matrices, delta_free, self.actuation, self.lower_bounds,
-                             self.upper_bounds, rate_limit=self._rate)
-        solution, status = self._solve_qp(problem, qp_solver, same_hessian)
-        actuation, gap, largest_gap, largest_move, finite = tick_outcome(
-            data.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
-            self.upper_bounds)
-        if not finite:
-            return self._rejected(t_start, solution.status, warnings)
-        saturated = binding_bounds(problem, solution.x)
-        if status == 'solved' and saturated.any():
-            status = 'saturated'
-        self.actuation[:] = actuation
-        data.gap[:] = gap
-        if apply_step:
-            data.step_entry(data.buffers)
-        return self._finish(targets, status, solution.status, solution.iterations, saturated,
-                            largest_gap, largest_move, False, warnings, t_start, t_linearised)
-
-    def _rejected(self, t_start, qp_status, warnings):
-        """Hold after a non-finite QP solution and forget the warm starts."""
-        # never a NaN actuation, never a poisoned warm start: hold, the next tick recovers
-        self._qp.reset()
-        self._active_set.reset()
-        return self._held('rejected', t_start, qp_status,
-                          warnings + ('QP returned a non-finite actuation: held',))
-
-    def _finish(self, targets, status, qp_status, iterations, saturated, largest_gap,
-                largest_move, positions_written, warnings, t_start, t_linearised):
-        """
-        Close a solved tick: age of the linearisation, Newton steps, effector positions, result.
-
-        ``positions_written``: the compiled tick wrote the effector positions into the tick
-        data (of the new state, or between linearisations the linear model's prediction).
-        """
-        data = self._data
-        if self._age < self.options.relinearize_every and largest_move > _FAST_MOVE:
+            self._age = 1 if self._prepared else self._age + 1
+        self._prepared = False
+        every = self._every
+        if self._age < every and largest_move > FAST_MOVE:
             # the actuation moves fast: the next tick relinearises
-            self._age = self.options.relinearize_every
-        t_qp = time.perf_counter()
-        if self.options.relinearize_every == 1:
-            self._pending = False
-            newton = self.options.newton_steps > 1
-            for _ in range(self.options.newton_steps - 1):
-                if not self._newton_step():
-                    break
-            if positions_written and not newton:
-                effector_positions = data.effector_positions.copy()
-            else:
-                effector_positions = self.effectors.positions(self._positions, self._rotations)
-        else:
-            # between linearisations the tick is the linear model of paper eq. 11
-            self._pending = True
-            effector_positions = (data.effector_positions.copy() if positions_written
-                                  else targets + data.gap.reshape(-1, 3))
-        t_end = time.perf_counter()
-        timings = {'assembly': t_linearised - t_start, 'factor': 0.0, 'projection': 0.0,
-                   'qp': t_qp - t_linearised, 'update': t_end - t_qp, 'total': t_end - t_start}
-        return TickResult.of_tick(self.actuation.copy(), effector_positions, status, qp_status,
-                                  iterations, saturated, largest_gap, self._residual_norm,
-                                  timings, warnings)
-
-    def _solve_qp(self, problem, qp_solver, same_hessian):
-        """
-        Solve the tick's QP (step 3 of the module docstring) with the chosen solver and fallbacks.
-
-        The active set falls back to proxsuite when it does not converge, proxsuite (status
-        checked) to projected Gauss-Seidel. Returns ``(solution, status)``, the status
-        ``'solved'`` or ``'qp_fallback'``.
-        """
-        status = 'solved'
-        if qp_solver == 'active_set':
-            solution = self._active_set.solve(problem)
-            if solution.ok:
-                return solution, status
-            # proxsuite (status checked) takes over; it has not seen this Hessian
-            qp_solver, same_hessian = 'proxsuite', False
-        if qp_solver == 'proxsuite':
-            solution = self._qp.solve(problem, same_hessian=same_hessian)
-            if not solution.ok:
-                status = 'qp_fallback'
-                solution = projected_gauss_seidel(problem)
-                solution = type(solution)(solution.x, self._qp_status_text(solution), 0, True)
-            return solution, status
-        return projected_gauss_seidel(problem), status
+            self._age = every
+        # between linearisations the tick is the linear model of paper eq. 11
+        self._pending = every != 1
+        data = self._data
+        actuation, effector_positions = data.actuation.copy(), data.effector_positions.copy()
+        saturated = data.mask.copy()
+        total = _perf_counter() - t_start
+        # one compiled call: its time is the linearisation's (when it linearised) or the QP's
+        timings = {'assembly': total if fresh else 0.0, 'factor': 0.0, 'projection': 0.0,
+                   'qp': 0.0 if fresh else total, 'update': 0.0, 'total': total}
+        return TickResult.of_tick(actuation, effector_positions,
+                                  'saturated' if binding else 'solved', 'solved', iterations,
+                                  saturated, largest_gap, self._residual_norm, timings, ())
 
     def prepare(self):
         """
@@ -458,26 +352,35 @@ class InverseSolver(ModelTerms):
 
         One compiled entry (:func:`cbha_inverse.core._kernels.tick.linearise_tick`) when the
         scene allows it; when the band Cholesky fails (or the scene's actuators need the
-        general evaluation), the evaluation, the fallback chain
-        (:meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`) and the
-        compiled projection (:func:`~cbha_inverse.core._kernels.tick.project_tick`). Returns
-        whether a factorization succeeded (the tick data then holds the linearisation).
+        general evaluation), the fallback chain (:meth:`_fall_back`). Returns whether a
+        factorization succeeded (the tick data then holds the linearisation).
         """
-        data, system = self._data, self._tick
+        data = self._data
         if data.fused:
-            info, residual_norm = data.linearise_entry(data.buffers,
-                                                       system.tick_cholesky)
+            info, residual_norm = data.linearise_entry(data.buffers, self._tick.tick_cholesky)
             if info == 0:
                 self._residual_norm = residual_norm
                 return True
-        else:
+        return self._fall_back()
+
+    def _fall_back(self):
+        """
+        Factor and project the linearisation without the fused band Cholesky.
+
+        After a failed fused Cholesky (the evaluation is written), the fallback chain
+        (:meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`: exact LU, then
+        material Cholesky) and the compiled projection
+        (:func:`~cbha_inverse.core._kernels.tick.project_tick`); for a scene whose actuators
+        need the general evaluation, that evaluation and its band Cholesky first. Returns
+        whether a factorization succeeded.
+        """
+        data, system = self._data, self._tick
+        factor = None
+        if not data.fused:
             tangent, _ = system.linearise(self._positions, self._rotations, self.actuation)
             data.linearised[:] = self.actuation
-            if not system.tick_cholesky:
-                tangent = None
-        factor = None
-        if not data.fused and tangent is not None:
-            factor = system.factor(tangent)
+            if system.tick_cholesky:
+                factor = system.factor(tangent)
         if factor is None:
             # not positive definite: the fallback chain (exact LU, then material Cholesky) of
             # the same evaluation; the residual is exact in every case, so only the
@@ -499,8 +402,3 @@ class InverseSolver(ModelTerms):
         retract_frames(self._positions, self._rotations, step.reshape(-1, 6),
                        self.options.max_rotation_step, in_place=True)
         return True
-
-    @staticmethod
-    def _qp_status_text(solution):
-        """Label the Gauss-Seidel fallback's status."""
-        return f'gauss_seidel_{solution.status}'

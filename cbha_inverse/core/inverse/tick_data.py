@@ -1,8 +1,9 @@
 """
 The buffers of the control tick: the data half of the solver's model / data split.
 
-:class:`TickData` holds every array the two compiled entries of a tick write
-(:func:`cbha_inverse.core._kernels.tick.linearise_tick` and
+:class:`TickData` holds every array the compiled entries of a tick write
+(:func:`cbha_inverse.core._kernels.tick.control_tick`, which runs
+:func:`~cbha_inverse.core._kernels.tick.linearise_tick` and
 :func:`~cbha_inverse.core._kernels.tick.solve_tick`) next to the constant arrays of the model
 they read, held by one compiled object built once
 (:class:`cbha_inverse.core._kernels.tick_buffers.TickBuffers`, :attr:`TickData.buffers`): a tick
@@ -41,6 +42,12 @@ class TickData:
         Energy and proximal weights, rotation step.
     max_iterations : int
         Active-set iteration limit.
+    base : (3,) ndarray, optional  [m]
+        Base position (the targets' check of
+        :func:`~cbha_inverse.core._kernels.tick.control_tick`; default: the origin).
+    reach : (k,) ndarray, optional  [m]
+        Largest distance (max-abs component) of each effector from the base (default:
+        infinite).
 
     Attributes
     ----------
@@ -92,9 +99,11 @@ class TickData:
     """
 
     def __init__(self, system, effectors, scale, lower_bounds, upper_bounds, rate_limit,
-                 options, max_iterations):
+                 options, max_iterations, base=None, reach=None):
         """Allocate every buffer and build the compiled object."""
         n, m, k = system.n, system.m, effectors.n_effectors
+        base = np.zeros(3) if base is None else np.array(base, dtype=float)
+        reach = np.full(k, math.inf) if reach is None else np.array(reach, dtype=float)
         self.positions = np.zeros((n + 1, 3))
         self.rotations = np.zeros((n + 1, 3, 3))
         self.vectors = np.zeros((rows.ACTUATOR_ROWS, m))
@@ -138,7 +147,20 @@ class TickData:
             self.matrices_stack, self.effector_matrices, self.gaps, np.zeros((3 * k, m + 1)),
             np.zeros((6 * n, 3 * k)), self.half_solved, frames, offsets, np.zeros((k, 3)),
             weights, self.flags, self.mask, np.zeros(m, dtype=np.int64), self.increments,
-            self.rotation_work, self.effector_positions, int(max_iterations), 1e-6, max_rotation)
+            self.rotation_work, self.effector_positions, base, reach, int(max_iterations), 1e-6,
+            max_rotation)
+
+    @functools.cached_property
+    def tick_entry(self):
+        """
+        Return the compiled ``control_tick`` (targets, buffers and four flags).
+
+        ``control_tick(targets, buffers, materialise, linearise, cholesky, apply_step)``; the
+        targets must be a C-contiguous float (k, 3) array
+        (:func:`cbha_inverse.core._kernels.tick.compiled_entry`).
+        """
+        return rows.compiled_entry(rows.control_tick, self.effector_positions, self.buffers,
+                                   True, True, True, True)
 
     @functools.cached_property
     def linearise_entry(self):
