@@ -14,7 +14,8 @@ INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
 EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
-KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py test/core/test_core_linalg_btd.py
+KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py test/core/test_core_linalg_btd.py \
+  test/core/test_core_tick.py
 COVERAGE_ARGS ?= --cov=cbha_inverse
 # the timing phase measures its pytest process only (test/coverage_timing.cfg: no subprocess patch)
 TIMING_COVERAGE_ARGS ?= $(COVERAGE_ARGS) --cov-config=test/coverage_timing.cfg
@@ -69,7 +70,7 @@ test: install  ## the whole test suite with coverage (~6-7 min on 2 quiet cores)
 
 # The kernel tests with NUMBA_DISABLE_JIT=1: the compiled code runs as Python and is measured
 # (the test of numba's compiled signatures has nothing to check without the JIT).
-cover-kernels: install  ## coverage of the numba kernels, their tests with the JIT off (~20 s)
+cover-kernels: install  ## coverage of the numba kernels, their tests with the JIT off (~1.5 min)
 	NUMBA_DISABLE_JIT=1 $(VPY) -m pytest $(KERNEL_TESTS) -q --cov=cbha_inverse --cov-report= \
 	  --deselect test/core/test_core_linalg_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
 	  $(PYTEST_ARGS)

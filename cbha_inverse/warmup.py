@@ -5,7 +5,7 @@ The kernels (every module of :mod:`cbha_inverse.core._kernels`) are ``numba.njit
 the first process that calls them compiles them (~15 s on the 2-core development machine) and
 writes the machine code to ``__pycache__`` next to the sources (or to ``NUMBA_CACHE_DIR``); later
 processes load it (~0.25 s for a first tick). This module runs representative ticks and static
-solves on every scene and QP solver (the solver's two compiled tick entries among them), one solve
+solves on every scene and QP solver (the solver's compiled tick entries among them), one solve
 of the compiled BTD backend (:mod:`cbha_inverse.core.linalg.btd`, the benchmark's) and the
 benchmark's multiply-add loop, so that the compile happens once, at
 install, and never inside a timed test, the demo or a control loop.

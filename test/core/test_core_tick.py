@@ -20,6 +20,7 @@ from cbha_inverse.core.inverse.qp import ActiveSetQP, qp_matrices
 from cbha_inverse.core.inverse.results import TickResult
 from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.scene import load_scene
+import numba
 from numba.core.runtime import _nrt_python, rtsys
 import numpy as np
 from oracles.effectors import effector_jacobian
@@ -155,9 +156,14 @@ def test_a_thousand_ticks_allocate_nothing_but_their_results(name, every):
         gc.enable()
     assert all(r.status in ('solved', 'saturated') for r in results)
     made = after.alloc - before.alloc
-    assert made == 1000
     assert after.free - before.free == made
     del results
+    if numba.config.DISABLE_JIT:
+        # the kernels' coverage run: the entries run as Python (no wrappers, and numpy's
+        # temporaries that tracemalloc would take minutes to follow)
+        assert made == 0
+        return
+    assert made == 1000
 
     m, k = len(scene.actuator_names), len(scene.effector_names)
     domain = [tracemalloc.DomainFilter(True, np.lib.tracemalloc_domain)]
