@@ -513,5 +513,25 @@ def scatter_add(index, values, weights, out):
 
     """
     out[:] = 0.0
-    for i in range(index.size):
+    scatter_more(index, values, weights, out, 0)
+
+
+@numba.njit(cache=True)
+def scatter_more(index, values, weights, out, first):
+    """
+    Add ``weights * values`` at ``index`` from value ``first`` on (:func:`scatter_add` unzeroed).
+
+    Parameters
+    ----------
+    index : (V,) int ndarray
+        Slot of every value in ``out``.
+    values, weights : (V,) ndarray
+        Values and their weights.
+    out : (S,) ndarray
+        Added to.
+    first : int
+        The values before it are left out.
+
+    """
+    for i in range(first, index.size):
         out[index[i]] += weights[i] * values[i]
