@@ -375,7 +375,13 @@ def _add_lower_into_band(out, band, width, dof):
     ``(dof + j) width + i - j``; with ``dof < 0`` (the first link) frame a is the base: its rows
     and columns are left out.
     """
-    for j in range(6 if dof < 0 else 0, 12):
+    if dof >= 0:
+        for j in range(6):
+            row = (dof + j) * width - j
+            for i in range(j, 12):
+                band[row + i] += out[i, j]
+    # (two loops of constant trip counts, fully unrolled)
+    for j in range(6, 12):
         row = (dof + j) * width - j
         for i in range(j, 12):
             band[row + i] += out[i, j]

@@ -15,8 +15,8 @@ into a few stacked arrays, held by one
 (numba unboxes every argument at every call). The rows of the stacks are the constants below.
 """
 
-from cbha_inverse.core._kernels.band import (band_cholesky, band_forward, band_rows, scatter_add,
-                                             scatter_more)
+from cbha_inverse.core._kernels.band import (band_cholesky_profiled, band_forward_profiled,
+                                             band_rows, scatter_add, scatter_more)
 from cbha_inverse.core._kernels.cables import cable_pass_into
 from cbha_inverse.core._kernels.links import link_pass_band_into, link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
@@ -123,7 +123,8 @@ def linearise_tick(buffers, cholesky):
     buffers.half_solved[0] = False
     if not cholesky:
         return -1, float('nan')
-    info = band_cholesky(factor)
+    # the block profile checked once, by the Cholesky on the band: its factor keeps it
+    info, profiled = band_cholesky_profiled(factor)
     if info != 0:
         # the symmetric pass left the link blocks of ``values`` unwritten: the exact evaluation
         # again, for the fallback chain (only when the Cholesky fails)
@@ -131,10 +132,10 @@ def linearise_tick(buffers, cholesky):
         return info, float('nan')
     solved, columns, rotations = buffers.solved, buffers.effector_columns, buffers.rotations
     solved[:, :] = rhs
-    band_forward(factor, solved, 0)
+    band_forward_profiled(factor, solved, 0, profiled)
     first = effector_columns_into(rotations, buffers.effector_frames, buffers.effector_offsets,
                                   buffers.levers, columns)
-    band_forward(factor, columns, first)
+    band_forward_profiled(factor, columns, first, profiled)
     buffers.half_solved[0] = True
     return 0, project_tick(buffers)
 
