@@ -1,8 +1,9 @@
 """Kernels (Jl⁻¹, log/exp, retraction, band Cholesky), band LU and the solver's fallbacks."""
 
 from cbha_inverse.core._kernels.band import (_backward_columns, _cholesky_width12,
-                                             _forward_columns, band_cholesky, band_solve,
-                                             frame_profile)
+                                             _forward_columns, band_cholesky,
+                                             band_cholesky_profiled, band_forward,
+                                             band_forward_profiled, band_solve, frame_profile)
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core._kernels.so3 import jl_coefficient, rotation_exp, rotation_log
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
@@ -122,6 +123,42 @@ def test_band_kernels_on_the_frame_profile_equal_the_full_band(n_rhs):
     band[1, 11] = np.nan
     assert not frame_profile(band)
     assert not frame_profile(np.zeros((42, 11)))
+
+
+@pytest.mark.parametrize('broken', [False, True])
+def test_the_cholesky_hands_its_profile_check_to_the_sweeps(broken):
+    """
+    band_cholesky_profiled checks the block profile once, for the sweeps of its factor.
+
+    A factor it marks profiled has the profile; one coupling outside it (row 2 reaching row 13)
+    turns the flag off and the sweep runs the full band: both give the dense half-solve, as
+    band_forward (which checks the factor itself) does, bit for bit.
+    """
+    rng = np.random.default_rng(3)
+    size = 48
+    r, c = np.indices((size, size))
+    a = rng.standard_normal((size, size))
+    a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)
+    if broken:
+        a[13, 2] = a[2, 13] = 0.5
+    band = np.zeros((size, 12))
+    for d in range(12):
+        band[:size - d, d] = np.diagonal(a, -d)
+    assert frame_profile(band) is not broken
+    info, profiled = band_cholesky_profiled(band)
+    assert info == 0 and profiled is not broken
+    assert frame_profile(band) is profiled
+    lower = np.zeros((size, size))
+    for d in range(12):
+        lower += np.diag(band[:size - d, d], -d)
+    for n_rhs in (7, 3, 5):
+        rhs = rng.standard_normal((size, n_rhs))
+        rhs[:12] = 0.0
+        solved, checked = rhs.copy(), rhs.copy()
+        band_forward_profiled(band, solved, 12, profiled)
+        band_forward(band, checked, 12)
+        np.testing.assert_array_equal(solved, checked)
+        np.testing.assert_allclose(solved, np.linalg.solve(lower, rhs), atol=1e-12)
 
 
 def test_band_cholesky_reports_the_first_bad_pivot():

@@ -1,7 +1,8 @@
 """Tests of the compliance links: Timoshenko closed form, rigid motion, equilibrium, FD tangent."""
 
 from cbha_inverse.core import links, so3
-from cbha_inverse.core._kernels.links import link_pass, nonzero_cavity_columns
+from cbha_inverse.core._kernels.links import (link_pass, link_pass_band_into, link_work_size,
+                                              nonzero_cavity_columns)
 import numpy as np
 from oracles import chain_forces
 import pytest
@@ -176,3 +177,53 @@ def test_link_pass_skips_zero_cavity_columns_exactly():
         assert np.all(np.isfinite(rhs)) and np.all(np.isfinite(blocks))
         np.testing.assert_array_equal(rhs, rhs_every)
         np.testing.assert_array_equal(blocks, blocks_every)
+
+
+@pytest.mark.parametrize('kd', [11, 17])
+def test_the_band_link_pass_adds_the_symmetric_part_of_the_exact_blocks(kd):
+    """
+    link_pass_band_into: the lower band of ``(T + Tᵀ) / 2`` of link_pass's exact blocks ``T``.
+
+    Assembled densely from the blocks (the base frame left out) and compared to rounding (the
+    band pass symmetrises before its products); the same wrenches and ``J_aᵀ``, bitwise; the
+    trash row of the band untouched.
+    """
+    rng = np.random.default_rng(17)
+    n, c = 4, 3
+    links_ = [_random_link(rng) for _ in range(n)]
+    stiffness = np.stack([link[0] for link in links_])
+    rest_offsets = np.stack([link[1] for link in links_])
+    rest_rotations_t = np.ascontiguousarray(np.stack([link[2].T for link in links_]))
+    positions = np.cumsum(rng.normal(scale=0.02, size=(n + 1, 3)), axis=0)
+    rotations = so3.so3_exp(rng.normal(scale=0.3, size=(n + 1, 3)))
+    wrench = rng.normal(size=(n, c, 6))
+    hessian = rng.normal(size=(n, c, 6, 6)) * 100.0
+    wrench[1, 2] = hessian[1, 2] = 0.0
+    # read-only as a scene holds them (the signature of the tick's evaluation)
+    stiffness.flags.writeable = rest_offsets.flags.writeable = False
+    columns = nonzero_cavity_columns(wrench, hessian)
+    actuation = rng.uniform(1e3, 1e5, c)
+    size = 6 * n
+    rhs = np.zeros((size, c + 1))
+    blocks = np.zeros((n, 12, 12))
+    link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation, wrench,
+              hessian, columns, rhs, blocks, False)
+    expected = np.zeros((size + 6, size + 6))
+    for link in range(n):
+        expected[6 * link:6 * link + 12, 6 * link:6 * link + 12] += blocks[link]
+    expected = np.tril(0.5 * (expected + expected.T))[6:, 6:]
+    width = kd + 1
+    band = np.zeros((size + 1) * width)
+    band_rhs = np.full((size, c + 1), np.nan)
+    link_pass_band_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t,
+                        actuation, wrench, hessian, columns, band_rhs, band,
+                        np.zeros(link_work_size(c)))
+    got = np.zeros((size, size))
+    for col in range(size):
+        for offset in range(min(width, size - col)):
+            got[col + offset, col] = band[col * width + offset]
+    assert np.abs(expected - expected.T).max() > 0.0  # lower triangle only
+    assert np.abs(blocks - np.swapaxes(blocks, 1, 2)).max() > 1e-3 * np.abs(blocks).max()
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14 * np.abs(expected).max())
+    np.testing.assert_array_equal(band_rhs, rhs)
+    np.testing.assert_array_equal(band[size * width:], 0.0)

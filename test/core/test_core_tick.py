@@ -73,6 +73,37 @@ def test_fused_linearisation_equals_the_composed_steps(name):
     np.testing.assert_array_equal(data.positions, positions)
 
 
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+def test_a_failed_cholesky_leaves_the_exact_evaluation_for_the_fallback_chain(name):
+    """
+    A failed Cholesky leaves the exact evaluation in ``values`` and ``rhs``.
+
+    linearise_tick's band pass writes no link blocks; the fallback chain reuses them.
+    """
+    scene = load_scene(name)
+    solver = scene.make_inverse_solver()
+    for target in _circle(scene, 3):
+        solver.step(target)
+    data, system = solver._data, solver._tick
+    values = system._values
+    stiffness = system.stiffness
+    writeable = stiffness.flags.writeable
+    stiffness.flags.writeable = True
+    saved = stiffness.copy()
+    try:
+        stiffness *= -1.0        # negative definite: the first pivot fails
+        values[:] = np.nan
+        info, residual_norm = fused.linearise_tick(data.buffers, True)
+        assert info == 1 and np.isnan(residual_norm) and not data.half_solved[0]
+        got_values, got_rhs = values.copy(), data.rhs.copy()
+        rhs = system.evaluate(data.positions, data.rotations, data.actuation)
+        np.testing.assert_array_equal(got_values, values)
+        np.testing.assert_array_equal(got_rhs, rhs)
+    finally:
+        stiffness[:] = saved
+        stiffness.flags.writeable = writeable
+
+
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'tendon_10f_16c', 'cbha'])
 def test_the_half_solves_give_the_dense_projection_and_step(name):
     """

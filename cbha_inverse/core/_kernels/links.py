@@ -92,14 +92,71 @@ def nonzero_cavity_columns(cavity_wrench, cavity_stiffness):
 
 @numba.njit(cache=True)
 def link_work_size(n_cavities):
-    """Return the length of the workspace of :func:`link_pass_into` (``c`` cavity columns)."""
-    return 114 + 12 * (1 + n_cavities)
+    """
+    Return the length of the workspace of the link passes (``c`` cavity columns).
+
+    :func:`link_pass_into` uses its first ``114 + 12 (1 + c)`` entries,
+    :func:`link_pass_band_into` 144 more (one link's 12 x 12 block).
+    """
+    return 114 + 12 * (1 + n_cavities) + 144
 
 
 @numba.njit(cache=True)
 def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
                    cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material, work):
     """:func:`link_pass` with its workspace given, ``work`` (:func:`link_work_size`,)."""
+    _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
+               cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material, work[:0],
+               0, False, work)
+
+
+@numba.njit(cache=True)
+def link_pass_band_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t,
+                        actuation, cavity_wrench, cavity_stiffness, cavity_columns, rhs, band,
+                        work):
+    """
+    Write the link wrenches into ``rhs`` and add the tangent's symmetric part into a band.
+
+    The pass of :func:`link_pass_into` (exact tangent, ``material`` False), which keeps of each
+    link's 12 x 12 world tangent ``T`` only what the symmetric lower band needs: the lower
+    triangle of ``(T + Tᵀ) / 2``, added straight into ``band`` (no assembly index, no weights;
+    the base frame's rows and columns are left out). ``(Eᵀ R M Rᵀ E + its transpose) / 2 =
+    Eᵀ R sym(M) Rᵀ E``: the 6 x 6 ``M`` is symmetrised first, so of the products with ``Ra`` and
+    ``E_a`` only the blocks on and below the diagonal are formed, and the geometric terms enter by
+    their symmetric part. The same tangent as the symmetric part of :func:`link_pass_into`'s
+    blocks up to rounding (the sums are grouped differently).
+
+    Parameters
+    ----------
+    positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation, cavity_wrench, \
+cavity_stiffness, cavity_columns, rhs
+        As :func:`link_pass` (``rhs`` zeroed, then the wrenches and ``J_aᵀ``).
+    band : ((N + 1) w,) ndarray
+        Lower band storage in C order, row ``c`` at ``c w``, ``band[c w + r - c] += K[r, c]``
+        (``w = kd + 1``, :func:`cbha_inverse.core._kernels.band.band_rows`; ``kd >= 11``);
+        added to, not zeroed.
+    work : (link_work_size(c),) ndarray
+        Workspace.
+
+    """
+    width = band.size // (rhs.shape[0] + 1)
+    scratch = work[work.size - 144:].reshape((1, 12, 12))
+    _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
+               cavity_wrench, cavity_stiffness, cavity_columns, rhs, scratch, False, band, width,
+               True, work)
+
+
+@numba.njit(cache=True, inline='always')
+def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
+               cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material, band, width,
+               symmetric, work):
+    """
+    Run the pass of :func:`link_pass_into` or (``symmetric``) :func:`link_pass_band_into`.
+
+    With ``symmetric`` every link's block is formed in ``blocks[0]`` (symmetric part, lower
+    triangle) and added into ``band`` (rows of ``width`` slots). Inlined into both with a
+    literal ``symmetric``: each compiles without the other's branches.
+    """
     n = stiffness.shape[0]
     n_cav = cavity_wrench.shape[1]
     kc = 1 + n_cav
@@ -216,11 +273,26 @@ def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations
         # [E_a^T M E_a, E_a^T M; M E_a, M] for M = R mat R^T
         # the hat matrices as locals (LLVM keeps them in registers)
         d0, d1, d2 = diff[0], diff[1], diff[2]
-        out = blocks[link]
-        # M = R mat R^T straight into its block of out, read back there
-        for p in range(2):
-            for q in range(2):
-                _rotate_block(mat, ra, out, 3 * p, 3 * q)
+        if symmetric:
+            # sym(mat): then M = R mat R^T is symmetric, its block (0, 1) the transpose of (1, 0)
+            for i in range(1, 6):
+                for j in range(i):
+                    s = 0.5 * (mat[i, j] + mat[j, i])
+                    mat[i, j] = s
+                    mat[j, i] = s
+            out = blocks[0]
+            _rotate_block(mat, ra, out, 0, 0)
+            _rotate_block(mat, ra, out, 3, 0)
+            _rotate_block(mat, ra, out, 3, 3)
+            for i in range(3):
+                for j in range(3):
+                    out[6 + i, 9 + j] = out[9 + j, 6 + i]
+        else:
+            out = blocks[link]
+            # M = R mat R^T straight into its block of out, read back there
+            for p in range(2):
+                for q in range(2):
+                    _rotate_block(mat, ra, out, 3 * p, 3 * q)
         # the products with d^ written out term by term (the zero terms of the hat matrix
         # dropped: x + 0 y = x for finite y), no tuple indexed by a loop variable
         for i in range(6):
@@ -233,7 +305,8 @@ def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations
             out[r, 3] = x1 * d2 - x2 * d1 - out[r, 9]
             out[r, 4] = x2 * d0 - x0 * d2 - out[r, 10]
             out[r, 5] = x0 * d1 - x1 * d0 - out[r, 11]
-        for c in range(12):
+        # (symmetric: the block (0, 1), E_a^T M, is above the diagonal)
+        for c in range(6 if symmetric else 12):
             # E_a^T M and E_a^T (M E_a), column c
             y0, y1, y2 = out[6, c], out[7, c], out[8, c]
             out[0, c] = -y0
@@ -242,6 +315,10 @@ def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations
             out[3, c] = -(y2 * d1 - d2 * y1) - out[9, c]
             out[4, c] = -(d2 * y0 - d0 * y2) - out[10, c]
             out[5, c] = -(d0 * y1 - d1 * y0) - out[11, c]
+        if symmetric:
+            _add_symmetric_geometric(out, world, d0, d1, d2)
+            _add_lower_into_band(out, band, width, 6 * (link - 1))
+            continue
         if material:
             continue
         # geometric terms of the b-side world wrench (F, M) = R_a L: turning frame a turns it
@@ -264,6 +341,50 @@ def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations
         out[5, 3] -= d0 * f2 - m1
         out[5, 4] -= m0 + d1 * f2
         out[5, 5] -= -(d1 * f1) - d0 * f0
+
+
+@numba.njit(cache=True, inline='always')
+def _add_symmetric_geometric(out, world, d0, d1, d2):
+    """
+    Add the symmetric part of a link's geometric terms to the lower triangle of its block.
+
+    The terms of :func:`link_pass_into` (``F``, ``M`` the b-side world wrench, column 0 of
+    ``world``): the pairs ``-F^`` at (0, 3) / ``F^`` at (3, 0) and ``-F^`` at (3, 6) / ``F^`` at
+    (6, 3) are each other's transposes (``F^`` stays below the diagonal), ``M^`` at (9, 3) has a
+    zero mirror (half of it stays) and of ``-(M^ + d^ F^)`` at (3, 3) the symmetric part is
+    ``-(d^ F^ + F^ d^) / 2``, ``d^ F^ = F dᵀ - (d·F) I``.
+    """
+    f0, f1, f2 = world[0, 0], world[1, 0], world[2, 0]
+    _add_hat(out, 3, 0, f0, f1, f2)
+    _add_hat(out, 6, 3, f0, f1, f2)
+    _add_hat(out, 9, 3, 0.5 * world[3, 0], 0.5 * world[4, 0], 0.5 * world[5, 0])
+    out[3, 3] -= -(d2 * f2) - d1 * f1
+    out[4, 3] -= 0.5 * (d0 * f1 + d1 * f0)
+    out[4, 4] -= -(d2 * f2) - d0 * f0
+    out[5, 3] -= 0.5 * (d0 * f2 + d2 * f0)
+    out[5, 4] -= 0.5 * (d1 * f2 + d2 * f1)
+    out[5, 5] -= -(d1 * f1) - d0 * f0
+
+
+@numba.njit(cache=True, inline='always')
+def _add_lower_into_band(out, band, width, dof):
+    """
+    Add the lower triangle of a link's 12 x 12 block into a lower band (C order, rows ``width``).
+
+    Entry ``(i, j)``, ``i >= j``, of the block at unknowns ``(dof + i, dof + j)`` goes to slot
+    ``(dof + j) width + i - j``; with ``dof < 0`` (the first link) frame a is the base: its rows
+    and columns are left out.
+    """
+    if dof >= 0:
+        for j in range(6):
+            row = (dof + j) * width - j
+            for i in range(j, 12):
+                band[row + i] += out[i, j]
+    # (two loops of constant trip counts, fully unrolled)
+    for j in range(6, 12):
+        row = (dof + j) * width - j
+        for i in range(j, 12):
+            band[row + i] += out[i, j]
 
 
 @numba.njit(cache=True, inline='always')

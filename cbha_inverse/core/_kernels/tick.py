@@ -17,9 +17,10 @@ into a few stacked arrays, held by one
 (numba unboxes every argument at every call). The rows of the stacks are the constants below.
 """
 
-from cbha_inverse.core._kernels.band import band_cholesky, band_forward, band_rows, scatter_add
+from cbha_inverse.core._kernels.band import (band_cholesky_profiled, band_forward_profiled,
+                                             band_rows, scatter_add, scatter_more)
 from cbha_inverse.core._kernels.cables import cable_pass_into
-from cbha_inverse.core._kernels.links import link_pass_into
+from cbha_inverse.core._kernels.links import link_pass_band_into, link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
                                                    project_effectors_into, target_status,
                                                    tick_outcome_into)
@@ -155,9 +156,10 @@ def linearise_tick(buffers, cholesky):
     """
     Linearise, factor and project at the buffers' state (steps 1-2 of the tick), in place.
 
-    Runs :func:`~cbha_inverse.core._kernels.links.link_pass_into`,
-    :func:`~cbha_inverse.core._kernels.cables.cable_pass_into` (one cable group, or none),
-    :func:`~cbha_inverse.core._kernels.band.scatter_add` into the symmetric lower band,
+    Runs :func:`~cbha_inverse.core._kernels.links.link_pass_band_into` (the links' symmetric
+    tangent straight into the symmetric lower band),
+    :func:`~cbha_inverse.core._kernels.cables.cable_pass_into` (one cable group, or none; its
+    blocks scattered into the band, :func:`~cbha_inverse.core._kernels.band.scatter_more`),
     :func:`~cbha_inverse.core._kernels.band.band_cholesky` (``K = L Lᵀ``) and, when it
     succeeds, the forward sweeps (:func:`~cbha_inverse.core._kernels.band.band_forward`)
     ``L⁻¹ [r, J_aᵀ]`` and ``L⁻¹ J_eᵀ`` (from the effector frame's rows on: ``J_eᵀ`` is zero
@@ -169,8 +171,10 @@ def linearise_tick(buffers, cholesky):
     buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
         The tick's buffers. Reads the frames, ``vectors[ACTUATION]`` (``λ_prev``) and
         ``vectors[SCALE]``, the evaluation's terms, ``external`` and the effectors; writes
-        ``values``, ``band`` (the symmetric lower band, last row: the base frame's trash, then
-        its factor), ``rhs`` (``[r, J_aᵀ]``), ``vectors[LINEARISED]`` and, when the Cholesky
+        ``band`` (the symmetric lower band, last row: the base frame's trash, then its factor),
+        ``rhs`` (``[r, J_aᵀ]``), ``values`` (the cable blocks; the link blocks too when
+        ``cholesky`` is False or the Cholesky fails: the exact evaluation, run again then),
+        ``vectors[LINEARISED]`` and, when the Cholesky
         succeeds, ``solved`` (``L⁻¹ [r, J_aᵀ]``), ``effector_columns`` (``L⁻¹ J_eᵀ``),
         ``half_solved`` (True) and the projection (:func:`project_tick`).
     cholesky : bool
@@ -186,20 +190,63 @@ def linearise_tick(buffers, cholesky):
         ``|r|`` (NaN unless ``info`` is 0).
 
     """
-    positions, rotations, vectors = buffers.positions, buffers.rotations, buffers.vectors
+    vectors, rhs = buffers.vectors, buffers.rhs
+    _evaluate(buffers, cholesky)
+    factor = band_rows(buffers.band, rhs.shape[0])
+    vectors[LINEARISED, :] = vectors[ACTUATION]
+    buffers.half_solved[0] = False
+    if not cholesky:
+        return -1, float('nan')
+    # the block profile checked once, by the Cholesky on the band: its factor keeps it
+    info, profiled = band_cholesky_profiled(factor)
+    if info != 0:
+        # the symmetric pass left the link blocks of ``values`` unwritten: the exact evaluation
+        # again, for the fallback chain (only when the Cholesky fails)
+        _evaluate(buffers, False)
+        return info, float('nan')
+    solved, columns, rotations = buffers.solved, buffers.effector_columns, buffers.rotations
+    solved[:, :] = rhs
+    band_forward_profiled(factor, solved, 0, profiled)
+    first = effector_columns_into(rotations, buffers.effector_frames, buffers.effector_offsets,
+                                  buffers.levers, columns)
+    band_forward_profiled(factor, columns, first, profiled)
+    buffers.half_solved[0] = True
+    return 0, project_tick(buffers)
+
+
+@numba.njit(cache=True)
+def _evaluate(buffers, symmetric):
+    """
+    Evaluate the links, the cable group and the external wrenches into the tick's buffers.
+
+    ``rhs`` receives ``[r, J_aᵀ]``; ``band`` the symmetric lower band (its trash row aside).
+    With ``symmetric`` the links add the symmetric part of their tangents straight into the
+    band (:func:`~cbha_inverse.core._kernels.links.link_pass_band_into`; their blocks in
+    ``values`` are not written) and only the cable values are scattered; else ``values``
+    receives every exact block and the band is their scatter
+    (:func:`~cbha_inverse.core._kernels.band.scatter_add`, what the fallback chain reads).
+    """
+    positions, rotations, actuation = buffers.positions, buffers.rotations, buffers.vectors[
+        ACTUATION]
     stiffness, counts, values = buffers.stiffness, buffers.counts, buffers.values
     rhs, band, external = buffers.rhs, buffers.band, buffers.external
     cable_frames, cable_spans = buffers.cable_frames, buffers.cable_spans
     cable_points = buffers.cable_points
-    actuation = vectors[ACTUATION]
     n = stiffness.shape[0]
     link_end = counts[0]
     pair_end = link_end + counts[1]
     moment_end = pair_end + counts[2]
-    link_pass_into(positions, rotations, stiffness, buffers.rest_offsets,
-                   buffers.rest_rotations_t, actuation, buffers.cavity_wrench,
-                   buffers.cavity_stiffness, buffers.cavity_columns, rhs,
-                   values[:link_end].reshape((n, 12, 12)), False, buffers.link_work)
+    if symmetric:
+        band[:] = 0.0
+        link_pass_band_into(positions, rotations, stiffness, buffers.rest_offsets,
+                            buffers.rest_rotations_t, actuation, buffers.cavity_wrench,
+                            buffers.cavity_stiffness, buffers.cavity_columns, rhs, band,
+                            buffers.link_work)
+    else:
+        link_pass_into(positions, rotations, stiffness, buffers.rest_offsets,
+                       buffers.rest_rotations_t, actuation, buffers.cavity_wrench,
+                       buffers.cavity_stiffness, buffers.cavity_columns, rhs,
+                       values[:link_end].reshape((n, 12, 12)), False, buffers.link_work)
     if cable_frames.size > 0:
         cable_pass_into(positions, rotations, actuation, buffers.cable_gains, cable_frames,
                         buffers.cable_offsets, cable_spans[0], cable_spans[1], cable_spans[2],
@@ -208,23 +255,10 @@ def linearise_tick(buffers, cholesky):
                         values[pair_end:moment_end].reshape((-1, 3, 3)), buffers.cable_work)
     for row in range(rhs.shape[0]):
         rhs[row, 0] += external[row]
-    scatter_add(buffers.index, values, buffers.slot_weights, band)
-    factor = band_rows(band, rhs.shape[0])
-    vectors[LINEARISED, :] = actuation
-    buffers.half_solved[0] = False
-    if not cholesky:
-        return -1, float('nan')
-    info = band_cholesky(factor)
-    if info != 0:
-        return info, float('nan')
-    solved, columns = buffers.solved, buffers.effector_columns
-    solved[:, :] = rhs
-    band_forward(factor, solved, 0)
-    first = effector_columns_into(rotations, buffers.effector_frames, buffers.effector_offsets,
-                                  buffers.levers, columns)
-    band_forward(factor, columns, first)
-    buffers.half_solved[0] = True
-    return 0, project_tick(buffers)
+    if symmetric:
+        scatter_more(buffers.index, values, buffers.slot_weights, band, link_end)
+    else:
+        scatter_add(buffers.index, values, buffers.slot_weights, band)
 
 
 @numba.njit(cache=True)
