@@ -55,12 +55,17 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
 test: install  ## the whole test suite with coverage (~6-7 min on 2 quiet cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
+	listed=$$shared/timing-files; rm -f $$listed; \
 	start=$$(date +%s); \
-	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \
-	  --durations=15 $(COVERAGE_ARGS) --cov-report= $(PYTEST_ARGS); first=$$?; \
+	CBHA_TIMING_FILES_OUT=$$listed $(VPY) -m pytest test -q -rs -m 'not timing' \
+	  -n $(TEST_WORKERS) --dist worksteal --durations=15 $(COVERAGE_ARGS) --cov-report= \
+	  $(PYTEST_ARGS); first=$$?; \
 	middle=$$(date +%s); \
-	$(VPY) -m pytest test -q -rs -m timing --durations=15 $(TIMING_COVERAGE_ARGS) --cov-append \
-	  $(COVERAGE_REPORT) $(PYTEST_ARGS); second=$$?; \
+	files=$$(tail -n +2 $$listed 2>/dev/null); \
+	if [ -n "$$files" ]; then check=CBHA_TIMING_FILES_IN=$$listed; else files=test; check=; \
+	  echo "make test: no list of the timing tests' files ($$listed), collecting test/"; fi; \
+	env $$check $(VPY) -m pytest $$files -q -rs -m timing --durations=15 $(TIMING_COVERAGE_ARGS) \
+	  --cov-append $(COVERAGE_REPORT) $(PYTEST_ARGS); second=$$?; \
 	end=$$(date +%s); \
 	echo "make test: $$((middle - start)) s on $(TEST_WORKERS) workers, $$((end - middle)) s of timing tests"; \
 	for status in $$first $$second; do [ $$status -eq 0 ] || [ $$status -eq 5 ] || exit $$status; done
