@@ -37,6 +37,10 @@ PYTEST_ARGS ?=
 # before: 528 s + 254 s at load 4-11); 3 workers once 447 s + 233 s (load 3-11): not kept.
 # Alone (load 1.8-2.7), three consecutive runs, all passed: 193 s + 194 s, 182 s + 189 s,
 # 201 s + 187 s (6.2-6.5 min from the command to its last line).
+# The timing phase then collected only the files the first phase listed (test/conftest.py):
+# 4.3-5.0 s of collection instead of 11.4-11.7 s (load ~4); beside two other jobs 427 s + 197 s
+# (load 4-10) against 435 s + 197 s before (load 2-5, the interface builds made): within the
+# noise. The first phase alone, alternated at load 2-9: 286 s and 305 s on 3 workers, 258 s on 2.
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
