@@ -41,6 +41,7 @@ PYTEST_ARGS ?=
 # 4.3-5.0 s of collection instead of 11.4-11.7 s (load ~4); beside two other jobs 427 s + 197 s
 # (load 4-10) against 435 s + 197 s before (load 2-5, the interface builds made): within the
 # noise. The first phase alone, alternated at load 2-9: 286 s and 305 s on 3 workers, 258 s on 2.
+# Then, as the other jobs ended (load 5.6 -> 1.5): 195 s + 173 s, 6.2 min (370 s), all passed.
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
