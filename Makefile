@@ -38,6 +38,11 @@ PYTEST_ARGS ?=
 # before: 528 s + 254 s at load 4-11); 3 workers once 447 s + 233 s (load 3-11): not kept.
 # Alone (load 1.8-2.7), three consecutive runs, all passed: 193 s + 194 s, 182 s + 189 s,
 # 201 s + 187 s (6.2-6.5 min from the command to its last line).
+# The timing phase then collected only the files the first phase listed (test/conftest.py):
+# 4.3-5.0 s of collection instead of 11.4-11.7 s (load ~4); beside two other jobs 427 s + 197 s
+# (load 4-10) against 435 s + 197 s before (load 2-5, the interface builds made): within the
+# noise. The first phase alone, alternated at load 2-9: 286 s and 305 s on 3 workers, 258 s on 2.
+# Then, as the other jobs ended (load 5.6 -> 1.5): 195 s + 173 s, 6.2 min (370 s), all passed.
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
@@ -56,12 +61,17 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
 test: install  ## the whole test suite with coverage (~6-7 min on 2 quiet cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
+	listed=$$shared/timing-files; rm -f $$listed; \
 	start=$$(date +%s); \
-	$(VPY) -m pytest test -q -rs -m 'not timing' -n $(TEST_WORKERS) --dist worksteal \
-	  --durations=15 $(COVERAGE_ARGS) --cov-report= $(PYTEST_ARGS); first=$$?; \
+	CBHA_TIMING_FILES_OUT=$$listed $(VPY) -m pytest test -q -rs -m 'not timing' \
+	  -n $(TEST_WORKERS) --dist worksteal --durations=15 $(COVERAGE_ARGS) --cov-report= \
+	  $(PYTEST_ARGS); first=$$?; \
 	middle=$$(date +%s); \
-	$(VPY) -m pytest test -q -rs -m timing --durations=15 $(TIMING_COVERAGE_ARGS) --cov-append \
-	  $(COVERAGE_REPORT) $(PYTEST_ARGS); second=$$?; \
+	files=$$(tail -n +2 $$listed 2>/dev/null); \
+	if [ -n "$$files" ]; then check=CBHA_TIMING_FILES_IN=$$listed; else files=test; check=; \
+	  echo "make test: no list of the timing tests' files ($$listed), collecting test/"; fi; \
+	env $$check $(VPY) -m pytest $$files -q -rs -m timing --durations=15 $(TIMING_COVERAGE_ARGS) \
+	  --cov-append $(COVERAGE_REPORT) $(PYTEST_ARGS); second=$$?; \
 	end=$$(date +%s); \
 	echo "make test: $$((middle - start)) s on $(TEST_WORKERS) workers, $$((end - middle)) s of timing tests"; \
 	for status in $$first $$second; do [ $$status -eq 0 ] || [ $$status -eq 5 ] || exit $$status; done

@@ -107,18 +107,65 @@ def is_timing(item):
     return _SOURCES[path]
 
 
+# ``make test``'s first phase collects every test: with CBHA_TIMING_FILES_OUT naming a file, it
+# writes there the number of timing tests, then the files that hold them, one a line; the second
+# phase collects those files alone (not the ~1,000 tests of the rest: 4-5 s of imports) and, with
+# CBHA_TIMING_FILES_IN naming the same file, fails unless it finds as many timing tests.
+TIMING_FILES_OUT = 'CBHA_TIMING_FILES_OUT'
+TIMING_FILES_IN = 'CBHA_TIMING_FILES_IN'
+_COLLECT_ERRORS = []
+
+
+def pytest_collectreport(report):
+    """Count the collection errors (a file that failed to import: its timing tests unknown)."""
+    if report.failed:
+        _COLLECT_ERRORS.append(report.nodeid)
+
+
+def _collected_everything(config):
+    """Return whether this session collected all of ``test/`` (no ``--lf`` skipping files)."""
+    tests = REPO_ROOT / 'test'
+    named = {Path(arg.split('::', 1)[0]).resolve() for arg in config.args}
+    return tests in named and not config.getoption('lf', False) and not _COLLECT_ERRORS
+
+
+def write_timing_files(path, timing):
+    """Write the count of ``timing`` (items) and their files in collection order to ``path``."""
+    files = list(dict.fromkeys(item.nodeid.split('::', 1)[0] for item in timing))
+    path = Path(path)
+    temporary = path.with_name(f'{path.name}.{os.getpid()}')
+    temporary.write_text(''.join(f'{line}\n' for line in [len(timing), *files]))
+    os.replace(temporary, path)     # the xdist workers both write it: whole or not at all
+
+
+def check_timing_files(path, timing):
+    """Fail the session unless ``timing`` holds as many tests as ``path`` counted."""
+    expected = int(Path(path).read_text().split('\n', 1)[0])
+    if len(timing) != expected:
+        raise pytest.UsageError(
+            f'{len(timing)} timing tests collected, {expected} in the first phase ({path}): '
+            'a test file changed between the phases; run make test again')
+
+
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     """
     Mark the timing tests ``timing`` (:func:`is_timing`), before ``-m`` selects on the marks.
 
     Run anyway under pytest-xdist (``pytest -n 2`` without ``-m``), they share one xdist group:
-    one after the other on one worker, though no longer alone on the cores.
+    one after the other on one worker, though no longer alone on the cores. Writes or checks the
+    timing phase's files (:data:`TIMING_FILES_OUT`, :data:`TIMING_FILES_IN`).
     """
+    timing = []
     for item in items:
         if is_timing(item):
             item.add_marker(pytest.mark.timing)
             item.add_marker(pytest.mark.xdist_group('timing'))
+            timing.append(item)
+    if os.environ.get(TIMING_FILES_OUT) and _collected_everything(config):
+        write_timing_files(os.environ[TIMING_FILES_OUT], timing)
+    if os.environ.get(TIMING_FILES_IN):
+        check_timing_files(os.environ[TIMING_FILES_IN], timing)
     workerinput = getattr(config, 'workerinput', None)
     if workerinput is not None:
         # on pytest-xdist workers the files that took longest in earlier runs go first (each
