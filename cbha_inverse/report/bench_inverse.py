@@ -269,6 +269,8 @@ def format_table(rows, flop_rate):
             f"{r['flops'] / 1e3:6.1f} {1e6 * bound:5.1f}us {med['total'] / bound:6.1f}x | "
             f"{1e3 * r['tracking_error_median']:6.3f}mm | {goal:>16s} | {paper_text} {ratio}")
     lines.append('')
+    lines.append('lin / QP / update: a tick of the active set runs as one compiled call, its '
+                 'whole time under lin when it linearises, else under QP')
     lines += [f'{name}: {text}' for name, text in PAPER.items()]
     return '\n'.join(lines)
 

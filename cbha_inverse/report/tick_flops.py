@@ -17,10 +17,13 @@ from typing import NamedTuple
 
 from cbha_inverse.core._kernels.flop_rate import multiply_add_chains
 
-# flops of one link in link_pass_into (loops of the kernel): the geometry, deformation, stress,
-# B^T K, the local wrench, the rotated tangent and its geometric terms (the products with the
-# hat matrices of d, F and M without their zero terms) ...
-_LINK_BASE = 1216
+# flops of one link in link_pass_band_into, the tick's link pass (loops of the kernel): the
+# geometry, deformation, stress, B^T K, the local wrench, the symmetric part of the 6 x 6 tangent,
+# its rotation (3 of the 4 blocks), the lower blocks of E^T M E and the symmetric part of the
+# geometric terms (the products with the hat matrices of d, F and M without their zero terms;
+# link_pass_into, the exact pass, does 144 more: the fourth block, the upper columns, all the
+# geometric terms) ...
+_LINK_BASE = 1072
 # ... the rest-rotation product when a link's rest rotation is not the identity ...
 _LINK_REST_ROTATION = 45
 # ... per condensed cavity column (its wrench, G0 + H δ, and load stiffness p H) ...
@@ -144,9 +147,14 @@ def tick_flops(shapes):
     # effector positions
     back = sum(1 + 2 * min(kd, size - 1 - j) for j in range(size))
     update = size * 2 * m + back + n * _RETRACT_PER_FRAME + 18 * k
+    # the assembly: the links add the lower triangles of their blocks into the band (78 values,
+    # 21 for the first link: the base frame's rows are left out), the cable blocks are scattered
+    # with their weights; the band is zeroed first
+    link_adds = 78 * (n - 1) + 21 if n else 0
+    cable_values = max(shapes.values - 144 * n, 0)
     counts = {'links': links,
               'cables': _CABLE_PER_POINT * shapes.points + _CABLE_PER_SPAN * shapes.spans,
-              'assembly': 2 * shapes.values + size, 'factor': factor, 'solve': solve,
+              'assembly': link_adds + 2 * cable_values + size, 'factor': factor, 'solve': solve,
               'projection': projection, 'qp': qp, 'update': update}
     counts['total'] = sum(counts.values())
     return counts

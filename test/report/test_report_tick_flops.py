@@ -53,6 +53,8 @@ def test_the_cbha_tick_counts_its_links_cavities_and_band():
     # the band of N = 96, kd = 11 with 7 right-hand sides: N (kd² + 2kd + 1) minus the end
     assert 0.8 * 96 * 144 < flops['factor'] < 96 * 144
     assert flops['cables'] == 0
+    # the links' lower triangles straight into the band, nothing scattered, the band zeroed
+    assert flops['assembly'] == 15 * 78 + 21 + 96
     # the nonzero cavity columns (3 per link) cost about a third of the link pass
     assert flops['links'] > 16 * 3 * 207
     assert 50_000 < flops['total'] < 200_000
