@@ -43,6 +43,8 @@ PYTEST_ARGS ?=
 # (load 4-10) against 435 s + 197 s before (load 2-5, the interface builds made): within the
 # noise. The first phase alone, alternated at load 2-9: 286 s and 305 s on 3 workers, 258 s on 2.
 # Then, as the other jobs ended (load 5.6 -> 1.5): 195 s + 173 s, 6.2 min (370 s), all passed.
+# With the tick as one compiled call, alone, four consecutive runs, all passed: 180 s + 167 s
+# (the first after a kernel recompile), 145 s + 167 s, 157 s + 165 s, 160 s + 168 s (5.2-5.5 min).
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
@@ -59,7 +61,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
-test: install  ## the whole test suite with coverage (~6-7 min on 2 quiet cores)
+test: install  ## the whole test suite with coverage (~5.5-6 min on 2 quiet cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	listed=$$shared/timing-files; rm -f $$listed; \
 	start=$$(date +%s); \
