@@ -60,7 +60,8 @@ class TickShapes(NamedTuple):
     points, spans : int
         Cable routing points and spans (0 without cables).
     values : int
-        Assembled tangent values (link and cable blocks).
+        Values of the exact evaluation's tangent blocks: 144 per link, then the cable blocks
+        (only these are scattered by the tick).
     jacobian_entries : int
         Nonzero entries of ``J_aᵀ``.
     effector_frames : tuple of int
@@ -151,7 +152,7 @@ def tick_flops(shapes):
     # 21 for the first link: the base frame's rows are left out), the cable blocks are scattered
     # with their weights; the band is zeroed first
     link_adds = 78 * (n - 1) + 21 if n else 0
-    cable_values = max(shapes.values - 144 * n, 0)
+    cable_values = shapes.values - 144 * n
     counts = {'links': links,
               'cables': _CABLE_PER_POINT * shapes.points + _CABLE_PER_SPAN * shapes.spans,
               'assembly': link_adds + 2 * cable_values + size, 'factor': factor, 'solve': solve,
