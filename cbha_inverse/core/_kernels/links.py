@@ -14,7 +14,8 @@ a test oracle (``test/oracles/chain_forces.py``).
 """
 
 from cbha_inverse.core._kernels.so3 import (_add_scaled_hat, jl_coefficient,
-                                            left_jacobian_inverse_into, rotation_log)
+                                            left_jacobian_inverse_into,
+                                            rotation_log_scalars)
 import numba
 import numpy as np
 
@@ -171,40 +172,45 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
     diff = work[111:114]
     local = work[114:114 + 6 * kc].reshape((6, kc))
     world = work[114 + 6 * kc:114 + 12 * kc].reshape((6, kc))
+    # every view taken once, here: a view taken per link costs atomic reference counts
+    phi = delta[3:]
+    s_r = stress[3:]
+    a_rr = a[3:, 3:]
+    out = blocks[0]
     for link in range(n):
-        ra = rotations[link]
-        rb = rotations[link + 1]
         for i in range(3):
             diff[i] = positions[link + 1, i] - positions[link, i]
         for i in range(3):
             for j in range(3):
-                rel[i, j] = ra[0, i] * rb[0, j] + ra[1, i] * rb[1, j] + ra[2, i] * rb[2, j]
+                rel[i, j] = (rotations[link, 0, i] * rotations[link + 1, 0, j]
+                             + rotations[link, 1, i] * rotations[link + 1, 1, j]
+                             + rotations[link, 2, i] * rotations[link + 1, 2, j])
         if rest_rotations_t.shape[0] > 0:
-            q0t = rest_rotations_t[link]
             tmp[:, :] = rel
             for i in range(3):
                 for j in range(3):
-                    rel[i, j] = (tmp[i, 0] * q0t[0, j] + tmp[i, 1] * q0t[1, j]
-                                 + tmp[i, 2] * q0t[2, j])
+                    rel[i, j] = (tmp[i, 0] * rest_rotations_t[link, 0, j]
+                                 + tmp[i, 1] * rest_rotations_t[link, 1, j]
+                                 + tmp[i, 2] * rest_rotations_t[link, 2, j])
         for i in range(3):
-            delta[i] = (ra[0, i] * diff[0] + ra[1, i] * diff[1] + ra[2, i] * diff[2]
-                        - rest_offsets[link, i])
-        theta = rotation_log(rel, delta[3:])
-        phi = delta[3:]
+            delta[i] = (rotations[link, 0, i] * diff[0] + rotations[link, 1, i] * diff[1]
+                        + rotations[link, 2, i] * diff[2] - rest_offsets[link, i])
+        theta, delta[3], delta[4], delta[5] = rotation_log_scalars(rel)
         t2 = theta * theta
         c, dc = jl_coefficient(theta)
-        k = stiffness[link]
         for i in range(6):
             acc = 0.0
             for j in range(6):
-                acc += k[i, j] * delta[j]
+                acc += stiffness[link, i, j] * delta[j]
             stress[i] = acc
         left_jacobian_inverse_into(phi, theta, c, jinv)
         # a = B^T K with B = diag(I, Jl^-1)
         for j in range(6):
             for i in range(3):
-                a[i, j] = k[i, j]
-                a[3 + i, j] = jinv[0, i] * k[3, j] + jinv[1, i] * k[4, j] + jinv[2, i] * k[5, j]
+                a[i, j] = stiffness[link, i, j]
+                a[3 + i, j] = (jinv[0, i] * stiffness[link, 3, j]
+                               + jinv[1, i] * stiffness[link, 4, j]
+                               + jinv[2, i] * stiffness[link, 5, j])
         # local b-side wrench: column 0 total (-B^T K delta + sum_c p_c (G0_c + H_c delta)),
         # columns 1.. per unit pressure
         for i in range(6):
@@ -219,27 +225,25 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
                 break
             used += 1
             p = actuation[cav]
-            g0 = cavity_wrench[link, cav]
-            h = cavity_stiffness[link, cav]
             for i in range(6):
-                acc = g0[i]
+                acc = cavity_wrench[link, cav, i]
                 for j in range(6):
-                    acc += h[i, j] * delta[j]
+                    acc += cavity_stiffness[link, cav, i, j] * delta[j]
                 local[i, 1 + cav] = acc
                 local[i, 0] += p * acc
             # the exact tangent's cavity load stiffness: a -= p_c H_c
             if p != 0.0 and not material:
                 for i in range(6):
                     for j in range(6):
-                        a[i, j] -= p * h[i, j]
+                        a[i, j] -= p * cavity_stiffness[link, cav, i, j]
         # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a)
         for slot in range(1 + used):
             col = 0 if slot == 0 else 1 + cavity_columns[link, slot - 1]
             for part in range(2):
                 for i in range(3):
-                    world[3 * part + i, col] = (ra[i, 0] * local[3 * part, col]
-                                                + ra[i, 1] * local[3 * part + 1, col]
-                                                + ra[i, 2] * local[3 * part + 2, col])
+                    world[3 * part + i, col] = (rotations[link, i, 0] * local[3 * part, col]
+                                                + rotations[link, i, 1] * local[3 * part + 1, col]
+                                                + rotations[link, i, 2] * local[3 * part + 2, col])
         row_b = 6 * link
         row_a = 6 * (link - 1)
         for slot in range(1 + used):
@@ -254,7 +258,6 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
                 rhs[row_a + 5, col] -= diff[0] * world[1, col] - diff[1] * world[0, col]
         if not material:
             # a[3:, 3:] += d(Jl^-T s_r)/dphi
-            s_r = stress[3:]
             ps = phi[0] * s_r[0] + phi[1] * s_r[1] + phi[2] * s_r[2]
             for i in range(3):
                 left0 = dc * (phi[i] * ps - t2 * s_r[i]) - 2.0 * c * s_r[i]
@@ -262,7 +265,7 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
                 for j in range(3):
                     a[3 + i, 3 + j] += left0 * phi[j] + left1 * s_r[j]
                 a[3 + i, 3 + i] += c * ps
-            _add_scaled_hat(a[3:, 3:], s_r, -0.5)
+            _add_scaled_hat(a_rr, s_r, -0.5)
         # mat = a B
         for i in range(6):
             for j in range(3):
@@ -280,10 +283,9 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
                     s = 0.5 * (mat[i, j] + mat[j, i])
                     mat[i, j] = s
                     mat[j, i] = s
-            out = blocks[0]
-            _rotate_block(mat, ra, out, 0, 0)
-            _rotate_block(mat, ra, out, 3, 0)
-            _rotate_block(mat, ra, out, 3, 3)
+            _rotate_block(mat, rotations[link], out, 0, 0)
+            _rotate_block(mat, rotations[link], out, 3, 0)
+            _rotate_block(mat, rotations[link], out, 3, 3)
             for i in range(3):
                 for j in range(3):
                     out[6 + i, 9 + j] = out[9 + j, 6 + i]
@@ -292,7 +294,7 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
             # M = R mat R^T straight into its block of out, read back there
             for p in range(2):
                 for q in range(2):
-                    _rotate_block(mat, ra, out, 3 * p, 3 * q)
+                    _rotate_block(mat, rotations[link], out, 3 * p, 3 * q)
         # the products with d^ written out term by term (the zero terms of the hat matrix
         # dropped: x + 0 y = x for finite y), no tuple indexed by a loop variable
         for i in range(6):

@@ -79,6 +79,18 @@ def rotation_log(rot, out):
         ``t = |φ|`` [rad], in [0, pi].
 
     """
+    theta, out[0], out[1], out[2] = rotation_log_scalars(rot)
+    return theta
+
+
+@numba.njit(cache=True, inline='always')
+def rotation_log_scalars(rot):
+    """
+    Return ``t`` and the three components of ``φ`` of :func:`rotation_log`.
+
+    Inlined where it is called (numba IR): no output view and no call per link in the link
+    passes.
+    """
     d0 = 0.5 * (rot[2, 1] - rot[1, 2])
     d1 = 0.5 * (rot[0, 2] - rot[2, 0])
     d2 = 0.5 * (rot[1, 0] - rot[0, 1])
@@ -89,16 +101,12 @@ def rotation_log(rot, out):
         theta = math.atan2(sin_t, cos_t)
         # sin_t = 0 only for d = 0, where any finite ratio gives the zero vector
         ratio = theta / max(sin_t, 1e-300)
-        out[0], out[1], out[2] = d0 * ratio, d1 * ratio, d2 * ratio
-        return theta
-    quaternion = np.empty(4)
-    quaternion_into(rot, quaternion)
-    x, y, z, w = quaternion[0], quaternion[1], quaternion[2], quaternion[3]
+        return theta, d0 * ratio, d1 * ratio, d2 * ratio
+    x, y, z, w = _quaternion(rot)
     v = math.sqrt(x * x + y * y + z * z)
     theta = 2.0 * math.atan2(v, w)
     ratio = theta / v
-    out[0], out[1], out[2] = x * ratio, y * ratio, z * ratio
-    return theta
+    return theta, x * ratio, y * ratio, z * ratio
 
 
 @numba.njit(cache=True)
@@ -146,7 +154,8 @@ def hat_into(v, out):
     out[2, 0], out[2, 1] = -v[1], v[0]
 
 
-@numba.njit(cache=True)
+# inlined (numba IR): called with views once per link, a call would count their references
+@numba.njit(cache=True, inline='always')
 def _add_scaled_hat(out, v, weight):
     """Add ``weight * hat(v)`` to a (3, 3) array (view)."""
     out[0, 1] -= weight * v[2]
@@ -173,6 +182,16 @@ def quaternion_into(rot, out):
         Receives ``(x, y, z, w)``.
 
     """
+    out[0], out[1], out[2], out[3] = _quaternion(rot)
+
+
+@numba.njit(cache=True, inline='always')
+def _quaternion(rot):
+    """
+    Return the quaternion of :func:`quaternion_into` as four floats.
+
+    Scalars, not an array: :func:`rotation_log` (inside every link pass) needs no workspace.
+    """
     trace = rot[0, 0] + rot[1, 1] + rot[2, 2]
     d21, d02, d10 = rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]
     s01, s02, s12 = rot[0, 1] + rot[1, 0], rot[0, 2] + rot[2, 0], rot[1, 2] + rot[2, 1]
@@ -190,10 +209,11 @@ def quaternion_into(rot, out):
     norm = math.sqrt(x * x + y * y + z * z + w * w)
     if w < 0.0:
         norm = -norm
-    out[0], out[1], out[2], out[3] = x / norm, y / norm, z / norm, w / norm
+    return x / norm, y / norm, z / norm, w / norm
 
 
-@numba.njit(cache=True)
+# inlined (numba IR): called with views once per link, a call would count their references
+@numba.njit(cache=True, inline='always')
 def left_jacobian_inverse_into(phi, theta, c, out):
     """
     Write ``Jl⁻¹(φ) = I - φ^/2 + c φ^² = (1 - c t²) I + c φ φᵀ - φ^/2`` into ``out``.
