@@ -225,17 +225,17 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
                 break
             used += 1
             p = actuation[cav]
+            # the exact tangent's cavity load stiffness, a -= p_c H_c, in the same pass over H_c
+            load = p != 0.0 and not material
             for i in range(6):
                 acc = cavity_wrench[link, cav, i]
                 for j in range(6):
-                    acc += cavity_stiffness[link, cav, i, j] * delta[j]
+                    h = cavity_stiffness[link, cav, i, j]
+                    acc += h * delta[j]
+                    if load:
+                        a[i, j] -= p * h
                 local[i, 1 + cav] = acc
                 local[i, 0] += p * acc
-            # the exact tangent's cavity load stiffness: a -= p_c H_c
-            if p != 0.0 and not material:
-                for i in range(6):
-                    for j in range(6):
-                        a[i, j] -= p * cavity_stiffness[link, cav, i, j]
         # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a)
         for slot in range(1 + used):
             col = 0 if slot == 0 else 1 + cavity_columns[link, slot - 1]
