@@ -236,26 +236,32 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
                         a[i, j] -= p * h
                 local[i, 1 + cav] = acc
                 local[i, 0] += p * acc
-        # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a)
-        for slot in range(1 + used):
-            col = 0 if slot == 0 else 1 + cavity_columns[link, slot - 1]
-            for part in range(2):
-                for i in range(3):
-                    world[3 * part + i, col] = (rotations[link, i, 0] * local[3 * part, col]
-                                                + rotations[link, i, 1] * local[3 * part + 1, col]
-                                                + rotations[link, i, 2] * local[3 * part + 2, col])
+        # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a),
+        # each column in scalar locals (LLVM keeps them in registers across the stores)
         row_b = 6 * link
         row_a = 6 * (link - 1)
         for slot in range(1 + used):
             col = 0 if slot == 0 else 1 + cavity_columns[link, slot - 1]
-            for i in range(6):
-                rhs[row_b + i, col] += world[i, col]
+            f0, f1, f2 = _rotate_vector(rotations, link, local, 0, col)
+            m0, m1, m2 = _rotate_vector(rotations, link, local, 3, col)
+            world[0, col], world[1, col], world[2, col] = f0, f1, f2
+            world[3, col], world[4, col], world[5, col] = m0, m1, m2
+            rhs[row_b, col] += f0
+            rhs[row_b + 1, col] += f1
+            rhs[row_b + 2, col] += f2
+            rhs[row_b + 3, col] += m0
+            rhs[row_b + 4, col] += m1
+            rhs[row_b + 5, col] += m2
             if link > 0:
-                for i in range(6):
-                    rhs[row_a + i, col] -= world[i, col]
-                rhs[row_a + 3, col] -= diff[1] * world[2, col] - diff[2] * world[1, col]
-                rhs[row_a + 4, col] -= diff[2] * world[0, col] - diff[0] * world[2, col]
-                rhs[row_a + 5, col] -= diff[0] * world[1, col] - diff[1] * world[0, col]
+                rhs[row_a, col] -= f0
+                rhs[row_a + 1, col] -= f1
+                rhs[row_a + 2, col] -= f2
+                rhs[row_a + 3, col] -= m0
+                rhs[row_a + 4, col] -= m1
+                rhs[row_a + 5, col] -= m2
+                rhs[row_a + 3, col] -= diff[1] * f2 - diff[2] * f1
+                rhs[row_a + 4, col] -= diff[2] * f0 - diff[0] * f2
+                rhs[row_a + 5, col] -= diff[0] * f1 - diff[1] * f0
         if not material:
             # a[3:, 3:] += d(Jl^-T s_r)/dphi
             ps = phi[0] * s_r[0] + phi[1] * s_r[1] + phi[2] * s_r[2]
@@ -398,6 +404,15 @@ def _add_hat(out, r0, c0, v0, v1, v2):
     out[r0 + 1, c0 + 2] -= v0
     out[r0 + 2, c0] -= v1
     out[r0 + 2, c0 + 1] += v0
+
+
+@numba.njit(cache=True, inline='always')
+def _rotate_vector(rotations, link, local, r0, col):
+    """Return ``Ra v``, ``v`` rows ``r0 .. r0 + 2`` of column ``col`` of ``local``, as floats."""
+    v0, v1, v2 = local[r0, col], local[r0 + 1, col], local[r0 + 2, col]
+    return (rotations[link, 0, 0] * v0 + rotations[link, 0, 1] * v1 + rotations[link, 0, 2] * v2,
+            rotations[link, 1, 0] * v0 + rotations[link, 1, 1] * v1 + rotations[link, 1, 2] * v2,
+            rotations[link, 2, 0] * v0 + rotations[link, 2, 1] * v1 + rotations[link, 2, 2] * v2)
 
 
 @numba.njit(cache=True, inline='always')
