@@ -354,41 +354,14 @@ def _backward_columns(factor, rhs, n_rhs, constant_width):
 
 @numba.njit(cache=True, inline='always')
 def _forward_row(factor, rhs, j, below, n_rhs):
-    """
-    Row ``j`` of the forward sweep (``below`` rows below the diagonal).
-
-    By groups of four columns (then two, then one) whose values of row ``j`` are held in
-    registers: to LLVM the rows of ``rhs`` may overlap, so a loop over the columns would load
-    row ``j`` again after every row it updates (the same operations in the same order).
-    """
+    """Row ``j`` of the forward sweep (``below`` rows below the diagonal)."""
     inverse = 1.0 / factor[j, 0]
-    col = 0
-    while col + 4 <= n_rhs:
-        y0, y1 = rhs[j, col] * inverse, rhs[j, col + 1] * inverse
-        y2, y3 = rhs[j, col + 2] * inverse, rhs[j, col + 3] * inverse
-        rhs[j, col], rhs[j, col + 1], rhs[j, col + 2], rhs[j, col + 3] = y0, y1, y2, y3
-        for a in range(1, below + 1):
-            weight = factor[j, a]
-            target = rhs[j + a]
-            target[col] -= weight * y0
-            target[col + 1] -= weight * y1
-            target[col + 2] -= weight * y2
-            target[col + 3] -= weight * y3
-        col += 4
-    if col + 2 <= n_rhs:
-        y0, y1 = rhs[j, col] * inverse, rhs[j, col + 1] * inverse
-        rhs[j, col], rhs[j, col + 1] = y0, y1
-        for a in range(1, below + 1):
-            weight = factor[j, a]
-            target = rhs[j + a]
-            target[col] -= weight * y0
-            target[col + 1] -= weight * y1
-        col += 2
-    if col < n_rhs:
-        y0 = rhs[j, col] * inverse
-        rhs[j, col] = y0
-        for a in range(1, below + 1):
-            rhs[j + a, col] -= factor[j, a] * y0
+    for col in range(n_rhs):
+        rhs[j, col] *= inverse
+    for a in range(1, below + 1):
+        weight = factor[j, a]
+        for col in range(n_rhs):
+            rhs[j + a, col] -= weight * rhs[j, col]
 
 
 @numba.njit(cache=True, inline='always')
