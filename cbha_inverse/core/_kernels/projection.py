@@ -288,11 +288,10 @@ def _gram_into(solved, w_aa):
     m = width - 1
     for i in range(0, m, 2):
         i1 = min(i + 1, m - 1)
-        start_i = min(_first_nonzero(solved, 1 + i), _first_nonzero(solved, 1 + i1))
+        start_i = _first_nonzero(solved, 1 + i, 1 + i1)
         for j in range(0, i + 1, 2):
             j1 = min(j + 1, m - 1)
-            start = max(start_i, min(_first_nonzero(solved, 1 + j),
-                                     _first_nonzero(solved, 1 + j1)))
+            start = max(start_i, _first_nonzero(solved, 1 + j, 1 + j1))
             a00 = a01 = a10 = a11 = 0.0
             b00 = b01 = b10 = b11 = 0.0
             q = start
@@ -327,10 +326,10 @@ def _gram_into(solved, w_aa):
 
 
 @numba.njit(cache=True, inline='always')
-def _first_nonzero(solved, col):
-    """Return the first row of ``solved[:, col]`` that is not zero (its length if none)."""
+def _first_nonzero(solved, col, col1):
+    """Return the first row of ``solved[:, [col, col1]]`` not zero (its length if none)."""
     for q in range(solved.shape[0]):
-        if solved[q, col] != 0.0:
+        if solved[q, col] != 0.0 or solved[q, col1] != 0.0:
             return q
     return solved.shape[0]
 
