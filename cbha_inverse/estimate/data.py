@@ -111,7 +111,7 @@ class EstimatorData:
                           self.base_external, self.mass_columns, self.mass_rhs,
                           self.mass_effectors, self.stuck, self.active, np.zeros(6 * n),
                           self.effector_w, self.effector_positions, self.tip_covariance,
-                          np.zeros(max(u + 2, 6 * n + 21)), self.sections)
+                          np.zeros(max(u + 2, 6 * n)), self.sections)
 
     @staticmethod
     def _section_arguments(system, sections):

@@ -215,10 +215,29 @@ def band_backward(factor, rhs):
         ``L⁻¹ b`` (C order), overwritten by ``X``.
 
     """
+    band_backward_profiled(factor, rhs,
+                           factor.shape[1] == FRAME_BAND_WIDTH and frame_profile(factor))
+
+
+@numba.njit(cache=True)
+def band_backward_profiled(factor, rhs, profiled):
+    """
+    Run :func:`band_backward` with the factor's profile check given.
+
+    Parameters
+    ----------
+    factor, rhs
+        As :func:`band_backward`.
+    profiled : bool
+        Whether ``factor`` has the 6 x 6 block profile (:func:`frame_profile`), as
+        :func:`band_cholesky_profiled` returned it for this factor; True for a factor without
+        it would skip entries.
+
+    """
     n_rhs = rhs.shape[1]
     counts = BACKWARD_COLUMN_COUNTS
     if factor.shape[1] == FRAME_BAND_WIDTH:
-        if frame_profile(factor):
+        if profiled:
             if n_rhs == counts[0]:
                 _backward_frames(factor, rhs, counts[0])
             elif n_rhs == counts[1]:

@@ -258,7 +258,7 @@ def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
         Receives the effector positions after the step.
     tip_covariance : (3, 3) ndarray  [m^2]
         Receives the last effector's covariance ``W P Wᵀ`` (``W = effector_w``, linear).
-    work : (max(u + 2, n * 6 + 21),) ndarray
+    work : (max(u + 2, n * 6),) ndarray
         Workspace.
     sections : tuple
         The sections' stiffness unknowns (:func:`section_loads`; none: ``section_stiffness``
@@ -375,9 +375,8 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
         free_step[row] = acc
     n = size // 6
     increments = work[:6 * n].reshape((n, 6))
-    rotation_work = work[6 * n:6 * n + 21].reshape((7, 3))
     apply_linear_step_into(positions, rotations, free_step, solved[:, 1:], change,
-                           scalars[MAX_ROTATION], increments, rotation_work, factor, False)
+                           scalars[MAX_ROTATION], increments, factor, False, False)
     for a in range(n_mass):
         masses[a] = z[2 * m + a] * scale[2 * m + a]
     effector_points_into(positions, rotations, effector_frames, effector_offsets,

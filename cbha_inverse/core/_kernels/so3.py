@@ -114,7 +114,8 @@ def rotation_exp(rotvec, out):
     """
     Write ``exp(hat(v))`` into ``out`` (Rodrigues: ``I + a v^ + b v^²``).
 
-    ``a = sin t / t`` and ``b = (1 - cos t) / t²``; below 1e-4 rad from their Taylor series.
+    ``a = sin t / t`` and ``b = (1 - cos t) / t²``; below 1e-4 rad from their Taylor series
+    (:func:`rotation_exp_entries`).
 
     Parameters
     ----------
@@ -124,7 +125,25 @@ def rotation_exp(rotvec, out):
         Receives the rotation.
 
     """
-    x, y, z = rotvec[0], rotvec[1], rotvec[2]
+    (out[0, 0], out[0, 1], out[0, 2], out[1, 0], out[1, 1], out[1, 2], out[2, 0], out[2, 1],
+     out[2, 2]) = rotation_exp_entries(rotvec[0], rotvec[1], rotvec[2])
+
+
+@numba.njit(cache=True)
+def rotation_exp_entries(x, y, z):
+    """
+    Return the entries of ``exp(hat(v))``, row by row, for ``v = (x, y, z)`` [rad].
+
+    The arithmetic of :func:`rotation_exp`, returned as scalars: a caller that multiplies by the
+    rotation at once keeps them in registers instead of a (3, 3) workspace
+    (:func:`cbha_inverse.core._kernels.retraction.retract_in_place`).
+
+    Returns
+    -------
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 : float
+        ``exp(hat(v))[i, j]`` in C order.
+
+    """
     t2 = x * x + y * y + z * z
     if t2 < 1e-8:
         a = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0)
@@ -134,15 +153,9 @@ def rotation_exp(rotvec, out):
         a = math.sin(t) / t
         b = (1.0 - math.cos(t)) / t2
     cos_t = 1.0 - b * t2
-    out[0, 0] = cos_t + b * x * x
-    out[1, 1] = cos_t + b * y * y
-    out[2, 2] = cos_t + b * z * z
-    out[0, 1] = b * x * y - a * z
-    out[1, 0] = b * x * y + a * z
-    out[0, 2] = b * x * z + a * y
-    out[2, 0] = b * x * z - a * y
-    out[1, 2] = b * y * z - a * x
-    out[2, 1] = b * y * z + a * x
+    return (cos_t + b * x * x, b * x * y - a * z, b * x * z + a * y,
+            b * x * y + a * z, cos_t + b * y * y, b * y * z - a * x,
+            b * x * z - a * y, b * y * z + a * x, cos_t + b * z * z)
 
 
 @numba.njit(cache=True)

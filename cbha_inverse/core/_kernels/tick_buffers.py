@@ -41,12 +41,14 @@ Fields (:data:`FIELDS`, in the order of :func:`make_tick_buffers`; stacked rows 
     effector_columns (6n, 3k)                              L⁻¹ J_eᵀ (half_solved) or J_eᵀ
     half_solved (1,) bool                                  whether solved and effector_columns
                                                              hold half-solves by the band factor
+    profiled (1,) bool                                     whether the band factor has the 6 x 6
+                                                             block profile (band.frame_profile)
     effector_frames (k,) int, effector_offsets (k, 3) [m]  the effector points
     weights (2,)                                           ε_E, ε_P
     flags (2, m) int8                                      active set (warm start), pivots
     free (m,) bool                                         QP workspace, then the binding bounds
     qp_index (m,) int                                      QP workspace
-    increments (n, 6), rotation_work (7, 3)                workspace of the Newton step
+    increments (n, 6)                                      workspace of the Newton step
     effector_positions (k, 3) [m]                          effector positions after the tick
     base (3,) [m], reach (k,) [m]                          the targets' check (base position,
                                                              largest reach of each effector)
@@ -68,9 +70,9 @@ FIELDS = ('positions', 'rotations', 'vectors', 'stiffness', 'rest_offsets', 'res
           'cable_gains', 'cable_offsets', 'cable_frames', 'cable_spans', 'cable_points',
           'cable_columns', 'cable_work', 'index', 'slot_weights', 'counts', 'values', 'band',
           'rhs', 'solved', 'matrices', 'effector_matrices', 'gaps', 'moved', 'effector_columns',
-          'half_solved', 'effector_frames', 'effector_offsets', 'levers', 'weights', 'flags',
-          'free', 'qp_index', 'increments', 'rotation_work', 'effector_positions', 'base',
-          'reach', 'max_iterations', 'tolerance', 'max_rotation')
+          'half_solved', 'profiled', 'effector_frames', 'effector_offsets', 'levers', 'weights',
+          'flags', 'free', 'qp_index', 'increments', 'effector_positions', 'base', 'reach',
+          'max_iterations', 'tolerance', 'max_rotation')
 """Field names, in the order of :func:`make_tick_buffers`."""
 
 EVALUATION_FIELDS = FIELDS[3:24]
@@ -179,8 +181,8 @@ def _new_tick_buffers(positions, rotations, vectors, stiffness, rest_offsets, re
                       cable_gains, cable_offsets, cable_frames, cable_spans, cable_points,
                       cable_columns, cable_work, index, slot_weights, counts, values, band, rhs,
                       solved, matrices, effector_matrices, gaps, moved, effector_columns,
-                      half_solved, effector_frames, effector_offsets, levers, weights, flags, free,
-                      qp_index, increments, rotation_work, effector_positions, base, reach,
+                      half_solved, profiled, effector_frames, effector_offsets, levers, weights,
+                      flags, free, qp_index, increments, effector_positions, base, reach,
                       max_iterations, tolerance, max_rotation):
     """Build the compiled object of :func:`make_tick_buffers`."""
     return TickBuffers(positions, rotations, vectors, stiffness, rest_offsets, rest_rotations_t,
@@ -188,9 +190,9 @@ def _new_tick_buffers(positions, rotations, vectors, stiffness, rest_offsets, re
                        cable_gains, cable_offsets, cable_frames, cable_spans, cable_points,
                        cable_columns, cable_work, index, slot_weights, counts, values, band, rhs,
                        solved, matrices, effector_matrices, gaps, moved, effector_columns,
-                       half_solved, effector_frames, effector_offsets, levers, weights, flags,
-                       free, qp_index, increments, rotation_work, effector_positions, base,
-                       reach, max_iterations, tolerance, max_rotation)
+                       half_solved, profiled, effector_frames, effector_offsets, levers, weights,
+                       flags, free, qp_index, increments, effector_positions, base, reach,
+                       max_iterations, tolerance, max_rotation)
 
 
 def placeholder_evaluation(rhs):

@@ -65,6 +65,9 @@ class TickData:
     half_solved : (1,) bool ndarray
         Whether :attr:`solved` holds the band factor's half-solves (the compiled entries read
         it; the fallback chain clears it before it writes ``K⁻¹ [r, J_aᵀ]``).
+    profiled : (1,) bool ndarray
+        Whether the band factor has the 6 x 6 block profile (written by the compiled
+        linearisation, read by the backward sweep of its step).
     offset : (3k,) ndarray  [m]
         ``p_e + J_e K⁻¹ r - W_ea λ_prev`` (so ``δ_free = offset - target``).
     w_ea : (3k, m) ndarray
@@ -93,7 +96,7 @@ class TickData:
     buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
         Every array above and the model's constant arrays, the one argument of the compiled
         entries (:mod:`cbha_inverse.core._kernels.tick`).
-    increments, rotation_work : ndarray
+    increments : (n, 6) ndarray
         Workspace of :func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`.
 
     """
@@ -115,6 +118,7 @@ class TickData:
         self.linearised = self.vectors[rows.LINEARISED]
         self.solved = np.zeros((6 * n, m + 1))
         self.half_solved = np.zeros(1, dtype=np.bool_)
+        self.profiled = np.zeros(1, dtype=np.bool_)
         self.rhs = system.rhs
         self.matrices_stack = np.zeros((rows.MATRIX_ROWS, m, m))
         self.effector_matrices = np.zeros((2, 3 * k, m))
@@ -141,13 +145,13 @@ class TickData:
             terms = placeholder_evaluation(self.rhs)
         self.external = terms[EVALUATION_FIELDS.index('external')]
         self.band = terms[EVALUATION_FIELDS.index('band')]
-        self.increments, self.rotation_work = np.zeros((n, 6)), np.zeros((7, 3))
+        self.increments = np.zeros((n, 6))
         self.buffers = make_tick_buffers(
             self.positions, self.rotations, self.vectors, *terms, self.solved,
             self.matrices_stack, self.effector_matrices, self.gaps, np.zeros((3 * k, m + 1)),
-            np.zeros((6 * n, 3 * k)), self.half_solved, frames, offsets, np.zeros((k, 3)),
-            weights, self.flags, self.mask, np.zeros(m, dtype=np.int64), self.increments,
-            self.rotation_work, self.effector_positions, base, reach, int(max_iterations), 1e-6,
+            np.zeros((6 * n, 3 * k)), self.half_solved, self.profiled, frames, offsets,
+            np.zeros((k, 3)), weights, self.flags, self.mask, np.zeros(m, dtype=np.int64),
+            self.increments, self.effector_positions, base, reach, int(max_iterations), 1e-6,
             max_rotation)
 
     @functools.cached_property
