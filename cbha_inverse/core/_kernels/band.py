@@ -69,11 +69,83 @@ def band_cholesky_profiled(band):
     """
     if band.shape[1] == FRAME_BAND_WIDTH:
         if frame_profile(band):
-            return _cholesky_frames(band), True
+            # no right-hand side: the sweep's loops vanish
+            return _cholesky_frames(band, band[:0], 0, 0, 0), True
         return _cholesky_width12(band), False
     if band.shape[1] == CABLE_BAND_WIDTH:
         return _cholesky_constant_width(band, CABLE_BAND_WIDTH), False
     return _cholesky_columns(band, 0), False
+
+
+@numba.njit(cache=True)
+def band_cholesky_forward(band, rhs):
+    """
+    Run :func:`band_cholesky_profiled` and the forward sweep ``rhs <- L⁻¹ rhs`` in one pass.
+
+    On the 6 x 6 block profile (:func:`frame_profile`) row ``j`` of the sweep runs right after
+    column ``j`` of the factor (:func:`_cholesky_frames`), while the column is in L1, and the
+    trailing columns that are zero down to some row (:func:`_zero_columns`: ``J_aᵀ`` of the
+    actuators of a later section; so is ``L⁻¹ J_aᵀ`` there) are swept from that row's block
+    on: ``x - w 0 = x`` for the finite factor. Each other entry of ``rhs`` takes the updates of
+    :func:`band_forward_profiled` in the same order: the same result. Other bands are factored,
+    then swept.
+
+    Parameters
+    ----------
+    band : (N, kd + 1) ndarray
+        As :func:`band_cholesky` (overwritten by ``L``).
+    rhs : (N, c) ndarray
+        Right-hand sides (C order), overwritten by ``L⁻¹ rhs`` when ``info`` is 0 (else partly).
+
+    Returns
+    -------
+    info : int
+        As :func:`band_cholesky`.
+    profiled : bool
+        As :func:`band_cholesky_profiled`.
+
+    """
+    counts = FORWARD_COLUMN_COUNTS
+    if band.shape[1] == FRAME_BAND_WIDTH and frame_profile(band):
+        n_rhs = rhs.shape[1]
+        # literal column counts: one compiled specialisation each (a count known at run time
+        # only makes the loops slower than the zeros they skip)
+        if n_rhs == counts[0]:
+            leading, zero_rows = _zero_columns(rhs)
+            if leading == counts[0] - counts[2]:
+                # the CBHA's: its second section's three actuators
+                return _cholesky_frames(band, rhs, counts[0], counts[0] - counts[2],
+                                        zero_rows), True
+            return _cholesky_frames(band, rhs, counts[0], counts[0], 0), True
+        if n_rhs == counts[1]:
+            return _cholesky_frames(band, rhs, counts[1], counts[1], 0), True
+        return _cholesky_frames(band, rhs, n_rhs, n_rhs, 0), True
+    info, profiled = band_cholesky_profiled(band)
+    if info == 0:
+        band_forward_profiled(band, rhs, 0, profiled)
+    return info, profiled
+
+
+@numba.njit(cache=True)
+def _zero_columns(rhs):
+    """
+    Return ``(p, s)``: columns ``p ... c - 1`` of ``rhs`` are zero in rows ``0 ... s - 1``.
+
+    The split that leaves the most entries, ``(c - p) s``, out of the sweep
+    (:func:`band_cholesky_forward`); ``(c, 0)`` when none is zero. The scan of a column stops at
+    the first nonzero row, or at the rows that the columns after it leave.
+    """
+    size, n_rhs = rhs.shape
+    leading, zero_rows, best = n_rhs, 0, 0
+    rows = size
+    for p in range(n_rhs - 1, -1, -1):
+        q = 0
+        while q < rows and rhs[q, p] == 0.0:
+            q += 1
+        rows = q
+        if (n_rhs - p) * rows > best:
+            leading, zero_rows, best = p, rows, (n_rhs - p) * rows
+    return leading, zero_rows
 
 
 @numba.njit(cache=True, inline='always')
@@ -416,43 +488,58 @@ FRAME_BLOCK = 6
 
 
 @numba.njit(cache=True, inline='always')
-def _factor_frame_block(band, j, last):
+def _factor_frame_block(band, j, last, rhs, n_rhs):
     """
     Factor the six columns ``j ... j + 5`` of a block of :func:`_cholesky_frames`.
 
     Column ``j + i`` reaches ``11 - i`` rows below the diagonal (``5 - i`` in the ``last``
-    block), a literal for each (constant trip counts). Returns 0, or the failing column + 1.
+    block), a literal for each (constant trip counts); row ``j + i`` of the forward sweep of
+    ``n_rhs`` columns of ``rhs`` follows it. Returns 0, or the failing column + 1.
     """
     extra = 0 if last else FRAME_BLOCK
     if not _factor_column(band, j, extra + 5):
         return j + 1
+    _forward_row(band, rhs, j, extra + 5, n_rhs)
     if not _factor_column(band, j + 1, extra + 4):
         return j + 2
+    _forward_row(band, rhs, j + 1, extra + 4, n_rhs)
     if not _factor_column(band, j + 2, extra + 3):
         return j + 3
+    _forward_row(band, rhs, j + 2, extra + 3, n_rhs)
     if not _factor_column(band, j + 3, extra + 2):
         return j + 4
+    _forward_row(band, rhs, j + 3, extra + 2, n_rhs)
     if not _factor_column(band, j + 4, extra + 1):
         return j + 5
+    _forward_row(band, rhs, j + 4, extra + 1, n_rhs)
     if not _factor_column(band, j + 5, extra):
         return j + 6
+    _forward_row(band, rhs, j + 5, extra, n_rhs)
     return 0
 
 
-@numba.njit(cache=True)
-def _cholesky_frames(band):
+@numba.njit(cache=True, inline='always')
+def _cholesky_frames(band, rhs, n_rhs, leading, zero_rows):
     """
     :func:`band_cholesky` of a band with the 6 x 6 block profile (:func:`frame_profile`).
 
     The arithmetic of :func:`_cholesky_width12` without the updates by the zeros outside the
-    profile (``x - 0 y = x`` for a finite ``y``: the same factor).
+    profile (``x - 0 y = x`` for a finite ``y``: the same factor); with the forward sweep of
+    ``n_rhs`` (a literal, or 0) columns of ``rhs`` (:func:`band_cholesky_forward`), of its
+    ``leading`` columns only in the blocks above row ``zero_rows`` (:func:`_zero_columns`).
+    Inlined, so literal counts give loops of constant trip count.
     """
     size = band.shape[0]
-    for j in range(0, size - FRAME_BLOCK, FRAME_BLOCK):
-        info = _factor_frame_block(band, j, False)
+    zero_end = min(zero_rows - zero_rows % FRAME_BLOCK, size - FRAME_BLOCK)
+    for j in range(0, zero_end, FRAME_BLOCK):
+        info = _factor_frame_block(band, j, False, rhs, leading)
         if info != 0:
             return info
-    return _factor_frame_block(band, size - FRAME_BLOCK, True)
+    for j in range(zero_end, size - FRAME_BLOCK, FRAME_BLOCK):
+        info = _factor_frame_block(band, j, False, rhs, n_rhs)
+        if info != 0:
+            return info
+    return _factor_frame_block(band, size - FRAME_BLOCK, True, rhs, n_rhs)
 
 
 @numba.njit(cache=True, inline='always')

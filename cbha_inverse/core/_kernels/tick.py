@@ -17,7 +17,7 @@ into a few stacked arrays, held by one
 (numba unboxes every argument at every call). The rows of the stacks are the constants below.
 """
 
-from cbha_inverse.core._kernels.band import (band_cholesky_profiled, band_forward_profiled,
+from cbha_inverse.core._kernels.band import (band_cholesky_forward, band_forward_profiled,
                                              band_rows, scatter_add, scatter_more)
 from cbha_inverse.core._kernels.cables import cable_pass_into
 from cbha_inverse.core._kernels.links import link_pass_band_into, link_pass_into
@@ -160,11 +160,12 @@ def linearise_tick(buffers, cholesky):
     tangent straight into the symmetric lower band),
     :func:`~cbha_inverse.core._kernels.cables.cable_pass_into` (one cable group, or none; its
     blocks scattered into the band, :func:`~cbha_inverse.core._kernels.band.scatter_more`),
-    :func:`~cbha_inverse.core._kernels.band.band_cholesky` (``K = L Lᵀ``) and, when it
-    succeeds, the forward sweeps (:func:`~cbha_inverse.core._kernels.band.band_forward`)
-    ``L⁻¹ [r, J_aᵀ]`` and ``L⁻¹ J_eᵀ`` (from the effector frame's rows on: ``J_eᵀ`` is zero
-    above them) and :func:`project_tick`. The backward sweep waits for the step
-    (:func:`apply_pending_step`): one column, ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``.
+    :func:`~cbha_inverse.core._kernels.band.band_cholesky_forward` (``K = L Lᵀ`` and, in the same
+    pass, the forward sweep ``L⁻¹ [r, J_aᵀ]``) and, when it succeeds, the forward sweep
+    (:func:`~cbha_inverse.core._kernels.band.band_forward`) ``L⁻¹ J_eᵀ`` (from the effector
+    frame's rows on: ``J_eᵀ`` is zero above them) and :func:`project_tick`. The backward
+    sweep waits for the step (:func:`apply_pending_step`): one column,
+    ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``.
 
     Parameters
     ----------
@@ -174,8 +175,8 @@ def linearise_tick(buffers, cholesky):
         ``band`` (the symmetric lower band, last row: the base frame's trash, then its factor),
         ``rhs`` (``[r, J_aᵀ]``), ``values`` (the cable blocks; the link blocks too when
         ``cholesky`` is False or the Cholesky fails: the exact evaluation, run again then),
-        ``vectors[LINEARISED]`` and, when the Cholesky
-        succeeds, ``solved`` (``L⁻¹ [r, J_aᵀ]``), ``effector_columns`` (``L⁻¹ J_eᵀ``),
+        ``vectors[LINEARISED]``, ``solved`` (``L⁻¹ [r, J_aᵀ]``; partly swept when the Cholesky
+        fails) and, when the Cholesky succeeds, ``effector_columns`` (``L⁻¹ J_eᵀ``),
         ``half_solved`` (True), ``profiled`` and the projection (:func:`project_tick`).
     cholesky : bool
         Factor the symmetric band (else the caller takes the fallback chain at once).
@@ -197,16 +198,16 @@ def linearise_tick(buffers, cholesky):
     buffers.half_solved[0] = False
     if not cholesky:
         return -1, float('nan')
-    # the block profile checked once, by the Cholesky on the band: its factor keeps it
-    info, profiled = band_cholesky_profiled(factor)
+    solved, columns, rotations = buffers.solved, buffers.effector_columns, buffers.rotations
+    solved[:, :] = rhs
+    # the block profile checked once, by the Cholesky on the band: its factor keeps it; the
+    # forward sweep of [r, J_aᵀ] in the same pass over the factor
+    info, profiled = band_cholesky_forward(factor, solved)
     if info != 0:
         # the symmetric pass left the link blocks of ``values`` unwritten: the exact evaluation
         # again, for the fallback chain (only when the Cholesky fails)
         _evaluate(buffers, False)
         return info, float('nan')
-    solved, columns, rotations = buffers.solved, buffers.effector_columns, buffers.rotations
-    solved[:, :] = rhs
-    band_forward_profiled(factor, solved, 0, profiled)
     first = effector_columns_into(rotations, buffers.effector_frames, buffers.effector_offsets,
                                   buffers.levers, columns)
     band_forward_profiled(factor, columns, first, profiled)
