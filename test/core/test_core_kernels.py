@@ -2,7 +2,8 @@
 
 from cbha_inverse.core._kernels.band import (_backward_columns, _cholesky_width12,
                                              _forward_columns, band_cholesky,
-                                             band_cholesky_profiled, band_forward,
+                                             band_cholesky_forward, band_cholesky_profiled,
+                                             band_forward,
                                              band_forward_profiled, band_solve, frame_profile)
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core._kernels.so3 import jl_coefficient, rotation_exp, rotation_log
@@ -159,6 +160,60 @@ def test_the_cholesky_hands_its_profile_check_to_the_sweeps(broken):
         band_forward(band, checked, 12)
         np.testing.assert_array_equal(solved, checked)
         np.testing.assert_allclose(solved, np.linalg.solve(lower, rhs), atol=1e-12)
+
+
+def _frame_band(rng, size, broken=False):
+    """A random SPD block-tridiagonal matrix of 6 x 6 blocks and its lower band (kd = 11)."""
+    r, c = np.indices((size, size))
+    a = rng.standard_normal((size, size))
+    a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)
+    if broken:
+        a[13, 2] = a[2, 13] = 0.5
+    band = np.zeros((size, 12))
+    for d in range(12):
+        band[:size - d, d] = np.diagonal(a, -d)
+    return a, band
+
+
+@pytest.mark.parametrize('broken', [False, True])
+@pytest.mark.parametrize('n_rhs, zero_from, zero_rows', [
+    (7, 4, 42), (7, 4, 40), (7, 5, 30), (7, 7, 0), (9, 6, 42), (3, 0, 0), (5, 2, 18)])
+def test_the_cholesky_with_its_sweep_equals_the_factor_then_the_sweep(broken, n_rhs, zero_from,
+                                                                      zero_rows):
+    """
+    band_cholesky_forward gives band_cholesky_profiled then band_forward_profiled, bit for bit.
+
+    Trailing columns zero down to some row (the J_aᵀ of a later section's actuators; a block
+    boundary or not) are swept from there on; the rows above stay zero. A band off the frame
+    profile is factored, then swept. Both give the dense half-solve.
+    """
+    rng = np.random.default_rng(n_rhs + zero_rows)
+    size = 96
+    a, band = _frame_band(rng, size, broken)
+    rhs = rng.standard_normal((size, n_rhs))
+    rhs[:zero_rows, zero_from:] = 0.0
+    fused, solved = band.copy(), rhs.copy()
+    info, profiled = band_cholesky_forward(fused, solved)
+    assert info == 0 and profiled is not broken
+    expected_band, expected = band.copy(), rhs.copy()
+    assert band_cholesky_profiled(expected_band) == (0, profiled)
+    band_forward_profiled(expected_band, expected, 0, profiled)
+    np.testing.assert_array_equal(fused, expected_band)
+    np.testing.assert_array_equal(solved, expected)
+    np.testing.assert_allclose(solved, np.linalg.solve(np.linalg.cholesky(a), rhs), atol=1e-12)
+    assert not solved[:zero_rows, zero_from:].any()
+
+
+@pytest.mark.parametrize('n_rhs', [7, 5])
+def test_the_cholesky_with_its_sweep_reports_the_failing_column(n_rhs):
+    rng = np.random.default_rng(5)
+    _, band = _frame_band(rng, 48)
+    band[20, 0] = -1.0
+    rhs = rng.standard_normal((48, n_rhs))
+    expected_band = band.copy()
+    info, profiled = band_cholesky_forward(band, rhs)
+    assert (info, profiled) == band_cholesky_profiled(expected_band)
+    assert info == 21 and profiled
 
 
 def test_band_cholesky_reports_the_first_bad_pivot():

@@ -283,9 +283,9 @@ class InverseSolver(TickPaths, ModelTerms):
                 targets = targets.reshape(1, 3)
             else:
                 raise ValueError(f'targets must have shape ({self._k}, 3), got {targets.shape}')
-        flags = targets.flags
-        if not (flags.c_contiguous and flags.writeable and flags.aligned):
-            # the compiled entries take exactly this type (they do not check it)
+        if not targets.flags.carray:
+            # C-contiguous, aligned and writeable: the compiled entries take exactly this type
+            # (they do not check it)
             targets = np.array(targets, order='C')
         tick = self._tick_entry
         if tick is None:
