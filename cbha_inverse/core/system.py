@@ -29,7 +29,8 @@ but slow cavity model) are evaluated through their own ``evaluate``; they couple
 the band is then the full matrix.
 """
 
-from cbha_inverse.core._kernels.band import band_cholesky, scatter_add
+from cbha_inverse.core._kernels.band import band_cholesky
+from cbha_inverse.core._kernels.band_assembly import scatter_add
 from cbha_inverse.core._kernels.cables import cable_work_size
 from cbha_inverse.core._kernels.links import link_pass, link_work_size, nonzero_cavity_columns
 from cbha_inverse.core.actuation.actuators import ActuatorSet

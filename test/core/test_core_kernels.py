@@ -163,7 +163,7 @@ def test_the_cholesky_hands_its_profile_check_to_the_sweeps(broken):
 
 
 def _frame_band(rng, size, broken=False):
-    """A random SPD block-tridiagonal matrix of 6 x 6 blocks and its lower band (kd = 11)."""
+    """Return a random SPD block-tridiagonal matrix of 6 x 6 blocks and its lower band."""
     r, c = np.indices((size, size))
     a = rng.standard_normal((size, size))
     a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)

@@ -26,7 +26,8 @@ positions, over the preallocated buffers of
 import math
 
 from cbha_inverse.core._kernels import tick
-from cbha_inverse.core._kernels.band import band_backward, band_rows, band_solve
+from cbha_inverse.core._kernels.band import band_backward, band_solve
+from cbha_inverse.core._kernels.band_assembly import band_rows
 from cbha_inverse.core._kernels.cables import routing_lengths_into
 from cbha_inverse.core._kernels.links import link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,

@@ -134,7 +134,7 @@ cavity_stiffness, cavity_columns, rhs
         As :func:`link_pass` (``rhs`` zeroed, then the wrenches and ``J_aᵀ``).
     band : ((N + 1) w,) ndarray
         Lower band storage in C order, row ``c`` at ``c w``, ``band[c w + r - c] += K[r, c]``
-        (``w = kd + 1``, :func:`cbha_inverse.core._kernels.band.band_rows`; ``kd >= 11``);
+        (``w = kd + 1``, :func:`cbha_inverse.core._kernels.band_assembly.band_rows`; ``kd >= 11``);
         added to, not zeroed.
     work : (link_work_size(c),) ndarray
         Workspace.

@@ -17,8 +17,8 @@ into a few stacked arrays, held by one
 (numba unboxes every argument at every call). The rows of the stacks are the constants below.
 """
 
-from cbha_inverse.core._kernels.band import (band_cholesky_forward, band_forward_profiled,
-                                             band_rows, scatter_add, scatter_more)
+from cbha_inverse.core._kernels.band import band_cholesky_forward, band_forward_profiled
+from cbha_inverse.core._kernels.band_assembly import band_rows, scatter_add, scatter_more
 from cbha_inverse.core._kernels.cables import cable_pass_into
 from cbha_inverse.core._kernels.links import link_pass_band_into, link_pass_into
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
@@ -159,7 +159,8 @@ def linearise_tick(buffers, cholesky):
     Runs :func:`~cbha_inverse.core._kernels.links.link_pass_band_into` (the links' symmetric
     tangent straight into the symmetric lower band),
     :func:`~cbha_inverse.core._kernels.cables.cable_pass_into` (one cable group, or none; its
-    blocks scattered into the band, :func:`~cbha_inverse.core._kernels.band.scatter_more`),
+    blocks scattered into the band,
+    :func:`~cbha_inverse.core._kernels.band_assembly.scatter_more`),
     :func:`~cbha_inverse.core._kernels.band.band_cholesky_forward` (``K = L Lᵀ`` and, in the same
     pass, the forward sweep ``L⁻¹ [r, J_aᵀ]``) and, when it succeeds, the forward sweep
     (:func:`~cbha_inverse.core._kernels.band.band_forward`) ``L⁻¹ J_eᵀ`` (from the effector
@@ -228,7 +229,7 @@ def _evaluate(buffers, symmetric):
     band (:func:`~cbha_inverse.core._kernels.links.link_pass_band_into`; their blocks in
     ``values`` are not written) and only the cable values are scattered; else ``values``
     receives every exact block and the band is their scatter
-    (:func:`~cbha_inverse.core._kernels.band.scatter_add`, what the fallback chain reads).
+    (:func:`~cbha_inverse.core._kernels.band_assembly.scatter_add`, what the fallback chain reads).
     """
     positions, rotations, actuation = buffers.positions, buffers.rotations, buffers.vectors[
         ACTUATION]

@@ -13,7 +13,8 @@ stiffness of the frame chain is block tridiagonal). Storage::
 Backends (all exact direct methods; ``method='auto'`` is ``'compiled'`` at every size, see
 :func:`choose_method` and the table below):
 
-- ``'compiled'``: numba kernels (:func:`~cbha_inverse.core._kernels.band.btd_band_cholesky`,
+- ``'compiled'``: numba kernels
+  (:func:`~cbha_inverse.core._kernels.band_assembly.btd_band_cholesky`,
   :func:`~cbha_inverse.core._kernels.band.band_solve`): one call writes the (bn, 2b) lower
   band (C order, ``band[c, r - c] = A[r, c]``) straight from the blocks and factors it, one call
   solves all right-hand sides. No LAPACK wrapper, so ~5 us less fixed cost per call at small n,
@@ -48,7 +49,8 @@ is the 1-norm condition number estimate (LAPACK ``dpocon`` for the dense backend
 Hager-Higham estimator with the factor's own solves otherwise).
 """
 
-from cbha_inverse.core._kernels.band import band_solve, btd_band_cholesky
+from cbha_inverse.core._kernels.band import band_solve
+from cbha_inverse.core._kernels.band_assembly import btd_band_cholesky
 import numpy as np
 from scipy.linalg import lapack
 
