@@ -126,6 +126,19 @@ def test_band_kernels_on_the_frame_profile_equal_the_full_band(n_rhs):
     assert not frame_profile(np.zeros((42, 11)))
 
 
+def _frame_band(rng, size, broken=False):
+    """Return a random SPD block-tridiagonal matrix of 6 x 6 blocks and its lower band."""
+    r, c = np.indices((size, size))
+    a = rng.standard_normal((size, size))
+    a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)
+    if broken:
+        a[13, 2] = a[2, 13] = 0.5
+    band = np.zeros((size, 12))
+    for d in range(12):
+        band[:size - d, d] = np.diagonal(a, -d)
+    return a, band
+
+
 @pytest.mark.parametrize('broken', [False, True])
 def test_the_cholesky_hands_its_profile_check_to_the_sweeps(broken):
     """
@@ -137,14 +150,7 @@ def test_the_cholesky_hands_its_profile_check_to_the_sweeps(broken):
     """
     rng = np.random.default_rng(3)
     size = 48
-    r, c = np.indices((size, size))
-    a = rng.standard_normal((size, size))
-    a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)
-    if broken:
-        a[13, 2] = a[2, 13] = 0.5
-    band = np.zeros((size, 12))
-    for d in range(12):
-        band[:size - d, d] = np.diagonal(a, -d)
+    _, band = _frame_band(rng, size, broken)
     assert frame_profile(band) is not broken
     info, profiled = band_cholesky_profiled(band)
     assert info == 0 and profiled is not broken
@@ -160,19 +166,6 @@ def test_the_cholesky_hands_its_profile_check_to_the_sweeps(broken):
         band_forward(band, checked, 12)
         np.testing.assert_array_equal(solved, checked)
         np.testing.assert_allclose(solved, np.linalg.solve(lower, rhs), atol=1e-12)
-
-
-def _frame_band(rng, size, broken=False):
-    """Return a random SPD block-tridiagonal matrix of 6 x 6 blocks and its lower band."""
-    r, c = np.indices((size, size))
-    a = rng.standard_normal((size, size))
-    a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)
-    if broken:
-        a[13, 2] = a[2, 13] = 0.5
-    band = np.zeros((size, 12))
-    for d in range(12):
-        band[:size - d, d] = np.diagonal(a, -d)
-    return a, band
 
 
 @pytest.mark.parametrize('broken', [False, True])
