@@ -141,7 +141,8 @@ cavity_stiffness, cavity_columns, rhs
 
     """
     width = band.size // (rhs.shape[0] + 1)
-    scratch = work[work.size - 144:].reshape((1, 12, 12))
+    scratch = np.lib.stride_tricks.as_strided(work[work.size - 144:], (1, 12, 12),
+                                              (1152, 96, 8))
     _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
                cavity_wrench, cavity_stiffness, cavity_columns, rhs, scratch, False, band, width,
                True, work)
@@ -162,16 +163,16 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
     n_cav = cavity_wrench.shape[1]
     kc = 1 + n_cav
     rhs[:, :] = 0.0
-    rel = work[0:9].reshape((3, 3))
-    tmp = work[9:18].reshape((3, 3))
+    rel = _matrix_view(work, 0, 3, 3)
+    tmp = _matrix_view(work, 9, 3, 3)
     delta = work[18:24]
     stress = work[24:30]
-    jinv = work[30:39].reshape((3, 3))
-    a = work[39:75].reshape((6, 6))
-    mat = work[75:111].reshape((6, 6))
+    jinv = _matrix_view(work, 30, 3, 3)
+    a = _matrix_view(work, 39, 6, 6)
+    mat = _matrix_view(work, 75, 6, 6)
     diff = work[111:114]
-    local = work[114:114 + 6 * kc].reshape((6, kc))
-    world = work[114 + 6 * kc:114 + 12 * kc].reshape((6, kc))
+    local = _matrix_view(work, 114, 6, kc)
+    world = _matrix_view(work, 114 + 6 * kc, 6, kc)
     # every view taken once, here: a view taken per link costs atomic reference counts
     phi = delta[3:]
     s_r = stress[3:]
@@ -289,9 +290,9 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
                     s = 0.5 * (mat[i, j] + mat[j, i])
                     mat[i, j] = s
                     mat[j, i] = s
-            _rotate_block(mat, rotations[link], out, 0, 0)
-            _rotate_block(mat, rotations[link], out, 3, 0)
-            _rotate_block(mat, rotations[link], out, 3, 3)
+            _rotate_block(mat, rotations, link, out, 0, 0)
+            _rotate_block(mat, rotations, link, out, 3, 0)
+            _rotate_block(mat, rotations, link, out, 3, 3)
             for i in range(3):
                 for j in range(3):
                     out[6 + i, 9 + j] = out[9 + j, 6 + i]
@@ -300,7 +301,7 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
             # M = R mat R^T straight into its block of out, read back there
             for p in range(2):
                 for q in range(2):
-                    _rotate_block(mat, rotations[link], out, 3 * p, 3 * q)
+                    _rotate_block(mat, rotations, link, out, 3 * p, 3 * q)
         # the products with d^ written out term by term (the zero terms of the hat matrix
         # dropped: x + 0 y = x for finite y), no tuple indexed by a loop variable
         for i in range(6):
@@ -349,6 +350,19 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
         out[5, 3] -= d0 * f2 - m1
         out[5, 4] -= m0 + d1 * f2
         out[5, 5] -= -(d1 * f1) - d0 * f0
+
+
+@numba.njit(cache=True, inline='always')
+def _matrix_view(work, start, rows, cols):
+    """
+    Return ``work[start:start + rows cols]`` as a (rows, cols) matrix in C order.
+
+    A view with its shape and strides given (``as_strided``), where ``reshape`` gets them from
+    a library call opaque to LLVM: with literal ``rows`` and ``cols`` the view's addresses are
+    constants and LLVM tells the workspace's matrices apart.
+    """
+    return np.lib.stride_tricks.as_strided(work[start:start + rows * cols], (rows, cols),
+                                           (8 * cols, 8))
 
 
 @numba.njit(cache=True, inline='always')
@@ -416,17 +430,18 @@ def _rotate_vector(rotations, link, local, r0, col):
 
 
 @numba.njit(cache=True, inline='always')
-def _rotate_block(mat, ra, out, r0, c0):
+def _rotate_block(mat, rotations, link, out, r0, c0):
     """
     Write ``Ra T Raᵀ``, ``T`` the 3 x 3 block of ``mat`` at ``(r0, c0)``, into ``out``.
 
     ``(T Raᵀ)`` first, then ``Ra (T Raᵀ)``, each sum left to right, in scalar locals (LLVM keeps
     them in registers, where a workspace array makes it store and reload them), written at
     ``(6 + r0, 6 + c0)`` of the link's 12 x 12 block (~0.5 µs of the CBHA's 16 links).
+    ``Ra = rotations[link]`` is read in place (a view of it would cost reference counts).
     """
-    r00, r01, r02 = ra[0, 0], ra[0, 1], ra[0, 2]
-    r10, r11, r12 = ra[1, 0], ra[1, 1], ra[1, 2]
-    r20, r21, r22 = ra[2, 0], ra[2, 1], ra[2, 2]
+    r00, r01, r02 = rotations[link, 0, 0], rotations[link, 0, 1], rotations[link, 0, 2]
+    r10, r11, r12 = rotations[link, 1, 0], rotations[link, 1, 1], rotations[link, 1, 2]
+    r20, r21, r22 = rotations[link, 2, 0], rotations[link, 2, 1], rotations[link, 2, 2]
     m00, m01, m02 = mat[r0, c0], mat[r0, c0 + 1], mat[r0, c0 + 2]
     m10, m11, m12 = mat[r0 + 1, c0], mat[r0 + 1, c0 + 1], mat[r0 + 1, c0 + 2]
     m20, m21, m22 = mat[r0 + 2, c0], mat[r0 + 2, c0 + 1], mat[r0 + 2, c0 + 2]
