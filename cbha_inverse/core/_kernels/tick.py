@@ -200,7 +200,11 @@ def linearise_tick(buffers, cholesky):
     if not cholesky:
         return -1, float('nan')
     solved, columns, rotations = buffers.solved, buffers.effector_columns, buffers.rotations
-    solved[:, :] = rhs
+    # over the flat storage (both C order, one shape): numba's 2-D slice assignment indexes and
+    # broadcasts element by element (~0.35 µs more on the CBHA's 96 x 7)
+    flat_solved, flat_rhs = solved.reshape(solved.size), rhs.reshape(rhs.size)
+    for i in range(flat_rhs.size):
+        flat_solved[i] = flat_rhs[i]
     # the block profile checked once, by the Cholesky on the band: its factor keeps it; the
     # forward sweep of [r, J_aᵀ] in the same pass over the factor
     info, profiled = band_cholesky_forward(factor, solved)
