@@ -141,8 +141,10 @@ cavity_stiffness, cavity_columns, rhs
 
     """
     width = band.size // (rhs.shape[0] + 1)
+    # (1, 12, 12) of literal shape and strides, as :func:`_matrix_view`
+    item = work.itemsize
     scratch = np.lib.stride_tricks.as_strided(work[work.size - 144:], (1, 12, 12),
-                                              (1152, 96, 8))
+                                              (144 * item, 12 * item, item))
     _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
                cavity_wrench, cavity_stiffness, cavity_columns, rhs, scratch, False, band, width,
                True, work)
@@ -362,7 +364,7 @@ def _matrix_view(work, start, rows, cols):
     constants and LLVM tells the workspace's matrices apart.
     """
     return np.lib.stride_tricks.as_strided(work[start:start + rows * cols], (rows, cols),
-                                           (8 * cols, 8))
+                                           (cols * work.itemsize, work.itemsize))
 
 
 @numba.njit(cache=True, inline='always')
