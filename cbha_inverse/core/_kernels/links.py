@@ -141,10 +141,9 @@ cavity_stiffness, cavity_columns, rhs
 
     """
     width = band.size // (rhs.shape[0] + 1)
-    # (1, 12, 12) of literal shape and strides, as :func:`_matrix_view`
-    item = work.itemsize
+    # (1, 12, 12) of literal shape and strides (float64), as :func:`_matrix_view`
     scratch = np.lib.stride_tricks.as_strided(work[work.size - 144:], (1, 12, 12),
-                                              (144 * item, 12 * item, item))
+                                              (1152, 96, 8))
     _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
                cavity_wrench, cavity_stiffness, cavity_columns, rhs, scratch, False, band, width,
                True, work)
@@ -357,14 +356,15 @@ def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, 
 @numba.njit(cache=True, inline='always')
 def _matrix_view(work, start, rows, cols):
     """
-    Return ``work[start:start + rows cols]`` as a (rows, cols) matrix in C order.
+    Return ``work[start:start + rows cols]`` (float64) as a (rows, cols) matrix in C order.
 
     A view with its shape and strides given (``as_strided``), where ``reshape`` gets them from
     a library call opaque to LLVM: with literal ``rows`` and ``cols`` the view's addresses are
-    constants and LLVM tells the workspace's matrices apart.
+    constants and LLVM tells the workspace's matrices apart. The strides are literal bytes:
+    ``work.itemsize`` is read at run time (the compiled CBHA tick 13.9 against 13.3 µs).
     """
     return np.lib.stride_tricks.as_strided(work[start:start + rows * cols], (rows, cols),
-                                           (cols * work.itemsize, work.itemsize))
+                                           (8 * cols, 8))
 
 
 @numba.njit(cache=True, inline='always')
