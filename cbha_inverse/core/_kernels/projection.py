@@ -79,7 +79,7 @@ def effector_points(positions, rotations, effector_frames, effector_offsets):
     return points
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def effector_points_into(positions, rotations, effector_frames, effector_offsets, points):
     """:func:`effector_points` into a preallocated ``points`` (k, 3)."""
     effector_levers_into(rotations, effector_frames, effector_offsets, points)
@@ -88,7 +88,7 @@ def effector_points_into(positions, rotations, effector_frames, effector_offsets
             points[e, i] += positions[effector_frames[e], i]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def effector_columns_into(rotations, effector_frames, effector_offsets, levers, columns):
     """
     Write ``J_eᵀ`` of effector points (paper Sec. IV) and return its first nonzero row.
@@ -187,7 +187,7 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
     return w_ea, w_aa, offset, residual_norm
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def project_effectors_into(solved, rhs, columns, half, positions, rotations, effector_frames,
                            effector_offsets, previous, w_ea, w_aa, offset, moved):
     """
@@ -372,7 +372,7 @@ def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bou
     return actuation, gap, largest_gap, largest_move, finite
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def tick_outcome_into(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bounds,
                       actuation, gap):
     """
@@ -399,7 +399,7 @@ def tick_outcome_into(w_ea, delta_free, scale, x, x_previous, lower_bounds, uppe
     return math.sqrt(largest), largest_move, finite
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def target_status(targets, base, reach):
     """
     Check the effector targets of a tick: finite, and within reach of the chain.

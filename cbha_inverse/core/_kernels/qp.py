@@ -64,7 +64,7 @@ def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
     return hessian, tracking, w
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, hessian, tracking, w):
     """
     :func:`qp_hessians` into preallocated ``hessian``, ``tracking`` (m, m) and ``w`` (3k, m).
@@ -149,7 +149,7 @@ def qp_vectors(weighted_w, proximal_weight, scale, delta_free, previous, lower_b
     return vectors
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def qp_vectors_into(weighted_w, proximal_weight, scale, delta_free, previous, lower_bounds,
                     upper_bounds, rate_limit, vectors):
     """:func:`qp_vectors` into a preallocated ``vectors`` (5, m)."""
@@ -453,7 +453,7 @@ def bounds_binding(tracking_hessian, tracking_gradient, lower, upper, x, toleran
     return binding
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def bounds_binding_into(tracking_hessian, tracking_gradient, lower, upper, x, tolerance,
                         binding):
     """:func:`bounds_binding` into a preallocated ``binding`` (m,) bool."""

@@ -72,7 +72,7 @@ def apply_linear_step(positions, rotations, free_step, solved_actuators, change,
                            False)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def apply_linear_step_into(positions, rotations, free_step, solved_actuators, change,
                            max_rotation, increments, factor, half, profiled):
     """
