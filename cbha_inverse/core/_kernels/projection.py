@@ -6,6 +6,8 @@ levers ``r = R_f o`` and points ``p = x_f + R_f o``, :func:`effector_columns_int
 :func:`project_effectors_into` forms ``W_ea``, ``W_aa`` and the free effector positions from
 the half-solves of the band factor or from ``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the
 actuation and remaining gap of a QP solution; :func:`target_status` checks the targets of a tick.
+The kernels that a control tick calls once are inlined into their callers (``inline='always'``,
+see :mod:`cbha_inverse.core._kernels.tick`).
 """
 
 import math

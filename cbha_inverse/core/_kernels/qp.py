@@ -8,7 +8,9 @@ These kernels hold the arithmetic of :mod:`cbha_inverse.core.inverse.qp` (``qp_m
 numba (``cache=True``: compiled once, later processes load the machine code
 from ``__pycache__``). The public functions there keep the documentation and the result types;
 the equations are cited in their docstrings. Small dense solves use the hand-written Cholesky
-factorisation of :func:`solve_free_block` (``m ≲ 30``: no LAPACK call overhead).
+factorisation of :func:`solve_free_block` (``m ≲ 30``: no LAPACK call overhead). The kernels
+that a control tick calls once are inlined into their callers (``inline='always'``, see
+:mod:`cbha_inverse.core._kernels.tick`).
 """
 
 import numba

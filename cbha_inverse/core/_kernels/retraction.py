@@ -5,6 +5,8 @@ Compiled updates of the frames: world-axis retraction and the chain's deformatio
 factored tick (:func:`apply_linear_step_into`, on full solves or on the band factor's
 half-solves); :func:`deformation_step` and :func:`deformed_poses`
 apply an increment in the links' deformation coordinates (the static solver's line search).
+:func:`apply_linear_step_into` is inlined into its callers (``inline='always'``, see
+:mod:`cbha_inverse.core._kernels.tick`).
 """
 
 import math

@@ -14,7 +14,12 @@ into compiled code once per step instead of once per kernel, and no array is all
 buffers are those of :class:`cbha_inverse.core.inverse.tick_data.TickData`, grouped by shape
 into a few stacked arrays, held by one
 :class:`~cbha_inverse.core._kernels.tick_buffers.TickBuffers`: an entry takes it as one argument
-(numba unboxes every argument at every call). The rows of the stacks are the constants below.
+(numba unboxes every argument at every call). The small kernels an entry calls once carry
+numba's ``inline='always'`` (the QP's vectors, Hessians and binding bounds, the outcome, the
+targets' check, the effector points and columns, the projection, the Newton step): a compiled
+callee that is not inlined costs its caller a pair of reference-count calls for every array
+view it is handed (352 such calls per CBHA tick remain, 430 before; `docs/design.md`). The
+rows of the stacks are the constants below.
 """
 
 from cbha_inverse.core._kernels.band import band_cholesky_forward, band_forward_profiled
