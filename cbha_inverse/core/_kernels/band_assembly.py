@@ -82,12 +82,10 @@ def scatter_add(index, values, weights, out):
 
     Parameters
     ----------
-    index : (V,) int ndarray
-        Slot of every value in ``out``.
-    values, weights : (V,) ndarray
-        Values and their weights.
+    index, values, weights
+        As :func:`scatter_more`.
     out : (S,) ndarray
-        Receives the sums.
+        Zeroed, then receives the sums.
 
     """
     out[:] = 0.0
