@@ -2,12 +2,13 @@
 
 import os
 import signal
+import sys
 import threading
 import time
 
 from cbha_inverse.ros.common.conversions import command_array, command_message
 from cbha_inverse.ros.common.qos import COMMAND_QOS
-from cbha_inverse.ros.common.runner import spin_until_stopped, StopRequest
+from cbha_inverse.ros.common.runner import SignalSafeEvent, spin_until_stopped, StopRequest
 import numpy as np
 from rclpy.node import Node
 from rclpy.task import Future
@@ -131,3 +132,93 @@ def test_a_stop_signal_ends_the_spin_of_a_node_whose_callbacks_cannot_keep_up(rc
     finally:
         guard.cancel()
         node.destroy_node()
+
+
+def _spin_with_a_signal_at_line(context, line_number, seconds=3.0):
+    """
+    Spin a node and send SIGINT when the main thread reaches a Python line of the loop.
+
+    Lines are counted in the spin loop's own module and in ``rclpy.task`` (the futures the
+    events executor calls at every slice); ``line_number`` 0 counts them without a signal until
+    a timer callback sends it. A spin the signal did not end gets a second SIGINT after
+    ``seconds`` (its ``KeyboardInterrupt`` ends the test's wait).
+
+    Returns
+    -------
+    tuple
+        (lines counted, ``(function, line)`` the signal was sent at or None, whether the spin
+        needed the second signal).
+
+    """
+    node = Node('signal_at_a_line', context=context)
+    counted, sent_at = [0], []
+
+    def send_stop():
+        os.kill(os.getpid(), signal.SIGINT)
+
+    def tracer(frame, event, arg):
+        if event == 'line' and not sent_at and frame.f_code.co_filename.endswith(
+                (os.path.join('common', 'runner.py'), os.path.join('rclpy', 'task.py'))):
+            counted[0] += 1
+            if counted[0] == line_number:
+                sent_at.append((frame.f_code.co_name, frame.f_lineno))
+                send_stop()
+        return tracer
+
+    def on_timer():
+        if line_number == 0 and not sent_at and time.monotonic() - start > 0.15:
+            sent_at.append(None)
+            send_stop()
+
+    node.create_timer(0.01, on_timer)
+    rescue = threading.Timer(seconds, send_stop)
+    hung = False
+    start = time.monotonic()
+    try:
+        with StopRequest() as stop:
+            rescue.start()
+            sys.settrace(tracer)
+            try:
+                spin_until_stopped(node, stop)
+            except KeyboardInterrupt:
+                hung = True
+            finally:
+                sys.settrace(None)
+    finally:
+        rescue.cancel()
+        node.destroy_node()
+    return counted[0], (sent_at or [None])[0], hung
+
+
+def test_a_stop_signal_at_any_line_of_the_spin_loop_ends_it(rclpy_context):
+    """
+    SIGINT at each Python line the loop runs: its setup and the first slices.
+
+    Python runs the handler between two bytecodes of the interrupted line. rclpy's ``Future``
+    takes a non-reentrant lock in ``add_done_callback`` and ``remove_done_callback``, which the
+    events executor calls at every slice: a handler that completed such a future there would
+    wait for that lock for ever (a node that ignores Ctrl-C and is killed).
+    """
+    lines, _, hung = _spin_with_a_signal_at_line(rclpy_context, 0)
+    assert not hung and lines >= 20, lines   # the setup and at least one whole slice
+    stuck = []
+    for line_number in range(1, lines + 1):
+        _, sent_at, hung = _spin_with_a_signal_at_line(rclpy_context, line_number)
+        assert sent_at is not None, f'line {line_number} of {lines} was never reached'
+        if hung:
+            stuck.append(sent_at)
+    assert not stuck, f'a stop signal at these lines did not end the spin: {stuck}'
+
+
+def test_signal_safe_event_runs_each_callback_once_as_a_future_does():
+    event, calls = SignalSafeEvent(), []
+    first, removed = (lambda e: calls.append(('first', e))), (lambda e: calls.append('removed'))
+    event.add_done_callback(first)
+    event.add_done_callback(removed)
+    assert event.remove_done_callback(removed) and not event.remove_done_callback(removed)
+    assert not event.done() and calls == []
+    event.trigger()
+    event.trigger()
+    assert event.done() and calls == [('first', event)]
+    event.add_done_callback(lambda e: calls.append('late'))   # runs at once, as a done Future's
+    assert calls == [('first', event), 'late']

@@ -22,6 +22,7 @@ import sys
 import time
 
 from cbha_inverse.ros.common.qos import MEASURED_QOS
+from cbha_inverse.ros.launch import launcher
 from cbha_inverse.ros.launch.compositions import (
     ArgumentError, COMPOSITIONS, node_module, resolve)
 import pytest
@@ -182,6 +183,43 @@ def test_cbha_launch_stops_every_node_when_one_fails(tmp_path):
     assert 'inverse_solver exited with status 2: stopping the others' in output
     assert re.search(r'exit statuses: trajectory 0, inverse_solver 2, cbha_sim 0', output), output
     assert time.monotonic() - start < 45.0
+
+
+_STOP_PROBE = """
+import signal, sys, time
+signal.signal(signal.SIGINT, {sigint})
+signal.signal(signal.SIGTERM, {sigterm})
+print('ready', flush=True)
+while True:
+    time.sleep(0.01)
+"""
+
+
+@pytest.mark.untimed
+def test_a_node_that_ignores_sigint_gets_sigterm_then_sigkill(monkeypatch):
+    monkeypatch.setattr(launcher, 'STOP_TIMEOUT', 0.5)
+    monkeypatch.setattr(launcher, 'TERM_TIMEOUT', 0.5)
+    behaviours = {'stops': ('lambda *_: sys.exit(0)', 'signal.SIG_DFL'),
+                  'needs_sigterm': ('signal.SIG_IGN', 'lambda *_: sys.exit(3)'),
+                  'hangs': ('signal.SIG_IGN', 'signal.SIG_IGN')}
+    children = []
+    try:
+        for name, (sigint, sigterm) in behaviours.items():
+            child = subprocess.Popen(
+                [sys.executable, '-c', _STOP_PROBE.format(sigint=sigint, sigterm=sigterm)],
+                stdout=subprocess.PIPE, text=True)
+            children.append((name, child))
+            assert child.stdout.readline() == 'ready\n', name
+        start = time.monotonic()
+        statuses = launcher._stop_all(children)
+        elapsed = time.monotonic() - start
+    finally:
+        for _, child in children:
+            child.kill()
+            child.wait()
+            child.stdout.close()
+    assert statuses == [('stops', 0), ('needs_sigterm', 3), ('hangs', -signal.SIGKILL)]
+    assert 1.0 <= elapsed < 5.0, elapsed
 
 
 @pytest.mark.untimed

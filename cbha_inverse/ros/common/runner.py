@@ -9,8 +9,11 @@ SIGINT and SIGTERM only set a flag (:class:`StopRequest`) that the spin loop pol
 :data:`SPIN_POLL_S`: rclpy's own handlers are not installed, because they raise
 ``KeyboardInterrupt`` at whatever Python line runs when the signal lands (inside rclpy's executor,
 a message conversion, a lock) and shut the context down from another thread: a stop could then
-fail with a ``RuntimeError`` from a half-taken message. The node is destroyed and the context
-shut down in order, on the main thread. A second signal stops at once (``KeyboardInterrupt``).
+fail with a ``RuntimeError`` from a half-taken message. The handler takes no lock
+(:class:`SignalSafeEvent`): Python runs it in the main thread between two bytecodes of whatever
+that thread runs, and a lock that line holds would never be released. The node is destroyed and
+the context shut down in order, on the main thread. A second signal stops at once
+(``KeyboardInterrupt``).
 Once the node is built its objects leave the garbage collector's generations (``gc.freeze``),
 so no collection walks them again; after the node's clean shutdown the process ends at once
 (:func:`end_process`: the ``atexit`` handlers, then ``os._exit``) instead of finalizing the
@@ -29,7 +32,6 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
-from rclpy.task import Future
 
 INTERRUPTED_EXIT = 1
 """Exit status of a node that ends by itself (``done``) when SIGINT/SIGTERM stopped it first."""
@@ -37,6 +39,56 @@ INTERRUPTED_EXIT = 1
 
 SPIN_POLL_S = 0.1
 """Longest time [s] between a stop signal and the spin loop noticing it."""
+
+
+class SignalSafeEvent:
+    """
+    A one-shot event that a signal handler may trigger: it takes no lock.
+
+    Python runs a signal handler in the main thread between two bytecodes of whatever that thread
+    runs. ``rclpy.task.Future`` takes its (non-reentrant) lock in ``add_done_callback`` and
+    ``remove_done_callback``, which the events executor calls at every spin slice: a handler
+    that completed such a future while the interrupted line held that lock would wait for it for
+    ever (a node that never stops). This event offers the same ``done``, ``add_done_callback``
+    and ``remove_done_callback``, so ``spin_until_future_complete`` can wait for it, and every
+    interleaving of :meth:`trigger` with them runs each callback exactly once: a callback is taken
+    off the list (``list.pop``, one bytecode) before it runs.
+    """
+
+    def __init__(self):
+        self._triggered = False
+        self._callbacks = []
+
+    def done(self):
+        """Whether :meth:`trigger` was called."""
+        return self._triggered
+
+    def trigger(self):
+        """Set the event and run its callbacks (each with the event as argument)."""
+        self._triggered = True
+        self._run_callbacks()
+
+    def add_done_callback(self, callback):
+        """Call ``callback(event)`` when the event is triggered (now, if it is)."""
+        self._callbacks.append(callback)
+        if self._triggered:
+            self._run_callbacks()
+
+    def remove_done_callback(self, callback):
+        """Remove a callback that has not run; return whether it was there."""
+        try:
+            self._callbacks.remove(callback)
+        except ValueError:
+            return False
+        return True
+
+    def _run_callbacks(self):
+        while True:
+            try:
+                callback = self._callbacks.pop()
+            except IndexError:
+                return
+            callback(self)
 
 
 class StopRequest:
@@ -49,8 +101,8 @@ class StopRequest:
 
     def __init__(self):
         self.signal_name = None
-        # completed (with the signal's name) by the first signal: it ends a spin at once
-        self.future = Future()
+        # set by the first signal: it ends a spin at once
+        self.event = SignalSafeEvent()
         self._previous = {}
 
     @property
@@ -62,7 +114,7 @@ class StopRequest:
         if self.requested:
             raise KeyboardInterrupt(signal.Signals(signum).name)
         self.signal_name = signal.Signals(signum).name
-        self.future.set_result(self.signal_name)
+        self.event.trigger()
 
     def __enter__(self):
         self._previous = {sig: signal.signal(sig, self._on_signal) for sig in STOP_SIGNALS}
@@ -86,8 +138,9 @@ def spin_until_stopped(node, stop, done=None):
     spins without a timeout), and ``stop`` is polled between them. A slice ends at its timeout
     only when no event is queued: a node whose callbacks cannot keep up (a timer callback longer
     than its period on a loaded machine) would spin one slice for ever. So the stop signal and
-    ``done`` also complete the future the slice waits for, which ends it after the callback that
-    runs (Python runs a signal handler in this thread, during that callback).
+    ``done`` also set the event the slice waits for (a :class:`SignalSafeEvent`), which ends it
+    after the callback that runs (Python runs a signal handler in this thread, during that
+    callback).
 
     Parameters
     ----------
@@ -101,13 +154,12 @@ def spin_until_stopped(node, stop, done=None):
     """
     executor = EventsExecutor(context=node.context)
     executor.add_node(node)
-    until = Future()
+    until = SignalSafeEvent()
 
     def end_the_slice(_):
-        if not until.done():
-            until.set_result(None)
+        until.trigger()
 
-    stop.future.add_done_callback(end_the_slice)
+    stop.event.add_done_callback(end_the_slice)
     if done is not None:
         done.add_done_callback(end_the_slice)
     try:

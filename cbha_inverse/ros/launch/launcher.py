@@ -4,7 +4,8 @@
 Starts every node of :data:`cbha_inverse.ros.launch.compositions.COMPOSITIONS` ``[name]`` as a
 process (``python -m cbha_inverse.ros.launch.node_process cbha_inverse.ros.nodes.<node> --ros-args
 -r __ns:=<namespace> --params-file <file> --params-file <overrides>``), prefixes each output line
-with ``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits for them. All
+with ``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits for them (SIGTERM
+after :data:`STOP_TIMEOUT`, SIGKILL after :data:`TERM_TIMEOUT` more, as ``ros2 launch``). All
 nodes are required: when one exits by itself, the others are stopped. Exit status: 0 when every
 node stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad
 argument, params file or conflict between them (one line on stderr). ``--dry-run`` prints the
@@ -41,6 +42,9 @@ restore_handlers(_LOADING)
 
 PROGRAM = 'cbha_launch'
 STOP_TIMEOUT = 15.0
+"""Seconds a node has to stop after SIGINT before it gets SIGTERM."""
+TERM_TIMEOUT = 5.0
+"""Seconds a node has to stop after SIGTERM before it is killed (SIGKILL)."""
 NODE_PROCESS = 'cbha_inverse.ros.launch.node_process'
 """Runs each node: a stop while it still loads is quiet (:mod:`.node_process`)."""
 
@@ -187,8 +191,10 @@ def supervise(lines, out=None):
 
     """
     out = sys.stdout if out is None else out
-    stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set())
+    # the handler only appends (no lock): Python runs it between two bytecodes of this thread,
+    # and a threading.Event's set() would wait for the lock its own wait() may hold there
+    stopping = []
+    previous = {sig: signal.signal(sig, lambda signum, _: stopping.append(signum))
                 for sig in (signal.SIGINT, signal.SIGTERM)}
     lock = threading.Lock()
     children, relays = [], []
@@ -210,10 +216,10 @@ def supervise(lines, out=None):
             relay.start()
             relays.append(relay)
         first_exit = None
-        while not stop.is_set() and first_exit is None:
+        while not stopping and first_exit is None:
             first_exit = next(((name, child.returncode) for name, child in children
                                if child.poll() is not None), None)
-            stop.wait(0.1)
+            time.sleep(0.1)
         if first_exit is not None:
             with lock:
                 out.write(f'[{PROGRAM}] {first_exit[0]} exited with status {first_exit[1]}: '
@@ -235,20 +241,27 @@ def supervise(lines, out=None):
 
 
 def _stop_all(children):
-    """SIGINT every running child, wait (SIGKILL after a timeout); return (name, status)."""
-    for _, child in children:
-        if child.poll() is None:
-            child.send_signal(signal.SIGINT)
-    deadline = time.monotonic() + STOP_TIMEOUT
-    statuses = []
-    for name, child in children:
-        try:
-            code = child.wait(timeout=max(0.1, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            child.kill()
-            code = child.wait()
-        statuses.append((name, code))
-    return statuses
+    """
+    Stop every running child as ``ros2 launch`` does; return ``[(name, exit status)]``.
+
+    SIGINT; a node still running after :data:`STOP_TIMEOUT` gets SIGTERM (a second stop signal:
+    a node of this package raises ``KeyboardInterrupt`` where it hangs, and its traceback shows
+    where), and SIGKILL after :data:`TERM_TIMEOUT` more.
+    """
+    running = [child for _, child in children if child.poll() is None]
+    for child in running:
+        child.send_signal(signal.SIGINT)
+    for escalation, timeout in ((signal.SIGTERM, STOP_TIMEOUT), (signal.SIGKILL, TERM_TIMEOUT)):
+        deadline = time.monotonic() + timeout
+        for child in running:
+            try:
+                child.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
+        running = [child for child in running if child.poll() is None]
+        for child in running:
+            child.send_signal(escalation)
+    return [(name, child.wait()) for name, child in children]
 
 
 def main(argv=None):
