@@ -174,6 +174,7 @@ def _spin_with_a_signal_at_line(context, line_number, seconds=3.0):
     rescue = threading.Timer(seconds, send_stop)
     hung = False
     start = time.monotonic()
+    measuring = sys.gettrace()   # coverage's tracer: given back after the spin
     try:
         with StopRequest() as stop:
             rescue.start()
@@ -183,7 +184,7 @@ def _spin_with_a_signal_at_line(context, line_number, seconds=3.0):
             except KeyboardInterrupt:
                 hung = True
             finally:
-                sys.settrace(None)
+                sys.settrace(measuring)
     finally:
         rescue.cancel()
         node.destroy_node()
