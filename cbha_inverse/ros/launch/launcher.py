@@ -244,9 +244,9 @@ def _stop_all(children):
     """
     Stop every running child as ``ros2 launch`` does; return ``[(name, exit status)]``.
 
-    SIGINT; a node still running after :data:`STOP_TIMEOUT` gets SIGTERM (a second stop signal:
-    a node of this package raises ``KeyboardInterrupt`` where it hangs, and its traceback shows
-    where), and SIGKILL after :data:`TERM_TIMEOUT` more.
+    SIGINT; a node still running after :data:`STOP_TIMEOUT` gets SIGTERM (for a node of this
+    package a second stop signal: a ``KeyboardInterrupt`` where its Python code waits), and
+    SIGKILL after :data:`TERM_TIMEOUT` more.
     """
     running = [child for _, child in children if child.poll() is None]
     for child in running:
