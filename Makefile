@@ -2,8 +2,8 @@
 #   make demo   venv from the pins, install, run the closed-loop CBHA scene in simulation
 #   make test   venv from the pins, install, run the whole test suite
 # The venv is rebuilt only when a pin file changes (stamp files), so warm runs start at once.
-# Installing also compiles the numba kernels into their on-disk cache (cbha_inverse.warmup,
-# ~20 s once, again whenever a kernel module changes), so nothing timed later pays for the compile.
+# Installing also compiles the numba kernels once into their on-disk cache (cbha_inverse.warmup;
+# again whenever a kernel module changes), so nothing timed later pays for the compile.
 
 # ROS 2 Jazzy wheels on PyPI are built for CPython 3.11.
 PYTHON ?= $(shell command -v python3.11 2>/dev/null)
@@ -28,23 +28,8 @@ PYTEST_ARGS ?=
 # on TEST_WORKERS pytest-xdist workers (each reserving its own ROS_DOMAIN_ID, test/conftest.py),
 # then the timing tests (`-m timing`: closed loops, lag, stop deadlines, replays, hosts) in one
 # process with the cores to themselves; coverage appends the second phase to the first (its node
-# processes untraced: test/coverage_timing.cfg). On 2 cores beside other jobs: 238-260 s and
-# 246-276 s from a warm venv at load 1-9 before that; after it 164 s + 183 s (5.8 min in all),
-# 193-194 s + 214-220 s and 197 s + 197 s at load 0.4-3,
-# 396 + 212 s and 734 + 273 s beside two other jobs (load 2-7, 5-17); 499-1016 s and 221-662 s
-# from a fresh clone (the interface builds) at load 2-11 (docs/design.md "Tests"). With 37 untimed
-# tests moved to the first phase, the replays batched and the children started once: beside two
-# other jobs compiling numba kernels, 310 s + 223 s (load 4-9) and 313 s + 195 s (load 3-6;
-# before: 528 s + 254 s at load 4-11); 3 workers once 447 s + 233 s (load 3-11): not kept.
-# Alone (load 1.8-2.7), three consecutive runs, all passed: 193 s + 194 s, 182 s + 189 s,
-# 201 s + 187 s (6.2-6.5 min from the command to its last line).
-# The timing phase then collected only the files the first phase listed (test/conftest.py):
-# 4.3-5.0 s of collection instead of 11.4-11.7 s (load ~4); beside two other jobs 427 s + 197 s
-# (load 4-10) against 435 s + 197 s before (load 2-5, the interface builds made): within the
-# noise. The first phase alone, alternated at load 2-9: 286 s and 305 s on 3 workers, 258 s on 2.
-# Then, as the other jobs ended (load 5.6 -> 1.5): 195 s + 173 s, 6.2 min (370 s), all passed.
-# With the tick as one compiled call, alone, four consecutive runs, all passed: 180 s + 167 s
-# (the first after a kernel recompile), 145 s + 167 s, 157 s + 165 s, 160 s + 168 s (5.2-5.5 min).
+# processes untraced: test/coverage_timing.cfg). Two workers: three were no faster on 2 cores
+# (docs/lab-notes.md).
 TEST_WORKERS ?= 2
 # small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
@@ -52,7 +37,7 @@ export OMP_NUM_THREADS ?= 1
 
 .PHONY: demo test help venv install lint bench report constraints clean cover-kernels mutate
 
-demo: install  ## the closed-loop CBHA scene in simulation: tracking error and timing (~2 min)
+demo: install  ## the closed-loop CBHA scene in simulation: tracking error and timing (~3 min)
 	$(VPY) -m cbha_inverse.experiments.demo --output $(DEMO_OUT)
 
 # Coverage over both phases (the first phase's child processes included: coverage's patch =
@@ -61,7 +46,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
-test: install  ## the whole test suite with coverage (~5.5-6 min on 2 quiet cores)
+test: install  ## the whole test suite with coverage (~5.5 min on 2 quiet cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	listed=$$shared/timing-files; rm -f $$listed; \
 	start=$$(date +%s); \
