@@ -1,45 +1,35 @@
 """
-The compiled evaluation of the chain's equilibrium: residual, actuator columns and tangents.
+The evaluator of the chain's equilibrium: residual, actuator columns and tangents (paper eq. 9).
 
-:class:`EquilibriumSystem` is the one evaluator of paper eq. 9,
-``r(q) = f(q) + f_ext + J_a(q)ᵀ λ``, behind the controller's tick
-(:class:`cbha_inverse.core.inverse.solver.InverseSolver`), the static solver
-(:func:`cbha_inverse.core.statics.solve_static`), the scenes' forward model and the simulated
-plant. With the compiled kernels of :mod:`cbha_inverse.core._kernels`:
+:class:`EquilibriumSystem` is the one evaluator of ``r(q) = f(q) + f_ext + J_a(q)ᵀ λ`` behind
+the controller's tick (:class:`cbha_inverse.core.inverse.solver.InverseSolver`), the static
+solver (:func:`cbha_inverse.core.statics.solve_static`), the scenes' forward model, the
+simulated plant and the shape estimator. It gathers the model's constant terms (the links'
+stiffness and rest shape, the condensed cavities, every cable, the skinned-mesh cavities, the
+external wrenches) and the buffers of an evaluation into one compiled record
+(:class:`cbha_inverse.core._kernels.evaluation.EquilibriumRecord`, :attr:`record`), which the
+compiled evaluation (:func:`cbha_inverse.core._kernels.evaluation.evaluate`) and the tick's
+entries read; every method here is a call of those kernels.
 
-- one pass over the links gives the residual, the condensed cavities' columns and every link's
-  exact 12 x 12 world tangent (paper eq. 8 with the geometric part and the exact cavity load
-  stiffness), or its material part alone (:meth:`EquilibriumSystem.material_system`);
-- one pass per cable group gives its columns, loads and span / point stiffness blocks;
-- every block is added by a constant index into one of two band storages: the lower band of the
-  symmetric part (weights ½ on the mirrored entries, the control tick's Cholesky,
-  :meth:`EquilibriumSystem.linearise`), or the general band of the exact, non-symmetric tangent
-  (Newton's LU, :meth:`EquilibriumSystem.exact_system`), with the half-bandwidth of the scene
-  (cables that skip frames widen it).
-
-Every factorisation returns a :class:`~cbha_inverse.core.linalg.factors.TangentFactor`, with
-``solve(rhs)`` (multi-RHS) and ``method``: a band Cholesky factor of the symmetric or material
-band (:meth:`EquilibriumSystem.factor`), a band LU factor of the exact band
-(:meth:`EquilibriumSystem.factor_exact`), a dense LU of an exact tangent with a user load
-stiffness. :meth:`EquilibriumSystem.fallback_factors` is the
-one fallback chain (exact LU, then material Cholesky) of the control tick and of Newton's method.
-
-Skinned-mesh cavities (:class:`~cbha_inverse.core.actuation.cavities.CavityGroup`, the exact
-but slow cavity model) are evaluated through their own ``evaluate``; they couple every frame, so
-the band is then the full matrix.
+Every block of the tangent is added by a constant index into one of two storages: the block
+band of the symmetric part (6 x 6 frame blocks, weights ½ on the mirrored entries, the control
+tick's block Cholesky, :meth:`EquilibriumSystem.linearise`), or the general band of the exact,
+non-symmetric tangent (Newton's LU, :meth:`EquilibriumSystem.exact_system`); cables that skip
+frames widen both. Every factorisation returns a
+:class:`~cbha_inverse.core.linalg.factors.TangentFactor` (``solve(rhs)``, ``method``);
+:meth:`EquilibriumSystem.fallback_factors` is the one fallback chain (exact LU, then material
+Cholesky) of the control tick and of Newton's method.
 """
 
-from cbha_inverse.core._kernels.band import band_cholesky
-from cbha_inverse.core._kernels.band_assembly import scatter_add
-from cbha_inverse.core._kernels.cables import cable_work_size
-from cbha_inverse.core._kernels.links import link_pass, link_work_size, nonzero_cavity_columns
+from cbha_inverse.core._kernels import evaluation
+from cbha_inverse.core._kernels.records import make_record
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import CableGroup, CableTerms
+from cbha_inverse.core.actuation.cavities import CavityGroup
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 from cbha_inverse.core.chain import rest_state
-from cbha_inverse.core.linalg.factors import BandCholesky, BandLU, DenseLU
+from cbha_inverse.core.linalg.factors import BandLU, BlockCholesky, DenseLU
 import numpy as np
-from scipy.linalg import lapack
 
 
 class EquilibriumSystem:
@@ -51,127 +41,182 @@ class EquilibriumSystem:
     model : cbha_inverse.core.chain.ChainModel
         The chain.
     actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
-        The actuators (``m``).
+        The actuators (``m``): cable groups, condensed cavities
+        (:class:`~cbha_inverse.core.actuation.condensed_cavities.LinearCavityGroup`) and
+        skinned-mesh cavities (:class:`~cbha_inverse.core.actuation.cavities.CavityGroup`).
     external : (6n,) ndarray  [N, N*m]
-        Constant external wrenches on frames 1..n (gravity).
+        Constant external wrenches on frames 1..n (gravity); the evaluations read this array
+        (not a copy when it is a C-ordered float array: a solver changes it in place for a
+        payload).
     stiffness : (n, 6, 6) ndarray, optional
-        The links' stiffness the evaluations read (default: the model's); the shape
-        estimator passes a read-only view of its own array, which it scales by its section
-        stiffness unknowns before each linearisation.
+        The links' stiffness the evaluations read (default: the model's); a solver or the shape
+        estimator passes a view of its own array, which it scales by its section factors.
 
     Attributes
     ----------
+    model : cbha_inverse.core.chain.ChainModel
+        The chain.
+    n, m, size : int
+        Links, actuators and unknowns ``6 n``.
     kd : int
         Half-bandwidth of the tangent (11 for a chain whose actuators act within a link).
-    tick_cholesky : bool
-        The control tick's first choice is the band Cholesky of the symmetric tangent (default);
-        False sends every tick to :meth:`fallback_factors` (the fallback chain's tests).
+    block_width : int
+        Blocks of the block band below its diagonal (``B``, 1 for such a chain).
+    record : cbha_inverse.core._kernels.evaluation.EquilibriumRecord
+        The compiled record of the terms and buffers.
+
+    Raises
+    ------
+    ValueError
+        If ``stiffness`` has the wrong shape, a condensed cavity part does not lie on one link
+        with its rest geometry, or an actuator group is of no known kind.
 
     """
 
-    tick_cholesky = True
-
     def __init__(self, model, actuators, external, stiffness=None):
-        """Precompute constants, buffers and the assembly index."""
-        n = model.n_links
-        m = actuators.n_actuators
+        """Gather the constant terms, build the assembly index and the buffers."""
+        n, m = model.n_links, actuators.n_actuators
+        self.model = model
         self.n, self.m, self.size = n, m, 6 * n
         self.stiffness = np.ascontiguousarray(model.stiffnesses if stiffness is None
                                               else stiffness, dtype=float)
         if self.stiffness.shape != (n, 6, 6):
             raise ValueError(f'stiffness must have shape ({n}, 6, 6), got '
                              f'{self.stiffness.shape}')
-        self.rest_offsets = np.ascontiguousarray(model.rest_offsets, dtype=float)
-        q0 = np.asarray(model.rest_rotations, dtype=float)
-        identity = np.array_equal(q0, np.broadcast_to(np.eye(3), q0.shape))
-        self._q0t = (np.zeros((0, 3, 3)) if identity
-                     else np.ascontiguousarray(np.swapaxes(q0, 1, 2)))
-        self.external = np.asarray(external, dtype=float).reshape(-1)
+        self.external = np.ascontiguousarray(external, dtype=float).reshape(-1)
         position = {name: k for k, name in enumerate(actuators.names)}
-        self._cables, self._generic = [], []
-        g0 = np.zeros((n, m, 6))
-        hess = np.zeros((n, m, 6, 6))
-        has_cavities = False
+        cables, meshes = [], []
+        self._cavity_wrench, self._cavity_stiffness = np.zeros((n, 0, 6)), np.zeros((n, 0, 6, 6))
         for group in actuators.groups:
-            cols = [position[name] for name in group.names]
+            columns = [position[name] for name in group.names]
             if isinstance(group, CableGroup):
-                self._cables.append(CableTerms(group, cols, model.n_frames))
+                cables.append((group, columns))
             elif isinstance(group, LinearCavityGroup):
-                if not _matches_links(group, model):
-                    raise ValueError(f'condensed cavities {group.names}: every part must lie on '
-                                     'one link and carry its rest offset and rotation')
-                for e in range(group.lower.size):
-                    col = cols[group.owner[e]]
-                    g0[group.lower[e], col] += group.g0[e]
-                    hess[group.lower[e], col] += group.hessian[e]
-                has_cavities = True
+                self._add_condensed_cavities(group, columns, model)
+            elif isinstance(group, CavityGroup):
+                meshes.append((group, columns))
             else:
-                self._generic.append((group, np.asarray(cols, dtype=int)))
-        self.has_cavities = has_cavities
-        # G0 and H of every actuator column per link (none without condensed cavities)
-        self._cavity_wrench = g0 if has_cavities else np.zeros((n, 0, 6))
-        self._cavity_stiffness = hess if has_cavities else np.zeros((n, 0, 6, 6))
-        self._cavity_columns = nonzero_cavity_columns(self._cavity_wrench, self._cavity_stiffness)
+                raise ValueError(f'actuators {group.names}: no evaluation of '
+                                 f'{type(group).__name__} groups')
+        self.has_cavities = self._cavity_wrench.shape[1] > 0
         # the cavities as built, kept by the first scale_cavities (which overwrites them)
         self._built_cavities = None
-        self._rhs = np.zeros((6 * n, m + 1))
-        # values of the assembly: link blocks, cable pair blocks, cable point moments
+        cable_terms = CableTerms(cables, model.n_frames)
+        index_fields = self._assembly(cable_terms)
+        self.record = make_record(
+            evaluation.EquilibriumRecord, evaluation.new_equilibrium_record,
+            **self._link_fields(model), **_cable_fields(cable_terms),
+            **_mesh_fields(meshes, model.n_frames), **index_fields,
+            **self._buffers(cable_terms, meshes, model.n_frames))
+
+    def _add_condensed_cavities(self, group, columns, model):
+        """Add a group of condensed cavities to the links' ``G0`` and ``H``."""
+        n = model.n_links
+        if not _matches_links(group, model):
+            raise ValueError(f'condensed cavities {group.names}: every part must lie on one link '
+                             'and carry its rest offset and rotation')
+        if self._cavity_wrench.shape[1] == 0:
+            self._cavity_wrench = np.zeros((n, self.m, 6))
+            self._cavity_stiffness = np.zeros((n, self.m, 6, 6))
+        for e in range(group.lower.size):
+            column = columns[group.owner[e]]
+            self._cavity_wrench[group.lower[e], column] += group.g0[e]
+            self._cavity_stiffness[group.lower[e], column] += group.hessian[e]
+
+    def _link_fields(self, model):
+        """Return the record's link and condensed-cavity fields."""
+        return {'stiffness': self.stiffness,
+                'rest_offsets': np.ascontiguousarray(model.rest_offsets, dtype=float),
+                'rest_rotations_t': np.ascontiguousarray(
+                    np.swapaxes(np.asarray(model.rest_rotations, dtype=float), 1, 2)),
+                'cavity_wrench': self._cavity_wrench,
+                'cavity_stiffness': self._cavity_stiffness,
+                'cavity_columns': nonzero_cavity_columns(self._cavity_wrench,
+                                                         self._cavity_stiffness),
+                'external': self.external}
+
+    def _assembly(self, cables):
+        """
+        Return the record's assembly fields: where every block value goes in either band.
+
+        The values are the links' 12 x 12 blocks (frames ``l``, ``l + 1``), the cables' span
+        blocks (one 12 x 12 per frame pair) and point moment blocks (3 x 3 per frame), in this
+        order. The block band stores entry ``(r, c)``, ``r >= c``, in block
+        ``[c // 6, r // 6 - c // 6]`` at ``[r % 6, c % 6]``
+        (:mod:`cbha_inverse.core._kernels.block_band`); the general band at
+        ``[c, 2 kd + r - c]`` of ``(N, 3 kd + 1)`` (the Fortran ``(3 kd + 1, N)`` layout of
+        LAPACK). Entries of the base frame go to a trash row at the end of either, value ``i``
+        to its slot ``i`` modulo the row's size (consecutive values add into different slots).
+        """
+        n, size = self.n, self.size
         rows, cols = [], []
-        f = np.arange(n)
-        i12 = np.arange(12)
-        link_dof = 6 * f[:, None] + i12[None, :] - 6          # frame a = l -> dof 6(l - 1)
+        link_dof = 6 * np.arange(n)[:, None] + np.arange(12)[None, :] - 6
         rows.append(np.broadcast_to(link_dof[:, :, None], (n, 12, 12)).reshape(-1))
         cols.append(np.broadcast_to(link_dof[:, None, :], (n, 12, 12)).reshape(-1))
-        slices = []
-        count = n * 144
-        for cab in self._cables:
-            i6 = np.arange(6)
-            for a, b in cab.pairs:
-                dof = np.concatenate([6 * (a - 1) + i6, 6 * (b - 1) + i6])
-                rows.append(np.repeat(dof, 12))
-                cols.append(np.tile(dof, 12))
-            i3 = np.arange(3)
-            for fr in cab.moment_frames:
-                dof = 6 * (fr - 1) + 3 + i3
-                rows.append(np.repeat(dof, 3))
-                cols.append(np.tile(dof, 3))
-            n_pair, n_mom = len(cab.pairs) * 144, len(cab.moment_frames) * 9
-            slices.append((slice(count, count + n_pair),
-                           slice(count + n_pair, count + n_pair + n_mom)))
-            count += n_pair + n_mom
+        for a, b in cables.pairs:
+            dof = np.concatenate([6 * (a - 1) + np.arange(6), 6 * (b - 1) + np.arange(6)])
+            rows.append(np.repeat(dof, 12))
+            cols.append(np.tile(dof, 12))
+        for frame in cables.moment_frames:
+            dof = 6 * (frame - 1) + 3 + np.arange(3)
+            rows.append(np.repeat(dof, 3))
+            cols.append(np.tile(dof, 3))
         rows, cols = np.concatenate(rows), np.concatenate(cols)
-        size = self.size
         valid = (rows >= 0) & (cols >= 0)
-        lo, hi = np.minimum(rows, cols), np.maximum(rows, cols)
-        self._weights = np.where(rows == cols, 1.0, 0.5)
-        # lower band storage (entry (r, c) at [c, r - c] of a C-order (N, kd + 1) array, the
-        # Fortran (kd + 1, N) layout of LAPACK); base-frame entries go to a trash row at the end,
-        # value i to its slot i mod (kd + 1): consecutive values add into different slots (one
-        # trash slot made the scatter wait on each add in turn, ~0.25 µs of the CBHA's 108)
-        kd = size - 1 if self._generic else int((hi - lo)[valid].max())
-        self.kd = kd
-        self._index = np.where(valid, lo * (kd + 1) + hi - lo,
-                               size * (kd + 1) + np.arange(rows.size) % (kd + 1))
-        self._band = np.zeros((size + 1) * (kd + 1))
-        # general band storage of the exact tangent for LAPACK's LU (dgbtrf, kl = ku = kd):
-        # entry (r, c) at [c, 2 kd + r - c] of a C-order (N, 3 kd + 1) array
-        width = 3 * kd + 1
-        self._exact_index = np.where(valid, cols * width + 2 * kd + rows - cols, size * width)
-        self._exact_band = np.zeros(size * width + 1)
-        self._ones = np.ones(rows.size)
-        self._exact_map = None            # dense <-> general band slots, on first use
-        c, d = np.meshgrid(np.arange(size), np.arange(kd + 1), indexing='ij')
-        inside = (c + d < size).reshape(-1)
-        self._band_slots = np.flatnonzero(inside)
-        self._dense_slots = ((c + d) * size + c).reshape(-1)[inside]
-        self._values = np.zeros(count)
-        self._link_values = self._values[:n * 144].reshape(n, 12, 12)
-        self._cable_values = [(cab, self._values[p], self._values[q])
-                              for cab, (p, q) in zip(self._cables, slices)]
+        low, high = np.minimum(rows, cols), np.maximum(rows, cols)
+        self.kd = max(int((high - low)[valid].max()) if valid.any() else 0, 11)
+        self.block_width = max(int((high // 6 - low // 6)[valid].max()) if valid.any() else 0, 1)
+        blocks = self.block_width + 1
+        block_slot = (((low // 6) * blocks + high // 6 - low // 6) * 6 + high % 6) * 6 + low % 6
+        exact_width = 3 * self.kd + 1
+        order = np.arange(rows.size)
+        self._pair_start = 144 * n
+        self._moment_start = self._pair_start + 144 * len(cables.pairs)
+        return {'index': np.where(valid, block_slot, n * blocks * 36 + order % 36),
+                'weights': np.where(rows == cols, 1.0, 0.5),
+                'exact_index': np.where(valid, cols * exact_width + 2 * self.kd + rows - cols,
+                                        size * exact_width + order % exact_width),
+                'pair_start': self._pair_start, 'moment_start': self._moment_start,
+                'moment_count': len(cables.moment_frames), 'half_bandwidth': self.kd}
+
+    def _buffers(self, cables, meshes, n_frames):
+        """Return the record's buffers and scratch arrays."""
+        n, m, size, kd = self.n, self.m, self.size, self.kd
+        points, spans = cables.frames.size, cables.start.size
+        vertices = sum(group.frame_a.size for group, _ in meshes)
+        n_mesh = sum(group.n_actuators for group, _ in meshes)
+        return {
+            'rhs': np.zeros((size, m + 1)),
+            'values': np.zeros(self._moment_start + 9 * len(cables.moment_frames)),
+            'blocks': np.zeros((n + 1, self.block_width + 1, 6, 6)),
+            'exact_band': np.zeros((size + 1, 3 * kd + 1)),
+            'lu_pivots': np.zeros(size, dtype=np.int64),
+            'lu_lower_reach': np.zeros(size, dtype=np.int64),
+            'lu_upper_reach': np.zeros(size, dtype=np.int64),
+            'link_difference': np.zeros(3), 'link_relative': np.zeros((3, 3)),
+            'link_delta': np.zeros(6), 'link_stress': np.zeros(6),
+            'link_jl_inverse': np.zeros((3, 3)), 'link_weighted': np.zeros((6, 6)),
+            'link_tangent': np.zeros((6, 6)), 'link_local': np.zeros((6, m + 1)),
+            'link_world': np.zeros((6, m + 1)), 'link_block': np.zeros((12, 12)),
+            'cable_levers': np.zeros((points, 3)), 'cable_points': np.zeros((points, 3)),
+            'cable_forces': np.zeros((points, 3)), 'span_units': np.zeros((spans, 3)),
+            'span_lengths': np.zeros(spans),
+            'pair_sums': np.zeros((len(cables.pairs), 6, 3, 3)),
+            'span_projection': np.zeros((3, 3)), 'start_hat': np.zeros((3, 3)),
+            'end_hat': np.zeros((3, 3)), 'start_product': np.zeros((3, 3)),
+            'end_product': np.zeros((3, 3)),
+            'mesh_points': np.zeros((vertices, 3)), 'mesh_levers_a': np.zeros((vertices, 3)),
+            'mesh_levers_b': np.zeros((vertices, 3)), 'mesh_forces': np.zeros((vertices, 3)),
+            'mesh_wrenches': np.zeros((n_mesh, n_frames, 6))}
+
+    @property
+    def rhs(self):
+        """Return the (6n, m + 1) buffer ``[r, J_aᵀ]`` that every evaluation writes."""
+        return self.record.rhs
 
     def evaluate(self, positions, rotations, actuation, material=False):
         """
-        Run the compiled passes: residual, actuator columns and every tangent block.
+        Evaluate the residual, ``J_aᵀ`` and every tangent block at a state.
 
         Parameters
         ----------
@@ -182,114 +227,24 @@ class EquilibriumSystem:
         actuation : (m,) ndarray  [N, Pa]
             ``λ`` (enters the residual and the load stiffness).
         material : bool
-            Keep only the material tangent of the links (:meth:`material_system`).
+            Keep only the material tangent (:meth:`material_system`).
 
         Returns
         -------
         rhs : (6n, m + 1) ndarray
-            Column 0: the residual ``f(q) + f_ext + J_aᵀ λ``; columns 1..m:
-            ``J_aᵀ``. A buffer of this object (overwritten by the next call).
+            Column 0: the residual ``f(q) + f_ext + J_aᵀ λ``; columns 1..m: ``J_aᵀ``. A buffer
+            of this object (overwritten by the next evaluation).
 
         """
-        positions = np.ascontiguousarray(positions, dtype=float)
-        rotations = np.ascontiguousarray(rotations, dtype=float)
-        actuation = np.ascontiguousarray(actuation, dtype=float)
-        rhs = self._rhs
-        link_pass(positions, rotations, self.stiffness, self.rest_offsets, self._q0t, actuation,
-                  self._cavity_wrench, self._cavity_stiffness, self._cavity_columns, rhs,
-                  self._link_values, material)
-        for cab, pair_values, moment_values in self._cable_values:
-            cab.evaluate(positions, rotations, actuation, rhs, pair_values, moment_values)
-            if material:
-                pair_values[:] = 0.0
-                moment_values[:] = 0.0
-        rhs[:, 0] += self.external
-        for group, cols in self._generic:
-            wrenches, _ = group.evaluate(positions, rotations, False)
-            jat = wrenches[:, 1:, :].reshape(wrenches.shape[0], -1)
-            rhs[:, 1 + cols] = jat.T
-            rhs[:, 0] += actuation[cols] @ jat
-        return rhs
-
-    @property
-    def rhs(self):
-        """Return the (6n, m + 1) buffer that :meth:`evaluate` writes and returns."""
-        return self._rhs
-
-    def fused_terms(self):
-        """
-        Return the model arrays and buffers of the fused linearisation, or None.
-
-        The fields ``stiffness`` ... ``rhs`` of the tick's buffers
-        (:data:`cbha_inverse.core._kernels.tick_buffers.EVALUATION_FIELDS`), in their order
-        (:func:`cbha_inverse.core._kernels.tick.linearise_tick` reads them): the constant
-        terms of the links and of the cable group, the assembly index of the symmetric band and
-        this object's buffers (so :meth:`fallback_factors` with ``evaluated=True`` reuses the
-        blocks it leaves). ``None`` when the fused entry cannot evaluate the actuators (more
-        than one cable group, or skinned-mesh cavities): the tick then runs :meth:`linearise`.
-
-        Returns
-        -------
-        tuple of ndarray or None
-
-        """
-        if self._generic or len(self._cables) > 1:
-            return None
-        n_link = self.n * 144
-        if self._cables:
-            cab, pair_values, moment_values = self._cable_values[0]
-            cable = (cab.gains, cab.offsets, cab.frames,
-                     np.stack([cab.start, cab.end, cab.span_owner, cab.span_pair]),
-                     np.stack([cab.point_owner, cab.point_slot]), cab.columns,
-                     np.zeros(cable_work_size(cab.frames.size, cab.start.size,
-                                              pair_values.size // 144)))
-            counts = (n_link, pair_values.size, moment_values.size)
-        else:
-            empty = np.zeros(0, dtype=np.int64)
-            cable = (np.zeros(0), np.zeros((0, 3)), empty, np.zeros((4, 0), dtype=np.int64),
-                     np.zeros((2, 0), dtype=np.int64), empty, np.zeros(0))
-            counts = (n_link, 0, 0)
-        link_work = np.zeros(link_work_size(self._cavity_wrench.shape[1]))
-        return ((self.stiffness, self.rest_offsets, self._q0t, self._cavity_wrench,
-                 self._cavity_stiffness, self._cavity_columns, link_work,
-                 np.ascontiguousarray(self.external))
-                + cable
-                + (self._index, self._weights, np.array(counts, dtype=np.int64), self._values,
-                   self._band, self._rhs))
-
-    def scale_cavities(self, gains):
-        """
-        Scale each condensed cavity's wrench and load stiffness by a gain, in place.
-
-        The evaluations (and the fused tick, which holds the same arrays) then see cavity ``j``
-        with ``gains[j]`` times the effective area it was built with, as a scene's
-        ``calibration.actuator_gain`` builds it.
-
-        Parameters
-        ----------
-        gains : (m,) ndarray  [-]
-            Gain of each actuator relative to the built one (1: unchanged).
-
-        Raises
-        ------
-        ValueError
-            If the actuators are not condensed cavities, or ``gains`` does not have shape (m,).
-
-        """
-        if not self.has_cavities or self._generic or self._cables:
-            raise ValueError('actuator gains need condensed cavities alone')
-        gains = np.asarray(gains, dtype=float)
-        if gains.shape != (self.m,):
-            raise ValueError(f'gains must have shape ({self.m},), got {gains.shape}')
-        if self._built_cavities is None:
-            self._built_cavities = (self._cavity_wrench.copy(), self._cavity_stiffness.copy())
-        wrench, stiffness = self._built_cavities
-        np.multiply(wrench, gains[None, :, None], out=self._cavity_wrench)
-        np.multiply(stiffness, gains[None, :, None, None], out=self._cavity_stiffness)
+        evaluation.evaluate(self.record, _floats(positions), _floats(rotations),
+                            _floats(actuation), not material, False)
+        return self.record.rhs
 
     def linearise(self, positions, rotations, actuation):
         """
-        Return the symmetric tangent (lower band) and the right-hand sides of a tick.
+        Return the symmetric tangent (block band) and the right-hand sides of a tick.
+
+        The control tick's evaluation: the exact tangent's symmetric part added into the band.
 
         Parameters
         ----------
@@ -302,20 +257,21 @@ class EquilibriumSystem:
 
         Returns
         -------
-        tangent : (6n, kd + 1) ndarray
-            ``K`` (symmetric part of structure + load stiffness) in lower band storage,
-            ``tangent[c, r - c] = K[r, c]`` (``c <= r``), for :meth:`factor`;
-            :meth:`dense` converts it. A buffer of this object (overwritten by the next call).
+        tangent : (n, B + 1, 6, 6) ndarray
+            ``K`` (symmetric part of structure + load stiffness) in block band storage,
+            ``tangent[c, d] = K_(c + d, c)`` (:mod:`cbha_inverse.core._kernels.block_band`), for
+            :meth:`factor`; :meth:`dense` converts it. A buffer of this object.
         rhs : (6n, m + 1) ndarray
             As :meth:`evaluate`.
 
         """
-        rhs = self.evaluate(positions, rotations, actuation)
-        return self._symmetric_band(), rhs
+        evaluation.evaluate(self.record, _floats(positions), _floats(rotations),
+                            _floats(actuation), True, True)
+        return self.record.blocks[:self.n], self.record.rhs
 
     def material_system(self, positions, rotations, actuation):
         """
-        Return the material tangent (lower band, SPD) and the right-hand sides.
+        Return the material tangent (block band, SPD) and the right-hand sides.
 
         The links' ``Dᵀ Bᵀ K B D`` alone (paper eq. 8): no geometric part, no load stiffness,
         so it stays positive definite far from equilibrium (the fallback of a step whose
@@ -323,7 +279,8 @@ class EquilibriumSystem:
 
         """
         rhs = self.evaluate(positions, rotations, actuation, material=True)
-        return self._symmetric_band(), rhs
+        evaluation.assemble_symmetric(self.record)
+        return self.record.blocks[:self.n], rhs
 
     def exact_system(self, positions, rotations, actuation):
         """
@@ -337,9 +294,9 @@ class EquilibriumSystem:
         -------
         tangent : (6n, 3 kd + 1) ndarray
             ``tangent[c, 2 kd + r - c] = K[r, c]`` for ``|r - c| <= kd``: the Fortran
-            ``(3 kd + 1, N)`` layout of LAPACK's ``dgbtrf`` (rows ``0 .. kd - 1`` of that layout
-            are its workspace), for :func:`factor_exact`; :meth:`dense_exact` converts it.
-            A buffer of this object.
+            ``(3 kd + 1, N)`` layout of LAPACK's ``dgbtrf`` (slots ``0 .. kd - 1`` of a row are
+            its workspace), for :meth:`factor_exact`; :meth:`dense_exact` converts it. A buffer
+            of this object.
         rhs : (6n, m + 1) ndarray
             As :meth:`evaluate`.
 
@@ -349,39 +306,64 @@ class EquilibriumSystem:
 
     def exact_tangent(self):
         """
-        Return the exact tangent of the last :meth:`evaluate` (see :meth:`exact_system`).
+        Return the exact tangent of the last (exact) :meth:`evaluate`.
 
         Returns
         -------
         (6n, 3 kd + 1) ndarray
-            General band storage, a buffer of this object.
+            General band storage (:meth:`exact_system`), a buffer of this object.
 
         """
-        scatter_add(self._exact_index, self._values, self._ones, self._exact_band)
-        return self._exact_band[:-1].reshape(self.size, 3 * self.kd + 1)
+        evaluation.assemble_exact(self.record)
+        return self.record.exact_band[:self.size]
 
-    def _symmetric_band(self):
-        """Scatter the blocks of the last :meth:`evaluate` into the symmetric lower band."""
-        scatter_add(self._index, self._values, self._weights, self._band)
-        return self._band[:self.size * (self.kd + 1)].reshape(self.size, self.kd + 1)
-
-    @staticmethod
-    def factor(tangent):
+    def factor(self, tangent=None):
         """
-        Factor the tangent of :meth:`linearise` or :meth:`material_system` in place.
+        Factor the symmetric block band (of :meth:`linearise` or :meth:`material_system`).
 
         Parameters
         ----------
-        tangent : (6n, kd + 1) ndarray
-            From :meth:`linearise` (overwritten by the factor).
+        tangent : (n, B + 1, 6, 6) ndarray, optional
+            The block band those methods returned (this object's buffer, the default; it is
+            factored in place).
 
         Returns
         -------
-        BandCholesky or None
-            The compiled band Cholesky factor; ``None`` if the tangent is not positive definite.
+        BlockCholesky or None
+            The compiled block Cholesky factor; ``None`` if the tangent is not positive
+            definite.
 
         """
-        return BandCholesky(tangent) if band_cholesky(tangent) == 0 else None
+        self._check_buffer(tangent, self.record.blocks)
+        if evaluation.factor_symmetric(self.record) != 0:
+            return None
+        return BlockCholesky(self.record.blocks[:self.n])
+
+    def factor_exact(self, tangent=None):
+        """
+        Factor the exact band (of :meth:`exact_system`) in place, by band LU.
+
+        Parameters
+        ----------
+        tangent : (6n, 3 kd + 1) ndarray, optional
+            The band :meth:`exact_system` returned (this object's buffer, the default).
+
+        Returns
+        -------
+        BandLU or None
+            ``None`` if the tangent is singular or not finite.
+
+        """
+        self._check_buffer(tangent, self.record.exact_band)
+        if evaluation.factor_exact(self.record) != 0:
+            return None
+        return BandLU(self.record.exact_band[:self.size], self.kd, self.record.lu_pivots,
+                      self.record.lu_lower_reach)
+
+    def _check_buffer(self, tangent, buffer):
+        """Refuse a band that is not this object's buffer (the factors work in place on it)."""
+        if tangent is not None and not np.shares_memory(tangent, buffer):
+            raise ValueError('factor the band this system returned (its own buffer)')
 
     def dense_exact(self, tangent):
         """
@@ -397,39 +379,13 @@ class EquilibriumSystem:
         (6n, 6n) ndarray
 
         """
-        if self._exact_map is None:
-            # entries (r, c), |r - c| <= kd: dense slot r N + c, band slot c (3 kd + 1) + 2 kd
-            # + r - c; O(N kd) index arrays (a dense grid would be O(N^2) at every build)
-            kd, size = self.kd, self.size
-            c, offset = np.meshgrid(np.arange(size), np.arange(-kd, kd + 1), indexing='ij')
-            r = c + offset
-            inside = (r >= 0) & (r < size)
-            self._exact_map = ((r * size + c)[inside],
-                               (c * (3 * kd + 1) + 2 * kd + offset)[inside])
-        dense_slots, band_slots = self._exact_map
-        out = np.zeros((self.size, self.size))
-        out.reshape(-1)[dense_slots] = np.asarray(tangent).reshape(-1)[band_slots]
+        kd, size = self.kd, self.size
+        c, offset = np.meshgrid(np.arange(size), np.arange(-kd, kd + 1), indexing='ij')
+        r = c + offset
+        inside = (r >= 0) & (r < size)
+        out = np.zeros((size, size))
+        out[r[inside], c[inside]] = np.asarray(tangent)[c[inside], 2 * kd + offset[inside]]
         return out
-
-    def factor_exact(self, tangent):
-        """
-        Factor the tangent of :meth:`exact_system` in place (LAPACK band LU, ``dgbtrf``).
-
-        Parameters
-        ----------
-        tangent : (6n, 3 kd + 1) ndarray
-            From :meth:`exact_system` (overwritten by the factor).
-
-        Returns
-        -------
-        BandLU or None
-            ``None`` if the tangent is singular or not finite.
-
-        """
-        if not np.all(np.isfinite(tangent)):
-            return None
-        lu, pivots, info = lapack.dgbtrf(tangent.T, self.kd, self.kd, overwrite_ab=1)
-        return BandLU(lu, pivots, self.kd) if info == 0 else None
 
     def fallback_factors(self, positions, rotations, actuation, evaluated=False, load=None):
         """
@@ -444,11 +400,11 @@ class EquilibriumSystem:
            :meth:`exact_system`), by band LU (:meth:`factor_exact`); with a user load stiffness
            ``load`` added, by dense LU;
         2. the material tangent alone (paper eq. 8, :meth:`material_system`), positive definite
-           whatever the stresses, far from equilibrium too, by band Cholesky (:meth:`factor`).
+           whatever the stresses, far from equilibrium too, by block Cholesky (:meth:`factor`).
 
         The residual is the same for every tangent (only the convergence rate changes). A
         tangent that does not factor is skipped. The evaluation of step 2 overwrites this
-        object's buffers (those of the last :meth:`evaluate`).
+        object's buffers (those of the last evaluation).
 
         Parameters
         ----------
@@ -459,65 +415,98 @@ class EquilibriumSystem:
         actuation : (m,) ndarray  [N, Pa]
             ``λ`` (enters the load stiffness).
         evaluated : bool
-            The last :meth:`evaluate` (not material) was at this state and actuation: step 1
-            reuses its blocks.
+            The last evaluation was an exact :meth:`evaluate` at this state and actuation: step
+            1 reuses its blocks (the band of :meth:`linearise` or of the compiled tick has
+            none).
         load : (6n, 6n) ndarray or None  [N/m, N, N*m/rad]
             Load stiffness ``-d f_load / dq`` of user follower loads, added to the exact tangent.
 
         Yields
         ------
         cbha_inverse.core.linalg.factors.TangentFactor
-            Each factor that succeeds (``BandLU`` or ``DenseLU``, then ``BandCholesky``).
+            Each factor that succeeds (``BandLU`` or ``DenseLU``, then ``BlockCholesky``).
 
         """
         if not evaluated:
             self.evaluate(positions, rotations, actuation)
         tangent = self.exact_tangent()
         if load is None:
-            factor = self.factor_exact(tangent)
+            factor = self.factor_exact()
         else:
             factor = DenseLU(self.dense_exact(tangent) + load)
         if factor is not None:
             yield factor
-        tangent, _ = self.material_system(positions, rotations, actuation)
-        factor = self.factor(tangent)
+        self.material_system(positions, rotations, actuation)
+        factor = self.factor()
         if factor is not None:
             yield factor
 
-    def blocks(self, tangent):
+    def scale_cavities(self, gains):
         """
-        Return the lower band of :meth:`linearise` as block-tridiagonal blocks.
+        Scale each condensed cavity's wrench and load stiffness by a gain, in place.
+
+        The evaluations (and the compiled tick, which holds the same arrays) then see cavity
+        ``j`` with ``gains[j]`` times the effective area it was built with, as a scene's
+        ``calibration.actuator_gain`` builds it.
 
         Parameters
         ----------
-        tangent : (6n, 12) ndarray
+        gains : (m,) ndarray  [-]
+            Gain of each actuator relative to the built one (1: unchanged).
+
+        Raises
+        ------
+        ValueError
+            If the actuators are not condensed cavities alone, or ``gains`` does not have shape
+            (m,).
+
+        """
+        record = self.record
+        if not self.has_cavities or record.cable_frames.size or record.mesh_columns.size:
+            raise ValueError('actuator gains need condensed cavities alone')
+        gains = np.asarray(gains, dtype=float)
+        if gains.shape != (self.m,):
+            raise ValueError(f'gains must have shape ({self.m},), got {gains.shape}')
+        if self._built_cavities is None:
+            self._built_cavities = (self._cavity_wrench.copy(), self._cavity_stiffness.copy())
+        wrench, stiffness = self._built_cavities
+        np.multiply(wrench, gains[None, :, None], out=self._cavity_wrench)
+        np.multiply(stiffness, gains[None, :, None, None], out=self._cavity_stiffness)
+
+    def tridiagonal_blocks(self, tangent):
+        """
+        Return the block band of :meth:`linearise` as the blocks of a block-tridiagonal matrix.
+
+        Parameters
+        ----------
+        tangent : (n, 2, 6, 6) ndarray
             From :meth:`linearise` of a chain whose actuators act within a link.
 
         Returns
         -------
         diagonal : (n, 6, 6) ndarray
-            Diagonal blocks.
+            Diagonal blocks (symmetric).
         upper : (n - 1, 6, 6) ndarray
             ``upper[i]`` = block (i, i + 1).
 
         """
-        if self.kd != 11:
-            raise ValueError(f'the tangent is not block tridiagonal (half-bandwidth {self.kd})')
-        band = np.asarray(tangent).reshape(self.n, 6, 12)
-        a, b = np.meshgrid(np.arange(6), np.arange(6), indexing='ij')
-        low, high = np.minimum(a, b), np.maximum(a, b)
-        diagonal = band[:, low, high - low]
-        upper = band[:-1, a, 6 + b - a]
-        return diagonal, upper
+        if self.block_width != 1:
+            raise ValueError(f'the tangent is not block tridiagonal ({self.block_width} blocks '
+                             'below the diagonal)')
+        tangent = np.asarray(tangent)
+        lower = np.tril(tangent[:, 0])
+        diagonal = lower + np.swapaxes(np.tril(lower, -1), 1, 2)
+        upper = np.swapaxes(tangent[:-1, 1], 1, 2)
+        return diagonal, np.ascontiguousarray(upper)
 
     def dense(self, tangent):
         """
-        Return the band storage of :meth:`linearise` as a full lower-triangular matrix.
+        Return the block band of :meth:`linearise` as a full lower-triangular matrix.
 
         Parameters
         ----------
-        tangent : (6n, kd + 1) ndarray
-            From :meth:`linearise`.
+        tangent : (n, B + 1, 6, 6) ndarray
+            From :meth:`linearise` (or its factor).
 
         Returns
         -------
@@ -525,9 +514,12 @@ class EquilibriumSystem:
             ``K`` on and below the diagonal, zero above.
 
         """
+        tangent = np.asarray(tangent)
         out = np.zeros((self.size, self.size))
-        out.reshape(-1)[self._dense_slots] = np.asarray(tangent).reshape(-1)[self._band_slots]
-        return out
+        for c in range(self.n):
+            for d in range(min(tangent.shape[1], self.n - c)):
+                out[6 * (c + d):6 * (c + d + 1), 6 * c:6 * (c + 1)] = tangent[c, d]
+        return np.tril(out)
 
 
 def chain_stiffness(model, state=None):
@@ -552,6 +544,75 @@ def chain_stiffness(model, state=None):
     tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
     lower = system.dense(tangent)
     return lower + np.tril(lower, -1).T
+
+
+def _floats(array):
+    """Return an array as the compiled kernels take it (C-ordered floats, no copy if it is)."""
+    return np.ascontiguousarray(array, dtype=float)
+
+
+def _cable_fields(cables):
+    """Return the record's cable fields of every cable of the scene."""
+    return {'cable_gains': cables.gains, 'cable_columns': cables.columns,
+            'cable_frames': cables.frames, 'cable_offsets': cables.offsets,
+            'point_owner': cables.point_owner, 'point_slot': cables.point_slot,
+            'span_start': cables.start, 'span_end': cables.end, 'span_owner': cables.span_owner,
+            'span_pair': cables.span_pair}
+
+
+def _mesh_fields(meshes, n_frames):
+    """Return the record's skinned-mesh fields, every group's cavities numbered in a row."""
+    fields = {name: [] for name in ('mesh_frame_a', 'mesh_local_a', 'mesh_local_b',
+                                    'mesh_weight_b', 'mesh_triangles', 'mesh_owner',
+                                    'mesh_gains', 'mesh_columns')}
+    vertices, cavities = 0, 0
+    for group, columns in meshes:
+        for name, value in (('mesh_frame_a', group.frame_a), ('mesh_local_a', group.local_a),
+                            ('mesh_local_b', group.local_b), ('mesh_weight_b', group.weight_b),
+                            ('mesh_triangles', group.triangles + vertices),
+                            ('mesh_owner', group.vertex_owner + cavities),
+                            ('mesh_gains', group.gains), ('mesh_columns', columns)):
+            fields[name].append(np.asarray(value))
+        vertices += group.frame_a.size
+        cavities += group.n_actuators
+    empty = {'mesh_frame_a': (0,), 'mesh_local_a': (0, 3), 'mesh_local_b': (0, 3),
+             'mesh_weight_b': (0,), 'mesh_triangles': (0, 3), 'mesh_owner': (0,),
+             'mesh_gains': (0,), 'mesh_columns': (0,)}
+    out = {}
+    for name, parts in fields.items():
+        dtype = float if name in ('mesh_local_a', 'mesh_local_b', 'mesh_weight_b',
+                                  'mesh_gains') else np.int64
+        out[name] = np.ascontiguousarray(np.concatenate(parts) if parts
+                                         else np.zeros(empty[name]), dtype=dtype)
+    return out
+
+
+def nonzero_cavity_columns(cavity_wrench, cavity_stiffness):
+    """
+    Return the cavity columns of every link whose ``G0`` or ``H`` is nonzero, padded with -1.
+
+    Parameters
+    ----------
+    cavity_wrench : (n, c, 6) ndarray  [N/Pa, N*m/Pa]
+        ``G0`` per link and cavity column.
+    cavity_stiffness : (n, c, 6, 6) ndarray
+        ``H`` per link and cavity column.
+
+    Returns
+    -------
+    (n, c) int64 ndarray
+        Per link, its nonzero cavity columns in increasing order, then -1 (the link pass
+        computes only those: the others add exact zeros).
+
+    """
+    n, c = cavity_wrench.shape[:2]
+    nonzero = (np.any(cavity_wrench != 0.0, axis=2)
+               | np.any(cavity_stiffness.reshape((n, c, 36)) != 0.0, axis=2))
+    columns = np.full((n, c), -1, dtype=np.int64)
+    for link in range(n):
+        active = np.flatnonzero(nonzero[link])
+        columns[link, :active.size] = active
+    return columns
 
 
 def _matches_links(group, model):

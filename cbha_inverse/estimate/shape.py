@@ -32,7 +32,6 @@ and the estimate is ``degraded``; ``rank`` says how many directions the remainin
 import math
 import time
 
-from cbha_inverse.core._kernels import estimation as kernel
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.sections import SECTION_FACTOR_BOUNDS
 from cbha_inverse.core.system import EquilibriumSystem
@@ -103,7 +102,7 @@ class ShapeEstimator:
             view = stiffness.view()
             view.setflags(write=False)
             self._system = EquilibriumSystem(model, actuators, external, stiffness=view)
-            section_arguments = (sections, model.stiffnesses, stiffness)
+            section_arguments = (sections, stiffness)
         m = self._m = actuators.n_actuators
         # the load unknowns, in this order: the arm's own weight error, a payload at the last
         # frame (the wrench of one kg of each), the sections' stiffness errors (rows the update
@@ -135,9 +134,8 @@ class ShapeEstimator:
                                       np.full(n_weights, _MASS_SCALE),
                                       np.full(len(self.section_names), _SECTION_SCALE)])
         self._data = EstimatorData(self._system, effectors, sensors, self._scale, load,
-                                   opts.max_rotation_step, section_arguments)
-        self._data.scalars[kernel.CHANGE_WALK] = opts.pressure_change_walk
-        self._data.scalars[kernel.GATE_SIGMA] = opts.outlier_sigma
+                                   opts.max_rotation_step, opts.pressure_change_walk,
+                                   opts.outlier_sigma, section_arguments)
 
         def walk(offset):
             stds = [opts.gain_walk_std] * m + [offset] * m + [w for _, w in self._mass_stds]
@@ -278,16 +276,16 @@ class ShapeEstimator:
             self._restart_actuation(measured)
         self._measured = measured
         if self._first:
-            data.pressure_rows[kernel.LAST_PRESSURE] = data.pressures
+            data.last_pressures[:] = data.pressures
             self._first = False
             if not self._converge():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
-        elif measured and np.abs(data.pressures - data.pressure_rows[kernel.LAST_PRESSURE]
+        elif measured and np.abs(data.pressures - data.last_pressures
                                  ).max() > self.options.predict_pressure_change:
             # the prediction of the state at the new pressures, before the pots correct it
             if not self._converge():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
-        data.scalars[kernel.GATE] = float(self._settled)
+        data.gate[0] = self._settled
         walk = self._walks[measured, self._settled]
         self._snapshot()
         iterations = max(1, self.options.iterations)
@@ -295,12 +293,12 @@ class ShapeEstimator:
             iterations = max(iterations, self.options.settle_iterations)
         if iterations > 1:
             prior = (data.z.copy(), data.covariance.copy(),
-                     data.pressure_rows[kernel.LAST_PRESSURE].copy())
+                     data.last_pressures.copy())
         for iteration in range(iterations):
             if iteration:
                 # iterated update: the same prior, relinearised at the last posterior
                 data.z[:], data.covariance[:] = prior[0], prior[1]
-                data.pressure_rows[kernel.LAST_PRESSURE] = prior[2]
+                data.last_pressures[:] = prior[2]
             data.walk[:] = walk
             if not self._step():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
@@ -312,7 +310,7 @@ class ShapeEstimator:
         dropped = self._used & ~data.active
         if dropped.any() and self._snapshots[2][1] == len(self._snapshots[0]):
             outliers = dropped & ~data.stuck
-            ratios = data.pots[kernel.RATIO].copy()
+            ratios = data.ratio.copy()
             # a pot just dropped may have pulled the unknowns before: start again from them as
             # they were before the stuck window, without it (left out as if stuck, reported as
             # what it was)
@@ -322,7 +320,7 @@ class ShapeEstimator:
             if not self._step():
                 return self._rejected('not_positive_definite: no factor of the tangent', started)
             data.stuck &= ~outliers
-            data.pots[kernel.RATIO, outliers] = ratios[outliers]
+            data.ratio[outliers] = ratios[outliers]
         self._used = data.active.copy()
         self._last = self._estimate(lengths, time.perf_counter() - started)
         return self._last
@@ -344,7 +342,7 @@ class ShapeEstimator:
         data.covariance[:, :2 * m] = 0.0
         data.covariance[range(2 * m), range(2 * m)] = (np.asarray(stds)
                                                        / self._scale[:2 * m]) ** 2
-        data.pressure_rows[kernel.LAST_PRESSURE] = data.pressures
+        data.last_pressures[:] = data.pressures
         self._settled = False
 
     def _converge(self):
@@ -359,7 +357,7 @@ class ShapeEstimator:
         stuck = data.stuck.copy()
         data.stuck[:] = True
         # the pressure change is the next update's (the offset's walk), not these steps'
-        last_pressures = data.pressure_rows[kernel.LAST_PRESSURE].copy()
+        last_pressures = data.last_pressures.copy()
         for step in range(self.options.initial_newton_steps):
             data.walk[:] = 0.0
             if not self._step():
@@ -369,7 +367,7 @@ class ShapeEstimator:
             if step and (np.abs(data.moved[:, 0]) < data.noise).all():
                 break
         data.stuck[:] = stuck
-        data.pressure_rows[kernel.LAST_PRESSURE] = last_pressures
+        data.last_pressures[:] = last_pressures
         return True
 
     def _snapshot(self):
@@ -430,20 +428,20 @@ class ShapeEstimator:
     def _step(self):
         """Run one compiled update (the fallback chain if the band is not positive definite)."""
         data = self._data
-        if data.update_entry(*data.arguments) == 0:
+        if data.entry('estimate_tick')(data.record) == 0:
             self._bound_sections()
             return True
         system = self._system
-        factor = next(system.fallback_factors(data.positions, data.rotations, data.actuation,
-                                              evaluated=True), None)
+        factor = next(system.fallback_factors(data.positions, data.rotations, data.actuation),
+                      None)
         if factor is None:
             return False
         data.tick.project_factor(factor)
         if self._n_mass:
             data.mass_columns[:, 1:] = factor.solve(np.ascontiguousarray(data.load.T))
-        data.scalars[kernel.SOLVE_MASS] = 0.0
-        kernel.estimate_from_linearisation(*data.from_linearisation_arguments)
-        data.scalars[kernel.SOLVE_MASS] = 1.0
+        data.solve_mass[0] = False
+        data.entry('estimate_from_linearisation')(data.record)
+        data.solve_mass[0] = True
         self._bound_sections()
         return True
 
@@ -465,7 +463,7 @@ class ShapeEstimator:
         """Return the :class:`ShapeEstimate` of the update just run."""
         data, m = self._data, self._m
         active = data.active.copy()
-        ratio = data.pots[kernel.RATIO]
+        ratio = data.ratio
         # settled: most pots within settle_sigma of their prediction (else the next update lets
         # the actuation's offset move by initial_actuation_std, as from far away, and gates no
         # pot); one pot off is the outlier gate's
@@ -485,6 +483,6 @@ class ShapeEstimator:
             status = 'degraded'
         return ShapeEstimate(status, reason, data.effector_positions.copy(),
                              data.tip_covariance.copy(), lengths,
-                             lengths - data.pots[kernel.PREDICTED], active, rank,
+                             lengths - data.predicted, active, rank,
                              data.actuation.copy(), self._payload(), self._weight_error(),
                              seconds, self._section_stiffness())

@@ -158,7 +158,7 @@ def bent_tangent(n_links, seed=0):
     system = EquilibriumSystem(model, ActuatorSet((), model.n_frames), np.zeros(6 * n_links))
     state = rest_state(model)
     tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
-    return system.blocks(tangent)
+    return system.tridiagonal_blocks(tangent)
 
 
 def btd_table(sizes, rhs_counts, budget, out):
@@ -276,7 +276,7 @@ def static_report(budget, out):
     times = {}
     system = EquilibriumSystem(model, ActuatorSet((), model.n_frames), np.zeros(6 * 16))
     none = np.zeros(0)
-    diagonal, upper = system.blocks(system.linearise(state.positions, state.rotations, none)[0])
+    diagonal, upper = system.tridiagonal_blocks(system.linearise(state.positions, state.rotations, none)[0])
     fac = btd.factorize(diagonal, upper)
     rhs6 = rng.normal(size=(96, 6))
     rhs20 = rng.normal(size=(96, 20))

@@ -65,7 +65,7 @@ def _condition(model, state):
     """Return the 1-norm condition estimate of the tangent at a state (BTD Cholesky)."""
     system = EquilibriumSystem(model, ActuatorSet((), model.n_frames), np.zeros(6 * model.n_links))
     tangent, _ = system.linearise(state.positions, state.rotations, np.zeros(0))
-    return float(factorize(*system.blocks(tangent)).condition_estimate)
+    return float(factorize(*system.tridiagonal_blocks(tangent)).condition_estimate)
 
 
 def _small_tip_force(compliances, offsets, deflection):

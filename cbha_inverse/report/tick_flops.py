@@ -17,20 +17,19 @@ from typing import NamedTuple
 
 from cbha_inverse.core._kernels.flop_rate import multiply_add_chains
 
-# flops of one link in link_pass_band_into, the tick's link pass (loops of the kernel): the
-# geometry, deformation, stress, B^T K, the local wrench, the symmetric part of the 6 x 6 tangent,
-# its rotation (3 of the 4 blocks), the lower blocks of E^T M E and the symmetric part of the
-# geometric terms (the products with the hat matrices of d, F and M without their zero terms;
-# link_pass_into, the exact pass, does 144 more: the fourth block, the upper columns, all the
-# geometric terms) ...
-_LINK_BASE = 1072
-# ... the rest-rotation product when a link's rest rotation is not the identity ...
-_LINK_REST_ROTATION = 45
+# flops of one link in links.link_pass, the tick's link pass (loops of the kernels): the
+# deformation, Jl⁻¹, the local wrench and B^T K, the local tangent with its stress terms, the
+# rotated 12 x 12 world tangent E^T R M R^T E, its geometric terms ...
+_LINK_BASE = 1341
 # ... per condensed cavity column (its wrench, G0 + H δ, and load stiffness p H) ...
 _LINK_PER_CAVITY = 156
 # ... and per wrench column (rotation to world axes, gathering onto the two frames)
-_LINK_PER_COLUMN = 51
-# cable_pass_into: per routing point (lever, point, force, wrench, moment block) and per span
+_LINK_PER_COLUMN = 54
+# the symmetric part of a link's block added into the band (66 pairs of entries averaged, 12 on
+# the diagonal), and for the first link, whose base-frame rows are left out
+_LINK_BAND = 210
+_FIRST_LINK_BAND = 51
+# cables.cable_pass: per routing point (lever, point, force, wrench, moment block) and per span
 # (unit vector, force, projector, the six summed 3 x 3 products)
 _CABLE_PER_POINT = 75
 _CABLE_PER_SPAN = 330
@@ -55,8 +54,6 @@ class TickShapes(NamedTuple):
     cavities : int
         Nonzero condensed cavity columns of the link pass, summed over the links (the pass skips
         the zero ones; 0 without cavities).
-    rest_rotations : bool
-        Whether the links have rest rotations other than the identity.
     points, spans : int
         Cable routing points and spans (0 without cables).
     values : int
@@ -67,6 +64,9 @@ class TickShapes(NamedTuple):
     effector_frames : tuple of int
         Frame (1..n) of every effector: ``J_eᵀ`` is zero above its rows, where its forward sweep
         and its products start.
+    below : tuple of int
+        Rows under the diagonal that each column of the band factor reaches (its loops run
+        over those: :func:`cbha_inverse.core._kernels.band.band_envelope`).
 
     """
 
@@ -75,12 +75,12 @@ class TickShapes(NamedTuple):
     k: int
     kd: int
     cavities: int
-    rest_rotations: bool
     points: int
     spans: int
     values: int
     jacobian_entries: int
     effector_frames: tuple
+    below: tuple
 
 
 def tick_shapes(solver):
@@ -90,20 +90,22 @@ def tick_shapes(solver):
     Parameters
     ----------
     solver : cbha_inverse.core.inverse.solver.InverseSolver
-        After at least one tick (``J_aᵀ`` is read from its last linearisation).
+        After at least one tick (``J_aᵀ`` and the factor's reach are read from its last
+        linearisation).
 
     Returns
     -------
     TickShapes
 
     """
-    system = solver._tick
-    (_, _, rest_rotations_t, _, _, cavity_columns, _, _, _, _, frames, spans, _, _, _, _, _,
-     _, values, _, rhs) = system.fused_terms()
+    system = solver._system
+    record = system.record
     return TickShapes(system.n, system.m, len(solver.effector_names), system.kd,
-                      int((cavity_columns >= 0).sum()), rest_rotations_t.shape[0] > 0, frames.size,
-                      spans.shape[1], values.size, int((rhs[:, 1:] != 0.0).sum()),
-                      tuple(int(f) for f in solver.effectors.frames))
+                      int((record.cavity_columns >= 0).sum()), record.cable_frames.size,
+                      record.span_start.size, record.values.size,
+                      int((record.rhs[:, 1:] != 0.0).sum()),
+                      tuple(int(f) for f in solver.effectors.frames),
+                      tuple(int(r - j) for j, r in enumerate(record.band_reach)))
 
 
 def tick_flops(shapes):
@@ -122,18 +124,19 @@ def tick_flops(shapes):
         ``update`` and their ``total``.
 
     """
-    n, m, k, kd = shapes.n, shapes.m, shapes.k, shapes.kd
+    n, m, k = shapes.n, shapes.m, shapes.k
     size, rows, columns = 6 * n, 3 * shapes.k, m + 1
-    links = (n * (_LINK_BASE + _LINK_REST_ROTATION * shapes.rest_rotations + _LINK_PER_COLUMN)
+    links = (n * (_LINK_BASE + _LINK_PER_COLUMN)
              + (_LINK_PER_CAVITY + _LINK_PER_COLUMN) * shapes.cavities)
     # band Cholesky: per column a square root, `below` scalings and the rank-one update of the
-    # trailing triangle; the solve: the forward sweeps of [r, J_aᵀ] (every row) and of J_eᵀ
-    # (3 columns per effector, from the first effector frame's rows on: zero above them)
-    factor = sum(1 + below + below * (below + 1) for below in
-                 (min(kd, size - 1 - j) for j in range(size)))
+    # trailing triangle within the column's reach; the solve: the forward sweeps of [r, J_aᵀ]
+    # (every row) and of J_eᵀ (3 columns per effector, from the first effector frame's rows on:
+    # zero above them)
+    below = shapes.below
+    factor = sum(1 + b + b * (b + 1) for b in below)
     first = 6 * (min(shapes.effector_frames) - 1) if shapes.effector_frames else size
-    solve = sum((columns + (rows if j >= first else 0)) * (1 + 2 * min(kd, size - 1 - j))
-                for j in range(size))
+    solve = sum((columns + (rows if j >= first else 0)) * (1 + 2 * b)
+                for j, b in enumerate(below))
     # the products of the half-solves: L⁻¹ J_eᵀ with L⁻¹ [r, J_aᵀ] from each effector's frame
     # on, the offset, the lower triangle of W_aa = (L⁻¹ J_aᵀ)ᵀ L⁻¹ J_aᵀ, |r|
     effector_rows = sum(size - 6 * (frame - 1) for frame in shapes.effector_frames)
@@ -146,12 +149,11 @@ def tick_flops(shapes):
           + (2 * rows * m + 4 * m + 5 * k) + 2 * m * m)
     # the step L⁻¹ r + L⁻¹ J_aᵀ Δλ, its backward sweep (one column), the retraction, the
     # effector positions
-    back = sum(1 + 2 * min(kd, size - 1 - j) for j in range(size))
+    back = sum(1 + 2 * b for b in below)
     update = size * 2 * m + back + n * _RETRACT_PER_FRAME + 18 * k
-    # the assembly: the links add the lower triangles of their blocks into the band (78 values,
-    # 21 for the first link: the base frame's rows are left out), the cable blocks are scattered
-    # with their weights; the band is zeroed first
-    link_adds = 78 * (n - 1) + 21 if n else 0
+    # the assembly: the links add the symmetric parts of their blocks into the band, the cable
+    # blocks are scattered with their weights; the band is zeroed first
+    link_adds = _LINK_BAND * (n - 1) + _FIRST_LINK_BAND if n else 0
     cable_values = shapes.values - 144 * n
     counts = {'links': links,
               'cables': _CABLE_PER_POINT * shapes.points + _CABLE_PER_SPAN * shapes.spans,

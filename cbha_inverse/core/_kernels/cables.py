@@ -1,11 +1,12 @@
 """
 Compiled cable terms of the equilibrium (paper eq. 9): columns of ``J_aᵀ``, loads, load stiffness.
 
-:func:`cable_pass` (numba) computes the cable columns, their loads, the span stiffness
+:func:`cable_pass` computes the cable columns, their loads, the span stiffness
 ``C P Cᵀ`` (``P = g λ/ℓ (I - u uᵀ)``, ``C = [I; r_s^; -I; -r_e^]``) summed per frame pair and the
 exact point moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``, for the routing data of
-:class:`cbha_inverse.core.actuation.cables.CableTerms`. A cable's gain ``g`` (calibration; 1 for
-the ideal cable) scales its force per unit tension ``F``: column, load and load stiffness alike.
+:class:`cbha_inverse.core.actuation.cables.CableTerms` (every cable of a scene, whatever its
+group). A cable's gain ``g`` (calibration; 1 for the ideal cable) scales its force per unit
+tension ``F``: column, load and load stiffness alike.
 :func:`routing_lengths` gives the routed lengths and their gradient from the same routing
 geometry (the passive cables of string potentiometers, :mod:`cbha_inverse.core.sensors`).
 """
@@ -23,7 +24,7 @@ _CABLE_SIGN = np.array([1.0, 1.0, -1.0, -1.0])
 _CABLE_PRODUCT = np.array([[0, -1, -1], [1, 3, -1], [2, 4, 5]])
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def point_wrench(force, lever):
     """
     Return the wrench ``(f, r × f)`` of a force at a lever from its frame's origin.
@@ -171,38 +172,31 @@ def routing_lengths(positions, rotations, frames, offsets, span_start, span_end,
     n_points, n_spans = frames.size, span_start.size
     lengths = np.empty(n_cables)
     routing_lengths_into(positions, rotations, frames, offsets, span_start, span_end,
-                         span_owner, point_owner, lengths, jacobian,
-                         np.empty(routing_work_size(n_points, n_spans, n_cables)))
+                         span_owner, point_owner, lengths, jacobian, np.empty((n_points, 3)),
+                         np.empty((n_points, 3)), np.empty((n_points, 3)),
+                         np.empty((n_spans, 3)), np.empty(n_spans), np.ones(n_cables))
     return lengths
 
 
 @numba.njit(cache=True)
-def routing_work_size(n_points, n_spans, n_cables):
-    """Return the length of the workspace of :func:`routing_lengths_into`."""
-    return 9 * n_points + 4 * n_spans + n_cables
-
-
-@numba.njit(cache=True)
 def routing_lengths_into(positions, rotations, frames, offsets, span_start, span_end,
-                         span_owner, point_owner, lengths, jacobian, work):
-    """:func:`routing_lengths` into ``lengths`` (c,), ``work``: :func:`routing_work_size`."""
-    n_points, n_spans = frames.size, span_start.size
-    end = 3 * n_points
-    levers = work[:end].reshape((n_points, 3))
-    points = work[end:2 * end].reshape((n_points, 3))
-    forces = work[2 * end:3 * end].reshape((n_points, 3))
-    units = work[3 * end:3 * end + 3 * n_spans].reshape((n_spans, 3))
-    span_lengths = work[3 * end + 3 * n_spans:3 * end + 4 * n_spans]
-    unit_gains = work[3 * end + 4 * n_spans:]
-    unit_gains[:] = 1.0
+                         span_owner, point_owner, lengths, jacobian, levers, points, forces,
+                         units, span_lengths, unit_gains):
+    """
+    :func:`routing_lengths` into ``lengths`` (c,), with its scratch arrays given.
+
+    ``levers``, ``points``, ``forces`` (P, 3) and ``units`` (S, 3), ``span_lengths`` (S,) are
+    :func:`routing_spans_into`'s and :func:`routing_forces_into`'s; ``unit_gains`` (c,) holds
+    ones (the bare length gradient).
+    """
     routing_spans_into(positions, rotations, frames, offsets, span_start, span_end, levers,
                        points, units, span_lengths)
     routing_forces_into(units, unit_gains, span_start, span_end, span_owner, forces)
     lengths[:] = 0.0
-    for s in range(n_spans):
+    for s in range(span_start.size):
         lengths[span_owner[s]] += span_lengths[s]
     jacobian[:, :] = 0.0
-    for p in range(n_points):
+    for p in range(frames.size):
         if frames[p] > 0:
             wrench = point_wrench(forces[p], levers[p])
             row = point_owner[p]
@@ -212,140 +206,150 @@ def routing_lengths_into(positions, rotations, frames, offsets, span_start, span
 
 
 @numba.njit(cache=True)
-def cable_pass(positions, rotations, actuation, gains, frames, offsets, span_start, span_end,
-               span_owner, point_owner, columns, span_pair, point_slot, rhs, pair_values,
-               moment_values):
+def cable_pass(system, positions, rotations, actuation):
     """
-    Add one cable group's columns and loads to ``rhs``; write its stiffness blocks.
+    Add the cables' columns and loads to ``system.rhs``; write their stiffness blocks.
 
-    The routing geometry is :func:`routing_spans` and :func:`routing_forces` (shared with the
-    string potentiometers' :func:`routing_lengths`). The span blocks are symmetric; the point
-    moment blocks are the exact (non-symmetric) load stiffness, whose symmetric part the control
-    tick keeps.
+    The routing geometry is :func:`routing_spans_into` and :func:`routing_forces_into` (shared
+    with the string potentiometers' :func:`routing_lengths`). Each routing point on a moving
+    frame adds its wrench per unit tension to its cable's column of ``J_aᵀ`` and, times the
+    tension, to the residual; :func:`add_point_moments` and :func:`add_span_stiffness` give the
+    exact load stiffness, written into ``system.values`` after the link blocks: the span blocks
+    summed per frame pair (12 x 12, symmetric), then the point moment blocks summed per frame
+    (3 x 3, not symmetric; the control tick keeps their symmetric part).
 
     Parameters
     ----------
+    system : EquilibriumRecord
+        The chain's terms and buffers (:mod:`cbha_inverse.core._kernels.evaluation`): the
+        cables' routing, gains and actuator columns, the scratch arrays; ``rhs`` is added to.
     positions : (n + 1, 3) ndarray  [m]
         Frame origins.
     rotations : (n + 1, 3, 3) ndarray
         Frame rotations.
     actuation : (m,) ndarray  [N]
-        All actuators (the tensions are at ``columns``).
-    gains : (m_c,) ndarray  [-]
-        Factor of every cable on its force per unit tension (its column, load and load
-        stiffness; a scene's ``calibration.actuator_gain``, 1 = the ideal cable).
-    frames : (P,) int ndarray
-        Frame of every routing point.
-    offsets : (P, 3) ndarray  [m]
-        Routing points in their frame's axes.
-    span_start, span_end : (S,) int ndarray
-        Points of every straight span (consecutive points of one cable).
-    span_owner, point_owner : (S,), (P,) int ndarray
-        Cable (0..m_c - 1) of every span and point.
-    columns : (m_c,) int ndarray
-        Actuator column of every cable.
-    span_pair : (S,) int ndarray
-        Frame-pair block that receives each span's stiffness.
-    point_slot : (P,) int ndarray
-        Moment block (one per frame used) that receives each point's moment stiffness.
-    rhs : (6n, m + 1) ndarray
-        Column 0 (residual) and the cables' ``J_aᵀ`` columns are added to.
-    pair_values : (n_pairs, 12, 12) ndarray
-        Receives the span blocks summed per frame pair.
-    moment_values : (n_slots, 3, 3) ndarray
-        Receives the point moment blocks summed per frame.
+        All actuators (the tensions are at the cables' columns).
 
     """
-    work = np.empty(cable_work_size(frames.size, span_start.size, pair_values.shape[0]))
-    cable_pass_into(positions, rotations, actuation, gains, frames, offsets, span_start, span_end,
-                    span_owner, point_owner, columns, span_pair, point_slot, rhs, pair_values,
-                    moment_values, work)
-
-
-@numba.njit(cache=True)
-def cable_work_size(n_points, n_spans, n_pairs):
-    """Return the length of the workspace of :func:`cable_pass_into`."""
-    return 9 * n_points + 4 * n_spans + 54 * n_pairs + 45
-
-
-@numba.njit(cache=True)
-def cable_pass_into(positions, rotations, actuation, gains, frames, offsets, span_start,
-                    span_end, span_owner, point_owner, columns, span_pair, point_slot, rhs,
-                    pair_values, moment_values, work):
-    """:func:`cable_pass` with its workspace given, ``work`` (:func:`cable_work_size`,)."""
-    n_points = frames.size
-    n_spans = span_start.size
-    n_pairs = pair_values.shape[0]
-    end = 3 * n_points
-    levers = work[:end].reshape((n_points, 3))
-    points = work[end:2 * end].reshape((n_points, 3))
-    forces = work[2 * end:3 * end].reshape((n_points, 3))
-    used = 3 * end
-    units = work[used:used + 3 * n_spans].reshape((n_spans, 3))
-    lengths = work[used + 3 * n_spans:used + 4 * n_spans]
-    used += 4 * n_spans
-    sums = work[used:used + 54 * n_pairs].reshape((n_pairs, 6, 3, 3))
-    used += 54 * n_pairs
-    proj = work[used:used + 9].reshape((3, 3))
-    s_hat = work[used + 9:used + 18].reshape((3, 3))
-    t_hat = work[used + 18:used + 27].reshape((3, 3))
-    sp = work[used + 27:used + 36].reshape((3, 3))
-    tp = work[used + 36:used + 45].reshape((3, 3))
-    routing_spans_into(positions, rotations, frames, offsets, span_start, span_end, levers,
-                       points, units, lengths)
-    routing_forces_into(units, gains, span_start, span_end, span_owner, forces)
-    moment_values[:, :, :] = 0.0
-    for p in range(n_points):
-        f, r = forces[p], levers[p]
-        tension = actuation[columns[point_owner[p]]]
+    frames, gains, columns = system.cable_frames, system.cable_gains, system.cable_columns
+    levers, forces = system.cable_levers, system.cable_forces
+    routing_spans_into(positions, rotations, frames, system.cable_offsets, system.span_start,
+                       system.span_end, levers, system.cable_points, system.span_units,
+                       system.span_lengths)
+    routing_forces_into(system.span_units, gains, system.span_start, system.span_end,
+                        system.span_owner, forces)
+    rhs, point_owner = system.rhs, system.point_owner
+    for p in range(frames.size):
         if frames[p] > 0:
+            cable = point_owner[p]
+            tension = actuation[columns[cable]]
             row = 6 * (frames[p] - 1)
-            col = 1 + columns[point_owner[p]]
-            wrench = point_wrench(f, r)
+            wrench = point_wrench(forces[p], levers[p])
             for i in range(6):
-                rhs[row + i, col] += wrench[i]
+                rhs[row + i, 1 + columns[cable]] += wrench[i]
                 rhs[row + i, 0] += tension * wrench[i]
-        # A = sum r (t F)^T per frame; the block is tr(A) I - A
-        block = moment_values[point_slot[p]]
+    n_pairs, n_moments = system.pair_sums.shape[0], system.moment_count
+    pair_values = system.values[system.pair_start:system.pair_start + 144 * n_pairs]
+    moment_values = system.values[system.moment_start:system.moment_start + 9 * n_moments]
+    add_point_moments(actuation, columns, point_owner, system.point_slot, forces, levers,
+                      moment_values.reshape((n_moments, 3, 3)))
+    add_span_stiffness(system, actuation, pair_values.reshape((n_pairs, 12, 12)))
+
+
+@numba.njit(cache=True)
+def add_point_moments(actuation, columns, point_owner, point_slot, forces, levers, blocks):
+    """
+    Write the exact moment stiffness of the routing points, summed per frame.
+
+    A point at lever ``r`` from its frame's origin, pulled by ``t F``, gives the moment
+    ``r × t F``; turning the frame turns ``r`` and ``F`` alike, so ``-d M / dθ = tr(A) I - A``,
+    ``A = Σ r (t F)ᵀ`` over the frame's points.
+
+    Parameters
+    ----------
+    actuation : (m,) ndarray  [N]
+        All actuators.
+    columns : (m_c,) int ndarray
+        Actuator column of every cable.
+    point_owner, point_slot : (P,) int ndarray
+        Cable and moment block of every point.
+    forces, levers : (P, 3) ndarray  [-, m]
+        Force per unit tension and lever of every point.
+    blocks : (F, 3, 3) ndarray  [N*m/rad]
+        Receives the blocks.
+
+    """
+    blocks[:, :, :] = 0.0
+    for p in range(forces.shape[0]):
+        tension = actuation[columns[point_owner[p]]]
+        block = blocks[point_slot[p]]
         for i in range(3):
             for j in range(3):
-                block[i, j] -= tension * r[i] * f[j]
-        trace = tension * (r[0] * f[0] + r[1] * f[1] + r[2] * f[2])
+                block[i, j] -= tension * levers[p, i] * forces[p, j]
+        trace = tension * (levers[p, 0] * forces[p, 0] + levers[p, 1] * forces[p, 1]
+                           + levers[p, 2] * forces[p, 2])
         for i in range(3):
             block[i, i] += trace
-    # C P C^T with C = [I; S; -I; -T] (S, T the hats of the start and end levers): block (i, j)
-    # is sign_i sign_j B_i P B_j^T with B = (I, S, I, T), sign = (1, 1, -1, -1); only the six
-    # products P, SP, TP, SPS^T, TPS^T, TPT^T are summed per frame pair, then expanded
+
+
+@numba.njit(cache=True)
+def add_span_stiffness(system, actuation, blocks):
+    """
+    Write the stiffness of the cables' straight spans, summed per frame pair.
+
+    A span of length ``ℓ`` and unit vector ``u`` under tension ``t`` (gain ``g``) between points
+    at levers ``s`` (frame ``a``) and ``e`` (frame ``b``) has the stiffness ``C P Cᵀ``,
+    ``P = g t / ℓ (I - u uᵀ)``, ``C = [I; s^; -I; -e^]`` over the increments of both frames.
+    Block ``(i, j)`` of ``C P Cᵀ`` is ``sign_i sign_j B_i P B_jᵀ`` with ``B = (I, S, I, T)``,
+    ``sign = (1, 1, -1, -1)`` (``S``, ``T`` the hats of ``s`` and ``e``): the six products ``P``,
+    ``S P``, ``T P``, ``S P Sᵀ``, ``T P Sᵀ``, ``T P Tᵀ`` are summed per frame pair
+    (``system.pair_sums``), then expanded.
+
+    Parameters
+    ----------
+    system : EquilibriumRecord
+        The cables' routing and scratch (``span_units`` and ``span_lengths`` written by the
+        routing, ``cable_levers``).
+    actuation : (m,) ndarray  [N]
+        All actuators.
+    blocks : (n_pairs, 12, 12) ndarray
+        Receives the blocks (rows and columns: frame ``a``'s increments, then frame ``b``'s).
+
+    """
+    sums, projection = system.pair_sums, system.span_projection
+    s_hat, t_hat = system.start_hat, system.end_hat
+    sp, tp = system.start_product, system.end_product
+    units, lengths, levers = system.span_units, system.span_lengths, system.cable_levers
+    span_owner, columns, gains = system.span_owner, system.cable_columns, system.cable_gains
     sums[:, :, :, :] = 0.0
-    for s in range(n_spans):
+    for s in range(units.shape[0]):
         scale = gains[span_owner[s]] * actuation[columns[span_owner[s]]] / lengths[s]
-        u = units[s]
         for i in range(3):
             for j in range(3):
-                proj[i, j] = -scale * u[i] * u[j]
-            proj[i, i] += scale
-        hat_into(levers[span_start[s]], s_hat)
-        hat_into(levers[span_end[s]], t_hat)
+                projection[i, j] = -scale * units[s, i] * units[s, j]
+            projection[i, i] += scale
+        hat_into(levers[system.span_start[s]], s_hat)
+        hat_into(levers[system.span_end[s]], t_hat)
         for i in range(3):
             for j in range(3):
-                sp[i, j] = s_hat[i, 0] * proj[0, j] + s_hat[i, 1] * proj[1, j] + s_hat[
-                    i, 2] * proj[2, j]
-                tp[i, j] = t_hat[i, 0] * proj[0, j] + t_hat[i, 1] * proj[1, j] + t_hat[
-                    i, 2] * proj[2, j]
-        acc = sums[span_pair[s]]
+                sp[i, j] = (s_hat[i, 0] * projection[0, j] + s_hat[i, 1] * projection[1, j]
+                            + s_hat[i, 2] * projection[2, j])
+                tp[i, j] = (t_hat[i, 0] * projection[0, j] + t_hat[i, 1] * projection[1, j]
+                            + t_hat[i, 2] * projection[2, j])
+        acc = sums[system.span_pair[s]]
         for i in range(3):
             for j in range(3):
-                acc[0, i, j] += proj[i, j]
+                acc[0, i, j] += projection[i, j]
                 acc[1, i, j] += sp[i, j]
                 acc[2, i, j] += tp[i, j]
-                acc[3, i, j] += sp[i, 0] * s_hat[j, 0] + sp[i, 1] * s_hat[j, 1] + sp[
-                    i, 2] * s_hat[j, 2]
-                acc[4, i, j] += tp[i, 0] * s_hat[j, 0] + tp[i, 1] * s_hat[j, 1] + tp[
-                    i, 2] * s_hat[j, 2]
-                acc[5, i, j] += tp[i, 0] * t_hat[j, 0] + tp[i, 1] * t_hat[j, 1] + tp[
-                    i, 2] * t_hat[j, 2]
-    for pair in range(n_pairs):
-        out = pair_values[pair]
+                acc[3, i, j] += (sp[i, 0] * s_hat[j, 0] + sp[i, 1] * s_hat[j, 1]
+                                 + sp[i, 2] * s_hat[j, 2])
+                acc[4, i, j] += (tp[i, 0] * s_hat[j, 0] + tp[i, 1] * s_hat[j, 1]
+                                 + tp[i, 2] * s_hat[j, 2])
+                acc[5, i, j] += (tp[i, 0] * t_hat[j, 0] + tp[i, 1] * t_hat[j, 1]
+                                 + tp[i, 2] * t_hat[j, 2])
+    for pair in range(blocks.shape[0]):
+        out = blocks[pair]
         acc = sums[pair]
         for bi in range(4):
             for bj in range(4):

@@ -7,11 +7,10 @@ weights (an error of the arm's own weight spread as its lumped masses, a payload
 last frame: the wrench of one kg of each is a row of ``load``) and a stiffness error ``σ_j`` per
 chain section (its links' stiffness is ``(1 + σ_j)`` times the model's, in the linearisation
 itself; the row of ``load`` is ``∂r/∂σ_j``, the elastic force of the section's links at the
-current frames, evaluated by :func:`cbha_inverse.core._kernels.links.link_pass_into` with their
-model stiffness alone); they follow a random walk. At the current frames one linearisation of
-the equilibrium (the control tick's :func:`cbha_inverse.core._kernels.tick.linearise_tick`,
-completed by the backward sweep of its band factor) gives ``K⁻¹ [r, J_aᵀ]``; with the pots'
-lengths ``ℓ0`` and gradient ``J_s``
+current frames, their model stiffness alone: :func:`section_loads`); they follow a random walk.
+At the current frames one linearisation of the equilibrium (the control tick's
+:func:`cbha_inverse.core._kernels.tick.linearise_tick`, completed by the backward sweep of its
+block factor) gives ``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s``
 (:func:`cbha_inverse.core._kernels.cables.routing_lengths_into`) the lengths after the Newton
 step are linear in ``z``: ``ℓ = base + H z``, ``H = W_sa [diag(p), I] | W_sμ``,
 ``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, paper eq. 11), ``W_sμ = J_s K⁻¹ ∂r/∂μ`` (by the
@@ -19,97 +18,176 @@ implicit function theorem, the lengths' derivative along the equilibrium).
 :func:`kalman_lengths` is the Kalman update on them, :func:`estimate_tick` the whole update:
 linearisation, Kalman update, the Newton step of the same factorisation
 (:func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`) and the effector
-positions, over the preallocated buffers of
-:class:`cbha_inverse.estimate.data.EstimatorData` (rows below).
+positions, over one :class:`EstimatorRecord` (fields :data:`ESTIMATOR_FIELDS`) built by
+:class:`cbha_inverse.estimate.data.EstimatorData`.
 """
 
 import math
 
-from cbha_inverse.core._kernels import tick
-from cbha_inverse.core._kernels.band import band_backward, band_solve
-from cbha_inverse.core._kernels.band_assembly import band_rows
+from cbha_inverse.core._kernels.block_band import block_solve
 from cbha_inverse.core._kernels.cables import routing_lengths_into
-from cbha_inverse.core._kernels.links import link_pass_into
+from cbha_inverse.core._kernels.evaluation import evaluate
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
                                                    project_effectors_into)
+from cbha_inverse.core._kernels.records import define_record, Field, Record, RecordType
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into
+from cbha_inverse.core._kernels.tick import backward_solves, linearise_tick
 import numba
+from numba.experimental import structref
+import numpy as np
 
-# rows of the per-pot vectors (POT_ROWS, c)
-MEASURED, NOISE, LENGTH0, BASE, PREDICTED, RATIO = 0, 1, 2, 3, 4, 5
-POT_ROWS = 6
-# rows of the unknowns' vectors (STATE_ROWS, u)
-Z, WALK, SCALE, GAIN_OF = 0, 1, 2, 3
-STATE_ROWS = 4
-# rows of the actuator vectors (PRESSURE_ROWS, m): measured pressures, those of the last update
-PRESSURE, LAST_PRESSURE = 0, 1
-PRESSURE_ROWS = 2
-# entries of the scalars (SCALARS,): relative walk of the offset per measured pressure change,
-# outlier gate [sigma], gate on (1) / off (0), mass columns solved by the band factor (1) or
-# given (0), largest frame rotation of a step [rad]
-CHANGE_WALK, GATE_SIGMA, GATE, SOLVE_MASS, MAX_ROTATION = 0, 1, 2, 3, 4
-SCALARS = 5
+F8, I8 = np.float64, np.int64
+
+ESTIMATOR_FIELDS = (
+    Field('tick', 'record', 0, 'the estimator\'s tick buffers (tick.TickRecord)'),
+    # the pots: c of them, routed through P points along S spans
+    Field('pot_frames', I8, 1, '(P,) frame of every routing point'),
+    Field('pot_offsets', F8, 2, '(P, 3) routing points in their frame [m]'),
+    Field('pot_span_start', I8, 1, '(S,) first point of every span'),
+    Field('pot_span_end', I8, 1, '(S,) second point of every span'),
+    Field('pot_span_owner', I8, 1, '(S,) pot of every span'),
+    Field('pot_point_owner', I8, 1, '(P,) pot of every point'),
+    Field('measured', F8, 1, '(c,) measured lengths [m]'),
+    Field('noise', F8, 1, '(c,) their noise std [m]'),
+    Field('stuck', np.bool_, 1, '(c,) pots left out'),
+    Field('active', np.bool_, 1, '(c,) the pots the update used'),
+    Field('length0', F8, 1, '(c,) lengths at the linearisation [m]'),
+    Field('base', F8, 1, '(c,) lengths after the step at z = 0: l = base + H z [m]'),
+    Field('predicted', F8, 1, '(c,) base + H z at the posterior [m]'),
+    Field('ratio', F8, 1, '(c,) innovation over its std'),
+    Field('jacobian', F8, 2, '(c, 6n) J_s = d l / dq'),
+    Field('moved', F8, 2, '(c, m + 1 + w) J_s K⁻¹ [r, J_aᵀ, J_μᵀ]'),
+    Field('h', F8, 2, '(c, u) d l / d z [m]'),
+    # the unknowns z (u = 2 m + w) and the pressures
+    Field('z', F8, 1, '(u,) the unknowns (scaled)'),
+    Field('walk', F8, 1, '(u,) their random walk variance per update'),
+    Field('unknown_scale', F8, 1, '(u,) x = scale z'),
+    Field('covariance', F8, 2, '(u, u) covariance of z'),
+    Field('kalman_gain', F8, 1, '(u,) workspace of the update'),
+    Field('pressures', F8, 1, '(m,) measured pressures (0 when none) [Pa]'),
+    Field('last_pressures', F8, 1, '(m,) those of the previous update [Pa]'),
+    Field('change_walk', float, 0, 'relative walk of the offset per measured pressure change'),
+    Field('gate_sigma', float, 0, 'outlier gate [sigma]'),
+    Field('gate', np.bool_, 1, '(1,) whether the gate is on'),
+    Field('solve_mass', np.bool_, 1, '(1,) solve the load columns by the block factor'),
+    # the load unknowns μ (w of them: weights [kg], then the sections' σ [-])
+    Field('masses', F8, 1, '(w,) the load unknowns of the linearisation'),
+    Field('load', F8, 2, '(w, 6n) J_μᵀ: wrench of one kg, then ∂r/∂σ_j [N/kg, N]'),
+    Field('base_external', F8, 1, '(6n,) external wrenches without the weight unknowns'),
+    Field('mass_columns', F8, 2, '(6n, 1 + w) K⁻¹ [r, J_μᵀ]'),
+    Field('mass_rhs', F8, 2, '(6n, 1 + w) [r, J_μᵀ]'),
+    Field('mass_w', F8, 2, '(3k, w) the load unknowns\' W on the effectors'),
+    Field('mass_w_aa', F8, 2, '(w, w) their W_aa (unused)'),
+    Field('mass_offset', F8, 1, '(3k,) their projection\'s offset (unused)'),
+    Field('mass_moved', F8, 2, '(3k, 1 + w) workspace of their projection'),
+    Field('mass_levers', F8, 2, '(k, 3) workspace of their projection'),
+    Field('mass_previous', F8, 1, '(w,) zeros'),
+    Field('mass_effector_columns', F8, 2, '(6n, 3k) J_eᵀ'),
+    # the sections' stiffness unknowns (s of them)
+    Field('link_section', I8, 1, '(n,) section of every link (-1: none)'),
+    Field('nominal', F8, 3, '(n, 6, 6) the model\'s link stiffness', read_only=True),
+    Field('scaled_stiffness', F8, 3, '(n, 6, 6) receives (1 + σ) K (the tick reads it)'),
+    Field('section_stiffness', F8, 4, '(s, n, 6, 6) section j\'s links\' stiffness, else 0',
+          read_only=True),
+    Field('sections', 'record', 0, 'an evaluator of the bare chain (∂r/∂σ_j)'),
+    # the outcome
+    Field('free_step', F8, 1, '(6n,) K⁻¹ r + K⁻¹ J_μᵀ Δμ'),
+    Field('effector_w', F8, 2, '(3, u) the last effector\'s d p / d z [m]'),
+    Field('effector_positions', F8, 2, '(k, 3) effector positions after the step [m]'),
+    Field('tip_covariance', F8, 2, '(3, 3) the last effector\'s covariance [m^2]'),
+    # scratch of the pots' routing
+    Field('pot_levers', F8, 2, '(P, 3)'),
+    Field('pot_points', F8, 2, '(P, 3)'),
+    Field('pot_forces', F8, 2, '(P, 3)'),
+    Field('pot_units', F8, 2, '(S, 3)'),
+    Field('pot_span_lengths', F8, 1, '(S,)'),
+    Field('pot_unit_gains', F8, 1, '(c,) ones'),
+)
+"""The fields of :class:`EstimatorRecord`."""
+
+
+@structref.register
+class EstimatorRecordType(RecordType):
+    """The numba type of :class:`EstimatorRecord`."""
+
+
+class EstimatorRecord(Record):
+    """The buffers of one shape estimator's updates (:data:`ESTIMATOR_FIELDS`)."""
+
+    __slots__ = ()
+
+
+define_record(EstimatorRecord, EstimatorRecordType, ESTIMATOR_FIELDS)
 
 
 @numba.njit(cache=True)
-def kalman_lengths(h, pots, state, covariance, stuck, active, work):
+def new_estimator_record(*values):
+    """Build an :class:`EstimatorRecord` (fields in declaration order)."""
+    return EstimatorRecord(*values)
+
+
+@numba.njit(cache=True)
+def kalman_lengths(h, measured, noise, base, z, walk, covariance, stuck, gate_sigma, active,
+                   gain, ratio, predicted):
     """
     Run the Kalman update of the unknowns on the pot lengths, in place.
 
-    The prior is ``state[Z]`` with ``covariance + diag(state[WALK])``; a pot's innovation
-    against it, over its standard deviation, is ``pots[RATIO]``; the pots not ``stuck`` and
-    within the gate ``work[u + 1]`` standard deviations of it (0: no gate; no gate either when
-    half of the pots or more are off) are ``active`` and update the mean
-    and the covariance one after the other (exact for independent noise).
+    The prior is ``z`` with ``covariance + diag(walk)``; a pot's innovation against it, over its
+    standard deviation, is ``ratio``; the pots not ``stuck`` and within the gate ``gate_sigma``
+    standard deviations of it (0: no gate; no gate either when half of the pots or more are off)
+    are ``active`` and update the mean and the covariance one after the other (exact for
+    independent noise).
 
     Parameters
     ----------
     h : (c, u) ndarray
         ``dℓ/dz`` [m].
-    pots : (POT_ROWS, c) ndarray
-        Reads ``MEASURED``, ``NOISE`` [m] and ``BASE`` (``ℓ = base + H z``), writes ``RATIO``
-        and ``PREDICTED`` (``base + H z`` at the posterior).
-    state : (STATE_ROWS, u) ndarray
-        ``Z`` (prior mean in, posterior out) and ``WALK`` (variance per update).
+    measured, noise, base : (c,) ndarray  [m]
+        Measured lengths, their noise std, and ``base`` (``ℓ = base + H z``).
+    z : (u,) ndarray
+        Prior mean in, posterior out.
+    walk : (u,) ndarray
+        Variance added per update.
     covariance : (u, u) ndarray
         Covariance of ``z`` (in and out).
     stuck : (c,) bool ndarray
         Pots left out whatever their innovation.
+    gate_sigma : float
+        The gate (0: off).
     active : (c,) bool ndarray
         Receives the pots used.
-    work : (u + 2,) ndarray
-        Workspace; ``work[u + 1]`` is the gate [sigma] (0: off).
+    gain : (u,) ndarray
+        Workspace.
+    ratio, predicted : (c,) ndarray
+        Receive the innovation ratios and ``base + H z`` at the posterior.
 
     """
     c, u = h.shape
-    z = state[Z]
     for j in range(u):
-        covariance[j, j] += state[WALK, j]
-    gain = work[:u]
-    sigma = work[u + 1]
+        covariance[j, j] += walk[j]
     for i in range(c):
-        innovation = pots[MEASURED, i] - pots[BASE, i]
-        spread = pots[NOISE, i] * pots[NOISE, i]
+        innovation = measured[i] - base[i]
+        spread = noise[i] * noise[i]
         for j in range(u):
             innovation -= h[i, j] * z[j]
             acc = 0.0
             for k in range(u):
                 acc += covariance[j, k] * h[i, k]
             spread += h[i, j] * acc
-        pots[RATIO, i] = abs(innovation) / math.sqrt(spread)
+        ratio[i] = abs(innovation) / math.sqrt(spread)
     # the gate drops a minority of pots: when more are off, the linear model is (a jump of the
     # arm), not the pots
     off = 0
     for i in range(c):
-        off += not stuck[i] and sigma > 0.0 and pots[RATIO, i] > sigma
+        off += not stuck[i] and gate_sigma > 0.0 and ratio[i] > gate_sigma
     for i in range(c):
-        active[i] = not stuck[i] and not (2 * off < c and sigma > 0.0
-                                          and pots[RATIO, i] > sigma)
+        active[i] = not stuck[i] and not (2 * off < c and gate_sigma > 0.0
+                                          and ratio[i] > gate_sigma)
     for i in range(c):
         if not active[i]:
             continue
-        innovation = pots[MEASURED, i] - pots[BASE, i]
-        spread = pots[NOISE, i] * pots[NOISE, i]
+        innovation = measured[i] - base[i]
+        spread = noise[i] * noise[i]
         for j in range(u):
             innovation -= h[i, j] * z[j]
             acc = 0.0
@@ -128,209 +206,125 @@ def kalman_lengths(h, pots, state, covariance, stuck, active, work):
             covariance[j, k] = mean
             covariance[k, j] = mean
     for i in range(c):
-        acc = pots[BASE, i]
+        acc = base[i]
         for j in range(u):
             acc += h[i, j] * z[j]
-        pots[PREDICTED, i] = acc
+        predicted[i] = acc
 
 
 @numba.njit(cache=True)
-def section_loads(buffers, sections, masses, load):
+def section_loads(estimator):
     """
     Scale the sections' link stiffness by ``1 + σ_j`` and write ``∂r/∂σ_j``, in place.
 
-    The last ``s`` entries of ``masses`` are the sections' ``σ`` at the linearisation (``s``
-    the first dimension of ``sections[3]``; none: nothing to do). The tick's link stiffness
-    (``buffers.stiffness``, a read-only view of ``sections[2]``) becomes the model's times
-    ``1 + σ`` of each link's section, so the linearisation is that of the scaled chain (as a
-    scene's ``calibration.section_stiffness`` builds it); row ``w - s + j`` of ``load`` becomes
-    the elastic force of section ``j``'s links at the current frames, their model stiffness
-    alone (the link pass at zero actuation, no cavity: ``-Dᵀ Bᵀ K δ``, paper eq. 4-7), over
-    the section's links and the link before it (zero in ``section_stiffness``: its frame ``a``
-    is the section's first frame, which the pass skips for a chain's first link).
-
-    Parameters
-    ----------
-    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
-        The estimator's tick buffers (frames, rest terms).
-    sections : tuple
-        ``link_section`` (n,) int (a link's section, -1: none), ``nominal`` (n, 6, 6) (the
-        model's link stiffness), ``stiffness`` (n, 6, 6) (receives the scaled one),
-        ``section_stiffness`` (s, n, 6, 6) (the model's stiffness of section ``j``'s links,
-        zero elsewhere), ``ranges`` (s, 2) int (first link and count of each section), then
-        the link pass's arguments without cavities and its workspaces: ``actuation`` (0,),
-        ``cavity_wrench`` (n, 0, 6), ``cavity_stiffness`` (n, 0, 6, 6), ``cavity_columns``
-        (n, 0), ``rhs`` (6n, 1), ``blocks`` (n, 12, 12), ``work``.
-    masses : (w,) ndarray
-        The load unknowns of the linearisation (weights [kg], then the sections' ``σ`` [-]).
-    load : (w, 6n) ndarray
-        Its last ``s`` rows receive ``∂r/∂σ_j`` [N, N*m].
-
+    The last ``s`` entries of ``masses`` are the sections' ``σ`` at the linearisation (none:
+    nothing to do). The tick's link stiffness (``scaled_stiffness``, which the tick's evaluator
+    reads) becomes the model's times ``1 + σ`` of each link's section, so the linearisation is
+    that of the scaled chain (as a scene's ``calibration.section_stiffness`` builds it); row
+    ``w - s + j`` of ``load`` becomes the elastic force of section ``j``'s links at the current
+    frames, their model stiffness alone: the bare chain's residual (paper eq. 4-7) with the
+    stiffness of ``section_stiffness[j]``, zero outside the section.
     """
-    (link_section, nominal, stiffness, section_stiffness, ranges, actuation, cavity_wrench,
-     cavity_stiffness, cavity_columns, rhs, blocks, work) = sections
+    section_stiffness, masses = estimator.section_stiffness, estimator.masses
     n_sections = section_stiffness.shape[0]
     if n_sections == 0:
         return
     first = masses.size - n_sections
+    nominal, scaled, link_section = (estimator.nominal, estimator.scaled_stiffness,
+                                     estimator.link_section)
     for link in range(link_section.size):
         section = link_section[link]
         factor = 1.0 if section < 0 else 1.0 + masses[first + section]
         for i in range(6):
             for j in range(6):
-                stiffness[link, i, j] = factor * nominal[link, i, j]
-    rest_rotations_t = buffers.rest_rotations_t
+                scaled[link, i, j] = factor * nominal[link, i, j]
+    tick, sections, load = estimator.tick, estimator.sections, estimator.load
     for section in range(n_sections):
-        low = max(ranges[section, 0] - 1, 0)
-        high = ranges[section, 0] + ranges[section, 1]
-        rotations_t = (rest_rotations_t[low:high] if rest_rotations_t.shape[0] > 0
-                       else rest_rotations_t)
-        link_pass_into(buffers.positions[low:high + 1], buffers.rotations[low:high + 1],
-                       section_stiffness[section, low:high], buffers.rest_offsets[low:high],
-                       rotations_t, actuation, cavity_wrench[low:high],
-                       cavity_stiffness[low:high], cavity_columns[low:high],
-                       rhs[6 * low:6 * high], blocks[low:high], True, work)
-        row = first + section
-        load[row, :] = 0.0
-        for k in range(6 * low, 6 * high):
-            load[row, k] = rhs[k, 0]
+        sections.stiffness = section_stiffness[section]
+        evaluate(sections, tick.positions, tick.rotations, estimator.mass_previous[:0], False,
+                 False)
+        load[first + section, :] = sections.rhs[:, 0]
 
 
 @numba.njit(cache=True)
-def estimate_tick(buffers, cholesky, routing, pots, jacobian, moved, h, state,
-                  covariance, pressures, scalars, masses, load, base_external, mass_columns,
-                  mass_rhs, mass_effectors, stuck, active, free_step, effector_w,
-                  effector_positions, tip_covariance, work, sections):
+def estimate_tick(estimator):
     """
     Run one estimator update (linearise, Kalman update, Newton step), in place.
 
+    Sets the external wrenches of the weight unknowns and the sections' stiffness
+    (:func:`section_loads`), linearises
+    (:func:`~cbha_inverse.core._kernels.tick.linearise_tick`), then
+    :func:`estimate_from_linearisation`.
+
     Parameters
     ----------
-    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
-        :attr:`cbha_inverse.core.inverse.tick_data.TickData.buffers` of the estimator's own
-        tick data (frames, ``vectors[ACTUATION]`` = the actuation of the linearisation, the
-        model terms and buffers).
-    cholesky : bool
-        Factor the symmetric band (else return at once for the fallback chain).
-    routing : tuple
-        The pots' routing (frames, offsets, span start, end, owner, point owner) and its
-        workspace (:func:`~cbha_inverse.core._kernels.cables.routing_work_size`).
-    pots : (POT_ROWS, c) ndarray
-        Per-pot rows (see :func:`kalman_lengths`; ``LENGTH0`` receives ``ℓ0``).
-    jacobian : (c, 6n) ndarray
-        Receives ``J_s``.
-    moved : (c, m + 1 + w) ndarray
-        Receives ``J_s K⁻¹ [r, J_aᵀ, J_μᵀ]`` [m, m/Pa, m/kg or m] (``w`` load unknowns: 0-2
-        weights, then the sections' stiffness errors).
-    h : (c, u) ndarray
-        Receives ``dℓ/dz``.
-    state : (STATE_ROWS, u) ndarray
-        ``Z``, ``WALK``, ``SCALE`` and ``GAIN_OF`` (1 for the gains, 0 otherwise) of the
-        unknowns ``(g, δ, μ)`` (``u = 2 m + w``).
-    covariance : (u, u) ndarray
-        Covariance of ``z``.
-    pressures : (PRESSURE_ROWS, m) ndarray  [Pa]
-        Measured pressures (zero when none) and those of the previous update.
-    scalars : (SCALARS,) ndarray
-        See the module's rows.
-    masses : (w,) ndarray  [kg, -]
-        The load unknowns of the linearisation (in and out: those after the step): the
-        weights, then the sections' stiffness errors ``σ``.
-    load : (w, 6n) ndarray  [N/kg, N]
-        ``J_μᵀ``: the external wrench of one kg of each weight unknown (the arm's own weight's
-        distribution, the payload at the last frame), then ``∂r/∂σ_j`` of each section (written
-        here, :func:`section_loads`).
-    base_external : (6n,) ndarray  [N, N*m]
-        External wrenches without the weight unknowns.
-    mass_columns, mass_rhs : (6n, 1 + w) ndarray
-        Workspace: ``K⁻¹ [r, J_μᵀ]`` (the load columns solved here with ``SOLVE_MASS``, else
-        given) and ``[r, J_μᵀ]``.
-    mass_effectors : tuple
-        Workspace of the load unknowns' projection on the effectors: ``w`` (3k, w), ``w_aa``
-        (w, w), ``offset`` (3k,), ``moved`` (3k, 1 + w), ``levers`` (k, 3), ``previous``
-        (w,), ``columns`` (6n, 3k) (``J_eᵀ``).
-    stuck, active : (c,) bool ndarray
-        Pots left out; receives the pots used.
-    free_step : (6n,) ndarray
-        Workspace: ``K⁻¹ r + K⁻¹ J_μᵀ Δμ``.
-    effector_w : (3, u) ndarray
-        Receives the last effector's ``d p / dz`` [m].
-    effector_positions : (k, 3) ndarray  [m]
-        Receives the effector positions after the step.
-    tip_covariance : (3, 3) ndarray  [m^2]
-        Receives the last effector's covariance ``W P Wᵀ`` (``W = effector_w``, linear).
-    work : (max(u + 2, n * 6),) ndarray
-        Workspace.
-    sections : tuple
-        The sections' stiffness unknowns (:func:`section_loads`; none: ``section_stiffness``
-        of shape (0, n, 6, 6)).
+    estimator : EstimatorRecord
+        The buffers (:data:`ESTIMATOR_FIELDS`).
 
     Returns
     -------
     int
-        0 when the update ran, else the band Cholesky's code (nothing changed but the
+        0 when the update ran, else the block Cholesky's code (nothing changed but the
         evaluation, for the fallback chain; then run :func:`estimate_from_linearisation`).
 
     """
-    external = buffers.external
-    size = external.size
-    for row in range(size):
+    tick, masses, load = estimator.tick, estimator.masses, estimator.load
+    external, base_external = tick.system.external, estimator.base_external
+    for row in range(external.size):
         external[row] = base_external[row]
-    for a in range(masses.size - sections[3].shape[0]):
-        for row in range(size):
+    for a in range(masses.size - estimator.section_stiffness.shape[0]):
+        for row in range(external.size):
             external[row] += masses[a] * load[a, row]
-    section_loads(buffers, sections, masses, load)
-    info, _ = tick.linearise_tick(buffers, cholesky)
+    section_loads(estimator)
+    info, _ = linearise_tick(tick)
     if info != 0:
         return info
-    estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, state,
-                                covariance, pressures, scalars, masses, load, mass_columns,
-                                mass_rhs, mass_effectors, stuck, active, free_step,
-                                effector_w, effector_positions, tip_covariance, work)
+    estimate_from_linearisation(estimator)
     return 0
 
 
 @numba.njit(cache=True)
-def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, state,
-                                covariance, pressures, scalars, masses, load, mass_columns,
-                                mass_rhs, mass_effectors, stuck, active, free_step,
-                                effector_w, effector_positions, tip_covariance, work):
+def estimate_from_linearisation(estimator):
     """
-    :func:`estimate_tick` after its linearisation (the tick data hold a solved one).
+    :func:`estimate_tick` after its linearisation (the tick's buffers hold a solved one).
 
-    The tick's half-solves ``L⁻¹ [r, J_aᵀ]`` (``half_solved``) are completed to
-    ``K⁻¹ [r, J_aᵀ]`` by the backward sweep of the band factor first.
+    The tick's half-solves ``L⁻¹ [r, J_aᵀ]`` are completed to ``K⁻¹ [r, J_aᵀ]`` first.
     """
-    positions, rotations, vectors = buffers.positions, buffers.rotations, buffers.vectors
-    band, rhs, solved = buffers.band, buffers.rhs, buffers.solved
+    tick = estimator.tick
+    backward_solves(tick)
+    positions, rotations, solved = tick.positions, tick.rotations, tick.solved
+    rhs, factor = tick.system.rhs, tick.system.blocks[:solved.shape[0] // 6]
     size = solved.shape[0]
-    factor = band_rows(band, size)
-    if buffers.half_solved[0]:
-        band_backward(factor, solved)
-        buffers.half_solved[0] = False
-    w_ea = buffers.effector_matrices[tick.W_EA]
-    effector_frames, effector_offsets = buffers.effector_frames, buffers.effector_offsets
     m = solved.shape[1] - 1
+    h, moved, masses, load = estimator.h, estimator.moved, estimator.masses, estimator.load
+    mass_columns, mass_rhs, jacobian = (estimator.mass_columns, estimator.mass_rhs,
+                                        estimator.jacobian)
     c, u = h.shape
     n_mass = masses.size
-    routing_lengths_into(positions, rotations, routing[0], routing[1], routing[2], routing[3],
-                         routing[4], routing[5], pots[LENGTH0], jacobian, routing[6])
+    routing_lengths_into(positions, rotations, estimator.pot_frames, estimator.pot_offsets,
+                         estimator.pot_span_start, estimator.pot_span_end,
+                         estimator.pot_span_owner, estimator.pot_point_owner,
+                         estimator.length0, jacobian, estimator.pot_levers,
+                         estimator.pot_points, estimator.pot_forces, estimator.pot_units,
+                         estimator.pot_span_lengths, estimator.pot_unit_gains)
     if n_mass:
         for row in range(size):
             mass_columns[row, 0] = solved[row, 0]
             mass_rhs[row, 0] = rhs[row, 0]
             for a in range(n_mass):
                 mass_rhs[row, 1 + a] = load[a, row]
-        if scalars[SOLVE_MASS] > 0.0:
+        if estimator.solve_mass[0]:
             for row in range(size):
                 for a in range(n_mass):
                     mass_columns[row, 1 + a] = mass_rhs[row, 1 + a]
-            band_solve(factor, mass_columns[:, 1:])
-        w_mass, w_aa, offset, levers_moved, levers, previous, columns = mass_effectors
-        effector_columns_into(rotations, effector_frames, effector_offsets, levers, columns)
-        project_effectors_into(mass_columns, mass_rhs, columns, False, positions, rotations,
-                               effector_frames, effector_offsets, previous, w_mass, w_aa, offset,
-                               levers_moved)
+            block_solve(factor, mass_columns[:, 1:])
+        effector_columns_into(rotations, tick.effector_frames, tick.effector_offsets,
+                              estimator.mass_levers, estimator.mass_effector_columns)
+        project_effectors_into(mass_columns, mass_rhs, estimator.mass_effector_columns, False,
+                               tick.column_starts, positions, rotations, tick.effector_frames,
+                               tick.effector_offsets, estimator.mass_previous, estimator.mass_w,
+                               estimator.mass_w_aa, estimator.mass_offset,
+                               estimator.mass_moved)
     for i in range(c):
         for j in range(m + 1 + n_mass):
             acc = 0.0
@@ -342,11 +336,10 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
                     acc += jacobian[i, row] * mass_columns[row, j - m]
             moved[i, j] = acc
     # ℓ = ℓ0 + J_s K⁻¹ r + W_sa (λ(z) - λ_lin) + W_sμ (μ - μ_lin), λ(z) = (1 + g) ∘ p + δ
-    lam = vectors[tick.ACTUATION]
-    p = pressures[PRESSURE]
-    scale = state[SCALE]
+    lam, p, scale = tick.actuation, estimator.pressures, estimator.unknown_scale
+    base, length0 = estimator.base, estimator.length0
     for i in range(c):
-        acc = pots[LENGTH0, i] + moved[i, 0]
+        acc = length0[i] + moved[i, 0]
         for j in range(m):
             acc += moved[i, 1 + j] * (p[j] - lam[j])
             h[i, j] = moved[i, 1 + j] * p[j] * scale[j]
@@ -354,48 +347,51 @@ def estimate_from_linearisation(buffers, routing, pots, jacobian, moved, h, stat
         for a in range(n_mass):
             acc -= moved[i, m + 1 + a] * masses[a]
             h[i, 2 * m + a] = moved[i, m + 1 + a] * scale[2 * m + a]
-        pots[BASE, i] = acc
+        base[i] = acc
     # the offset's walk grows with the measured change of the pressures
+    walk, last = estimator.walk, estimator.last_pressures
     for j in range(m):
-        change = scalars[CHANGE_WALK] * (p[j] - pressures[LAST_PRESSURE, j]) / scale[m + j]
-        state[WALK, m + j] += change * change
-        pressures[LAST_PRESSURE, j] = p[j]
-    work[u + 1] = scalars[GATE_SIGMA] if scalars[GATE] > 0.0 else 0.0
-    kalman_lengths(h, pots, state, covariance, stuck, active, work)
+        change = estimator.change_walk * (p[j] - last[j]) / scale[m + j]
+        walk[m + j] += change * change
+        last[j] = p[j]
+    z, covariance = estimator.z, estimator.covariance
+    kalman_lengths(h, estimator.measured, estimator.noise, base, z, walk, covariance,
+                   estimator.stuck, estimator.gate_sigma if estimator.gate[0] else 0.0,
+                   estimator.active, estimator.kalman_gain, estimator.ratio,
+                   estimator.predicted)
     # the Newton step of the same factorisation to the new actuation and weights
-    change = vectors[tick.CHANGE]
-    z = state[Z]
+    change = tick.change
     for j in range(m):
         new = (1.0 + z[j] * scale[j]) * p[j] + z[m + j] * scale[m + j]
         change[j] = new - lam[j]
         lam[j] = new
+    free_step = estimator.free_step
     for row in range(size):
         acc = solved[row, 0]
         for a in range(n_mass):
             acc += mass_columns[row, 1 + a] * (z[2 * m + a] * scale[2 * m + a] - masses[a])
         free_step[row] = acc
-    n = size // 6
-    increments = work[:6 * n].reshape((n, 6))
     apply_linear_step_into(positions, rotations, free_step, solved[:, 1:], change,
-                           scalars[MAX_ROTATION], increments, factor, False, False)
+                           tick.max_rotation, tick.increments, factor, False)
     for a in range(n_mass):
         masses[a] = z[2 * m + a] * scale[2 * m + a]
-    effector_points_into(positions, rotations, effector_frames, effector_offsets,
-                         effector_positions)
-    last = w_ea.shape[0] - 3
+    effector_points_into(positions, rotations, tick.effector_frames, tick.effector_offsets,
+                         estimator.effector_positions)
+    last_row = tick.w_ea.shape[0] - 3
+    effector_w, mass_w = estimator.effector_w, estimator.mass_w
     for i in range(3):
         for j in range(m):
-            effector_w[i, j] = w_ea[last + i, j] * p[j] * scale[j]
-            effector_w[i, m + j] = w_ea[last + i, j] * scale[m + j]
+            effector_w[i, j] = tick.w_ea[last_row + i, j] * p[j] * scale[j]
+            effector_w[i, m + j] = tick.w_ea[last_row + i, j] * scale[m + j]
         for a in range(n_mass):
-            effector_w[i, 2 * m + a] = mass_effectors[0][last + i, a] * scale[2 * m + a]
+            effector_w[i, 2 * m + a] = mass_w[last_row + i, a] * scale[2 * m + a]
     for i in range(3):
         for k in range(3):
             acc = 0.0
             for j in range(u):
                 for q in range(u):
                     acc += effector_w[i, j] * covariance[j, q] * effector_w[k, q]
-            tip_covariance[i, k] = acc
+            estimator.tip_covariance[i, k] = acc
 
 
 @numba.njit(cache=True)

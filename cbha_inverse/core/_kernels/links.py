@@ -1,469 +1,518 @@
 """
-Compiled pass over the compliance links (numba): deformation, wrenches, tangent blocks.
+The compliance links' equations (paper eq. 4-8), one compiled function per equation.
 
-:func:`link_pass`, per link ``l`` (frames ``a = l``, ``b = l + 1``): the deformation ``δ``
-(paper eq. 4-8), the local b-side wrench ``L = [-s_f; -Jl⁻ᵀ(φ) s_r] + Σ_c p_c (G0_c + H_c δ)``
-(paper eq. 9 plus the condensed cavities of
-:mod:`cbha_inverse.core.actuation.condensed_cavities`) rotated to world axes and gathered onto
-the two frames (paper eq. 5-7), and the exact 12 x 12 world tangent ``Eᵀ R M Rᵀ E`` + the
-geometric terms of the rotated wrench, ``M = (Bᵀ K + Z(dJ) - H_p) B`` (paper eq. 8 plus the
-exact cavity load stiffness), or the material part alone. The one implementation of the link
-equations: the control tick, the static solver, the scenes' forward model and the plant all run
-it (through :class:`cbha_inverse.core.system.EquilibriumSystem`); the readable numpy version is
-a test oracle (``test/oracles/chain_forces.py``).
+A link joins frame ``a`` (its lower frame) to frame ``b = a + 1``; its stiffness ``K = C⁻¹`` acts
+on the corotational deformation ``δ``. :func:`link_pass` runs, for every link, in order:
+
+1. :func:`link_deformation`, eq. 4: ``δ = [R_aᵀ (x_b - x_a) - d0; log(R_aᵀ R_b Q0ᵀ)]``;
+2. :func:`local_wrench`, eq. 5 with ``B = diag(I, Jl⁻¹(φ))``: the b-side wrench in frame-a axes
+   ``L = -Bᵀ K δ`` and ``A = Bᵀ K``; :func:`add_cavity_wrenches`, the condensed cavities of
+   :mod:`cbha_inverse.core.actuation.condensed_cavities`: ``L += Σ_c p_c (G0_c + H_c δ)``, one
+   column of ``J_aᵀ`` per cavity, and their load stiffness ``A -= p_c H_c``;
+3. :func:`scatter_link_wrenches`, eq. 5-7: ``L`` rotated to world axes onto frame ``b``, the
+   equilibrating wrench onto frame ``a`` (the moment transported from ``x_b`` to ``x_a``);
+4. :func:`local_tangent`, eq. 8 and the stress terms: ``M = (A + Z - ½ s_r^) B`` with
+   ``Z = d(Jl⁻ᵀ(φ) s_r)/dφ`` (exact), or ``Bᵀ K B`` alone (material);
+5. :func:`world_tangent`: the 12 x 12 tangent of the pair in world axes, ``Eᵀ R M Rᵀ E``
+   (``R = diag(R_a, R_a)``, ``E = [E_a, I]``, ``E_a = [-I, d^; 0, -I]``);
+6. :func:`add_geometric_terms` (exact tangent): the terms of the rotated wrench and of its lever.
+
+The control tick factors the symmetric part of the tangent: ``Eᵀ R sym(M) Rᵀ E`` plus the
+symmetric part of the geometric terms, whose blocks on and below the diagonal alone are formed
+(the same tangent as the symmetric part of the exact one, up to rounding).
+
+The one implementation of these equations, behind the control tick, the static solver, the
+scenes' forward model and the plant (:mod:`cbha_inverse.core._kernels.evaluation`); the readable
+numpy version is a test oracle (``test/oracles/chain_forces.py``).
 """
 
-from cbha_inverse.core._kernels.so3 import (_add_scaled_hat, jl_coefficient,
-                                            left_jacobian_inverse_into,
-                                            rotation_log_scalars)
+from cbha_inverse.core._kernels.assembly import add_link_block
+from cbha_inverse.core._kernels.so3 import (add_scaled_hat, jl_coefficient,
+                                            left_jacobian_inverse_into, rotation_log_scalars)
 import numba
-import numpy as np
 
 
-@numba.njit(cache=True)
-def link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-              cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material):
+@numba.njit(cache=True, inline='always')
+def link_deformation(positions, rotations, rest_offsets, rest_rotations_t, link, difference,
+                     relative, delta):
     """
-    Write every link's wrenches into ``rhs`` and its world tangent into ``blocks``.
+    Write the deformation ``δ`` of a link (paper eq. 4) and return its angle ``|φ|``.
 
     Parameters
     ----------
     positions : (n + 1, 3) ndarray  [m]
         Frame origins.
     rotations : (n + 1, 3, 3) ndarray
-        Frame rotations.
-    stiffness : (n, 6, 6) ndarray  [N/m, N, N*m/rad]
-        Link stiffness ``K``.
+        Frame rotations (frame axes → world).
     rest_offsets : (n, 3) ndarray  [m]
-        ``d0``.
+        ``d0``: frame ``b`` in frame ``a`` at rest.
     rest_rotations_t : (n, 3, 3) ndarray
-        ``Q0ᵀ``, or a (0, 3, 3) array when every ``Q0`` is the identity.
-    actuation : (m,) ndarray  [Pa, N]
-        ``λ`` (the cavity pressures enter the wrench and the load stiffness).
-    cavity_wrench : (n, c, 6) ndarray  [N/Pa, N*m/Pa]
-        ``G0`` of every condensed cavity part per link (``c = m`` with cavities, else 0).
-    cavity_stiffness : (n, c, 6, 6) ndarray
-        ``H`` of the same parts (derivative of the local wrench per unit pressure).
-    cavity_columns : (n, c) int ndarray
-        Per link, the cavity columns whose ``G0`` or ``H`` is nonzero, then -1
-        (:func:`nonzero_cavity_columns`): only those are computed (the others add exact zeros).
-    rhs : (6n, m + 1) ndarray
-        Zeroed here; receives the link wrenches (column 0) and, with cavities, ``J_aᵀ``
-        (columns ``1 + c``).
-    blocks : (n, 12, 12) ndarray
-        Receives the link tangents ``-d[w_a; w_b]/d[dq_a; dq_b]`` in world axes, rows and
-        columns (frame a, frame b): exact (not symmetric; material, geometric and cavity load
-        stiffness), or with ``material`` the material part ``Dᵀ Bᵀ K B D`` alone (paper eq. 8,
-        symmetric positive semi-definite whatever the loads).
-    material : bool
-        Write the material tangent instead of the exact one (the residual is the same).
-
-    """
-    link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-                   cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material,
-                   np.empty(link_work_size(cavity_wrench.shape[1])))
-
-
-def nonzero_cavity_columns(cavity_wrench, cavity_stiffness):
-    """
-    Return the cavity columns of every link whose ``G0`` or ``H`` is nonzero, padded with -1.
-
-    Parameters
-    ----------
-    cavity_wrench : (n, c, 6) ndarray  [N/Pa, N*m/Pa]
-        ``G0`` per link and cavity column.
-    cavity_stiffness : (n, c, 6, 6) ndarray
-        ``H`` per link and cavity column.
+        ``Q0ᵀ``: the rest rotation of frame ``b`` in frame ``a``, transposed.
+    link : int
+        The link (frames ``a = link``, ``b = link + 1``).
+    difference : (3,) ndarray  [m]
+        Receives ``x_b - x_a`` (world axes).
+    relative : (3, 3) ndarray
+        Receives ``R_aᵀ R_b Q0ᵀ``.
+    delta : (6,) ndarray  [m, rad]
+        Receives ``δ = [R_aᵀ (x_b - x_a) - d0; φ]``, ``φ = log(R_aᵀ R_b Q0ᵀ)``.
 
     Returns
     -------
-    (n, c) int64 ndarray
-        Per link, its nonzero cavity columns in increasing order, then -1.
+    float  [rad]
+        ``t = |φ|``.
 
     """
-    n, c = cavity_wrench.shape[:2]
-    nonzero = (np.any(cavity_wrench != 0.0, axis=2)
-               | np.any(cavity_stiffness.reshape((n, c, 36)) != 0.0, axis=2))
-    columns = np.full((n, c), -1, dtype=np.int64)
-    for link in range(n):
-        active = np.flatnonzero(nonzero[link])
-        columns[link, :active.size] = active
-    return columns
+    a, b = link, link + 1
+    for i in range(3):
+        difference[i] = positions[b, i] - positions[a, i]
+    for i in range(3):
+        # row i of R_aᵀ R_b, then times Q0ᵀ
+        t0 = (rotations[a, 0, i] * rotations[b, 0, 0] + rotations[a, 1, i] * rotations[b, 1, 0]
+              + rotations[a, 2, i] * rotations[b, 2, 0])
+        t1 = (rotations[a, 0, i] * rotations[b, 0, 1] + rotations[a, 1, i] * rotations[b, 1, 1]
+              + rotations[a, 2, i] * rotations[b, 2, 1])
+        t2 = (rotations[a, 0, i] * rotations[b, 0, 2] + rotations[a, 1, i] * rotations[b, 1, 2]
+              + rotations[a, 2, i] * rotations[b, 2, 2])
+        for j in range(3):
+            relative[i, j] = (t0 * rest_rotations_t[link, 0, j] + t1 * rest_rotations_t[link, 1, j]
+                              + t2 * rest_rotations_t[link, 2, j])
+    for i in range(3):
+        delta[i] = (rotations[a, 0, i] * difference[0] + rotations[a, 1, i] * difference[1]
+                    + rotations[a, 2, i] * difference[2] - rest_offsets[link, i])
+    theta, delta[3], delta[4], delta[5] = rotation_log_scalars(relative)
+    return theta
 
 
-@numba.njit(cache=True)
-def link_work_size(n_cavities):
+@numba.njit(cache=True, inline='always')
+def local_wrench(stiffness, link, delta, jl_inverse, stress, weighted, local):
     """
-    Return the length of the workspace of the link passes (``c`` cavity columns).
+    Write the elastic b-side wrench of a link in frame-``a`` axes (paper eq. 5).
 
-    :func:`link_pass_into` uses its first ``114 + 12 (1 + c)`` entries,
-    :func:`link_pass_band_into` 144 more (one link's 12 x 12 block).
-    """
-    return 114 + 12 * (1 + n_cavities) + 144
-
-
-@numba.njit(cache=True)
-def link_pass_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-                   cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material, work):
-    """:func:`link_pass` with its workspace given, ``work`` (:func:`link_work_size`,)."""
-    _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-               cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material, work[:0],
-               0, False, work)
-
-
-@numba.njit(cache=True)
-def link_pass_band_into(positions, rotations, stiffness, rest_offsets, rest_rotations_t,
-                        actuation, cavity_wrench, cavity_stiffness, cavity_columns, rhs, band,
-                        work):
-    """
-    Write the link wrenches into ``rhs`` and add the tangent's symmetric part into a band.
-
-    The pass of :func:`link_pass_into` (exact tangent, ``material`` False), which keeps of each
-    link's 12 x 12 world tangent ``T`` only what the symmetric lower band needs: the lower
-    triangle of ``(T + Tᵀ) / 2``, added straight into ``band`` (no assembly index, no weights;
-    the base frame's rows and columns are left out). ``(Eᵀ R M Rᵀ E + its transpose) / 2 =
-    Eᵀ R sym(M) Rᵀ E``: the 6 x 6 ``M`` is symmetrised first, so of the products with ``Ra`` and
-    ``E_a`` only the blocks on and below the diagonal are formed, and the geometric terms enter by
-    their symmetric part. The same tangent as the symmetric part of :func:`link_pass_into`'s
-    blocks up to rounding (the sums are grouped differently).
+    With ``B = diag(I, Jl⁻¹(φ))`` (the rotation increments of ``φ``): ``s = K δ``,
+    ``A = Bᵀ K`` and ``L = -Bᵀ K δ = -A δ``.
 
     Parameters
     ----------
-    positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation, cavity_wrench, \
-cavity_stiffness, cavity_columns, rhs
-        As :func:`link_pass` (``rhs`` zeroed, then the wrenches and ``J_aᵀ``).
-    band : ((N + 1) w,) ndarray
-        Lower band storage in C order, row ``c`` at ``c w``, ``band[c w + r - c] += K[r, c]``
-        (``w = kd + 1``, :func:`cbha_inverse.core._kernels.band_assembly.band_rows`; ``kd >= 11``);
-        added to, not zeroed.
-    work : (link_work_size(c),) ndarray
-        Workspace.
+    stiffness : (n, 6, 6) ndarray  [N/m, N, N*m/rad]
+        The links' ``K``.
+    link : int
+        The link.
+    delta : (6,) ndarray  [m, rad]
+        ``δ`` (:func:`link_deformation`).
+    jl_inverse : (3, 3) ndarray
+        ``Jl⁻¹(φ)``.
+    stress : (6,) ndarray  [N, N*m]
+        Receives ``s = K δ``.
+    weighted : (6, 6) ndarray
+        Receives ``A = Bᵀ K``.
+    local : (6, m + 1) ndarray  [N, N*m]
+        Column 0 receives ``L``.
 
     """
-    width = band.size // (rhs.shape[0] + 1)
-    # (1, 12, 12) of literal shape and strides (float64), as :func:`_matrix_view`
-    scratch = np.lib.stride_tricks.as_strided(work[work.size - 144:], (1, 12, 12),
-                                              (1152, 96, 8))
-    _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-               cavity_wrench, cavity_stiffness, cavity_columns, rhs, scratch, False, band, width,
-               True, work)
-
-
-@numba.njit(cache=True, inline='always')
-def _link_pass(positions, rotations, stiffness, rest_offsets, rest_rotations_t, actuation,
-               cavity_wrench, cavity_stiffness, cavity_columns, rhs, blocks, material, band, width,
-               symmetric, work):
-    """
-    Run the pass of :func:`link_pass_into` or (``symmetric``) :func:`link_pass_band_into`.
-
-    With ``symmetric`` every link's block is formed in ``blocks[0]`` (symmetric part, lower
-    triangle) and added into ``band`` (rows of ``width`` slots). Inlined into both with a
-    literal ``symmetric``: each compiles without the other's branches.
-    """
-    n = stiffness.shape[0]
-    n_cav = cavity_wrench.shape[1]
-    kc = 1 + n_cav
-    rhs[:, :] = 0.0
-    rel = _matrix_view(work, 0, 3, 3)
-    tmp = _matrix_view(work, 9, 3, 3)
-    delta = work[18:24]
-    stress = work[24:30]
-    jinv = _matrix_view(work, 30, 3, 3)
-    a = _matrix_view(work, 39, 6, 6)
-    mat = _matrix_view(work, 75, 6, 6)
-    diff = work[111:114]
-    local = _matrix_view(work, 114, 6, kc)
-    world = _matrix_view(work, 114 + 6 * kc, 6, kc)
-    # every view taken once, here: a view taken per link costs atomic reference counts
-    phi = delta[3:]
-    s_r = stress[3:]
-    a_rr = a[3:, 3:]
-    out = blocks[0]
-    for link in range(n):
-        for i in range(3):
-            diff[i] = positions[link + 1, i] - positions[link, i]
-        for i in range(3):
-            for j in range(3):
-                rel[i, j] = (rotations[link, 0, i] * rotations[link + 1, 0, j]
-                             + rotations[link, 1, i] * rotations[link + 1, 1, j]
-                             + rotations[link, 2, i] * rotations[link + 1, 2, j])
-        if rest_rotations_t.shape[0] > 0:
-            tmp[:, :] = rel
-            for i in range(3):
-                for j in range(3):
-                    rel[i, j] = (tmp[i, 0] * rest_rotations_t[link, 0, j]
-                                 + tmp[i, 1] * rest_rotations_t[link, 1, j]
-                                 + tmp[i, 2] * rest_rotations_t[link, 2, j])
-        for i in range(3):
-            delta[i] = (rotations[link, 0, i] * diff[0] + rotations[link, 1, i] * diff[1]
-                        + rotations[link, 2, i] * diff[2] - rest_offsets[link, i])
-        theta, delta[3], delta[4], delta[5] = rotation_log_scalars(rel)
-        t2 = theta * theta
-        c, dc = jl_coefficient(theta)
-        for i in range(6):
-            acc = 0.0
-            for j in range(6):
-                acc += stiffness[link, i, j] * delta[j]
-            stress[i] = acc
-        left_jacobian_inverse_into(phi, theta, c, jinv)
-        # a = B^T K with B = diag(I, Jl^-1)
+    for i in range(6):
+        acc = 0.0
         for j in range(6):
-            for i in range(3):
-                a[i, j] = stiffness[link, i, j]
-                a[3 + i, j] = (jinv[0, i] * stiffness[link, 3, j]
-                               + jinv[1, i] * stiffness[link, 4, j]
-                               + jinv[2, i] * stiffness[link, 5, j])
-        # local b-side wrench: column 0 total (-B^T K delta + sum_c p_c (G0_c + H_c delta)),
-        # columns 1.. per unit pressure
+            acc += stiffness[link, i, j] * delta[j]
+        stress[i] = acc
+    for j in range(6):
+        for i in range(3):
+            weighted[i, j] = stiffness[link, i, j]
+            weighted[3 + i, j] = (jl_inverse[0, i] * stiffness[link, 3, j]
+                                  + jl_inverse[1, i] * stiffness[link, 4, j]
+                                  + jl_inverse[2, i] * stiffness[link, 5, j])
+    for i in range(6):
+        acc = 0.0
+        for j in range(6):
+            acc += weighted[i, j] * delta[j]
+        local[i, 0] = -acc
+
+
+@numba.njit(cache=True, inline='always')
+def add_cavity_wrenches(cavity_wrench, cavity_stiffness, cavity_columns, link, actuation,
+                        delta, with_load, local, weighted):
+    """
+    Add a link's condensed cavities to its local wrench and, exact, their load stiffness.
+
+    Cavity ``c`` (an actuator column) adds ``G0_c + H_c δ`` per pascal: column ``1 + c`` of
+    ``local`` (a column of ``J_aᵀ`` before rotation), and ``p_c`` times it to column 0 (the
+    wrench at the current pressure). Its load stiffness ``-p_c H_c`` enters ``A``.
+
+    Parameters
+    ----------
+    cavity_wrench : (n, c, 6) ndarray  [N/Pa, N*m/Pa]
+        ``G0`` per link and actuator column.
+    cavity_stiffness : (n, c, 6, 6) ndarray
+        ``H`` per link and actuator column.
+    cavity_columns : (n, c) int ndarray
+        Per link, the columns with a nonzero ``G0`` or ``H``, then -1.
+    link : int
+        The link.
+    actuation : (m,) ndarray  [Pa]
+        ``λ``.
+    delta : (6,) ndarray  [m, rad]
+        ``δ``.
+    with_load : bool
+        Subtract the load stiffness from ``weighted`` (the exact tangent).
+    local : (6, m + 1) ndarray
+        Column 0 is added to; the cavities' columns are written.
+    weighted : (6, 6) ndarray
+        ``A`` (added to).
+
+    Returns
+    -------
+    int
+        The number of cavity columns written.
+
+    """
+    used = 0
+    for slot in range(cavity_columns.shape[1]):
+        cavity = cavity_columns[link, slot]
+        if cavity < 0:
+            break
+        used += 1
+        pressure = actuation[cavity]
+        load = with_load and pressure != 0.0
         for i in range(6):
-            acc = 0.0
+            acc = cavity_wrench[link, cavity, i]
             for j in range(6):
-                acc += a[i, j] * delta[j]
-            local[i, 0] = -acc
-        used = 0
-        for slot in range(n_cav):
-            cav = cavity_columns[link, slot]
-            if cav < 0:
-                break
-            used += 1
-            p = actuation[cav]
-            # the exact tangent's cavity load stiffness, a -= p_c H_c, in the same pass over H_c
-            load = p != 0.0 and not material
-            for i in range(6):
-                acc = cavity_wrench[link, cav, i]
-                for j in range(6):
-                    h = cavity_stiffness[link, cav, i, j]
-                    acc += h * delta[j]
-                    if load:
-                        a[i, j] -= p * h
-                local[i, 1 + cav] = acc
-                local[i, 0] += p * acc
-        # world axes; frame b gets the wrench, frame a the equilibrating one (moment at x_a),
-        # each column in scalar locals (LLVM keeps them in registers across the stores)
-        row_b = 6 * link
-        row_a = 6 * (link - 1)
-        for slot in range(1 + used):
-            col = 0 if slot == 0 else 1 + cavity_columns[link, slot - 1]
-            f0, f1, f2 = _rotate_vector(rotations, link, local, 0, col)
-            m0, m1, m2 = _rotate_vector(rotations, link, local, 3, col)
-            world[0, col], world[1, col], world[2, col] = f0, f1, f2
-            world[3, col], world[4, col], world[5, col] = m0, m1, m2
-            rhs[row_b, col] += f0
-            rhs[row_b + 1, col] += f1
-            rhs[row_b + 2, col] += f2
-            rhs[row_b + 3, col] += m0
-            rhs[row_b + 4, col] += m1
-            rhs[row_b + 5, col] += m2
-            if link > 0:
-                rhs[row_a, col] -= f0
-                rhs[row_a + 1, col] -= f1
-                rhs[row_a + 2, col] -= f2
-                rhs[row_a + 3, col] -= m0
-                rhs[row_a + 4, col] -= m1
-                rhs[row_a + 5, col] -= m2
-                rhs[row_a + 3, col] -= diff[1] * f2 - diff[2] * f1
-                rhs[row_a + 4, col] -= diff[2] * f0 - diff[0] * f2
-                rhs[row_a + 5, col] -= diff[0] * f1 - diff[1] * f0
-        if not material:
-            # a[3:, 3:] += d(Jl^-T s_r)/dphi
-            ps = phi[0] * s_r[0] + phi[1] * s_r[1] + phi[2] * s_r[2]
-            for i in range(3):
-                left0 = dc * (phi[i] * ps - t2 * s_r[i]) - 2.0 * c * s_r[i]
-                left1 = c * phi[i]
-                for j in range(3):
-                    a[3 + i, 3 + j] += left0 * phi[j] + left1 * s_r[j]
-                a[3 + i, 3 + i] += c * ps
-            _add_scaled_hat(a_rr, s_r, -0.5)
-        # mat = a B
-        for i in range(6):
+                acc += cavity_stiffness[link, cavity, i, j] * delta[j]
+                if load:
+                    weighted[i, j] -= pressure * cavity_stiffness[link, cavity, i, j]
+            local[i, 1 + cavity] = acc
+            local[i, 0] += pressure * acc
+    return used
+
+
+@numba.njit(cache=True, inline='always')
+def scatter_link_wrenches(rotations, link, difference, local, column, rhs, world):
+    """
+    Rotate one column of a link's local wrench to world axes and add it to both frames.
+
+    Paper eq. 5-7: frame ``b`` gets ``w = [R_a L_f; R_a L_m]``; frame ``a`` the opposite force and
+    the opposite moment transported to ``x_a``, ``-[F; M + (x_b - x_a) × F]`` (none for the
+    base, ``link`` 0). The two wrenches are in equilibrium.
+
+    Parameters
+    ----------
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    link : int
+        The link (frame ``a = link``).
+    difference : (3,) ndarray  [m]
+        ``x_b - x_a``.
+    local : (6, m + 1) ndarray  [N, N*m]
+        The local wrenches (column 0, then per unit actuation).
+    column : int
+        The column of ``local`` and ``rhs``.
+    rhs : (6n, m + 1) ndarray
+        Added to: rows ``6 (b - 1) ...`` for frame ``b``, ``6 (a - 1) ...`` for frame ``a``.
+    world : (6, m + 1) ndarray
+        Receives ``w`` (column ``column``).
+
+    """
+    for i in range(3):
+        world[i, column] = (rotations[link, i, 0] * local[0, column]
+                            + rotations[link, i, 1] * local[1, column]
+                            + rotations[link, i, 2] * local[2, column])
+        world[3 + i, column] = (rotations[link, i, 0] * local[3, column]
+                                + rotations[link, i, 1] * local[4, column]
+                                + rotations[link, i, 2] * local[5, column])
+    row_b = 6 * link
+    for i in range(6):
+        rhs[row_b + i, column] += world[i, column]
+    if link == 0:
+        return
+    row_a = row_b - 6
+    f0, f1, f2 = world[0, column], world[1, column], world[2, column]
+    d0, d1, d2 = difference[0], difference[1], difference[2]
+    for i in range(6):
+        rhs[row_a + i, column] -= world[i, column]
+    rhs[row_a + 3, column] -= d1 * f2 - d2 * f1
+    rhs[row_a + 4, column] -= d2 * f0 - d0 * f2
+    rhs[row_a + 5, column] -= d0 * f1 - d1 * f0
+
+
+@numba.njit(cache=True, inline='always')
+def local_tangent(weighted, jl_inverse, delta, stress, theta, exact, tangent):
+    """
+    Write the local tangent ``M`` of a link, ``-d L / d(δ increments)`` (paper eq. 8).
+
+    ``M = (A + Z - ½ s_r^) B`` with ``A = Bᵀ K`` (less the cavities' load stiffness) and
+    ``Z = d(Jl⁻ᵀ(φ) s_r)/dφ``, ``s_r`` the moment part of ``K δ``: the stress terms of the
+    rotation's parametrisation, exact; without them (``exact`` False) the material part
+    ``Bᵀ K B``, positive semi-definite whatever the loads.
+
+    Parameters
+    ----------
+    weighted : (6, 6) ndarray
+        ``A`` (:func:`local_wrench`, :func:`add_cavity_wrenches`); its moment block receives
+        the stress terms when ``exact``.
+    jl_inverse : (3, 3) ndarray
+        ``Jl⁻¹(φ)``.
+    delta : (6,) ndarray  [m, rad]
+        ``δ`` (``φ`` is ``delta[3:]``).
+    stress : (6,) ndarray  [N, N*m]
+        ``K δ``.
+    theta : float  [rad]
+        ``|φ|``.
+    exact : bool
+        Add the stress terms.
+    tangent : (6, 6) ndarray
+        Receives ``M``.
+
+    """
+    if exact:
+        # d(Jl⁻ᵀ s_r)/dφ with Jl⁻¹ = I - φ^/2 + c(t) φ^²: the derivative of c φ^² gives
+        # c' φ (φ·s) - ..., written with ps = φ·s_r and c' = dc t
+        c, dc = jl_coefficient(theta)
+        phi0, phi1, phi2 = delta[3], delta[4], delta[5]
+        s0, s1, s2 = stress[3], stress[4], stress[5]
+        ps = phi0 * s0 + phi1 * s1 + phi2 * s2
+        t2 = theta * theta
+        for i in range(3):
+            left0 = dc * (delta[3 + i] * ps - t2 * stress[3 + i]) - 2.0 * c * stress[3 + i]
+            left1 = c * delta[3 + i]
             for j in range(3):
-                mat[i, j] = a[i, j]
-                mat[i, 3 + j] = a[i, 3] * jinv[0, j] + a[i, 4] * jinv[1, j] + a[i, 5] * jinv[2, j]
-        # D = d delta / d(q_a, q_b) = R^T E with R = diag(Ra, Ra) and E = [E_a, I],
-        # E_a = [-I, d^; 0, -I]: the world tangent is E^T (R mat R^T) E, blocks
-        # [E_a^T M E_a, E_a^T M; M E_a, M] for M = R mat R^T
-        # the hat matrices as locals (LLVM keeps them in registers)
-        d0, d1, d2 = diff[0], diff[1], diff[2]
-        if symmetric:
-            # sym(mat): then M = R mat R^T is symmetric, its block (0, 1) the transpose of (1, 0)
-            for i in range(1, 6):
-                for j in range(i):
-                    s = 0.5 * (mat[i, j] + mat[j, i])
-                    mat[i, j] = s
-                    mat[j, i] = s
-            _rotate_block(mat, rotations, link, out, 0, 0)
-            _rotate_block(mat, rotations, link, out, 3, 0)
-            _rotate_block(mat, rotations, link, out, 3, 3)
-            for i in range(3):
-                for j in range(3):
-                    out[6 + i, 9 + j] = out[9 + j, 6 + i]
-        else:
-            out = blocks[link]
-            # M = R mat R^T straight into its block of out, read back there
-            for p in range(2):
-                for q in range(2):
-                    _rotate_block(mat, rotations, link, out, 3 * p, 3 * q)
-        # the products with d^ written out term by term (the zero terms of the hat matrix
-        # dropped: x + 0 y = x for finite y), no tuple indexed by a loop variable
-        for i in range(6):
-            # M E_a
-            r = 6 + i
-            x0, x1, x2 = out[r, 6], out[r, 7], out[r, 8]
-            out[r, 0] = -x0
-            out[r, 1] = -x1
-            out[r, 2] = -x2
-            out[r, 3] = x1 * d2 - x2 * d1 - out[r, 9]
-            out[r, 4] = x2 * d0 - x0 * d2 - out[r, 10]
-            out[r, 5] = x0 * d1 - x1 * d0 - out[r, 11]
-        # (symmetric: the block (0, 1), E_a^T M, is above the diagonal)
-        for c in range(6 if symmetric else 12):
-            # E_a^T M and E_a^T (M E_a), column c
-            y0, y1, y2 = out[6, c], out[7, c], out[8, c]
-            out[0, c] = -y0
-            out[1, c] = -y1
-            out[2, c] = -y2
-            out[3, c] = -(y2 * d1 - d2 * y1) - out[9, c]
-            out[4, c] = -(d2 * y0 - d0 * y2) - out[10, c]
-            out[5, c] = -(d0 * y1 - d1 * y0) - out[11, c]
-        if symmetric:
-            _add_symmetric_geometric(out, world, d0, d1, d2)
-            _add_lower_into_band(out, band, width, 6 * (link - 1))
-            continue
-        if material:
-            continue
-        # geometric terms of the b-side world wrench (F, M) = R_a L: turning frame a turns it
-        # (dF = -F^ dθ_a, dM = -M^ dθ_a) and the lever d = x_b - x_a of the a-side moment
-        # -M - d x F moves with x_a, x_b: the blocks -F^ at (0, 3), F^ at (3, 0), -F^ at
-        # (3, 6), F^ at (6, 3), M^ at (9, 3) and -(M^ + d^ F^) at (3, 3)
-        f0, f1, f2 = world[0, 0], world[1, 0], world[2, 0]
-        m0, m1, m2 = world[3, 0], world[4, 0], world[5, 0]
-        _add_hat(out, 0, 3, -f0, -f1, -f2)
-        _add_hat(out, 3, 0, f0, f1, f2)
-        _add_hat(out, 3, 6, -f0, -f1, -f2)
-        _add_hat(out, 6, 3, f0, f1, f2)
-        _add_hat(out, 9, 3, m0, m1, m2)
-        out[3, 3] -= -(d2 * f2) - d1 * f1
-        out[3, 4] -= d1 * f0 - m2
-        out[3, 5] -= m1 + d2 * f0
-        out[4, 3] -= m2 + d0 * f1
-        out[4, 4] -= -(d2 * f2) - d0 * f0
-        out[4, 5] -= d2 * f1 - m0
-        out[5, 3] -= d0 * f2 - m1
-        out[5, 4] -= m0 + d1 * f2
-        out[5, 5] -= -(d1 * f1) - d0 * f0
+                weighted[3 + i, 3 + j] += left0 * delta[3 + j] + left1 * stress[3 + j]
+            weighted[3 + i, 3 + i] += c * ps
+        add_scaled_hat(weighted, 3, 3, s0, s1, s2, -0.5)
+    for i in range(6):
+        for j in range(3):
+            tangent[i, j] = weighted[i, j]
+            tangent[i, 3 + j] = (weighted[i, 3] * jl_inverse[0, j]
+                                 + weighted[i, 4] * jl_inverse[1, j]
+                                 + weighted[i, 5] * jl_inverse[2, j])
 
 
 @numba.njit(cache=True, inline='always')
-def _matrix_view(work, start, rows, cols):
+def world_tangent(tangent, rotations, link, difference, symmetric, block):
     """
-    Return ``work[start:start + rows cols]`` (float64) as a (rows, cols) matrix in C order.
+    Write a link's 12 x 12 world tangent ``Eᵀ R M Rᵀ E`` (frames ``a``, ``b``) into ``block``.
 
-    A view with its shape and strides given (``as_strided``), where ``reshape`` gets them from
-    a library call opaque to LLVM: with literal ``rows`` and ``cols`` the view's addresses are
-    constants and LLVM tells the workspace's matrices apart. The strides are literal bytes:
-    ``work.itemsize`` is read at run time (the compiled CBHA tick 13.9 against 13.3 µs).
+    ``δ`` moves with the world increments ``(dx, dθ)`` of its two frames as ``Rᵀ E``, with
+    ``R = diag(R_a, R_a)``, ``E = [E_a, I]`` and ``E_a = [-I, d^; 0, -I]`` (``d = x_b - x_a``):
+    the blocks are ``[E_aᵀ W E_a, E_aᵀ W; W E_a, W]`` for ``W = R M Rᵀ``. Rows and columns: frame
+    ``a``'s six increments, then frame ``b``'s. A symmetric ``M`` gives a symmetric tangent:
+    then only its entries on and below the diagonal are written.
+
+    Parameters
+    ----------
+    tangent : (6, 6) ndarray
+        ``M`` (:func:`local_tangent`).
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (``R_a = rotations[link]``).
+    link : int
+        The link.
+    difference : (3,) ndarray  [m]
+        ``d = x_b - x_a``.
+    symmetric : bool
+        ``M`` is symmetric: write the lower triangle.
+    block : (12, 12) ndarray
+        Receives the tangent.
+
     """
-    return np.lib.stride_tricks.as_strided(work[start:start + rows * cols], (rows, cols),
-                                           (8 * cols, 8))
+    rotate_block(tangent, 0, 0, rotations, link, block, 6, 6)
+    rotate_block(tangent, 3, 0, rotations, link, block, 9, 6)
+    rotate_block(tangent, 3, 3, rotations, link, block, 9, 9)
+    if symmetric:
+        for i in range(3):
+            for j in range(3):
+                block[6 + i, 9 + j] = block[9 + j, 6 + i]
+    else:
+        rotate_block(tangent, 0, 3, rotations, link, block, 6, 9)
+    d0, d1, d2 = difference[0], difference[1], difference[2]
+    # W E_a: columns 0-2 are -W[:, 0:3], columns 3-5 are W[:, 0:3] d^ - W[:, 3:6]
+    for r in range(6, 12):
+        x0, x1, x2 = block[r, 6], block[r, 7], block[r, 8]
+        block[r, 0] = -x0
+        block[r, 1] = -x1
+        block[r, 2] = -x2
+        block[r, 3] = x1 * d2 - x2 * d1 - block[r, 9]
+        block[r, 4] = x2 * d0 - x0 * d2 - block[r, 10]
+        block[r, 5] = x0 * d1 - x1 * d0 - block[r, 11]
+    # E_aᵀ (W E_a, W): rows 0-2 are -Y[0:3], rows 3-5 are -d^ Y[0:3] - Y[3:6]
+    for c in range(6 if symmetric else 12):
+        y0, y1, y2 = block[6, c], block[7, c], block[8, c]
+        block[0, c] = -y0
+        block[1, c] = -y1
+        block[2, c] = -y2
+        block[3, c] = -(y2 * d1 - d2 * y1) - block[9, c]
+        block[4, c] = -(d2 * y0 - d0 * y2) - block[10, c]
+        block[5, c] = -(d0 * y1 - d1 * y0) - block[11, c]
 
 
 @numba.njit(cache=True, inline='always')
-def _add_symmetric_geometric(out, world, d0, d1, d2):
-    """
-    Add the symmetric part of a link's geometric terms to the lower triangle of its block.
+def symmetrize(matrix):
+    """Replace a square matrix by its symmetric part ``(M + Mᵀ) / 2``, in place."""
+    for i in range(1, matrix.shape[0]):
+        for j in range(i):
+            mean = 0.5 * (matrix[i, j] + matrix[j, i])
+            matrix[i, j] = mean
+            matrix[j, i] = mean
 
-    The terms of :func:`link_pass_into` (``F``, ``M`` the b-side world wrench, column 0 of
-    ``world``): the pairs ``-F^`` at (0, 3) / ``F^`` at (3, 0) and ``-F^`` at (3, 6) / ``F^`` at
-    (6, 3) are each other's transposes (``F^`` stays below the diagonal), ``M^`` at (9, 3) has a
-    zero mirror (half of it stays) and of ``-(M^ + d^ F^)`` at (3, 3) the symmetric part is
-    ``-(d^ F^ + F^ d^) / 2``, ``d^ F^ = F dᵀ - (d·F) I``.
+
+@numba.njit(cache=True, inline='always')
+def add_geometric_terms(world, difference, symmetric, block):
+    """
+    Add the geometric terms of a link's world wrenches to its 12 x 12 tangent.
+
+    With ``(F, M)`` the b-side world wrench (column 0 of ``world``): turning frame ``a`` turns it
+    (``dF = -F^ dθ_a``, ``dM = -M^ dθ_a``), and the lever ``d = x_b - x_a`` of the a-side
+    moment ``-M - d × F`` moves with ``x_a`` and ``x_b``. The blocks: ``-F^`` at (0, 3), ``F^`` at
+    (3, 0), ``-F^`` at (3, 6), ``F^`` at (6, 3), ``M^`` at (9, 3) and ``-(M^ + d^ F^)`` at (3, 3),
+    ``d^ F^ = F dᵀ - (d·F) I``. With ``symmetric``, their symmetric part on and below the
+    diagonal: the pairs at (0, 3) / (3, 0) and (3, 6) / (6, 3) are each other's transposes
+    (``F^`` stays below the diagonal), ``M^`` at (9, 3) has a zero mirror (half of it stays), the
+    skew ``M^`` at (3, 3) has none and ``d^ F^`` gives ``(F dᵀ + d Fᵀ) / 2 - (d·F) I``.
+
+    Parameters
+    ----------
+    world : (6, m + 1) ndarray  [N, N*m]
+        The link's world wrenches (:func:`scatter_link_wrenches`).
+    difference : (3,) ndarray  [m]
+        ``d``.
+    symmetric : bool
+        Add the symmetric part, lower triangle (the block of :func:`world_tangent` with
+        ``symmetric``).
+    block : (12, 12) ndarray
+        Added to.
+
     """
     f0, f1, f2 = world[0, 0], world[1, 0], world[2, 0]
-    _add_hat(out, 3, 0, f0, f1, f2)
-    _add_hat(out, 6, 3, f0, f1, f2)
-    _add_hat(out, 9, 3, 0.5 * world[3, 0], 0.5 * world[4, 0], 0.5 * world[5, 0])
-    out[3, 3] -= -(d2 * f2) - d1 * f1
-    out[4, 3] -= 0.5 * (d0 * f1 + d1 * f0)
-    out[4, 4] -= -(d2 * f2) - d0 * f0
-    out[5, 3] -= 0.5 * (d0 * f2 + d2 * f0)
-    out[5, 4] -= 0.5 * (d1 * f2 + d2 * f1)
-    out[5, 5] -= -(d1 * f1) - d0 * f0
+    m0, m1, m2 = world[3, 0], world[4, 0], world[5, 0]
+    d0, d1, d2 = difference[0], difference[1], difference[2]
+    force = (f0, f1, f2)
+    lever = (d0, d1, d2)
+    dot = d0 * f0 + d1 * f1 + d2 * f2
+    add_scaled_hat(block, 3, 0, f0, f1, f2, 1.0)
+    add_scaled_hat(block, 6, 3, f0, f1, f2, 1.0)
+    if symmetric:
+        add_scaled_hat(block, 9, 3, m0, m1, m2, 0.5)
+        for i in range(3):
+            for j in range(i + 1):
+                block[3 + i, 3 + j] -= 0.5 * (force[i] * lever[j] + lever[i] * force[j])
+            block[3 + i, 3 + i] += dot
+        return
+    add_scaled_hat(block, 0, 3, f0, f1, f2, -1.0)
+    add_scaled_hat(block, 3, 6, f0, f1, f2, -1.0)
+    add_scaled_hat(block, 9, 3, m0, m1, m2, 1.0)
+    add_scaled_hat(block, 3, 3, m0, m1, m2, -1.0)
+    for i in range(3):
+        for j in range(3):
+            block[3 + i, 3 + j] -= force[i] * lever[j]
+        block[3 + i, 3 + i] += dot
 
 
 @numba.njit(cache=True, inline='always')
-def _add_lower_into_band(out, band, width, dof):
+def rotate_block(source, r0, c0, rotations, link, target, r1, c1):
     """
-    Add the lower triangle of a link's 12 x 12 block into a lower band (C order, rows ``width``).
+    Write ``R_a S R_aᵀ`` of the 3 x 3 block ``S`` of ``source`` at (r0, c0) into ``target``.
 
-    Entry ``(i, j)``, ``i >= j``, of the block at unknowns ``(dof + i, dof + j)`` goes to slot
-    ``(dof + j) width + i - j``; with ``dof < 0`` (the first link) frame a is the base: its rows
-    and columns are left out.
-    """
-    if dof >= 0:
-        for j in range(6):
-            row = (dof + j) * width - j
-            for i in range(j, 12):
-                band[row + i] += out[i, j]
-    # (two loops of constant trip counts, fully unrolled)
-    for j in range(6, 12):
-        row = (dof + j) * width - j
-        for i in range(j, 12):
-            band[row + i] += out[i, j]
+    ``T = S R_aᵀ`` first, then ``R_a T``; ``R_a`` and ``S`` are read once, before the first
+    store (a store to ``target`` could otherwise be one to them, for all the compiler knows).
 
+    Parameters
+    ----------
+    source : (p, q) ndarray
+        Holds ``S`` at rows ``r0 ...``, columns ``c0 ...``.
+    r0, c0 : int
+        Its corner.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (``R_a = rotations[link]``).
+    link : int
+        The frame.
+    target : (p', q') ndarray
+        Receives the block at rows ``r1 ...``, columns ``c1 ...``.
+    r1, c1 : int
+        Its corner.
 
-@numba.njit(cache=True, inline='always')
-def _add_hat(out, r0, c0, v0, v1, v2):
-    """Add ``hat(v)`` to the 3 x 3 block of ``out`` at ``(r0, c0)`` (its diagonal is zero)."""
-    out[r0, c0 + 1] -= v2
-    out[r0, c0 + 2] += v1
-    out[r0 + 1, c0] += v2
-    out[r0 + 1, c0 + 2] -= v0
-    out[r0 + 2, c0] -= v1
-    out[r0 + 2, c0 + 1] += v0
-
-
-@numba.njit(cache=True, inline='always')
-def _rotate_vector(rotations, link, local, r0, col):
-    """Return ``Ra v``, ``v`` rows ``r0 .. r0 + 2`` of column ``col`` of ``local``, as floats."""
-    v0, v1, v2 = local[r0, col], local[r0 + 1, col], local[r0 + 2, col]
-    return (rotations[link, 0, 0] * v0 + rotations[link, 0, 1] * v1 + rotations[link, 0, 2] * v2,
-            rotations[link, 1, 0] * v0 + rotations[link, 1, 1] * v1 + rotations[link, 1, 2] * v2,
-            rotations[link, 2, 0] * v0 + rotations[link, 2, 1] * v1 + rotations[link, 2, 2] * v2)
-
-
-@numba.njit(cache=True, inline='always')
-def _rotate_block(mat, rotations, link, out, r0, c0):
-    """
-    Write ``Ra T Raᵀ``, ``T`` the 3 x 3 block of ``mat`` at ``(r0, c0)``, into ``out``.
-
-    ``(T Raᵀ)`` first, then ``Ra (T Raᵀ)``, each sum left to right, in scalar locals (LLVM keeps
-    them in registers, where a workspace array makes it store and reload them), written at
-    ``(6 + r0, 6 + c0)`` of the link's 12 x 12 block (~0.5 µs of the CBHA's 16 links).
-    ``Ra = rotations[link]`` is read in place (a view of it would cost reference counts).
     """
     r00, r01, r02 = rotations[link, 0, 0], rotations[link, 0, 1], rotations[link, 0, 2]
     r10, r11, r12 = rotations[link, 1, 0], rotations[link, 1, 1], rotations[link, 1, 2]
     r20, r21, r22 = rotations[link, 2, 0], rotations[link, 2, 1], rotations[link, 2, 2]
-    m00, m01, m02 = mat[r0, c0], mat[r0, c0 + 1], mat[r0, c0 + 2]
-    m10, m11, m12 = mat[r0 + 1, c0], mat[r0 + 1, c0 + 1], mat[r0 + 1, c0 + 2]
-    m20, m21, m22 = mat[r0 + 2, c0], mat[r0 + 2, c0 + 1], mat[r0 + 2, c0 + 2]
-    t00 = m00 * r00 + m01 * r01 + m02 * r02
-    t01 = m00 * r10 + m01 * r11 + m02 * r12
-    t02 = m00 * r20 + m01 * r21 + m02 * r22
-    t10 = m10 * r00 + m11 * r01 + m12 * r02
-    t11 = m10 * r10 + m11 * r11 + m12 * r12
-    t12 = m10 * r20 + m11 * r21 + m12 * r22
-    t20 = m20 * r00 + m21 * r01 + m22 * r02
-    t21 = m20 * r10 + m21 * r11 + m22 * r12
-    t22 = m20 * r20 + m21 * r21 + m22 * r22
-    r0 += 6
-    c0 += 6
-    out[r0, c0] = r00 * t00 + r01 * t10 + r02 * t20
-    out[r0, c0 + 1] = r00 * t01 + r01 * t11 + r02 * t21
-    out[r0, c0 + 2] = r00 * t02 + r01 * t12 + r02 * t22
-    out[r0 + 1, c0] = r10 * t00 + r11 * t10 + r12 * t20
-    out[r0 + 1, c0 + 1] = r10 * t01 + r11 * t11 + r12 * t21
-    out[r0 + 1, c0 + 2] = r10 * t02 + r11 * t12 + r12 * t22
-    out[r0 + 2, c0] = r20 * t00 + r21 * t10 + r22 * t20
-    out[r0 + 2, c0 + 1] = r20 * t01 + r21 * t11 + r22 * t21
-    out[r0 + 2, c0 + 2] = r20 * t02 + r21 * t12 + r22 * t22
+    s00, s01, s02 = source[r0, c0], source[r0, c0 + 1], source[r0, c0 + 2]
+    s10, s11, s12 = source[r0 + 1, c0], source[r0 + 1, c0 + 1], source[r0 + 1, c0 + 2]
+    s20, s21, s22 = source[r0 + 2, c0], source[r0 + 2, c0 + 1], source[r0 + 2, c0 + 2]
+    # T = S R_aᵀ
+    t00, t01, t02 = (s00 * r00 + s01 * r01 + s02 * r02, s00 * r10 + s01 * r11 + s02 * r12,
+                     s00 * r20 + s01 * r21 + s02 * r22)
+    t10, t11, t12 = (s10 * r00 + s11 * r01 + s12 * r02, s10 * r10 + s11 * r11 + s12 * r12,
+                     s10 * r20 + s11 * r21 + s12 * r22)
+    t20, t21, t22 = (s20 * r00 + s21 * r01 + s22 * r02, s20 * r10 + s21 * r11 + s22 * r12,
+                     s20 * r20 + s21 * r21 + s22 * r22)
+    # R_a T
+    target[r1, c1] = r00 * t00 + r01 * t10 + r02 * t20
+    target[r1, c1 + 1] = r00 * t01 + r01 * t11 + r02 * t21
+    target[r1, c1 + 2] = r00 * t02 + r01 * t12 + r02 * t22
+    target[r1 + 1, c1] = r10 * t00 + r11 * t10 + r12 * t20
+    target[r1 + 1, c1 + 1] = r10 * t01 + r11 * t11 + r12 * t21
+    target[r1 + 1, c1 + 2] = r10 * t02 + r11 * t12 + r12 * t22
+    target[r1 + 2, c1] = r20 * t00 + r21 * t10 + r22 * t20
+    target[r1 + 2, c1 + 1] = r20 * t01 + r21 * t11 + r22 * t21
+    target[r1 + 2, c1 + 2] = r20 * t02 + r21 * t12 + r22 * t22
+
+
+@numba.njit(cache=True)
+def link_pass(system, positions, rotations, actuation, exact, into_band):
+    """
+    Add every link's wrenches to ``system.rhs`` and write or add its tangent (paper eq. 4-8).
+
+    For each link, in order: :func:`link_deformation`, ``Jl⁻¹(φ)``, :func:`local_wrench`,
+    :func:`add_cavity_wrenches`, :func:`scatter_link_wrenches` (column 0 and each cavity column),
+    :func:`local_tangent`, :func:`world_tangent` and, exact, :func:`add_geometric_terms`. The
+    12 x 12 tangent goes to ``system.values`` (its link block) or, ``into_band``, its symmetric
+    part (of ``M`` first, :func:`symmetrize`, then of the geometric terms) into the block band
+    ``system.blocks`` (:func:`~cbha_inverse.core._kernels.assembly.add_link_block`).
+
+    Parameters
+    ----------
+    system : EquilibriumRecord
+        The chain's terms and buffers (:mod:`cbha_inverse.core._kernels.evaluation`); its
+        ``rhs`` is added to (zeroed by the caller).
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins.
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations.
+    actuation : (m,) ndarray  [Pa, N]
+        ``λ`` (the cavity pressures enter the wrenches and the load stiffness).
+    exact : bool
+        The exact tangent (stress, geometric and load terms), else the material part.
+    into_band : bool
+        Add the tangents' symmetric parts into the block band instead of writing the blocks.
+
+    """
+    stiffness, rhs = system.stiffness, system.rhs
+    difference, relative = system.link_difference, system.link_relative
+    delta, stress = system.link_delta, system.link_stress
+    jl_inverse, weighted, tangent = system.link_jl_inverse, system.link_weighted, system.link_tangent
+    local, world, block = system.link_local, system.link_world, system.link_block
+    cavity_wrench, cavity_stiffness = system.cavity_wrench, system.cavity_stiffness
+    cavity_columns, values, blocks = system.cavity_columns, system.values, system.blocks
+    phi = delta[3:]
+    for link in range(stiffness.shape[0]):
+        theta = link_deformation(positions, rotations, system.rest_offsets,
+                                 system.rest_rotations_t, link, difference, relative, delta)
+        c, _ = jl_coefficient(theta)
+        left_jacobian_inverse_into(phi, theta, c, jl_inverse)
+        local_wrench(stiffness, link, delta, jl_inverse, stress, weighted, local)
+        used = add_cavity_wrenches(cavity_wrench, cavity_stiffness, cavity_columns, link,
+                                   actuation, delta, exact, local,
+                                   weighted)
+        scatter_link_wrenches(rotations, link, difference, local, 0, rhs, world)
+        for slot in range(used):
+            scatter_link_wrenches(rotations, link, difference, local,
+                                  1 + cavity_columns[link, slot], rhs, world)
+        local_tangent(weighted, jl_inverse, delta, stress, theta, exact, tangent)
+        if into_band:
+            symmetrize(tangent)
+        world_tangent(tangent, rotations, link, difference, into_band, block)
+        if exact:
+            add_geometric_terms(world, difference, into_band, block)
+        if into_band:
+            add_link_block(blocks, link, block)
+        else:
+            start = 144 * link
+            for i in range(12):
+                for j in range(12):
+                    values[start + 12 * i + j] = block[i, j]

@@ -4,10 +4,8 @@ Compiled projection of a solved linearisation onto effectors and actuators (pape
 :func:`effector_levers` and :func:`effector_points` are the one implementation of the effector
 levers ``r = R_f o`` and points ``p = x_f + R_f o``, :func:`effector_columns_into` of ``J_eᵀ``;
 :func:`project_effectors_into` forms ``W_ea``, ``W_aa`` and the free effector positions from
-the half-solves of the band factor or from ``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the
+the half-solves of the block factor or from ``K⁻¹ [r, J_aᵀ]``; :func:`tick_outcome` the
 actuation and remaining gap of a QP solution; :func:`target_status` checks the targets of a tick.
-The kernels that a control tick calls once are inlined into their callers (``inline='always'``,
-see :mod:`cbha_inverse.core._kernels.tick`).
 """
 
 import math
@@ -81,7 +79,7 @@ def effector_points(positions, rotations, effector_frames, effector_offsets):
     return points
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def effector_points_into(positions, rotations, effector_frames, effector_offsets, points):
     """:func:`effector_points` into a preallocated ``points`` (k, 3)."""
     effector_levers_into(rotations, effector_frames, effector_offsets, points)
@@ -90,10 +88,10 @@ def effector_points_into(positions, rotations, effector_frames, effector_offsets
             points[e, i] += positions[effector_frames[e], i]
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def effector_columns_into(rotations, effector_frames, effector_offsets, levers, columns):
     """
-    Write ``J_eᵀ`` of effector points (paper Sec. IV) and return its first nonzero row.
+    Write ``J_eᵀ`` of effector points (paper Sec. IV).
 
     Effector ``e`` on frame ``f`` moves by ``dp = dx_f + dθ_f x r = [I, -r^] [dx_f; dθ_f]``
     (``r = R_f o``, :func:`effector_levers`): its columns ``3e ... 3e + 2`` of ``J_eᵀ`` are
@@ -112,18 +110,11 @@ def effector_columns_into(rotations, effector_frames, effector_offsets, levers, 
     columns : (6n, 3k) ndarray  [1, m]
         Receives ``J_eᵀ``.
 
-    Returns
-    -------
-    int
-        ``6 (min f - 1)``: the rows above it are zero.
-
     """
     effector_levers_into(rotations, effector_frames, effector_offsets, levers)
     columns[:, :] = 0.0
-    first = columns.shape[0]
     for e in range(effector_frames.size):
         base = 6 * (effector_frames[e] - 1)
-        first = min(first, base)
         rx, ry, rz = levers[e, 0], levers[e, 1], levers[e, 2]
         for i in range(3):
             columns[base + i, 3 * e + i] = 1.0
@@ -134,7 +125,6 @@ def effector_columns_into(rotations, effector_frames, effector_offsets, levers, 
         columns[base + 4, 3 * e + 2] = -rx
         columns[base + 5, 3 * e] = -ry
         columns[base + 5, 3 * e + 1] = rx
-    return first
 
 
 @numba.njit(cache=True)
@@ -184,21 +174,22 @@ def project_effectors(solved, rhs, positions, rotations, effector_frames, effect
     effector_columns_into(rotations, effector_frames, effector_offsets, np.empty((k, 3)),
                           columns)
     residual_norm = project_effectors_into(
-        solved, rhs, columns, False, positions, rotations, effector_frames, effector_offsets,
-        previous, w_ea, w_aa, offset, np.empty((3 * k, width)))
+        solved, rhs, columns, False, np.zeros(width, dtype=np.int64), positions, rotations,
+        effector_frames, effector_offsets, previous, w_ea, w_aa, offset, np.empty((3 * k, width)))
     return w_ea, w_aa, offset, residual_norm
 
 
-@numba.njit(cache=True, inline='always')
-def project_effectors_into(solved, rhs, columns, half, positions, rotations, effector_frames,
-                           effector_offsets, previous, w_ea, w_aa, offset, moved):
+@numba.njit(cache=True)
+def project_effectors_into(solved, rhs, columns, half, starts, positions, rotations,
+                           effector_frames, effector_offsets, previous, w_ea, w_aa, offset,
+                           moved):
     """
     Project onto the effectors and actuators into preallocated ``w_ea``, ``w_aa``, ``offset``.
 
     The one implementation of paper eq. 11-12, on either operands of ``K⁻¹`` (`docs/design.md`):
 
-    - ``half``: the half-solves of the band factor ``K = L Lᵀ``, ``solved = L⁻¹ [r, J_aᵀ]``
-      and ``columns = L⁻¹ J_eᵀ`` (:func:`~cbha_inverse.core._kernels.band.band_forward`):
+    - ``half``: the half-solves of the block factor ``K = L Lᵀ``, ``solved = L⁻¹ [r, J_aᵀ]``
+      and ``columns = L⁻¹ J_eᵀ`` (:func:`~cbha_inverse.core._kernels.block_band.block_forward`):
       ``W_ea = columnsᵀ solved_a``, ``J_e K⁻¹ r = columnsᵀ solved_r`` over the rows from the
       effector's frame to the end, ``W_aa = solved_aᵀ solved_a`` (symmetric: its lower
       triangle, mirrored);
@@ -216,6 +207,9 @@ def project_effectors_into(solved, rhs, columns, half, positions, rotations, eff
         ``L⁻¹ J_eᵀ`` or ``J_eᵀ``.
     half : bool
         Which operands.
+    starts : (m + 1,) int ndarray
+        With ``half``, the first nonzero row of each column of ``[r, J_aᵀ]``: its half-solve is
+        zero above that row's block (not read otherwise).
     positions : (n + 1, 3) ndarray  [m]
         Frame origins.
     rotations : (n + 1, 3, 3) ndarray
@@ -266,7 +260,7 @@ def project_effectors_into(solved, rhs, columns, half, positions, rotations, eff
     for q in range(size):
         residual += rhs[q, 0] * rhs[q, 0]
     if half:
-        _gram_into(solved, w_aa)
+        _gram_into(solved, starts, w_aa)
     else:
         for q in range(size):
             for i in range(m):
@@ -277,63 +271,42 @@ def project_effectors_into(solved, rhs, columns, half, positions, rotations, eff
 
 
 @numba.njit(cache=True)
-def _gram_into(solved, w_aa):
+def _gram_into(solved, starts, w_aa):
     """
-    Write ``w_aa = Yᵀ Y`` of the columns ``Y = solved[:, 1:]`` (symmetric: its lower triangle).
+    Write ``w_aa = Yᵀ Y`` of the columns ``Y = solved[:, 1:]``, symmetric.
 
-    By 2 x 2 blocks of ``w_aa``, two rows at a time: eight independent sums in registers
-    (`docs/design.md`, step 2). A block starts at the first row where both of its column
-    pairs have a nonzero entry: ``L⁻¹ J_aᵀ`` is zero above the first nonzero row of ``J_aᵀ``
-    (an actuator of a later section), and those zeros add nothing.
+    ``L⁻¹ J_aᵀ`` is zero above the block of the first nonzero row of ``J_aᵀ`` (``starts``: an
+    actuator of a later section): each product starts at the later of its two columns' blocks.
     """
     size, width = solved.shape
-    m = width - 1
-    for i in range(0, m, 2):
-        i1 = min(i + 1, m - 1)
-        start_i = _first_nonzero(solved, 1 + i, 1 + i1)
-        for j in range(0, i + 1, 2):
-            j1 = min(j + 1, m - 1)
-            start = max(start_i, _first_nonzero(solved, 1 + j, 1 + j1))
-            a00 = a01 = a10 = a11 = 0.0
-            b00 = b01 = b10 = b11 = 0.0
-            q = start
-            while q + 1 < size:
-                yi0, yi1 = solved[q, 1 + i], solved[q, 1 + i1]
-                yj0, yj1 = solved[q, 1 + j], solved[q, 1 + j1]
-                a00 += yi0 * yj0
-                a01 += yi0 * yj1
-                a10 += yi1 * yj0
-                a11 += yi1 * yj1
-                yi0, yi1 = solved[q + 1, 1 + i], solved[q + 1, 1 + i1]
-                yj0, yj1 = solved[q + 1, 1 + j], solved[q + 1, 1 + j1]
-                b00 += yi0 * yj0
-                b01 += yi0 * yj1
-                b10 += yi1 * yj0
-                b11 += yi1 * yj1
-                q += 2
-            if q < size:
-                yi0, yi1 = solved[q, 1 + i], solved[q, 1 + i1]
-                yj0, yj1 = solved[q, 1 + j], solved[q, 1 + j1]
-                a00 += yi0 * yj0
-                a01 += yi0 * yj1
-                a10 += yi1 * yj0
-                a11 += yi1 * yj1
-            w_aa[i, j] = a00 + b00
-            w_aa[i, j1] = a01 + b01
-            w_aa[i1, j] = a10 + b10
-            w_aa[i1, j1] = a11 + b11
-    for i in range(m):
-        for j in range(i):
-            w_aa[j, i] = w_aa[i, j]
+    for i in range(width - 1):
+        for j in range(i + 1):
+            value = column_dot(solved, 1 + i, 1 + j,
+                               max(starts[1 + i], starts[1 + j]) // 6 * 6, size)
+            w_aa[i, j] = value
+            w_aa[j, i] = value
 
 
 @numba.njit(cache=True, inline='always')
-def _first_nonzero(solved, col, col1):
-    """Return the first row of ``solved[:, [col, col1]]`` not zero (its length if none)."""
-    for q in range(solved.shape[0]):
-        if solved[q, col] != 0.0 or solved[q, col1] != 0.0:
-            return q
-    return solved.shape[0]
+def column_dot(matrix, a, b, first, end):
+    """
+    Return the dot product of columns ``a`` and ``b`` of ``matrix`` over rows ``first ... end-1``.
+
+    Four partial sums, every fourth row each: independent chains of multiply-adds (a single sum
+    waits on each of its additions in turn).
+    """
+    s0 = s1 = s2 = s3 = 0.0
+    q = first
+    while q + 3 < end:
+        s0 += matrix[q, a] * matrix[q, b]
+        s1 += matrix[q + 1, a] * matrix[q + 1, b]
+        s2 += matrix[q + 2, a] * matrix[q + 2, b]
+        s3 += matrix[q + 3, a] * matrix[q + 3, b]
+        q += 4
+    while q < end:
+        s0 += matrix[q, a] * matrix[q, b]
+        q += 1
+    return (s0 + s1) + (s2 + s3)
 
 
 @numba.njit(cache=True)
@@ -374,7 +347,7 @@ def tick_outcome(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bou
     return actuation, gap, largest_gap, largest_move, finite
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def tick_outcome_into(w_ea, delta_free, scale, x, x_previous, lower_bounds, upper_bounds,
                       actuation, gap):
     """
@@ -401,7 +374,7 @@ def tick_outcome_into(w_ea, delta_free, scale, x, x_previous, lower_bounds, uppe
     return math.sqrt(largest), largest_move, finite
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def target_status(targets, base, reach):
     """
     Check the effector targets of a tick: finite, and within reach of the chain.

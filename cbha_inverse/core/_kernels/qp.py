@@ -8,9 +8,7 @@ These kernels hold the arithmetic of :mod:`cbha_inverse.core.inverse.qp` (``qp_m
 numba (``cache=True``: compiled once, later processes load the machine code
 from ``__pycache__``). The public functions there keep the documentation and the result types;
 the equations are cited in their docstrings. Small dense solves use the hand-written Cholesky
-factorisation of :func:`solve_free_block` (``m ≲ 30``: no LAPACK call overhead). The kernels
-that a control tick calls once are inlined into their callers (``inline='always'``, see
-:mod:`cbha_inverse.core._kernels.tick`).
+factorisation of :func:`solve_free_block` (``m ≲ 30``: no LAPACK call overhead).
 """
 
 import numba
@@ -66,7 +64,7 @@ def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
     return hessian, tracking, w
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, hessian, tracking, w):
     """
     :func:`qp_hessians` into preallocated ``hessian``, ``tracking`` (m, m) and ``w`` (3k, m).
@@ -134,30 +132,28 @@ def qp_vectors(weighted_w, proximal_weight, scale, delta_free, previous, lower_b
         ``λ_prev``.
     lower_bounds, upper_bounds : (m,) ndarray of float64
         Actuator bounds.
-    rate_limit : (m,) ndarray of float64 or None
-        Largest change per tick.
+    rate_limit : (m,) ndarray of float64
+        Largest change per tick (``inf``: none).
 
     Returns
     -------
-    (5, m) ndarray
-        Rows ``gradient, lower, upper, x_prev, tracking_gradient``: the QP's gradient and box,
-        ``x_prev`` and the tracking part ``t`` of the gradient (one array: a single allocation;
-        unpacking it gives the rows).
+    gradient, lower, upper, x_prev, tracking_gradient : (m,) ndarray
+        The QP's gradient and box, ``x_prev`` and the tracking part ``t`` of the gradient.
 
     """
-    vectors = np.empty((5, weighted_w.shape[1]))
+    m = weighted_w.shape[1]
+    gradient, lower, upper = np.empty(m), np.empty(m), np.empty(m)
+    x_prev, tracking_gradient = np.empty(m), np.empty(m)
     qp_vectors_into(weighted_w, proximal_weight, scale, delta_free, previous, lower_bounds,
-                    upper_bounds, rate_limit, vectors)
-    return vectors
+                    upper_bounds, rate_limit, gradient, lower, upper, x_prev, tracking_gradient)
+    return gradient, lower, upper, x_prev, tracking_gradient
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def qp_vectors_into(weighted_w, proximal_weight, scale, delta_free, previous, lower_bounds,
-                    upper_bounds, rate_limit, vectors):
-    """:func:`qp_vectors` into a preallocated ``vectors`` (5, m)."""
+                    upper_bounds, rate_limit, gradient, lower, upper, x_prev, tracking_gradient):
+    """:func:`qp_vectors` into preallocated (m,) arrays (the order of its results)."""
     rows, m = weighted_w.shape
-    gradient, lower, upper, x_prev, tracking_gradient = (
-        vectors[0], vectors[1], vectors[2], vectors[3], vectors[4])
     for j in range(m):
         x_prev[j] = previous[j] / scale[j]
         s = 0.0
@@ -167,10 +163,9 @@ def qp_vectors_into(weighted_w, proximal_weight, scale, delta_free, previous, lo
         gradient[j] = s - proximal_weight * x_prev[j]
         lower[j] = lower_bounds[j] / scale[j]
         upper[j] = upper_bounds[j] / scale[j]
-        if rate_limit is not None:
-            step = rate_limit[j] / scale[j]
-            lower[j] = max(lower[j], x_prev[j] - step)
-            upper[j] = min(upper[j], x_prev[j] + step)
+        step = rate_limit[j] / scale[j]
+        lower[j] = max(lower[j], x_prev[j] - step)
+        upper[j] = min(upper[j], x_prev[j] + step)
 
 
 @numba.njit(cache=True)
@@ -455,7 +450,7 @@ def bounds_binding(tracking_hessian, tracking_gradient, lower, upper, x, toleran
     return binding
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def bounds_binding_into(tracking_hessian, tracking_gradient, lower, upper, x, tolerance,
                         binding):
     """:func:`bounds_binding` into a preallocated ``binding`` (m,) bool."""

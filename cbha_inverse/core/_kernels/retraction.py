@@ -2,16 +2,14 @@
 Compiled updates of the frames: world-axis retraction and the chain's deformation coordinates.
 
 :func:`retract_frames` (``x += dx``, ``R ← exp(dθ) R``, `docs/design.md`) and the Newton step of a
-factored tick (:func:`apply_linear_step_into`, on full solves or on the band factor's
+factored tick (:func:`apply_linear_step_into`, on full solves or on the block factor's
 half-solves); :func:`deformation_step` and :func:`deformed_poses`
 apply an increment in the links' deformation coordinates (the static solver's line search).
-:func:`apply_linear_step_into` is inlined into its callers (``inline='always'``, see
-:mod:`cbha_inverse.core._kernels.tick`).
 """
 
 import math
 
-from cbha_inverse.core._kernels.band import band_backward_profiled
+from cbha_inverse.core._kernels.block_band import block_backward
 from cbha_inverse.core._kernels.so3 import (jl_coefficient, left_jacobian_inverse_into,
                                             rotation_exp, rotation_exp_entries, rotation_log)
 import numba
@@ -70,20 +68,19 @@ def apply_linear_step(positions, rotations, free_step, solved_actuators, change,
     """
     size = solved_actuators.shape[0]
     apply_linear_step_into(positions, rotations, free_step, solved_actuators, change,
-                           max_rotation, np.empty((size // 6, 6)), np.empty((0, 1)), False,
-                           False)
+                           max_rotation, np.empty((size // 6, 6)), np.empty((0, 2, 6, 6)), False)
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def apply_linear_step_into(positions, rotations, free_step, solved_actuators, change,
-                           max_rotation, increments, factor, half, profiled):
+                           max_rotation, increments, factor, half):
     """
     :func:`apply_linear_step` with its workspace given, on full solves or on half-solves.
 
     The step is ``free_step + solved_actuators Δλ``; with ``half`` the operands are the
-    half-solves of the band factor ``K = L Lᵀ`` (``L⁻¹ r``, ``L⁻¹ J_aᵀ``,
-    :func:`~cbha_inverse.core._kernels.band.band_forward`) and one backward sweep
-    (:func:`~cbha_inverse.core._kernels.band.band_backward_profiled`) gives
+    half-solves of the block factor ``K = L Lᵀ`` (``L⁻¹ r``, ``L⁻¹ J_aᵀ``,
+    :func:`~cbha_inverse.core._kernels.block_band.block_forward`) and one backward sweep
+    (:func:`~cbha_inverse.core._kernels.block_band.block_backward`) gives
     ``dq = L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ) = K⁻¹ (r + J_aᵀ Δλ)`` (`docs/design.md`, step 4).
 
     Parameters
@@ -93,14 +90,10 @@ def apply_linear_step_into(positions, rotations, free_step, solved_actuators, ch
         with ``half``); ``change`` may be a buffer of the caller (not ``increments``).
     increments : (n, 6) ndarray
         Workspace (C order): the step.
-    factor : (6n, kd + 1) ndarray
-        ``L`` in lower band storage (read only with ``half``).
+    factor : (n, B + 1, 6, 6) ndarray
+        ``L`` in block band storage (read only with ``half``).
     half : bool
         Whether the operands are half-solves.
-    profiled : bool
-        Whether ``factor`` has the 6 x 6 block profile
-        (:func:`~cbha_inverse.core._kernels.band.band_backward_profiled`; read only with
-        ``half``).
 
     """
     size, m = solved_actuators.shape
@@ -115,7 +108,7 @@ def apply_linear_step_into(positions, rotations, free_step, solved_actuators, ch
         for row in range(size):
             step[row, 0] += solved_actuators[row, j] * weight
     if half:
-        band_backward_profiled(factor, step, profiled)
+        block_backward(factor, step)
     retract_in_place(positions, rotations, increments, max_rotation)
 
 

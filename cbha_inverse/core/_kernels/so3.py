@@ -83,14 +83,9 @@ def rotation_log(rot, out):
     return theta
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def rotation_log_scalars(rot):
-    """
-    Return ``t`` and the three components of ``φ`` of :func:`rotation_log`.
-
-    Inlined where it is called (numba IR): no output view and no call per link in the link
-    passes.
-    """
+    """Return ``t`` and the three components of ``φ`` of :func:`rotation_log`, as floats."""
     d0 = 0.5 * (rot[2, 1] - rot[1, 2])
     d1 = 0.5 * (rot[0, 2] - rot[2, 0])
     d2 = 0.5 * (rot[1, 0] - rot[0, 1])
@@ -158,7 +153,7 @@ def rotation_exp_entries(x, y, z):
             b * x * z - a * y, b * y * z + a * x, cos_t + b * z * z)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def hat_into(v, out):
     """Write ``hat(v)`` (``hat(v) @ b = v x b``) into a (3, 3) array."""
     out[0, 0] = out[1, 1] = out[2, 2] = 0.0
@@ -167,16 +162,29 @@ def hat_into(v, out):
     out[2, 0], out[2, 1] = -v[1], v[0]
 
 
-# inlined (numba IR): called with views once per link, a call would count their references
 @numba.njit(cache=True, inline='always')
-def _add_scaled_hat(out, v, weight):
-    """Add ``weight * hat(v)`` to a (3, 3) array (view)."""
-    out[0, 1] -= weight * v[2]
-    out[1, 0] += weight * v[2]
-    out[0, 2] += weight * v[1]
-    out[2, 0] -= weight * v[1]
-    out[1, 2] -= weight * v[0]
-    out[2, 1] += weight * v[0]
+def add_scaled_hat(out, r0, c0, v0, v1, v2, weight):
+    """
+    Add ``weight * hat(v)`` to the 3 x 3 block of ``out`` at ``(r0, c0)`` (its diagonal is 0).
+
+    Parameters
+    ----------
+    out : (p, q) ndarray
+        Added to.
+    r0, c0 : int
+        The block's corner.
+    v0, v1, v2 : float
+        ``v``.
+    weight : float
+        The factor.
+
+    """
+    out[r0, c0 + 1] -= weight * v2
+    out[r0 + 1, c0] += weight * v2
+    out[r0, c0 + 2] += weight * v1
+    out[r0 + 2, c0] -= weight * v1
+    out[r0 + 1, c0 + 2] -= weight * v0
+    out[r0 + 2, c0 + 1] += weight * v0
 
 
 @numba.njit(cache=True)
@@ -198,7 +206,7 @@ def quaternion_into(rot, out):
     out[0], out[1], out[2], out[3] = _quaternion(rot)
 
 
-@numba.njit(cache=True, inline='always')
+@numba.njit(cache=True)
 def _quaternion(rot):
     """
     Return the quaternion of :func:`quaternion_into` as four floats.
@@ -225,7 +233,6 @@ def _quaternion(rot):
     return x / norm, y / norm, z / norm, w / norm
 
 
-# inlined (numba IR): called with views once per link, a call would count their references
 @numba.njit(cache=True, inline='always')
 def left_jacobian_inverse_into(phi, theta, c, out):
     """
@@ -249,7 +256,7 @@ def left_jacobian_inverse_into(phi, theta, c, out):
         for j in range(3):
             out[i, j] = c * phi[i] * phi[j]
         out[i, i] += 1.0 - c * theta * theta
-    _add_scaled_hat(out, phi, -0.5)
+    add_scaled_hat(out, 0, 0, phi[0], phi[1], phi[2], -0.5)
 
 
 @numba.njit(cache=True)

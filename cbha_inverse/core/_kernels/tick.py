@@ -1,131 +1,156 @@
 """
-The control tick as compiled entry points over preallocated buffers (`docs/design.md`).
+The control tick as compiled code over one record of buffers (paper Sec. IV, `docs/design.md`).
 
-:func:`linearise_tick` is steps 1-2 of :class:`cbha_inverse.core.inverse.solver.InverseSolver`
-(links and cables, band assembly, band Cholesky, the forward sweeps of ``[r, J_aᵀ]`` and
-``J_eᵀ``, the projection onto the effectors and actuators and the QP matrices);
-:func:`solve_tick` is steps 3-4 (the QP vectors from the targets, the active-set box QP, the
-outcome, the binding bounds, the linear step with its backward sweep and the effector
-positions). :func:`control_tick` runs a whole tick of the active set in one call: the targets'
-check, :func:`linearise_tick` (when the tick linearises) and :func:`solve_tick`. Each calls the
-kernels of this folder that hold the equations (numba
-compiles them into the entry): nothing here is a second copy of their arithmetic. Python crosses
-into compiled code once per step instead of once per kernel, and no array is allocated: the
-buffers are those of :class:`cbha_inverse.core.inverse.tick_data.TickData`, grouped by shape
-into a few stacked arrays, held by one
-:class:`~cbha_inverse.core._kernels.tick_buffers.TickBuffers`: an entry takes it as one argument
-(numba unboxes every argument at every call). The small kernels an entry calls once carry
-numba's ``inline='always'`` (the QP's vectors, Hessians and binding bounds, the outcome, the
-targets' check, the effector points and columns, the projection, the Newton step): a compiled
-callee that is not inlined costs its caller a pair of reference-count calls for every array
-view it is handed (352 such calls per CBHA tick remain, 430 before; `docs/design.md`). The
-rows of the stacks are the constants below.
+:func:`control_tick` is one tick of :class:`cbha_inverse.core.inverse.solver.InverseSolver`, in
+the order of the paper's section IV:
+
+1. :func:`linearise_tick`, steps 1-2: the equilibrium's residual, ``J_aᵀ`` and symmetric
+   tangent at the current state (:func:`~cbha_inverse.core._kernels.evaluation.evaluate`), the
+   block Cholesky ``K = L Lᵀ`` with the forward sweep of ``[r, J_aᵀ]``, the sweep of ``J_eᵀ``,
+   then :func:`project_tick`: ``W_ea``, ``W_aa``, ``δ_free`` (eq. 11-12) and the QP matrices;
+2. :func:`solve_tick`, steps 3-4: the QP vectors of the targets, the active-set box QP
+   (eq. 13), its outcome, and the Newton step of the same factorization
+   (:func:`apply_pending_step`: ``dq = K⁻¹ (r + J_aᵀ Δλ)``).
+
+Its buffers and the model's constant arrays are one :class:`TickRecord` (fields
+:data:`TICK_FIELDS`), held by :class:`cbha_inverse.core.inverse.tick_data.TickData`; Python
+crosses into compiled code once per tick.
 """
 
-from cbha_inverse.core._kernels.band import band_cholesky_forward, band_forward_profiled
-from cbha_inverse.core._kernels.band_assembly import band_rows, scatter_add, scatter_more
-from cbha_inverse.core._kernels.cables import cable_pass_into
-from cbha_inverse.core._kernels.links import link_pass_band_into, link_pass_into
+from cbha_inverse.core._kernels.block_band import (block_backward, block_cholesky_forward,
+                                                   block_forward, first_nonzero_rows)
+from cbha_inverse.core._kernels.evaluation import evaluate
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
                                                    project_effectors_into, target_status,
                                                    tick_outcome_into)
 from cbha_inverse.core._kernels.qp import (active_set_box_qp_into, bounds_binding_into,
                                            qp_hessians_into, qp_vectors_into, SOLVED)
+from cbha_inverse.core._kernels.records import define_record, Field, Record, RecordType
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into
 import numba
+from numba.experimental import structref
+import numpy as np
 
-# rows of the actuator vectors, (ACTUATOR_ROWS, m): model constants, then the tick's state and
-# its workspace
-SCALE, LOWER, UPPER, RATE = 0, 1, 2, 3
-ACTUATION, PROPOSED, LINEARISED, X, CHANGE, SOLVE = 4, 5, 6, 7, 8, 9
-GRADIENT, BOX_LOWER, BOX_UPPER, X_PREVIOUS, TRACKING_GRADIENT = 10, 11, 12, 13, 14
-ACTUATOR_ROWS = 15
-# matrices (MATRIX_ROWS, m, m): the QP's Hessian and tracking Hessian, W_aa, the solve's factor
-HESSIAN, TRACKING, W_AA, FACTOR = 0, 1, 2, 3
-MATRIX_ROWS = 4
-# effector-actuator matrices (2, 3k, m): W_ea, W_ea σ / ν
-W_EA, WEIGHTED_W = 0, 1
-# effector gaps (3, 3k): p_e + J_e K⁻¹ r - W_ea λ_prev, δ_free, the predicted gap
-OFFSET, DELTA_FREE, GAP = 0, 1, 2
-# int8 flags (2, m): the active set (warm start), the pivots
-STATE, PIVOT = 0, 1
-# code of solve_tick beside the QP's own (SOLVED, MAX_ITERATIONS, SINGULAR)
+F8, I8 = np.float64, np.int64
+
+TICK_FIELDS = (
+    Field('system', 'record', 0, 'the equilibrium evaluator (evaluation.EquilibriumRecord)'),
+    # the state
+    Field('positions', F8, 2, '(n + 1, 3) frame origins [m]'),
+    Field('rotations', F8, 3, '(n + 1, 3, 3) frame rotations'),
+    Field('actuation', F8, 1, '(m,) the actuation λ [Pa, N]'),
+    Field('linearised', F8, 1, '(m,) λ_prev of the current linearisation'),
+    # the actuators' constants
+    Field('scale', F8, 1, '(m,) σ: λ = σ x'),
+    Field('lower', F8, 1, '(m,) lower bounds [Pa, N]'),
+    Field('upper', F8, 1, '(m,) upper bounds [Pa, N]'),
+    Field('rate', F8, 1, '(m,) largest change per tick (inf: none) [Pa, N]'),
+    # the effectors
+    Field('effector_frames', I8, 1, '(k,) frame of every effector point'),
+    Field('effector_offsets', F8, 2, '(k, 3) effector points in their frame [m]'),
+    Field('base', F8, 1, '(3,) base position, for the targets\' check [m]'),
+    Field('reach', F8, 1, '(k,) largest distance of each effector from the base [m]'),
+    # the linearisation (steps 1-2)
+    Field('solved', F8, 2, '(6n, m + 1) L⁻¹ [r, J_aᵀ] (half_solved), or K⁻¹ [r, J_aᵀ]'),
+    Field('column_starts', I8, 1, '(m + 1,) first nonzero row of each column of [r, J_aᵀ]'),
+    Field('effector_columns', F8, 2, '(6n, 3k) L⁻¹ J_eᵀ (half_solved), or J_eᵀ'),
+    Field('effector_starts', I8, 1, '(3k,) first nonzero row of each column of J_eᵀ'),
+    Field('half_solved', np.bool_, 1, '(1,) whether solved and effector_columns are half-solves'),
+    Field('levers', F8, 2, '(k, 3) effector levers R_f o [m]'),
+    Field('moved', F8, 2, '(3k, m + 1) J_e K⁻¹ [r, J_aᵀ]'),
+    Field('w_ea', F8, 2, '(3k, m) W_ea [m/Pa, m/N]'),
+    Field('w_aa', F8, 2, '(m, m) W_aa'),
+    Field('offset', F8, 1, '(3k,) p_e + J_e K⁻¹ r - W_ea λ_prev [m]'),
+    # the QP (step 3)
+    Field('hessian', F8, 2, '(m, m) the QP\'s normalised Hessian'),
+    Field('tracking', F8, 2, '(m, m) its tracking part'),
+    Field('weighted_w', F8, 2, '(3k, m) W_ea σ / ν'),
+    Field('energy_weight', float, 0, 'ε_E'),
+    Field('proximal_weight', float, 0, 'ε_P'),
+    Field('delta_free', F8, 1, '(3k,) δ_free = offset - target [m]'),
+    Field('gradient', F8, 1, '(m,) the QP\'s gradient'),
+    Field('tracking_gradient', F8, 1, '(m,) its tracking part'),
+    Field('box_lower', F8, 1, '(m,) the QP\'s box, lower'),
+    Field('box_upper', F8, 1, '(m,) the QP\'s box, upper'),
+    Field('x_previous', F8, 1, '(m,) λ_prev / σ'),
+    Field('x', F8, 1, '(m,) the QP\'s solution'),
+    Field('active_set', np.int8, 1, '(m,) -1 / 0 / +1: at the lower bound, free, at the upper'),
+    Field('pivot', np.int8, 1, '(m,) the active set\'s pivots'),
+    Field('free', np.bool_, 1, '(m,) free variables; after a solved QP, the binding bounds'),
+    Field('qp_index', I8, 1, '(m,) workspace of the active set'),
+    Field('qp_factor', F8, 2, '(m, m) factor of the free block'),
+    Field('qp_solve', F8, 1, '(m,) its right-hand side'),
+    Field('max_iterations', int, 0, 'active-set iteration limit'),
+    Field('tolerance', float, 0, 'tolerance of the binding bounds'),
+    # the outcome and the step (step 4)
+    Field('proposed', F8, 1, '(m,) σ x within the bounds [Pa, N]'),
+    Field('gap', F8, 1, '(3k,) W_ea λ + δ_free, the predicted effector gap [m]'),
+    Field('change', F8, 1, '(m,) λ - λ_prev of the step'),
+    Field('increments', F8, 2, '(n, 6) the step [m, rad]'),
+    Field('max_rotation', float, 0, 'largest frame rotation of a step [rad]'),
+    Field('effector_positions', F8, 2, '(k, 3) effector positions after the tick [m]'),
+)
+"""The fields of :class:`TickRecord`."""
+
+
+@structref.register
+class TickRecordType(RecordType):
+    """The numba type of :class:`TickRecord`."""
+
+
+class TickRecord(Record):
+    """The buffers of one solver's ticks (:data:`TICK_FIELDS`)."""
+
+    __slots__ = ()
+
+
+define_record(TickRecord, TickRecordType, TICK_FIELDS)
+
+
+@numba.njit(cache=True)
+def new_tick_record(*values):
+    """Build a :class:`TickRecord` (fields in declaration order)."""
+    return TickRecord(*values)
+
+
 REJECTED = -1
 """The QP returned a non-finite actuation: the actuation and the state are unchanged."""
-# codes of control_tick beside solve_tick's: it returned before the QP
 TARGET_NOT_FINITE = -2
 """Some target is not finite: nothing was done."""
 BEYOND_REACH = -3
 """Some target is beyond reach (the caller clamps it): nothing was done."""
 NOT_FACTORED = -4
-"""The band Cholesky failed (or was not asked for): the evaluation is written, for the fallback
-chain (:meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors`)."""
-
-
-def compiled_entry(dispatcher, *arguments):
-    """
-    Return the compiled wrapper of an entry for the types of the given arguments.
-
-    Compiles the entry for them, or loads it from numba's on-disk cache. Calling the wrapper
-    skips numba's type dispatch, which types a :class:`TickBuffers
-    <cbha_inverse.core._kernels.tick_buffers.TickBuffers>` on its slow path at every call (a
-    few tenths of a microsecond per call, the argument's unboxing aside); the caller passes
-    arguments of exactly these types (the wrapper does not check them).
-
-    Parameters
-    ----------
-    dispatcher : numba dispatcher
-        :func:`control_tick`, :func:`linearise_tick`, :func:`solve_tick`,
-        :func:`apply_pending_step`, :func:`pending_step_into` or :func:`project_tick`.
-    *arguments
-        Example arguments (their numba types are the signature).
-
-    Returns
-    -------
-    callable
-        The entry itself with numba's JIT off (``NUMBA_DISABLE_JIT=1``).
-
-    """
-    if numba.config.DISABLE_JIT:
-        return dispatcher
-    signature = tuple(numba.typeof(argument) for argument in arguments)
-    dispatcher.compile(signature)
-    return dispatcher.get_overload(signature)
+"""The block Cholesky failed: nothing solved (the fallback chain of
+:meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors` takes over)."""
 
 
 @numba.njit(cache=True)
-def control_tick(targets, buffers, materialise, linearise, cholesky, apply_step):
+def control_tick(targets, tick, materialise, linearise, solve, apply_step):
     """
-    Run one tick of the active set: check the targets, linearise if asked, solve and step.
-
-    :func:`~cbha_inverse.core._kernels.projection.target_status` on ``buffers.base`` and
-    ``buffers.reach``; when the targets are finite and within reach, :func:`apply_pending_step`
-    (``materialise``), :func:`linearise_tick` (``linearise``) and, when it factored the band
-    (or the tick keeps a linearisation), :func:`solve_tick`. The calls of the three entries one
-    by one, in one crossing into compiled code: the same arithmetic, the same results.
+    Run one tick, or its parts: check the targets, linearise, solve the QP and step.
 
     Parameters
     ----------
     targets : (k, 3) ndarray  [m]
-        Effector targets.
-    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
-        The tick's buffers (as :func:`linearise_tick` and :func:`solve_tick` read and write
-        them).
+        Effector targets (read only with ``solve``).
+    tick : TickRecord
+        The tick's buffers.
     materialise : bool
-        Apply the kept linearisation's pending step to the frames before linearising.
+        Apply the kept linearisation's pending step to the frames first
+        (:func:`apply_pending_step`).
     linearise : bool
-        Linearise at the frames (else solve on the kept linearisation).
-    cholesky : bool
-        Factor the band (:func:`linearise_tick`).
+        Linearise at the frames (:func:`linearise_tick`); else solve on the kept linearisation.
+    solve : bool
+        Check the targets and solve (:func:`solve_tick`); else stop after the linearisation.
     apply_step : bool
-        Apply the linear step after the QP (:func:`solve_tick`).
+        Apply the Newton step after the QP (:func:`solve_tick`).
 
     Returns
     -------
     code : int
         :data:`TARGET_NOT_FINITE` or :data:`BEYOND_REACH` (nothing done), :data:`NOT_FACTORED`
-        (the pending step applied if asked, the evaluation written, nothing solved), else the
-        code of :func:`solve_tick`.
+        (nothing solved), else the code of :func:`solve_tick` (:data:`SOLVED` after a
+        linearisation alone).
     iterations : int
         Active-set iterations (0 unless the QP ran).
     largest_gap : float  [m]
@@ -139,154 +164,82 @@ def control_tick(targets, buffers, materialise, linearise, cholesky, apply_step)
 
     """
     nan = float('nan')
-    checked = target_status(targets, buffers.base, buffers.reach)
-    if checked == 1:
-        return TARGET_NOT_FINITE, 0, nan, nan, False, nan
-    if checked == 2:
-        return BEYOND_REACH, 0, nan, nan, False, nan
+    if solve:
+        checked = target_status(targets, tick.base, tick.reach)
+        if checked == 1:
+            return TARGET_NOT_FINITE, 0, nan, nan, False, nan
+        if checked == 2:
+            return BEYOND_REACH, 0, nan, nan, False, nan
     if materialise:
-        apply_pending_step(buffers)
+        apply_pending_step(tick)
     residual_norm = nan
     if linearise:
-        info, residual_norm = linearise_tick(buffers, cholesky)
+        info, residual_norm = linearise_tick(tick)
         if info != 0:
             return NOT_FACTORED, 0, nan, nan, False, nan
-    code, iterations, largest_gap, largest_move, binding = solve_tick(targets, buffers,
-                                                                      apply_step)
+    if not solve:
+        return SOLVED, 0, nan, nan, False, residual_norm
+    code, iterations, largest_gap, largest_move, binding = solve_tick(targets, tick, apply_step)
     return code, iterations, largest_gap, largest_move, binding, residual_norm
 
 
 @numba.njit(cache=True)
-def linearise_tick(buffers, cholesky):
+def linearise_tick(tick):
     """
-    Linearise, factor and project at the buffers' state (steps 1-2 of the tick), in place.
+    Linearise, factor and project at the tick's state (steps 1-2), in place.
 
-    Runs :func:`~cbha_inverse.core._kernels.links.link_pass_band_into` (the links' symmetric
-    tangent straight into the symmetric lower band),
-    :func:`~cbha_inverse.core._kernels.cables.cable_pass_into` (one cable group, or none; its
-    blocks scattered into the band,
-    :func:`~cbha_inverse.core._kernels.band_assembly.scatter_more`),
-    :func:`~cbha_inverse.core._kernels.band.band_cholesky_forward` (``K = L Lᵀ`` and, in the same
-    pass, the forward sweep ``L⁻¹ [r, J_aᵀ]``) and, when it succeeds, the forward sweep
-    (:func:`~cbha_inverse.core._kernels.band.band_forward`) ``L⁻¹ J_eᵀ`` (from the effector
-    frame's rows on: ``J_eᵀ`` is zero above them) and :func:`project_tick`. The backward
-    sweep waits for the step (:func:`apply_pending_step`): one column,
-    ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``.
+    :func:`~cbha_inverse.core._kernels.evaluation.evaluate` (the exact tangent's symmetric part
+    into the block band), :func:`~cbha_inverse.core._kernels.block_band.block_cholesky_forward`
+    (``K = L Lᵀ`` and, in the same pass, ``L⁻¹ [r, J_aᵀ]``), the forward sweep of ``J_eᵀ`` and
+    :func:`project_tick`; each column's sweep starts at its first nonzero row (above it, the
+    column and its sweep are zero). The backward sweep waits
+    for the step (:func:`apply_pending_step`): one column, ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``.
 
     Parameters
     ----------
-    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
-        The tick's buffers. Reads the frames, ``vectors[ACTUATION]`` (``λ_prev``) and
-        ``vectors[SCALE]``, the evaluation's terms, ``external`` and the effectors; writes
-        ``band`` (the symmetric lower band, last row: the base frame's trash, then its factor),
-        ``rhs`` (``[r, J_aᵀ]``), ``values`` (the cable blocks; the link blocks too when
-        ``cholesky`` is False or the Cholesky fails: the exact evaluation, run again then),
-        ``vectors[LINEARISED]``, ``solved`` (``L⁻¹ [r, J_aᵀ]``; partly swept when the Cholesky
-        fails) and, when the Cholesky succeeds, ``effector_columns`` (``L⁻¹ J_eᵀ``),
-        ``half_solved`` (True), ``profiled`` and the projection (:func:`project_tick`).
-    cholesky : bool
-        Factor the symmetric band (else the caller takes the fallback chain at once).
+    tick : TickRecord
+        The tick's buffers (reads the frames and ``actuation``; writes ``linearised``,
+        ``solved``, ``effector_columns``, ``half_solved`` and the projection).
 
     Returns
     -------
     info : int
-        0 if the band Cholesky succeeded (everything written), else nonzero (``rhs`` and
-        ``values`` hold the evaluation, for
-        :meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors`).
+        0 if the block Cholesky succeeded (everything written), else nonzero.
     residual_norm : float  [N, N*m]
         ``|r|`` (NaN unless ``info`` is 0).
 
     """
-    vectors, rhs = buffers.vectors, buffers.rhs
-    _evaluate(buffers, cholesky)
-    factor = band_rows(buffers.band, rhs.shape[0])
-    vectors[LINEARISED, :] = vectors[ACTUATION]
-    buffers.half_solved[0] = False
-    if not cholesky:
-        return -1, float('nan')
-    solved, columns, rotations = buffers.solved, buffers.effector_columns, buffers.rotations
-    # over the flat storage (both C order, one shape): numba's 2-D slice assignment indexes and
-    # broadcasts element by element (~0.35 µs more on the CBHA's 96 x 7)
-    flat_solved, flat_rhs = solved.reshape(solved.size), rhs.reshape(rhs.size)
-    for i in range(flat_rhs.size):
-        flat_solved[i] = flat_rhs[i]
-    # the block profile checked once, by the Cholesky on the band: its factor keeps it; the
-    # forward sweep of [r, J_aᵀ] in the same pass over the factor
-    info, profiled = band_cholesky_forward(factor, solved)
-    if info != 0:
-        # the symmetric pass left the link blocks of ``values`` unwritten: the exact evaluation
-        # again, for the fallback chain (only when the Cholesky fails)
-        _evaluate(buffers, False)
-        return info, float('nan')
-    first = effector_columns_into(rotations, buffers.effector_frames, buffers.effector_offsets,
-                                  buffers.levers, columns)
-    band_forward_profiled(factor, columns, first, profiled)
-    buffers.half_solved[0] = True
-    # for the backward sweep of the step (stored here, after the sweeps: stored right after
-    # the Cholesky, it made the linearisation 0.4 µs slower, LLVM's doing)
-    buffers.profiled[0] = profiled
-    return 0, project_tick(buffers)
-
-
-@numba.njit(cache=True)
-def _evaluate(buffers, symmetric):
-    """
-    Evaluate the links, the cable group and the external wrenches into the tick's buffers.
-
-    ``rhs`` receives ``[r, J_aᵀ]``; ``band`` the symmetric lower band (its trash row aside).
-    With ``symmetric`` the links add the symmetric part of their tangents straight into the
-    band (:func:`~cbha_inverse.core._kernels.links.link_pass_band_into`; their blocks in
-    ``values`` are not written) and only the cable values are scattered; else ``values``
-    receives every exact block and the band is their scatter
-    (:func:`~cbha_inverse.core._kernels.band_assembly.scatter_add`, what the fallback chain reads).
-    """
-    positions, rotations, actuation = buffers.positions, buffers.rotations, buffers.vectors[
-        ACTUATION]
-    stiffness, counts, values = buffers.stiffness, buffers.counts, buffers.values
-    rhs, band, external = buffers.rhs, buffers.band, buffers.external
-    cable_frames, cable_spans = buffers.cable_frames, buffers.cable_spans
-    cable_points = buffers.cable_points
-    n = stiffness.shape[0]
-    link_end = counts[0]
-    pair_end = link_end + counts[1]
-    moment_end = pair_end + counts[2]
-    if symmetric:
-        band[:] = 0.0
-        link_pass_band_into(positions, rotations, stiffness, buffers.rest_offsets,
-                            buffers.rest_rotations_t, actuation, buffers.cavity_wrench,
-                            buffers.cavity_stiffness, buffers.cavity_columns, rhs, band,
-                            buffers.link_work)
-    else:
-        link_pass_into(positions, rotations, stiffness, buffers.rest_offsets,
-                       buffers.rest_rotations_t, actuation, buffers.cavity_wrench,
-                       buffers.cavity_stiffness, buffers.cavity_columns, rhs,
-                       values[:link_end].reshape((n, 12, 12)), False, buffers.link_work)
-    if cable_frames.size > 0:
-        cable_pass_into(positions, rotations, actuation, buffers.cable_gains, cable_frames,
-                        buffers.cable_offsets, cable_spans[0], cable_spans[1], cable_spans[2],
-                        cable_points[0], buffers.cable_columns, cable_spans[3], cable_points[1],
-                        rhs, values[link_end:pair_end].reshape((-1, 12, 12)),
-                        values[pair_end:moment_end].reshape((-1, 3, 3)), buffers.cable_work)
+    system, solved = tick.system, tick.solved
+    evaluate(system, tick.positions, tick.rotations, tick.actuation, True, True)
+    tick.linearised[:] = tick.actuation
+    tick.half_solved[0] = False
+    rhs = system.rhs
     for row in range(rhs.shape[0]):
-        rhs[row, 0] += external[row]
-    if symmetric:
-        scatter_more(buffers.index, values, buffers.slot_weights, band, link_end)
-    else:
-        scatter_add(buffers.index, values, buffers.slot_weights, band)
+        for col in range(rhs.shape[1]):
+            solved[row, col] = rhs[row, col]
+    first_nonzero_rows(solved, tick.column_starts)
+    factor = system.blocks[:solved.shape[0] // 6]
+    info = block_cholesky_forward(factor, solved, tick.column_starts)
+    if info != 0:
+        return info, float('nan')
+    effector_columns_into(tick.rotations, tick.effector_frames, tick.effector_offsets,
+                          tick.levers, tick.effector_columns)
+    first_nonzero_rows(tick.effector_columns, tick.effector_starts)
+    block_forward(factor, tick.effector_columns, tick.effector_starts)
+    tick.half_solved[0] = True
+    return 0, project_tick(tick)
 
 
 @numba.njit(cache=True)
-def project_tick(buffers):
+def project_tick(tick):
     """
     Project a solved linearisation and form the QP matrices (the end of step 2), in place.
 
     :func:`~cbha_inverse.core._kernels.projection.project_effectors_into` then
-    :func:`~cbha_inverse.core._kernels.qp.qp_hessians_into` on the buffers
-    (:class:`~cbha_inverse.core._kernels.tick_buffers.TickBuffers`; ``solved``, ``rhs``,
-    ``effector_columns``, ``half_solved`` and ``vectors[LINEARISED]`` = ``λ_prev`` are read);
-    writes ``W_EA``, ``WEIGHTED_W``, ``W_AA``, ``HESSIAN``, ``TRACKING`` and ``OFFSET``. Without
-    ``half_solved`` (``solved`` holds ``K⁻¹ [r, J_aᵀ]`` of another factor: the fallback
-    chain) it first writes ``J_eᵀ`` into ``effector_columns``.
+    :func:`~cbha_inverse.core._kernels.qp.qp_hessians_into`: ``w_ea``, ``w_aa``, ``offset``,
+    ``hessian``, ``tracking`` and ``weighted_w``. Without ``half_solved`` (``solved`` holds
+    ``K⁻¹ [r, J_aᵀ]`` of another factor: the fallback chain) it first writes ``J_eᵀ`` into
+    ``effector_columns``.
 
     Returns
     -------
@@ -294,49 +247,40 @@ def project_tick(buffers):
         ``|r|``.
 
     """
-    vectors, matrices = buffers.vectors, buffers.matrices
-    effector_matrices, weights = buffers.effector_matrices, buffers.weights
-    w_ea = effector_matrices[W_EA]
-    w_aa = matrices[W_AA]
-    half = buffers.half_solved[0]
+    half = tick.half_solved[0]
     if not half:
-        effector_columns_into(buffers.rotations, buffers.effector_frames,
-                              buffers.effector_offsets, buffers.levers, buffers.effector_columns)
+        effector_columns_into(tick.rotations, tick.effector_frames, tick.effector_offsets,
+                              tick.levers, tick.effector_columns)
     residual_norm = project_effectors_into(
-        buffers.solved, buffers.rhs, buffers.effector_columns, half, buffers.positions,
-        buffers.rotations, buffers.effector_frames, buffers.effector_offsets, vectors[LINEARISED],
-        w_ea, w_aa, buffers.gaps[OFFSET], buffers.moved)
-    qp_hessians_into(w_ea, w_aa, vectors[SCALE], weights[0], weights[1], matrices[HESSIAN],
-                     matrices[TRACKING], effector_matrices[WEIGHTED_W])
+        tick.solved, tick.system.rhs, tick.effector_columns, half, tick.column_starts,
+        tick.positions, tick.rotations, tick.effector_frames, tick.effector_offsets,
+        tick.linearised, tick.w_ea, tick.w_aa, tick.offset, tick.moved)
+    qp_hessians_into(tick.w_ea, tick.w_aa, tick.scale, tick.energy_weight, tick.proximal_weight,
+                     tick.hessian, tick.tracking, tick.weighted_w)
     return residual_norm
 
 
 @numba.njit(cache=True)
-def solve_tick(targets, buffers, apply_step):
+def solve_tick(targets, tick, apply_step):
     """
     Solve a tick's QP on a linearisation and apply it (steps 3-4 of the tick), in place.
 
-    Forms ``δ_free`` (the targets are checked by the caller,
-    :func:`~cbha_inverse.core._kernels.projection.target_status`) and the QP vectors
-    (:func:`~cbha_inverse.core._kernels.qp.qp_vectors_into`), solves the box QP by the active
-    set (:func:`~cbha_inverse.core._kernels.qp.active_set_box_qp_into`, warm-started from
-    ``flags[STATE]``), then the outcome
+    ``δ_free = offset - target``, the QP vectors
+    (:func:`~cbha_inverse.core._kernels.qp.qp_vectors_into`), the active-set box QP
+    (:func:`~cbha_inverse.core._kernels.qp.active_set_box_qp_into`, warm-started from
+    ``active_set``), the outcome
     (:func:`~cbha_inverse.core._kernels.projection.tick_outcome_into`) and the binding bounds
     (:func:`~cbha_inverse.core._kernels.qp.bounds_binding_into`). With ``apply_step`` the
     Newton step of the factorization (:func:`apply_pending_step`) moves the frames and the
     effector positions of the new state are written; without it, those the linear model
-    predicts (the targets plus the predicted gaps).
+    predicts (the targets plus the predicted gaps, paper eq. 11).
 
     Parameters
     ----------
     targets : (k, 3) ndarray  [m]
         Finite effector targets within reach.
-    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
-        The tick's buffers as :func:`linearise_tick` left them. Writes ``DELTA_FREE``, the QP
-        vectors, ``X``, ``PROPOSED``, ``GAP``, ``STATE``, ``free`` (on return the binding
-        bounds, ``saturated``, when the QP is solved) and, unless the code is
-        :data:`REJECTED` or the QP failed, ``ACTUATION`` and ``effector_positions``; with
-        ``apply_step`` the frames.
+    tick : TickRecord
+        The tick's buffers as :func:`linearise_tick` left them.
     apply_step : bool
         Apply the linear step now (``relinearize_every`` 1).
 
@@ -356,44 +300,37 @@ def solve_tick(targets, buffers, apply_step):
         Whether some bound binds (the QP is solved and the tick saturated).
 
     """
-    vectors, matrices, gaps = buffers.vectors, buffers.matrices, buffers.gaps
-    effector_matrices, flags, free = buffers.effector_matrices, buffers.flags, buffers.free
     k = targets.shape[0]
-    offset, delta_free, gap = gaps[OFFSET], gaps[DELTA_FREE], gaps[GAP]
+    offset, delta_free, gap = tick.offset, tick.delta_free, tick.gap
     for e in range(k):
         for i in range(3):
             delta_free[3 * e + i] = offset[3 * e + i] - targets[e, i]
-    weighted_w = effector_matrices[WEIGHTED_W]
-    rate = vectors[RATE]
-    qp_vectors_into(weighted_w, buffers.weights[1], vectors[SCALE], delta_free,
-                    vectors[ACTUATION], vectors[LOWER], vectors[UPPER], rate, vectors[GRADIENT:])
-    hessian = matrices[HESSIAN]
-    lower, upper = vectors[BOX_LOWER], vectors[BOX_UPPER]
-    x = vectors[X]
+    qp_vectors_into(tick.weighted_w, tick.proximal_weight, tick.scale, delta_free,
+                    tick.actuation, tick.lower, tick.upper, tick.rate, tick.gradient,
+                    tick.box_lower, tick.box_upper, tick.x_previous, tick.tracking_gradient)
     code, iterations = active_set_box_qp_into(
-        hessian, vectors[GRADIENT], lower, upper, flags[STATE], buffers.max_iterations, x, free,
-        flags[PIVOT], buffers.qp_index, matrices[FACTOR], vectors[SOLVE])
+        tick.hessian, tick.gradient, tick.box_lower, tick.box_upper, tick.active_set,
+        tick.max_iterations, tick.x, tick.free, tick.pivot, tick.qp_index, tick.qp_factor,
+        tick.qp_solve)
     if code != SOLVED:
         return code, iterations, 0.0, 0.0, False
-    proposed = vectors[PROPOSED]
     largest_gap, largest_move, finite = tick_outcome_into(
-        effector_matrices[W_EA], delta_free, vectors[SCALE], x, vectors[X_PREVIOUS],
-        vectors[LOWER], vectors[UPPER], proposed, gap)
+        tick.w_ea, delta_free, tick.scale, tick.x, tick.x_previous, tick.lower, tick.upper,
+        tick.proposed, gap)
     if not finite:
         return REJECTED, iterations, largest_gap, largest_move, False
-    bounds_binding_into(matrices[TRACKING], vectors[TRACKING_GRADIENT], lower, upper, x,
-                        buffers.tolerance, free)
+    bounds_binding_into(tick.tracking, tick.tracking_gradient, tick.box_lower, tick.box_upper,
+                        tick.x, tick.tolerance, tick.free)
     binding = False
-    for j in range(free.size):
-        binding = binding or free[j]
-    vectors[ACTUATION, :] = proposed
-    effector_positions = buffers.effector_positions
+    for j in range(tick.free.size):
+        binding = binding or tick.free[j]
+    tick.actuation[:] = tick.proposed
+    effector_positions = tick.effector_positions
     if apply_step:
-        apply_pending_step(buffers)
-        effector_points_into(buffers.positions, buffers.rotations, buffers.effector_frames,
-                             buffers.effector_offsets, effector_positions)
+        apply_pending_step(tick)
+        effector_points_into(tick.positions, tick.rotations, tick.effector_frames,
+                             tick.effector_offsets, effector_positions)
     else:
-        # the linear model's prediction (paper eq. 11): the targets plus the predicted gaps
         for e in range(k):
             for i in range(3):
                 effector_positions[e, i] = targets[e, i] + gap[3 * e + i]
@@ -401,48 +338,46 @@ def solve_tick(targets, buffers, apply_step):
 
 
 @numba.njit(cache=True)
-def apply_pending_step(buffers):
-    """
-    Apply the Newton step of the linearisation to the buffers' frames, in place.
-
-    :func:`pending_step_into` on ``buffers.positions`` and ``buffers.rotations``.
-
-    Parameters
-    ----------
-    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
-        The tick's buffers (a solved linearisation).
-
-    """
-    pending_step_into(buffers, buffers.positions, buffers.rotations)
+def apply_pending_step(tick):
+    """Apply the Newton step of the linearisation to the tick's frames, in place."""
+    pending_step_into(tick, tick.positions, tick.rotations)
 
 
 @numba.njit(cache=True)
-def pending_step_into(buffers, positions, rotations):
+def pending_step_into(tick, positions, rotations):
     """
-    Apply the Newton step of the buffers' linearisation to given frames, in place.
+    Apply the Newton step of the tick's linearisation to given frames, in place.
 
-    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` with ``λ`` and ``λ_prev`` the buffers'
-    ``vectors[ACTUATION]`` and ``vectors[LINEARISED]`` (their difference is written to
-    ``vectors[CHANGE]``), by
+    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (``change`` receives ``λ - λ_prev``), by
     :func:`~cbha_inverse.core._kernels.retraction.apply_linear_step_into` on ``solved``: with
-    ``half_solved`` the half-solves, then one backward sweep of the band factor (on its block
-    profile with ``profiled``, as its Cholesky found it: no second check).
+    ``half_solved`` the half-solves, then one backward sweep of the block factor.
 
     Parameters
     ----------
-    buffers : cbha_inverse.core._kernels.tick_buffers.TickBuffers
+    tick : TickRecord
         The tick's buffers (a solved linearisation).
     positions : (n + 1, 3) ndarray  [m]
-        Frame origins (updated; the buffers' or a copy).
+        Frame origins (updated; the tick's or a copy).
     rotations : (n + 1, 3, 3) ndarray
         Frame rotations (updated).
 
     """
-    vectors, solved = buffers.vectors, buffers.solved
-    change, actuation, linearised = vectors[CHANGE], vectors[ACTUATION], vectors[LINEARISED]
+    change, solved, system = tick.change, tick.solved, tick.system
     for j in range(change.size):
-        change[j] = actuation[j] - linearised[j]
+        change[j] = tick.actuation[j] - tick.linearised[j]
     apply_linear_step_into(positions, rotations, solved[:, 0], solved[:, 1:], change,
-                           buffers.max_rotation, buffers.increments,
-                           band_rows(buffers.band, buffers.rhs.shape[0]),
-                           buffers.half_solved[0], buffers.profiled[0])
+                           tick.max_rotation, tick.increments,
+                           system.blocks[:solved.shape[0] // 6], tick.half_solved[0])
+
+
+@numba.njit(cache=True)
+def backward_solves(tick):
+    """
+    Complete the half-solves of a linearisation, ``solved <- K⁻¹ [r, J_aᵀ]``, in place.
+
+    One backward sweep of the block factor (the shape estimator's full solves); nothing to do
+    when ``solved`` already holds full solves.
+    """
+    if tick.half_solved[0]:
+        block_backward(tick.system.blocks[:tick.solved.shape[0] // 6], tick.solved)
+        tick.half_solved[0] = False

@@ -1,18 +1,18 @@
 """
-Cables (tendons) of a frame chain: routing data and the tick's evaluator (paper Sec. IV).
+Cables (tendons) of a frame chain: their routing data (paper Sec. IV).
 
 A cable is routed through points fixed to frames; its force on each routing point is the sum of
 the unit vectors toward its neighbouring points (the last point pulls toward the previous one),
 mapped rigidly to the wrench of the point's frame: one column of ``J_aᵀ`` per cable (paper eq. 9),
 ``-d(length)/dq`` without friction, ``λ ≥ 0`` the tension. :class:`CableGroup` indexes the
-routing of all cables; :class:`CableTerms` adds the assembly index of their load stiffness for
-the compiled :func:`cbha_inverse.core._kernels.cables.cable_pass` (the one implementation of the
-cable equations; the numpy version is a test oracle, ``test/oracles/actuation.py``).
+routing of all cables; :class:`CableTerms` indexes every cable of a scene and the blocks of their
+load stiffness for the compiled :func:`cbha_inverse.core._kernels.cables.cable_pass` (the one
+implementation of the cable equations; the numpy version is a test oracle,
+``test/oracles/actuation.py``).
 """
 
 from dataclasses import dataclass
 
-from cbha_inverse.core._kernels.cables import cable_pass
 import numpy as np
 
 
@@ -126,33 +126,54 @@ class CableGroup:
 
 class CableTerms:
     """
-    The assembly index of one :class:`CableGroup` for the compiled cable pass.
+    Every cable of a scene (all its cable groups) indexed for the compiled cable pass.
 
     Parameters
     ----------
-    group : cbha_inverse.core.actuation.cables.CableGroup
-        The cables.
-    columns : sequence of int
-        Their columns in the actuator order.
+    groups : sequence of (CableGroup, sequence of int)
+        The cable groups and their columns in the actuator order.
     n_frames : int
         Number of frames (base included).
 
     Attributes
     ----------
+    gains, columns : (m_c,) ndarray
+        Force gain and actuator column of every cable.
+    frames, offsets, start, end, span_owner, point_owner : ndarray
+        The routing of :attr:`CableGroup.routing`, the cables numbered across the groups.
     pairs : list of (int, int)
         Frame pairs ``(a, b)`` of the spans, one 12 x 12 stiffness block each.
+    span_pair : (S,) int ndarray
+        The pair of every span.
     moment_frames : list of int
         Frames carrying routing points, one 3 x 3 moment block each.
+    point_slot : (P,) int ndarray
+        The moment block of every point.
 
     """
 
-    def __init__(self, group, columns, n_frames):
-        """Precompute the routing and the block of every span and point."""
+    def __init__(self, groups, n_frames):
+        """Concatenate the groups' routing; index the block of every span and point."""
         self.n_frames = int(n_frames)
-        self.columns = np.asarray(columns, dtype=np.int64)
+        routing = [[] for _ in range(6)]
+        gains, columns = [], []
+        points, cables = 0, 0
+        for group, group_columns in groups:
+            frames, offsets, start, end, span_owner, point_owner = group.routing
+            for part, value in zip(routing, (frames, offsets, start + points, end + points,
+                                             span_owner + cables, point_owner + cables)):
+                part.append(value)
+            gains.append(group.gains)
+            columns.append(np.asarray(group_columns, dtype=np.int64))
+            points += frames.size
+            cables += group.n_actuators
         (self.frames, self.offsets, self.start, self.end, self.span_owner,
-         self.point_owner) = group.routing
-        self.gains = np.ascontiguousarray(group.gains, dtype=float)
+         self.point_owner) = (
+            np.ascontiguousarray(np.concatenate(part) if part else empty, dtype=empty.dtype)
+            for part, empty in zip(routing, _EMPTY_ROUTING))
+        self.gains = np.ascontiguousarray(np.concatenate(gains) if gains else np.zeros(0))
+        self.columns = np.ascontiguousarray(np.concatenate(columns) if columns
+                                            else np.zeros(0, dtype=np.int64))
         pairs = {}
         self.span_pair = np.array([
             pairs.setdefault((int(self.frames[s]), int(self.frames[e])), len(pairs))
@@ -162,27 +183,7 @@ class CableTerms:
         slot = {f: i for i, f in enumerate(self.moment_frames)}
         self.point_slot = np.array([slot[int(f)] for f in self.frames], dtype=np.int64)
 
-    def evaluate(self, positions, rotations, actuation, rhs, pair_values, moment_values):
-        """
-        Add the cable columns and loads to ``rhs``; write the stiffness blocks.
 
-        Parameters
-        ----------
-        positions : (n + 1, 3) ndarray  [m]
-            Frame origins.
-        rotations : (n + 1, 3, 3) ndarray
-            Frame rotations.
-        actuation : (m,) ndarray  [N]
-            All actuators (the cable tensions are taken at :attr:`columns`).
-        rhs : (6n, m + 1) ndarray
-            C-contiguous; residual (column 0) and ``J_aᵀ`` (columns ``1 + j``), added to.
-        pair_values : (P * 144,) ndarray
-            Receives the span stiffness blocks summed per frame pair (12 x 12 each).
-        moment_values : (F * 9,) ndarray
-            Receives the point moment blocks summed per frame (3 x 3 each).
-
-        """
-        cable_pass(positions, rotations, actuation, self.gains, self.frames, self.offsets,
-                   self.start, self.end, self.span_owner, self.point_owner, self.columns,
-                   self.span_pair, self.point_slot, rhs, pair_values.reshape(-1, 12, 12),
-                   moment_values.reshape(-1, 3, 3))
+_EMPTY_ROUTING = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0, dtype=np.int64),
+                  np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
+                  np.zeros(0, dtype=np.int64))

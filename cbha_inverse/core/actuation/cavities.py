@@ -21,32 +21,9 @@ Two evaluators share this geometry:
 
 from dataclasses import dataclass
 
-from cbha_inverse.core.so3 import cross
+from cbha_inverse.core._kernels.mesh_cavities import (mesh_cavity_volumes, mesh_cavity_wrenches,
+                                                      skinned_vertices)
 import numpy as np
-import scipy.sparse as sp
-
-
-def point_wrenches(levers, forces):
-    """
-    Map forces applied at points to wrenches at frame origins (paper Fig. 4, rigid mapping).
-
-    A force ``F`` at ``p = x_f + r`` does the virtual work ``F · (dx_f + dθ_f × r)``, so the
-    wrench at the frame origin is ``[F; r × F]`` (world axes).
-
-    Parameters
-    ----------
-    levers : (P, 3) ndarray  [m]
-        ``r = p - x_f``, world axes.
-    forces : (P, 3) ndarray  [N]
-        Forces, world axes.
-
-    Returns
-    -------
-    (P, 6) ndarray  [N, N*m]
-        Wrenches at the frame origins.
-
-    """
-    return np.concatenate([forces, cross(levers, forces)], axis=1)
 
 
 @dataclass(frozen=True)
@@ -123,27 +100,13 @@ def skinning_weights(points, rest_offset):
     return np.clip(points @ d0 / (d0 @ d0), 0.0, 1.0)
 
 
-def triangle_volume_terms(p0, p1, p2):
-    """
-    Return the signed volume of each triangle's tetrahedron with the origin.
-
-    Parameters
-    ----------
-    p0, p1, p2 : (T, 3) ndarray  [m]
-        Triangle corners.
-
-    Returns
-    -------
-    (T,) ndarray  [m^3]
-        ``p0 · (p1 × p2) / 6``; their sum over a closed outward surface is its volume.
-
-    """
-    return np.einsum('ti,ti->t', p0, cross(p1, p2)) / 6.0
-
-
 class CavityGroup:
     """
     Exact evaluation of skinned cavity meshes (paper Fig. 5).
+
+    The arithmetic is compiled (:mod:`cbha_inverse.core._kernels.mesh_cavities`, which the
+    equilibrium evaluation runs too); the numpy version is a test oracle
+    (``test/oracles/actuation.py``).
 
     Parameters
     ----------
@@ -152,15 +115,28 @@ class CavityGroup:
     n_frames : int
         Number of frames (base included).
 
+    Attributes
+    ----------
+    frame_a : (V,) int ndarray
+        Lower frame of every vertex of every part (the upper one is ``frame_a + 1``).
+    local_a, local_b : (V, 3) ndarray  [m]
+        The vertices in the lower and upper frame's axes.
+    weight_b : (V,) ndarray
+        Skinning weight of the upper frame (:func:`skinning_weights`).
+    triangles : (T, 3) int ndarray
+        Triangles over the concatenated vertices.
+    vertex_owner, triangle_owner : (V,), (T,) int ndarray
+        Cavity of every vertex and triangle.
+    gains : (m,) ndarray  [-]
+        Gain of every cavity.
+
     """
 
     def __init__(self, cavities, n_frames):
-        """Concatenate all parts and precompute the skinning and scatter matrices."""
+        """Concatenate all parts and their skinning."""
         self.cavities = tuple(cavities)
         self.names = tuple(c.name for c in self.cavities)
         self.n_frames = int(n_frames)
-        m = len(self.cavities)
-        gains = np.array([c.gain for c in self.cavities], dtype=float)
         fa, la, lb, wb, tris, owner_v, owner_t = [], [], [], [], [], [], []
         count = 0
         for j, cavity in enumerate(self.cavities):
@@ -169,46 +145,33 @@ class CavityGroup:
                     raise ValueError(f'cavity {cavity.name!r}: lower frame {part.lower} outside '
                                      f'0..{n_frames - 2}')
                 pts = np.asarray(part.points, dtype=float)
-                s = skinning_weights(pts, part.rest_offset)
                 fa.append(np.full(len(pts), part.lower))
                 la.append(pts)
                 lb.append((pts - part.rest_offset) @ np.asarray(part.rest_rotation))
-                wb.append(s)
+                wb.append(skinning_weights(pts, part.rest_offset))
                 tris.append(np.asarray(part.triangles, dtype=int) + count)
                 owner_v.append(np.full(len(pts), j))
                 owner_t.append(np.full(len(part.triangles), j))
                 count += len(pts)
-        self.frame_a = np.concatenate(fa)
-        self.frame_b = self.frame_a + 1
-        self.local_a = np.concatenate(la)
-        self.local_b = np.concatenate(lb)
-        self.weight_b = np.concatenate(wb)
-        self.weight_a = 1.0 - self.weight_b
-        self.triangles = np.concatenate(tris)
-        owner_v = np.concatenate(owner_v)
-        owner_t = np.concatenate(owner_t)
-        n_v, n_t = count, len(self.triangles)
-        rows = self.triangles.reshape(-1)
-        cols = np.repeat(np.arange(n_t), 3)
-        self._vertex_triangle = sp.csr_matrix((np.full(rows.size, 1.0 / 6.0), (rows, cols)),
-                                              shape=(n_v, n_t))
-        self._triangle_sum = sp.csr_matrix((gains[owner_t], (owner_t, np.arange(n_t))),
-                                           shape=(m, n_t))
-        shape = (m * self.n_frames, n_v)
-        cols_v = np.arange(n_v)
-        self._scatter_a = sp.csr_matrix(
-            (self.weight_a * gains[owner_v], (owner_v * self.n_frames + self.frame_a, cols_v)),
-            shape=shape)
-        self._scatter_b = sp.csr_matrix(
-            (self.weight_b * gains[owner_v], (owner_v * self.n_frames + self.frame_b, cols_v)),
-            shape=shape)
+        self.frame_a = np.ascontiguousarray(np.concatenate(fa), dtype=np.int64)
+        self.local_a = np.ascontiguousarray(np.concatenate(la), dtype=float)
+        self.local_b = np.ascontiguousarray(np.concatenate(lb), dtype=float)
+        self.weight_b = np.ascontiguousarray(np.concatenate(wb), dtype=float)
+        self.triangles = np.ascontiguousarray(np.concatenate(tris), dtype=np.int64)
+        self.vertex_owner = np.ascontiguousarray(np.concatenate(owner_v), dtype=np.int64)
+        self.triangle_owner = np.ascontiguousarray(np.concatenate(owner_t), dtype=np.int64)
+        self.gains = np.array([c.gain for c in self.cavities], dtype=float)
         self.upper_bounds = np.array([c.max_pressure for c in self.cavities], dtype=float)
-        self.lower_bounds = np.zeros(m)
+        self.lower_bounds = np.zeros(len(self.cavities))
 
     @property
     def n_actuators(self):
         """Return the number of cavities."""
         return len(self.cavities)
+
+    def _scratch(self):
+        """Return new arrays for the skinned vertices, their levers and forces (V, 3)."""
+        return tuple(np.empty((self.frame_a.size, 3)) for _ in range(4))
 
     def vertices(self, positions, rotations):
         """
@@ -227,15 +190,14 @@ class CavityGroup:
             ``p = (1 - s)(x_a + R_a a) + s (x_b + R_b b)``, ``R_a a`` and ``R_b b``.
 
         """
-        ra = np.einsum('vij,vj->vi', rotations[self.frame_a], self.local_a)
-        rb = np.einsum('vij,vj->vi', rotations[self.frame_b], self.local_b)
-        points = (self.weight_a[:, None] * (positions[self.frame_a] + ra)
-                  + self.weight_b[:, None] * (positions[self.frame_b] + rb))
-        return points, ra, rb
+        points, levers_a, levers_b, _ = self._scratch()
+        skinned_vertices(_frames(positions), _frames(rotations), self.frame_a, self.local_a,
+                         self.local_b, self.weight_b, points, levers_a, levers_b)
+        return points, levers_a, levers_b
 
     def volumes(self, positions, rotations):
         """
-        Return the enclosed volume of every cavity.
+        Return the enclosed volume of every cavity (times its gain).
 
         Parameters
         ----------
@@ -251,9 +213,9 @@ class CavityGroup:
 
         """
         points, _, _ = self.vertices(positions, rotations)
-        t = self.triangles
-        return self._triangle_sum @ triangle_volume_terms(points[t[:, 0]], points[t[:, 1]],
-                                                          points[t[:, 2]])
+        volumes = np.empty(self.n_actuators)
+        mesh_cavity_volumes(points, self.triangles, self.triangle_owner, self.gains, volumes)
+        return volumes
 
     def evaluate(self, positions, rotations, displacements=True):
         """
@@ -276,15 +238,19 @@ class CavityGroup:
             Cavity volumes (``δ_a`` up to a constant).
 
         """
-        points, ra, rb = self.vertices(positions, rotations)
-        t = self.triangles
-        p0, p1, p2 = points[t[:, 0]], points[t[:, 1]], points[t[:, 2]]
-        normals = cross(p1 - p0, p2 - p0)
-        forces = self._vertex_triangle @ normals
-        wrenches = (self._scatter_a @ point_wrenches(ra, forces)
-                    + self._scatter_b @ point_wrenches(rb, forces))
-        volumes = self._triangle_sum @ triangle_volume_terms(p0, p1, p2)
-        return wrenches.reshape(self.n_actuators, self.n_frames, 6), volumes
+        points, levers_a, levers_b, forces = self._scratch()
+        wrenches = np.empty((self.n_actuators, self.n_frames, 6))
+        mesh_cavity_wrenches(_frames(positions), _frames(rotations), self.frame_a, self.local_a,
+                             self.local_b, self.weight_b, self.triangles, self.vertex_owner,
+                             self.gains, points, levers_a, levers_b, forces, wrenches)
+        volumes = np.empty(self.n_actuators)
+        mesh_cavity_volumes(points, self.triangles, self.triangle_owner, self.gains, volumes)
+        return wrenches, volumes
+
+
+def _frames(array):
+    """Return frame data as the compiled kernels take it (C-ordered floats)."""
+    return np.ascontiguousarray(array, dtype=float)
 
 
 def tube_surface(length, radius, center, n_around=16, n_along=2):

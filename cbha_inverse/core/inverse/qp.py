@@ -151,9 +151,10 @@ def qp_problem(matrices, delta_free, previous, lower_bounds, upper_bounds, rate_
     QPProblem
 
     """
+    rate = np.full(previous.size, np.inf) if rate_limit is None else rate_limit
     gradient, lower, upper, x_prev, tracking_gradient = qp_kernels.qp_vectors(
         matrices.weighted_w, float(matrices.proximal_weight), matrices.scale, delta_free,
-        previous, lower_bounds, upper_bounds, rate_limit)
+        previous, lower_bounds, upper_bounds, rate)
     return QPProblem(matrices.hessian, gradient, lower, upper, matrices.scale, x_prev,
                      matrices.tracking_hessian, tracking_gradient)
 

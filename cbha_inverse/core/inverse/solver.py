@@ -4,60 +4,61 @@ The per-tick inverse-simulation controller (paper Sec. IV, eq. 9-13; `docs/desig
 :class:`InverseSolver` holds the immutable model (chain, actuators, effectors, gravity) and a
 mutable tick state (frame poses, current actuation, QP warm start). One :meth:`InverseSolver.step`:
 
-1. linearise at the current state in one fused pass of the compiled kernels
-   (:class:`cbha_inverse.core.system.EquilibriumSystem`, the static solver's evaluation too):
-   tangent stiffness ``K`` (symmetric part of structure + load stiffness), actuator columns
-   ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
+1. linearise at the current state (:func:`cbha_inverse.core._kernels.evaluation.evaluate`, the
+   static solver's evaluation too): tangent stiffness ``K`` (symmetric part of structure + load
+   stiffness), actuator columns ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
 2. factor ``K = L Lᵀ`` (compiled band Cholesky) and sweep ``L⁻¹ [r, J_aᵀ]`` and ``L⁻¹ J_eᵀ``
    forward, giving ``W_ea``, ``W_aa`` and ``δ_e^free`` as products of these half-solves
    (:func:`cbha_inverse.core._kernels.projection.project_effectors_into`); if ``K`` is not
    positive definite, the fallback chain
    (:meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`) solves
    ``K⁻¹ [r, J_aᵀ]`` and the same projection takes ``J_eᵀ`` and ``J_aᵀ`` as its left operands;
-3. solve the regularised box QP (proxsuite, warm-started, or the exact active-set solver; projected
-   Gauss-Seidel on request or as a fallback if proxsuite reports a failure);
+3. solve the regularised box QP (the exact active-set solver, compiled; proxsuite, warm-started,
+   or projected Gauss-Seidel on request or as fallbacks);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (one backward sweep of one column,
    ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``), followed by ``newton_steps - 1``
    further full Newton steps at fixed ``λ`` if requested (or, with ``relinearize_every > 1``,
    keep the linear model for a few ticks; see :class:`InverseOptions`).
 
-The closed-loop :class:`~cbha_inverse.core.inverse.correction.TargetCorrector` lives in
-:mod:`cbha_inverse.core.inverse.correction` (re-exported here).
+With the active-set QP and one Newton step per tick, the whole tick is one compiled call
+(:func:`cbha_inverse.core._kernels.tick.control_tick`); the other paths (a clamped or rejected
+target, the fallback chain, the QP solvers in Python, further Newton steps) call its parts.
 
 Repeated ticks therefore run Newton's method on the coupled problem (equilibrium plus optimal
 actuation); at a fixed target the state converges to the static equilibrium of the returned
 actuation. Each step is limited to ``max_rotation_step`` radians per frame so a far target cannot
 throw the linearisation off.
+
+The closed-loop :class:`~cbha_inverse.core.inverse.correction.TargetCorrector` lives in
+:mod:`cbha_inverse.core.inverse.correction` (re-exported here).
 """
 
 import math
 import time
 
-from cbha_inverse.core._kernels import tick as fused
-from cbha_inverse.core._kernels.projection import target_status
+from cbha_inverse.core._kernels import tick as kernels
+from cbha_inverse.core._kernels.projection import target_status, tick_outcome
 from cbha_inverse.core._kernels.qp import SOLVED
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
-from cbha_inverse.core.inverse.model_terms import ModelTerms
-from cbha_inverse.core.inverse.qp import ActiveSetQP, ProxsuiteQP
+from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
+                                          ProxsuiteQP, qp_problem)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
-from cbha_inverse.core.inverse.tick_paths import FAST_MOVE, TickPaths
-from cbha_inverse.core.sections import SectionStiffness
+from cbha_inverse.core.sections import (check_section_factors, rate_limited,
+                                        SectionStiffness)
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
-# targets farther from the base than this many chain lengths are clamped onto that sphere
-_REACH_FACTOR = 2.0
-# the tick's globals, one lookup each
-_perf_counter = time.perf_counter
-_asarray = np.asarray
-_FLOAT = np.dtype(float)
+REACH_FACTOR = 2.0
+"""Targets farther from the base than this many chain lengths are clamped onto that sphere."""
+FAST_MOVE = 0.02
+"""An actuator moving more than this fraction of its range ends a kept linearisation."""
 
 
-class InverseSolver(TickPaths, ModelTerms):
+class InverseSolver:
     """
     The per-tick controller of the module docstring (pure numerics, no ROS).
 
@@ -97,11 +98,16 @@ class InverseSolver(TickPaths, ModelTerms):
     Notes
     -----
     Every tick is overflow-safe: each effector target farther from the base than
-    ``_REACH_FACTOR`` times the chain's length (plus the effector offset) is moved along the
+    :data:`REACH_FACTOR` times the chain's length (plus the effector offset) is moved along the
     line from the base to it onto that sphere (no point beyond it is reachable, so the QP gives
     the same saturated answer), and a tick whose QP returns a non-finite actuation holds the
     last actuation and forgets the QP warm start (status ``'rejected'``), so the next sane
     target is tracked again without :meth:`reset`.
+
+    The solver's state between ticks: whether the tick data hold a linearisation, how many ticks
+    have used it (``relinearize_every``), whether :meth:`prepare` made it, and whether its
+    linear step with the current actuation still waits to be applied to the frames (between
+    linearisations). :meth:`_account` is the one place that updates it.
 
     """
 
@@ -134,7 +140,6 @@ class InverseSolver(TickPaths, ModelTerms):
             if self._scale.shape != (m,) or not np.all(np.isfinite(self._scale)) or np.any(
                     self._scale <= 0.0):
                 raise ValueError(f'scale must be {m} positive finite values')
-        # a plain C-order copy: one compiled signature of the QP kernels whatever was given
         self._rate = (None if self.options.rate_limit is None
                       else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
                                                     (m,))))
@@ -147,34 +152,25 @@ class InverseSolver(TickPaths, ModelTerms):
         self._sections = SectionStiffness(model.stiffnesses, sections or {})
         self.section_names = self._sections.names
         self._gains = np.ones(m)
-        self._tick = EquilibriumSystem(model, actuators, self._external,
+        self._system = EquilibriumSystem(model, actuators, self._external,
                                        stiffness=self._sections.stiffness)
-        self._effector_frames = np.ascontiguousarray(effectors.frames, dtype=np.int64)
-        self._effector_offsets = np.ascontiguousarray(effectors.offsets, dtype=float)
         # no effector can be farther from the base than this (overflow-safe targets)
         self._base = np.array(model.base_position, dtype=float)
-        self._reach = _REACH_FACTOR * (model.length + np.linalg.norm(
-            self._effector_offsets, axis=1))
+        offsets = np.asarray(effectors.offsets, dtype=float).reshape(-1, 3)
+        self._reach = REACH_FACTOR * (model.length + np.linalg.norm(offsets, axis=1))
         self._active_set = ActiveSetQP(m)
-        self._data = TickData(self._tick, effectors, self._scale, self.lower_bounds,
+        self._data = TickData(self._system, effectors, self._scale, self.lower_bounds,
                               self.upper_bounds, self._rate, self.options,
                               self._active_set.max_iterations, self._base, self._reach)
-        self._active_set = ActiveSetQP(m, state=self._data.state)
+        self._active_set = ActiveSetQP(m, state=self._data.active_set)
         self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
-        self._m, self._k = m, effectors.n_effectors
-        self._target_shape = (self._k, 3)
-        self._max_rotation = self._data.max_rotation
-        # the compiled check without numba's per-call dispatch (step passes (k, 3) C floats)
-        self._target_status = fused.compiled_entry(target_status, self._data.effector_positions,
-                                                   self._base, self._reach)
-        # the whole tick as one compiled call (fused linearisation, active set, one Newton
-        # step per tick); otherwise the target check, the linearisation and the QP one by one
-        self._buffers = self._data.buffers
+        self._target_shape = (effectors.n_effectors, 3)
         self._every = self.options.relinearize_every
-        self._apply_step = self._every == 1
-        self._tick_entry = (self._data.tick_entry if self._data.fused
-                            and self.options.qp_solver == 'active_set'
-                            and self.options.newton_steps == 1 else None)
+        # the whole tick is one compiled call with the active set and one Newton step per tick
+        self._one_call = (self.options.qp_solver == 'active_set'
+                          and self.options.newton_steps == 1)
+        self._control_tick = self._data.entry('control_tick')
+        self._record = self._data.record
         # the frames and the actuation live in the tick data (the compiled tick updates them)
         self._positions, self._rotations = self._data.positions, self._data.rotations
         self.actuation = self._data.actuation
@@ -200,50 +196,29 @@ class InverseSolver(TickPaths, ModelTerms):
                                     self.upper_bounds)
         self._qp.reset()
         self._active_set.reset()
-        self._linearised = False      # the tick data holds a valid linearisation
+        self._linearised = False      # the tick data hold a valid linearisation
         self._residual_norm = math.nan
         self._pending = False         # its linear step with the current actuation is not applied
-        self._age = 0
-        self._prepared = False
+        self._age = 0                 # ticks that have used it
+        self._prepared = False        # prepare() made it for the next tick
 
     def warm_up(self):
         """
         Run two ticks toward the current effector positions, then restore state and actuation.
 
         The first tick of a process compiles the numba kernels (or loads them from numba's
-        on-disk cache, ~0.3 s); a node calls this before its control loop starts so that no
-        control tick pays for it. The warm start of the QP is forgotten.
+        on-disk cache); a node calls this before its control loop starts so that no control
+        tick pays for it. The warm start of the QP is forgotten.
         """
         state, actuation = self.state, self.actuation.copy()
         targets = self.effector_positions()
         self.step(targets)
         self.prepare()
         self.step(targets)
-        # the compiled projection that follows a fallback factorization (reset forgets it)
-        fused.project_tick(self._data.buffers)
-        # the entries of the ticks that leave the one compiled call (a target beyond reach, a
-        # failed band Cholesky, prepare), compiled or loaded, not run
-        for entry in ('linearise_entry', 'solve_entry', 'step_entry'):
-            getattr(self._data, entry)
-        # the pending step on copies of the frames (state and effector positions between
-        # linearisations, ``relinearize_every`` > 1)
-        self._data.pending_entry(self._data.buffers, self._positions.copy(),
-                                 self._rotations.copy())
+        # the entries of the other paths (the fallback chain's projection, the pending step)
+        self._data.entry('project_tick')
+        self._data.entry('pending_step_into')
         self.reset(state, actuation)
-
-    def _current(self):
-        """Return the frames with the pending linear step applied (a copy when one is pending)."""
-        if not self._pending:
-            return self._positions, self._rotations
-        positions, rotations = self._positions.copy(), self._rotations.copy()
-        self._data.pending_entry(self._data.buffers, positions, rotations)
-        return positions, rotations
-
-    def _materialise(self):
-        """Apply the pending linear step to the stored frames."""
-        if self._pending:
-            self._data.step_entry(self._data.buffers)
-            self._pending = False
 
     @property
     def state(self):
@@ -254,6 +229,14 @@ class InverseSolver(TickPaths, ModelTerms):
     def effector_positions(self):
         """Return the effector positions (k, 3) of the current model state."""
         return self.effectors.positions(*self._current())
+
+    def _current(self):
+        """Return the frames with the pending linear step applied (a copy when one is pending)."""
+        if not self._pending:
+            return self._positions, self._rotations
+        positions, rotations = self._positions.copy(), self._rotations.copy()
+        self._data.entry('pending_step_into')(self._record, positions, rotations)
+        return positions, rotations
 
     def step(self, targets):
         """
@@ -276,52 +259,34 @@ class InverseSolver(TickPaths, ModelTerms):
             shape, e.g. a transposed (3, k) array, is reinterpreted.
 
         """
-        t_start = _perf_counter()
-        targets = _asarray(targets, _FLOAT)
-        if targets.shape != self._target_shape:
-            if self._k == 1 and targets.shape == (3,):
-                targets = targets.reshape(1, 3)
-            else:
-                raise ValueError(f'targets must have shape ({self._k}, 3), got {targets.shape}')
-        if not targets.flags.carray:
-            # C-contiguous, aligned and writeable: the compiled entries take exactly this type
-            # (they do not check it)
-            targets = np.array(targets, order='C')
-        tick = self._tick_entry
-        if tick is None:
-            checked = self._target_status(targets, self._base, self._reach)
-            if checked == 1:
-                return self._held('rejected', t_start, warnings=('non-finite target rejected',))
-            return self._step(targets, checked, t_start)
-        # the whole tick in one compiled call: the target check, the linearisation (when due)
-        # and the active-set QP with its step
+        started = time.perf_counter()
+        targets = self._target_array(targets)
         fresh = not self._linearised or self._age >= self._every
-        code, iterations, largest_gap, largest_move, binding, residual_norm = tick(
-            targets, self._buffers, fresh and self._pending, fresh, self._tick.tick_cholesky,
-            self._apply_step)
-        if code != SOLVED:
-            return self._after_tick(code, targets, fresh, residual_norm, t_start)
+        if not self._one_call:
+            checked = target_status(targets, self._base, self._reach)
+            if checked == 1:
+                return self._held('rejected', started, warnings=('non-finite target rejected',))
+            clamped, warnings = self._reachable(targets) if checked == 2 else (targets, ())
+            return self._split_tick(clamped, fresh, warnings, started)
+        code, iterations, largest_gap, largest_move, binding, residual_norm = self._control_tick(
+            targets, self._record, fresh and self._pending, fresh, True, self._every == 1)
+        called = time.perf_counter()
+        if code == kernels.TARGET_NOT_FINITE:
+            return self._held('rejected', started, warnings=('non-finite target rejected',))
+        if code == kernels.BEYOND_REACH:
+            clamped, warnings = self._reachable(targets)
+            return self._split_tick(clamped, fresh, warnings, started)
         if fresh:
-            self._linearised, self._residual_norm, self._age = True, residual_norm, 1
-        else:
-            self._age = 1 if self._prepared else self._age + 1
-        self._prepared = False
-        every = self._every
-        if self._age < every and largest_move > FAST_MOVE:
-            # the actuation moves fast: the next tick relinearises
-            self._age = every
-        # between linearisations the tick is the linear model of paper eq. 11
-        self._pending = every != 1
-        data = self._data
-        actuation, effector_positions = data.actuation.copy(), data.effector_positions.copy()
-        saturated = data.mask.copy()
-        total = _perf_counter() - t_start
-        # one compiled call: its time is the linearisation's (when it linearised) or the QP's
-        timings = {'assembly': total if fresh else 0.0, 'factor': 0.0, 'projection': 0.0,
-                   'qp': 0.0 if fresh else total, 'update': 0.0, 'total': total}
-        return TickResult.of_tick(actuation, effector_positions,
-                                  'saturated' if binding else 'solved', 'solved', iterations,
-                                  saturated, largest_gap, self._residual_norm, timings, ())
+            self._pending = False
+            if code == kernels.NOT_FACTORED:
+                return self._fall_back_tick(targets, (), started)
+        self._account(fresh, residual_norm)
+        linearised = called if fresh else started
+        if code == SOLVED:
+            return self._close(targets, 'saturated' if binding else 'solved', 'solved',
+                               iterations, self._data.free.copy(), largest_gap, largest_move,
+                               True, (), (started, linearised, called))
+        return self._after_active_set(code, targets, (), (started, linearised))
 
     def prepare(self):
         """
@@ -339,66 +304,391 @@ class InverseSolver(TickPaths, ModelTerms):
             False when no factorization of the tangent succeeds (the next step then holds).
 
         """
-        if self._linearised and self._age < self.options.relinearize_every:
+        if self._linearised and self._age < self._every:
             return True
-        self._materialise()
         self._linearised = self._linearise()
         self._age, self._prepared = 0, self._linearised
         return self._linearised
+
+    def _target_array(self, targets):
+        """Return the targets as the compiled tick takes them, (k, 3) C-ordered floats."""
+        targets = np.asarray(targets, dtype=float)
+        if targets.shape != self._target_shape:
+            if self._target_shape[0] == 1 and targets.shape == (3,):
+                targets = targets.reshape(1, 3)
+            else:
+                raise ValueError(f'targets must have shape ({self._target_shape[0]}, 3), got '
+                                 f'{targets.shape}')
+        if not targets.flags.carray:
+            # C-contiguous, aligned and writeable: the compiled entries take exactly this type
+            targets = np.array(targets, order='C')
+        return targets
+
+    def _account(self, fresh, residual_norm=math.nan):
+        """
+        Count a tick on the linearisation: a fresh one starts at age 1, a kept one ages.
+
+        The tick after :meth:`prepare` is the first on its linearisation; ``residual_norm`` is
+        that of a fresh one made in the tick.
+        """
+        if fresh:
+            self._linearised, self._age = True, 1
+            if not math.isnan(residual_norm):
+                self._residual_norm = residual_norm
+        else:
+            self._age = 1 if self._prepared else self._age + 1
+        self._prepared = False
 
     def _linearise(self):
         """
         Linearise, factor and project at the stored state and actuation (steps 1-2).
 
-        One compiled entry (:func:`cbha_inverse.core._kernels.tick.linearise_tick`) when the
-        scene allows it; when the band Cholesky fails (or the scene's actuators need the
-        general evaluation), the fallback chain (:meth:`_fall_back`). Returns whether a
-        factorization succeeded (the tick data then holds the linearisation).
+        Applies a pending step first; the compiled linearisation, or, when its band Cholesky
+        fails, the fallback chain (:meth:`_fall_back`). Returns whether a factorization
+        succeeded (the tick data then hold the linearisation).
         """
-        data = self._data
-        if data.fused:
-            info, residual_norm = data.linearise_entry(data.buffers, self._tick.tick_cholesky)
-            if info == 0:
-                self._residual_norm = residual_norm
-                return True
+        code, _, _, _, _, residual_norm = self._control_tick(
+            self._data.effector_positions, self._record, self._pending, True, False, False)
+        self._pending = False
+        if code == SOLVED:
+            self._residual_norm = residual_norm
+            return True
         return self._fall_back()
 
     def _fall_back(self):
         """
-        Factor and project the linearisation without the fused band Cholesky.
+        Factor and project the linearisation by the fallback chain (exact LU, then material).
 
-        After a failed fused Cholesky (the evaluation is written), the fallback chain
-        (:meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`: exact LU, then
-        material Cholesky) and the compiled projection
-        (:func:`~cbha_inverse.core._kernels.tick.project_tick`); for a scene whose actuators
-        need the general evaluation, that evaluation and its band Cholesky first. Returns
-        whether a factorization succeeded.
+        The residual is exact whatever the tangent, so only the convergence rate changes.
+        Returns whether a factorization succeeded.
         """
-        data, system = self._data, self._tick
-        factor = None
-        if not data.fused:
-            tangent, _ = system.linearise(self._positions, self._rotations, self.actuation)
-            data.linearised[:] = self.actuation
-            if system.tick_cholesky:
-                factor = system.factor(tangent)
-        if factor is None:
-            # not positive definite: the fallback chain (exact LU, then material Cholesky) of
-            # the same evaluation; the residual is exact in every case, so only the
-            # convergence rate changes
-            factor = next(system.fallback_factors(self._positions, self._rotations,
-                                                  self.actuation, evaluated=True), None)
+        factor = next(self._system.fallback_factors(self._positions, self._rotations,
+                                                  self.actuation), None)
         if factor is None:
             return False
-        self._residual_norm = data.project_factor(factor)
+        self._residual_norm = self._data.project_factor(factor)
         return True
+
+    def _fall_back_tick(self, targets, warnings, started):
+        """Finish a tick whose compiled linearisation did not factor: the fallback chain."""
+        self._linearised = self._fall_back()
+        if not self._linearised:
+            return self._held('not_positive_definite', started)
+        self._account(True)
+        return self._solve(targets, True, warnings, (started, time.perf_counter()))
+
+    def _split_tick(self, targets, fresh, warnings, started):
+        """Run a tick whose linearisation and QP are calls of their own (module docstring)."""
+        if fresh:
+            self._linearised = self._linearise()
+            if not self._linearised:
+                return self._held('not_positive_definite', started)
+        prepared = self._prepared
+        self._account(fresh)
+        linearised = time.perf_counter() if fresh else started
+        return self._solve(targets, fresh or prepared, warnings, (started, linearised))
+
+    def _solve(self, targets, new_hessian, warnings, times):
+        """Solve the QP of the tick data's linearisation and apply it (steps 3-4)."""
+        if self.options.qp_solver != 'active_set':
+            return self._general_qp(targets, self.options.qp_solver, not new_hessian, warnings,
+                                    times)
+        code, iterations, largest_gap, largest_move, binding, _ = self._control_tick(
+            targets, self._record, False, False, True, self._every == 1)
+        if code == SOLVED:
+            return self._close(targets, 'saturated' if binding else 'solved', 'solved',
+                               iterations, self._data.free.copy(), largest_gap, largest_move,
+                               True, warnings, times + (time.perf_counter(),))
+        return self._after_active_set(code, targets, warnings, times)
+
+    def _after_active_set(self, code, targets, warnings, times):
+        """Hold a non-finite QP solution, or hand an unconverged active set to proxsuite."""
+        if code == kernels.REJECTED:
+            return self._rejected('solved', warnings, times[0])
+        # proxsuite (status checked) takes over; it has not seen this Hessian
+        self._active_set.reset()
+        return self._general_qp(targets, 'proxsuite', False, warnings, times)
+
+    def _general_qp(self, targets, qp_solver, same_hessian, warnings, times):
+        """Solve the tick's QP in Python (proxsuite, Gauss-Seidel) and apply it (steps 3-4)."""
+        data = self._data
+        delta_free = data.offset - targets.reshape(-1)
+        problem = qp_problem(data.matrices, delta_free, self.actuation, self.lower_bounds,
+                             self.upper_bounds, rate_limit=self._rate)
+        solution, status = self._solve_qp(problem, qp_solver, same_hessian)
+        actuation, gap, largest_gap, largest_move, finite = tick_outcome(
+            data.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
+            self.upper_bounds)
+        if not finite:
+            return self._rejected(solution.status, warnings, times[0])
+        saturated = binding_bounds(problem, solution.x)
+        if status == 'solved' and saturated.any():
+            status = 'saturated'
+        self.actuation[:] = actuation
+        data.gap[:] = gap
+        if self._every == 1:
+            self._control_tick(targets, self._record, True, False, False, False)
+        return self._close(targets, status, solution.status, solution.iterations, saturated,
+                           largest_gap, largest_move, False, warnings,
+                           times + (time.perf_counter(),))
+
+    def _solve_qp(self, problem, qp_solver, same_hessian):
+        """
+        Solve the tick's QP (step 3 of the module docstring) with the chosen solver and fallbacks.
+
+        The active set falls back to proxsuite when it does not converge, proxsuite (status
+        checked) to projected Gauss-Seidel. Returns ``(solution, status)``, the status
+        ``'solved'`` or ``'qp_fallback'``.
+        """
+        status = 'solved'
+        if qp_solver == 'active_set':
+            solution = self._active_set.solve(problem)
+            if solution.ok:
+                return solution, status
+            # proxsuite (status checked) takes over; it has not seen this Hessian
+            qp_solver, same_hessian = 'proxsuite', False
+        if qp_solver == 'proxsuite':
+            solution = self._qp.solve(problem, same_hessian=same_hessian)
+            if not solution.ok:
+                status = 'qp_fallback'
+                solution = projected_gauss_seidel(problem)
+                solution = type(solution)(solution.x, f'gauss_seidel_{solution.status}', 0, True)
+            return solution, status
+        return projected_gauss_seidel(problem), status
+
+    def _close(self, targets, status, qp_status, iterations, saturated, largest_gap,
+               largest_move, positions_written, warnings, times):
+        """
+        Close a solved tick: Newton steps, effector positions, the result.
+
+        ``positions_written``: the compiled tick wrote the effector positions into the tick
+        data (of the new state, or between linearisations the linear model's prediction).
+        ``times``: ``time.perf_counter()`` at the tick's start, after its linearisation and
+        after its QP.
+        """
+        data = self._data
+        if self._age < self._every and largest_move > FAST_MOVE:
+            # the actuation moves fast: the next tick relinearises
+            self._age = self._every
+        if self._every == 1:
+            self._pending = False
+            newton = self.options.newton_steps > 1
+            for _ in range(self.options.newton_steps - 1):
+                if not self._newton_step():
+                    break
+            if positions_written and not newton:
+                effector_positions = data.effector_positions.copy()
+            else:
+                effector_positions = self.effectors.positions(self._positions, self._rotations)
+        else:
+            # between linearisations the tick is the linear model of paper eq. 11
+            self._pending = True
+            effector_positions = (data.effector_positions.copy() if positions_written
+                                  else targets + data.gap.reshape(-1, 3))
+        return TickResult(self.actuation.copy(), effector_positions, status, qp_status,
+                          iterations, saturated, largest_gap, self._residual_norm,
+                          _timings(*times, time.perf_counter()), warnings)
 
     def _newton_step(self):
         """Apply one full Newton step at the current actuation; return whether it succeeded."""
-        tangent, rhs = self._tick.linearise(self._positions, self._rotations, self.actuation)
-        factor = self._tick.factor(tangent)
+        _, rhs = self._system.linearise(self._positions, self._rotations, self.actuation)
+        factor = self._system.factor()
         if factor is None:
             return False
         step = factor.solve(rhs[:, :1])
         retract_frames(self._positions, self._rotations, step.reshape(-1, 6),
                        self.options.max_rotation_step, in_place=True)
         return True
+
+    def _held(self, status, started, qp_status='not_run', warnings=()):
+        """Return a tick result that keeps the actuation and the state."""
+        m = self.actuation.size
+        return TickResult(self.actuation.copy(), self.effector_positions(), status, qp_status, 0,
+                          np.zeros(m, dtype=bool), math.nan, math.nan,
+                          _timings(started, started, started, time.perf_counter()),
+                          tuple(warnings))
+
+    def _rejected(self, qp_status, warnings, started):
+        """Hold after a non-finite QP solution and forget the warm starts."""
+        # never a NaN actuation, never a poisoned warm start: hold, the next tick recovers
+        self._qp.reset()
+        self._active_set.reset()
+        return self._held('rejected', started, qp_status,
+                          warnings + ('QP returned a non-finite actuation: held',))
+
+    def _reachable(self, targets):
+        """
+        Return the targets moved onto the reach sphere when beyond it, and the warnings.
+
+        Parameters
+        ----------
+        targets : (k, 3) ndarray  [m]
+            Finite effector targets.
+
+        Returns
+        -------
+        targets : (k, 3) ndarray  [m]
+        warnings : tuple of str
+
+        """
+        away = targets - self._base
+        largest = np.abs(away).max(axis=1)
+        far = largest > self._reach
+        # direction without overflow: divide by the largest component before the norm
+        unit = away[far] / largest[far, None]
+        unit /= np.linalg.norm(unit, axis=1)[:, None]
+        clamped = targets.copy()
+        clamped[far] = self._base + self._reach[far, None] * unit
+        names = ', '.join(name for name, f in zip(self.effector_names, far) if f)
+        return clamped, (f'target of {names} is beyond any reach of the chain: clamped to '
+                         f'{self._reach[far].max():.3g} m from the base',)
+
+    # What the model takes from outside while it runs: a payload, the sections' stiffness, the
+    # cavities' gains. Each replaces the previous value, comes rate-limited on request (an
+    # estimated value should come in small steps: each change of the model is a step of the
+    # commanded actuation, and in a loop on an estimate that step disturbs the estimate it came
+    # from) and makes the next tick relinearise.
+
+    def set_payload(self, mass, max_change=None):
+        """
+        Add a known mass at the last frame to the model's loads (e.g. an estimated payload).
+
+        The tick's equilibrium then carries its weight (a load in ``f_ext`` of paper eq. 9, the
+        same as a scene's ``tip_payload_mass``), so the QP compensates it in the model instead
+        of leaving it to the closed loop's correction. It replaces the previous one; the next
+        linearisation uses it (a node calls :meth:`prepare` right after, so that the target ->
+        command path does not pay for it; an unchanged payload keeps the linearisation).
+
+        Parameters
+        ----------
+        mass : float  [kg]
+            The payload (0: none).
+        max_change : float or None  [kg]
+            Move the model's payload toward ``mass`` by at most this (None: all the way).
+
+        Returns
+        -------
+        float  [kg]
+            The payload now in the model's loads.
+
+        Raises
+        ------
+        ValueError
+            If ``mass`` is not finite, or the model has no gravity.
+
+        """
+        mass = float(mass)
+        if not math.isfinite(mass):
+            raise ValueError(f'payload must be finite, got {mass}')
+        if self._gravity is None:
+            raise ValueError('a payload needs the scene gravity')
+        if max_change is not None:
+            mass = self._payload + min(max(mass - self._payload, -max_change), max_change)
+        if mass == self._payload:
+            # the loads already carry it: the linearisation (prepared or not) stays valid
+            return mass
+        self._payload = mass
+        size = self._external.size
+        self._external[size - 6:size - 3] = self._unloaded[size - 6:size - 3] + mass * (
+            self._gravity)
+        self._age = self._every
+        return mass
+
+    @property
+    def payload(self):
+        """Return the payload in the model's loads [kg] (:meth:`set_payload`)."""
+        return self._payload
+
+    def set_section_stiffness(self, factors, max_change=None):
+        """
+        Scale each chain section's link stiffness in the model (e.g. estimated factors).
+
+        The links of section ``j`` become ``factors[j]`` times as stiff as the model's (as a
+        scene's ``calibration.section_stiffness`` builds them), so the QP compensates a
+        section's stiffness error in the model instead of leaving it to the closed loop's
+        correction. It replaces the previous factors; the next linearisation uses them.
+
+        Parameters
+        ----------
+        factors : (s,) array_like  [-]
+            One factor per section, :attr:`section_names` order (1: the model's stiffness).
+        max_change : float or None  [-]
+            Move each factor toward ``factors`` by at most this (None: all the way).
+
+        Returns
+        -------
+        (s,) ndarray  [-]
+            The factors now in the model.
+
+        Raises
+        ------
+        ValueError
+            If ``factors`` is not one finite value per section within
+            :data:`cbha_inverse.core.sections.SECTION_FACTOR_BOUNDS` (a model without
+            sections takes none), or ``max_change`` is negative or not finite.
+
+        """
+        applied = self._sections.apply(factors, max_change)
+        self._age = self._every
+        return applied
+
+    @property
+    def section_stiffness(self):
+        """Return the sections' stiffness factors in the model, (s,) [-]."""
+        return self._sections.factors
+
+    def set_actuator_gain(self, gains, max_change=None):
+        """
+        Scale each condensed cavity's effective area in the model (e.g. estimated gains).
+
+        Cavity ``j`` then acts ``gains[j]`` times as strongly per Pa as the scene built it (as a
+        scene's ``calibration.actuator_gain``); rate-limited and relinearised as
+        :meth:`set_section_stiffness`.
+
+        Parameters
+        ----------
+        gains : (m,) array_like  [-]
+            One gain per actuator, :attr:`actuator_names` order (1: the scene's).
+        max_change : float or None  [-]
+            Move each gain toward ``gains`` by at most this (None: all the way).
+
+        Returns
+        -------
+        (m,) ndarray  [-]
+            The gains now in the model.
+
+        Raises
+        ------
+        ValueError
+            If ``gains`` is not one finite value per actuator within
+            :data:`cbha_inverse.core.sections.SECTION_FACTOR_BOUNDS`, ``max_change`` is
+            negative or not finite, or the actuators are not condensed cavities.
+
+        """
+        refused = check_section_factors(gains, self.actuation.size, 'actuator gain')
+        if refused is not None:
+            raise ValueError(refused[1])
+        applied = rate_limited(self._gains, np.asarray(gains, dtype=float), max_change)
+        self._system.scale_cavities(applied)
+        self._gains = applied
+        self._age = self._every
+        return applied.copy()
+
+    @property
+    def actuator_gain(self):
+        """Return the actuators' gains in the model, (m,) [-] (:meth:`set_actuator_gain`)."""
+        return self._gains.copy()
+
+
+def _timings(started, linearised, solved, ended):
+    """
+    Return a tick's timings [s] from ``time.perf_counter()`` at its phases' ends.
+
+    ``assembly``: the linearisation (steps 1-2, one compiled call; 0 on a tick that keeps a
+    linearisation), ``qp``: the QP, its outcome and (active set) the Newton step, ``update``:
+    further Newton steps and the result, ``total``; ``factor`` and ``projection`` are 0 (they
+    run inside the linearisation). A tick of the active set that is one compiled call counts it
+    as ``assembly`` when it linearised, else as ``qp``.
+    """
+    return {'assembly': linearised - started, 'factor': 0.0, 'projection': 0.0,
+            'qp': solved - linearised, 'update': ended - solved, 'total': ended - started}

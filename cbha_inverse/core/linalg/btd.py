@@ -13,14 +13,12 @@ stiffness of the frame chain is block tridiagonal). Storage::
 Backends (all exact direct methods; ``method='auto'`` is ``'compiled'`` at every size, see
 :func:`choose_method` and the table below):
 
-- ``'compiled'``: numba kernels
-  (:func:`~cbha_inverse.core._kernels.band_assembly.btd_band_cholesky`,
-  :func:`~cbha_inverse.core._kernels.band.band_solve`): one call writes the (bn, 2b) lower
-  band (C order, ``band[c, r - c] = A[r, c]``) straight from the blocks and factors it, one call
-  solves all right-hand sides. No LAPACK wrapper, so ~5 us less fixed cost per call at small n,
-  and for b = 6 the factor loops have constant trip counts; the default, and the factorisation
-  of the control tick and the static solver
-  (:class:`cbha_inverse.core.system.EquilibriumSystem`);
+- ``'compiled'`` (b = 6, the frame chain's blocks): numba kernels
+  (:func:`~cbha_inverse.core._kernels.assembly.btd_cholesky`,
+  :func:`~cbha_inverse.core._kernels.block_band.block_solve`): the block Cholesky of the
+  control tick and of the static solver's fallback
+  (:class:`cbha_inverse.core.system.EquilibriumSystem`), one call to factor, one to solve all
+  right-hand sides, no LAPACK wrapper; the default for b = 6;
 - ``'banded'``: LAPACK banded Cholesky ``dpbtrf``/``dpbtrs`` on the (2b, bn) lower band storage
   (half-bandwidth 2b - 1 = 11), built from the blocks by two strided copies: the standard
   banded comparison point;
@@ -49,8 +47,8 @@ is the 1-norm condition number estimate (LAPACK ``dpocon`` for the dense backend
 Hager-Higham estimator with the factor's own solves otherwise).
 """
 
-from cbha_inverse.core._kernels.band import band_solve
-from cbha_inverse.core._kernels.band_assembly import btd_band_cholesky
+from cbha_inverse.core._kernels.assembly import btd_cholesky
+from cbha_inverse.core._kernels.block_band import block_solve
 import numpy as np
 from scipy.linalg import lapack
 
@@ -282,46 +280,53 @@ def _kernel_array(array):
 
 def _factor_compiled(diagonal, upper):
     """
-    Compiled band Cholesky backend (numba, :mod:`cbha_inverse.core._kernels.band`).
+    Compiled block Cholesky backend (numba, :mod:`cbha_inverse.core._kernels.block_band`).
 
-    One kernel call writes the (bn, 2b) lower band straight from the blocks and factors it
-    within the block-tridiagonal envelope; each solve copies the right-hand sides into a
-    C-ordered array and runs one forward and one back substitution on all of them at once.
+    One kernel call writes the block band straight from the blocks and factors it; each solve
+    copies the right-hand sides into a C-ordered array and runs one forward and one backward
+    sweep on all of them at once. Blocks of 6 x 6 (a frame's unknowns) only.
     """
     b = diagonal.shape[1]
-    factor, info = btd_band_cholesky(_kernel_array(diagonal), _kernel_array(upper))
+    if b != 6:
+        raise ValueError(f"the compiled backend factors 6 x 6 blocks, got {b} x {b}: use "
+                         "method='banded' or 'dense'")
+    factor, info = btd_cholesky(_kernel_array(diagonal), _kernel_array(upper))
     if info > 0:
-        pivot = factor[info - 1, 0]
+        row = info - 1
+        pivot = factor[row // 6, 0, row % 6, row % 6]
         if not np.isfinite(pivot):
-            raise ValueError(f'compiled band Cholesky failed: non-finite pivot at row {info - 1}')
-        raise not_pd_error(info - 1, b, pivot, 'compiled band Cholesky')
+            raise ValueError(f'compiled block Cholesky failed: non-finite pivot at row {row}')
+        raise not_pd_error(row, b, pivot, 'compiled block Cholesky')
 
     def solver(rhs):
         x = np.array(rhs, dtype=np.float64, order='C')
-        band_solve(factor, x)
+        block_solve(factor, x)
         return x
 
     return BTDFactorization('compiled', (diagonal, upper), solver)
 
 
-def choose_method(n_blocks):
+def choose_method(n_blocks, block_size=6):
     """
-    Return the backend ``'auto'`` uses for ``n_blocks`` blocks: ``'compiled'`` for every size.
+    Return the backend ``'auto'`` uses: ``'compiled'`` for 6 x 6 blocks at every size.
 
     It measured fastest at every n and number of right-hand sides of ``cbha_bench_core`` (see the
-    module docstring), and it uses no BLAS, so the choice does not depend on BLAS threading.
+    module docstring), and it uses no BLAS, so the choice does not depend on BLAS threading;
+    other block sizes take LAPACK's banded Cholesky.
 
     Parameters
     ----------
     n_blocks : int
         Number of diagonal blocks.
+    block_size : int
+        ``b``.
 
     Returns
     -------
     str
 
     """
-    return 'compiled'
+    return 'compiled' if block_size == 6 else 'banded'
 
 
 def _dense_lower(diagonal, upper):
@@ -398,7 +403,7 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
     upper : (n - 1, b, b) array_like
         ``upper[i]`` = block (i, i+1); block (i+1, i) is its transpose.
     method : {'auto', 'compiled', 'dense', 'banded'}
-        Backend; 'auto' is 'compiled' (see :func:`choose_method`).
+        Backend; 'auto' is 'compiled' for 6 x 6 blocks (see :func:`choose_method`).
     max_condition : float, optional
         If given, the condition estimate is computed at once and a larger one raises
         :class:`IllConditionedError` (otherwise it is computed on first access).
@@ -420,7 +425,7 @@ def factorize(diagonal, upper, method='auto', max_condition=None):
     """
     diagonal, upper = _check_blocks(diagonal, upper)
     if method == 'auto':
-        method = choose_method(diagonal.shape[0])
+        method = choose_method(diagonal.shape[0], diagonal.shape[1])
     backend = _BACKENDS.get(method)
     if backend is None:
         raise ValueError(f'method must be one of {METHODS}, got {method!r}')

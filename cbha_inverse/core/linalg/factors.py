@@ -2,16 +2,17 @@
 Factors of a tangent stiffness ``K``, all with one protocol: ``solve(rhs)`` and ``method``.
 
 The equilibrium evaluator (:class:`cbha_inverse.core.system.EquilibriumSystem`) factors its
-tangents into these: :class:`BandCholesky` (compiled, the symmetric band of the control tick and
-the material band of the fallback), :class:`BandLU` (LAPACK ``dgbtrf``, the exact,
-non-symmetric band of Newton's method) and :class:`DenseLU` (an exact tangent with a user load
-stiffness). The control tick, Newton's method and the static checks use them through
+tangents into these: :class:`BlockCholesky` (the symmetric block band of the control tick and
+the material one of the fallback), :class:`BandLU` (the exact, non-symmetric band of Newton's
+method), both compiled (:mod:`cbha_inverse.core._kernels.block_band`,
+:mod:`cbha_inverse.core._kernels.band_lu`), and :class:`DenseLU` (an exact tangent with a user
+load stiffness). The control tick, Newton's method and the static checks use them through
 :class:`TangentFactor` alone.
 """
 
-from cbha_inverse.core._kernels.band import band_solve
+from cbha_inverse.core._kernels.block_band import block_solve
+from cbha_inverse.core._kernels.band_lu import band_lu_solve
 import numpy as np
-from scipy.linalg import lapack
 
 
 class TangentFactor:
@@ -21,7 +22,7 @@ class TangentFactor:
     Attributes
     ----------
     method : str
-        ``'band_cholesky'``, ``'band_lu'`` or ``'dense_lu'``.
+        ``'block_cholesky'``, ``'band_lu'`` or ``'dense_lu'``.
 
     """
 
@@ -57,20 +58,20 @@ class TangentFactor:
         raise NotImplementedError
 
 
-class BandCholesky(TangentFactor):
+class BlockCholesky(TangentFactor):
     """
-    Cholesky factor ``L`` of a symmetric band tangent (compiled kernels).
+    Block Cholesky factor ``L`` of a symmetric block band tangent (compiled kernels).
 
     Parameters
     ----------
-    factor : (N, kd + 1) ndarray
-        ``L`` in the lower band storage of
+    factor : (n, B + 1, 6, 6) ndarray
+        ``L`` in the block band storage of
         :meth:`cbha_inverse.core.system.EquilibriumSystem.linearise` (a buffer of the system:
         valid until its next evaluation).
 
     """
 
-    method = 'band_cholesky'
+    method = 'block_cholesky'
 
     def __init__(self, factor):
         """Keep the factor."""
@@ -79,38 +80,39 @@ class BandCholesky(TangentFactor):
     def solve(self, rhs):
         """Solve ``K X = rhs`` as :meth:`TangentFactor.solve` (the tick's path: one copy)."""
         solved = np.array(rhs, dtype=float, order='C')
-        band_solve(self._factor, solved if solved.ndim == 2
-                   else solved.reshape(solved.shape[0], -1))
+        block_solve(self._factor, solved if solved.ndim == 2
+                    else solved.reshape(solved.shape[0], -1))
         return solved
 
 
 class BandLU(TangentFactor):
     """
-    LU factor of a general band matrix (LAPACK ``dgbtrf``).
+    LU factor of a general band matrix (:func:`cbha_inverse.core._kernels.band_lu.band_lu`).
 
     Parameters
     ----------
-    lu : (3 kd + 1, N) ndarray
-        Factor in LAPACK's general band layout (Fortran order).
-    pivots : (N,) int ndarray
-        Row interchanges.
+    lu : (N, 3 kd + 1) ndarray
+        Factor in the general band storage of
+        :meth:`cbha_inverse.core.system.EquilibriumSystem.exact_system` (a buffer of the
+        system: valid until its next factorisation).
     kd : int
         Number of sub- and super-diagonals of the factored matrix.
+    pivots, lower_reach : (N,) int ndarray
+        Row interchanges and the reach of the columns of ``L``.
 
     """
 
     method = 'band_lu'
 
-    def __init__(self, lu, pivots, kd):
+    def __init__(self, lu, kd, pivots, lower_reach):
         """Keep the factor."""
-        self._lu, self._pivots, self._kd = lu, pivots, kd
+        self._lu, self._kd, self._pivots, self._reach = lu, kd, pivots, lower_reach
 
     def _solve(self, columns):
-        """Solve with LAPACK's ``dgbtrs``."""
-        x, info = lapack.dgbtrs(self._lu, self._kd, self._kd, columns, self._pivots)
-        if info != 0:
-            raise np.linalg.LinAlgError(f'dgbtrs failed (info {info})')
-        return np.ascontiguousarray(x)
+        """Solve with the compiled band LU's forward and backward sweeps."""
+        solved = np.array(columns, dtype=float, order='C')
+        band_lu_solve(self._lu, self._kd, self._pivots, self._reach, solved)
+        return solved
 
 
 class DenseLU(TangentFactor):
