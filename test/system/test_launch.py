@@ -331,10 +331,10 @@ def test_sigint_at_any_moment_of_the_start_is_a_clean_stop(delay):
     """
     SIGINT ``delay`` seconds after cbha_launch's first line: status 0, no traceback.
 
-    The delay counts from the launcher's stop handlers (Python sets none for SIGTERM, the
-    launcher's first line does): before them the interpreter itself still starts (twice: the
-    ROS wheels re-exec it), which no program can stop cleanly, and which takes longer than 0.3 s
-    on a loaded machine.
+    The delay counts from the launcher's stop handlers (Python sets none for SIGTERM, the import
+    of ``cbha_inverse.ros`` before the launcher's module does): before them the interpreter
+    itself still starts (twice: the ROS wheels re-exec it), which no program can stop cleanly,
+    and which takes longer than 0.3 s on a loaded machine.
     """
     process = _launch('scene:=tendon_6f_8c')
     deadline = time.monotonic() + 60.0

@@ -10,35 +10,28 @@ nodes are required: when one exits by itself, the others are stopped. Exit statu
 node stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad
 argument, params file or conflict between them (one line on stderr). ``--dry-run`` prints the
 command lines instead, and keeps the overrides params files they name; ``--show-args`` lists the
-composition's arguments (as ``ros2 launch ... --show-args``).
+composition's arguments (as ``ros2 launch ... --show-args``). A stop while the command itself
+still loads exits 0 with one line (:mod:`cbha_inverse.ros.common.loading`).
 """
 
+import argparse
+import os
+from pathlib import Path
+import shlex
+import shutil
 import signal
+import subprocess
 import sys
+import tempfile
+import threading
+import time
 
-from cbha_inverse.ros.common.loading import install_quiet_stop, restore_handlers
-
-# a Ctrl-C right after the start lands in the imports below: one line and status 0, not a
-# KeyboardInterrupt traceback (restored once they are done)
-_LOADING = install_quiet_stop('cbha_launch')
-
-import argparse  # noqa: E402, I100
-import os  # noqa: E402
-from pathlib import Path  # noqa: E402
-import shlex  # noqa: E402
-import shutil  # noqa: E402
-import subprocess  # noqa: E402
-import tempfile  # noqa: E402
-import threading  # noqa: E402
-import time  # noqa: E402
-
-from cbha_inverse.config_files import read_yaml  # noqa: E402
-from cbha_inverse.errors import ConfigError, report_config_error  # noqa: E402
-from cbha_inverse.ros.launch.compositions import (  # noqa: E402
+from cbha_inverse.config_files import read_yaml
+from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.ros.common.loading import loaded
+from cbha_inverse.ros.launch.compositions import (
     ArgumentError, COMPOSITIONS, node_module, resolve)
-import yaml  # noqa: E402
-
-restore_handlers(_LOADING)
+import yaml
 
 PROGRAM = 'cbha_launch'
 STOP_TIMEOUT = 15.0
@@ -279,6 +272,8 @@ def main(argv=None):
         See the module docstring.
 
     """
+    # from here this command handles its stops (:mod:`cbha_inverse.ros.common.loading`)
+    loaded()
     try:
         return _main(argv)
     except KeyboardInterrupt:      # before the nodes start: nothing to stop
