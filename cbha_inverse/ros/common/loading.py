@@ -12,7 +12,8 @@ cbha_inverse.ros.nodes.inverse_solver``; ``cbha_launch``), SIGINT and SIGTERM pr
 program takes them over (a node's ``main``; ``cbha_launch``'s, through :func:`loaded`). Any other
 process (a test importing a node class) keeps its handlers.
 
-``cbha_launch`` starts the nodes with SIGINT and SIGTERM blocked, so that a stop during the
+The launcher starts the nodes with SIGINT and SIGTERM blocked
+(:class:`cbha_inverse.ros.launch.processes.NodeProcesses`), so that a stop during the
 interpreter's own start (where it would end in a fatal error) waits: :func:`quiet_while_loading`
 unblocks them once the quiet stop is installed, and a signal that came meanwhile is then a stop
 while loading.
