@@ -490,8 +490,9 @@ def aborted_logs(folder, lines=60):
     """
     Return the end of every process log under ``folder`` that holds a faulthandler stack.
 
-    ``cbha_demo`` sends SIGABRT to a process that does not stop after SIGINT; with
-    ``PYTHONFAULTHANDLER`` its log then ends with the stack of every thread.
+    ``cbha_demo``'s processes run with ``PYTHONFAULTHANDLER``: the log of one that ended by a
+    fatal signal (SIGABRT, SIGSEGV) ends with the stack of every thread. One that did not stop
+    after SIGINT is named on the demo's stderr (``still running 15 s after SIGINT``).
 
     Parameters
     ----------

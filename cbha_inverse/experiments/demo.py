@@ -1,16 +1,22 @@
 """
 ``cbha_demo`` (``make demo``): the paper's circle and square, open and closed loop, on real DDS.
 
-For each run the demo starts ``cbha_bag record`` (into ``<output>/<run>/bag``: target, tip/true,
-tip/measured, tip/estimated, payload/estimated, sections/estimated, pressure_command,
-pressure_measured, string_pots, /diagnostics), then ``cbha_sim``, ``inverse_solver``
-(``--realtime-priority``) and ``trajectory`` as separate processes (as ``ros2 run`` would, with the
-installed params files plus a per-run override file; the solver over UDP on 127.0.0.1,
-``--solver-transport``: ``cbha_inverse.ros.common.transport``), runs one lap, stops them with
-SIGINT and prints one line: tracking RMS and max (plant tip vs target, moving part: ``cbha_bag
-eval``), the solver's tick and target-to-command latency (callback entry to publish; its CPU time:
-the rest is waiting for a core), median / p99. It writes ``demo.png``, ``summary.json`` and per run
-params, logs, bag.
+Each run is ``cbha_launch sim`` with the run's parameters: the nodes of the composition ``sim``
+(:mod:`cbha_inverse.ros.launch.compositions`; ``feedback`` ``sim``, ``stereo`` or ``proprio`` by
+the run, ``solver_transport`` from ``--solver-transport``, by default ``udp-loopback``: the solver
+over UDP on 127.0.0.1 alone), started and stopped by the launcher's
+:class:`cbha_inverse.ros.launch.processes.NodeProcesses`. Every node gets its installed params
+file, then the composition's overrides with the run's over them (``<output>/<run>/<node>.yaml``:
+the plant's errors, the lap, ``--realtime-priority``), and writes its output into
+``<output>/<run>/<node>.log``. The demo first starts ``cbha_bag record`` (into
+``<output>/<run>/bag``: target, tip/true, tip/measured, tip/estimated, payload/estimated,
+sections/estimated, pressure_command, pressure_measured, string_pots, /diagnostics), then every
+node but ``trajectory``, which starts once the others publish diagnostics. After one lap it stops
+the nodes, then the recorder, as ``cbha_launch`` does (SIGINT; SIGTERM 15 s later, SIGKILL 5 s
+after that: a process that needed either fails the demo), and prints one line: tracking RMS and
+max (plant tip vs target, moving part: ``cbha_bag eval``), the solver's tick and target-to-command
+latency (callback entry to publish; its CPU time: the rest is waiting for a core), median / p99.
+It writes ``demo.png``, ``summary.json`` and per run params, logs, bag.
 
 Defaults (paper, section V): circle r = 60 mm at 2.5 cm/s, square 80 mm at 3.1 cm/s, y-z plane,
 centred on the scene's suggested workspace centre; the plant is 10 % softer than the model.
@@ -39,12 +45,11 @@ holds) adds an identification run: ``cbha_sim`` and ``cbha_excite`` alone, recor
 """
 
 import argparse
+from dataclasses import replace
 import json
 import os
 from pathlib import Path
 import shutil
-import signal
-import subprocess
 import sys
 import time
 
@@ -60,18 +65,17 @@ from cbha_inverse.metrics import plot_runs
 from cbha_inverse.paths import config_path
 from cbha_inverse.robot.safety import command_bounds
 from cbha_inverse.robot.trajectory import make_trajectory
-from cbha_inverse.ros.common.transport import loopback_udp_environment, node_environment
+from cbha_inverse.ros.common.transport import node_environment
+from cbha_inverse.ros.launch.compositions import (ArgumentError, COMPOSITIONS, NodeProcess,
+                                                  resolve)
+from cbha_inverse.ros.launch.processes import NodeProcesses
 from cbha_inverse.scene import load_scene
 import numpy as np
 import yaml
 
-NODES = ('cbha_sim', 'inverse_solver', 'trajectory')
-MODULES = {'cbha_sim': 'cbha_inverse.ros.nodes.cbha_sim',
-           'inverse_solver': 'cbha_inverse.ros.nodes.inverse_solver',
-           'trajectory': 'cbha_inverse.ros.nodes.trajectory',
-           'stereo_tracker': 'cbha_inverse.ros.nodes.stereo_tracker',
-           'cbha_excite': 'cbha_inverse.ros.nodes.cbha_excite',
-           'shape_estimator': 'cbha_inverse.ros.nodes.shape_estimator'}
+PROGRAM = 'cbha_demo'
+FEEDBACK = {'direct': 'sim', 'stereo': 'stereo', 'proprio': 'proprio'}
+"""The ``feedback`` argument of the ``sim`` composition for each kind of run."""
 NAMESPACE = '/cbha'
 RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'payload/estimated',
             'sections/estimated', 'pressure_command', 'pressure_measured', 'string_pots',
@@ -145,68 +149,44 @@ def parse_args(argv):
     return parser.parse_args(argv)
 
 
-def _write_params(path, values):
-    """Write a ``--params-file`` YAML for all nodes."""
-    path.write_text(yaml.safe_dump({'/**': {'ros__parameters': values}}, sort_keys=False))
-    return path
+def run_nodes(args, parameters, mode='closed', feedback='direct'):
+    """
+    Return ``{node: NodeProcess}`` of one run: the ``sim`` composition, the run's parameters last.
+
+    ``parameters`` maps a node to its run's overrides; ``feedback`` is a key of :data:`FEEDBACK`;
+    a mode the composition does not know raises its ``ArgumentError``.
+    """
+    nodes = resolve(COMPOSITIONS['sim'], {
+        'namespace': NAMESPACE, 'scene': args.scene, 'mode': mode,
+        'feedback': FEEDBACK[feedback], 'solver_transport': args.solver_transport})
+    return {node.executable: replace(node, parameters={
+        **node.parameters, **parameters.get(node.executable, {})}) for node in nodes}
 
 
-def _start(node, run_dir, overrides, env, transport='default'):
-    """Start one node process with its installed params file and the run's overrides."""
-    params = _write_params(run_dir / f'{node}.yaml', overrides)
-    env = loopback_udp_environment(env) if transport == 'udp-loopback' else env
-    log = open(run_dir / f'{node}.log', 'w')
-    process = subprocess.Popen(
-        [sys.executable, '-m', MODULES[node], '--ros-args', '-r', f'__ns:={NAMESPACE}',
-         '--params-file', str(config_path(f'{node}.yaml')), '--params-file', str(params)],
-        env=env, stdout=log, stderr=subprocess.STDOUT)
-    process.log = log
-    return process
-
-
-def _start_recorder(run_dir, env, recorded=RECORDED):
+def _start_recorder(recording, run_dir, recorded=RECORDED):
     """Start ``cbha_bag record`` of the run's topics into ``run_dir/bag`` (replacing it)."""
     bag = run_dir / 'bag'
     if bag.exists():
         shutil.rmtree(bag)
     topics = [t if t.startswith('/') else f'{NAMESPACE}/{t}' for t in recorded]
-    log = open(run_dir / 'cbha_bag_record.log', 'w')
-    process = subprocess.Popen(
+    return recording.start(
+        'cbha_bag_record',
         [sys.executable, '-m', 'cbha_inverse.ros.bag.cli', 'record', '-o', str(bag), *topics],
-        env=env, stdout=log, stderr=subprocess.STDOUT)
-    process.log = log
-    return process
+        log=run_dir / 'cbha_bag_record.log', node=False)
 
 
-STOP_TIMEOUT_S = 15.0
-"""Longest wait [s] for a process to end after SIGINT before it is aborted."""
+def _start_node(processes, node, run_dir):
+    """Start a node with its params files, its overrides in ``run_dir``, its log there."""
+    return processes.start_node(node, run_dir, log=run_dir / f'{node.executable}.log')
 
 
-def _stop(processes):
-    """
-    SIGINT every process, then wait; return the exit codes.
-
-    A process still running :data:`STOP_TIMEOUT_S` after SIGINT gets SIGABRT (its log ends with
-    the stack of every thread: ``PYTHONFAULTHANDLER``), then SIGKILL; a line on stderr names it.
-    """
-    for process in processes.values():
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-    codes = {}
-    for name, process in processes.items():
-        try:
-            codes[name] = process.wait(timeout=STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            process.send_signal(signal.SIGABRT)
-            try:
-                codes[name] = process.wait(timeout=5.0)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                codes[name] = process.wait()
-            print(f'cbha_demo: {name} did not stop within {STOP_TIMEOUT_S:.0f} s of SIGINT '
-                  f'(its stack: the end of {process.log.name})', file=sys.stderr)
-        process.log.close()
-    return codes
+def _stop(processes, recording):
+    """Stop a run's nodes, then its recorder; return exit statuses and escalations by name."""
+    try:
+        codes = dict(processes.stop())
+    finally:
+        recorded = dict(recording.stop())
+    return {**codes, **recorded}, {**processes.escalated, **recording.escalated}
 
 
 class Recorder:
@@ -328,30 +308,33 @@ def run_excitation(recorder, run_dir, args, program, valve_names, env):
     """
     run_dir.mkdir(parents=True, exist_ok=True)
     recorder.clear()
-    recorder_process = {'cbha_bag_record': _start_recorder(run_dir, env, EXCITE_RECORDED)}
-    processes = {'cbha_sim': _start('cbha_sim', run_dir, _sim_overrides(args, valve_names), env)}
+    plant = run_nodes(args, {'cbha_sim': _sim_overrides(args, valve_names)})['cbha_sim']
+    excite = NodeProcess('cbha_excite', NAMESPACE, (str(config_path('cbha_excite.yaml')),), {
+        'scene': args.scene, 'valve_names': list(valve_names), 'program': args.excite,
+        'hold_time': args.excite_hold_time, 'ramp_time': args.excite_ramp_time,
+        'wait_for_subscribers': 2})
+    recording, processes = NodeProcesses(PROGRAM, env, sys.stderr), NodeProcesses(
+        PROGRAM, env, sys.stderr)
     try:
+        _start_recorder(recording, run_dir, EXCITE_RECORDED)
+        _start_node(processes, plant, run_dir)
         if not recorder.spin_until(lambda: any(
                 name.startswith('cbha_sim:') for name in recorder.diagnostics), 120.0):
             raise RuntimeError(f'cbha_sim did not start, see the logs in {run_dir}')
         # the program starts once the plant and the bag recorder subscribe to its commands
-        processes['cbha_excite'] = _start('cbha_excite', run_dir, {
-            'scene': args.scene, 'valve_names': list(valve_names), 'program': args.excite,
-            'hold_time': args.excite_hold_time, 'ramp_time': args.excite_ramp_time,
-            'wait_for_subscribers': 2}, env)
-        excite = processes['cbha_excite']
-        if not recorder.spin_until(lambda: excite.poll() is not None, program.duration + 120.0):
+        excited = _start_node(processes, excite, run_dir)
+        if not recorder.spin_until(lambda: excited.poll() is not None,
+                                   program.duration + 120.0):
             raise RuntimeError(f'cbha_excite did not finish, see the logs in {run_dir}')
         time.sleep(0.3)     # the plant's response to the last command reaches the bag
     finally:
-        codes = _stop(processes)
-        codes.update(_stop(recorder_process))
+        codes, escalated = _stop(processes, recording)
     with open_bag(run_dir / 'bag') as bag:
         counts = {topic.name: topic.count for topic in bag.summary.topics}
     return {'program': args.excite, 'holds': program.n_holds,
             'hold_time_s': program.hold_time, 'ramp_time_s': program.ramp_time,
-            'duration_s': program.duration, 'exit_codes': codes, 'bag': str(run_dir / 'bag'),
-            'messages': counts}
+            'duration_s': program.duration, 'exit_codes': codes, 'escalated': escalated,
+            'bag': str(run_dir / 'bag'), 'messages': counts}
 
 
 def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, feedback='direct'):
@@ -362,29 +345,31 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
     run_dir.mkdir(parents=True, exist_ok=True)
     recorder.clear()
     common = {'scene': args.scene, 'valve_names': list(valve_names)}
-    recorder_process = {'cbha_bag_record': _start_recorder(run_dir, env)}
-    sim_extra, solver_extra, waited = {}, {}, ['cbha_sim', 'inverse_solver']
+    model = {**common, 'scene': str(args.model_scene or args.scene), 'diagnostics_period': 0.5}
+    sim_extra, solver_extra, tracker_params, estimator_extra = {}, {}, {}, {}
     if feedback == 'stereo':
         sim_extra, tracker_params = _stereo_overrides(args)
         solver_extra = {'loop_gain': args.stereo_loop_gain}
-        waited.append('stereo_tracker')
     if feedback == 'proprio':
         sim_extra = proprio_sim_parameters(args, trajectory)
         estimator_extra, solver_extra = proprio_node_parameters(args)
-        waited.append('shape_estimator')
-    processes = {'cbha_sim': _start('cbha_sim', run_dir, {
-        **_sim_overrides(args, valve_names), **sim_extra}, env)}
-    if feedback == 'stereo':
-        processes['stereo_tracker'] = _start('stereo_tracker', run_dir, tracker_params, env)
-    if feedback == 'proprio':
-        processes['shape_estimator'] = _start('shape_estimator', run_dir, {
-            **common, 'scene': str(args.model_scene or args.scene), 'diagnostics_period': 0.5,
-            **estimator_extra}, env)
-    processes['inverse_solver'] = _start('inverse_solver', run_dir, {
-        **common, 'scene': str(args.model_scene or args.scene), 'mode': mode,
-        'diagnostics_period': 0.5, 'realtime_priority': args.realtime_priority,
-        **solver_extra}, env, args.solver_transport)
+    nodes = run_nodes(args, {
+        'cbha_sim': {**_sim_overrides(args, valve_names), **sim_extra},
+        'stereo_tracker': tracker_params,
+        'shape_estimator': {**model, **estimator_extra},
+        'inverse_solver': {**model, 'mode': mode, 'realtime_priority': args.realtime_priority,
+                           **solver_extra},
+        'trajectory': {'shape': shape, 'center': [float(v) for v in center],
+                       'radius': args.radius, 'side': args.side, 'plane': 'yz', 'speed': speed,
+                       'laps': 1, 'start_hold': args.start_hold, 'wait_for_subscribers': 3}},
+        mode, feedback)
+    waited = [name for name in nodes if name != 'trajectory']
+    recording, processes = NodeProcesses(PROGRAM, env, sys.stderr), NodeProcesses(
+        PROGRAM, env, sys.stderr)
     try:
+        _start_recorder(recording, run_dir)
+        for name in waited:
+            _start_node(processes, nodes[name], run_dir)
         # the trajectory starts once the nodes publish diagnostics (they spin), and keeps its
         # clock at 0 until the solver, this recorder and the bag recorder subscribe to it
         if not recorder.spin_until(lambda: all(
@@ -392,10 +377,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
                 for node in waited), 120.0):
             raise RuntimeError(f'nodes did not start, see the logs in {run_dir}')
         launched = time.time()  # targets stamped earlier are late messages of a previous run
-        processes['trajectory'] = _start('trajectory', run_dir, {
-            'shape': shape, 'center': [float(v) for v in center], 'radius': args.radius,
-            'side': args.side, 'plane': 'yz', 'speed': speed, 'laps': 1,
-            'start_hold': args.start_hold, 'wait_for_subscribers': 3}, env)
+        _start_node(processes, nodes['trajectory'], run_dir)
         if not recorder.spin_until(lambda: any(t[0] >= launched for t in recorder.targets),
                                    60.0):
             raise RuntimeError(f'no target received, see the logs in {run_dir}')
@@ -406,8 +388,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         recorder.spin_until(lambda: recorder.diagnostics.get(
             'inverse_solver: control', ({}, 0.0))[1] > fresh, 2.0)
     finally:
-        codes = _stop(processes)
-        codes.update(_stop(recorder_process))
+        codes, escalated = _stop(processes, recording)
     evaluation = evaluate_bag(run_dir / 'bag', namespace=NAMESPACE, tip='true',
                               start=args.start_hold, end=trajectory.duration)
     if evaluation.tracking is None:
@@ -455,7 +436,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
             'solver_status': {k[len('status.'):]: v for k, v in control.items()
                               if k.startswith('status.')},
             'plant_tick_median_ms': number(plant, 'tick_median_ms'),
-            'exit_codes': codes, 'bag': str(run_dir / 'bag'),
+            'exit_codes': codes, 'escalated': escalated, 'bag': str(run_dir / 'bag'),
             'eval_window_s': [args.start_hold, trajectory.duration],
             'bag_latency_p99_ms': float(np.percentile(evaluation.latencies, 99) * 1e3)
             if evaluation.latencies.size else float('nan'),
@@ -490,6 +471,18 @@ def main(argv=None):
     valve_names = configured.get('/**', {}).get('ros__parameters', {}).get('valve_names')
     if valve_names is None or sorted(valve_names) != sorted(scene.actuator_names):
         valve_names = list(scene.actuator_names)
+    feedbacks = args.feedback.split(',')
+    runs = [(shape, mode, 'direct') for shape in args.shapes.split(',')
+            for mode in args.modes.split(',') if 'direct' in feedbacks]
+    runs += [(shape, 'closed', 'stereo') for shape in args.stereo_shapes.split(',')
+             if 'stereo' in feedbacks]
+    runs += [(shape, 'closed', 'proprio') for shape in args.proprio_shapes.split(',')
+             if 'proprio' in feedbacks]
+    try:       # the composition's arguments of every run, checked before any node starts
+        for _, mode, feedback in runs:
+            run_nodes(args, {}, mode, feedback)
+    except ArgumentError as exc:
+        return report_config_error('cbha_demo', exc)
     excitation = None
     if args.excite is not None:
         try:       # the program cbha_excite will run, checked before any node starts
@@ -525,13 +518,6 @@ def main(argv=None):
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     recorder = Recorder(context)
     results = []
-    feedbacks = args.feedback.split(',')
-    runs = [(shape, mode, 'direct') for shape in args.shapes.split(',')
-            for mode in args.modes.split(',') if 'direct' in feedbacks]
-    runs += [(shape, 'closed', 'stereo') for shape in args.stereo_shapes.split(',')
-             if 'stereo' in feedbacks]
-    runs += [(shape, 'closed', 'proprio') for shape in args.proprio_shapes.split(',')
-             if 'proprio' in feedbacks]
     try:
         for shape, mode, feedback in runs:
             name = f'{shape}_{mode}' + ('' if feedback == 'direct' else f'_{feedback}')
@@ -584,8 +570,9 @@ def main(argv=None):
     (output / 'summary.json').write_text(json.dumps(summary, indent=2))
     print(f"wrote {output / 'demo.png'} and {output / 'summary.json'} "
           f"({summary['wall_time_s']:.0f} s)")
-    clean = all(code == 0 for r in results + ([excited] if excitation is not None else [])
-                for code in r['exit_codes'].values())
+    done = results + ([excited] if excitation is not None else [])
+    clean = all(code == 0 for r in done for code in r['exit_codes'].values()) and not any(
+        r['escalated'] for r in done)
     return 0 if clean else 1
 
 

@@ -6,4 +6,20 @@ The ROS 2 layer (rclpy).
 (``cbha_status``, a console view of ``/diagnostics``). Below this layer nothing
 imports rclpy; above it only :mod:`cbha_inverse.experiments` and the bag benchmark
 :mod:`cbha_inverse.report.bench_bag` do (see ``docs/design.md``).
+
+Importing it in a node executable or in ``cbha_launch`` makes a stop signal while the program
+still loads a quiet exit (:func:`cbha_inverse.ros.common.loading.quiet_while_loading`): every
+node module and the launcher are below this package, so no program of it loads before that.
 """
+
+from pathlib import Path
+
+from cbha_inverse.ros.common.loading import quiet_while_loading
+
+PROGRAMS = {
+    **{f'{__name__}.nodes.{path.stem}': path.stem
+       for path in (Path(__file__).parent / 'nodes').glob('*.py') if path.stem != '__init__'},
+    f'{__name__}.launch.launcher': 'cbha_launch'}
+"""The programs that stop quietly while they load: ``module -> program`` (console script)."""
+
+quiet_while_loading(PROGRAMS)

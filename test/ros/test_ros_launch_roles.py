@@ -4,7 +4,7 @@ import re
 
 from cbha_inverse.ros.common.transport import LOOPBACK_UDP_PROFILE
 from cbha_inverse.ros.launch.compositions import ArgumentError, COMPOSITIONS, resolve, ROLES
-from cbha_inverse.ros.launch.launcher import command_lines
+from cbha_inverse.ros.launch.processes import command_lines
 import pytest
 
 EXPECTED = {

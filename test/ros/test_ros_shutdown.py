@@ -101,16 +101,19 @@ def test_a_stop_while_a_node_executable_loads_is_quiet():
         assert output.strip().endswith(f'stopped by {sig} while loading'), output
 
 
-def test_only_a_node_executable_gets_the_quiet_loading_stop(monkeypatch):
-    from cbha_inverse.ros.common.loading import node_executable
-    names = {'inverse_solver', 'cbha_sim'}
-    assert node_executable('/venv/bin/inverse_solver', names) == 'inverse_solver'
-    assert node_executable('/venv/bin/pytest', names) is None
-    assert node_executable('/repo/cbha_inverse/ros/launch/node_process.py', names) is None
+def test_only_a_program_of_the_package_gets_the_quiet_loading_stop(monkeypatch):
+    from cbha_inverse.ros import PROGRAMS
+    from cbha_inverse.ros.common.loading import program_name
+    assert program_name('/venv/bin/inverse_solver', PROGRAMS) == 'inverse_solver'
+    assert program_name('/venv/bin/cbha_launch', PROGRAMS) == 'cbha_launch'
+    assert program_name('/venv/bin/pytest', PROGRAMS) is None
+    assert program_name('/repo/cbha_inverse/ros/bag/cli.py', PROGRAMS) is None
     monkeypatch.setattr(sys, 'orig_argv', ['python', '-m', 'cbha_inverse.ros.nodes.cbha_sim'])
-    assert node_executable('-m', names) == 'cbha_sim'
+    assert program_name('-m', PROGRAMS) == 'cbha_sim'
+    monkeypatch.setattr(sys, 'orig_argv', ['python', '-m', 'cbha_inverse.ros.launch.launcher'])
+    assert program_name('-m', PROGRAMS) == 'cbha_launch'
     monkeypatch.setattr(sys, 'orig_argv', ['python', '-m', 'pytest', 'test'])
-    assert node_executable('-m', names) is None
+    assert program_name('-m', PROGRAMS) is None
 
 
 QUIET_STOP_PROGRAM = """

@@ -11,6 +11,7 @@ source (syntax, imports, the composition they read), and ``cbha_launch`` runs th
 import ast
 from dataclasses import fields, is_dataclass
 import importlib
+import io
 from itertools import product
 import os
 from pathlib import Path
@@ -22,7 +23,7 @@ import sys
 import time
 
 from cbha_inverse.ros.common.qos import MEASURED_QOS
-from cbha_inverse.ros.launch import launcher
+from cbha_inverse.ros.launch import processes as node_processes
 from cbha_inverse.ros.launch.compositions import (
     ArgumentError, COMPOSITIONS, node_module, resolve)
 import pytest
@@ -196,30 +197,39 @@ while True:
 
 
 @pytest.mark.untimed
-def test_a_node_that_ignores_sigint_gets_sigterm_then_sigkill(monkeypatch):
-    monkeypatch.setattr(launcher, 'STOP_TIMEOUT', 0.5)
-    monkeypatch.setattr(launcher, 'TERM_TIMEOUT', 0.5)
+def test_a_node_that_ignores_sigint_gets_sigterm_then_sigkill(monkeypatch, tmp_path):
+    monkeypatch.setattr(node_processes, 'STOP_TIMEOUT', 0.5)
+    monkeypatch.setattr(node_processes, 'TERM_TIMEOUT', 0.5)
     behaviours = {'stops': ('lambda *_: sys.exit(0)', 'signal.SIG_DFL'),
                   'needs_sigterm': ('signal.SIG_IGN', 'lambda *_: sys.exit(3)'),
                   'hangs': ('signal.SIG_IGN', 'signal.SIG_IGN')}
+    out = io.StringIO()
+    group = node_processes.NodeProcesses('cbha_launch', out=out)
     children = []
     try:
         for name, (sigint, sigterm) in behaviours.items():
-            child = subprocess.Popen(
-                [sys.executable, '-c', _STOP_PROBE.format(sigint=sigint, sigterm=sigterm)],
-                stdout=subprocess.PIPE, text=True)
-            children.append((name, child))
-            assert child.stdout.readline() == 'ready\n', name
+            log = tmp_path / f'{name}.log'
+            children.append(group.start(
+                name, [sys.executable, '-c', _STOP_PROBE.format(sigint=sigint, sigterm=sigterm)],
+                log=log, node=False))
+            deadline = time.monotonic() + 60.0
+            while log.read_text() != 'ready\n':
+                assert time.monotonic() < deadline and children[-1].poll() is None, name
+                time.sleep(0.01)
         start = time.monotonic()
-        statuses = launcher._stop_all(children)
+        statuses = group.stop()
         elapsed = time.monotonic() - start
     finally:
-        for _, child in children:
+        for child in children:
             child.kill()
             child.wait()
-            child.stdout.close()
     assert statuses == [('stops', 0), ('needs_sigterm', 3), ('hangs', -signal.SIGKILL)]
     assert 1.0 <= elapsed < 5.0, elapsed
+    assert group.escalated == {'needs_sigterm': 'SIGTERM', 'hangs': 'SIGKILL'}
+    assert out.getvalue().splitlines() == [
+        '[cbha_launch] needs_sigterm still running 0.5 s after SIGINT: SIGTERM',
+        '[cbha_launch] hangs still running 0.5 s after SIGINT: SIGTERM',
+        '[cbha_launch] hangs still running 0.5 s after SIGTERM: SIGKILL']
 
 
 @pytest.mark.untimed
@@ -331,10 +341,10 @@ def test_sigint_at_any_moment_of_the_start_is_a_clean_stop(delay):
     """
     SIGINT ``delay`` seconds after cbha_launch's first line: status 0, no traceback.
 
-    The delay counts from the launcher's stop handlers (Python sets none for SIGTERM, the
-    launcher's first line does): before them the interpreter itself still starts (twice: the
-    ROS wheels re-exec it), which no program can stop cleanly, and which takes longer than 0.3 s
-    on a loaded machine.
+    The delay counts from the launcher's stop handlers (Python sets none for SIGTERM, the import
+    of ``cbha_inverse.ros`` before the launcher's module does): before them the interpreter
+    itself still starts (twice: the ROS wheels re-exec it), which no program can stop cleanly,
+    and which takes longer than 0.3 s on a loaded machine.
     """
     process = _launch('scene:=tendon_6f_8c')
     deadline = time.monotonic() + 60.0

@@ -1,15 +1,22 @@
 """
-A stop signal while a node executable still loads ends it with status 0 and one line.
+A stop signal while a program of the package still loads ends it with status 0 and one line.
 
 Loading a node (numpy, scipy, numba's cached kernels, rclpy) takes a second or more before its
 ``main`` installs its own handling (:class:`cbha_inverse.ros.common.runner.StopRequest`); a
 Ctrl-C in that time would end in a ``KeyboardInterrupt`` traceback from deep inside an import.
-:func:`quiet_while_loading` runs when the package of the node modules is imported, before any of
-them: when this process is a node executable (``inverse_solver``, or ``python -m
-cbha_inverse.ros.nodes.inverse_solver``), SIGINT and SIGTERM print
-``<executable>: stopped by SIGINT while loading`` and end the process with status 0 until the
-node's ``main`` takes them over. Any other process (a test importing a node class,
-``cbha_launch``'s :mod:`cbha_inverse.ros.launch.node_process`) keeps its handlers.
+:func:`quiet_while_loading` runs once, when :mod:`cbha_inverse.ros` is imported, before any node
+module or ``cbha_launch``'s: when this process is one of the programs it is given (a node
+executable: ``inverse_solver``, ``ros2 run cbha_inverse inverse_solver`` or ``python -m
+cbha_inverse.ros.nodes.inverse_solver``; ``cbha_launch``), SIGINT and SIGTERM print
+``<program>: stopped by SIGINT while loading`` and end the process with status 0 until the
+program takes them over (a node's ``main``; ``cbha_launch``'s, through :func:`loaded`). Any other
+process (a test importing a node class) keeps its handlers.
+
+The launcher starts the nodes with SIGINT and SIGTERM blocked
+(:class:`cbha_inverse.ros.launch.processes.NodeProcesses`), so that a stop during the
+interpreter's own start (where it would end in a fatal error) waits: :func:`quiet_while_loading`
+unblocks them once the quiet stop is installed, and a signal that came meanwhile is then a stop
+while loading.
 """
 
 import atexit
@@ -19,37 +26,38 @@ import sys
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
-
-def stopped_message(executable, signal_name):
-    """Return the one line of a node stopped while it loads."""
-    return f'{executable}: stopped by {signal_name} while loading'
+_REPLACED = {}
+"""The handlers :func:`quiet_while_loading` replaced, for :func:`loaded`."""
 
 
-def node_executable(argv0, node_names):
+def stopped_message(program, signal_name):
+    """Return the one line of a program stopped while it loads."""
+    return f'{program}: stopped by {signal_name} while loading'
+
+
+def program_name(argv0, programs):
     """
-    Return the node executable this process runs, or None.
+    Return the program of the package this process runs, or None.
 
     Parameters
     ----------
     argv0 : str
-        ``sys.argv[0]`` while the node package is imported: the console script's path, or ``-m``
-        while ``python -m`` locates its module.
-    node_names : collection of str
-        The node executables (the modules of the node package).
+        ``sys.argv[0]`` while :mod:`cbha_inverse.ros` is imported: the console script's path, or
+        ``-m`` while ``python -m`` locates its module.
+    programs : mapping of str to str
+        ``module -> program`` (the console script's name).
 
     Returns
     -------
     str or None
-        The executable's name (for ``-m``, the module named on the command line).
+        The program's name (for ``-m``, the one of the module named on the command line).
 
     """
     name = os.path.basename(argv0)
-    if name in node_names:
+    if name in programs.values():
         return name
     if argv0 == '-m':
-        module = _module_argument(getattr(sys, 'orig_argv', []))
-        name = module.rsplit('.', 1)[-1] if module else ''
-        return name if name in node_names else None
+        return programs.get(_module_argument(getattr(sys, 'orig_argv', [])))
     return None
 
 
@@ -61,40 +69,45 @@ def _module_argument(orig_argv):
     return ''
 
 
-def quiet_while_loading(node_names):
+def quiet_while_loading(programs):
     """
-    Install the quiet stop for the loading of a node executable (nothing in other processes).
+    Install the quiet stop for the loading of a program (nothing in other processes).
+
+    Also unblocks SIGINT and SIGTERM, which the launcher blocks in the nodes it starts.
 
     Parameters
     ----------
-    node_names : collection of str
-        The node executables.
+    programs : mapping of str to str
+        ``module -> program`` (:func:`program_name`).
 
     Returns
     -------
     str or None
-        The executable, when the handlers were installed.
+        The program, when the handlers were installed.
 
     """
-    executable = node_executable(sys.argv[0], node_names)
-    if executable is None:
+    program = program_name(sys.argv[0], programs)
+    if program is None:
         return None
     # a handler the process was given (an ignored SIGINT in a background job) stays
-    install_quiet_stop(executable, keep_given=True)
-    return executable
+    _REPLACED.update(install_quiet_stop(program, keep_given=True))
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
+    return program
 
 
-def install_quiet_stop(executable, keep_given=False):
+def loaded():
+    """Put back the handlers :func:`quiet_while_loading` replaced: the program handles stops."""
+    restore_handlers(_REPLACED)
+    _REPLACED.clear()
+
+
+def install_quiet_stop(program, keep_given=False):
     """
     Make SIGINT and SIGTERM print :func:`stopped_message` and end the process with status 0.
 
-    The one quiet stop of a program that still loads: a node executable
-    (:func:`quiet_while_loading`), ``cbha_launch`` before it starts the nodes, and
-    :mod:`cbha_inverse.ros.launch.node_process` while it imports a node module.
-
     Parameters
     ----------
-    executable : str
+    program : str
         The program's name, first word of the line.
     keep_given : bool
         Leave a signal alone whose handler is not Python's default (one the process was given).
@@ -106,7 +119,7 @@ def install_quiet_stop(executable, keep_given=False):
 
     """
     def stop(signum, frame):
-        print(stopped_message(executable, signal.Signals(signum).name), file=sys.stderr,
+        print(stopped_message(program, signal.Signals(signum).name), file=sys.stderr,
               flush=True)
         # not SystemExit: raised while the interpreter compiles a module (``python -m`` compiles
         # the node's own module), it is lost and the node would go on loading and run

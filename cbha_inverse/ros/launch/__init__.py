@@ -1,1 +1,1 @@
-"""The launch compositions (one table) and ``cbha_launch``, which starts them as processes."""
+"""The launch compositions (one table), how their nodes run as processes, and ``cbha_launch``."""

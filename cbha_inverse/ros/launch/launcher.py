@@ -2,51 +2,34 @@
 ``cbha_launch sim|robot [name:=value ...]``: the launch files' compositions, without ``launch``.
 
 Starts every node of :data:`cbha_inverse.ros.launch.compositions.COMPOSITIONS` ``[name]`` as a
-process (``python -m cbha_inverse.ros.launch.node_process cbha_inverse.ros.nodes.<node> --ros-args
--r __ns:=<namespace> --params-file <file> --params-file <overrides>``), prefixes each output line
-with ``[<node>]``, and on SIGINT or SIGTERM sends SIGINT to every node and waits for them (SIGTERM
-after :data:`STOP_TIMEOUT`, SIGKILL after :data:`TERM_TIMEOUT` more, as ``ros2 launch``). All
-nodes are required: when one exits by itself, the others are stopped. Exit status: 0 when every
-node stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad
-argument, params file or conflict between them (one line on stderr). ``--dry-run`` prints the
-command lines instead, and keeps the overrides params files they name; ``--show-args`` lists the
-composition's arguments (as ``ros2 launch ... --show-args``).
+process (:class:`cbha_inverse.ros.launch.processes.NodeProcesses`: ``python -m
+cbha_inverse.ros.nodes.<node> --ros-args -r __ns:=<namespace> -r __node:=<node> --params-file
+<file> --params-file <overrides>``), prefixes each output line with ``[<node>]``, and on SIGINT or
+SIGTERM sends SIGINT to every node and waits for them (SIGTERM after
+:data:`~cbha_inverse.ros.launch.processes.STOP_TIMEOUT`, SIGKILL after
+:data:`~cbha_inverse.ros.launch.processes.TERM_TIMEOUT` more, as ``ros2 launch``). All nodes are
+required: when one exits by itself, the others are stopped. Exit status: 0 when every node
+stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad argument,
+params file or conflict between them (one line on stderr). ``--dry-run`` prints the command lines
+instead, and keeps the overrides params files they name; ``--show-args`` lists the composition's
+arguments (as ``ros2 launch ... --show-args``). A stop while the command itself still loads exits
+0 with one line (:mod:`cbha_inverse.ros.common.loading`).
 """
 
+import argparse
+import shlex
+import shutil
 import signal
 import sys
+import tempfile
+import time
 
-from cbha_inverse.ros.common.loading import install_quiet_stop, restore_handlers
-
-# a Ctrl-C right after the start lands in the imports below: one line and status 0, not a
-# KeyboardInterrupt traceback (restored once they are done)
-_LOADING = install_quiet_stop('cbha_launch')
-
-import argparse  # noqa: E402, I100
-import os  # noqa: E402
-from pathlib import Path  # noqa: E402
-import shlex  # noqa: E402
-import shutil  # noqa: E402
-import subprocess  # noqa: E402
-import tempfile  # noqa: E402
-import threading  # noqa: E402
-import time  # noqa: E402
-
-from cbha_inverse.config_files import read_yaml  # noqa: E402
-from cbha_inverse.errors import ConfigError, report_config_error  # noqa: E402
-from cbha_inverse.ros.launch.compositions import (  # noqa: E402
-    ArgumentError, COMPOSITIONS, node_module, resolve)
-import yaml  # noqa: E402
-
-restore_handlers(_LOADING)
+from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.ros.common.loading import loaded
+from cbha_inverse.ros.launch.compositions import ArgumentError, COMPOSITIONS, resolve
+from cbha_inverse.ros.launch.processes import command_lines, NodeProcesses
 
 PROGRAM = 'cbha_launch'
-STOP_TIMEOUT = 15.0
-"""Seconds a node has to stop after SIGINT before it gets SIGTERM."""
-TERM_TIMEOUT = 5.0
-"""Seconds a node has to stop after SIGTERM before it is killed (SIGKILL)."""
-NODE_PROCESS = 'cbha_inverse.ros.launch.node_process'
-"""Runs each node: a stop while it still loads is quiet (:mod:`.node_process`)."""
 
 
 def _parser():
@@ -114,65 +97,6 @@ def parse_assignments(items):
     return values
 
 
-def command_lines(processes, overrides_dir):
-    """
-    Return the command line of each node and write its overrides params file.
-
-    Parameters
-    ----------
-    processes : list of cbha_inverse.ros.launch.compositions.NodeProcess
-        The resolved composition.
-    overrides_dir : pathlib.Path
-        Where the overrides params files are written.
-
-    Returns
-    -------
-    list of (str, list of str)
-        ``(executable, argv)`` per node.
-
-    Raises
-    ------
-    cbha_inverse.errors.ConfigError
-        If a params file is missing or not valid YAML.
-
-    """
-    lines = []
-    for process in processes:
-        for params in process.params_files:
-            read_yaml(params)
-        # a node's own variables through env(1): the dry run shows them on its line
-        prefix = (['env', *(f'{name}={value}' for name, value in process.environment.items())]
-                  if process.environment else [])
-        argv = [*prefix, sys.executable, '-m', NODE_PROCESS, node_module(process.executable),
-                '--ros-args', '-r', f'__ns:={process.namespace}',
-                '-r', f'__node:={process.executable}']
-        for params in process.params_files:
-            argv += ['--params-file', params]
-        if process.parameters:
-            overrides = Path(overrides_dir) / f'{process.executable}.yaml'
-            overrides.write_text(yaml.safe_dump(
-                {'/**': {'ros__parameters': process.parameters}}, sort_keys=False))
-            argv += ['--params-file', str(overrides)]
-        lines.append((process.executable, argv))
-    return lines
-
-
-def _child_environment():
-    """Return the nodes' environment (the rclpy wheels re-bootstrap in each child)."""
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    env['PYTHONUNBUFFERED'] = '1'
-    return env
-
-
-def _relay(name, stream, out, lock):
-    """Copy a child's output line by line, prefixed with its node name."""
-    for line in stream:
-        with lock:
-            out.write(f'[{name}] {line}')
-            out.flush()
-
-
 def supervise(lines, out=None):
     """
     Run the node processes until a signal or until one of them exits; stop all of them.
@@ -180,7 +104,7 @@ def supervise(lines, out=None):
     Parameters
     ----------
     lines : list of (str, list of str)
-        From :func:`command_lines`.
+        From :func:`cbha_inverse.ros.launch.processes.command_lines`.
     out : file-like, optional
         Where the prefixed output goes (default ``sys.stdout``).
 
@@ -190,78 +114,31 @@ def supervise(lines, out=None):
         0 if every node stopped cleanly after SIGINT/SIGTERM, else the first non-zero status.
 
     """
-    out = sys.stdout if out is None else out
     # the handler only appends (no lock): Python runs it between two bytecodes of this thread,
     # and a threading.Event's set() would wait for the lock its own wait() may hold there
     stopping = []
     previous = {sig: signal.signal(sig, lambda signum, _: stopping.append(signum))
                 for sig in (signal.SIGINT, signal.SIGTERM)}
-    lock = threading.Lock()
-    children, relays = [], []
     try:
-        for name, argv in lines:
-            # own session: a Ctrl-C in the terminal reaches the nodes once, through us; started
-            # with the stop signals blocked (node_process unblocks them once it can handle them:
-            # a stop during the interpreter's start is then a quiet stop, not a fatal error)
-            blocked = signal.pthread_sigmask(signal.SIG_BLOCK, (signal.SIGINT, signal.SIGTERM))
-            try:
-                child = subprocess.Popen(argv, env=_child_environment(), stdout=subprocess.PIPE,
-                                         stderr=subprocess.STDOUT, text=True,
-                                         start_new_session=True)
-            finally:
-                signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-            children.append((name, child))
-            relay = threading.Thread(target=_relay, args=(name, child.stdout, out, lock),
-                                     daemon=True)
-            relay.start()
-            relays.append(relay)
-        first_exit = None
-        while not stopping and first_exit is None:
-            first_exit = next(((name, child.returncode) for name, child in children
-                               if child.poll() is not None), None)
-            time.sleep(0.1)
-        if first_exit is not None:
-            with lock:
-                out.write(f'[{PROGRAM}] {first_exit[0]} exited with status {first_exit[1]}: '
-                          'stopping the others\n')
-        statuses = _stop_all(children)
+        with NodeProcesses(PROGRAM, out=out) as processes:
+            for name, argv in lines:
+                processes.start(name, argv)
+            first_exit = None
+            while not stopping and first_exit is None:
+                first_exit = processes.exited()
+                time.sleep(0.1)
+            if first_exit is not None:
+                processes.write(f'{first_exit[0]} exited with status {first_exit[1]}: '
+                                'stopping the others')
+            statuses = processes.stop()
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    for relay in relays:
-        relay.join(timeout=5.0)
     failed = [(name, code) for name, code in statuses if code != 0]
-    with lock:
-        out.write(f'[{PROGRAM}] exit statuses: '
-                  + ', '.join(f'{name} {code}' for name, code in statuses) + '\n')
-        out.flush()
+    processes.write('exit statuses: ' + ', '.join(f'{name} {code}' for name, code in statuses))
     if first_exit is not None and first_exit[1] != 0:
         return first_exit[1]
     return failed[0][1] if failed else 0
-
-
-def _stop_all(children):
-    """
-    Stop every running child as ``ros2 launch`` does; return ``[(name, exit status)]``.
-
-    SIGINT; a node still running after :data:`STOP_TIMEOUT` gets SIGTERM (for a node of this
-    package a second stop signal: a ``KeyboardInterrupt`` where its Python code waits), and
-    SIGKILL after :data:`TERM_TIMEOUT` more.
-    """
-    running = [child for _, child in children if child.poll() is None]
-    for child in running:
-        child.send_signal(signal.SIGINT)
-    for escalation, timeout in ((signal.SIGTERM, STOP_TIMEOUT), (signal.SIGKILL, TERM_TIMEOUT)):
-        deadline = time.monotonic() + timeout
-        for child in running:
-            try:
-                child.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                pass
-        running = [child for child in running if child.poll() is None]
-        for child in running:
-            child.send_signal(escalation)
-    return [(name, child.wait()) for name, child in children]
 
 
 def main(argv=None):
@@ -279,6 +156,8 @@ def main(argv=None):
         See the module docstring.
 
     """
+    # from here this command handles its stops (:mod:`cbha_inverse.ros.common.loading`)
+    loaded()
     try:
         return _main(argv)
     except KeyboardInterrupt:      # before the nodes start: nothing to stop
