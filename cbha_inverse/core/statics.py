@@ -64,10 +64,12 @@ equilibrium, links strained beyond the small-strain range of their compliance.
 """
 
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import NamedTuple
 import weakref
 
-from cbha_inverse.core._kernels.residual import residual_measures
+from cbha_inverse.core._kernels import newton
+from cbha_inverse.core._kernels.records import compiled_entry, make_record
 from cbha_inverse.core._kernels.retraction import deformation_step, deformed_poses
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.chain import ChainState, checked_array, external_wrenches, rest_state
@@ -178,6 +180,7 @@ def _residual_floor(model, length):
 
 
 _SYSTEMS = weakref.WeakKeyDictionary()
+_ENTRIES = {}
 
 
 class _ChainConstants(NamedTuple):
@@ -191,7 +194,7 @@ class _ChainConstants(NamedTuple):
 
 
 def _cached(model):
-    """Return the per-model cache entry (systems and constants)."""
+    """Return the per-model cache entry (systems, Newton buffers and constants)."""
     entry = _SYSTEMS.get(model)
     if entry is None:
         length = model.length if model.length > 0.0 else 1.0
@@ -200,9 +203,63 @@ def _cached(model):
             np.ascontiguousarray(_residual_floor(model, length)),
             np.ascontiguousarray(model.rest_rotations, dtype=float), rest_state(model))
         entry = {'chain': None, 'actuated': weakref.WeakKeyDictionary(),
-                 'constants': constants}
+                 'newton': weakref.WeakKeyDictionary(), 'constants': constants}
         _SYSTEMS[model] = entry
     return entry
+
+
+def _newton_record(model, actuators, system):
+    """Return the Newton buffers of a chain and its actuators, built once per pair."""
+    per_model = _cached(model)
+    records = per_model['newton']
+    key = 'chain' if actuators is None else actuators
+    if key == 'chain':
+        record = per_model.get('chain_newton')
+    else:
+        record = records.get(actuators)
+    if record is None:
+        constants = per_model['constants']
+        n, m = model.n_links, system.m
+        arrays = {'actuation': np.zeros(m), 'scaled_actuation': np.zeros(m),
+                  'dead': np.zeros(6 * n), 'extra': np.zeros(6 * n), 'floor': constants.floor,
+                  'frame_max': np.zeros(n), 'residual': np.zeros(6 * n),
+                  'step': np.zeros((6 * n, 1)), 'rest_rotations': constants.rest_rotations,
+                  'coordinates': np.zeros((n, 12))}
+        record = SimpleNamespace(record=make_record(
+            newton.NewtonRecord, newton.new_newton_record, system=system.record, **arrays),
+            **arrays)
+        if key == 'chain':
+            per_model['chain_newton'] = record
+        else:
+            records[actuators] = record
+    return record
+
+
+def _entries(record, state):
+    """
+    Return the compiled kernels of a Newton iteration, by name (built once per process).
+
+    ``'point'`` (:func:`~cbha_inverse.core._kernels.newton.newton_point`), ``'trial'``
+    (:func:`~cbha_inverse.core._kernels.newton.newton_trial`), ``'direction'``
+    (:func:`~cbha_inverse.core._kernels.newton.newton_direction`) and ``'coordinates'``
+    (:func:`~cbha_inverse.core._kernels.retraction.deformation_step`), called without numba's
+    per-call type dispatch (:func:`cbha_inverse.core._kernels.records.compiled_entry`): every
+    record has one type, and :class:`_Problem` passes C-ordered float arrays of fixed
+    dimensions and float scalars.
+    """
+    if not _ENTRIES:
+        positions, rotations = state.positions.copy(), state.rotations.copy()
+        _ENTRIES['point'] = compiled_entry(newton.newton_point, record.record, positions,
+                                           rotations, 1.0, 1.0, 1e-10)
+        _ENTRIES['trial'] = compiled_entry(newton.newton_trial, record.record, positions,
+                                           rotations, 1.0, positions, rotations, 1.0, 1.0, 1e-10)
+        _ENTRIES['direction'] = compiled_entry(newton.newton_direction, record.record, positions,
+                                               rotations)
+        _ENTRIES['coordinates'] = compiled_entry(deformation_step, positions, rotations,
+                                                 record.rest_rotations,
+                                                 np.zeros((record.frame_max.size, 6)),
+                                                 record.coordinates)
+    return _ENTRIES
 
 
 def _system(model, actuators):
@@ -243,42 +300,69 @@ class _Problem:
                  tolerance, absolute_tolerance, max_rotation_step):
         self.model = model
         self.system = _system(model, actuators)
+        self.newton = _newton_record(model, actuators, self.system)
         self.actuation = actuation
-        self.external = np.ascontiguousarray(external, dtype=float).reshape(-1)
-        self._no_extra = np.zeros(6 * model.n_links)
+        self.newton.actuation[:] = actuation
+        self.external = self.newton.dead
+        self.external[:] = np.asarray(external, dtype=float).reshape(-1)
+        self.newton.extra[:] = 0.0
         self.load_function = load_function
         self.load_tangent = load_tangent
         self.tolerance = float(tolerance)
         self.absolute = None if absolute_tolerance is None else float(absolute_tolerance)
         self.max_rotation_step = max_rotation_step
         constants = _cached(model)['constants']
-        self.length, self.x_ref, self.floor = constants.length, constants.x_ref, constants.floor
+        self.length, self.x_ref = constants.length, constants.x_ref
         self.rest_rotations, self.rest = constants.rest_rotations, constants.rest
-        self._frame_max = np.empty(model.n_links)
-        self.coordinates = np.empty((model.n_links, 12))
+        self.coordinates = self.newton.coordinates
         self._evaluated = None
+        self._entries = _entries(self.newton, self.rest)
 
     def point(self, state, lam):
         """Evaluate a state at load factor ``lam`` (residual, convergence test)."""
-        n = self.model.n_links
-        actuation = lam * self.actuation
-        rhs = self.system.evaluate(state.positions, state.rotations, actuation)
-        self._evaluated = (state, lam)
-        extra = self._no_extra
+        self._set_extra(state)
+        measures = self._entries['point'](
+            self.newton.record, np.ascontiguousarray(state.positions, dtype=float),
+            np.ascontiguousarray(state.rotations, dtype=float), float(lam), self.length,
+            self.tolerance)
+        return self._measured(state, lam, measures)
+
+    def trial(self, state, alpha, lam):
+        """
+        Evaluate ``state`` moved along the last step's deformation coordinates by ``alpha``.
+
+        The line search's point (:func:`~cbha_inverse.core._kernels.newton.newton_trial`); a
+        user load function is evaluated at the moved state.
+        """
         if self.load_function is not None:
-            extra = np.asarray(self.load_function(state), dtype=float)
-            if extra.shape != (n, 6):
-                raise ValueError(f'load_function must return shape {(n, 6)}')
-            extra = np.ascontiguousarray(extra.reshape(-1))
-        res = np.empty(6 * n)
-        measure, merit, scaled_norm, norm, scale, within = residual_measures(
-            rhs, actuation, self.external, extra, lam, self.length, self.floor, self.tolerance,
-            res, self._frame_max)
-        res = res.reshape(n, 6)
+            return self.point(self.poses(state, alpha), lam)
+        positions, rotations = np.empty_like(state.positions), np.empty_like(state.rotations)
+        measures = self._entries['trial'](
+            self.newton.record, np.ascontiguousarray(state.positions, dtype=float),
+            np.ascontiguousarray(state.rotations, dtype=float), float(alpha), positions,
+            rotations, float(lam), self.length, self.tolerance)
+        return self._measured(ChainState(positions, rotations), lam, measures)
+
+    def _set_extra(self, state):
+        """Write the user loads at ``state`` into the record (none without a load function)."""
+        if self.load_function is None:
+            return
+        n = self.model.n_links
+        extra = np.asarray(self.load_function(state), dtype=float)
+        if extra.shape != (n, 6):
+            raise ValueError(f'load_function must return shape {(n, 6)}')
+        self.newton.extra[:] = extra.reshape(-1)
+
+    def _measured(self, state, lam, measures):
+        """Return the point of an evaluated state (its blocks are the system's now)."""
+        measure, merit, scaled_norm, norm, scale, within = measures
+        self._evaluated = (state, lam)
+        residual = self.newton.residual.reshape(-1, 6).copy()
         if self.absolute is not None:
-            return _Point(state, res, norm, scaled_norm, norm <= self.absolute, False, scale)
-        return _Point(state, res, measure, merit, measure <= self.tolerance * scale, within,
-                      scale)
+            return _Point(state, residual, norm, scaled_norm, norm <= self.absolute, False,
+                          scale)
+        return _Point(state, residual, measure, merit, measure <= self.tolerance * scale,
+                      within, scale)
 
     def roundoff_step(self, step, relative):
         """Return whether a Newton correction (n, 6) is below ``relative`` (module docstring)."""
@@ -288,28 +372,57 @@ class _Problem:
     def coordinates_of(self, state, step=None):
         """Return the links' deformation coordinates ``(u, φ, du, dφ)`` (n, 12) for a step."""
         step = np.zeros((self.model.n_links, 6)) if step is None else step
-        largest = deformation_step(
+        largest = self._entries['coordinates'](
             np.ascontiguousarray(state.positions, dtype=float),
             np.ascontiguousarray(state.rotations, dtype=float), self.rest_rotations,
             np.ascontiguousarray(step, dtype=float), self.coordinates)
         return self.coordinates, largest
 
-    def factors(self, state, lam):
+    def steps(self, point, lam):
         """
-        Yield the factors of Newton's tangents at ``state`` (exact, then material).
+        Yield Newton's steps at a point by the tangents of the fallback chain, in order.
 
-        :meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors`, with the user load
-        stiffness; the blocks of the last :meth:`point` are reused when it evaluated ``state``.
+        The exact tangent (with the user load stiffness, if any), then the material one
+        (:meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors`). The exact step of
+        the point just evaluated, without user loads, is one compiled call
+        (:func:`~cbha_inverse.core._kernels.newton.newton_direction`), which leaves its
+        deformation coordinates ready for the line search.
+
+        Yields
+        ------
+        step : (n, 6) ndarray or None  [m, rad]
+            The step, or None when this tangent gave none.
+        why : str
+            Which tangent, or why it gave no step.
+        link_rotation : float or None  [rad]
+            The largest link rotation of the step when its coordinates are ready, else None.
+
         """
+        state = point.state
         evaluated = self._evaluated == (state, lam)
+        tried = evaluated and self.load_tangent is None
+        if tried:
+            info, largest = self._entries['direction'](
+                self.newton.record, np.ascontiguousarray(state.positions, dtype=float),
+                np.ascontiguousarray(state.rotations, dtype=float))
+            if info == 0:
+                yield self.newton.step.reshape(-1, 6).copy(), 'block_lu', largest
+            else:
+                yield None, 'singular exact tangent', None
         load = None if self.load_tangent is None or lam == 0.0 else self.load_tangent(state)
         if load is not None:
             load = lam * np.asarray(load, dtype=float)
         for factor in self.system.fallback_factors(state.positions, state.rotations,
-                                                   lam * self.actuation, evaluated, load):
+                                                   lam * self.actuation, evaluated, load,
+                                                   exact=not tried):
             # the chain may have evaluated the system again (material tangent): forget the key
             self._evaluated = None
-            yield factor
+            try:
+                step = factor.solve(point.residual.reshape(-1)).reshape(-1, 6)
+            except np.linalg.LinAlgError as exc:
+                yield None, str(exc) or 'singular tangent', None
+                continue
+            yield step, factor.method, None
         self._evaluated = None
 
     def applied(self, state):
@@ -329,13 +442,13 @@ class _Problem:
         return limit / link_rotation
 
     def poses(self, state, alpha):
-        """Return the state of the last :func:`deformation_step` advanced by ``alpha``."""
+        """Return the state of the last step's deformation coordinates advanced by ``alpha``."""
         positions, rotations = state.positions.copy(), state.rotations.copy()
         deformed_poses(self.coordinates, alpha, self.rest_rotations, positions, rotations)
         return ChainState(positions, rotations)
 
 
-def _line_search(problem, point, lam, step):
+def _line_search(problem, point, lam, step, link_rotation=None):
     """
     Backtrack along the Newton step (in deformation coordinates) on the residual norm.
 
@@ -343,13 +456,15 @@ def _line_search(problem, point, lam, step):
     frame (module docstring; the plain scaled norm with an absolute tolerance),
     ``|r(a)| <= (1 - 1e-4 a) |r(0)|``, halving ``a`` at most ``_MAX_HALVINGS`` times; returns
     the accepted point, or None (the caller then tries the fallback direction or cuts the load
-    step, which is cheaper than creeping along a poor direction).
+    step, which is cheaper than creeping along a poor direction). ``link_rotation``: the step's
+    coordinates are ready (:meth:`_Problem.steps`) with this largest link rotation.
     """
     state = point.state
-    _, link_rotation = problem.coordinates_of(state, step)
+    if link_rotation is None:
+        _, link_rotation = problem.coordinates_of(state, step)
     alpha = problem.first_alpha(link_rotation)
     for _ in range(_MAX_HALVINGS):
-        trial = problem.point(problem.poses(state, alpha), lam)
+        trial = problem.trial(state, alpha, lam)
         if trial.converged or trial.norm <= (1.0 - _ARMIJO * alpha) * point.norm:
             return trial
         alpha *= 0.5
@@ -369,26 +484,24 @@ def _newton(problem, state, lam, max_iterations):
         if exhausted and not point.roundoff:
             return False, point, iterations, 'iteration budget exhausted'
         accepted, why = None, 'no tangent factors (exact singular, material not positive definite)'
-        for factor in problem.factors(point.state, lam):
-            try:
-                step = factor.solve(point.residual.reshape(-1)).reshape(-1, 6)
-            except np.linalg.LinAlgError as exc:
-                why = str(exc) or 'singular tangent'
+        for step, method, link_rotation in problem.steps(point, lam):
+            if step is None:
+                why = method
                 continue
-            if not np.all(np.isfinite(step)):
-                why = f'non-finite Newton step ({factor.method})'
+            if not np.isfinite(step).all():
+                why = f'non-finite Newton step ({method})'
                 continue
             if point.roundoff and problem.roundoff_step(step, _ROUNDOFF_NOISE):
                 # the correction is noise itself (e.g. the rest shape under no load)
                 return True, point, iterations, 'converged (round-off limited)'
             if point.roundoff and problem.roundoff_step(step, _ROUNDOFF_STEP):
                 problem.coordinates_of(point.state, step)
-                corrected = problem.point(problem.poses(point.state, 1.0), lam)
+                corrected = problem.trial(point.state, 1.0, lam)
                 if corrected.converged or corrected.roundoff:
                     return True, corrected, iterations + 1, 'converged (round-off limited)'
             if exhausted:
                 return False, point, iterations, 'iteration budget exhausted'
-            accepted = _line_search(problem, point, lam, step)
+            accepted = _line_search(problem, point, lam, step, link_rotation)
             if accepted is not None:
                 break
             why = 'line search failed'

@@ -11,11 +11,11 @@ external wrenches) and the buffers of an evaluation into one compiled record
 compiled evaluation (:func:`cbha_inverse.core._kernels.evaluation.evaluate`) and the tick's
 entries read; every method here is a call of those kernels.
 
-Every block of the tangent is added by a constant index into one of two storages: the block
-band of the symmetric part (6 x 6 frame blocks, weights ½ on the mirrored entries, the control
-tick's block Cholesky, :meth:`EquilibriumSystem.linearise`), or the general band of the exact,
-non-symmetric tangent (Newton's LU, :meth:`EquilibriumSystem.exact_system`); cables that skip
-frames widen both. Every factorisation returns a
+Every block of the tangent is added by a constant index into one of two storages of 6 x 6 frame
+blocks: the block band of the symmetric part (weights ½ on the mirrored entries, the control
+tick's block Cholesky, :meth:`EquilibriumSystem.linearise`), or the blocks of the exact,
+non-symmetric tangent (Newton's block LU, :meth:`EquilibriumSystem.exact_system`); cables that
+skip frames widen both. Every factorisation returns a
 :class:`~cbha_inverse.core.linalg.factors.TangentFactor` (``solve(rhs)``, ``method``);
 :meth:`EquilibriumSystem.fallback_factors` is the one fallback chain (exact LU, then material
 Cholesky) of the control tick and of Newton's method.
@@ -28,7 +28,7 @@ from cbha_inverse.core.actuation.cables import CableGroup, CableTerms
 from cbha_inverse.core.actuation.cavities import CavityGroup
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 from cbha_inverse.core.chain import rest_state
-from cbha_inverse.core.linalg.factors import BandLU, BlockCholesky, DenseLU
+from cbha_inverse.core.linalg.factors import BlockCholesky, BlockLU, DenseLU
 import numpy as np
 
 
@@ -58,10 +58,9 @@ class EquilibriumSystem:
         The chain.
     n, m, size : int
         Links, actuators and unknowns ``6 n``.
-    kd : int
-        Half-bandwidth of the tangent (11 for a chain whose actuators act within a link).
     block_width : int
-        Blocks of the block band below its diagonal (``B``, 1 for such a chain).
+        Blocks of the tangent below (and above) its diagonal (``B``, 1 for a chain whose
+        actuators act within a link).
     record : cbha_inverse.core._kernels.evaluation.EquilibriumRecord
         The compiled record of the terms and buffers.
 
@@ -143,10 +142,10 @@ class EquilibriumSystem:
         blocks (one 12 x 12 per frame pair) and point moment blocks (3 x 3 per frame), in this
         order. The block band stores entry ``(r, c)``, ``r >= c``, in block
         ``[c // 6, r // 6 - c // 6]`` at ``[r % 6, c % 6]``
-        (:mod:`cbha_inverse.core._kernels.block_band`); the general band at
-        ``[c, 2 kd + r - c]`` of ``(N, 3 kd + 1)`` (the Fortran ``(3 kd + 1, N)`` layout of
-        LAPACK). Entries of the base frame go to a trash row at the end of either, value ``i``
-        to its slot ``i`` modulo the row's size (consecutive values add into different slots).
+        (:mod:`cbha_inverse.core._kernels.block_band`), the exact tangent's blocks in block
+        ``[c // 6, B + r // 6 - c // 6]`` (:mod:`cbha_inverse.core._kernels.block_lu`). Entries
+        of the base frame go to a trash row of blocks at the end of either, value ``i`` to its
+        slot ``i mod 36`` (consecutive values add into different slots).
         """
         n, size = self.n, self.size
         rows, cols = [], []
@@ -164,35 +163,33 @@ class EquilibriumSystem:
         rows, cols = np.concatenate(rows), np.concatenate(cols)
         valid = (rows >= 0) & (cols >= 0)
         low, high = np.minimum(rows, cols), np.maximum(rows, cols)
-        self.kd = max(int((high - low)[valid].max()) if valid.any() else 0, 11)
         self.block_width = max(int((high // 6 - low // 6)[valid].max()) if valid.any() else 0, 1)
-        blocks = self.block_width + 1
-        block_slot = (((low // 6) * blocks + high // 6 - low // 6) * 6 + high % 6) * 6 + low % 6
-        exact_width = 3 * self.kd + 1
-        order = np.arange(rows.size)
+        lower_blocks, exact_blocks = self.block_width + 1, 2 * self.block_width + 1
+        lower_slot = (((low // 6) * lower_blocks + high // 6 - low // 6) * 6 + high % 6) * 6 + (
+            low % 6)
+        exact_slot = (((cols // 6) * exact_blocks + self.block_width + rows // 6 - cols // 6) * 6
+                      + rows % 6) * 6 + cols % 6
+        trash = np.arange(rows.size) % 36
         self._pair_start = 144 * n
         self._moment_start = self._pair_start + 144 * len(cables.pairs)
-        return {'index': np.where(valid, block_slot, n * blocks * 36 + order % 36),
+        return {'index': np.where(valid, lower_slot, n * lower_blocks * 36 + trash),
                 'weights': np.where(rows == cols, 1.0, 0.5),
-                'exact_index': np.where(valid, cols * exact_width + 2 * self.kd + rows - cols,
-                                        size * exact_width + order % exact_width),
+                'exact_index': np.where(valid, exact_slot, n * exact_blocks * 36 + trash),
                 'pair_start': self._pair_start, 'moment_start': self._moment_start,
-                'moment_count': len(cables.moment_frames), 'half_bandwidth': self.kd}
+                'moment_count': len(cables.moment_frames)}
 
     def _buffers(self, cables, meshes, n_frames):
         """Return the record's buffers and scratch arrays."""
-        n, m, size, kd = self.n, self.m, self.size, self.kd
+        n, m, size, width = self.n, self.m, self.size, self.block_width
         points, spans = cables.frames.size, cables.start.size
         vertices = sum(group.frame_a.size for group, _ in meshes)
         n_mesh = sum(group.n_actuators for group, _ in meshes)
         return {
             'rhs': np.zeros((size, m + 1)),
             'values': np.zeros(self._moment_start + 9 * len(cables.moment_frames)),
-            'blocks': np.zeros((n + 1, self.block_width + 1, 6, 6)),
-            'exact_band': np.zeros((size + 1, 3 * kd + 1)),
-            'lu_pivots': np.zeros(size, dtype=np.int64),
-            'lu_lower_reach': np.zeros(size, dtype=np.int64),
-            'lu_upper_reach': np.zeros(size, dtype=np.int64),
+            'blocks': np.zeros((n + 1, width + 1, 6, 6)),
+            'exact_blocks': np.zeros((n + 1, 2 * width + 1, 6, 6)),
+            'lu_pivots': np.zeros((n, 6), dtype=np.int64),
             'link_difference': np.zeros(3), 'link_relative': np.zeros((3, 3)),
             'link_delta': np.zeros(6), 'link_stress': np.zeros(6),
             'link_jl_inverse': np.zeros((3, 3)), 'link_weighted': np.zeros((6, 6)),
@@ -284,7 +281,7 @@ class EquilibriumSystem:
 
     def exact_system(self, positions, rotations, actuation):
         """
-        Return the exact tangent (general band) and the right-hand sides.
+        Return the exact tangent (its frame blocks) and the right-hand sides.
 
         ``K = -d r / dq`` including the geometric part and the actuators' exact load stiffness
         (not symmetric): Newton's tangent (quadratic convergence). Arguments as
@@ -292,11 +289,9 @@ class EquilibriumSystem:
 
         Returns
         -------
-        tangent : (6n, 3 kd + 1) ndarray
-            ``tangent[c, 2 kd + r - c] = K[r, c]`` for ``|r - c| <= kd``: the Fortran
-            ``(3 kd + 1, N)`` layout of LAPACK's ``dgbtrf`` (slots ``0 .. kd - 1`` of a row are
-            its workspace), for :meth:`factor_exact`; :meth:`dense_exact` converts it. A buffer
-            of this object.
+        tangent : (n, 2B + 1, 6, 6) ndarray
+            ``tangent[c, B + d] = K_(c + d, c)`` (:mod:`cbha_inverse.core._kernels.block_lu`);
+            :meth:`dense_exact` converts it. A buffer of this object.
         rhs : (6n, m + 1) ndarray
             As :meth:`evaluate`.
 
@@ -310,12 +305,12 @@ class EquilibriumSystem:
 
         Returns
         -------
-        (6n, 3 kd + 1) ndarray
-            General band storage (:meth:`exact_system`), a buffer of this object.
+        (n, 2B + 1, 6, 6) ndarray
+            Its frame blocks (:meth:`exact_system`), a buffer of this object.
 
         """
         evaluation.assemble_exact(self.record)
-        return self.record.exact_band[:self.size]
+        return self.record.exact_blocks[:self.n]
 
     def factor(self, tangent=None):
         """
@@ -339,39 +334,34 @@ class EquilibriumSystem:
             return None
         return BlockCholesky(self.record.blocks[:self.n])
 
-    def factor_exact(self, tangent=None):
+    def factor_exact(self):
         """
-        Factor the exact band (of :meth:`exact_system`) in place, by band LU.
+        Factor the exact tangent of the last (exact) :meth:`evaluate`, by block LU.
 
-        Parameters
-        ----------
-        tangent : (6n, 3 kd + 1) ndarray, optional
-            The band :meth:`exact_system` returned (this object's buffer, the default).
+        Its blocks are assembled (as :meth:`exact_tangent`) and factored in place.
 
         Returns
         -------
-        BandLU or None
+        BlockLU or None
             ``None`` if the tangent is singular or not finite.
 
         """
-        self._check_buffer(tangent, self.record.exact_band)
         if evaluation.factor_exact(self.record) != 0:
             return None
-        return BandLU(self.record.exact_band[:self.size], self.kd, self.record.lu_pivots,
-                      self.record.lu_lower_reach)
+        return BlockLU(self.record.exact_blocks[:self.n], self.record.lu_pivots)
 
     def _check_buffer(self, tangent, buffer):
-        """Refuse a band that is not this object's buffer (the factors work in place on it)."""
+        """Refuse a tangent that is not this object's buffer (the factors work in place on it)."""
         if tangent is not None and not np.shares_memory(tangent, buffer):
-            raise ValueError('factor the band this system returned (its own buffer)')
+            raise ValueError('factor the tangent this system returned (its own buffer)')
 
     def dense_exact(self, tangent):
         """
-        Return the general band storage of :meth:`exact_system` as a dense matrix.
+        Return the blocks of :meth:`exact_system` as a dense matrix.
 
         Parameters
         ----------
-        tangent : (6n, 3 kd + 1) ndarray
+        tangent : (n, 2B + 1, 6, 6) ndarray
             From :meth:`exact_system`.
 
         Returns
@@ -379,15 +369,15 @@ class EquilibriumSystem:
         (6n, 6n) ndarray
 
         """
-        kd, size = self.kd, self.size
-        c, offset = np.meshgrid(np.arange(size), np.arange(-kd, kd + 1), indexing='ij')
-        r = c + offset
-        inside = (r >= 0) & (r < size)
-        out = np.zeros((size, size))
-        out[r[inside], c[inside]] = np.asarray(tangent)[c[inside], 2 * kd + offset[inside]]
+        tangent, width = np.asarray(tangent), self.block_width
+        out = np.zeros((self.size, self.size))
+        for c in range(self.n):
+            for d in range(max(-width, -c), min(width, self.n - 1 - c) + 1):
+                out[6 * (c + d):6 * (c + d + 1), 6 * c:6 * (c + 1)] = tangent[c, width + d]
         return out
 
-    def fallback_factors(self, positions, rotations, actuation, evaluated=False, load=None):
+    def fallback_factors(self, positions, rotations, actuation, evaluated=False, load=None,
+                         exact=True):
         """
         Yield the factors of the fallback chain, for a state whose first choice fails.
 
@@ -397,7 +387,7 @@ class EquilibriumSystem:
         line search rejects), the chain is, in this order:
 
         1. the exact tangent, structure + geometric part + exact load stiffness (not symmetric,
-           :meth:`exact_system`), by band LU (:meth:`factor_exact`); with a user load stiffness
+           :meth:`exact_system`), by block LU (:meth:`factor_exact`); with a user load stiffness
            ``load`` added, by dense LU;
         2. the material tangent alone (paper eq. 8, :meth:`material_system`), positive definite
            whatever the stresses, far from equilibrium too, by block Cholesky (:meth:`factor`).
@@ -420,22 +410,24 @@ class EquilibriumSystem:
             none).
         load : (6n, 6n) ndarray or None  [N/m, N, N*m/rad]
             Load stiffness ``-d f_load / dq`` of user follower loads, added to the exact tangent.
+        exact : bool
+            Begin with step 1 (else the caller has tried the exact tangent itself).
 
         Yields
         ------
         cbha_inverse.core.linalg.factors.TangentFactor
-            Each factor that succeeds (``BandLU`` or ``DenseLU``, then ``BlockCholesky``).
+            Each factor that succeeds (``BlockLU`` or ``DenseLU``, then ``BlockCholesky``).
 
         """
-        if not evaluated:
-            self.evaluate(positions, rotations, actuation)
-        tangent = self.exact_tangent()
-        if load is None:
-            factor = self.factor_exact()
-        else:
-            factor = DenseLU(self.dense_exact(tangent) + load)
-        if factor is not None:
-            yield factor
+        if exact:
+            if not evaluated:
+                self.evaluate(positions, rotations, actuation)
+            if load is None:
+                factor = self.factor_exact()
+            else:
+                factor = DenseLU(self.dense_exact(self.exact_tangent()) + load)
+            if factor is not None:
+                yield factor
         self.material_system(positions, rotations, actuation)
         factor = self.factor()
         if factor is not None:

@@ -18,17 +18,18 @@ from typing import NamedTuple
 from cbha_inverse.core._kernels.flop_rate import multiply_add_chains
 
 # flops of one link in links.link_pass, the tick's link pass (loops of the kernels): the
-# deformation, Jl⁻¹, the local wrench and B^T K, the local tangent with its stress terms, the
-# rotated 12 x 12 world tangent E^T R M R^T E, its geometric terms ...
-_LINK_BASE = 1341
+# deformation, Jl⁻¹, the local wrench and B^T K, the stress terms, the local tangent and its
+# symmetric part, the lower blocks of the world tangent E^T R M R^T E, the symmetric part of the
+# geometric terms ...
+_LINK_BASE = 1152
 # ... per condensed cavity column (its wrench, G0 + H δ, and load stiffness p H) ...
 _LINK_PER_CAVITY = 156
 # ... and per wrench column (rotation to world axes, gathering onto the two frames)
 _LINK_PER_COLUMN = 54
-# the symmetric part of a link's block added into the band (66 pairs of entries averaged, 12 on
-# the diagonal), and for the first link, whose base-frame rows are left out
-_LINK_BAND = 210
-_FIRST_LINK_BAND = 51
+# the lower triangle of a link's symmetric block added into the block band, and for the first
+# link, whose base-frame rows are left out
+_LINK_BAND = 78
+_FIRST_LINK_BAND = 21
 # cables.cable_pass: per routing point (lever, point, force, wrench, moment block) and per span
 # (unit vector, force, projector, the six summed 3 x 3 products)
 _CABLE_PER_POINT = 75
@@ -49,8 +50,8 @@ class TickShapes(NamedTuple):
         Actuators.
     k : int
         Effectors.
-    kd : int
-        Half-bandwidth of the tangent.
+    block_width : int
+        Blocks of the tangent below its diagonal (``B``).
     cavities : int
         Nonzero condensed cavity columns of the link pass, summed over the links (the pass skips
         the zero ones; 0 without cavities).
@@ -64,23 +65,23 @@ class TickShapes(NamedTuple):
     effector_frames : tuple of int
         Frame (1..n) of every effector: ``J_eᵀ`` is zero above its rows, where its forward sweep
         and its products start.
-    below : tuple of int
-        Rows under the diagonal that each column of the band factor reaches (its loops run
-        over those: :func:`cbha_inverse.core._kernels.band.band_envelope`).
+    starts : tuple of int
+        First nonzero row of each column of ``[r, J_aᵀ]`` (its forward sweep starts at that
+        row's block).
 
     """
 
     n: int
     m: int
     k: int
-    kd: int
+    block_width: int
     cavities: int
     points: int
     spans: int
     values: int
     jacobian_entries: int
     effector_frames: tuple
-    below: tuple
+    starts: tuple
 
 
 def tick_shapes(solver):
@@ -100,12 +101,12 @@ def tick_shapes(solver):
     """
     system = solver._system
     record = system.record
-    return TickShapes(system.n, system.m, len(solver.effector_names), system.kd,
+    return TickShapes(system.n, system.m, len(solver.effector_names), system.block_width,
                       int((record.cavity_columns >= 0).sum()), record.cable_frames.size,
                       record.span_start.size, record.values.size,
                       int((record.rhs[:, 1:] != 0.0).sum()),
                       tuple(int(f) for f in solver.effectors.frames),
-                      tuple(int(r - j) for j, r in enumerate(record.band_reach)))
+                      tuple(int(row) for row in solver._data.column_starts))
 
 
 def tick_flops(shapes):
@@ -128,15 +129,21 @@ def tick_flops(shapes):
     size, rows, columns = 6 * n, 3 * shapes.k, m + 1
     links = (n * (_LINK_BASE + _LINK_PER_COLUMN)
              + (_LINK_PER_CAVITY + _LINK_PER_COLUMN) * shapes.cavities)
-    # band Cholesky: per column a square root, `below` scalings and the rank-one update of the
-    # trailing triangle within the column's reach; the solve: the forward sweeps of [r, J_aᵀ]
-    # (every row) and of J_eᵀ (3 columns per effector, from the first effector frame's rows on:
-    # zero above them)
-    below = shapes.below
-    factor = sum(1 + b + b * (b + 1) for b in below)
-    first = 6 * (min(shapes.effector_frames) - 1) if shapes.effector_frames else size
-    solve = sum((columns + (rows if j >= first else 0)) * (1 + 2 * b)
-                for j, b in enumerate(below))
+    # block Cholesky, per block column: the diagonal block's Cholesky, the blocks below times
+    # its inverse, the trailing blocks' updates (lower triangle on the diagonal); the solve: the
+    # forward sweeps of [r, J_aᵀ] and of J_eᵀ (3 columns per effector), each column from the
+    # block of its first nonzero row (zero above it)
+    width = shapes.block_width
+    diagonal = sum(2 * j + 2 + (5 - j) * (2 * j + 1) for j in range(6))
+    factor, solve, back = 0, 0, 0
+    effector_starts = [6 * (frame - 1) for frame in shapes.effector_frames for _ in range(3)]
+    for c in range(n):
+        below = min(width, n - 1 - c)
+        factor += (diagonal + below * 216 + below * (below - 1) // 2 * 432 + below * 252)
+        row_sweep = 36 + 72 * below
+        solve += row_sweep * sum(1 for start in list(shapes.starts) + effector_starts
+                                 if 6 * c + 6 > start)
+        back += row_sweep
     # the products of the half-solves: L⁻¹ J_eᵀ with L⁻¹ [r, J_aᵀ] from each effector's frame
     # on, the offset, the lower triangle of W_aa = (L⁻¹ J_aᵀ)ᵀ L⁻¹ J_aᵀ, |r|
     effector_rows = sum(size - 6 * (frame - 1) for frame in shapes.effector_frames)
@@ -149,10 +156,9 @@ def tick_flops(shapes):
           + (2 * rows * m + 4 * m + 5 * k) + 2 * m * m)
     # the step L⁻¹ r + L⁻¹ J_aᵀ Δλ, its backward sweep (one column), the retraction, the
     # effector positions
-    back = sum(1 + 2 * b for b in below)
     update = size * 2 * m + back + n * _RETRACT_PER_FRAME + 18 * k
-    # the assembly: the links add the symmetric parts of their blocks into the band, the cable
-    # blocks are scattered with their weights; the band is zeroed first
+    # the assembly: the links add the symmetric parts of their blocks into the block band, the
+    # cable blocks are scattered with their weights; the block band is zeroed first
     link_adds = _LINK_BAND * (n - 1) + _FIRST_LINK_BAND if n else 0
     cable_values = shapes.values - 144 * n
     counts = {'links': links,

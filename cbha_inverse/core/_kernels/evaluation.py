@@ -13,15 +13,13 @@ wrenches. Its terms and buffers are one :class:`EquilibriumRecord` (fields
 The tangent's 12 x 12 blocks (one per link, one per frame pair of cable spans) and 3 x 3 blocks
 (cable point moments) are kept in ``values``; a constant index adds them into either storage:
 the block band of the symmetric part (:func:`assemble_symmetric`, the block Cholesky of
-:mod:`cbha_inverse.core._kernels.block_band`) or the general band of the exact tangent
-(:func:`assemble_exact`, the band LU of :mod:`cbha_inverse.core._kernels.band_lu`). The control
+:mod:`cbha_inverse.core._kernels.block_band`) or the blocks of the exact tangent
+(:func:`assemble_exact`, the block LU of :mod:`cbha_inverse.core._kernels.block_lu`). The control
 tick's evaluation adds the links' symmetric parts straight into the block band instead.
 """
 
-import math
-
 from cbha_inverse.core._kernels.assembly import scatter_add, scatter_more
-from cbha_inverse.core._kernels.band_lu import band_lu
+from cbha_inverse.core._kernels.block_lu import block_lu, block_lu_solve
 from cbha_inverse.core._kernels.block_band import block_cholesky
 from cbha_inverse.core._kernels.cables import cable_pass
 from cbha_inverse.core._kernels.links import link_pass
@@ -69,20 +67,17 @@ EQUILIBRIUM_FIELDS = (
     Field('index', I8, 1, '(V_b,) slot of every block value in the flat block band',
           read_only=True),
     Field('weights', F8, 1, '(V_b,) its weight (1 on the diagonal, 1/2 off it)', read_only=True),
-    Field('exact_index', I8, 1, '(V_b,) slot of every block value in the flat exact band',
+    Field('exact_index', I8, 1, '(V_b,) slot of every block value in the flat exact blocks',
           read_only=True),
     Field('pair_start', int, 0, 'first value of the cable span blocks (after the links)'),
     Field('moment_start', int, 0, 'first value of the cable point moment blocks'),
     Field('moment_count', int, 0, 'number of cable point moment blocks'),
-    Field('half_bandwidth', int, 0, 'kd of the tangent (its general band)'),
     # buffers of one evaluation
     Field('rhs', F8, 2, '(6n, m + 1) [r, J_aᵀ] [N, N*m]'),
     Field('values', F8, 1, '(V_b,) the tangent blocks: links (n 12 x 12), spans, moments'),
     Field('blocks', F8, 4, '(n + 1, B + 1, 6, 6) symmetric block band, last: base-frame trash'),
-    Field('exact_band', F8, 2, '(6n + 1, 3 kd + 1) exact general band, last row: trash'),
-    Field('lu_pivots', I8, 1, '(6n,) row interchanges of its LU'),
-    Field('lu_lower_reach', I8, 1, '(6n,) last row of every column of L'),
-    Field('lu_upper_reach', I8, 1, '(6n,) workspace of the LU'),
+    Field('exact_blocks', F8, 4, '(n + 1, 2B + 1, 6, 6) exact tangent\'s blocks, last: trash'),
+    Field('lu_pivots', I8, 2, '(n, 6) row interchanges of its LU within the diagonal blocks'),
     # scratch of the link pass (one link at a time)
     Field('link_difference', F8, 1, '(3,) x_b - x_a [m]'),
     Field('link_relative', F8, 2, '(3, 3) R_aᵀ R_b Q0ᵀ'),
@@ -194,9 +189,9 @@ def assemble_symmetric(system):
 
 @numba.njit(cache=True)
 def assemble_exact(system):
-    """Add every block of ``system.values`` into the zeroed general band of the exact tangent."""
-    exact = system.exact_band
-    exact[:, :] = 0.0
+    """Add every block of ``system.values`` into the zeroed blocks of the exact tangent."""
+    exact = system.exact_blocks
+    exact[:, :, :, :] = 0.0
     flat = exact.reshape(exact.size)
     values, index = system.values, system.exact_index
     for i in range(index.size):
@@ -216,16 +211,39 @@ def factor_symmetric(system):
 @numba.njit(cache=True)
 def factor_exact(system):
     """
-    Factor the exact band in place, ``P K = L U``; return 0, or the failing column + 1.
+    Assemble and factor the exact tangent's blocks, ``K = L U``; return 0, or the failing
+    unknown + 1.
 
-    :func:`~cbha_inverse.core._kernels.band_lu.band_lu` of :func:`assemble_exact`'s band; a band
-    with a non-finite entry is refused (-1).
+    :func:`assemble_exact`, then :func:`~cbha_inverse.core._kernels.block_lu.block_lu` (a
+    non-finite pivot fails it; a non-finite entry elsewhere gives a non-finite solve, which the
+    callers refuse).
     """
-    size = system.rhs.shape[0]
-    exact = system.exact_band
-    for c in range(size):
-        for slot in range(exact.shape[1]):
-            if not math.isfinite(exact[c, slot]):
-                return -1
-    return band_lu(system.exact_band[:size], system.half_bandwidth, system.lu_pivots,
-                   system.lu_lower_reach, system.lu_upper_reach)
+    assemble_exact(system)
+    return block_lu(system.exact_blocks[:system.rhs.shape[0] // 6], system.lu_pivots)
+
+
+@numba.njit(cache=True)
+def exact_newton_step(system, step):
+    """
+    Solve Newton's equation with the exact tangent of the last evaluation, ``K step = r``.
+
+    :func:`factor_exact`, then its solve (:func:`~cbha_inverse.core._kernels.block_lu.block_lu_solve`)
+    of ``step``, which holds ``r`` and receives the step.
+
+    Parameters
+    ----------
+    system : EquilibriumRecord
+        The terms and buffers (its ``values`` hold the last exact evaluation's blocks).
+    step : (6n, 1) ndarray  [N, N*m] -> [m, rad]
+        ``r`` in, the step out (when the result is 0).
+
+    Returns
+    -------
+    int
+        As :func:`factor_exact`.
+
+    """
+    info = factor_exact(system)
+    if info == 0:
+        block_lu_solve(system.exact_blocks[:step.shape[0] // 6], system.lu_pivots, step)
+    return info

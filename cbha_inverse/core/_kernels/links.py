@@ -9,10 +9,11 @@ on the corotational deformation ``δ``. :func:`link_pass` runs, for every link, 
    ``L = -Bᵀ K δ`` and ``A = Bᵀ K``; :func:`add_cavity_wrenches`, the condensed cavities of
    :mod:`cbha_inverse.core.actuation.condensed_cavities`: ``L += Σ_c p_c (G0_c + H_c δ)``, one
    column of ``J_aᵀ`` per cavity, and their load stiffness ``A -= p_c H_c``;
-3. :func:`scatter_link_wrenches`, eq. 5-7: ``L`` rotated to world axes onto frame ``b``, the
-   equilibrating wrench onto frame ``a`` (the moment transported from ``x_b`` to ``x_a``);
-4. :func:`local_tangent`, eq. 8 and the stress terms: ``M = (A + Z - ½ s_r^) B`` with
-   ``Z = d(Jl⁻ᵀ(φ) s_r)/dφ`` (exact), or ``Bᵀ K B`` alone (material);
+3. :func:`world_wrench`, :func:`add_to_frame_b`, :func:`add_to_frame_a`, eq. 5-7: ``L``
+   rotated to world axes onto frame ``b``, the equilibrating wrench onto frame ``a`` (the moment
+   transported from ``x_b`` to ``x_a``; none for the base);
+4. :func:`add_stress_terms` (exact tangent) and :func:`local_tangent`, eq. 8:
+   ``M = (A + Z - ½ s_r^) B`` with ``Z = d(Jl⁻ᵀ(φ) s_r)/dφ``, or ``Bᵀ K B`` alone (material);
 5. :func:`world_tangent`: the 12 x 12 tangent of the pair in world axes, ``Eᵀ R M Rᵀ E``
    (``R = diag(R_a, R_a)``, ``E = [E_a, I]``, ``E_a = [-I, d^; 0, -I]``);
 6. :func:`add_geometric_terms` (exact tangent): the terms of the rotated wrench and of its lever.
@@ -166,10 +167,8 @@ def add_cavity_wrenches(cavity_wrench, cavity_stiffness, cavity_columns, link, a
 
     """
     used = 0
-    for slot in range(cavity_columns.shape[1]):
-        cavity = cavity_columns[link, slot]
-        if cavity < 0:
-            break
+    while used < cavity_columns.shape[1] and cavity_columns[link, used] >= 0:
+        cavity = cavity_columns[link, used]
         used += 1
         pressure = actuation[cavity]
         load = with_load and pressure != 0.0
@@ -185,13 +184,9 @@ def add_cavity_wrenches(cavity_wrench, cavity_stiffness, cavity_columns, link, a
 
 
 @numba.njit(cache=True, inline='always')
-def scatter_link_wrenches(rotations, link, difference, local, column, rhs, world):
+def world_wrench(rotations, link, local, column, world):
     """
-    Rotate one column of a link's local wrench to world axes and add it to both frames.
-
-    Paper eq. 5-7: frame ``b`` gets ``w = [R_a L_f; R_a L_m]``; frame ``a`` the opposite force and
-    the opposite moment transported to ``x_a``, ``-[F; M + (x_b - x_a) × F]`` (none for the
-    base, ``link`` 0). The two wrenches are in equilibrium.
+    Rotate one column of a link's local wrench to world axes: ``w = [R_a L_f; R_a L_m]``.
 
     Parameters
     ----------
@@ -199,14 +194,10 @@ def scatter_link_wrenches(rotations, link, difference, local, column, rhs, world
         Frame rotations.
     link : int
         The link (frame ``a = link``).
-    difference : (3,) ndarray  [m]
-        ``x_b - x_a``.
     local : (6, m + 1) ndarray  [N, N*m]
         The local wrenches (column 0, then per unit actuation).
     column : int
-        The column of ``local`` and ``rhs``.
-    rhs : (6n, m + 1) ndarray
-        Added to: rows ``6 (b - 1) ...`` for frame ``b``, ``6 (a - 1) ...`` for frame ``a``.
+        The column of ``local`` and ``world``.
     world : (6, m + 1) ndarray
         Receives ``w`` (column ``column``).
 
@@ -218,65 +209,87 @@ def scatter_link_wrenches(rotations, link, difference, local, column, rhs, world
         world[3 + i, column] = (rotations[link, i, 0] * local[3, column]
                                 + rotations[link, i, 1] * local[4, column]
                                 + rotations[link, i, 2] * local[5, column])
-    row_b = 6 * link
-    for i in range(6):
-        rhs[row_b + i, column] += world[i, column]
-    if link == 0:
-        return
-    row_a = row_b - 6
-    f0, f1, f2 = world[0, column], world[1, column], world[2, column]
-    d0, d1, d2 = difference[0], difference[1], difference[2]
-    for i in range(6):
-        rhs[row_a + i, column] -= world[i, column]
-    rhs[row_a + 3, column] -= d1 * f2 - d2 * f1
-    rhs[row_a + 4, column] -= d2 * f0 - d0 * f2
-    rhs[row_a + 5, column] -= d0 * f1 - d1 * f0
 
 
 @numba.njit(cache=True, inline='always')
-def local_tangent(weighted, jl_inverse, delta, stress, theta, exact, tangent):
-    """
-    Write the local tangent ``M`` of a link, ``-d L / d(δ increments)`` (paper eq. 8).
+def add_to_frame_b(world, column, link, rhs):
+    """Add the world wrench ``w`` (column ``column``) to frame ``b``'s rows ``6 link ...``."""
+    for i in range(6):
+        rhs[6 * link + i, column] += world[i, column]
 
-    ``M = (A + Z - ½ s_r^) B`` with ``A = Bᵀ K`` (less the cavities' load stiffness) and
-    ``Z = d(Jl⁻ᵀ(φ) s_r)/dφ``, ``s_r`` the moment part of ``K δ``: the stress terms of the
-    rotation's parametrisation, exact; without them (``exact`` False) the material part
-    ``Bᵀ K B``, positive semi-definite whatever the loads.
+
+@numba.njit(cache=True, inline='always')
+def add_to_frame_a(world, column, difference, link, rhs):
+    """
+    Add the equilibrating wrench to frame ``a``'s rows ``6 (link - 1) ...`` (paper eq. 5-7).
+
+    The opposite force and the opposite moment transported to ``x_a``,
+    ``-[F; M + (x_b - x_a) × F]``: the two wrenches of a link are in equilibrium.
+    """
+    row = 6 * (link - 1)
+    f0, f1, f2 = world[0, column], world[1, column], world[2, column]
+    d0, d1, d2 = difference[0], difference[1], difference[2]
+    for i in range(6):
+        rhs[row + i, column] -= world[i, column]
+    rhs[row + 3, column] -= d1 * f2 - d2 * f1
+    rhs[row + 4, column] -= d2 * f0 - d0 * f2
+    rhs[row + 5, column] -= d0 * f1 - d1 * f0
+
+
+@numba.njit(cache=True, inline='always')
+def add_stress_terms(weighted, delta, stress, theta):
+    """
+    Add the stress terms of the rotation's parametrisation to ``A``: ``Z - ½ s_r^``.
+
+    ``Z = d(Jl⁻ᵀ(φ) s_r)/dφ`` with ``Jl⁻¹ = I - φ^/2 + c(t) φ^²`` (the derivative of ``c φ^²``
+    written with ``ps = φ·s_r`` and ``c' = dc t``), ``s_r`` the moment part of ``K δ``: with
+    them the local tangent is exact (:func:`local_tangent`).
 
     Parameters
     ----------
     weighted : (6, 6) ndarray
-        ``A`` (:func:`local_wrench`, :func:`add_cavity_wrenches`); its moment block receives
-        the stress terms when ``exact``.
-    jl_inverse : (3, 3) ndarray
-        ``Jl⁻¹(φ)``.
+        ``A``; its moment block is added to.
     delta : (6,) ndarray  [m, rad]
         ``δ`` (``φ`` is ``delta[3:]``).
     stress : (6,) ndarray  [N, N*m]
         ``K δ``.
     theta : float  [rad]
         ``|φ|``.
-    exact : bool
-        Add the stress terms.
+
+    """
+    c, dc = jl_coefficient(theta)
+    phi0, phi1, phi2 = delta[3], delta[4], delta[5]
+    s0, s1, s2 = stress[3], stress[4], stress[5]
+    ps = phi0 * s0 + phi1 * s1 + phi2 * s2
+    t2 = theta * theta
+    for i in range(3):
+        left0 = dc * (delta[3 + i] * ps - t2 * stress[3 + i]) - 2.0 * c * stress[3 + i]
+        left1 = c * delta[3 + i]
+        for j in range(3):
+            weighted[3 + i, 3 + j] += left0 * delta[3 + j] + left1 * stress[3 + j]
+        weighted[3 + i, 3 + i] += c * ps
+    add_scaled_hat(weighted, 3, 3, s0, s1, s2, -0.5)
+
+
+@numba.njit(cache=True, inline='always')
+def local_tangent(weighted, jl_inverse, tangent):
+    """
+    Write the local tangent ``M = A B`` of a link, ``-d L / d(δ increments)`` (paper eq. 8).
+
+    ``A = Bᵀ K`` less the cavities' load stiffness, with the stress terms for the exact tangent
+    (:func:`add_stress_terms`), else alone: the material part ``Bᵀ K B``, positive
+    semi-definite whatever the loads; ``B = diag(I, Jl⁻¹(φ))``.
+
+    Parameters
+    ----------
+    weighted : (6, 6) ndarray
+        ``A``.
+    jl_inverse : (3, 3) ndarray
+        ``Jl⁻¹(φ)``.
     tangent : (6, 6) ndarray
         Receives ``M``.
 
     """
-    if exact:
-        # d(Jl⁻ᵀ s_r)/dφ with Jl⁻¹ = I - φ^/2 + c(t) φ^²: the derivative of c φ^² gives
-        # c' φ (φ·s) - ..., written with ps = φ·s_r and c' = dc t
-        c, dc = jl_coefficient(theta)
-        phi0, phi1, phi2 = delta[3], delta[4], delta[5]
-        s0, s1, s2 = stress[3], stress[4], stress[5]
-        ps = phi0 * s0 + phi1 * s1 + phi2 * s2
-        t2 = theta * theta
-        for i in range(3):
-            left0 = dc * (delta[3 + i] * ps - t2 * stress[3 + i]) - 2.0 * c * stress[3 + i]
-            left1 = c * delta[3 + i]
-            for j in range(3):
-                weighted[3 + i, 3 + j] += left0 * delta[3 + j] + left1 * stress[3 + j]
-            weighted[3 + i, 3 + i] += c * ps
-        add_scaled_hat(weighted, 3, 3, s0, s1, s2, -0.5)
     for i in range(6):
         for j in range(3):
             tangent[i, j] = weighted[i, j]
@@ -369,7 +382,7 @@ def add_geometric_terms(world, difference, symmetric, block):
     Parameters
     ----------
     world : (6, m + 1) ndarray  [N, N*m]
-        The link's world wrenches (:func:`scatter_link_wrenches`).
+        The link's world wrenches (:func:`world_wrench`).
     difference : (3,) ndarray  [m]
         ``d``.
     symmetric : bool
@@ -459,8 +472,10 @@ def link_pass(system, positions, rotations, actuation, exact, into_band):
     Add every link's wrenches to ``system.rhs`` and write or add its tangent (paper eq. 4-8).
 
     For each link, in order: :func:`link_deformation`, ``Jl⁻¹(φ)``, :func:`local_wrench`,
-    :func:`add_cavity_wrenches`, :func:`scatter_link_wrenches` (column 0 and each cavity column),
-    :func:`local_tangent`, :func:`world_tangent` and, exact, :func:`add_geometric_terms`. The
+    :func:`add_cavity_wrenches`, :func:`world_wrench` and the frames' shares (column 0 and each
+    cavity column),
+    :func:`add_stress_terms` (exact), :func:`local_tangent`, :func:`world_tangent` and, exact,
+    :func:`add_geometric_terms`. The
     12 x 12 tangent goes to ``system.values`` (its link block) or, ``into_band``, its symmetric
     part (of ``M`` first, :func:`symmetrize`, then of the geometric terms) into the block band
     ``system.blocks`` (:func:`~cbha_inverse.core._kernels.assembly.add_link_block`).
@@ -499,11 +514,15 @@ def link_pass(system, positions, rotations, actuation, exact, into_band):
         used = add_cavity_wrenches(cavity_wrench, cavity_stiffness, cavity_columns, link,
                                    actuation, delta, exact, local,
                                    weighted)
-        scatter_link_wrenches(rotations, link, difference, local, 0, rhs, world)
-        for slot in range(used):
-            scatter_link_wrenches(rotations, link, difference, local,
-                                  1 + cavity_columns[link, slot], rhs, world)
-        local_tangent(weighted, jl_inverse, delta, stress, theta, exact, tangent)
+        for slot in range(1 + used):
+            column = 0 if slot == 0 else 1 + cavity_columns[link, slot - 1]
+            world_wrench(rotations, link, local, column, world)
+            add_to_frame_b(world, column, link, rhs)
+            if link > 0:
+                add_to_frame_a(world, column, difference, link, rhs)
+        if exact:
+            add_stress_terms(weighted, delta, stress, theta)
+        local_tangent(weighted, jl_inverse, tangent)
         if into_band:
             symmetrize(tangent)
         world_tangent(tangent, rotations, link, difference, into_band, block)

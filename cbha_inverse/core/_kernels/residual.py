@@ -1,8 +1,8 @@
 """
 Compiled convergence measures of the static solver's residual (paper eq. 9).
 
-:func:`residual_measures` adds the dead loads to the residual of a linearisation pass and
-returns, in one loop, the norms :mod:`cbha_inverse.core.statics` tests convergence with.
+:func:`residual_measures` adds the dead loads to the residual of an evaluation and returns, in
+one loop, the norms :mod:`cbha_inverse.core.statics` tests convergence with.
 """
 
 import math

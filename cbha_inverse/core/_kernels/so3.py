@@ -83,7 +83,7 @@ def rotation_log(rot, out):
     return theta
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def rotation_log_scalars(rot):
     """Return ``t`` and the three components of ``φ`` of :func:`rotation_log`, as floats."""
     d0 = 0.5 * (rot[2, 1] - rot[1, 2])
@@ -206,7 +206,7 @@ def quaternion_into(rot, out):
     out[0], out[1], out[2], out[3] = _quaternion(rot)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def _quaternion(rot):
     """
     Return the quaternion of :func:`quaternion_into` as four floats.

@@ -1,6 +1,7 @@
 """Options and per-tick result of the inverse solver (:mod:`cbha_inverse.core.inverse.solver`)."""
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import NamedTuple
 
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 import numpy as np
@@ -67,10 +68,10 @@ class InverseOptions:
             raise ValueError('relinearize_every must be >= 1')
 
 
-@dataclass(frozen=True, slots=True)
-class TickResult:
+class TickResult(NamedTuple):
     """
-    Result of one control tick.
+    Result of one control tick (immutable; a named tuple: built every tick, several times
+    cheaper than a frozen dataclass).
 
     Attributes
     ----------
@@ -118,5 +119,5 @@ class TickResult:
     saturated: np.ndarray
     predicted_error: float
     residual_norm: float
-    timings: dict = field(default_factory=dict)
+    timings: dict
     warnings: tuple = ()

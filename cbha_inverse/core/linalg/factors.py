@@ -3,15 +3,16 @@ Factors of a tangent stiffness ``K``, all with one protocol: ``solve(rhs)`` and 
 
 The equilibrium evaluator (:class:`cbha_inverse.core.system.EquilibriumSystem`) factors its
 tangents into these: :class:`BlockCholesky` (the symmetric block band of the control tick and
-the material one of the fallback), :class:`BandLU` (the exact, non-symmetric band of Newton's
-method), both compiled (:mod:`cbha_inverse.core._kernels.block_band`,
-:mod:`cbha_inverse.core._kernels.band_lu`), and :class:`DenseLU` (an exact tangent with a user
+the material one of the fallback), :class:`BlockLU` (the exact, non-symmetric tangent of
+Newton's method), both compiled (:mod:`cbha_inverse.core._kernels.block_band`,
+:mod:`cbha_inverse.core._kernels.block_lu`), and :class:`DenseLU` (an exact tangent with a user
 load stiffness). The control tick, Newton's method and the static checks use them through
 :class:`TangentFactor` alone.
 """
 
 from cbha_inverse.core._kernels.block_band import block_solve
-from cbha_inverse.core._kernels.band_lu import band_lu_solve
+from cbha_inverse.core._kernels.block_lu import block_lu_solve
+from cbha_inverse.core._kernels.records import compiled_entry
 import numpy as np
 
 
@@ -22,7 +23,7 @@ class TangentFactor:
     Attributes
     ----------
     method : str
-        ``'block_cholesky'``, ``'band_lu'`` or ``'dense_lu'``.
+        ``'block_cholesky'``, ``'block_lu'`` or ``'dense_lu'``.
 
     """
 
@@ -77,42 +78,59 @@ class BlockCholesky(TangentFactor):
         """Keep the factor."""
         self._factor = factor
 
-    def solve(self, rhs):
-        """Solve ``K X = rhs`` as :meth:`TangentFactor.solve` (the tick's path: one copy)."""
-        solved = np.array(rhs, dtype=float, order='C')
-        block_solve(self._factor, solved if solved.ndim == 2
-                    else solved.reshape(solved.shape[0], -1))
+    def _solve(self, columns):
+        """Solve with the compiled block Cholesky's forward and backward sweeps."""
+        solved = np.array(columns, dtype=float, order='C')
+        _entry(block_solve, self._factor, solved)(self._factor, solved)
         return solved
 
 
-class BandLU(TangentFactor):
+class BlockLU(TangentFactor):
     """
-    LU factor of a general band matrix (:func:`cbha_inverse.core._kernels.band_lu.band_lu`).
+    LU factor of a tangent of frame blocks (:func:`cbha_inverse.core._kernels.block_lu.block_lu`).
 
     Parameters
     ----------
-    lu : (N, 3 kd + 1) ndarray
-        Factor in the general band storage of
+    factor : (n, 2B + 1, 6, 6) ndarray
+        ``L`` and ``U`` in the block storage of
         :meth:`cbha_inverse.core.system.EquilibriumSystem.exact_system` (a buffer of the
         system: valid until its next factorisation).
-    kd : int
-        Number of sub- and super-diagonals of the factored matrix.
-    pivots, lower_reach : (N,) int ndarray
-        Row interchanges and the reach of the columns of ``L``.
+    pivots : (n, 6) int ndarray
+        Row interchanges within the diagonal blocks.
 
     """
 
-    method = 'band_lu'
+    method = 'block_lu'
 
-    def __init__(self, lu, kd, pivots, lower_reach):
+    def __init__(self, factor, pivots):
         """Keep the factor."""
-        self._lu, self._kd, self._pivots, self._reach = lu, kd, pivots, lower_reach
+        self._factor, self._pivots = factor, pivots
 
     def _solve(self, columns):
-        """Solve with the compiled band LU's forward and backward sweeps."""
+        """Solve with the compiled block LU's forward and backward sweeps."""
         solved = np.array(columns, dtype=float, order='C')
-        band_lu_solve(self._lu, self._kd, self._pivots, self._reach, solved)
+        _entry(block_lu_solve, self._factor, self._pivots, solved)(self._factor, self._pivots,
+                                                                   solved)
         return solved
+
+
+_ENTRIES = {}
+
+
+def _entry(kernel, *arguments):
+    """
+    Return a kernel's compiled entry for its arguments' types, without numba's type dispatch.
+
+    The factors' arrays are C-ordered float and int arrays of fixed dimensions, and the solves
+    C-ordered float columns: one entry per kernel and dimensions
+    (:func:`cbha_inverse.core._kernels.records.compiled_entry`).
+    """
+    key = (kernel,) + tuple((a.dtype.char, a.ndim, a.flags.c_contiguous, a.flags.writeable)
+                            for a in arguments)
+    entry = _ENTRIES.get(key)
+    if entry is None:
+        entry = _ENTRIES[key] = compiled_entry(kernel, *arguments)
+    return entry
 
 
 class DenseLU(TangentFactor):
