@@ -1,14 +1,14 @@
 """
-Compile the numba kernels into numba's on-disk cache (run at install).
+Compile the numba kernels the shipped scenes use into numba's on-disk cache (run at install).
 
-The kernels (every module of :mod:`cbha_inverse.core._kernels`) are ``numba.njit(cache=True)``:
-the first process that calls them compiles them (~15 s on the 2-core development machine) and
-writes the machine code to ``__pycache__`` next to the sources (or to ``NUMBA_CACHE_DIR``); later
-processes load it (~0.25 s for a first tick). This module runs representative ticks and static
-solves on every scene and QP solver (the solver's compiled tick entries among them), one solve
-of the compiled BTD backend (:mod:`cbha_inverse.core.linalg.btd`, the benchmark's) and the
-benchmark's multiply-add loop, so that the compile happens once, at
-install, and never inside a timed test, the demo or a control loop.
+The kernels (the modules of :mod:`cbha_inverse.core._kernels`) are ``numba.njit(cache=True)``:
+the first process that calls them compiles them and writes the machine code to ``__pycache__``
+next to the sources (or to ``NUMBA_CACHE_DIR``); later processes load it (a fraction of a second
+for a first tick). This module runs, on every shipped scene, what a node or a command runs: the
+control ticks of every QP solver and option branch, a static solve (the forward model, the
+plant) and the shape estimator's updates, so that each kernel is compiled once, at install, and
+never inside a timed test, the demo or a control loop. The benchmarks' own kernels (the compiled
+BTD backend, the flop-rate loop) are left to the benchmarks, which time repeated calls.
 
 Usage: ``python -m cbha_inverse.warmup [--scenes NAME ...]``. Pure numerics, no rclpy.
 """
@@ -17,9 +17,7 @@ import argparse
 import sys
 import time
 
-from cbha_inverse.core._kernels.flop_rate import multiply_add_chains
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
-from cbha_inverse.core.linalg import btd
 from cbha_inverse.estimate.shape import ShapeEstimator
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
@@ -86,27 +84,19 @@ def warm_targets(center, radius, n_ticks=6):
     return targets
 
 
-def warm_scene(name):
+def warm_control(name):
     """
-    Run the warm-up ticks of one scene with every option set.
+    Run the control ticks of one scene with every option set, then its shape estimator.
 
     Parameters
     ----------
     name : str
         Scene name (``config/scenes/<name>.yaml``).
 
-    Returns
-    -------
-    int
-        Number of ticks run.
-
     """
     scene = load_scene(name)
     radius = 0.06 if name == 'cbha' else 0.01
     targets = warm_targets(scene.workspace_center, radius)
-    # the static solver's kernels (forward model, plant): one solve at mid actuation
-    scene.forward(0.5 * (scene.lower_bounds + scene.upper_bounds))
-    ticks = 0
     for options in option_sets(len(scene.actuator_names),
                                scene.upper_bounds - scene.lower_bounds):
         solver = scene.make_inverse_solver(**options)
@@ -114,15 +104,27 @@ def warm_scene(name):
         for target in targets:
             solver.step(target)
             solver.prepare()
-        ticks += 2 + len(targets)
     if scene.sensors is not None:
         ShapeEstimator.from_scene(scene).warm_up()
-    return ticks
+
+
+def warm_statics(name):
+    """
+    Run one static solve of one scene at mid actuation (the forward model, the plant).
+
+    Parameters
+    ----------
+    name : str
+        Scene name.
+
+    """
+    scene = load_scene(name)
+    scene.forward(0.5 * (scene.lower_bounds + scene.upper_bounds))
 
 
 def main(argv=None):
     """
-    Compile (or load) every tick kernel by running representative ticks; print the time.
+    Compile (or load) every kernel the shipped scenes use; print the time.
 
     Parameters
     ----------
@@ -140,20 +142,17 @@ def main(argv=None):
                         help='scenes to run (default: all)')
     args = parser.parse_args(argv)
     started = time.perf_counter()
-    # the compiled BTD backend (its inputs are normalised to one type, so one small solve
-    # compiles all it ever needs)
-    btd.solve(np.tile(np.eye(6), (2, 1, 1)), np.zeros((1, 6, 6)), np.ones(12))
-    # the benchmark's measure of the machine's multiply-add rate
-    multiply_add_chains(1, 0.5)
-    ran = []
+    names = []
     for name in args.scenes:
         if name == 'cbha' and not config_path('segments', 'cbha_segment.yaml').is_file():
             print('warm-up: skipping cbha (the condensed CBHA segment is not generated yet)')
             continue
-        warm_scene(name)
-        ran.append(name)
-    print(f'warm-up: numba tick kernels compiled or loaded from the cache in '
-          f'{time.perf_counter() - started:.1f} s ({", ".join(ran) or "no scene"})', flush=True)
+        warm_control(name)
+        warm_statics(name)
+        names.append(name)
+    print(f'warm-up: numba kernels compiled or loaded from the cache in '
+          f'{time.perf_counter() - started:.1f} s ({", ".join(names) or "no scene"})',
+          flush=True)
     return 0
 
 

@@ -1,5 +1,5 @@
 """
-Record the reference results of ``test/reference_cases.py`` into ``test/data/reference_results.npz``.
+Record the results of ``test/reference_cases.py`` into ``test/data/reference_results.npz``.
 
 Run from the repository root with the package's venv: ``.venv/bin/python
 test/record_reference_results.py``. The arrays in the repository were recorded on the code

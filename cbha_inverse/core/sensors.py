@@ -4,12 +4,12 @@ String potentiometers: passive cables whose routed length is read (``docs/propri
 A string potentiometer is a force-free cable routed through points fixed to frames (base plate,
 guide vertebrae, end plate); its length is the sum of the straight spans between them, the same
 routing geometry as the actuation cables (:class:`cbha_inverse.core.actuation.cables.CableGroup`
-indexes it, :func:`cbha_inverse.core._kernels.cables.routing_lengths` evaluates it). Its raw
+indexes it, :func:`cbha_inverse.core._kernels.cables.routing_lengths_into` evaluates it). Its raw
 reading is affine in the length, ``reading = offset + gain * length``, with a noise of standard
 deviation ``noise_std`` on the length.
 """
 
-from cbha_inverse.core._kernels.cables import routing_lengths
+from cbha_inverse.core._kernels.cables import routing_lengths_into
 from cbha_inverse.core.actuation.cables import Cable, CableGroup
 import numpy as np
 
@@ -56,6 +56,15 @@ class StringPots:
         if np.any(self.noise_std <= 0.0):
             raise ValueError('string pots: noise_std must be positive')
         self._jacobian = np.zeros((c, 6 * (self.n_frames - 1)))
+        n_points, n_spans = self._routing[0].size, self._routing[2].size
+        unit_gains = np.ones(c)
+        unit_gains.flags.writeable = False
+        # the lengths and the scratch of routing_lengths_into: levers, points, forces (P, 3),
+        # span units (S, 3) and lengths (S,), unit gains (c,)
+        self._lengths = np.zeros(c)
+        self._scratch = (np.zeros((n_points, 3)), np.zeros((n_points, 3)),
+                         np.zeros((n_points, 3)), np.zeros((n_spans, 3)), np.zeros(n_spans),
+                         unit_gains)
 
     @property
     def routing(self):
@@ -113,10 +122,10 @@ class StringPots:
             this object (overwritten by the next call).
 
         """
-        lengths = routing_lengths(np.ascontiguousarray(positions, dtype=float),
-                                  np.ascontiguousarray(rotations, dtype=float), *self.routing,
-                                  self.n_sensors, self._jacobian)
-        return lengths, self._jacobian
+        routing_lengths_into(np.ascontiguousarray(positions, dtype=float),
+                             np.ascontiguousarray(rotations, dtype=float), *self.routing,
+                             self._lengths, self._jacobian, *self._scratch)
+        return self._lengths.copy(), self._jacobian
 
     def readings(self, lengths):
         """

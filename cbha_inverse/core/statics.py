@@ -256,7 +256,7 @@ def _entries(record, state):
         _ENTRIES['direction'] = compiled_entry(newton.newton_direction, record.record, positions,
                                                rotations)
         _ENTRIES['coordinates'] = compiled_entry(deformation_step, positions, rotations,
-                                                 record.rest_rotations,
+                                                 record.record.rest_rotations,
                                                  np.zeros((record.frame_max.size, 6)),
                                                  record.coordinates)
     return _ENTRIES
@@ -313,7 +313,8 @@ class _Problem:
         self.max_rotation_step = max_rotation_step
         constants = _cached(model)['constants']
         self.length, self.x_ref = constants.length, constants.x_ref
-        self.rest_rotations, self.rest = constants.rest_rotations, constants.rest
+        # the record's read-only view: the compiled kernels see one type of it
+        self.rest_rotations, self.rest = self.newton.record.rest_rotations, constants.rest
         self.coordinates = self.newton.coordinates
         self._evaluated = None
         self._entries = _entries(self.newton, self.rest)

@@ -147,7 +147,7 @@ class EquilibriumSystem:
         of the base frame go to a trash row of blocks at the end of either, value ``i`` to its
         slot ``i mod 36`` (consecutive values add into different slots).
         """
-        n, size = self.n, self.size
+        n = self.n
         rows, cols = [], []
         link_dof = 6 * np.arange(n)[:, None] + np.arange(12)[None, :] - 6
         rows.append(np.broadcast_to(link_dof[:, :, None], (n, 12, 12)).reshape(-1))

@@ -1,8 +1,8 @@
 """
 The buffers of the shape estimator's update, held in one compiled record.
 
-:class:`EstimatorData` allocates every array that
-:func:`cbha_inverse.core._kernels.estimation.estimate_tick` reads and writes: the estimator's
+:class:`EstimatorData` allocates every array that the compiled update
+(:mod:`cbha_inverse.core._kernels.estimation`) reads and writes: the estimator's
 own control-tick data (frames, actuation, the linearisation;
 :class:`cbha_inverse.core.inverse.tick_data.TickData`), the pots' routing and lengths, the
 unknowns and their covariance, the sections' stiffness unknowns. They are the fields of one
@@ -85,11 +85,12 @@ class EstimatorData(RecordOwner):
             'last_pressures': np.zeros(m), 'gate': np.zeros(1, dtype=np.bool_),
             'solve_mass': np.ones(1, dtype=np.bool_), 'masses': np.zeros(w), 'load': load,
             'base_external': system.external.copy(), 'mass_columns': np.zeros((6 * n, 1 + w)),
+            'load_solved': np.zeros((6 * n, w)),
             'mass_rhs': np.zeros((6 * n, 1 + w)), 'mass_w': np.zeros((3 * k, w)),
             'mass_w_aa': np.zeros((w, w)), 'mass_offset': np.zeros(3 * k),
             'mass_moved': np.zeros((3 * k, 1 + w)), 'mass_levers': np.zeros((k, 3)),
             'mass_previous': np.zeros(w), 'mass_effector_columns': np.zeros((6 * n, 3 * k)),
-            'free_step': np.zeros(6 * n), 'effector_w': np.zeros((3, u)),
+            'free_step': np.zeros((6 * n, 1)), 'effector_w': np.zeros((3, u)),
             'effector_positions': np.zeros((k, 3)), 'tip_covariance': np.zeros((3, 3)),
             'pot_levers': np.zeros((frames.size, 3)), 'pot_points': np.zeros((frames.size, 3)),
             'pot_forces': np.zeros((frames.size, 3)), 'pot_units': np.zeros((start.size, 3)),
@@ -142,7 +143,7 @@ class EstimatorData(RecordOwner):
 
     def entry(self, name):
         """
-        Return the compiled ``estimate_tick`` or ``estimate_from_linearisation`` of the record.
+        Return the compiled ``estimator_loads`` or ``estimate_from_linearisation`` of the record.
 
         Without numba's per-call type dispatch
         (:func:`cbha_inverse.core._kernels.records.compiled_entry`); call it with

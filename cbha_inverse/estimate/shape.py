@@ -14,8 +14,8 @@ effective area and stiffness), and ``μ`` (optionally also a stiffness error ``�
 section, which scales that section's links in the linearisation itself, as a scene's
 ``calibration.section_stiffness`` does); they change slowly, so they follow a small random walk
 and each update is a Kalman step that averages the pot noise over many updates (the compiled
-:func:`cbha_inverse.core._kernels.estimation.estimate_tick`, one call per update over the buffers
-of :class:`cbha_inverse.estimate.data.EstimatorData`). The offset's walk grows with the measured
+:mod:`cbha_inverse.core._kernels.estimation`, over the buffers of
+:class:`cbha_inverse.estimate.data.EstimatorData`). The offset's walk grows with the measured
 pressure change (the model's error shows when the arm moves); without measured pressures ``λ = δ``
 with a large walk. The state then takes the Newton step of the same factorisation, so repeated
 updates converge to the equilibrium of the estimate; after a step of the measured pressures
@@ -32,6 +32,7 @@ and the estimate is ``degraded``; ``rank`` says how many directions the remainin
 import math
 import time
 
+from cbha_inverse.core._kernels.tick import SOLVED
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.sections import SECTION_FACTOR_BOUNDS
 from cbha_inverse.core.system import EquilibriumSystem
@@ -426,9 +427,21 @@ class ShapeEstimator:
         return self._ranks[key]
 
     def _step(self):
-        """Run one compiled update (the fallback chain if the band is not positive definite)."""
-        data = self._data
-        if data.entry('estimate_tick')(data.record) == 0:
+        """
+        Run one update: the loads, the linearisation, the Kalman update and Newton step.
+
+        Three compiled calls: the loads of the load unknowns
+        (:func:`~cbha_inverse.core._kernels.estimation.estimator_loads`), the control tick's
+        linearisation alone, then the rest
+        (:func:`~cbha_inverse.core._kernels.estimation.estimate_from_linearisation`); the
+        fallback chain when the band is not positive definite.
+        """
+        data, tick = self._data, self._data.tick
+        data.entry('estimator_loads')(data.record)
+        linearised = tick.entry('control_tick')(tick.effector_positions, tick.record, False,
+                                                True, False, False)
+        if linearised[0] == SOLVED:
+            data.entry('estimate_from_linearisation')(data.record)
             self._bound_sections()
             return True
         system = self._system

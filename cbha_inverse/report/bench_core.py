@@ -276,7 +276,8 @@ def static_report(budget, out):
     times = {}
     system = EquilibriumSystem(model, ActuatorSet((), model.n_frames), np.zeros(6 * 16))
     none = np.zeros(0)
-    diagonal, upper = system.tridiagonal_blocks(system.linearise(state.positions, state.rotations, none)[0])
+    tangent = system.linearise(state.positions, state.rotations, none)[0]
+    diagonal, upper = system.tridiagonal_blocks(tangent)
     fac = btd.factorize(diagonal, upper)
     rhs6 = rng.normal(size=(96, 6))
     rhs20 = rng.normal(size=(96, 20))

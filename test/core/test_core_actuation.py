@@ -81,6 +81,44 @@ def test_cavity_mesh_column_is_virtual_work_of_volume():
     _fd_check(group, _deformed(rng), rng)
 
 
+def test_compiled_mesh_cavities_equal_the_numpy_oracle():
+    """
+    The compiled skinning, columns and volumes of a CavityGroup against the numpy oracle.
+
+    Parts with rest rotations and offsets off the segment axis (the skinning weight clipped at
+    both caps), gains other than 1, two cavities sharing frames, a deformed and a rigidly moved
+    chain.
+    """
+    rng = np.random.default_rng(9)
+    points, tris = tube_surface(LENGTH + 0.004, 0.004, (0.008, 0.003), n_around=9, n_along=4)
+    points = points - [0.002, 0.0, 0.0]     # the caps beyond the frames: weights 0 and 1
+    parts = tuple(CavityPart(points, tris, i, np.array([LENGTH, 0.002, -0.001]),
+                             so3_exp(0.1 * rng.standard_normal(3))) for i in (0, 2, 3))
+    cavities = _cavities()
+    cavities = [Cavity('q', parts, 1e5, gain=0.8), cavities[0],
+                Cavity('r', cavities[1].parts, 1e5, gain=1.3)]
+    group = CavityGroup(cavities, N_LINKS + 1)
+    reference = oracle(group)
+    assert type(reference) is not CavityGroup
+    rigid = retract(rest_state(_model()), np.tile([0.01, 0.0, 0.0, 0.2, -0.1, 0.3], (N_LINKS, 1)))
+    for state in (_deformed(rng, 0.3), rigid):
+        pose = _pose(state)
+        for got, expected in zip(group.vertices(*pose), reference.vertices(*pose)):
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15)
+        wrenches, volumes = group.evaluate(*pose)
+        expected_wrenches, expected_volumes = reference.evaluate(*pose)
+        assert np.abs(expected_wrenches).max() > 0.0 and np.all(expected_volumes > 0.0)
+        np.testing.assert_allclose(wrenches, expected_wrenches, rtol=0,
+                                   atol=1e-13 * np.abs(expected_wrenches).max())
+        np.testing.assert_allclose(volumes, expected_volumes, rtol=1e-12)
+        np.testing.assert_allclose(group.volumes(*pose), expected_volumes, rtol=1e-12)
+    # the gains scale the columns and the volumes
+    unit = oracle(CavityGroup([Cavity('q', parts, 1e5)], N_LINKS + 1)).evaluate(*pose)
+    np.testing.assert_allclose(0.8 * unit[0][0], wrenches[0], rtol=1e-12,
+                               atol=1e-15 * np.abs(wrenches).max())
+    assert 0.8 * unit[1][0] == pytest.approx(volumes[0], rel=1e-12)
+
+
 def test_tube_volume_and_outward_orientation():
     points, tris = tube_surface(0.05, 0.01, (0.0, 0.0), n_around=64, n_along=5)
     part = CavityPart(points, tris, 0, np.array([0.05, 0, 0]), np.eye(3))

@@ -70,7 +70,7 @@ def test_a_limited_change_moves_each_factor_in_steps(scenes):
     # the tick's link stiffness is the nominal one times each link's factor
     nominal = scenes[0].model.stiffnesses
     links = scenes[0].section_links
-    stiffness = solver._tick.stiffness
+    stiffness = solver._system.stiffness
     for factor, (first, count) in zip((1.05, 0.95), links.values()):
         np.testing.assert_allclose(stiffness[first:first + count],
                                    factor * nominal[first:first + count], rtol=1e-15)

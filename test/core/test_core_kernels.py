@@ -1,21 +1,22 @@
-"""Kernels (Jl⁻¹, log/exp, retraction, band Cholesky), band LU and the solver's fallbacks."""
+"""Kernels (Jl⁻¹, log/exp, retraction), block Cholesky, block LU and the solver's fallbacks."""
 
-from cbha_inverse.core._kernels.band import (_backward_columns, _cholesky_width12,
-                                             _forward_columns, band_cholesky,
-                                             band_cholesky_forward, band_cholesky_profiled,
-                                             band_forward,
-                                             band_forward_profiled, band_solve, frame_profile)
+from cbha_inverse.core._kernels import evaluation
+from cbha_inverse.core._kernels.block_band import (block_backward, block_cholesky,
+                                                   block_cholesky_forward, block_forward,
+                                                   block_solve, first_nonzero_rows)
+from cbha_inverse.core._kernels.block_lu import block_lu, block_lu_solve
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core._kernels.so3 import jl_coefficient, rotation_exp, rotation_log
 from cbha_inverse.core.chain import ChainModel, ChainState, rest_state, retract
-from cbha_inverse.core.inverse import solver as control
 from cbha_inverse.core.links import timoshenko_compliance
+from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.scene import load_scene
 import numpy as np
 from oracles.actuation import oracle
 from oracles.chain_forces import assemble_tangent, blocks_to_dense, material_tangent
 from oracles.so3 import _jl_inv_coefficient, so3_exp, so3_log
 import pytest
+from tick_faults import refuse_cholesky
 
 
 def jl_coefficients(theta):
@@ -65,157 +66,247 @@ def test_rotation_log_inverts_exp_up_to_pi(angle):
         assert theta == pytest.approx(angle, abs=1e-12)
 
 
-# kd = 11 with 7 or 9 right-hand sides and kd = 17 with 9 run the constant-trip-count sweeps of
-# band_solve (FORWARD_COLUMN_COUNTS, BACKWARD_COLUMN_COUNTS), the others its general loops;
-# kd = 11 and 17 the constant-trip-count Cholesky
-@pytest.mark.parametrize('size, kd, n_rhs', [
-    (1, 0, 5), (12, 11, 5), (36, 17, 5), (96, 11, 5), (20, 19, 5), (96, 11, 7), (96, 11, 9),
-    (12, 11, 7), (36, 11, 9), (96, 11, 17), (96, 11, 1), (36, 17, 9), (60, 17, 17),
-    (18, 17, 9)])
-def test_band_cholesky_equals_dense_solve(size, kd, n_rhs):
-    rng = np.random.default_rng(size + kd + n_rhs)
-    a = rng.standard_normal((size, size))
-    r, c = np.indices((size, size))
-    a = np.where(np.abs(r - c) <= kd, a @ a.T + size * np.eye(size), 0.0)
-    band = np.zeros((size, kd + 1))
-    for d in range(kd + 1):
-        band[:size - d, d] = np.diagonal(a, -d)
-    assert band_cholesky(band) == 0
-    lower = np.zeros((size, size))
-    for d in range(kd + 1):
-        lower += np.diag(band[:size - d, d], -d)
-    np.testing.assert_allclose(lower, np.linalg.cholesky(a), atol=1e-12 * size)
-    # a strided right-hand side (the columns after the first)
-    rhs = rng.standard_normal((size, n_rhs + 1))
+def _spd_block_band(rng, n_blocks, width):
+    """
+    Return a random SPD matrix of 6 x 6 blocks with ``width`` blocks below the diagonal.
+
+    ``A = L Lᵀ`` for a random lower-triangular ``L`` of that block bandwidth with a dominant
+    positive diagonal: ``L`` is numpy's Cholesky factor of ``A``, and ``A`` is well conditioned.
+    """
+    size = 6 * n_blocks
+    rows, cols = np.indices((size, size)) // 6
+    lower = np.tril(np.where(rows - cols <= width, 0.1 * rng.standard_normal((size, size)), 0.0))
+    lower[np.diag_indices(size)] = rng.uniform(2.0, 3.0, size)
+    return lower @ lower.T
+
+
+def _block_band(dense, width):
+    """Return the block band ``blocks[c, d] = K_(c+d, c)`` of a dense matrix, block by block."""
+    n_blocks = dense.shape[0] // 6
+    blocks = np.zeros((n_blocks, width + 1, 6, 6))
+    for c in range(n_blocks):
+        for d in range(min(width + 1, n_blocks - c)):
+            blocks[c, d] = dense[6 * (c + d):6 * (c + d + 1), 6 * c:6 * (c + 1)]
+    return blocks
+
+
+def _factor_matrix(factor):
+    """Return the dense ``L`` of a block Cholesky factor (its diagonal blocks hold 1 / L_ii)."""
+    n_blocks, widths = factor.shape[:2]
+    out = np.zeros((6 * n_blocks, 6 * n_blocks))
+    for c in range(n_blocks):
+        for d in range(min(widths, n_blocks - c)):
+            block = factor[c, d]
+            if d == 0:
+                block = np.tril(block, -1) + np.diag(1.0 / np.diag(block))
+            out[6 * (c + d):6 * (c + d + 1), 6 * c:6 * (c + 1)] = block
+    return out
+
+
+def _close(got, expected, tolerance=1e-12):
+    """Assert ``got`` equals ``expected`` within ``tolerance`` of the largest entry's size."""
+    np.testing.assert_allclose(got, expected, rtol=0, atol=tolerance * np.abs(expected).max())
+
+
+@pytest.mark.parametrize('n_blocks, width, n_rhs', [
+    (1, 1, 3), (2, 1, 5), (7, 1, 1), (16, 1, 7), (2, 2, 5), (3, 2, 4), (10, 2, 9), (5, 3, 2)])
+def test_block_cholesky_gives_numpys_factor_and_dense_solves(n_blocks, width, n_rhs):
+    """
+    block_cholesky gives numpy's Cholesky factor; the sweeps give the dense triangular solves.
+
+    Of a diagonal block only the lower triangle is read and written: its upper triangle (NaN
+    here) is left as it was. block_forward solves ``L Y = R``, block_backward ``Lᵀ X = Y`` and
+    block_solve both, bit for bit; block bandwidths 1 (a chain), 2 and 3 (cables that skip
+    frames), with fewer blocks than the bandwidth too.
+    """
+    rng = np.random.default_rng(10 * n_blocks + width + n_rhs)
+    dense = _spd_block_band(rng, n_blocks, width)
+    blocks = _block_band(dense, width)
+    above = np.triu_indices(6, 1)
+    blocks[:, 0][:, above[0], above[1]] = np.nan
+    assert block_cholesky(blocks) == 0
+    assert np.isnan(blocks[:, 0][:, above[0], above[1]]).all()
+    lower = np.linalg.cholesky(dense)
+    _close(_factor_matrix(blocks), lower)
+    rhs = rng.standard_normal((6 * n_blocks, n_rhs))
+    forward = rhs.copy()
+    block_forward(blocks, forward, np.zeros(n_rhs, dtype=np.int64))
+    _close(forward, np.linalg.solve(lower, rhs))
+    backward = forward.copy()
+    block_backward(blocks, backward)
+    _close(backward, np.linalg.solve(lower.T, forward))
+    _close(backward, np.linalg.solve(dense, rhs), 1e-11)
     solved = rhs.copy()
-    band_solve(band, solved[:, 1:])
-    np.testing.assert_allclose(solved[:, 1:], np.linalg.solve(a, rhs[:, 1:]), atol=1e-11)
-    np.testing.assert_array_equal(solved[:, 0], rhs[:, 0])
+    block_solve(blocks, solved)
+    np.testing.assert_array_equal(solved, backward)
 
 
-@pytest.mark.parametrize('n_rhs', [7, 9, 5])
-def test_band_kernels_on_the_frame_profile_equal_the_full_band(n_rhs):
-    # a block-tridiagonal matrix of 6 x 6 blocks: band_cholesky and band_solve skip the zeros
-    # outside its profile (frame_profile); the result is that of the full-band loops, bit for bit
-    rng = np.random.default_rng(n_rhs)
-    size = 48
-    r, c = np.indices((size, size))
-    a = rng.standard_normal((size, size))
-    a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)
-    band = np.zeros((size, 12))
-    for d in range(12):
-        band[:size - d, d] = np.diagonal(a, -d)
-    assert frame_profile(band)
-    full = band.copy()
-    assert _cholesky_width12(full) == 0
-    assert band_cholesky(band) == 0
-    np.testing.assert_array_equal(band, full)
-    assert frame_profile(band)
-    rhs = rng.standard_normal((size, n_rhs))
-    solved, expected = rhs.copy(), rhs.copy()
-    band_solve(band, solved)
-    _forward_columns(full, expected, n_rhs, 12, 0)
-    _backward_columns(full, expected, n_rhs, 12)
-    np.testing.assert_array_equal(solved, expected)
-    np.testing.assert_allclose(solved, np.linalg.solve(a, rhs), atol=1e-11)
-    # one entry outside the profile (or a NaN) and the full band runs
-    band[1, 11] = 1e-3
-    assert not frame_profile(band)
-    band[1, 11] = np.nan
-    assert not frame_profile(band)
-    assert not frame_profile(np.zeros((42, 11)))
-
-
-def _frame_band(rng, size, broken=False):
-    """Return a random SPD block-tridiagonal matrix of 6 x 6 blocks and its lower band."""
-    r, c = np.indices((size, size))
-    a = rng.standard_normal((size, size))
-    a = np.where(np.abs(r // 6 - c // 6) <= 1, a @ a.T + size * np.eye(size), 0.0)
-    if broken:
-        a[13, 2] = a[2, 13] = 0.5
-    band = np.zeros((size, 12))
-    for d in range(12):
-        band[:size - d, d] = np.diagonal(a, -d)
-    return a, band
-
-
-@pytest.mark.parametrize('broken', [False, True])
-def test_the_cholesky_hands_its_profile_check_to_the_sweeps(broken):
+@pytest.mark.parametrize('width', [1, 2])
+def test_the_factor_with_its_sweep_equals_the_factor_then_the_sweep(width):
     """
-    band_cholesky_profiled checks the block profile once, for the sweeps of its factor.
+    block_cholesky_forward gives block_cholesky then block_forward, bit for bit.
 
-    A factor it marks profiled has the profile; one coupling outside it (row 2 reaching row 13)
-    turns the flag off and the sweep runs the full band: both give the dense half-solve, as
-    band_forward (which checks the factor itself) does, bit for bit.
+    Columns zero down to some row (the ``J_aᵀ`` of a later section's actuators; at a block
+    boundary or inside a block, or zero throughout): first_nonzero_rows finds that row, the
+    sweep starts at its block and gives the bits of the sweep from row 0; the zeros stay zero.
+    Both give the dense half-solve ``L⁻¹ R``.
     """
-    rng = np.random.default_rng(3)
-    size = 48
-    _, band = _frame_band(rng, size, broken)
-    assert frame_profile(band) is not broken
-    info, profiled = band_cholesky_profiled(band)
-    assert info == 0 and profiled is not broken
-    assert frame_profile(band) is profiled
-    lower = np.zeros((size, size))
-    for d in range(12):
-        lower += np.diag(band[:size - d, d], -d)
-    for n_rhs in (7, 3, 5):
-        rhs = rng.standard_normal((size, n_rhs))
-        rhs[:12] = 0.0
-        solved, checked = rhs.copy(), rhs.copy()
-        band_forward_profiled(band, solved, 12, profiled)
-        band_forward(band, checked, 12)
-        np.testing.assert_array_equal(solved, checked)
-        np.testing.assert_allclose(solved, np.linalg.solve(lower, rhs), atol=1e-12)
+    rng = np.random.default_rng(width)
+    n_blocks, zeros = 8, [0, 3, 6, 8, 30, 47, 48]
+    dense = _spd_block_band(rng, n_blocks, width)
+    blocks = _block_band(dense, width)
+    rhs = rng.standard_normal((6 * n_blocks, len(zeros)))
+    for col, rows in enumerate(zeros):
+        rhs[:rows, col] = 0.0
+    starts = np.full(len(zeros), -1, dtype=np.int64)
+    first_nonzero_rows(rhs, starts)
+    np.testing.assert_array_equal(starts, zeros)
+    fused, swept = blocks.copy(), rhs.copy()
+    assert block_cholesky_forward(fused, swept, starts) == 0
+    factor, expected = blocks.copy(), rhs.copy()
+    assert block_cholesky(factor) == 0
+    block_forward(factor, expected, starts)
+    np.testing.assert_array_equal(fused, factor)
+    np.testing.assert_array_equal(swept, expected)
+    from_the_top = rhs.copy()
+    block_forward(factor, from_the_top, np.zeros(len(zeros), dtype=np.int64))
+    np.testing.assert_array_equal(swept, from_the_top)
+    _close(swept, np.linalg.solve(np.linalg.cholesky(dense), rhs))
+    for col, rows in enumerate(zeros):
+        assert not swept[:rows, col].any()
 
 
-@pytest.mark.parametrize('broken', [False, True])
-@pytest.mark.parametrize('n_rhs, zero_from, zero_rows', [
-    (7, 4, 42), (7, 4, 40), (7, 5, 30), (7, 7, 0), (9, 6, 42), (3, 0, 0), (5, 2, 18)])
-def test_the_cholesky_with_its_sweep_equals_the_factor_then_the_sweep(broken, n_rhs, zero_from,
-                                                                      zero_rows):
+@pytest.mark.parametrize('width, unknown, pivot', [
+    (1, 0, -0.5), (1, 20, -0.5), (2, 27, -2.0), (2, 47, np.nan), (1, 33, np.inf),
+    (2, 6, -1e-3)])
+def test_block_cholesky_reports_the_first_failing_pivot_and_leaves_it(width, unknown, pivot):
     """
-    band_cholesky_forward gives band_cholesky_profiled then band_forward_profiled, bit for bit.
+    A pivot that is not positive (or not finite) stops the factorisation at ``6 c + j + 1``.
 
-    Trailing columns zero down to some row (the J_aᵀ of a later section's actuators; a block
-    boundary or not) are swept from there on; the rows above stay zero. A band off the frame
-    profile is factored, then swept. Both give the dense half-solve.
+    The pivot of unknown ``p`` is the Schur complement ``A_pp - A_p,:p A_:p,:p⁻¹ A_:p,p``; planted
+    at ``pivot`` (the leading minors stay positive definite), block_cholesky and
+    block_cholesky_forward return ``p + 1`` and leave it in ``blocks[c, 0, j, j]``.
     """
-    rng = np.random.default_rng(n_rhs + zero_rows)
-    size = 96
-    a, band = _frame_band(rng, size, broken)
-    rhs = rng.standard_normal((size, n_rhs))
-    rhs[:zero_rows, zero_from:] = 0.0
-    fused, solved = band.copy(), rhs.copy()
-    info, profiled = band_cholesky_forward(fused, solved)
-    assert info == 0 and profiled is not broken
-    expected_band, expected = band.copy(), rhs.copy()
-    assert band_cholesky_profiled(expected_band) == (0, profiled)
-    band_forward_profiled(expected_band, expected, 0, profiled)
-    np.testing.assert_array_equal(fused, expected_band)
-    np.testing.assert_array_equal(solved, expected)
-    np.testing.assert_allclose(solved, np.linalg.solve(np.linalg.cholesky(a), rhs), atol=1e-12)
-    assert not solved[:zero_rows, zero_from:].any()
+    rng = np.random.default_rng(unknown)
+    dense = _spd_block_band(rng, 8, width)
+    p = unknown
+    if np.isfinite(pivot):
+        schur = dense[p, :p] @ np.linalg.solve(dense[:p, :p], dense[:p, p]) if p else 0.0
+        dense[p, p] = schur + pivot
+    else:
+        dense[p, p] = pivot
+    c, j = divmod(p, 6)
+    for fused in (False, True):
+        blocks = _block_band(dense, width)
+        if fused:
+            info = block_cholesky_forward(blocks, rng.standard_normal((48, 3)),
+                                          np.zeros(3, dtype=np.int64))
+        else:
+            info = block_cholesky(blocks)
+        assert info == 6 * c + j + 1
+        if np.isfinite(pivot):
+            assert blocks[c, 0, j, j] == pytest.approx(pivot, rel=1e-9)
+        else:
+            np.testing.assert_array_equal(blocks[c, 0, j, j], pivot)
 
 
-@pytest.mark.parametrize('n_rhs', [7, 5])
-def test_the_cholesky_with_its_sweep_reports_the_failing_column(n_rhs):
-    rng = np.random.default_rng(5)
-    _, band = _frame_band(rng, 48)
-    band[20, 0] = -1.0
-    rhs = rng.standard_normal((48, n_rhs))
-    expected_band = band.copy()
-    info, profiled = band_cholesky_forward(band, rhs)
-    assert (info, profiled) == band_cholesky_profiled(expected_band)
-    assert info == 21 and profiled
+def _exact_storage(dense, width):
+    """Return the blocks ``blocks[c, B + d] = K_(c+d, c)``, ``d = -B ... B``, of a dense matrix."""
+    n_blocks = dense.shape[0] // 6
+    blocks = np.zeros((n_blocks, 2 * width + 1, 6, 6))
+    for c in range(n_blocks):
+        for d in range(max(-width, -c), min(width, n_blocks - 1 - c) + 1):
+            blocks[c, width + d] = dense[6 * (c + d):6 * (c + d + 1), 6 * c:6 * (c + 1)]
+    return blocks
 
 
-def test_band_cholesky_reports_the_first_bad_pivot():
-    a = np.diag([2.0, 3.0, -1.0, 4.0])
-    band = np.zeros((4, 2))
-    band[:, 0] = np.diag(a)
-    assert band_cholesky(band) == 3
-    band[:, 0] = [1.0, np.nan, 1.0, 1.0]
-    assert band_cholesky(band) == 2
+def _block_banded(rng, n_blocks, width):
+    """
+    Return a random non-symmetric matrix of 6 x 6 blocks, ``width`` blocks on either side.
+
+    Each diagonal block is a random block of singular values 1 ... 3 (its elimination needs row
+    interchanges), the couplings are small against it: elimination without interchanges across
+    blocks is stable, as for the tangent near a stable equilibrium.
+    """
+    size = 6 * n_blocks
+    rows, cols = np.indices((size, size)) // 6
+    dense = np.where(np.abs(rows - cols) <= width, 0.02 * rng.standard_normal((size, size)), 0.0)
+    for c in range(n_blocks):
+        left, _ = np.linalg.qr(rng.standard_normal((6, 6)))
+        right, _ = np.linalg.qr(rng.standard_normal((6, 6)))
+        dense[6 * c:6 * c + 6, 6 * c:6 * c + 6] = (left * rng.uniform(1.0, 3.0, 6)) @ right
+    return dense
+
+
+@pytest.mark.parametrize('n_blocks, width, n_rhs', [
+    (1, 1, 2), (2, 1, 3), (9, 1, 5), (2, 2, 3), (3, 2, 1), (10, 2, 8)])
+def test_block_lu_solves_random_block_banded_matrices(n_blocks, width, n_rhs):
+    """block_lu and block_lu_solve against numpy.linalg.solve (B = 1 and 2, any block count)."""
+    rng = np.random.default_rng(10 * n_blocks + width)
+    dense = _block_banded(rng, n_blocks, width)
+    dense[0, 0] = 0.0       # the first column needs an interchange
+    assert np.abs(dense - dense.T).max() > 0.1
+    blocks = _exact_storage(dense, width)
+    pivots = np.full((n_blocks, 6), -1, dtype=np.int64)
+    assert block_lu(blocks, pivots) == 0
+    assert np.all((pivots >= np.arange(6)) & (pivots < 6)) and pivots[0, 0] != 0
+    rhs = rng.standard_normal((6 * n_blocks, n_rhs))
+    solved = rhs.copy()
+    block_lu_solve(blocks, pivots, solved)
+    _close(solved, np.linalg.solve(dense, rhs))
+
+
+@pytest.mark.parametrize('width, unknown, entry', [
+    (1, 0, 0.0), (1, 20, 0.0), (2, 35, 0.0), (2, 59, 0.0), (1, 13, np.nan), (2, 40, np.inf)])
+def test_block_lu_stops_at_a_zero_or_non_finite_pivot(width, unknown, entry):
+    """
+    A zero column ``p`` (a singular matrix), or a non-finite entry on the diagonal at ``p``.
+
+    The column stays zero (or non-finite) through the elimination of the ones before it, so
+    block_lu stops at ``p``: it returns ``p + 1``.
+    """
+    rng = np.random.default_rng(unknown)
+    dense = _block_banded(rng, 10, width)
+    if entry == 0.0:
+        dense[:, unknown] = 0.0
+    else:
+        dense[unknown, unknown] = entry
+    pivots = np.zeros((10, 6), dtype=np.int64)
+    assert block_lu(_exact_storage(dense, width), pivots) == unknown + 1
+
+
+@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
+def test_block_lu_solves_the_exact_tangent_of_a_scene_and_refuses_a_singular_one(name):
+    """
+    The block LU of the exact (non-symmetric) tangent solves the numpy oracle's dense tangent.
+
+    The tendon trunk's cables span two links (B = 2), the CBHA's cavities one (B = 1). A chain
+    whose last link has no stiffness, with slack tendons and no pressure, leaves its last frame
+    free: a zero block column, refused at the last frame's first unknown.
+    """
+    scene = load_scene(name)
+    model, n, m = scene.model, scene.model.n_links, len(scene.actuator_names)
+    rng = np.random.default_rng(4)
+    state = retract(rest_state(model), 0.05 * rng.standard_normal((n, 6)))
+    actuation = scene.upper_bounds * rng.uniform(0.2, 0.7, m)
+    system = EquilibriumSystem(model, scene.actuators, np.zeros(6 * n))
+    assert system.block_width == (2 if name.startswith('tendon') else 1)
+    system.evaluate(state.positions, state.rotations, actuation)
+    exact = (assemble_tangent(model, state).to_dense(exact=True)
+             + oracle(scene.actuators).load_tangent(state.positions, state.rotations, actuation,
+                                                    symmetric=False))
+    assert np.abs(exact - exact.T).max() > 1e-3 * np.abs(exact).max()   # not symmetric
+    factor = system.factor_exact()
+    assert factor.method == 'block_lu'
+    rhs = rng.standard_normal((6 * n, 3))
+    np.testing.assert_allclose(exact @ factor.solve(rhs), rhs, atol=1e-9)
+    stiffness = np.array(model.stiffnesses)
+    stiffness[-1] = 0.0
+    free_end = EquilibriumSystem(model, scene.actuators, np.zeros(6 * n), stiffness=stiffness)
+    free_end.evaluate(state.positions, state.rotations, np.zeros(m))
+    assert not free_end.dense_exact(free_end.exact_tangent())[:, -6:].any()
+    assert free_end.factor_exact() is None
+    assert evaluation.factor_exact(free_end.record) == 6 * (n - 1) + 1
 
 
 def test_retract_frames_and_exp_match_reference():
@@ -232,27 +323,9 @@ def test_retract_frames_and_exp_match_reference():
     np.testing.assert_allclose(exp_rotations(v), so3_exp(v), atol=1e-14)
 
 
-def test_band_lu_solves_the_exact_tangent_and_detects_singular():
-    """LAPACK band LU of the exact (non-symmetric) tangent: solves; a zero column is refused."""
-    scene = load_scene('tendon_6f_8c')
-    model, n, m = scene.model, scene.model.n_links, len(scene.actuator_names)
-    rng = np.random.default_rng(4)
-    state = retract(rest_state(model), 0.05 * rng.standard_normal((n, 6)))
-    actuation = scene.upper_bounds * rng.uniform(0.2, 0.7, m)
-    system = control.EquilibriumSystem(model, scene.actuators, np.zeros(6 * n))
-    tangent, _ = system.exact_system(state.positions, state.rotations, actuation)
-    dense = system.dense_exact(tangent)
-    assert np.abs(dense - dense.T).max() > 1e-3 * np.abs(dense).max()   # not symmetric
-    rhs = rng.standard_normal((6 * n, 3))
-    np.testing.assert_allclose(dense @ system.factor_exact(tangent).solve(rhs), rhs, atol=1e-9)
-    tangent, _ = system.exact_system(state.positions, state.rotations, actuation)
-    tangent[7] = 0.0    # column 7 of the matrix (general band storage, C order)
-    assert system.factor_exact(tangent) is None
-
-
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
 def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkeypatch):
-    """LU of the exact structure + load tangent; BTD Cholesky of the material one if LU fails."""
+    """Block LU of the exact structure + load tangent; block Cholesky of the material one next."""
     scene = load_scene(name)
     model, n, m = scene.model, scene.model.n_links, len(scene.actuator_names)
     rng = np.random.default_rng(8)
@@ -265,17 +338,17 @@ def test_solver_fallbacks_factor_the_exact_and_the_material_tangent(name, monkey
     exact = (assemble_tangent(model, ChainState(positions, rotations)).to_dense(exact=True)
              + oracle(scene.actuators).load_tangent(positions, rotations, actuation,
                                                     symmetric=False))
-    factor = next(solver._tick.fallback_factors(positions, rotations, actuation))
-    assert factor.method == 'band_lu'
+    factor = next(solver._system.fallback_factors(positions, rotations, actuation))
+    assert factor.method == 'block_lu'
     np.testing.assert_allclose(exact @ factor.solve(rhs), rhs, atol=1e-9)
 
-    def singular(self, tangent):
+    def singular(self):
         return None
 
-    monkeypatch.setattr(control.EquilibriumSystem, 'factor_exact', singular)
+    monkeypatch.setattr(EquilibriumSystem, 'factor_exact', singular)
     material = blocks_to_dense(*material_tangent(model, ChainState(positions, rotations)))
-    factor = next(solver._tick.fallback_factors(positions, rotations, actuation))
-    assert factor.method == 'band_cholesky'
+    factor = next(solver._system.fallback_factors(positions, rotations, actuation))
+    assert factor.method == 'block_cholesky'
     np.testing.assert_allclose(material @ factor.solve(rhs), rhs, atol=1e-9)
 
 
@@ -289,31 +362,33 @@ def test_ticks_through_the_fallback_factorization_still_reach_the_target(name, m
         0.0, 0.5, m)
     target = scene.forward(actuation, strict=True).effector_positions
     solver = scene.make_inverse_solver()
-    calls = []
-    chain = solver._tick.fallback_factors
+    methods = []
+    chain = solver._system.fallback_factors
 
     def counted(*args, **kwargs):
-        calls.append(1)
-        return chain(*args, **kwargs)
+        for factor in chain(*args, **kwargs):
+            methods.append(factor.method)
+            yield factor
 
-    monkeypatch.setattr(solver._tick, 'tick_cholesky', False)
-    monkeypatch.setattr(solver._tick, 'fallback_factors', counted)
+    refuse_cholesky(solver, monkeypatch)
+    monkeypatch.setattr(solver._system, 'fallback_factors', counted)
     for _ in range(30):
         out = solver.step(target)
         assert out.status in ('solved', 'saturated')
-    assert len(calls) == 30
+    assert methods == ['block_lu'] * 30
     reached = scene.forward(out.actuation, initial_state=solver.state, strict=True)
     assert np.linalg.norm(reached.effector_positions - target, axis=1).max() < 1e-4
 
 
 def test_a_tick_without_any_factorization_holds_the_actuation(monkeypatch):
+    """The Cholesky refused, the exact and the material tangents too: the tick holds."""
     scene = load_scene('tendon_6f_8c')
     solver = scene.make_inverse_solver()
     first = solver.step(scene.workspace_center + 0.002)
     state = solver.state
-    monkeypatch.setattr(solver._tick, 'tick_cholesky', False)
-    monkeypatch.setattr(solver._tick, 'factor', lambda tangent: None)
-    monkeypatch.setattr(solver._tick, 'factor_exact', lambda tangent: None)
+    refuse_cholesky(solver, monkeypatch)
+    monkeypatch.setattr(solver._system, 'factor', lambda tangent=None: None)
+    monkeypatch.setattr(solver._system, 'factor_exact', lambda: None)
     held = solver.step(scene.workspace_center - 0.002)
     assert held.status == 'not_positive_definite'
     np.testing.assert_array_equal(held.actuation, first.actuation)

@@ -1,7 +1,7 @@
 """Tests of the block-tridiagonal solver against scipy.linalg.solveh_banded and dense solves."""
 
-from cbha_inverse.core._kernels import band as band_kernels
-from cbha_inverse.core._kernels.band_assembly import btd_band_cholesky
+from cbha_inverse.core._kernels import block_band
+from cbha_inverse.core._kernels.assembly import btd_cholesky
 from cbha_inverse.core.linalg import btd
 import numpy as np
 import pytest
@@ -156,14 +156,12 @@ def test_compiled_accepts_strided_and_read_only_blocks():
     upper_ro = upper.copy()
     upper_ro.flags.writeable = False
     btd.factorize(diag, upper, method='compiled').solve(rhs)      # the C-ordered signature
-    compiled = (list(btd_band_cholesky.signatures),
-                list(band_kernels.band_solve.signatures))
+    compiled = (list(btd_cholesky.signatures), list(block_band.block_solve.signatures))
     x = btd.factorize(diag_t, upper_ro, method='compiled').solve(np.asfortranarray(rhs))
     assert np.abs(x - ref).max() <= 1e-10 * np.abs(ref).max()
     # the C-ordered writable float64 signatures serve such inputs: no new compile (other tests
     # of this process may have compiled other layouts of the kernels directly)
-    assert (list(btd_band_cholesky.signatures),
-            list(band_kernels.band_solve.signatures)) == compiled
+    assert (list(btd_cholesky.signatures), list(block_band.block_solve.signatures)) == compiled
 
 
 @pytest.mark.parametrize('block', [0, 5, 11])
@@ -173,7 +171,7 @@ def test_compiled_refuses_indefinite_matrix(block):
     diag, upper, dense = _random_btd(rng, 12)
     diag[block] -= 1e3 * np.eye(6)
     with pytest.raises(btd.NotPositiveDefiniteError,
-                       match=rf'compiled band Cholesky pivot .* \(block {block}, component'):
+                       match=rf'compiled block Cholesky pivot .* \(block {block}, component'):
         btd.factorize(diag, upper, method='compiled')
 
 
@@ -187,3 +185,45 @@ def test_compiled_condition_estimate():
         true = np.linalg.cond(dense + shift * np.eye(6 * n), 1)
         est = btd.factorize(diag, upper, method='compiled').condition_estimate
         assert true / 3.0 <= est <= true * (1 + 1e-8)
+
+
+@pytest.mark.parametrize('n', [1, 2, 9])
+def test_btd_cholesky_writes_the_block_band_and_gives_numpys_factor(n):
+    """
+    btd_cholesky: block ``c`` of the band holds ``D_c`` and ``U_cᵀ``, factored in place.
+
+    Its factor (1 / L_ii on the diagonal of the diagonal blocks) is numpy's Cholesky factor of
+    the dense matrix; an indefinite diagonal block stops it at ``6 c + j + 1``, the first
+    unknown whose pivot is not positive (the Schur complement of the leading minor).
+    """
+    rng = np.random.default_rng(20 + n)
+    diag, upper, dense = _random_btd(rng, n)
+    factor, info = btd_cholesky(diag, upper)
+    assert info == 0 and factor.shape == (n, 2, 6, 6)
+    lower = np.zeros((6 * n, 6 * n))
+    for c in range(n):
+        block = np.tril(factor[c, 0], -1) + np.diag(1.0 / np.diag(factor[c, 0]))
+        lower[6 * c:6 * c + 6, 6 * c:6 * c + 6] = block
+        if c + 1 < n:
+            lower[6 * c + 6:6 * c + 12, 6 * c:6 * c + 6] = factor[c, 1]
+    expected = np.linalg.cholesky(dense)
+    np.testing.assert_allclose(lower, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    bad = diag.copy()
+    bad[n - 1] -= 1e3 * np.eye(6)
+    dense[-6:, -6:] -= 1e3 * np.eye(6)
+    pivots = [dense[p, p] - dense[p, :p] @ np.linalg.solve(dense[:p, :p], dense[:p, p])
+              if p else dense[0, 0] for p in range(6 * n)]
+    first = next(p for p, pivot in enumerate(pivots) if pivot <= 0.0)
+    assert first // 6 == n - 1
+    factor, info = btd_cholesky(bad, upper)
+    assert info == first + 1
+    assert factor[n - 1, 0, first % 6, first % 6] == pytest.approx(pivots[first], rel=1e-9)
+
+
+def test_compiled_backend_takes_frame_blocks_only():
+    """The compiled block Cholesky factors 6 x 6 blocks: other sizes are refused, not guessed."""
+    rng = np.random.default_rng(9)
+    diag, upper, _ = _random_btd(rng, 4, b=3)
+    with pytest.raises(ValueError, match='6 x 6 blocks'):
+        btd.factorize(diag, upper, method='compiled')
+    assert btd.factorize(diag, upper).method == 'banded'

@@ -361,17 +361,34 @@ def test_follower_moment_with_its_tangent_rolls_the_circle(n):
 
 
 def test_material_fallback_converges_when_the_exact_tangent_fails(monkeypatch):
-    """A singular exact tangent: modified-Newton steps with the material tangent still converge."""
+    """
+    A singular exact tangent: modified-Newton steps with the material tangent still converge.
+
+    Every exact step fails as the block LU of a singular tangent does: the compiled step of an
+    evaluated point (Newton's ``'direction'`` entry) returns a nonzero info, and the fallback
+    chain's exact factor (:meth:`EquilibriumSystem.factor_exact`) none; the material tangent
+    alone takes every step.
+    """
     model = _elastica_chain(8)
     load = [0.0, 1.0, 0.0, 0.0, 0.0, 0.0]
+    methods = []
+    steps = statics._Problem.steps
+
+    def counted(self, point, lam):
+        for step, method, link_rotation in steps(self, point, lam):
+            methods.append(method)
+            yield step, method, link_rotation
+
+    monkeypatch.setattr(statics._Problem, 'steps', counted)
     reference = statics.solve_static(model, tip_wrench=load)
-
-    def singular(self, tangent):
-        return None
-
-    monkeypatch.setattr(EquilibriumSystem, 'factor_exact', singular)
+    assert set(methods) == {'block_lu'}
+    methods.clear()
+    monkeypatch.setitem(statics._ENTRIES, 'direction',
+                        lambda record, positions, rotations: (1, np.nan))
+    monkeypatch.setattr(EquilibriumSystem, 'factor_exact', lambda self: None)
     res = statics.solve_static(model, tip_wrench=load, max_iterations=200)
     assert res.converged, res.message
     assert res.iterations > reference.iterations
+    assert 'block_cholesky' in methods and 'block_lu' not in methods
     # linear convergence stops near the round-off floor of the EA-stiff links (as above)
     np.testing.assert_allclose(res.positions, reference.positions, atol=1e-6)

@@ -1,30 +1,30 @@
 """
-The compiled tick: its entries over the solver's preallocated data, nothing allocated per tick.
+The compiled tick: its entries over the solver's preallocated record, nothing allocated per tick.
 
-The fused linearisation is checked against the composed public steps (evaluation, band
-Cholesky, multi-RHS solve, projection, QP matrices), the one compiled call of a tick against its
-entries one by one; the allocations of 1,000 ticks are counted
-by numba's runtime statistics (compiled code) and by ``tracemalloc`` (Python and numpy).
+The linearisation is checked against the composed public steps (evaluation, block Cholesky,
+multi-RHS solve, projection, QP matrices) and its half-solves against dense solves, the one
+compiled call of a tick against its entries one by one; the allocations of 1,000 ticks are
+counted by numba's runtime statistics (compiled code) and by ``tracemalloc`` (Python and numpy).
 """
 
-import dataclasses
 import functools
 import gc
+import math
 import tracemalloc
 
-from cbha_inverse.core._kernels import tick as fused
+from cbha_inverse.core._kernels import tick as kernels
 from cbha_inverse.core._kernels.projection import project_effectors
 from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core.inverse import solver as solver_module
 from cbha_inverse.core.inverse.qp import ActiveSetQP, qp_matrices
 from cbha_inverse.core.inverse.results import TickResult
-from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.scene import load_scene
 import numba
 from numba.core.runtime import _nrt_python, rtsys
 import numpy as np
 from oracles.effectors import effector_jacobian
 import pytest
+from tick_faults import refuse_cholesky
 
 
 def _circle(scene, n_ticks, radius=0.003):
@@ -42,31 +42,30 @@ def _close(got, expected, tolerance=1e-9):
 
 
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'tendon_10f_16c', 'cbha'])
-def test_fused_linearisation_equals_the_composed_steps(name):
+def test_the_linearisation_equals_the_composed_steps(name):
     """linearise_tick vs linearise + factor + solve + project_effectors + qp_matrices."""
     scene = load_scene(name)
     solver = scene.make_inverse_solver()
     for target in _circle(scene, 5):
         solver.step(target)
-    data, system = solver._data, solver._tick
-    assert data.fused
+    data, system = solver._data, solver._system
     positions, rotations = data.positions.copy(), data.rotations.copy()
     actuation = data.actuation.copy()
-    info, residual_norm = fused.linearise_tick(data.buffers, True)
+    info, residual_norm = kernels.linearise_tick(data.record)
     assert info == 0 and data.half_solved[0]
     tangent, rhs = system.linearise(positions, rotations, actuation)
     solved = system.factor(tangent).solve(rhs)
     w_ea, w_aa, offset, norm = project_effectors(
-        solved, rhs, positions, rotations, solver._effector_frames, solver._effector_offsets,
+        solved, rhs, positions, rotations, data.effector_frames, data.effector_offsets,
         actuation)
-    matrices = qp_matrices(w_ea, w_aa, solver._scale, energy_weight=solver.options.energy_weight,
+    matrices = qp_matrices(w_ea, w_aa, data.scale, energy_weight=solver.options.energy_weight,
                            proximal_weight=solver.options.proximal_weight)
     # the half-solves and the full solves give the same products up to rounding
     _close(data.w_ea, w_ea)
     _close(data.offset, offset, 1e-12)
-    _close(data.matrices_stack[fused.W_AA], w_aa)
-    _close(data.matrices.hessian, matrices.hessian)
-    _close(data.matrices.weighted_w, matrices.weighted_w)
+    _close(data.w_aa, w_aa)
+    _close(data.hessian, matrices.hessian)
+    _close(data.weighted_w, matrices.weighted_w)
     np.testing.assert_array_equal(data.linearised, actuation)
     assert residual_norm == norm == pytest.approx(np.linalg.norm(rhs[:, 0]), rel=1e-12)
     # the state is only read
@@ -74,31 +73,40 @@ def test_fused_linearisation_equals_the_composed_steps(name):
 
 
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
-def test_a_failed_cholesky_leaves_the_exact_evaluation_for_the_fallback_chain(name):
+def test_a_failed_cholesky_solves_nothing_and_leaves_the_evaluation(name):
     """
-    A failed Cholesky leaves the exact evaluation in ``values`` and ``rhs``.
+    A tangent that is not positive definite: the tick reports NOT_FACTORED and solves nothing.
 
-    linearise_tick's band pass writes no link blocks; the fallback chain reuses them.
+    The links' stiffness negated (the first pivot fails: the block Cholesky returns 1): no QP,
+    no step, the actuation and the frames as they were, a NaN residual norm, no half-solves;
+    the evaluation's ``[r, J_aᵀ]`` is left for the fallback chain, that of the exact
+    evaluation at the state.
     """
     scene = load_scene(name)
     solver = scene.make_inverse_solver()
-    for target in _circle(scene, 3):
+    targets = _circle(scene, 4)
+    for target in targets[:3]:
         solver.step(target)
-    data, system = solver._data, solver._tick
-    values = system._values
+    data, system = solver._data, solver._system
+    positions, rotations = data.positions.copy(), data.rotations.copy()
+    actuation = data.actuation.copy()
     stiffness = system.stiffness
     writeable = stiffness.flags.writeable
     stiffness.flags.writeable = True
     saved = stiffness.copy()
     try:
         stiffness *= -1.0        # negative definite: the first pivot fails
-        values[:] = np.nan
-        info, residual_norm = fused.linearise_tick(data.buffers, True)
-        assert info == 1 and np.isnan(residual_norm) and not data.half_solved[0]
-        got_values, got_rhs = values.copy(), data.rhs.copy()
-        rhs = system.evaluate(data.positions, data.rotations, data.actuation)
-        np.testing.assert_array_equal(got_values, values)
-        np.testing.assert_array_equal(got_rhs, rhs)
+        code, iterations, _, _, binding, residual_norm = solver._control_tick(
+            targets[3], data.record, False, True, True, True)
+        assert code == kernels.NOT_FACTORED and iterations == 0 and not binding
+        assert math.isnan(residual_norm) and not data.half_solved[0]
+        np.testing.assert_array_equal(data.actuation, actuation)
+        np.testing.assert_array_equal(data.positions, positions)
+        np.testing.assert_array_equal(data.rotations, rotations)
+        got_rhs = system.rhs.copy()
+        np.testing.assert_array_equal(got_rhs, system.evaluate(positions, rotations, actuation))
+        info, residual_norm = kernels.linearise_tick(data.record)
+        assert info == 1 and math.isnan(residual_norm)
     finally:
         stiffness[:] = saved
         stiffness.flags.writeable = writeable
@@ -107,7 +115,7 @@ def test_a_failed_cholesky_leaves_the_exact_evaluation_for_the_fallback_chain(na
 @pytest.mark.parametrize('name', ['tendon_6f_8c', 'tendon_10f_16c', 'cbha'])
 def test_the_half_solves_give_the_dense_projection_and_step(name):
     """
-    The band factor's half-solves against a dense K⁻¹ (`docs/design.md`, steps 2 and 4).
+    The block factor's half-solves against a dense K⁻¹ (`docs/design.md`, steps 2 and 4).
 
     ``W_ea = J_e K⁻¹ J_aᵀ``, ``W_aa = J_a K⁻¹ J_aᵀ``, the free effector positions
     ``p_e + J_e K⁻¹ r`` and the Newton step ``K⁻¹ (r + J_aᵀ Δλ)`` applied to the frames, from
@@ -118,8 +126,10 @@ def test_the_half_solves_give_the_dense_projection_and_step(name):
     solver = scene.make_inverse_solver(relinearize_every=5)
     for target in _circle(scene, 5):
         solver.step(target)
-    data, system = solver._data, solver._tick
-    solver._materialise()
+    data, system = solver._data, solver._system
+    if solver._pending:
+        kernels.apply_pending_step(data.record)
+        solver._pending = False
     positions, rotations = data.positions.copy(), data.rotations.copy()
     previous = data.actuation.copy()
     tangent, rhs = system.linearise(positions, rotations, previous)
@@ -132,24 +142,24 @@ def test_the_half_solves_give_the_dense_projection_and_step(name):
     w_ea = jac @ np.linalg.solve(kmat, jat)
     w_aa = jat.T @ np.linalg.solve(kmat, jat)
     rng = np.random.default_rng(len(name))
-    change = 0.02 * rng.uniform(-1.0, 1.0, previous.size) * solver._scale
+    change = 0.02 * rng.uniform(-1.0, 1.0, previous.size) * data.scale
     expected = retract_frames(positions, rotations,
                               np.linalg.solve(kmat, rhs[:, 0] + jat @ change).reshape(-1, 6),
                               solver.options.max_rotation_step)
     for fallback in (False, True):
         if fallback:
             data.half_solved[0] = False
-            data.solved[:] = np.linalg.solve(kmat, rhs)
-            fused.project_tick(data.buffers)
+            data.solved[:] = np.linalg.solve(kmat, system.rhs)
+            data.entry('project_tick')(data.record)
         else:
-            assert fused.linearise_tick(data.buffers, True)[0] == 0
+            assert kernels.linearise_tick(data.record)[0] == 0
             assert data.half_solved[0]
         _close(data.w_ea, w_ea)
-        _close(data.matrices_stack[fused.W_AA], w_aa)
+        _close(data.w_aa, w_aa)
         _close(data.offset + data.w_ea @ previous, free, 1e-12)
         data.actuation[:] = previous + change
         moved_positions, moved_rotations = positions.copy(), rotations.copy()
-        data.pending_entry(data.buffers, moved_positions, moved_rotations)
+        data.entry('pending_step_into')(data.record, moved_positions, moved_rotations)
         data.actuation[:] = previous
         _close(moved_positions - positions, expected[0] - positions)
         _close(moved_rotations - rotations, expected[1] - rotations)
@@ -217,38 +227,17 @@ def test_a_thousand_ticks_allocate_nothing_but_their_results(name, every):
     assert abs(left - traced) < 1000
 
 
-@pytest.mark.parametrize('name', ['tendon_6f_8c', 'cbha'])
-@pytest.mark.parametrize('every', [1, 5])
-def test_the_kernels_one_by_one_give_the_fused_ticks(name, every, monkeypatch):
-    """A scene the fused pass cannot evaluate runs the same kernels one by one: same ticks."""
-    scene = load_scene(name)
-    fused_solver = scene.make_inverse_solver(relinearize_every=every)
-    monkeypatch.setattr(EquilibriumSystem, 'fused_terms', lambda self: None)
-    composed = scene.make_inverse_solver(relinearize_every=every)
-    assert fused_solver._data.fused and not composed._data.fused
-    for target in _circle(scene, 12, radius=0.01):
-        expected, got = fused_solver.step(target), composed.step(target)
-        assert got.status == expected.status
-        # the fused tick projects and steps with the band factor's half-solves, the composed
-        # one with full solves: the same up to rounding
-        np.testing.assert_allclose(got.actuation, expected.actuation, rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(got.effector_positions, expected.effector_positions,
-                                   rtol=0, atol=1e-11)
-        # |r| near the equilibrium is a small difference of the links' forces: the rounding
-        # of the steps weighs more in it
-        assert got.residual_norm == pytest.approx(expected.residual_norm, rel=1e-6)
-
-
-def test_a_result_of_the_tick_is_the_constructors_result():
-    """TickResult.of_tick builds the same frozen result as TickResult(...)."""
+def test_a_tick_result_is_immutable():
+    """A TickResult (a named tuple) cannot be changed in place; ``_replace`` makes a new one."""
     fields = (np.arange(3.0), np.ones((1, 3)), 'solved', 'solved', 1, np.zeros(3, dtype=bool),
               0.5, 2.0, {'total': 1e-5}, ('note',))
-    fast, plain = TickResult.of_tick(*fields), TickResult(*fields)
-    assert repr(fast) == repr(plain)
-    assert dataclasses.astuple(fast)[2:5] == dataclasses.astuple(plain)[2:5]
-    with pytest.raises(dataclasses.FrozenInstanceError):
-        fast.status = 'rejected'
-    assert dataclasses.replace(fast, status='saturated').status == 'saturated'
+    result = TickResult(*fields)
+    assert (result.status, result.qp_iterations, result.warnings) == ('solved', 1, ('note',))
+    with pytest.raises(AttributeError):
+        result.status = 'rejected'
+    changed = result._replace(status='saturated')
+    assert (changed.status, result.status) == ('saturated', 'solved')
+    assert changed.actuation is result.actuation
 
 
 def test_targets_of_any_layout_give_the_same_tick():
@@ -283,7 +272,7 @@ def _same_result(got, expected):
 
 def _two_calls(solver):
     """Send a solver's ticks through the target check and the two compiled calls one by one."""
-    solver._tick_entry = None
+    solver._one_call = False
     return solver
 
 
@@ -298,7 +287,7 @@ def _tick_both(one, two, target, prepare):
                                                          two._linearised)
     # the result's arrays are its own
     data = one._data
-    for array, buffer in ((got.actuation, data.vectors), (got.saturated, data.mask),
+    for array, buffer in ((got.actuation, data.actuation), (got.saturated, data.free),
                           (got.effector_positions, data.effector_positions)):
         assert not np.shares_memory(array, buffer)
     if prepare:
@@ -315,32 +304,44 @@ def test_one_compiled_call_gives_the_ticks_of_the_calls_one_by_one(name, every, 
     ``control_tick`` against the target check, ``linearise_tick`` and ``solve_tick`` one by one.
 
     The same arithmetic, so the same results bit for bit, over solved and saturated ticks, a
-    non-finite target (held), a target beyond reach (clamped), band Choleskys refused (the
-    fallback chain) and no factorization at all (held), with and without ``prepare`` between
-    the ticks (the node's order).
+    non-finite target (held), a target beyond reach (clamped), block Choleskys refused (the
+    fallback chain, :func:`tick_faults.refuse_cholesky`) and no factorization at all (held),
+    with and without ``prepare`` between the ticks (the node's order).
     """
     scene = load_scene(name)
     one = scene.make_inverse_solver(relinearize_every=every)
     two = _two_calls(scene.make_inverse_solver(relinearize_every=every))
-    assert one._tick_entry is not None
+    assert one._one_call
     targets = list(_circle(scene, 32, radius=0.01))
     targets[4] = np.full_like(targets[4], np.nan)
     targets[7] = targets[7] + 100.0
     statuses = []
+    fallbacks = {id(one): [], id(two): []}
     for tick, target in enumerate(targets):
         if tick == 12:
             for solver in (one, two):
-                monkeypatch.setattr(solver._tick, 'tick_cholesky', False)
-        if tick == 16:
+                refuse_cholesky(solver, monkeypatch)
+                chain = solver._system.fallback_factors
+
+                def counted(*args, chain=chain, calls=fallbacks[id(solver)], **kwargs):
+                    calls.append(tick)
+                    return chain(*args, **kwargs)
+
+                monkeypatch.setattr(solver._system, 'fallback_factors', counted)
+        if tick == 18:
             for solver in (one, two):
-                monkeypatch.setattr(solver._tick, 'factor', lambda tangent: None)
-                monkeypatch.setattr(solver._tick, 'factor_exact', lambda tangent: None)
+                monkeypatch.setattr(solver._system, 'factor', lambda tangent=None: None)
+                monkeypatch.setattr(solver._system, 'factor_exact', lambda: None)
         if tick == 26:
             monkeypatch.undo()
         statuses.append(_tick_both(one, two, target, prepare).status)
+    assert fallbacks[id(one)] == fallbacks[id(two)]
+    # the fallback chain factored the linearisations of ticks 12-17 (each, or every fifth)
+    assert set(range(12, 18)) & set(fallbacks[id(one)])
+    assert set(fallbacks[id(one)]) <= set(range(12, 26))
     assert statuses[4] == 'rejected'
     assert 'clamped' in one.step(targets[7]).warnings[0]
-    assert 'not_positive_definite' in statuses[16:26]
+    assert 'not_positive_definite' in statuses[18:26]
     assert statuses[-1] in ('solved', 'saturated')
 
 

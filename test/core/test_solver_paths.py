@@ -8,7 +8,6 @@ object).
 """
 
 import contextlib
-import dataclasses
 import math
 
 from cbha_inverse.core.inverse.qp import ProxsuiteQP
@@ -175,8 +174,7 @@ def test_solver_failures_hold_the_last_command_and_are_counted(rclpy_context, fa
             result = step(goal)
             if failure == 'non_finite':
                 # a copy: the solver's own state stays finite
-                result = dataclasses.replace(result, actuation=np.full_like(result.actuation,
-                                                                            math.nan))
+                result = result._replace(actuation=np.full_like(result.actuation, math.nan))
             return result
 
         def failing_prepare():

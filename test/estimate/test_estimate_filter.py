@@ -21,58 +21,72 @@ def test_the_sequential_update_is_the_batch_information_form():
     rng = np.random.default_rng(0)
     c, u = 6, 13
     h = rng.standard_normal((c, u)) * 1e-3
-    pots = np.zeros((kernel.POT_ROWS, c))
-    pots[kernel.MEASURED] = rng.standard_normal(c) * 1e-3
-    pots[kernel.NOISE] = 1e-4 * (1.0 + rng.random(c))
-    pots[kernel.BASE] = rng.standard_normal(c) * 1e-4
-    state = np.zeros((kernel.STATE_ROWS, u))
-    state[kernel.Z] = rng.standard_normal(u)
-    state[kernel.WALK] = 0.01 * rng.random(u)
+    measured = rng.standard_normal(c) * 1e-3
+    noise = 1e-4 * (1.0 + rng.random(c))
+    base = rng.standard_normal(c) * 1e-4
+    z = rng.standard_normal(u)
+    walk = 0.01 * rng.random(u)
     root = rng.standard_normal((u, u))
     covariance = root @ root.T + np.eye(u)
     stuck = np.zeros(c, dtype=bool)
     stuck[2] = True
-    prior_mean = state[kernel.Z].copy()
-    prior = covariance + np.diag(state[kernel.WALK])
+    prior_mean = z.copy()
+    prior = covariance + np.diag(walk)
     active = np.zeros(c, dtype=bool)
-    work = np.zeros(u + 2)
-    kernel.kalman_lengths(h, pots, state, covariance, stuck, active, work)
+    ratio, predicted = np.zeros(c), np.zeros(c)
+    kernel.kalman_lengths(h, measured, noise, base, z, walk, covariance, stuck, 0.0, active,
+                          np.zeros(u), ratio, predicted)
     assert active.tolist() == [True, True, False, True, True, True]
     used = h[active]
-    weights = np.diag(1.0 / pots[kernel.NOISE, active] ** 2)
+    weights = np.diag(1.0 / noise[active] ** 2)
     information = np.linalg.inv(prior) + used.T @ weights @ used
     posterior = np.linalg.inv(information)
     mean = posterior @ (np.linalg.solve(prior, prior_mean) + used.T @ weights @ (
-        pots[kernel.MEASURED, active] - pots[kernel.BASE, active]))
-    np.testing.assert_allclose(state[kernel.Z], mean, rtol=1e-8, atol=1e-10)
+        measured[active] - base[active]))
+    np.testing.assert_allclose(z, mean, rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(covariance, posterior, rtol=1e-7, atol=1e-12)
-    np.testing.assert_allclose(pots[kernel.PREDICTED], pots[kernel.BASE] + h @ mean)
-    spread = np.sqrt(pots[kernel.NOISE] ** 2 + np.einsum('ij,jk,ik->i', h, prior, h))
-    innovation = pots[kernel.MEASURED] - pots[kernel.BASE] - h @ prior_mean
-    np.testing.assert_allclose(pots[kernel.RATIO], np.abs(innovation) / spread)
+    np.testing.assert_allclose(predicted, base + h @ mean)
+    spread = np.sqrt(noise ** 2 + np.einsum('ij,jk,ik->i', h, prior, h))
+    innovation = measured - base - h @ prior_mean
+    np.testing.assert_allclose(ratio, np.abs(innovation) / spread)
 
 
 @numba.njit
-def _estimator_fields(buffers):
-    """Return the fields of the tick's buffers the compiled update reads beside the tick's."""
-    return (buffers.external, buffers.solved, buffers.rhs, buffers.effector_matrices,
-            buffers.effector_frames, buffers.band)
+def _estimator_fields(estimator):
+    """Return the arrays the compiled update reads through its record's tick and system."""
+    tick = estimator.tick
+    return (tick.system.external, tick.solved, tick.system.rhs, tick.effector_columns,
+            tick.effector_frames, tick.system.blocks, tick.positions, tick.actuation,
+            tick.system.stiffness)
 
 
 def test_the_buffers_are_the_tick_data_and_the_system(cbha):
     """The compiled entry reads the tick data's own arrays (the same objects, not copies)."""
     estimator = ShapeEstimator.from_scene(cbha, EstimatorOptions(payload_std=0.1))
     data = estimator._data
-    assert data.arguments[0] is data.tick.buffers
-    external, solved, rhs, effector_matrices, frames, band = _estimator_fields(
-        data.tick.buffers)
+    system = estimator._system
+    (external, solved, rhs, effector_columns, frames, blocks, positions, actuation,
+     stiffness) = _estimator_fields(data.record)
     assert external is data.external
-    np.testing.assert_array_equal(data.external, estimator._system.external)
+    assert external is system.external
+    assert external is system.record.external
     assert solved is data.tick.solved
-    assert rhs is data.tick.rhs
-    assert effector_matrices is data.tick.effector_matrices
-    assert band is data.tick.band
+    assert rhs is system.record.rhs
+    assert effector_columns is data.tick.effector_columns
+    assert blocks is system.record.blocks
+    assert positions is data.positions
+    assert actuation is data.actuation
     np.testing.assert_array_equal(frames, cbha.effectors.frames)
+    # the base of the external wrenches is the system's own, a copy (the update adds the
+    # weights' wrenches to the system's)
+    np.testing.assert_array_equal(data.base_external, system.external)
+    assert not np.shares_memory(data.base_external, system.external)
+    # the tick evaluates the model's stiffness (read-only for the compiled code)
+    np.testing.assert_array_equal(stiffness, np.asarray(cbha.model.stiffnesses))
+    assert not stiffness.flags.writeable
+    # a write from Python is seen by the compiled code: the same memory
+    data.positions[-1, 0] += 1.0
+    assert _estimator_fields(data.record)[6][-1, 0] == data.positions[-1, 0]
 
 
 def test_the_filter_averages_the_pot_noise_at_a_held_pose(cbha):
@@ -113,7 +127,7 @@ def test_the_compiled_payload_column_is_the_lengths_derivative_in_the_mass(cbha,
     derivative = (cbha.sensors.lengths(loaded.state.positions, loaded.state.rotations)
                   - lengths) / step
     assert np.abs(derivative).max() > 1e-3  # a tip weight stretches and bends the pots
-    np.testing.assert_allclose(data.h[:, -1] / data.state[kernel.SCALE, -1], derivative,
+    np.testing.assert_allclose(data.h[:, -1] / data.unknown_scale[-1], derivative,
                                rtol=0.05, atol=0.02 * np.abs(derivative).max())
 
 

@@ -1,6 +1,5 @@
 """The shape estimator's section stiffness unknowns against the scaled scene's equilibria."""
 
-from cbha_inverse.core._kernels import estimation as kernel
 from cbha_inverse.core.sections import link_sections, section_link_factors
 from cbha_inverse.estimate.shape import EstimatorOptions, ShapeEstimator
 from cbha_inverse.scene import load_scene
@@ -71,7 +70,7 @@ def test_the_estimate_is_the_scaled_chain_and_its_columns_are_the_derivative(cbh
             lengths_at.append(cbha.sensors.lengths(other.state.positions,
                                                    other.state.rotations))
         derivative = (lengths_at[0] - lengths_at[1]) / (2.0 * step)
-        column = data.h[:, 12 + j] / data.state[kernel.SCALE, 12 + j]
+        column = data.h[:, 12 + j] / data.unknown_scale[12 + j]
         assert np.abs(derivative).max() > 1e-3  # a section's stiffness moves its pots
         np.testing.assert_allclose(column, derivative, rtol=0.01,
                                    atol=0.003 * np.abs(derivative).max())
@@ -133,7 +132,7 @@ def test_the_factors_stay_within_their_bounds(cbha):
     estimator.update(cbha.sensors.readings(lengths), PRESSURES)
     data = estimator._data
     data.masses[-2:] = [-0.95, 4.0]
-    data.z[-2:] = data.masses[-2:] / data.state[kernel.SCALE, -2:]
+    data.z[-2:] = data.masses[-2:] / data.unknown_scale[-2:]
     estimate = estimator.update(cbha.sensors.readings(lengths), PRESSURES)
     assert np.all(np.isfinite(estimate.tip)), estimate
     np.testing.assert_allclose(estimate.section_stiffness, [0.5, 2.0])

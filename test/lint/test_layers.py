@@ -1,5 +1,5 @@
 """
-The package's layers: what may import what, module sizes, and text that cites outside places.
+The package's layers: what may import what, and text that cites outside places.
 
 Layers, bottom to top (:data:`LAYERS`); a module may import its own layer and the ones below,
 never one above. Imports are read with :mod:`ast` from every ``.py`` file of the package,
@@ -30,9 +30,6 @@ LAYERS = (
     ('experiments',),
 )
 """Parts of the package (relative dotted names), bottom layer first."""
-
-MAX_LINES = 600
-"""Longest module: a longer one holds more than one concept."""
 
 NUMBA_HOMES = ('core/_kernels/',)
 """Where numba may be imported (relative to the package folder; a folder ends with /)."""
@@ -168,16 +165,6 @@ def test_ros_package_holds_only_subpackages():
     """``cbha_inverse/ros/`` is sorted by kind: nodes/, common/, bag/, launch/, console/."""
     flat = sorted(p.name for p in (PACKAGE_DIR / 'ros').glob('*.py') if p.name != '__init__.py')
     assert not flat, f'modules directly in cbha_inverse/ros/: {flat}'
-
-
-def test_no_module_is_longer_than_the_limit():
-    long = []
-    for path in MODULES.values():
-        with open(path, encoding='utf-8') as stream:
-            lines = sum(1 for _ in stream)
-        if lines > MAX_LINES:
-            long.append(f'{_relative(path)}: {lines} lines')
-    assert not long, f'modules over {MAX_LINES} lines (split by concept):\n' + '\n'.join(long)
 
 
 def _text_files(root):

@@ -1,13 +1,15 @@
 """
 Actuator columns ``J_aᵀ``, loads and load stiffness in batched numpy (oracle of the kernels).
 
-The readable reference of the cable and condensed-cavity terms that
-:func:`cbha_inverse.core._kernels.cables.cable_pass` and
-:func:`cbha_inverse.core._kernels.links.link_pass` compute: :func:`oracle` wraps a production
+The readable reference of the cable, condensed-cavity and skinned-mesh cavity terms that
+:func:`cbha_inverse.core._kernels.cables.cable_pass`,
+:func:`cbha_inverse.core._kernels.links.link_pass` and
+:mod:`cbha_inverse.core._kernels.mesh_cavities` compute: :func:`oracle` wraps a production
 group (or an :class:`~cbha_inverse.core.actuation.actuators.ActuatorSet`) in an object with
-``evaluate`` / ``load_tangent`` / ``loads`` / ``lengths`` (the skinned-mesh
-:class:`~cbha_inverse.core.actuation.cavities.CavityGroup` has its own numpy ``evaluate``: it is
-returned as it is).
+``evaluate`` / ``load_tangent`` / ``loads`` / ``lengths`` (a skinned-mesh
+:class:`~cbha_inverse.core.actuation.cavities.CavityGroup` in :class:`MeshCavityOracle`, which
+rebuilds the skinning from the cavities' parts and has no load stiffness, as the production
+group).
 
 Sign conventions (the actuator's virtual work is ``λ · dδ_a``): cable ``δ_a`` is the shortening
 (column ``-d(length)/dq``), cavity ``δ_a`` the volume (column ``+d(volume)/dq``).
@@ -15,6 +17,7 @@ Sign conventions (the actuator's virtual work is ``λ · dδ_a``): cable ``δ_a`
 
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import CableGroup
+from cbha_inverse.core.actuation.cavities import CavityGroup
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 import numpy as np
 from oracles.chain_forces import link_deformation
@@ -44,7 +47,13 @@ def oracle(actuators):
     Returns
     -------
     object
-        With ``evaluate``, ``load_tangent`` (and ``loads`` for a set, ``lengths`` for cables).
+        With ``evaluate``, ``load_tangent`` (and ``loads`` for a set, ``lengths`` for cables,
+        ``vertices`` and ``volumes`` for mesh cavities, which have no ``load_tangent``).
+
+    Raises
+    ------
+    TypeError
+        For a group of no known kind.
 
     """
     if isinstance(actuators, ActuatorSet):
@@ -53,7 +62,9 @@ def oracle(actuators):
         return CableOracle(actuators)
     if isinstance(actuators, LinearCavityGroup):
         return LinearCavityOracle(actuators)
-    return actuators
+    if isinstance(actuators, CavityGroup):
+        return MeshCavityOracle(actuators)
+    raise TypeError(f'no oracle of {type(actuators).__name__}')
 
 
 class CableOracle:
@@ -399,6 +410,140 @@ def _linear_cavity_load_tangent(group, positions, rotations, pressures, symmetri
     dense = np.bincount(group._tangent_index, blocks.reshape(-1),
                         minlength=size * size).reshape(size, size)[6:, 6:]
     return 0.5 * (dense + dense.T) if symmetric else dense
+
+
+class MeshCavityOracle:
+    """
+    Numpy evaluation of a skinned-mesh :class:`~cbha_inverse.core.actuation.cavities.CavityGroup`.
+
+    Built from the group's cavities (their parts' points, triangles, lower frames and rest
+    transforms), not from the arrays the group derived from them: every vertex follows its two
+    frames by linear skinning along the segment axis, ``p = (1 - s)(x_a + R_a a) + s (x_b + R_b
+    b)`` with ``s = clip(p0·d0 / |d0|², 0, 1)``, ``a = p0`` and ``b = Q0ᵀ (p0 - d0)`` (``p0``
+    the vertex in segment coordinates); sparse matrices scatter the triangles' normals onto
+    their vertices (a third of the area each: the volume gradient) and the vertex wrenches onto
+    the frames (times the skinning weights and the cavity's gain).
+    """
+
+    def __init__(self, group):
+        """Concatenate the parts and build the scatter matrices."""
+        self.group = group
+        self.n_frames, self.n_actuators = group.n_frames, len(group.cavities)
+        frame_a, local_a, local_b, weight_b, triangles, owner_v, owner_t = ([] for _ in range(7))
+        count = 0
+        for j, cavity in enumerate(group.cavities):
+            for part in cavity.parts:
+                points = np.asarray(part.points, dtype=float)
+                offset = np.asarray(part.rest_offset, dtype=float)
+                rotation = np.asarray(part.rest_rotation, dtype=float)
+                frame_a.append(np.full(len(points), part.lower))
+                local_a.append(points)
+                local_b.append(np.einsum('ji,vj->vi', rotation, points - offset))
+                weight_b.append(np.clip(points @ offset / (offset @ offset), 0.0, 1.0))
+                triangles.append(np.asarray(part.triangles, dtype=int) + count)
+                owner_v.append(np.full(len(points), j))
+                owner_t.append(np.full(len(part.triangles), j))
+                count += len(points)
+        self.frame_a = np.concatenate(frame_a)
+        self.frame_b = self.frame_a + 1
+        self.local_a, self.local_b = np.concatenate(local_a), np.concatenate(local_b)
+        self.weight_b = np.concatenate(weight_b)
+        self.weight_a = 1.0 - self.weight_b
+        self.triangles = np.concatenate(triangles)
+        owner_v, owner_t = np.concatenate(owner_v), np.concatenate(owner_t)
+        gains = np.array([cavity.gain for cavity in group.cavities], dtype=float)
+        m, n_v, n_t = self.n_actuators, count, len(self.triangles)
+        rows = self.triangles.reshape(-1)
+        self._vertex_triangle = sp.csr_matrix(
+            (np.full(rows.size, 1.0 / 6.0), (rows, np.repeat(np.arange(n_t), 3))),
+            shape=(n_v, n_t))
+        self._triangle_sum = sp.csr_matrix((gains[owner_t], (owner_t, np.arange(n_t))),
+                                           shape=(m, n_t))
+        shape, vertices = (m * self.n_frames, n_v), np.arange(n_v)
+        self._scatter_a = sp.csr_matrix(
+            (self.weight_a * gains[owner_v], (owner_v * self.n_frames + self.frame_a, vertices)),
+            shape=shape)
+        self._scatter_b = sp.csr_matrix(
+            (self.weight_b * gains[owner_v], (owner_v * self.n_frames + self.frame_b, vertices)),
+            shape=shape)
+
+    def vertices(self, positions, rotations):
+        """
+        Return the skinned world vertices and the levers of both attachments.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+
+        Returns
+        -------
+        points, levers_a, levers_b : (V, 3) ndarray  [m]
+            ``p``, ``R_a a`` and ``R_b b``.
+
+        """
+        levers_a = np.einsum('vij,vj->vi', rotations[self.frame_a], self.local_a)
+        levers_b = np.einsum('vij,vj->vi', rotations[self.frame_b], self.local_b)
+        points = (self.weight_a[:, None] * (positions[self.frame_a] + levers_a)
+                  + self.weight_b[:, None] * (positions[self.frame_b] + levers_b))
+        return points, levers_a, levers_b
+
+    def _triangle_volumes(self, points):
+        """Return the corners of every triangle and its signed volume with the origin."""
+        t = self.triangles
+        p0, p1, p2 = points[t[:, 0]], points[t[:, 1]], points[t[:, 2]]
+        return p0, p1, p2, np.einsum('ti,ti->t', p0, np.cross(p1, p2)) / 6.0
+
+    def volumes(self, positions, rotations):
+        """
+        Return the enclosed volume of every cavity (times its gain).
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+
+        Returns
+        -------
+        (m,) ndarray  [m^3]
+            Sum of ``p0 · (p1 × p2) / 6`` over each cavity's triangles.
+
+        """
+        points, _, _ = self.vertices(positions, rotations)
+        return self._triangle_sum @ self._triangle_volumes(points)[3]
+
+    def evaluate(self, positions, rotations, displacements=True):
+        """
+        Return the Jacobian columns and the volumes of all cavities.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations (frame axes → world).
+        displacements : bool
+            Unused (the volumes come with the normals).
+
+        Returns
+        -------
+        wrenches : (m, n + 1, 6) ndarray  [N, N*m per Pa]
+            Frame wrenches per unit pressure (columns of ``J_aᵀ``).
+        displacements : (m,) ndarray  [m^3]
+            Cavity volumes (``δ_a`` up to a constant).
+
+        """
+        points, levers_a, levers_b = self.vertices(positions, rotations)
+        p0, p1, p2, volumes = self._triangle_volumes(points)
+        forces = self._vertex_triangle @ np.cross(p1 - p0, p2 - p0)
+        wrenches = (self._scatter_a @ point_wrenches(levers_a, forces)
+                    + self._scatter_b @ point_wrenches(levers_b, forces))
+        return (wrenches.reshape(self.n_actuators, self.n_frames, 6),
+                self._triangle_sum @ volumes)
 
 
 class ActuatorSetOracle:

@@ -60,13 +60,13 @@ def scatter_add(index, values, weights, out):
 
     """
     out[:] = 0.0
-    scatter_more(index, values, weights, out, 0)
+    scatter_more(index, values, weights, out)
 
 
 @numba.njit(cache=True)
-def scatter_more(index, values, weights, out, first):
+def scatter_more(index, values, weights, out):
     """
-    Add ``weights * values`` at ``index`` from value ``first`` on (:func:`scatter_add` unzeroed).
+    Add ``weights * values`` at ``index`` (:func:`scatter_add` without zeroing ``out``).
 
     Parameters
     ----------
@@ -76,11 +76,9 @@ def scatter_more(index, values, weights, out, first):
         Values and their weights.
     out : (S,) ndarray
         Added to.
-    first : int
-        The values before it are left out.
 
     """
-    for i in range(first, index.size):
+    for i in range(index.size):
         out[index[i]] += weights[i] * values[i]
 
 

@@ -23,7 +23,6 @@ takes the material tangent instead.
 import math
 
 import numba
-import numpy as np
 
 FRAME = 6
 """Unknowns of a frame: the size of a block."""

@@ -7,7 +7,7 @@ exact point moments ``tr(A) I - A``, ``A = Σ r (λ F)ᵀ``, for the routing dat
 :class:`cbha_inverse.core.actuation.cables.CableTerms` (every cable of a scene, whatever its
 group). A cable's gain ``g`` (calibration; 1 for the ideal cable) scales its force per unit
 tension ``F``: column, load and load stiffness alike.
-:func:`routing_lengths` gives the routed lengths and their gradient from the same routing
+:func:`routing_lengths_into` gives the routed lengths and their gradient from the same routing
 geometry (the passive cables of string potentiometers, :mod:`cbha_inverse.core.sensors`).
 """
 
@@ -144,50 +144,35 @@ def routing_forces_into(units, gains, span_start, span_end, span_owner, forces):
 
 
 @numba.njit(cache=True)
-def routing_lengths(positions, rotations, frames, offsets, span_start, span_end, span_owner,
-                    point_owner, n_cables, jacobian):
+def routing_lengths_into(positions, rotations, frames, offsets, span_start, span_end,
+                         span_owner, point_owner, lengths, jacobian, levers, points, forces,
+                         units, span_lengths, unit_gains):
     """
-    Return the routed length of every cable and write its gradient ``d(length)/dq``.
+    Write the routed length of every cable and its gradient ``d(length)/dq``.
 
-    The length is the sum of the straight spans (:func:`routing_spans`); its gradient, in the
-    retract increments ``dq = (dx_f, dθ_f)`` of frames 1..n, is minus the cable's column of
+    The length is the sum of the straight spans (:func:`routing_spans_into`); its gradient, in
+    the retract increments ``dq = (dx_f, dθ_f)`` of frames 1..n, is minus the cable's column of
     ``J_aᵀ`` at unit gain (:func:`cable_pass`): the routing geometry is the same.
 
     Parameters
     ----------
     positions, rotations, frames, offsets, span_start, span_end
-        As :func:`routing_spans`.
+        As :func:`routing_spans_into`.
     span_owner, point_owner : (S,), (P,) int ndarray
         Cable (0..c - 1) of every span and point.
-    n_cables : int
-        Number of cables ``c``.
+    lengths : (c,) ndarray  [m]
+        Receives the lengths.
     jacobian : (c, 6n) ndarray
         Receives ``d(length)/dq`` [-, m/rad] (overwritten).
+    levers, points, forces : (P, 3) ndarray
+        Scratch of :func:`routing_spans_into` and :func:`routing_forces_into`.
+    units : (S, 3) ndarray
+        Scratch: the span unit vectors.
+    span_lengths : (S,) ndarray
+        Scratch: the span lengths.
+    unit_gains : (c,) ndarray
+        Ones (the bare length gradient).
 
-    Returns
-    -------
-    (c,) ndarray  [m]
-
-    """
-    n_points, n_spans = frames.size, span_start.size
-    lengths = np.empty(n_cables)
-    routing_lengths_into(positions, rotations, frames, offsets, span_start, span_end,
-                         span_owner, point_owner, lengths, jacobian, np.empty((n_points, 3)),
-                         np.empty((n_points, 3)), np.empty((n_points, 3)),
-                         np.empty((n_spans, 3)), np.empty(n_spans), np.ones(n_cables))
-    return lengths
-
-
-@numba.njit(cache=True)
-def routing_lengths_into(positions, rotations, frames, offsets, span_start, span_end,
-                         span_owner, point_owner, lengths, jacobian, levers, points, forces,
-                         units, span_lengths, unit_gains):
-    """
-    :func:`routing_lengths` into ``lengths`` (c,), with its scratch arrays given.
-
-    ``levers``, ``points``, ``forces`` (P, 3) and ``units`` (S, 3), ``span_lengths`` (S,) are
-    :func:`routing_spans_into`'s and :func:`routing_forces_into`'s; ``unit_gains`` (c,) holds
-    ones (the bare length gradient).
     """
     routing_spans_into(positions, rotations, frames, offsets, span_start, span_end, levers,
                        points, units, span_lengths)
@@ -211,7 +196,7 @@ def cable_pass(system, positions, rotations, actuation):
     Add the cables' columns and loads to ``system.rhs``; write their stiffness blocks.
 
     The routing geometry is :func:`routing_spans_into` and :func:`routing_forces_into` (shared
-    with the string potentiometers' :func:`routing_lengths`). Each routing point on a moving
+    with the string potentiometers' :func:`routing_lengths_into`). Each routing point on a moving
     frame adds its wrench per unit tension to its cable's column of ``J_aᵀ`` and, times the
     tension, to the residual; :func:`add_point_moments` and :func:`add_span_stiffness` give the
     exact load stiffness, written into ``system.values`` after the link blocks: the span blocks

@@ -7,7 +7,7 @@ weights (an error of the arm's own weight spread as its lumped masses, a payload
 last frame: the wrench of one kg of each is a row of ``load``) and a stiffness error ``σ_j`` per
 chain section (its links' stiffness is ``(1 + σ_j)`` times the model's, in the linearisation
 itself; the row of ``load`` is ``∂r/∂σ_j``, the elastic force of the section's links at the
-current frames, their model stiffness alone: :func:`section_loads`); they follow a random walk.
+current frames, their model stiffness alone: :func:`estimator_loads`); they follow a random walk.
 At the current frames one linearisation of the equilibrium (the control tick's
 :func:`cbha_inverse.core._kernels.tick.linearise_tick`, completed by the backward sweep of its
 block factor) gives ``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and gradient ``J_s``
@@ -15,11 +15,12 @@ block factor) gives ``K⁻¹ [r, J_aᵀ]``; with the pots' lengths ``ℓ0`` and 
 step are linear in ``z``: ``ℓ = base + H z``, ``H = W_sa [diag(p), I] | W_sμ``,
 ``W_sa = J_s K⁻¹ J_aᵀ`` (the pots' ``W_ea``, paper eq. 11), ``W_sμ = J_s K⁻¹ ∂r/∂μ`` (by the
 implicit function theorem, the lengths' derivative along the equilibrium).
-:func:`kalman_lengths` is the Kalman update on them, :func:`estimate_tick` the whole update:
-linearisation, Kalman update, the Newton step of the same factorisation
-(:func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`) and the effector
-positions, over one :class:`EstimatorRecord` (fields :data:`ESTIMATOR_FIELDS`) built by
-:class:`cbha_inverse.estimate.data.EstimatorData`.
+:func:`kalman_lengths` is the Kalman update on them. An update is three compiled calls over one
+:class:`EstimatorRecord` (fields :data:`ESTIMATOR_FIELDS`, built by
+:class:`cbha_inverse.estimate.data.EstimatorData`): :func:`estimator_loads`, the linearisation,
+then :func:`estimate_from_linearisation` (the Kalman update, the Newton step of the same
+factorisation, :func:`cbha_inverse.core._kernels.retraction.apply_linear_step_into`, and the
+effector positions).
 """
 
 import math
@@ -31,7 +32,7 @@ from cbha_inverse.core._kernels.projection import (effector_columns_into, effect
                                                    project_effectors_into)
 from cbha_inverse.core._kernels.records import define_record, Field, Record, RecordType
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into
-from cbha_inverse.core._kernels.tick import backward_solves, linearise_tick
+from cbha_inverse.core._kernels.tick import backward_solves
 import numba
 from numba.experimental import structref
 import numpy as np
@@ -39,14 +40,14 @@ import numpy as np
 F8, I8 = np.float64, np.int64
 
 ESTIMATOR_FIELDS = (
-    Field('tick', 'record', 0, 'the estimator\'s tick buffers (tick.TickRecord)'),
+    Field('tick', 'record', 0, "the estimator's tick buffers (tick.TickRecord)"),
     # the pots: c of them, routed through P points along S spans
-    Field('pot_frames', I8, 1, '(P,) frame of every routing point'),
-    Field('pot_offsets', F8, 2, '(P, 3) routing points in their frame [m]'),
-    Field('pot_span_start', I8, 1, '(S,) first point of every span'),
-    Field('pot_span_end', I8, 1, '(S,) second point of every span'),
-    Field('pot_span_owner', I8, 1, '(S,) pot of every span'),
-    Field('pot_point_owner', I8, 1, '(P,) pot of every point'),
+    Field('pot_frames', I8, 1, '(P,) frame of every routing point', read_only=True),
+    Field('pot_offsets', F8, 2, '(P, 3) routing points in their frame [m]', read_only=True),
+    Field('pot_span_start', I8, 1, '(S,) first point of every span', read_only=True),
+    Field('pot_span_end', I8, 1, '(S,) second point of every span', read_only=True),
+    Field('pot_span_owner', I8, 1, '(S,) pot of every span', read_only=True),
+    Field('pot_point_owner', I8, 1, '(P,) pot of every point', read_only=True),
     Field('measured', F8, 1, '(c,) measured lengths [m]'),
     Field('noise', F8, 1, '(c,) their noise std [m]'),
     Field('stuck', np.bool_, 1, '(c,) pots left out'),
@@ -75,33 +76,34 @@ ESTIMATOR_FIELDS = (
     Field('load', F8, 2, '(w, 6n) J_μᵀ: wrench of one kg, then ∂r/∂σ_j [N/kg, N]'),
     Field('base_external', F8, 1, '(6n,) external wrenches without the weight unknowns'),
     Field('mass_columns', F8, 2, '(6n, 1 + w) K⁻¹ [r, J_μᵀ]'),
+    Field('load_solved', F8, 2, "(6n, w) K⁻¹ J_μᵀ (the block solve's columns)"),
     Field('mass_rhs', F8, 2, '(6n, 1 + w) [r, J_μᵀ]'),
-    Field('mass_w', F8, 2, '(3k, w) the load unknowns\' W on the effectors'),
+    Field('mass_w', F8, 2, "(3k, w) the load unknowns' W on the effectors"),
     Field('mass_w_aa', F8, 2, '(w, w) their W_aa (unused)'),
-    Field('mass_offset', F8, 1, '(3k,) their projection\'s offset (unused)'),
+    Field('mass_offset', F8, 1, "(3k,) their projection's offset (unused)"),
     Field('mass_moved', F8, 2, '(3k, 1 + w) workspace of their projection'),
     Field('mass_levers', F8, 2, '(k, 3) workspace of their projection'),
     Field('mass_previous', F8, 1, '(w,) zeros'),
     Field('mass_effector_columns', F8, 2, '(6n, 3k) J_eᵀ'),
     # the sections' stiffness unknowns (s of them)
     Field('link_section', I8, 1, '(n,) section of every link (-1: none)'),
-    Field('nominal', F8, 3, '(n, 6, 6) the model\'s link stiffness', read_only=True),
+    Field('nominal', F8, 3, "(n, 6, 6) the model's link stiffness", read_only=True),
     Field('scaled_stiffness', F8, 3, '(n, 6, 6) receives (1 + σ) K (the tick reads it)'),
-    Field('section_stiffness', F8, 4, '(s, n, 6, 6) section j\'s links\' stiffness, else 0',
+    Field('section_stiffness', F8, 4, "(s, n, 6, 6) section j's links' stiffness, else 0",
           read_only=True),
     Field('sections', 'record', 0, 'an evaluator of the bare chain (∂r/∂σ_j)'),
     # the outcome
-    Field('free_step', F8, 1, '(6n,) K⁻¹ r + K⁻¹ J_μᵀ Δμ'),
-    Field('effector_w', F8, 2, '(3, u) the last effector\'s d p / d z [m]'),
+    Field('free_step', F8, 2, '(6n, 1) K⁻¹ r + K⁻¹ J_μᵀ Δμ'),
+    Field('effector_w', F8, 2, "(3, u) the last effector's d p / d z [m]"),
     Field('effector_positions', F8, 2, '(k, 3) effector positions after the step [m]'),
-    Field('tip_covariance', F8, 2, '(3, 3) the last effector\'s covariance [m^2]'),
+    Field('tip_covariance', F8, 2, "(3, 3) the last effector's covariance [m^2]"),
     # scratch of the pots' routing
     Field('pot_levers', F8, 2, '(P, 3)'),
     Field('pot_points', F8, 2, '(P, 3)'),
     Field('pot_forces', F8, 2, '(P, 3)'),
     Field('pot_units', F8, 2, '(S, 3)'),
     Field('pot_span_lengths', F8, 1, '(S,)'),
-    Field('pot_unit_gains', F8, 1, '(c,) ones'),
+    Field('pot_unit_gains', F8, 1, '(c,) ones', read_only=True),
 )
 """The fields of :class:`EstimatorRecord`."""
 
@@ -213,23 +215,32 @@ def kalman_lengths(h, measured, noise, base, z, walk, covariance, stuck, gate_si
 
 
 @numba.njit(cache=True)
-def section_loads(estimator):
+def estimator_loads(estimator):
     """
-    Scale the sections' link stiffness by ``1 + σ_j`` and write ``∂r/∂σ_j``, in place.
+    Set the loads of the load unknowns at the current frames, in place (before a linearisation).
 
-    The last ``s`` entries of ``masses`` are the sections' ``σ`` at the linearisation (none:
-    nothing to do). The tick's link stiffness (``scaled_stiffness``, which the tick's evaluator
-    reads) becomes the model's times ``1 + σ`` of each link's section, so the linearisation is
-    that of the scaled chain (as a scene's ``calibration.section_stiffness`` builds it); row
-    ``w - s + j`` of ``load`` becomes the elastic force of section ``j``'s links at the current
-    frames, their model stiffness alone: the bare chain's residual (paper eq. 4-7) with the
-    stiffness of ``section_stiffness[j]``, zero outside the section.
+    The tick's external wrenches become ``base_external`` plus the weights' rows of ``load``
+    times their current masses. The last ``s`` entries of ``masses`` are the sections' ``σ`` at
+    the linearisation (none: nothing more to do): the tick's link stiffness
+    (``scaled_stiffness``, which the tick's evaluator reads) becomes the model's times ``1 + σ``
+    of each link's section, so the linearisation is that of the scaled chain (as a scene's
+    ``calibration.section_stiffness`` builds it); row ``w - s + j`` of ``load`` becomes the
+    elastic force of section ``j``'s links at the current frames, their model stiffness alone:
+    the bare chain's residual (paper eq. 4-7) with the stiffness of ``section_stiffness[j]``,
+    zero outside the section.
     """
-    section_stiffness, masses = estimator.section_stiffness, estimator.masses
+    tick, masses, load = estimator.tick, estimator.masses, estimator.load
+    section_stiffness = estimator.section_stiffness
     n_sections = section_stiffness.shape[0]
+    first = masses.size - n_sections
+    external, base_external = tick.system.external, estimator.base_external
+    for row in range(external.size):
+        external[row] = base_external[row]
+    for a in range(first):
+        for row in range(external.size):
+            external[row] += masses[a] * load[a, row]
     if n_sections == 0:
         return
-    first = masses.size - n_sections
     nominal, scaled, link_section = (estimator.nominal, estimator.scaled_stiffness,
                                      estimator.link_section)
     for link in range(link_section.size):
@@ -238,57 +249,26 @@ def section_loads(estimator):
         for i in range(6):
             for j in range(6):
                 scaled[link, i, j] = factor * nominal[link, i, j]
-    tick, sections, load = estimator.tick, estimator.sections, estimator.load
+    sections = estimator.sections
     for section in range(n_sections):
         sections.stiffness = section_stiffness[section]
-        evaluate(sections, tick.positions, tick.rotations, estimator.mass_previous[:0], False,
-                 False)
-        load[first + section, :] = sections.rhs[:, 0]
-
-
-@numba.njit(cache=True)
-def estimate_tick(estimator):
-    """
-    Run one estimator update (linearise, Kalman update, Newton step), in place.
-
-    Sets the external wrenches of the weight unknowns and the sections' stiffness
-    (:func:`section_loads`), linearises
-    (:func:`~cbha_inverse.core._kernels.tick.linearise_tick`), then
-    :func:`estimate_from_linearisation`.
-
-    Parameters
-    ----------
-    estimator : EstimatorRecord
-        The buffers (:data:`ESTIMATOR_FIELDS`).
-
-    Returns
-    -------
-    int
-        0 when the update ran, else the block Cholesky's code (nothing changed but the
-        evaluation, for the fallback chain; then run :func:`estimate_from_linearisation`).
-
-    """
-    tick, masses, load = estimator.tick, estimator.masses, estimator.load
-    external, base_external = tick.system.external, estimator.base_external
-    for row in range(external.size):
-        external[row] = base_external[row]
-    for a in range(masses.size - estimator.section_stiffness.shape[0]):
-        for row in range(external.size):
-            external[row] += masses[a] * load[a, row]
-    section_loads(estimator)
-    info, _ = linearise_tick(tick)
-    if info != 0:
-        return info
-    estimate_from_linearisation(estimator)
-    return 0
+        evaluate(sections, tick.positions, tick.rotations, estimator.mass_previous[:0],
+                 bool(False), bool(False))
+        rhs = sections.rhs
+        for row in range(rhs.shape[0]):
+            load[first + section, row] = rhs[row, 0]
 
 
 @numba.njit(cache=True)
 def estimate_from_linearisation(estimator):
     """
-    :func:`estimate_tick` after its linearisation (the tick's buffers hold a solved one).
+    Finish an update after its linearisation: Kalman update, Newton step, effector positions.
 
-    The tick's half-solves ``L⁻¹ [r, J_aᵀ]`` are completed to ``K⁻¹ [r, J_aᵀ]`` first.
+    The tick's buffers hold a solved linearisation at the loads of :func:`estimator_loads`
+    (:func:`cbha_inverse.core._kernels.tick.linearise_tick`, or a factor of the fallback chain
+    projected into them, with the load columns ``K⁻¹ J_μᵀ`` already in ``mass_columns`` when
+    ``solve_mass`` is off). The tick's half-solves ``L⁻¹ [r, J_aᵀ]`` are completed to
+    ``K⁻¹ [r, J_aᵀ]`` first.
     """
     tick = estimator.tick
     backward_solves(tick)
@@ -314,17 +294,21 @@ def estimate_from_linearisation(estimator):
             for a in range(n_mass):
                 mass_rhs[row, 1 + a] = load[a, row]
         if estimator.solve_mass[0]:
+            load_solved = estimator.load_solved
             for row in range(size):
                 for a in range(n_mass):
-                    mass_columns[row, 1 + a] = mass_rhs[row, 1 + a]
-            block_solve(factor, mass_columns[:, 1:])
+                    load_solved[row, a] = load[a, row]
+            block_solve(factor, load_solved)
+            for row in range(size):
+                for a in range(n_mass):
+                    mass_columns[row, 1 + a] = load_solved[row, a]
         effector_columns_into(rotations, tick.effector_frames, tick.effector_offsets,
                               estimator.mass_levers, estimator.mass_effector_columns)
-        project_effectors_into(mass_columns, mass_rhs, estimator.mass_effector_columns, False,
-                               tick.column_starts, positions, rotations, tick.effector_frames,
-                               tick.effector_offsets, estimator.mass_previous, estimator.mass_w,
-                               estimator.mass_w_aa, estimator.mass_offset,
-                               estimator.mass_moved)
+        project_effectors_into(mass_columns, mass_rhs, estimator.mass_effector_columns,
+                               bool(False), tick.column_starts, positions, rotations,
+                               tick.effector_frames, tick.effector_offsets,
+                               estimator.mass_previous, estimator.mass_w, estimator.mass_w_aa,
+                               estimator.mass_offset, estimator.mass_moved)
     for i in range(c):
         for j in range(m + 1 + n_mass):
             acc = 0.0
@@ -370,9 +354,9 @@ def estimate_from_linearisation(estimator):
         acc = solved[row, 0]
         for a in range(n_mass):
             acc += mass_columns[row, 1 + a] * (z[2 * m + a] * scale[2 * m + a] - masses[a])
-        free_step[row] = acc
-    apply_linear_step_into(positions, rotations, free_step, solved[:, 1:], change,
-                           tick.max_rotation, tick.increments, factor, False)
+        free_step[row, 0] = acc
+    apply_linear_step_into(positions, rotations, free_step[:, 0], solved[:, 1:], change,
+                           tick.max_rotation, tick.increments, factor, bool(False))
     for a in range(n_mass):
         masses[a] = z[2 * m + a] * scale[2 * m + a]
     effector_points_into(positions, rotations, tick.effector_frames, tick.effector_offsets,
@@ -419,7 +403,8 @@ def stuck_pots(history, counters, lengths, stuck, tolerance, motion):
 
     """
     window, c = history.shape
-    history[counters[0]] = lengths
+    for i in range(c):
+        history[counters[0], i] = lengths[i]
     counters[0] = (counters[0] + 1) % window
     counters[1] = min(counters[1] + 1, window)
     if counters[1] < window:

@@ -16,11 +16,15 @@ the block band of the symmetric part (:func:`assemble_symmetric`, the block Chol
 :mod:`cbha_inverse.core._kernels.block_band`) or the blocks of the exact tangent
 (:func:`assemble_exact`, the block LU of :mod:`cbha_inverse.core._kernels.block_lu`). The control
 tick's evaluation adds the links' symmetric parts straight into the block band instead.
+
+Compiled callers pass the flags ``exact`` and ``into_band`` as run-time values (``bool(True)``,
+not ``True``): numba compiles a separate copy of a function, and of every function it calls,
+for each literal argument.
 """
 
 from cbha_inverse.core._kernels.assembly import scatter_add, scatter_more
-from cbha_inverse.core._kernels.block_lu import block_lu, block_lu_solve
 from cbha_inverse.core._kernels.block_band import block_cholesky
+from cbha_inverse.core._kernels.block_lu import block_lu
 from cbha_inverse.core._kernels.cables import cable_pass
 from cbha_inverse.core._kernels.links import link_pass
 from cbha_inverse.core._kernels.mesh_cavities import mesh_cavity_pass
@@ -76,7 +80,7 @@ EQUILIBRIUM_FIELDS = (
     Field('rhs', F8, 2, '(6n, m + 1) [r, J_aᵀ] [N, N*m]'),
     Field('values', F8, 1, '(V_b,) the tangent blocks: links (n 12 x 12), spans, moments'),
     Field('blocks', F8, 4, '(n + 1, B + 1, 6, 6) symmetric block band, last: base-frame trash'),
-    Field('exact_blocks', F8, 4, '(n + 1, 2B + 1, 6, 6) exact tangent\'s blocks, last: trash'),
+    Field('exact_blocks', F8, 4, "(n + 1, 2B + 1, 6, 6) exact tangent's blocks, last: trash"),
     Field('lu_pivots', I8, 2, '(n, 6) row interchanges of its LU within the diagonal blocks'),
     # scratch of the link pass (one link at a time)
     Field('link_difference', F8, 1, '(3,) x_b - x_a [m]'),
@@ -176,8 +180,9 @@ def evaluate(system, positions, rotations, actuation, exact, into_band):
     for row in range(rhs.shape[0]):
         rhs[row, 0] += external[row]
     if into_band:
-        scatter_more(system.index, system.values, system.weights,
-                     system.blocks.reshape(system.blocks.size), system.pair_start)
+        first = system.pair_start
+        scatter_more(system.index[first:], system.values[first:], system.weights[first:],
+                     system.blocks.reshape(system.blocks.size))
 
 
 @numba.njit(cache=True)
@@ -211,39 +216,11 @@ def factor_symmetric(system):
 @numba.njit(cache=True)
 def factor_exact(system):
     """
-    Assemble and factor the exact tangent's blocks, ``K = L U``; return 0, or the failing
-    unknown + 1.
+    Assemble and factor the exact tangent's blocks, ``K = L U``; return 0 or the failing unknown.
 
-    :func:`assemble_exact`, then :func:`~cbha_inverse.core._kernels.block_lu.block_lu` (a
-    non-finite pivot fails it; a non-finite entry elsewhere gives a non-finite solve, which the
-    callers refuse).
+    The failing unknown is counted from 1. :func:`assemble_exact`, then
+    :func:`~cbha_inverse.core._kernels.block_lu.block_lu` (a non-finite pivot fails it; a
+    non-finite entry elsewhere gives a non-finite solve, which the callers refuse).
     """
     assemble_exact(system)
     return block_lu(system.exact_blocks[:system.rhs.shape[0] // 6], system.lu_pivots)
-
-
-@numba.njit(cache=True)
-def exact_newton_step(system, step):
-    """
-    Solve Newton's equation with the exact tangent of the last evaluation, ``K step = r``.
-
-    :func:`factor_exact`, then its solve (:func:`~cbha_inverse.core._kernels.block_lu.block_lu_solve`)
-    of ``step``, which holds ``r`` and receives the step.
-
-    Parameters
-    ----------
-    system : EquilibriumRecord
-        The terms and buffers (its ``values`` hold the last exact evaluation's blocks).
-    step : (6n, 1) ndarray  [N, N*m] -> [m, rad]
-        ``r`` in, the step out (when the result is 0).
-
-    Returns
-    -------
-    int
-        As :func:`factor_exact`.
-
-    """
-    info = factor_exact(system)
-    if info == 0:
-        block_lu_solve(system.exact_blocks[:step.shape[0] // 6], system.lu_pivots, step)
-    return info

@@ -325,15 +325,15 @@ def world_tangent(tangent, rotations, link, difference, symmetric, block):
         Receives the tangent.
 
     """
-    rotate_block(tangent, 0, 0, rotations, link, block, 6, 6)
-    rotate_block(tangent, 3, 0, rotations, link, block, 9, 6)
-    rotate_block(tangent, 3, 3, rotations, link, block, 9, 9)
+    # W = R M Rᵀ, 3 x 3 block by block (a symmetric M: its upper block is the lower's mirror)
+    for row in range(0, 6, 3):
+        for column in range(0, 6, 3):
+            if column <= row or not symmetric:
+                rotate_block(tangent, row, column, rotations, link, block, 6 + row, 6 + column)
     if symmetric:
         for i in range(3):
             for j in range(3):
                 block[6 + i, 9 + j] = block[9 + j, 6 + i]
-    else:
-        rotate_block(tangent, 0, 3, rotations, link, block, 6, 9)
     d0, d1, d2 = difference[0], difference[1], difference[2]
     # W E_a: columns 0-2 are -W[:, 0:3], columns 3-5 are W[:, 0:3] d^ - W[:, 3:6]
     for r in range(6, 12):
@@ -394,17 +394,15 @@ def add_geometric_terms(world, difference, symmetric, block):
     """
     f0, f1, f2 = world[0, 0], world[1, 0], world[2, 0]
     m0, m1, m2 = world[3, 0], world[4, 0], world[5, 0]
-    d0, d1, d2 = difference[0], difference[1], difference[2]
-    force = (f0, f1, f2)
-    lever = (d0, d1, d2)
-    dot = d0 * f0 + d1 * f1 + d2 * f2
+    dot = difference[0] * f0 + difference[1] * f1 + difference[2] * f2
     add_scaled_hat(block, 3, 0, f0, f1, f2, 1.0)
     add_scaled_hat(block, 6, 3, f0, f1, f2, 1.0)
     if symmetric:
         add_scaled_hat(block, 9, 3, m0, m1, m2, 0.5)
         for i in range(3):
             for j in range(i + 1):
-                block[3 + i, 3 + j] -= 0.5 * (force[i] * lever[j] + lever[i] * force[j])
+                block[3 + i, 3 + j] -= 0.5 * (world[i, 0] * difference[j]
+                                              + difference[i] * world[j, 0])
             block[3 + i, 3 + i] += dot
         return
     add_scaled_hat(block, 0, 3, f0, f1, f2, -1.0)
@@ -413,7 +411,7 @@ def add_geometric_terms(world, difference, symmetric, block):
     add_scaled_hat(block, 3, 3, m0, m1, m2, -1.0)
     for i in range(3):
         for j in range(3):
-            block[3 + i, 3 + j] -= force[i] * lever[j]
+            block[3 + i, 3 + j] -= world[i, 0] * difference[j]
         block[3 + i, 3 + i] += dot
 
 
@@ -500,7 +498,8 @@ def link_pass(system, positions, rotations, actuation, exact, into_band):
     stiffness, rhs = system.stiffness, system.rhs
     difference, relative = system.link_difference, system.link_relative
     delta, stress = system.link_delta, system.link_stress
-    jl_inverse, weighted, tangent = system.link_jl_inverse, system.link_weighted, system.link_tangent
+    jl_inverse, weighted = system.link_jl_inverse, system.link_weighted
+    tangent = system.link_tangent
     local, world, block = system.link_local, system.link_world, system.link_block
     cavity_wrench, cavity_stiffness = system.cavity_wrench, system.cavity_stiffness
     cavity_columns, values, blocks = system.cavity_columns, system.values, system.blocks

@@ -39,9 +39,11 @@ def skinned_vertices(positions, rotations, frame_a, local_a, local_b, weight_b, 
     for v in range(frame_a.size):
         a, b, s = frame_a[v], frame_a[v] + 1, weight_b[v]
         for i in range(3):
-            levers_a[v, i] = (rotations[a, i, 0] * local_a[v, 0] + rotations[a, i, 1] * local_a[v, 1]
+            levers_a[v, i] = (rotations[a, i, 0] * local_a[v, 0]
+                              + rotations[a, i, 1] * local_a[v, 1]
                               + rotations[a, i, 2] * local_a[v, 2])
-            levers_b[v, i] = (rotations[b, i, 0] * local_b[v, 0] + rotations[b, i, 1] * local_b[v, 1]
+            levers_b[v, i] = (rotations[b, i, 0] * local_b[v, 0]
+                              + rotations[b, i, 1] * local_b[v, 1]
                               + rotations[b, i, 2] * local_b[v, 2])
             points[v, i] = ((1.0 - s) * (positions[a, i] + levers_a[v, i])
                             + s * (positions[b, i] + levers_b[v, i]))

@@ -5,14 +5,15 @@ The compiled steps of the static solver's Newton iteration (paper eq. 9), over o
 the links' deformation coordinates. Its compiled parts: :func:`newton_point` evaluates a state
 (:func:`~cbha_inverse.core._kernels.evaluation.evaluate`, exact) and measures its residual
 (:func:`~cbha_inverse.core._kernels.residual.residual_measures`); :func:`newton_direction`
-solves Newton's equation with the exact tangent of that evaluation
-(:func:`~cbha_inverse.core._kernels.evaluation.exact_newton_step`) and maps the step to the
+solves Newton's equation with the exact tangent of that evaluation (its block LU,
+:func:`~cbha_inverse.core._kernels.evaluation.factor_exact`) and maps the step to the
 deformation coordinates (:func:`~cbha_inverse.core._kernels.retraction.deformation_step`);
 :func:`newton_trial` moves the frames along it and evaluates them. The buffers are one
 :class:`NewtonRecord` (fields :data:`NEWTON_FIELDS`), one per chain and actuators.
 """
 
-from cbha_inverse.core._kernels.evaluation import evaluate, exact_newton_step
+from cbha_inverse.core._kernels.block_lu import block_lu_solve
+from cbha_inverse.core._kernels.evaluation import evaluate, factor_exact
 from cbha_inverse.core._kernels.records import define_record, Field, Record, RecordType
 from cbha_inverse.core._kernels.residual import residual_measures
 from cbha_inverse.core._kernels.retraction import deformation_step, deformed_poses
@@ -89,7 +90,7 @@ def newton_point(newton, positions, rotations, load_factor, length, tolerance):
     scaled, actuation = newton.scaled_actuation, newton.actuation
     for j in range(scaled.size):
         scaled[j] = load_factor * actuation[j]
-    evaluate(newton.system, positions, rotations, scaled, True, False)
+    evaluate(newton.system, positions, rotations, scaled, bool(True), bool(False))
     return residual_measures(newton.system.rhs, scaled, newton.dead, newton.extra, load_factor,
                              length, newton.floor, tolerance, newton.residual, newton.frame_max)
 
@@ -99,8 +100,9 @@ def newton_direction(newton, positions, rotations):
     """
     Solve Newton's equation at the last point with its exact tangent; map the step to the links.
 
-    ``step = K⁻¹ r`` (:func:`~cbha_inverse.core._kernels.evaluation.exact_newton_step`; the
-    system's blocks are those of the last :func:`newton_point`, at these frames), then its
+    ``K step = r``: the exact tangent of the last :func:`newton_point` (its blocks, at these
+    frames) assembled and factored (:func:`~cbha_inverse.core._kernels.evaluation.factor_exact`)
+    and solved (:func:`~cbha_inverse.core._kernels.block_lu.block_lu_solve`), then the step's
     deformation coordinates (:func:`~cbha_inverse.core._kernels.retraction.deformation_step`).
 
     Returns
@@ -111,12 +113,13 @@ def newton_direction(newton, positions, rotations):
         The largest link rotation of the step (NaN unless ``info`` is 0).
 
     """
-    step, residual = newton.step, newton.residual
-    for row in range(residual.size):
-        step[row, 0] = residual[row]
-    info = exact_newton_step(newton.system, step)
+    system, step, residual = newton.system, newton.step, newton.residual
+    info = factor_exact(system)
     if info != 0:
         return info, np.nan
+    for row in range(residual.size):
+        step[row, 0] = residual[row]
+    block_lu_solve(system.exact_blocks[:step.shape[0] // 6], system.lu_pivots, step)
     return 0, deformation_step(positions, rotations, newton.rest_rotations,
                                step.reshape((step.shape[0] // 6, 6)), newton.coordinates)
 

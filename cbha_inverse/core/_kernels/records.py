@@ -210,7 +210,8 @@ class RecordOwner:
 
     The compiled code reads the arrays the record was built with; assigning a new array to one
     of those attributes would leave the record on the old one, so it is refused (write into the
-    array instead, ``owner.field[:] = value``).
+    array instead, ``owner.field[:] = value``). Rebinding to the same array, as an in-place
+    operator does (``owner.mask |= dropped``), is allowed.
     """
 
     _fields = frozenset()
@@ -223,8 +224,8 @@ class RecordOwner:
         self._fields = frozenset(arrays)
 
     def __setattr__(self, name, value):
-        """Refuse to rebind an attribute that is one of the record's arrays."""
-        if name in self._fields:
+        """Refuse to rebind an attribute that is one of the record's arrays to another object."""
+        if name in self._fields and value is not getattr(self, name):
             raise AttributeError(f'{name} is an array of the compiled record: write into it '
                                  f'({name}[:] = ...) instead of replacing it')
         object.__setattr__(self, name, value)

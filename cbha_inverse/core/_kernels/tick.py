@@ -48,7 +48,7 @@ TICK_FIELDS = (
     # the effectors
     Field('effector_frames', I8, 1, '(k,) frame of every effector point'),
     Field('effector_offsets', F8, 2, '(k, 3) effector points in their frame [m]'),
-    Field('base', F8, 1, '(3,) base position, for the targets\' check [m]'),
+    Field('base', F8, 1, "(3,) base position, for the targets' check [m]"),
     Field('reach', F8, 1, '(k,) largest distance of each effector from the base [m]'),
     # the linearisation (steps 1-2)
     Field('solved', F8, 2, '(6n, m + 1) L⁻¹ [r, J_aᵀ] (half_solved), or K⁻¹ [r, J_aᵀ]'),
@@ -62,20 +62,20 @@ TICK_FIELDS = (
     Field('w_aa', F8, 2, '(m, m) W_aa'),
     Field('offset', F8, 1, '(3k,) p_e + J_e K⁻¹ r - W_ea λ_prev [m]'),
     # the QP (step 3)
-    Field('hessian', F8, 2, '(m, m) the QP\'s normalised Hessian'),
+    Field('hessian', F8, 2, "(m, m) the QP's normalised Hessian"),
     Field('tracking', F8, 2, '(m, m) its tracking part'),
     Field('weighted_w', F8, 2, '(3k, m) W_ea σ / ν'),
     Field('energy_weight', float, 0, 'ε_E'),
     Field('proximal_weight', float, 0, 'ε_P'),
     Field('delta_free', F8, 1, '(3k,) δ_free = offset - target [m]'),
-    Field('gradient', F8, 1, '(m,) the QP\'s gradient'),
+    Field('gradient', F8, 1, "(m,) the QP's gradient"),
     Field('tracking_gradient', F8, 1, '(m,) its tracking part'),
-    Field('box_lower', F8, 1, '(m,) the QP\'s box, lower'),
-    Field('box_upper', F8, 1, '(m,) the QP\'s box, upper'),
+    Field('box_lower', F8, 1, "(m,) the QP's box, lower"),
+    Field('box_upper', F8, 1, "(m,) the QP's box, upper"),
     Field('x_previous', F8, 1, '(m,) λ_prev / σ'),
-    Field('x', F8, 1, '(m,) the QP\'s solution'),
+    Field('x', F8, 1, "(m,) the QP's solution"),
     Field('active_set', np.int8, 1, '(m,) -1 / 0 / +1: at the lower bound, free, at the upper'),
-    Field('pivot', np.int8, 1, '(m,) the active set\'s pivots'),
+    Field('pivot', np.int8, 1, "(m,) the active set's pivots"),
     Field('free', np.bool_, 1, '(m,) free variables; after a solved QP, the binding bounds'),
     Field('qp_index', I8, 1, '(m,) workspace of the active set'),
     Field('qp_factor', F8, 2, '(m, m) factor of the free block'),
@@ -210,8 +210,10 @@ def linearise_tick(tick):
 
     """
     system, solved = tick.system, tick.solved
-    evaluate(system, tick.positions, tick.rotations, tick.actuation, True, True)
-    tick.linearised[:] = tick.actuation
+    evaluate(system, tick.positions, tick.rotations, tick.actuation, bool(True), bool(True))
+    linearised, actuation = tick.linearised, tick.actuation
+    for j in range(actuation.size):
+        linearised[j] = actuation[j]
     tick.half_solved[0] = False
     rhs = system.rhs
     for row in range(rhs.shape[0]):
@@ -324,7 +326,9 @@ def solve_tick(targets, tick, apply_step):
     binding = False
     for j in range(tick.free.size):
         binding = binding or tick.free[j]
-    tick.actuation[:] = tick.proposed
+    actuation, proposed = tick.actuation, tick.proposed
+    for j in range(actuation.size):
+        actuation[j] = proposed[j]
     effector_positions = tick.effector_positions
     if apply_step:
         apply_pending_step(tick)

@@ -101,6 +101,9 @@ class CableGroup:
         self.upper_bounds = np.array([c.max_tension for c in self.cables], dtype=float)
         self.lower_bounds = np.zeros(m)
         self.gains = np.array([c.gain for c in self.cables], dtype=float)
+        for routing_array in self.routing:
+            # constants of the compiled kernels, which take them read-only (one compiled type)
+            routing_array.flags.writeable = False
 
     @property
     def n_actuators(self):

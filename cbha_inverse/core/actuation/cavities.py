@@ -161,6 +161,10 @@ class CavityGroup:
         self.vertex_owner = np.ascontiguousarray(np.concatenate(owner_v), dtype=np.int64)
         self.triangle_owner = np.ascontiguousarray(np.concatenate(owner_t), dtype=np.int64)
         self.gains = np.array([c.gain for c in self.cavities], dtype=float)
+        for constant in (self.frame_a, self.local_a, self.local_b, self.weight_b, self.triangles,
+                         self.vertex_owner, self.triangle_owner, self.gains):
+            # constants of the compiled kernels, which take them read-only (one compiled type)
+            constant.flags.writeable = False
         self.upper_bounds = np.array([c.max_pressure for c in self.cavities], dtype=float)
         self.lower_bounds = np.zeros(len(self.cavities))
 

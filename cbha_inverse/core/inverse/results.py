@@ -70,8 +70,9 @@ class InverseOptions:
 
 class TickResult(NamedTuple):
     """
-    Result of one control tick (immutable; a named tuple: built every tick, several times
-    cheaper than a frozen dataclass).
+    Result of one control tick (immutable).
+
+    A named tuple: built every tick, several times cheaper than a frozen dataclass.
 
     Attributes
     ----------

@@ -153,7 +153,7 @@ class InverseSolver:
         self.section_names = self._sections.names
         self._gains = np.ones(m)
         self._system = EquilibriumSystem(model, actuators, self._external,
-                                       stiffness=self._sections.stiffness)
+                                         stiffness=self._sections.stiffness)
         # no effector can be farther from the base than this (overflow-safe targets)
         self._base = np.array(model.base_position, dtype=float)
         offsets = np.asarray(effectors.offsets, dtype=float).reshape(-1, 3)
@@ -215,8 +215,12 @@ class InverseSolver:
         self.step(targets)
         self.prepare()
         self.step(targets)
-        # the entries of the other paths (the fallback chain's projection, the pending step)
-        self._data.entry('project_tick')
+        # the other paths: the fallback chain (each factor and its solve, the projection of
+        # the first) and the pending step
+        for factor in self._system.fallback_factors(self._positions, self._rotations,
+                                                    self.actuation):
+            factor.solve(np.zeros(self._system.size))
+        self._fall_back()
         self._data.entry('pending_step_into')
         self.reset(state, actuation)
 
@@ -363,7 +367,7 @@ class InverseSolver:
         Returns whether a factorization succeeded.
         """
         factor = next(self._system.fallback_factors(self._positions, self._rotations,
-                                                  self.actuation), None)
+                                                    self.actuation), None)
         if factor is None:
             return False
         self._residual_norm = self._data.project_factor(factor)

@@ -288,7 +288,7 @@ def _factor_compiled(diagonal, upper):
     """
     b = diagonal.shape[1]
     if b != 6:
-        raise ValueError(f"the compiled backend factors 6 x 6 blocks, got {b} x {b}: use "
+        raise ValueError(f'the compiled backend factors 6 x 6 blocks, got {b} x {b}: use '
                          "method='banded' or 'dense'")
     factor, info = btd_cholesky(_kernel_array(diagonal), _kernel_array(upper))
     if info > 0:
