@@ -14,8 +14,19 @@ INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
 EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
-KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py test/core/test_core_linalg_btd.py \
-  test/core/test_core_tick.py
+KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py \
+  test/core/test_core_linalg_btd.py test/core/test_core_tick.py test/core/test_core_links.py \
+  test/core/test_core_so3.py test/core/test_core_actuation.py test/core/test_core_sensors.py \
+  test/core/test_core_statics.py test/core/test_solver_paths.py test/core/test_core_records.py \
+  test/estimate/test_estimate_filter.py test/estimate/test_estimate_shape.py \
+  test/report/test_report_tick_flops.py::test_the_multiply_add_chains_follow_their_closed_form
+# with the JIT off: the tests of numba's compiled signatures and allocations have nothing to
+# check, and the long estimation runs repeat what the short ones cover
+KERNEL_DESELECT ?= test/core/test_core_linalg_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
+  test/core/test_core_tick.py::test_a_thousand_ticks_allocate_nothing_but_their_results \
+  test/estimate/test_estimate_shape.py::test_a_softer_plant_is_a_weight_error_not_a_tip_bias \
+  test/estimate/test_estimate_shape.py::test_the_weight_error_and_a_tip_payload_are_two_unknowns \
+  test/estimate/test_estimate_filter.py::test_the_filter_averages_the_pot_noise_at_a_held_pose
 COVERAGE_ARGS ?= --cov=cbha_inverse
 # the timing phase measures its pytest process only (test/coverage_timing.cfg: no subprocess patch)
 TIMING_COVERAGE_ARGS ?= $(COVERAGE_ARGS) --cov-config=test/coverage_timing.cfg
@@ -65,12 +76,14 @@ test: install  ## the whole test suite with coverage (~5.5 min on 2 quiet cores)
 	@$(VPY) -m coverage report --omit='$(subst $(space),$(comma),$(KERNEL_SOURCES))' \
 	  | tail -n 1 | sed 's/^TOTAL/non-compiled code (kernels omitted): TOTAL/'
 
-# The kernel tests with NUMBA_DISABLE_JIT=1: the compiled code runs as Python and is measured
-# (the test of numba's compiled signatures has nothing to check without the JIT).
-cover-kernels: install  ## coverage of the numba kernels, their tests with the JIT off (~1.5 min)
-	NUMBA_DISABLE_JIT=1 $(VPY) -m pytest $(KERNEL_TESTS) -q --cov=cbha_inverse --cov-report= \
-	  --deselect test/core/test_core_linalg_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
-	  $(PYTEST_ARGS)
+# The kernel tests with NUMBA_DISABLE_JIT=1: the compiled code runs as Python and is measured.
+# A record's boxing is code generation, run only while numba compiles: its tests run again
+# with the JIT on and append to the same coverage.
+cover-kernels: install  ## coverage of the numba kernels, their tests with the JIT off
+	NUMBA_DISABLE_JIT=1 $(VPY) -m pytest $(KERNEL_TESTS) -q -n $(TEST_WORKERS) --cov=cbha_inverse \
+	  --cov-report= $(addprefix --deselect ,$(KERNEL_DESELECT)) $(PYTEST_ARGS)
+	$(VPY) -m pytest test/core/test_core_records.py -q --cov=cbha_inverse --cov-append \
+	  --cov-report= $(PYTEST_ARGS)
 	$(VPY) -m coverage report --include='$(subst $(space),$(comma),$(KERNEL_SOURCES))'
 
 # Mutation testing (not in CI: ~20-30 min on 2 cores) of the modules a wrong line hurts most;

@@ -8,6 +8,7 @@ from cbha_inverse.core.actuation.effectors import PointEffectors
 from cbha_inverse.core.chain import ChainModel, rest_state, retract
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.so3 import so3_exp
+from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 from oracles.actuation import oracle
 from oracles.effectors import apply_effector_jacobian, effector_jacobian
@@ -117,6 +118,26 @@ def test_compiled_mesh_cavities_equal_the_numpy_oracle():
     np.testing.assert_allclose(0.8 * unit[0][0], wrenches[0], rtol=1e-12,
                                atol=1e-15 * np.abs(wrenches).max())
     assert 0.8 * unit[1][0] == pytest.approx(volumes[0], rel=1e-12)
+
+
+def test_the_evaluation_puts_the_mesh_cavities_columns_and_loads_on_their_frames():
+    """``J_aᵀ`` with mesh cavities: the oracle's wrenches, ``λ`` times them in ``r``."""
+    rng = np.random.default_rng(4)
+    model = _model()
+    group = CavityGroup(_cavities(), N_LINKS + 1)
+    system = EquilibriumSystem(model, ActuatorSet([group], model.n_frames), np.zeros(6 * N_LINKS))
+    pose = _pose(_deformed(rng))
+    wrenches, _ = oracle(group).evaluate(*pose)
+    # frame f's wrench on rows 6 (f - 1) ... 6 f (the base frame is fixed)
+    columns = wrenches[:, 1:].reshape(len(wrenches), -1).T
+    pressures = np.array([4e4, 2e4])
+    rhs = system.evaluate(*pose, pressures).copy()
+    unloaded = system.evaluate(*pose, np.zeros(2))[:, 0].copy()
+    scale = np.abs(columns).max()
+    assert scale > 0.0
+    np.testing.assert_allclose(rhs[:, 1:], columns, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(rhs[:, 0] - unloaded, columns @ pressures, rtol=0,
+                               atol=1e-12 * scale * pressures.max())
 
 
 def test_tube_volume_and_outward_orientation():

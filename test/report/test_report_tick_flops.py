@@ -17,6 +17,7 @@ from types import SimpleNamespace
 
 from cbha_inverse.core._kernels import (assembly, block_band, cables, evaluation, links,
                                         mesh_cavities, so3)
+from cbha_inverse.core._kernels.flop_rate import multiply_add_chains
 from cbha_inverse.report import bench_inverse
 from cbha_inverse.report.tick_flops import (measured_flop_rate, tick_flops, tick_shapes,
                                             TickShapes)
@@ -430,6 +431,15 @@ def test_a_link_and_its_cavity_columns_cost_what_the_link_pass_does(monkeypatch,
               for n_links in (3, 4)]
     assert (tick_flops(shapes[1])['links'] - tick_flops(shapes[0])['links']
             == counted[1] - counted[0])
+
+
+def test_the_multiply_add_chains_follow_their_closed_form():
+    """``a_k = cᵏ a_0 + d (1 - cᵏ) / (1 - c)`` for each of the eight chains, summed."""
+    c, d, n_steps, seed = 0.999999, 1e-7, 1000, 0.25
+    starts = seed + np.arange(8.0)
+    expected = (c ** n_steps * starts + d * (1 - c ** n_steps) / (1 - c)).sum()
+    assert multiply_add_chains(n_steps, seed) == pytest.approx(expected, rel=1e-12)
+    assert multiply_add_chains(0, seed) == pytest.approx(starts.sum(), rel=1e-15)
 
 
 def test_flop_rate_and_the_table_print_the_bound():
