@@ -272,44 +272,78 @@ def estimate_from_linearisation(estimator):
     """
     tick = estimator.tick
     backward_solves(tick)
-    positions, rotations, solved = tick.positions, tick.rotations, tick.solved
-    rhs, factor = tick.system.rhs, tick.system.blocks[:solved.shape[0] // 6]
-    size = solved.shape[0]
-    m = solved.shape[1] - 1
-    h, moved, masses, load = estimator.h, estimator.moved, estimator.masses, estimator.load
-    mass_columns, mass_rhs, jacobian = (estimator.mass_columns, estimator.mass_rhs,
-                                        estimator.jacobian)
-    c, u = h.shape
-    n_mass = masses.size
-    routing_lengths_into(positions, rotations, estimator.pot_frames, estimator.pot_offsets,
-                         estimator.pot_span_start, estimator.pot_span_end,
-                         estimator.pot_span_owner, estimator.pot_point_owner,
-                         estimator.length0, jacobian, estimator.pot_levers,
-                         estimator.pot_points, estimator.pot_forces, estimator.pot_units,
-                         estimator.pot_span_lengths, estimator.pot_unit_gains)
-    if n_mass:
+    routing_lengths_into(tick.positions, tick.rotations, estimator.pot_frames,
+                         estimator.pot_offsets, estimator.pot_span_start,
+                         estimator.pot_span_end, estimator.pot_span_owner,
+                         estimator.pot_point_owner, estimator.length0, estimator.jacobian,
+                         estimator.pot_levers, estimator.pot_points, estimator.pot_forces,
+                         estimator.pot_units, estimator.pot_span_lengths,
+                         estimator.pot_unit_gains)
+    if estimator.masses.size:
+        load_columns(estimator)
+    linear_lengths(estimator)
+    grow_offset_walk(estimator)
+    kalman_lengths(estimator.h, estimator.measured, estimator.noise, estimator.base,
+                   estimator.z, estimator.walk, estimator.covariance, estimator.stuck,
+                   estimator.gate_sigma if estimator.gate[0] else 0.0, estimator.active,
+                   estimator.kalman_gain, estimator.ratio, estimator.predicted)
+    step_to_the_estimate(estimator)
+    effector_points_into(tick.positions, tick.rotations, tick.effector_frames,
+                         tick.effector_offsets, estimator.effector_positions)
+    tip_covariance(estimator)
+
+
+@numba.njit(cache=True, inline='always')
+def load_columns(estimator):
+    """
+    Compute the load unknowns' columns ``K⁻¹ J_μᵀ`` and their ``W`` on the effectors (eq. 11).
+
+    ``mass_columns = K⁻¹ [r, J_μᵀ]`` (the load columns by the tick's block factor when
+    ``solve_mass`` is on, else as the caller left them) and ``mass_w = J_e K⁻¹ J_μᵀ``.
+    """
+    tick = estimator.tick
+    solved, rhs, load = tick.solved, tick.system.rhs, estimator.load
+    mass_columns, mass_rhs = estimator.mass_columns, estimator.mass_rhs
+    size, n_mass = solved.shape[0], load.shape[0]
+    for row in range(size):
+        mass_columns[row, 0] = solved[row, 0]
+        mass_rhs[row, 0] = rhs[row, 0]
+        for a in range(n_mass):
+            mass_rhs[row, 1 + a] = load[a, row]
+    if estimator.solve_mass[0]:
+        load_solved = estimator.load_solved
         for row in range(size):
-            mass_columns[row, 0] = solved[row, 0]
-            mass_rhs[row, 0] = rhs[row, 0]
             for a in range(n_mass):
-                mass_rhs[row, 1 + a] = load[a, row]
-        if estimator.solve_mass[0]:
-            load_solved = estimator.load_solved
-            for row in range(size):
-                for a in range(n_mass):
-                    load_solved[row, a] = load[a, row]
-            block_solve(factor, load_solved)
-            for row in range(size):
-                for a in range(n_mass):
-                    mass_columns[row, 1 + a] = load_solved[row, a]
-        effector_columns_into(rotations, tick.effector_frames, tick.effector_offsets,
-                              estimator.mass_levers, estimator.mass_effector_columns)
-        project_effectors_into(mass_columns, mass_rhs, estimator.mass_effector_columns,
-                               bool(False), tick.column_starts, positions, rotations,
-                               tick.effector_frames, tick.effector_offsets,
-                               estimator.mass_previous, estimator.mass_w, estimator.mass_w_aa,
-                               estimator.mass_offset, estimator.mass_moved)
-    for i in range(c):
+                load_solved[row, a] = load[a, row]
+        block_solve(tick.system.blocks[:size // 6], load_solved)
+        for row in range(size):
+            for a in range(n_mass):
+                mass_columns[row, 1 + a] = load_solved[row, a]
+    effector_columns_into(tick.rotations, tick.effector_frames, tick.effector_offsets,
+                          estimator.mass_levers, estimator.mass_effector_columns)
+    project_effectors_into(mass_columns, mass_rhs, estimator.mass_effector_columns,
+                           bool(False), tick.column_starts, tick.positions, tick.rotations,
+                           tick.effector_frames, tick.effector_offsets, estimator.mass_previous,
+                           estimator.mass_w, estimator.mass_w_aa, estimator.mass_offset,
+                           estimator.mass_moved)
+
+
+@numba.njit(cache=True, inline='always')
+def linear_lengths(estimator):
+    """
+    Linearise the pots' lengths after the Newton step in the unknowns: ``ℓ = base + H z``.
+
+    ``moved = J_s K⁻¹ [r, J_aᵀ, J_μᵀ]``; then ``ℓ = ℓ0 + J_s K⁻¹ r + W_sa (λ(z) - λ_lin) +
+    W_sμ (μ - μ_lin)`` with ``λ(z) = (1 + g) ∘ p + δ`` gives ``base`` (``z = 0``) and ``H``.
+    """
+    tick = estimator.tick
+    solved, mass_columns, jacobian, moved = (tick.solved, estimator.mass_columns,
+                                             estimator.jacobian, estimator.moved)
+    lam, p, scale = tick.actuation, estimator.pressures, estimator.unknown_scale
+    masses = estimator.masses
+    h, base, length0 = estimator.h, estimator.base, estimator.length0
+    size, m, n_mass = solved.shape[0], solved.shape[1] - 1, masses.size
+    for i in range(h.shape[0]):
         for j in range(m + 1 + n_mass):
             acc = 0.0
             if j <= m:
@@ -319,10 +353,6 @@ def estimate_from_linearisation(estimator):
                 for row in range(size):
                     acc += jacobian[i, row] * mass_columns[row, j - m]
             moved[i, j] = acc
-    # ℓ = ℓ0 + J_s K⁻¹ r + W_sa (λ(z) - λ_lin) + W_sμ (μ - μ_lin), λ(z) = (1 + g) ∘ p + δ
-    lam, p, scale = tick.actuation, estimator.pressures, estimator.unknown_scale
-    base, length0 = estimator.base, estimator.length0
-    for i in range(c):
         acc = length0[i] + moved[i, 0]
         for j in range(m):
             acc += moved[i, 1 + j] * (p[j] - lam[j])
@@ -332,37 +362,56 @@ def estimate_from_linearisation(estimator):
             acc -= moved[i, m + 1 + a] * masses[a]
             h[i, 2 * m + a] = moved[i, m + 1 + a] * scale[2 * m + a]
         base[i] = acc
-    # the offset's walk grows with the measured change of the pressures
-    walk, last = estimator.walk, estimator.last_pressures
+
+
+@numba.njit(cache=True, inline='always')
+def grow_offset_walk(estimator):
+    """Grow the offsets' random walk with the measured change of the pressures."""
+    walk, last, p = estimator.walk, estimator.last_pressures, estimator.pressures
+    scale, m = estimator.unknown_scale, p.size
     for j in range(m):
         change = estimator.change_walk * (p[j] - last[j]) / scale[m + j]
         walk[m + j] += change * change
         last[j] = p[j]
-    z, covariance = estimator.z, estimator.covariance
-    kalman_lengths(h, estimator.measured, estimator.noise, base, z, walk, covariance,
-                   estimator.stuck, estimator.gate_sigma if estimator.gate[0] else 0.0,
-                   estimator.active, estimator.kalman_gain, estimator.ratio,
-                   estimator.predicted)
-    # the Newton step of the same factorisation to the new actuation and weights
-    change = tick.change
+
+
+@numba.njit(cache=True, inline='always')
+def step_to_the_estimate(estimator):
+    """
+    Take the Newton step of the same factorisation to the estimated actuation and loads.
+
+    ``λ = (1 + g) ∘ p + δ`` and ``μ`` at the posterior; ``dq = K⁻¹ r + K⁻¹ J_μᵀ Δμ +
+    K⁻¹ J_aᵀ Δλ`` (:func:`~cbha_inverse.core._kernels.retraction.apply_linear_step_into`).
+    """
+    tick = estimator.tick
+    solved, mass_columns, masses = tick.solved, estimator.mass_columns, estimator.masses
+    lam, change, p = tick.actuation, tick.change, estimator.pressures
+    z, scale = estimator.z, estimator.unknown_scale
+    m, n_mass, free_step = p.size, masses.size, estimator.free_step
     for j in range(m):
         new = (1.0 + z[j] * scale[j]) * p[j] + z[m + j] * scale[m + j]
         change[j] = new - lam[j]
         lam[j] = new
-    free_step = estimator.free_step
-    for row in range(size):
+    for row in range(solved.shape[0]):
         acc = solved[row, 0]
         for a in range(n_mass):
             acc += mass_columns[row, 1 + a] * (z[2 * m + a] * scale[2 * m + a] - masses[a])
         free_step[row, 0] = acc
-    apply_linear_step_into(positions, rotations, free_step[:, 0], solved[:, 1:], change,
-                           tick.max_rotation, tick.increments, factor, bool(False))
+    apply_linear_step_into(tick.positions, tick.rotations, free_step[:, 0], solved[:, 1:],
+                           change, tick.max_rotation, tick.increments,
+                           tick.system.blocks[:solved.shape[0] // 6], bool(False))
     for a in range(n_mass):
         masses[a] = z[2 * m + a] * scale[2 * m + a]
-    effector_points_into(positions, rotations, tick.effector_frames, tick.effector_offsets,
-                         estimator.effector_positions)
-    last_row = tick.w_ea.shape[0] - 3
+
+
+@numba.njit(cache=True, inline='always')
+def tip_covariance(estimator):
+    """Propagate to the last effector's covariance ``W_pz Σ W_pzᵀ``, ``W_pz = d p / d z`` [m²]."""
+    tick = estimator.tick
+    p, scale, covariance = estimator.pressures, estimator.unknown_scale, estimator.covariance
     effector_w, mass_w = estimator.effector_w, estimator.mass_w
+    m, n_mass, u = p.size, estimator.masses.size, covariance.shape[0]
+    last_row = tick.w_ea.shape[0] - 3
     for i in range(3):
         for j in range(m):
             effector_w[i, j] = tick.w_ea[last_row + i, j] * p[j] * scale[j]
