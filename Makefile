@@ -42,7 +42,7 @@ PYTEST_ARGS ?=
 # processes untraced: test/coverage_timing.cfg). Two workers: three were no faster on 2 cores
 # (docs/lab-notes.md).
 TEST_WORKERS ?= 2
-# small dense solves are ~50x slower with OpenBLAS worker threads on 2 loaded cores
+# small dense solves are far slower with OpenBLAS worker threads on 2 loaded cores
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 

@@ -89,7 +89,7 @@ TYPICAL_FILE_SECONDS = {
     'test/system/test_installed_executables.py': 98.0, 'test/ros/test_ros_bag_play.py': 86.0,
     'test/scene/test_config_errors.py': 70.0, 'test/core/test_core_system.py': 65.0,
     'test/identify/test_identify_pots.py': 60.0, 'test/vision/test_vision_calibration.py': 48.0,
-    'test/vision/test_vision_tracking.py': 47.0}
+    'test/vision/test_vision_tracking.py': 47.0, 'test/system/test_warmup.py': 75.0}
 _FILE_SECONDS = {}
 
 

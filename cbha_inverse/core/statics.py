@@ -17,12 +17,12 @@ the plant evaluate the same physics with the same code:
 - Newton increments ``dq = T⁻¹ r`` (world axes, as for :func:`cbha_inverse.core.chain.retract`)
   with ``T = -dr/dq`` the exact, non-symmetric tangent: material + geometric part of the links
   and the actuators' exact load stiffness (quadratic convergence; the structural tangent alone
-  sees a tendon-compressed backbone as unstable), factored by LAPACK's band LU (``dgbtrf``,
-  the bandwidth of the scene, O(n)). If the tangent is singular, the step is not finite or the
-  line search rejects it, the iteration falls back to the material tangent (paper eq. 8, SPD
-  whatever the stresses, compiled band Cholesky): a modified-Newton step, robust where ``T``
-  is indefinite or singular (a chain near a limit point, high pressure). Both come from the
-  one fallback chain of the package,
+  sees a tendon-compressed backbone as unstable), factored by the compiled block LU of its
+  6 x 6 frame blocks (:mod:`cbha_inverse.core._kernels.block_lu`, O(n)). If the tangent is
+  singular, the step is not finite or the line search rejects it, the iteration falls back to
+  the material tangent (paper eq. 8, SPD whatever the stresses, compiled block Cholesky): a
+  modified-Newton step, robust where ``T`` is indefinite or singular (a chain near a limit
+  point, high pressure). Both come from the one fallback chain of the package,
   :meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors`;
 - the increment is applied in the chain's deformation coordinates
   (:func:`cbha_inverse.core._kernels.retraction.deformation_step`): full Newton steps stay

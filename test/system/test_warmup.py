@@ -1,6 +1,7 @@
-"""The install-time warm-up fills numba's cache for every kernel module the scenes use."""
+"""The install-time warm-up compiles every kernel once, into numba's cache, and later loads it."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -9,9 +10,9 @@ from cbha_inverse.paths import config_path
 # kernel modules of the benchmarks alone, which the warm-up leaves to them
 BENCHMARK_ONLY = {'flop_rate'}
 
-# Run in a child process: the warm-up, then, for every kernel module, what its compiled functions
-# did in this process (signatures) and through numba's cache (hits: loaded, misses: compiled and
-# written), and whether their cache index is on disk.
+# Run in a child process: the warm-up, then, for every kernel module, what each of its compiled
+# functions did in this process: its signatures (the copies compiled or loaded), its cache misses
+# (compiled and written) and hits (loaded), and whether its cache index is on disk.
 PROBE = """
 import json, sys
 from pathlib import Path
@@ -27,8 +28,7 @@ for module in kernel_modules():
     report[name] = [
         {'function': value.py_func.__name__, 'signatures': len(value.signatures),
          'cached': isinstance(value._cache, FunctionCache),
-         'through_cache': set(value.signatures)
-         <= set(value.stats.cache_hits) | set(value.stats.cache_misses),
+         'misses': len(value.stats.cache_misses), 'hits': len(value.stats.cache_hits),
          'index': value.signatures != [] and Path(value._cache._cache_file._index_path).exists()}
         for value in vars(module).values()
         if isinstance(value, Dispatcher) and value.py_func.__module__ == module.__name__]
@@ -36,31 +36,50 @@ print(json.dumps(report))
 """
 
 
-def test_warmup_writes_the_numba_cache_of_every_kernel_module():
-    """
-    The warm-up of a tendon scene and the CBHA reaches every kernel module through numba's cache.
-
-    The tendon scene runs the cable kernels, the CBHA the cavities and the shape estimator on its
-    string pots. In every kernel module (but the benchmarks' own, ``BENCHMARK_ONLY``, reached by
-    none) at least one compiled function gets a signature in the
-    warm-up's process, each such signature was loaded from numba's on-disk cache or compiled and
-    written to it (``make install`` ran the warm-up, so this costs seconds, not the minute of a
-    cold compile), and its cache index is on disk: a kernel module the warm-up does not reach, a
-    kernel without ``cache=True`` or one numba cannot cache fails.
-    """
-    out = subprocess.run([sys.executable, '-c', PROBE], capture_output=True, text=True,
-                         cwd=str(config_path().parents[0]), check=True, timeout=240)
+def run_warmup(cache):
+    """Run the warm-up of a tendon scene and the CBHA over the numba cache ``cache``."""
+    env = {**os.environ, 'NUMBA_CACHE_DIR': str(cache)}
+    out = subprocess.run([sys.executable, '-c', PROBE], capture_output=True, text=True, env=env,
+                         cwd=str(config_path().parents[0]), check=True, timeout=420)
     lines = out.stdout.strip().splitlines()
     assert lines[-3].startswith('warm-up: '), out.stdout
     assert lines[-3].endswith('(tendon_6f_8c, cbha)'), out.stdout
     assert lines[-2] == 'False', 'the warm-up must not import rclpy'
-    report = json.loads(lines[-1])
-    assert len(report) >= 7
-    for module, functions in report.items():
+    return json.loads(lines[-1])
+
+
+def test_the_warmup_compiles_every_kernel_once_into_the_cache_and_a_later_process_loads_it(
+        tmp_path):
+    """
+    From an empty cache the warm-up compiles each kernel once; a second process compiles nothing.
+
+    The tendon scene runs the cable kernels, the CBHA the cavities and the shape estimator on its
+    string pots. The first process starts from an empty ``NUMBA_CACHE_DIR`` (a cold compile, as
+    ``make install`` after a kernel changed): in every kernel module but the benchmarks' own
+    (``BENCHMARK_ONLY``) some compiled function is compiled; each compiled function has exactly
+    one signature (a caller passing a literal flag, a writable array where the others pass a
+    read-only one, or another layout compiles a second copy of it and of everything it calls),
+    was written to the cache and has its index on disk; the functions inlined into their callers
+    (``inline='always'``) have none. The second process, over the same cache, loads every entry
+    it calls and compiles nothing: a kernel without ``cache=True``, one numba cannot cache or one
+    whose cache entry misses fails.
+    """
+    cold = run_warmup(tmp_path / 'numba-cache')
+    assert len(cold) >= 7
+    for module, functions in cold.items():
         assert all(f['cached'] for f in functions), (module, functions)
-        used = [f for f in functions if f['signatures'] > 0]
+        compiled = [f for f in functions if f['signatures'] > 0]
         if module in BENCHMARK_ONLY:
-            assert not used, (module, used)
+            assert not compiled, (module, compiled)
             continue
-        assert used, f'the warm-up compiles nothing of the kernel module {module}'
-        assert all(f['through_cache'] and f['index'] for f in used), (module, used)
+        if functions:
+            assert compiled, f'the warm-up compiles nothing of the kernel module {module}'
+        for f in compiled:
+            assert (f['signatures'], f['misses'], f['hits']) == (1, 1, 0), (module, f)
+            assert f['index'], (module, f)
+    warm = run_warmup(tmp_path / 'numba-cache')
+    entries = [(module, f) for module, functions in warm.items() for f in functions
+               if f['signatures'] > 0]
+    assert entries
+    for module, f in entries:
+        assert (f['signatures'], f['misses'], f['hits']) == (1, 0, 1), (module, f)

@@ -7,7 +7,7 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
 1. linearise at the current state (:func:`cbha_inverse.core._kernels.evaluation.evaluate`, the
    static solver's evaluation too): tangent stiffness ``K`` (symmetric part of structure + load
    stiffness), actuator columns ``J_aᵀ`` and the residual ``r = f(q) + f_ext + J_aᵀ λ_prev``;
-2. factor ``K = L Lᵀ`` (compiled band Cholesky) and sweep ``L⁻¹ [r, J_aᵀ]`` and ``L⁻¹ J_eᵀ``
+2. factor ``K = L Lᵀ`` (compiled block Cholesky) and sweep ``L⁻¹ [r, J_aᵀ]`` and ``L⁻¹ J_eᵀ``
    forward, giving ``W_ea``, ``W_aa`` and ``δ_e^free`` as products of these half-solves
    (:func:`cbha_inverse.core._kernels.projection.project_effectors_into`); if ``K`` is not
    positive definite, the fallback chain
@@ -347,7 +347,7 @@ class InverseSolver:
         """
         Linearise, factor and project at the stored state and actuation (steps 1-2).
 
-        Applies a pending step first; the compiled linearisation, or, when its band Cholesky
+        Applies a pending step first; the compiled linearisation, or, when its block Cholesky
         fails, the fallback chain (:meth:`_fall_back`). Returns whether a factorization
         succeeded (the tick data then hold the linearisation).
         """
