@@ -48,7 +48,7 @@ export OMP_NUM_THREADS ?= 1
 
 .PHONY: demo test help venv install lint bench report constraints clean cover-kernels mutate
 
-demo: install  ## the closed-loop CBHA scene in simulation: tracking error and timing (~3 min)
+demo: install  ## the closed-loop CBHA scene in simulation: tracking error and timing (~2 min)
 	$(VPY) -m cbha_inverse.experiments.demo --output $(DEMO_OUT)
 
 # Coverage over both phases (the first phase's child processes included: coverage's patch =
@@ -57,7 +57,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
 # reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
-test: install  ## the whole test suite with coverage (~5.5 min on 2 quiet cores)
+test: install  ## the whole test suite with coverage (~7 min on 2 cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	listed=$$shared/timing-files; rm -f $$listed; \
 	start=$$(date +%s); \
