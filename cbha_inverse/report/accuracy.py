@@ -29,6 +29,7 @@ import platform
 import sys
 import time
 
+from cbha_inverse.core.inverse.results import HELD_STATUSES
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.report.bench_inverse import circle_targets
 from cbha_inverse.report.references import elastica_tip, straight_beam_chain
@@ -182,7 +183,7 @@ def closed_loop_rows(quick):
                 measured = plant.update(out.actuation).effector_positions
             for target in targets:
                 started = time.perf_counter()
-                out = solver.step(corrector.update(target, measured, out.status == 'saturated'))
+                out = solver.step(corrector.update(target, measured, out.status in HELD_STATUSES))
                 solver.prepare()
                 times.append(time.perf_counter() - started)
                 measured = plant.update(out.actuation).effector_positions

@@ -173,8 +173,9 @@ def test_a_thousand_ticks_allocate_nothing_but_their_results(name, every):
     numba counts every allocation of its runtime; each array passed from Python gets one
     wrapper (freed on return), the tick's buffers none (one compiled object, built once), so a
     tick that allocates nothing of its own makes exactly as many allocations as it passes
-    arrays: the targets to its one compiled call (``control_tick``), whether it linearises (or
-    applies a kept linearisation's step) or not. ``tracemalloc`` then sees numpy keep only the
+    arrays: the targets to its compiled call (``control_tick``), and the same array again to
+    the linearisation's own call on the ticks that linearise (every tick, or every fifth).
+    ``tracemalloc`` then sees numpy keep only the
     results' own arrays (actuation, effector positions, saturated flags) and no memory left
     behind by ticks whose results are dropped.
     """
@@ -204,7 +205,7 @@ def test_a_thousand_ticks_allocate_nothing_but_their_results(name, every):
         # temporaries that tracemalloc would take minutes to follow)
         assert made == 0
         return
-    assert made == 1000
+    assert made == 1000 + 1000 // every
 
     m, k = len(scene.actuator_names), len(scene.effector_names)
     domain = [tracemalloc.DomainFilter(True, np.lib.tracemalloc_domain)]
@@ -253,7 +254,8 @@ def test_targets_of_any_layout_give_the_same_tick():
     for layout in layouts:
         solver.reset()
         results.append(solver.step(layout))
-    assert results[0].status == 'solved'
+    # from the rest shape (not the equilibrium under gravity) the first tick says so
+    assert results[0].status == 'not_converged'
     for result in results[1:]:
         np.testing.assert_array_equal(result.actuation, results[0].actuation)
         np.testing.assert_array_equal(result.effector_positions, results[0].effector_positions)
@@ -342,7 +344,7 @@ def test_one_compiled_call_gives_the_ticks_of_the_calls_one_by_one(name, every, 
     assert statuses[4] == 'rejected'
     assert 'clamped' in one.step(targets[7]).warnings[0]
     assert 'not_positive_definite' in statuses[18:26]
-    assert statuses[-1] in ('solved', 'saturated')
+    assert statuses[-1] in ('solved', 'saturated'), statuses
 
 
 def test_one_compiled_call_hands_an_unconverged_active_set_to_proxsuite(monkeypatch):

@@ -1,10 +1,15 @@
 """Options and per-tick result of the inverse solver (:mod:`cbha_inverse.core.inverse.solver`)."""
 
 from dataclasses import dataclass
+import math
 from typing import NamedTuple
 
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 import numpy as np
+
+HELD_STATUSES = ('saturated', 'unreachable', 'not_converged')
+"""Tick statuses in which a bound, the reach or the state's convergence holds the effector: a
+closed loop's integral must not grow on them (anti-windup)."""
 
 
 @dataclass(frozen=True)
@@ -36,6 +41,18 @@ class InverseOptions:
         Largest frame rotation increment per Newton step.
     eps_abs : float
         QP tolerance (normalised problem).
+    equilibrium_tolerance : float  [m]
+        Largest distance of an effector from the model's equilibrium at the current actuation
+        for the state to count as an equilibrium. Each linearisation measures that distance to
+        first order, ``|J_e K⁻¹ r|`` (the effector move of a Newton step at fixed actuation);
+        above the tolerance the tick's status is ``'not_converged'`` and the solver narrows the
+        actuation's trust region until the state converges again (:class:`InverseSolver
+        <cbha_inverse.core.inverse.solver.InverseSolver>`). ``math.inf`` switches the check off
+        (the paper's tick: no trust region, no restoration).
+    unreachable_distance : float  [m]
+        Predicted effector gap above which a tick held by an actuator bound reports
+        ``'unreachable'`` rather than ``'saturated'``: the QP's optimum within the actuators'
+        range leaves the target this far away (``math.inf``: never).
     relinearize_every : int
         Ticks between linearisations. 1 (default) is the paper: tangent, factor,
         ``W`` and a Newton update at every tick. ``N > 1``: a linearisation is kept for up to
@@ -56,6 +73,8 @@ class InverseOptions:
     max_rotation_step: float = 0.5
     eps_abs: float = 1e-10
     relinearize_every: int = 1
+    equilibrium_tolerance: float = 2e-4
+    unreachable_distance: float = 1e-3
 
     def __post_init__(self):
         """Validate."""
@@ -66,6 +85,11 @@ class InverseOptions:
             raise ValueError('newton_steps must be >= 1')
         if self.relinearize_every < 1:
             raise ValueError('relinearize_every must be >= 1')
+        for name in ('equilibrium_tolerance', 'unreachable_distance'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and value > 0.0):
+                raise ValueError(f'{name} must be a positive distance [m] (inf: no check), '
+                                 f'got {value!r}')
 
 
 class TickResult(NamedTuple):
@@ -84,6 +108,12 @@ class TickResult(NamedTuple):
     status : str
         ``'solved'`` (QP solved, no bound limits the tracking), ``'saturated'`` (QP solved, some
         actuator is held by a bound the target pushes against: closest reachable point),
+        ``'unreachable'`` (saturated, and the predicted gap exceeds
+        :attr:`InverseOptions.unreachable_distance`: the target is outside what the actuators
+        reach; ``predicted_error`` is the distance), ``'not_converged'`` (the state the tick
+        linearised at is not an equilibrium of the model within
+        :attr:`InverseOptions.equilibrium_tolerance`: ``equilibrium_gap`` is the distance; the
+        actuation's step is narrowed until it converges),
         ``'qp_fallback'`` (proxsuite failed, the Gauss-Seidel solution is used),
         ``'not_positive_definite'`` (tangent not SPD: actuation held, state unchanged) or
         ``'rejected'`` (non-finite target or non-finite QP solution: actuation held, state
@@ -109,6 +139,9 @@ class TickResult(NamedTuple):
     warnings : tuple of str
         What the user should know about this tick (a clamped or rejected target, a held
         non-finite QP solution); a node logs them.
+    equilibrium_gap : float  [m]
+        Distance of the effectors from the model's equilibrium at the linearisation the tick
+        solved on, ``max_k |(J_e K⁻¹ r)_k|`` (NaN for a held tick).
 
     """
 
@@ -122,3 +155,4 @@ class TickResult(NamedTuple):
     residual_norm: float
     timings: dict
     warnings: tuple = ()
+    equilibrium_gap: float = math.nan

@@ -34,6 +34,7 @@ The closed-loop :class:`~cbha_inverse.core.inverse.correction.TargetCorrector` l
 :mod:`cbha_inverse.core.inverse.correction` (re-exported here).
 """
 
+from dataclasses import replace
 import math
 import time
 
@@ -49,6 +50,7 @@ from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
 from cbha_inverse.core.sections import (check_section_factors, rate_limited,
                                         SectionStiffness)
+from cbha_inverse.core.statics import solve_static
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
 
@@ -56,6 +58,22 @@ REACH_FACTOR = 2.0
 """Targets farther from the base than this many chain lengths are clamped onto that sphere."""
 FAST_MOVE = 0.02
 """An actuator moving more than this fraction of its range ends a kept linearisation."""
+MIN_TRUST_RADIUS = 1e-3
+"""Smallest trust region of the actuation's step per tick, as a fraction of each range."""
+TRUST_SHRINK = 0.5
+"""Factor on the trust radius after a linearisation away from equilibrium."""
+TRUST_GROW = 1.5
+"""Factor on the trust radius after a linearisation well within the equilibrium tolerance."""
+TRUST_GROW_BELOW = 0.25
+"""The radius grows when the equilibrium gap is below this fraction of the tolerance."""
+RESTORE_LOAD_STEPS = 16
+"""Load steps the static solver may take to restore an equilibrium from rest."""
+CONTRACTION = 0.5
+"""A gap above the tolerance that the last tick's Newton update did not shrink below this
+fraction of the one before: the updates diverge, and the static solver restores equilibrium."""
+CHECKED_MOVE = 0.02
+"""A tick moving an actuator by more than this fraction of its range checks its new state at once
+(it linearises there, as :meth:`InverseSolver.prepare` would next)."""
 
 
 class InverseSolver:
@@ -143,6 +161,7 @@ class InverseSolver:
         self._rate = (None if self.options.rate_limit is None
                       else np.array(np.broadcast_to(np.asarray(self.options.rate_limit, float),
                                                     (m,))))
+        self._span = span
         self._external = external_wrenches(model, gravity=gravity).reshape(-1)
         # the model's loads without a payload, and the payload's acceleration (set_payload)
         self._unloaded = self._external.copy()
@@ -152,6 +171,8 @@ class InverseSolver:
         self._sections = SectionStiffness(model.stiffnesses, sections or {})
         self.section_names = self._sections.names
         self._gains = np.ones(m)
+        self.restorations = 0         # static solves that restored an equilibrium (or tried)
+        self._scaled_model = None     # (section factors, the chain with their stiffness)
         self._system = EquilibriumSystem(model, actuators, self._external,
                                          stiffness=self._sections.stiffness)
         # no effector can be farther from the base than this (overflow-safe targets)
@@ -198,6 +219,11 @@ class InverseSolver:
         self._active_set.reset()
         self._linearised = False      # the tick data hold a valid linearisation
         self._residual_norm = math.nan
+        self._gap = math.nan          # its effectors' distance from equilibrium [m]
+        self._restored_gap = 0.0      # the gap before the static solver restored it [m]
+        self._model_changed = False   # a payload, stiffness or gain changed since
+        self._previous_gap = math.nan  # the gap of the linearisation before [m]
+        self._set_trust_radius(1.0)
         self._pending = False         # its linear step with the current actuation is not applied
         self._age = 0                 # ticks that have used it
         self._prepared = False        # prepare() made it for the next tick
@@ -265,27 +291,27 @@ class InverseSolver:
         """
         started = time.perf_counter()
         targets = self._target_array(targets)
-        fresh = not self._linearised or self._age >= self._every
+        # the linearisation (steps 1-2) when no prepare() made it: checked for equilibrium
+        # before the QP, as prepare() does
+        fresh = not (self._linearised and self._age < self._every)
+        if fresh and not self._prepare():
+            return self._held('not_positive_definite', started)
+        linearised = time.perf_counter() if fresh else started
         if not self._one_call:
             checked = target_status(targets, self._base, self._reach)
             if checked == 1:
                 return self._held('rejected', started, warnings=('non-finite target rejected',))
             clamped, warnings = self._reachable(targets) if checked == 2 else (targets, ())
-            return self._split_tick(clamped, fresh, warnings, started)
-        code, iterations, largest_gap, largest_move, binding, residual_norm = self._control_tick(
-            targets, self._record, fresh and self._pending, fresh, True, self._every == 1)
+            return self._split_tick(clamped, warnings, (started, linearised))
+        code, iterations, largest_gap, largest_move, binding, _ = self._control_tick(
+            targets, self._record, False, False, True, self._every == 1)
         called = time.perf_counter()
         if code == kernels.TARGET_NOT_FINITE:
             return self._held('rejected', started, warnings=('non-finite target rejected',))
         if code == kernels.BEYOND_REACH:
             clamped, warnings = self._reachable(targets)
-            return self._split_tick(clamped, fresh, warnings, started)
-        if fresh:
-            self._pending = False
-            if code == kernels.NOT_FACTORED:
-                return self._fall_back_tick(targets, (), started)
-        self._account(fresh, residual_norm)
-        linearised = called if fresh else started
+            return self._split_tick(clamped, warnings, (started, linearised))
+        self._account()
         if code == SOLVED:
             return self._close(targets, 'saturated' if binding else 'solved', 'solved',
                                iterations, self._data.free.copy(), largest_gap, largest_move,
@@ -308,6 +334,10 @@ class InverseSolver:
             False when no factorization of the tangent succeeds (the next step then holds).
 
         """
+        return self._prepare()
+
+    def _prepare(self):
+        """Linearise for the next tick unless the kept linearisation is valid (:meth:`prepare`)."""
         if self._linearised and self._age < self._every:
             return True
         self._linearised = self._linearise()
@@ -328,19 +358,9 @@ class InverseSolver:
             targets = np.array(targets, order='C')
         return targets
 
-    def _account(self, fresh, residual_norm=math.nan):
-        """
-        Count a tick on the linearisation: a fresh one starts at age 1, a kept one ages.
-
-        The tick after :meth:`prepare` is the first on its linearisation; ``residual_norm`` is
-        that of a fresh one made in the tick.
-        """
-        if fresh:
-            self._linearised, self._age = True, 1
-            if not math.isnan(residual_norm):
-                self._residual_norm = residual_norm
-        else:
-            self._age = 1 if self._prepared else self._age + 1
+    def _account(self):
+        """Count a tick on the linearisation: the first after :meth:`prepare` is at age 1."""
+        self._age = 1 if self._prepared else self._age + 1
         self._prepared = False
 
     def _linearise(self):
@@ -348,14 +368,31 @@ class InverseSolver:
         Linearise, factor and project at the stored state and actuation (steps 1-2).
 
         Applies a pending step first; the compiled linearisation, or, when its block Cholesky
-        fails, the fallback chain (:meth:`_fall_back`). Returns whether a factorization
+        fails, the fallback chain (:meth:`_fall_back`). It measures the state's distance from
+        equilibrium (:meth:`_measure_equilibrium`) and adapts the trust region of the next
+        steps to it (:meth:`_adapt_trust_region`); when the Newton updates diverge
+        (:meth:`_diverging`), the static solver restores the equilibrium at the current
+        actuation (:meth:`_restore_equilibrium`) and the linearisation is made again there
+        (``_restored_gap`` keeps the distance it was at). Returns whether a factorization
         succeeded (the tick data then hold the linearisation).
         """
+        factored = self._linearise_here()
+        self._restored_gap = 0.0
+        if factored:
+            self._adapt_trust_region(self._gap)
+            if self._diverging() and self._restore_equilibrium():
+                self._restored_gap = self._gap
+                factored = self._linearise_here()
+        return factored
+
+    def _linearise_here(self):
+        """Linearise at the stored state and measure its gap (:meth:`_linearise`'s steps)."""
         code, _, _, _, _, residual_norm = self._control_tick(
             self._data.effector_positions, self._record, self._pending, True, False, False)
         self._pending = False
         if code == SOLVED:
             self._residual_norm = residual_norm
+            self._measure_equilibrium()
             return True
         return self._fall_back()
 
@@ -371,26 +408,14 @@ class InverseSolver:
         if factor is None:
             return False
         self._residual_norm = self._data.project_factor(factor)
+        self._measure_equilibrium()
         return True
 
-    def _fall_back_tick(self, targets, warnings, started):
-        """Finish a tick whose compiled linearisation did not factor: the fallback chain."""
-        self._linearised = self._fall_back()
-        if not self._linearised:
-            return self._held('not_positive_definite', started)
-        self._account(True)
-        return self._solve(targets, True, warnings, (started, time.perf_counter()))
-
-    def _split_tick(self, targets, fresh, warnings, started):
-        """Run a tick whose linearisation and QP are calls of their own (module docstring)."""
-        if fresh:
-            self._linearised = self._linearise()
-            if not self._linearised:
-                return self._held('not_positive_definite', started)
+    def _split_tick(self, targets, warnings, times):
+        """Run a tick whose target check and QP are calls of their own (module docstring)."""
         prepared = self._prepared
-        self._account(fresh)
-        linearised = time.perf_counter() if fresh else started
-        return self._solve(targets, fresh or prepared, warnings, (started, linearised))
+        self._account()
+        return self._solve(targets, prepared, warnings, times)
 
     def _solve(self, targets, new_hessian, warnings, times):
         """Solve the QP of the tick data's linearisation and apply it (steps 3-4)."""
@@ -418,7 +443,7 @@ class InverseSolver:
         data = self._data
         delta_free = data.offset - targets.reshape(-1)
         problem = qp_problem(data.matrices, delta_free, self.actuation, self.lower_bounds,
-                             self.upper_bounds, rate_limit=self._rate)
+                             self.upper_bounds, rate_limit=self._step_limit())
         solution, status = self._solve_qp(problem, qp_solver, same_hessian)
         actuation, gap, largest_gap, largest_move, finite = tick_outcome(
             data.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
@@ -471,6 +496,8 @@ class InverseSolver:
         after its QP.
         """
         data = self._data
+        # the distance from equilibrium of the state the tick solved from
+        gap = max(self._gap, self._restored_gap)
         if self._age < self._every and largest_move > FAST_MOVE:
             # the actuation moves fast: the next tick relinearises
             self._age = self._every
@@ -489,9 +516,131 @@ class InverseSolver:
             self._pending = True
             effector_positions = (data.effector_positions.copy() if positions_written
                                   else targets + data.gap.reshape(-1, 3))
+        residual_norm = self._residual_norm
+        if status in ('solved', 'saturated'):
+            if (self._every == 1 and largest_move > CHECKED_MOVE
+                    and self.options.equilibrium_tolerance < math.inf and self._prepare()):
+                # a large step may leave the linearisation's reach: check the new state now
+                gap = max(gap, self._gap, self._restored_gap)
+                if self._restored_gap:
+                    effector_positions = self.effectors.positions(self._positions,
+                                                                  self._rotations)
+            status = self._tick_status(status, saturated, largest_gap, gap)
         return TickResult(self.actuation.copy(), effector_positions, status, qp_status,
-                          iterations, saturated, largest_gap, self._residual_norm,
-                          _timings(*times, time.perf_counter()), warnings)
+                          iterations, saturated, largest_gap, residual_norm,
+                          _timings(*times, time.perf_counter()), warnings, gap)
+
+    def _measure_equilibrium(self):
+        """
+        Measure how far the linearised state is from equilibrium (``_gap`` [m]).
+
+        The effector move of a Newton step at the current actuation, ``J_e K⁻¹ r`` (column 0
+        of the projection's ``moved``), is each effector's distance from the model's
+        equilibrium to first order.
+        """
+        moved = self._data.moved
+        gap = 0.0
+        for row in range(0, moved.shape[0], 3):
+            gap = max(gap, math.hypot(moved[row, 0], moved[row + 1, 0], moved[row + 2, 0]))
+        self._previous_gap, self._gap = self._gap, gap
+
+    def _diverging(self):
+        """
+        Return whether the state is off equilibrium and the Newton updates do not converge it.
+
+        The gap is above ``equilibrium_tolerance`` and not below :data:`CONTRACTION` of the
+        gap of the linearisation before (or there was none).
+        """
+        return self._gap > self.options.equilibrium_tolerance and not (
+            self._gap <= CONTRACTION * self._previous_gap)
+
+    def _restore_equilibrium(self):
+        """
+        Move the state to the model's equilibrium at the current actuation (paper eq. 9).
+
+        The package's static solver (:func:`cbha_inverse.core.statics.solve_static`: the exact
+        tangent, a line search, load steps if the warm start fails), warm-started from the
+        current state, with the solver's loads (gravity, payload), its sections' stiffness and
+        its actuator gains (a condensed cavity's wrench is linear in its pressure: gain ``g`` at
+        ``p`` is the built cavity at ``g p``). Returns whether the state was restored.
+        """
+        result = solve_static(
+            self._static_model(), frame_wrenches=self._external.reshape(-1, 6),
+            actuators=self.actuators, actuation=self.actuation * self._gains,
+            initial_state=ChainState(self._positions.copy(), self._rotations.copy()),
+            max_load_steps=RESTORE_LOAD_STEPS, check_warnings=False)
+        self.restorations += 1
+        if not result.converged:
+            return False
+        self._positions[:] = result.positions
+        self._rotations[:] = result.rotations
+        self._pending = False
+        return True
+
+    def _static_model(self):
+        """Return the chain with the sections' stiffness of the tick (built once per factors)."""
+        factors = tuple(self._sections.factors)
+        if self._scaled_model is None or self._scaled_model[0] != factors:
+            model = (self.model if all(f == 1.0 for f in factors)
+                     else replace(self.model, stiffnesses=self._sections.stiffness.copy()))
+            self._scaled_model = (factors, model)
+        return self._scaled_model[1]
+
+    def _adapt_trust_region(self, gap):
+        """
+        Narrow or widen the actuation's step per tick for an equilibrium gap ``gap`` [m].
+
+        Each linearisation adapts it before the QP that solves on it (:meth:`_linearise`).
+
+        A gap above ``equilibrium_tolerance`` after a tick's step means the step was more
+        than the linearisation can follow: the radius is halved (down to
+        :data:`MIN_TRUST_RADIUS` of each range), and with smaller steps each tick's Newton
+        update converges the state again. A gap that follows a change of the model (a payload,
+        the sections' stiffness, the actuators' gains) is the model's, not the step's: it is
+        left to the Newton updates. Well within the tolerance (below
+        :data:`TRUST_GROW_BELOW` of it) the radius grows back to the whole range.
+        """
+        tolerance = self.options.equilibrium_tolerance
+        changed, self._model_changed = self._model_changed, False
+        if gap > tolerance and not changed:
+            self._set_trust_radius(max(TRUST_SHRINK * self._radius, MIN_TRUST_RADIUS))
+        elif self._radius < 1.0 and gap < TRUST_GROW_BELOW * tolerance:
+            self._set_trust_radius(min(TRUST_GROW * self._radius, 1.0))
+
+    def _set_trust_radius(self, radius):
+        """Limit each actuator's change per tick to ``radius`` of its range (and the rate)."""
+        self._radius = radius
+        rate = self._data.rate
+        rate[:] = math.inf if self._rate is None else self._rate
+        if radius < 1.0:
+            np.minimum(rate, radius * self._span, out=rate)
+
+    def _step_limit(self):
+        """Return the largest change per tick of each actuator, or None for none."""
+        return None if self._rate is None and self._radius >= 1.0 else self._data.rate
+
+    def _tick_status(self, status, saturated, largest_gap, gap):
+        """
+        Return a solved tick's status: ``'not_converged'`` or ``'unreachable'`` where they hold.
+
+        ``'not_converged'``: the tick's equilibrium ``gap`` (of the linearisation it solved on,
+        or of its new state when it checked it) exceeds ``equilibrium_tolerance``.
+        ``'unreachable'``: an actuator bound holds the QP's optimum and the predicted gap
+        exceeds ``unreachable_distance``. A tick that only the trust region holds is
+        ``'solved'``: it steps toward the target, the next ticks continue.
+        """
+        if gap > self.options.equilibrium_tolerance:
+            return 'not_converged'
+        trust_region = self._radius < 1.0 and self._rate is None
+        far = largest_gap > self.options.unreachable_distance
+        if status != 'saturated' or not (far or trust_region):
+            return status
+        margin = 1e-9 * self._span
+        at_bound = (saturated & ((self.actuation <= self.lower_bounds + margin)
+                                 | (self.actuation >= self.upper_bounds - margin))).any()
+        if not at_bound:
+            return 'solved' if trust_region else status
+        return 'unreachable' if far else status
 
     def _newton_step(self):
         """Apply one full Newton step at the current actuation; return whether it succeeded."""
@@ -592,6 +741,7 @@ class InverseSolver:
             # the loads already carry it: the linearisation (prepared or not) stays valid
             return mass
         self._payload = mass
+        self._model_changed = True
         size = self._external.size
         self._external[size - 6:size - 3] = self._unloaded[size - 6:size - 3] + mass * (
             self._gravity)
@@ -634,6 +784,7 @@ class InverseSolver:
         """
         applied = self._sections.apply(factors, max_change)
         self._age = self._every
+        self._model_changed = True
         return applied
 
     @property
@@ -676,6 +827,7 @@ class InverseSolver:
         self._system.scale_cavities(applied)
         self._gains = applied
         self._age = self._every
+        self._model_changed = True
         return applied.copy()
 
     @property

@@ -31,7 +31,9 @@ import math
 import sys
 import time
 
+from cbha_inverse.core.inverse.episodes import StatusEpisodes
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
+from cbha_inverse.core.inverse.results import HELD_STATUSES
 from cbha_inverse.core.inverse.solver import TargetCorrector
 from cbha_inverse.core.sections import check_section_factors
 from cbha_inverse.robot.ordering import DROPPED, StampOrder
@@ -61,6 +63,12 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'inverse_solver'
+EPISODE_TEXT = {'not_converged': 'model state off equilibrium at the effector',
+                'unreachable': 'target beyond reach: closest reachable point at'}
+EPISODE_ACTION = {'not_converged': 'narrowing the actuation step until it converges',
+                  'unreachable': 'tracking the closest reachable point'}
+NOT_CONVERGED_ERROR_S = 1.0
+"""An episode off equilibrium longer than this [s] is an ERROR in the diagnostics."""
 
 
 @dataclass(frozen=True)
@@ -194,6 +202,8 @@ class InverseSolverNode(Node):
         self.published = 0
         self.ticks = 0
         self.statuses = {}
+        # ticks off equilibrium or beyond reach: logged once per episode, in the diagnostics
+        self.episodes = StatusEpisodes()
         self.tick_times = TimingStats()
         self.latencies = TimingStats()
         # the thread's CPU time over the same window: latency minus it is time spent waiting
@@ -362,7 +372,9 @@ class InverseSolverNode(Node):
         self.measured = point
         self.feedback_watch.mark(time.monotonic())
         if self.params.mode == 'closed' and self.target is not None and self.enabled:
-            saturated = self.last_result is not None and self.last_result.status == 'saturated'
+            # anti-windup: no integration while a bound, the reach or the model's convergence
+            # holds the tip
+            saturated = self.last_result is not None and self.last_result.status in HELD_STATUSES
             # the target of the measurement's own time: delivery delays and bursts of
             # measurements stay out of the integral
             reference = self.target_history.at(stamp, self.target)
@@ -436,6 +448,7 @@ class InverseSolverNode(Node):
         """``~/reset``: model state and closed-loop correction back to rest."""
         self.solver.reset()
         self.corrector.reset()
+        self.episodes.reset()
         self.last_result = None
         self.target_error = math.nan
         self._last_solve = -math.inf
@@ -463,6 +476,7 @@ class InverseSolverNode(Node):
         # off the target -> command path (``docs/design.md``)
         self.last_result = result
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
+        self._account_episode(result)
         for warning in result.warnings:
             self.log.warning('solver_warning', warning)
         self._last_solve = self._node_seconds()
@@ -476,6 +490,19 @@ class InverseSolverNode(Node):
         if self.tf is not None and every and self.ticks % every == 0:
             self._publish_tf()
         return published
+
+    def _account_episode(self, result):
+        """Log the start and the end of an episode off equilibrium or beyond reach, once each."""
+        figure = (result.equilibrium_gap if result.status == 'not_converged'
+                  else result.predicted_error)
+        started, ended = self.episodes.update(result.status, figure, time.monotonic())
+        logger = self.get_logger()
+        if ended is not None:
+            logger.info(f'{EPISODE_TEXT[ended.condition]} ended after {ended.duration:.2f} s, '
+                        f'{ended.ticks} ticks (worst {1e3 * ended.worst:.2f} mm)')
+        if started is not None:
+            logger.warning(f'{EPISODE_TEXT[started.condition]}: {1e3 * started.figure:.2f} mm '
+                           f'({EPISODE_ACTION[started.condition]})')
 
     def _count_failure(self, what, exc):
         self.statuses['exception'] = self.statuses.get('exception', 0) + 1
@@ -515,6 +542,7 @@ class InverseSolverNode(Node):
                   'qp_status': result.qp_status if result else '',
                   'residual_norm': result.residual_norm if result else math.nan,
                   'predicted_error_mm': 1e3 * result.predicted_error if result else math.nan,
+                  'equilibrium_gap_mm': 1e3 * result.equilibrium_gap if result else math.nan,
                   'saturated': ','.join(np.asarray(self.scene.actuator_names)[
                       result.saturated].tolist()) if result else '',
                   'target_age_s': self.target_watch.age(now),
@@ -531,8 +559,14 @@ class InverseSolverNode(Node):
         if self.params.actuator_gain_topic:
             values.update({f'actuator_gain.{name}': float(v) for name, v in
                            zip(self.scene.actuator_names, self.solver.actuator_gain)})
+        episode = self.episodes.current
         if result is not None and result.status == 'not_positive_definite':
             level, message = ERROR, 'model tangent not positive definite: holding'
+        elif episode is not None:
+            level = (ERROR if episode.condition == 'not_converged'
+                     and episode.duration > NOT_CONVERGED_ERROR_S else WARN)
+            message = (f'{EPISODE_TEXT[episode.condition]}: {1e3 * episode.figure:.2f} mm '
+                       f'for {episode.duration:.1f} s (worst {1e3 * episode.worst:.2f} mm)')
         elif self.decision in ('hold', 'vent'):
             level, message = WARN, f'stale feedback: {self.decision}'
         elif self.decision == 'disabled':
