@@ -26,21 +26,26 @@ def test_a_flickering_condition_is_one_episode_with_its_worst_figure():
     (t0, started, none), (t1, none_too, ended) = events
     assert none is None and none_too is None and started is ended
     assert (t0, t1) == (0.02, 0.16)
-    assert ended.condition == 'unreachable' and ended.ticks == 7
-    assert ended.worst == 0.006 and ended.figure == 0.005
+    assert ended.condition == 'unreachable' and ended.ticks == {'unreachable': 7}
+    assert ended.worst == {'unreachable': 0.006} and ended.figure == 0.005
     assert ended.duration == pytest.approx(0.13 - 0.02)
     assert episodes.current is None
 
 
-def test_another_condition_ends_the_episode_and_starts_its_own():
-    """From ``unreachable`` to ``not_converged``: one tick ends the first and starts the next."""
+def test_both_conditions_in_turn_are_one_episode_named_by_most_of_its_ticks():
+    """A target at the edge of the reach: unreachable, now and then off equilibrium."""
     episodes = StatusEpisodes()
-    events = run(episodes, [('unreachable', 0.002), ('not_converged', 0.03),
-                            ('not_converged', math.nan)])
-    assert [(e[1] and e[1].condition, e[2] and e[2].condition) for e in events] == [
-        ('unreachable', None), ('not_converged', 'unreachable')]
-    assert episodes.current.condition == 'not_converged'
-    assert episodes.current.worst == 0.03 and math.isnan(episodes.current.figure)
+    ticks = [('not_converged', 0.03)] + [('unreachable', 0.2), ('unreachable', 0.19),
+                                         ('not_converged', math.nan)] * 4
+    events = run(episodes, ticks)
+    assert len(events) == 1 and events[0][1] is episodes.current
+    episode = episodes.current
+    assert episode.ticks == {'not_converged': 5, 'unreachable': 8}
+    assert episode.condition == 'unreachable' and episode.figure == 0.19
+    assert episode.worst == {'not_converged': 0.03, 'unreachable': 0.2}
+    # a tie names the more severe condition
+    episode.ticks['not_converged'] = 8
+    assert episode.condition == 'not_converged' and math.isnan(episode.figure)
     episodes.reset()
     assert episodes.current is None
     assert episodes.update('solved', 0.0, 1.0) == (None, None)

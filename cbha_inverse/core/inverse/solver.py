@@ -62,7 +62,7 @@ MIN_TRUST_RADIUS = 1e-3
 """Smallest trust region of the actuation's step per tick, as a fraction of each range."""
 TRUST_SHRINK = 0.5
 """Factor on the trust radius after a linearisation away from equilibrium."""
-TRUST_GROW = 1.5
+TRUST_GROW = 1.25
 """Factor on the trust radius after a linearisation well within the equilibrium tolerance."""
 TRUST_GROW_BELOW = 0.25
 """The radius grows when the equilibrium gap is below this fraction of the tolerance."""

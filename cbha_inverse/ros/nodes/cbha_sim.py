@@ -193,6 +193,7 @@ class CbhaSimNode(Node):
         self.last_result = None
         self.last_stamp = None
         self.not_converged = 0
+        self.unconverged_since = None   # steady time of the first unconverged update in a row
         self.failures = 0
         self.resets = 0
         self.tick_times = TimingStats()
@@ -295,7 +296,20 @@ class CbhaSimNode(Node):
             return
         stamp = self.get_clock().now().to_msg()
         self.last_result, self.last_stamp = result, stamp
-        self.not_converged += not result.converged
+        if not result.converged:
+            # a state the static solve did not reach is no measurement of the plant: nothing
+            # is published until it converges again (logged once per episode)
+            self.not_converged += 1
+            if self.unconverged_since is None:
+                self.unconverged_since = time.monotonic()
+                self.get_logger().warning(
+                    f'plant static solve did not converge ({result.message}): no tip or pot '
+                    'readings published until it does')
+            return
+        if self.unconverged_since is not None:
+            self.get_logger().info(f'plant static solve converged again after '
+                                   f'{time.monotonic() - self.unconverged_since:.2f} s')
+            self.unconverged_since = None
         tip = result.effector_positions[-1]
         if self.params.tip_output in ('point', 'both'):
             self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
@@ -331,7 +345,8 @@ class CbhaSimNode(Node):
                   'camera_frames': self.cameras.frames if self.cameras else 0}
         level = WARN if total or (result is not None and not result.converged) else OK
         message = (f'{total} rejected commands' if total else
-                   'plant not converged' if level == WARN else 'ok')
+                   'plant not converged: no tip or pot readings published' if level == WARN
+                   else 'ok')
         return [make_status(self.get_name(), 'plant', level, message, values)]
 
 

@@ -63,8 +63,8 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'inverse_solver'
-EPISODE_TEXT = {'not_converged': 'model state off equilibrium at the effector',
-                'unreachable': 'target beyond reach: closest reachable point at'}
+EPISODE_TEXT = {'not_converged': 'model state off equilibrium at the effector by',
+                'unreachable': 'target beyond reach, the closest reachable point at'}
 EPISODE_ACTION = {'not_converged': 'narrowing the actuation step until it converges',
                   'unreachable': 'tracking the closest reachable point'}
 NOT_CONVERGED_ERROR_S = 1.0
@@ -498,8 +498,9 @@ class InverseSolverNode(Node):
         started, ended = self.episodes.update(result.status, figure, time.monotonic())
         logger = self.get_logger()
         if ended is not None:
-            logger.info(f'{EPISODE_TEXT[ended.condition]} ended after {ended.duration:.2f} s, '
-                        f'{ended.ticks} ticks (worst {1e3 * ended.worst:.2f} mm)')
+            summary = ', '.join(f'{EPISODE_TEXT[c]} {n} ticks (worst {1e3 * ended.worst[c]:.2f} '
+                                f'mm)' for c, n in ended.ticks.items())
+            logger.info(f'back to normal after {ended.duration:.2f} s: {summary}')
         if started is not None:
             logger.warning(f'{EPISODE_TEXT[started.condition]}: {1e3 * started.figure:.2f} mm '
                            f'({EPISODE_ACTION[started.condition]})')
@@ -565,8 +566,9 @@ class InverseSolverNode(Node):
         elif episode is not None:
             level = (ERROR if episode.condition == 'not_converged'
                      and episode.duration > NOT_CONVERGED_ERROR_S else WARN)
+            worst = episode.worst[episode.condition]
             message = (f'{EPISODE_TEXT[episode.condition]}: {1e3 * episode.figure:.2f} mm '
-                       f'for {episode.duration:.1f} s (worst {1e3 * episode.worst:.2f} mm)')
+                       f'for {episode.duration:.1f} s (worst {1e3 * worst:.2f} mm)')
         elif self.decision in ('hold', 'vent'):
             level, message = WARN, f'stale feedback: {self.decision}'
         elif self.decision == 'disabled':
