@@ -44,6 +44,10 @@ def test_payload_messages_walk_the_model_load_and_bad_ones_are_counted(rclpy_con
     assert walked == [0.02, 0.04, 0.05]
     # the load was linearised when it came, not in the target's tick
     assert solver.last_result.timings['assembly'] == 0.0
-    assert solver.last_result.status in ('solved', 'saturated')
+    # the new load moved the model's equilibrium some millimetres: the first tick after it
+    # starts off equilibrium and says so
+    assert solver.last_result.status in ('solved', 'saturated', 'not_converged')
+    assert solver.last_result.equilibrium_gap > 1e-3 or solver.last_result.status != (
+        'not_converged')
     assert solver.rejected == {'payload.out_of_range': 4}
     assert solver.solver.payload == 0.05

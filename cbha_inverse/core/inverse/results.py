@@ -130,12 +130,11 @@ class TickResult(NamedTuple):
         Norm of the equilibrium residual at the last linearisation (before its update).
     timings : dict
         Seconds spent in ``assembly`` (the whole linearisation, steps 1-2 of
-        :class:`~cbha_inverse.core.inverse.solver.InverseSolver`, one compiled call; 0 on a tick
-        that reuses a linearisation), ``qp`` (the QP, its outcome and, with the active set, the
-        Newton step and the effector positions), ``update`` (further Newton steps, the result)
-        and ``total``; ``factor`` and ``projection`` are 0 (they run inside the linearisation).
-        A tick of the active set that runs as one compiled call (one Newton step per tick)
-        counts that call as ``assembly`` when it linearised, else as ``qp``.
+        :class:`~cbha_inverse.core.inverse.solver.InverseSolver`; 0 on a tick on a prepared or
+        kept linearisation), ``qp`` (the QP, its outcome and, with the active set, the Newton
+        step and the effector positions), ``update`` (further Newton steps, a check of the new
+        state, the result) and ``total``; ``factor`` and ``projection`` are 0 (they run inside
+        the linearisation).
     warnings : tuple of str
         What the user should know about this tick (a clamped or rejected target, a held
         non-finite QP solution); a node logs them.

@@ -21,9 +21,18 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    further full Newton steps at fixed ``λ`` if requested (or, with ``relinearize_every > 1``,
    keep the linear model for a few ticks; see :class:`InverseOptions`).
 
-With the active-set QP and one Newton step per tick, the whole tick is one compiled call
-(:func:`cbha_inverse.core._kernels.tick.control_tick`); the other paths (a clamped or rejected
-target, the fallback chain, the QP solvers in Python, further Newton steps) call its parts.
+With the active-set QP and one Newton step per tick, a tick on a prepared linearisation
+(:meth:`InverseSolver.prepare`) is one compiled call
+(:func:`cbha_inverse.core._kernels.tick.control_tick`); a tick without one linearises first,
+in a call of its own, so that its linearisation is checked before the QP (below). The other
+paths (a clamped or rejected target, the fallback chain, the QP solvers in Python, further
+Newton steps) call its parts.
+
+Every linearisation measures the state's distance from equilibrium, ``|J_e K⁻¹ r|`` at the
+effectors, narrows the actuation's step per tick (a trust region) when it exceeds
+``equilibrium_tolerance``, and restores the equilibrium with the static solver when the Newton
+updates diverge; a tick solved from a state off equilibrium reads ``'not_converged'``
+(``docs/design.md``, "The state is an equilibrium, or the tick says it is not").
 
 Repeated ticks therefore run Newton's method on the coupled problem (equilibrium plus optimal
 actuation); at a fixed target the state converges to the static equilibrium of the returned
@@ -187,7 +196,8 @@ class InverseSolver:
         self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
         self._target_shape = (effectors.n_effectors, 3)
         self._every = self.options.relinearize_every
-        # the whole tick is one compiled call with the active set and one Newton step per tick
+        # a tick on a prepared linearisation is one compiled call with the active set and one
+        # Newton step per tick
         self._one_call = (self.options.qp_solver == 'active_set'
                           and self.options.newton_steps == 1)
         self._control_tick = self._data.entry('control_tick')
@@ -840,11 +850,10 @@ def _timings(started, linearised, solved, ended):
     """
     Return a tick's timings [s] from ``time.perf_counter()`` at its phases' ends.
 
-    ``assembly``: the linearisation (steps 1-2, one compiled call; 0 on a tick that keeps a
+    ``assembly``: the linearisation (steps 1-2; 0 on a tick on a prepared or kept
     linearisation), ``qp``: the QP, its outcome and (active set) the Newton step, ``update``:
-    further Newton steps and the result, ``total``; ``factor`` and ``projection`` are 0 (they
-    run inside the linearisation). A tick of the active set that is one compiled call counts it
-    as ``assembly`` when it linearised, else as ``qp``.
+    further Newton steps, a check of the new state and the result, ``total``; ``factor`` and
+    ``projection`` are 0 (they run inside the linearisation).
     """
     return {'assembly': linearised - started, 'factor': 0.0, 'projection': 0.0,
             'qp': solved - linearised, 'update': ended - solved, 'total': ended - started}

@@ -63,8 +63,9 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'inverse_solver'
-EPISODE_TEXT = {'not_converged': 'model state off equilibrium at the effector by',
-                'unreachable': 'target beyond reach, the closest reachable point at'}
+EPISODE_TEXT = {'not_converged': 'model state off equilibrium: the effector {:.2f} mm from it',
+                'unreachable': 'target beyond reach: the closest reachable point {:.2f} mm away'}
+"""What an episode's condition means, with its distance [mm]."""
 EPISODE_ACTION = {'not_converged': 'narrowing the actuation step until it converges',
                   'unreachable': 'tracking the closest reachable point'}
 NOT_CONVERGED_ERROR_S = 1.0
@@ -498,12 +499,12 @@ class InverseSolverNode(Node):
         started, ended = self.episodes.update(result.status, figure, time.monotonic())
         logger = self.get_logger()
         if ended is not None:
-            summary = ', '.join(f'{EPISODE_TEXT[c]} {n} ticks (worst {1e3 * ended.worst[c]:.2f} '
-                                f'mm)' for c, n in ended.ticks.items())
+            summary = ', '.join(f'{n} ticks {c} (worst {1e3 * ended.worst[c]:.2f} mm)'
+                                for c, n in ended.ticks.items())
             logger.info(f'back to normal after {ended.duration:.2f} s: {summary}')
         if started is not None:
-            logger.warning(f'{EPISODE_TEXT[started.condition]}: {1e3 * started.figure:.2f} mm '
-                           f'({EPISODE_ACTION[started.condition]})')
+            text = EPISODE_TEXT[started.condition].format(1e3 * started.figure)
+            logger.warning(f'{text} ({EPISODE_ACTION[started.condition]})')
 
     def _count_failure(self, what, exc):
         self.statuses['exception'] = self.statuses.get('exception', 0) + 1
@@ -567,8 +568,8 @@ class InverseSolverNode(Node):
             level = (ERROR if episode.condition == 'not_converged'
                      and episode.duration > NOT_CONVERGED_ERROR_S else WARN)
             worst = episode.worst[episode.condition]
-            message = (f'{EPISODE_TEXT[episode.condition]}: {1e3 * episode.figure:.2f} mm '
-                       f'for {episode.duration:.1f} s (worst {1e3 * worst:.2f} mm)')
+            message = (EPISODE_TEXT[episode.condition].format(1e3 * episode.figure)
+                       + f' for {episode.duration:.1f} s (worst {1e3 * worst:.2f} mm)')
         elif self.decision in ('hold', 'vent'):
             level, message = WARN, f'stale feedback: {self.decision}'
         elif self.decision == 'disabled':
