@@ -23,7 +23,7 @@ Scene YAML schema (SI units)::
     cavity_model: linear | mesh          # core.actuation.condensed_cavities / .cavities
     actuator_order: [names]              # column order (default: cables, then cavities)
     effectors: [{name, frame: <int or 'tip'> or vertebra: <int>, offset: [x, y, z]}]
-    workspace_center: [x, y, z] or {actuation_fraction: f}
+    workspace_center: [x, y, z], {actuation_fraction: f} or reachable_center  # see below
     sensors:                             # string potentiometers (core.sensors), optional
       - {name, kind: string_pot, angle_deg, radius, end_vertebra, start_vertebra (0)}  # or
       - {name, kind: string_pot, points: [{vertebra or frame, offset: [x, y, z]}, ...]}
@@ -34,6 +34,14 @@ Scene YAML schema (SI units)::
       actuator_gain: {<actuator name>: factor}       # cavity effective area, cable force/N
       tip_payload_mass: kg                           # mass added at the last frame
       base_offset: {position: [x, y, z], rpy: [r, p, y]}  # chain base in base_frame, m / rad
+
+``workspace_center`` is the suggested centre of target trajectories (``Scene.workspace_center``):
+explicit coordinates of the last effector; ``{actuation_fraction: f}``, the effectors with every
+actuator at ``f`` of its range; or ``reachable_center`` (``{reachable_center: {samples: N}}``,
+default 300 samples), the centre of the sampled reachable set
+(:func:`cbha_inverse.scene.reach.sample_reachable_set`: a reached position around which the
+largest circle fits in the hull of the reach), computed when first read (a few tenths of a
+second), deterministic. Without it: the effectors at rest.
 
 Frame 0 of the chain (the base) sits at the origin of ``base_frame``, or at
 ``calibration.base_offset`` when given: every frame, routing and effector point moves with it,
@@ -155,7 +163,7 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     effectors = _effectors(effector_items, model, vertebra_frames)
     sensors = _sensors(spec.sections('sensors', []), model, vertebra_frames)
     g = spec.vector('gravity', 3, (0.0, 0.0, -9.81)) if gravity is None else gravity
-    workspace = _workspace(spec)
+    workspace = _workspace(spec, len(actuators.names))
     if isinstance(workspace, tuple):
         workspace = tuple(base_rotation @ np.asarray(workspace) + base_position)
     return Scene(spec.text('name', path.stem), model, actuators, effectors, g,
@@ -186,14 +194,35 @@ def _actuator_set(spec, groups, n_frames):
         raise spec.error('actuator_order', str(exc)) from None
 
 
-def _workspace(spec):
-    """Return ``workspace_center``: None, three coordinates or ``{actuation_fraction: f}``."""
+def _workspace(spec, n_actuators):
+    """
+    Return ``workspace_center``: None, three coordinates, or its kind as a dict.
+
+    ``{'actuation_fraction': f}``, or ``{'reachable_center': samples}`` for ``reachable_center``
+    and ``{reachable_center: {samples: N}}``.
+    """
     if not spec.has('workspace_center'):
         return None
-    if isinstance(spec.data['workspace_center'], dict):
-        center = spec.section('workspace_center').only('actuation_fraction')
-        return {'actuation_fraction': center.number('actuation_fraction', minimum=0.0)}
-    return spec.vector('workspace_center', 3)
+    value = spec.data['workspace_center']
+    if isinstance(value, str) and value != 'reachable_center':
+        raise spec.error('workspace_center', 'must be [x, y, z], {actuation_fraction: f} or '
+                         f'reachable_center, got {value!r}')
+    if not isinstance(value, (str, dict)):
+        return spec.vector('workspace_center', 3)
+    center = spec.section('workspace_center') if isinstance(value, dict) else None
+    if center is not None:
+        center.only('actuation_fraction', 'reachable_center')
+        if 'reachable_center' not in center.data:
+            return {'actuation_fraction': center.number('actuation_fraction', minimum=0.0)}
+        if 'actuation_fraction' in center.data:
+            raise spec.error('workspace_center',
+                             'give actuation_fraction or reachable_center, not both')
+    from cbha_inverse.scene.reach import DEFAULT_SAMPLES, fewest_samples
+    samples = max(DEFAULT_SAMPLES, fewest_samples(n_actuators))
+    if center is not None and center.data['reachable_center'] is not None:
+        reach = center.section('reachable_center').only('samples')
+        samples = reach.integer('samples', samples, minimum=fewest_samples(n_actuators))
+    return {'reachable_center': samples}
 
 
 def _solver_defaults(spec):

@@ -143,14 +143,22 @@ class Scene:
         (k, 3) suggested centre of target trajectories [m].
 
         From the scene's ``workspace_center``: explicit coordinates (tip effector, moved with
-        the calibration's base offset; other effectors at rest), or ``{actuation_fraction: f}``
-        = the effectors at the uniform actuation ``lower + f (upper - lower)``. Without it: the
-        rest effector positions. For the CBHA this is the tip at mid pressure in every tube,
-        around which the paper's 60 mm circle in the y-z plane is reachable.
+        the calibration's base offset; other effectors at rest), ``{actuation_fraction: f}``
+        = the effectors at the uniform actuation ``lower + f (upper - lower)``, or
+        ``reachable_center`` = the last effector at the centre of its sampled reachable set
+        (:func:`cbha_inverse.scene.reach.sample_reachable_set`, computed here on first read,
+        deterministic; other effectors at rest). Without it: the rest effector positions. For
+        the CBHA this is the tip at mid pressure in every tube, around which the paper's 60 mm
+        circle in the y-z plane is reachable.
         """
         spec = self._workspace
         if spec is None:
             return self.rest_effector_positions.copy()
+        if isinstance(spec, dict) and 'reachable_center' in spec:
+            from cbha_inverse.scene.reach import sample_reachable_set
+            center = self.rest_effector_positions.copy()
+            center[-1] = sample_reachable_set(self, spec['reachable_center']).center
+            return center
         if isinstance(spec, dict):
             f = float(spec.get('actuation_fraction', 0.0))
             a = self.lower_bounds + f * (self.upper_bounds - self.lower_bounds)
