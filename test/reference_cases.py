@@ -31,9 +31,10 @@ REFERENCE = Path(__file__).resolve().parent / 'data' / 'reference_results.npz'
 TICKS = 40
 """Control ticks per tick case."""
 
-UNCHECKED = {'equilibrium_tolerance': math.inf, 'unreachable_distance': math.inf}
-"""The paper's tick: no equilibrium check (no trust region, no restoration) and no
-``'unreachable'`` status, as the recorded ticks were made."""
+UNCHECKED = {'equilibrium_tolerance': math.inf, 'unreachable_distance': math.inf,
+             'max_step': 1.0}
+"""The paper's tick: no equilibrium check (no trust region, no restoration), no step limit and
+no ``'unreachable'`` status, as the recorded ticks were made."""
 
 TICK_OPTIONS = {
     'default': UNCHECKED,

@@ -14,6 +14,7 @@ The results and how to read them: docs/stability-and-accuracy.md.
 import argparse
 from dataclasses import asdict, dataclass, field, replace
 import json
+import math
 from pathlib import Path
 import platform
 import sys
@@ -376,6 +377,188 @@ def target_cases():
     return cases
 
 
+EQUILIBRIUM_MATCH = 5e-4
+"""Distance [m] within which a tick's effectors must match the equilibrium of its command."""
+
+
+def _tendon_robot(seed):
+    """
+    Return the scene dict of a random beam-and-tendon robot of a fixed seed.
+
+    The parts of docs/own-robot.md: 1-3 sections of 2-6 vertebra intervals (0.06-0.25 m in
+    all), 3-9 tendons at random angles and radii (8-16 mm) ending at a section's last vertebra,
+    2-20 N each, gravity or none. The backbone (R 6 mm) is as stiff as it takes for the tendons
+    at full tension to bend it by 0.5-3 rad toward the side where they bend it most, for its own
+    weight to droop it by at most 15 % of its length and for the tendons to strain it by at most
+    8 % (linear estimates), as the property test's robots (test/core/random_robots.py).
+    """
+    rng = np.random.default_rng(seed)
+    ends = [int(end) for end in np.cumsum(rng.integers(2, 7, size=int(rng.integers(1, 4))))]
+    interval = float(rng.uniform(0.06, 0.25)) / ends[-1]
+    tendons = [{'name': f'tendon_{i}', 'angle_deg': round(float(rng.uniform(0.0, 360.0)), 3),
+                'radius': round(float(rng.uniform(0.008, 0.016)), 5),
+                'end_vertebra': ends[int(rng.integers(len(ends)))],
+                'max_tension': round(float(rng.uniform(2.0, 20.0)), 3)}
+               for i in range(int(rng.integers(3, 10)))]
+    gravity = bool(rng.random() < 0.7)
+    directions = np.deg2rad(np.arange(0.0, 360.0, 5.0))
+    # the tendons' bending moment times length, toward the side where it is largest [N m^2]
+    bending = sum(t['max_tension'] * t['radius'] * interval * t['end_vertebra']
+                  * np.maximum(np.cos(np.deg2rad(t['angle_deg']) - directions), 0.0)
+                  for t in tendons)
+    moment = float(bending.max())
+    radius, density = 0.006, 1100.0
+    second_moment, area = np.pi * radius ** 4 / 4.0, np.pi * radius ** 2
+    youngs_modulus = max(moment / float(rng.uniform(0.5, 3.0)) / second_moment,
+                         9.81 * density * area * (interval * ends[-1]) ** 3
+                         / (8.0 * 0.15 * second_moment),
+                         sum(t['max_tension'] for t in tendons) / (0.08 * area))
+    return _beam_robot(f'random seed {seed}', ends[-1], interval, youngs_modulus,
+                       tendons, gravity)
+
+
+def _beam_robot(name, n_vertebrae, interval, youngs_modulus, tendons, gravity=True):
+    """Return the scene dict of a solid 6 mm beam backbone with tendons and a tip effector."""
+    return {'name': name, 'gravity': [0.0, 0.0, -9.81 if gravity else 0.0],
+            'chain': {'type': 'beam_vertebrae', 'n_vertebrae': n_vertebrae,
+                      'beams_per_interval': 1, 'interval_length': round(interval, 6),
+                      'vertebra_mass': 0.0,
+                      'backbone': {'youngs_modulus': float(f'{youngs_modulus:.4g}'),
+                                   'poisson_ratio': 0.45, 'outer_radius': 0.006,
+                                   'inner_radius': 0.0, 'density': 1100.0}},
+            'cables': tendons,
+            'effectors': [{'name': 'tip', 'frame': 'tip', 'offset': [0.0, 0.0, 0.0]}],
+            'workspace_center': {'actuation_fraction': 0.3}}
+
+
+def _staggered_robot(stagger):
+    """
+    Return the three-section robot that limit-cycled off its equilibrium before the gap check.
+
+    3 x 4 intervals of 20 mm (0.24 m, the guide's rod as beams: E 20 MPa, R 6 mm), nine
+    tendons, three per section at 120 deg, each section's set turned by ``stagger`` degrees,
+    radius 12 mm, ending at vertebrae 4, 8 and 12, 0..10 N.
+    """
+    tendons = [{'name': f'section_{s}_{j}', 'angle_deg': 120.0 * j + stagger * s,
+                'radius': 0.012, 'end_vertebra': 4 * (s + 1), 'max_tension': 10.0}
+               for s in range(3) for j in range(3)]
+    return _beam_robot(f'staggered {stagger:g} deg', 12, 0.02, 2.0e7, tendons)
+
+
+def _robot_targets(scene, rng, n_inside):
+    """Return ``[(kind, targets)]``: forward solves at random tensions, and each moved 20-60 mm."""
+    targets = []
+    for _ in range(n_inside):
+        actuation = scene.lower_bounds + rng.random(scene.lower_bounds.size) * (
+            scene.upper_bounds - scene.lower_bounds) * (rng.random(scene.lower_bounds.size) > 0.3)
+        result = scene.forward(actuation, check_warnings=False)
+        if not result.converged:
+            continue
+        direction = rng.standard_normal(3)
+        targets += [('inside', result.effector_positions),
+                    ('outside', result.effector_positions
+                     + rng.uniform(0.02, 0.06) * direction / np.linalg.norm(direction))]
+    return targets
+
+
+def _equilibrium_contract(scene, targets, ticks):
+    """
+    Run ``ticks`` ticks (``step`` + ``prepare``) per target; return the contract's findings.
+
+    The contract of a tick: its command is finite and within the bounds; its effectors match the
+    equilibrium of its command (the forward solve warm-started from the solver's state) within
+    :data:`EQUILIBRIUM_MATCH`, or it or the next tick is ``'not_converged'``; ``'solved'``,
+    ``'saturated'`` and ``'unreachable'`` come with an ``equilibrium_gap`` within the
+    tolerance; after an inside target's ticks the effectors are within 1 mm of it or the
+    status is ``'unreachable'`` or ``'not_converged'``. Returns ``(violations, worst, counts)``:
+    the violations in words, the largest distance from equilibrium of a tick not flagged
+    ``'not_converged'`` [m] and counts of ticks, statuses and skipped forward solves.
+    """
+    solver = scene.make_inverse_solver()
+    tolerance = solver.options.equilibrium_tolerance
+    plan = [(kind, target) for kind, target in targets for _ in range(ticks)]
+    violations, worst, counts, ticks_done = [], 0.0, {'ticks': 0, 'skipped': 0}, []
+    for index, (kind, target) in enumerate(plan + plan[-1:]):
+        out = solver.step(target)
+        state = solver.state
+        solver.prepare()
+        if index == len(plan):
+            ticks_done.append((out, math.nan))
+            break
+        counts['ticks'] += 1
+        counts[out.status] = counts.get(out.status, 0) + 1
+        where = f'target {index // ticks} ({kind}), tick {index % ticks}'
+        if not _bounded(solver, out):
+            violations.append(f'{where}: command outside the bounds')
+        if out.status in ('solved', 'saturated', 'unreachable') and not (
+                out.equilibrium_gap <= tolerance):
+            violations.append(f'{where}: {out.status} with equilibrium gap '
+                              f'{out.equilibrium_gap * 1e3:.3f} mm')
+        forward = scene.forward(out.actuation, initial_state=state, check_warnings=False)
+        off = math.nan
+        if forward.converged:
+            off = float(np.linalg.norm(forward.effector_positions - out.effector_positions,
+                                       axis=1).max())
+        else:
+            counts['skipped'] += 1
+        ticks_done.append((out, off))
+        if kind == 'inside' and index % ticks == ticks - 1:
+            left = float(np.linalg.norm(out.effector_positions - target, axis=1).max())
+            if left > 1e-3 and out.status not in ('unreachable', 'not_converged'):
+                violations.append(f'{where}: {out.status} {left * 1e3:.2f} mm from the target')
+    for index, ((out, off), (after, _)) in enumerate(zip(ticks_done, ticks_done[1:])):
+        if 'not_converged' in (out.status, after.status) or not off >= 0.0:
+            continue
+        worst = max(worst, off)
+        if off > EQUILIBRIUM_MATCH:
+            violations.append(f'target {index // ticks}, tick {index % ticks}: {out.status} '
+                              f'{off * 1e3:.2f} mm off the equilibrium of its command '
+                              f'(equilibrium gap {out.equilibrium_gap * 1e3:.3f} mm)')
+    return violations, worst, counts
+
+
+def random_robot_cases(tmp_dir, quick):
+    """
+    Random tendon robots (fixed seeds) and the staggered three-section robot: the contract.
+
+    Each robot tracks targets inside its reach (forward solves at random tensions) and outside
+    it (moved 20-60 mm), the staggered robot its target 40 mm from the workspace centre toward
+    (0, -1, -1); every tick must keep the equilibrium contract of
+    :func:`_equilibrium_contract` (the property test test/core/test_random_robots.py draws
+    more robots, condensed chains and a closed loop).
+    """
+    ticks = 60 if quick else 120
+    robots = [(_staggered_robot(stagger), None) for stagger in (0.0, 40.0, 60.0)]
+    robots += [(_tendon_robot(seed), seed) for seed in range(1, 7 if quick else 25)]
+    cases = []
+    for spec, seed in robots:
+        path = Path(tmp_dir) / 'random_robot.yaml'
+        path.write_text(yaml.safe_dump(spec), encoding='utf-8')
+        scene = load_scene(path)
+        if seed is None:
+            targets = [('given', scene.workspace_center + 0.04 * np.array([0.0, -1.0, -1.0])
+                        / np.sqrt(2.0))]
+            n_ticks = 2 * ticks
+        else:
+            targets, n_ticks = _robot_targets(scene, np.random.default_rng(seed), 2), ticks
+        violations, worst, counts = _equilibrium_contract(scene, targets, n_ticks)
+        statuses = ', '.join(f'{counts[s]} {s}' for s in sorted(counts)
+                             if s not in ('ticks', 'skipped'))
+        message = (f'{len(targets)} targets, {counts["ticks"]} ticks ({statuses}); '
+                   f'{counts["skipped"]} forward solves did not converge')
+        if violations:
+            message = f'{len(violations)} violations, first: {violations[0]}; ' + message
+        cases.append(Case('random robots', spec['name'],
+                          'bounded; every tick at the equilibrium of its command (0.5 mm) or '
+                          'not_converged (it or the next); solved/saturated/unreachable within '
+                          'the equilibrium tolerance; inside targets reached (1 mm) or '
+                          'unreachable/not_converged', not violations, worst, message,
+                          {'ticks': counts['ticks'], 'violations': len(violations),
+                           'tendons': len(spec['cables']),
+                           'vertebrae': spec['chain']['n_vertebrae']}))
+    return cases
+
+
 def run_cases(quick, tmp_dir):
     """Run every case group; return the list of cases."""
     cases = []
@@ -384,6 +567,7 @@ def run_cases(quick, tmp_dir):
         cases += group(quick)
     cases += actuator_cases(tmp_dir)
     cases += target_cases()
+    cases += random_robot_cases(tmp_dir, quick)
     return cases
 
 

@@ -49,6 +49,12 @@ class InverseOptions:
         actuation's trust region until the state converges again (:class:`InverseSolver
         <cbha_inverse.core.inverse.solver.InverseSolver>`). ``math.inf`` switches the check off
         (the paper's tick: no trust region, no restoration).
+    max_step : float  [-]
+        Largest change of each actuator in one tick, as a fraction of its range: the widest
+        trust region of the actuation's step. 1 (default, the paper): a tick may move an
+        actuator across its whole range when the target jumps. Below 1 no tick moves the arm
+        by more than this step can, however far the target jumps (0.1 at 100 Hz: the whole
+        range in a tenth of a second); the approach to a far target then takes more ticks.
     unreachable_distance : float  [m]
         Predicted effector gap above which a tick held by an actuator bound reports
         ``'unreachable'`` rather than ``'saturated'``: the QP's optimum within the actuators'
@@ -74,6 +80,7 @@ class InverseOptions:
     eps_abs: float = 1e-10
     relinearize_every: int = 1
     equilibrium_tolerance: float = 2e-4
+    max_step: float = 1.0
     unreachable_distance: float = 1e-3
 
     def __post_init__(self):
@@ -85,6 +92,9 @@ class InverseOptions:
             raise ValueError('newton_steps must be >= 1')
         if self.relinearize_every < 1:
             raise ValueError('relinearize_every must be >= 1')
+        if not (isinstance(self.max_step, (int, float)) and 0.0 < self.max_step <= 1.0):
+            raise ValueError('max_step must lie in (0, 1] (a fraction of each actuator range), '
+                             f'got {self.max_step!r}')
         for name in ('equilibrium_tolerance', 'unreachable_distance'):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value > 0.0):

@@ -233,7 +233,7 @@ class InverseSolver:
         self._restored_gap = 0.0      # the gap before the static solver restored it [m]
         self._model_changed = False   # a payload, stiffness or gain changed since
         self._previous_gap = math.nan  # the gap of the linearisation before [m]
-        self._set_trust_radius(1.0)
+        self._set_trust_radius(self.options.max_step)
         self._pending = False         # its linear step with the current actuation is not applied
         self._age = 0                 # ticks that have used it
         self._prepared = False        # prepare() made it for the next tick
@@ -346,11 +346,11 @@ class InverseSolver:
         """
         return self._prepare()
 
-    def _prepare(self):
+    def _prepare(self, strict=False):
         """Linearise for the next tick unless the kept linearisation is valid (:meth:`prepare`)."""
         if self._linearised and self._age < self._every:
             return True
-        self._linearised = self._linearise()
+        self._linearised = self._linearise(strict)
         self._age, self._prepared = 0, self._linearised
         return self._linearised
 
@@ -373,7 +373,7 @@ class InverseSolver:
         self._age = 1 if self._prepared else self._age + 1
         self._prepared = False
 
-    def _linearise(self):
+    def _linearise(self, strict=False):
         """
         Linearise, factor and project at the stored state and actuation (steps 1-2).
 
@@ -383,14 +383,18 @@ class InverseSolver:
         steps to it (:meth:`_adapt_trust_region`); when the Newton updates diverge
         (:meth:`_diverging`), the static solver restores the equilibrium at the current
         actuation (:meth:`_restore_equilibrium`) and the linearisation is made again there
-        (``_restored_gap`` keeps the distance it was at). Returns whether a factorization
-        succeeded (the tick data then hold the linearisation).
+        (``_restored_gap`` keeps the distance it was at). With ``strict`` (after a large step,
+        where the first-order gap can underestimate the distance several times over) it
+        restores whenever the gap exceeds :data:`TRUST_GROW_BELOW` of the tolerance. Returns
+        whether a factorization succeeded (the tick data then hold the linearisation).
         """
         factored = self._linearise_here()
         self._restored_gap = 0.0
         if factored:
             self._adapt_trust_region(self._gap)
-            if self._diverging() and self._restore_equilibrium():
+            restore = self._diverging() or (
+                strict and self._gap > TRUST_GROW_BELOW * self.options.equilibrium_tolerance)
+            if restore and self._restore_equilibrium():
                 self._restored_gap = self._gap
                 factored = self._linearise_here()
         return factored
@@ -529,7 +533,8 @@ class InverseSolver:
         residual_norm = self._residual_norm
         if status in ('solved', 'saturated'):
             if (self._every == 1 and largest_move > CHECKED_MOVE
-                    and self.options.equilibrium_tolerance < math.inf and self._prepare()):
+                    and self.options.equilibrium_tolerance < math.inf
+                    and self._prepare(strict=True)):
                 # a large step may leave the linearisation's reach: check the new state now
                 gap = max(gap, self._gap, self._restored_gap)
                 if self._restored_gap:
@@ -608,14 +613,14 @@ class InverseSolver:
         update converges the state again. A gap that follows a change of the model (a payload,
         the sections' stiffness, the actuators' gains) is the model's, not the step's: it is
         left to the Newton updates. Well within the tolerance (below
-        :data:`TRUST_GROW_BELOW` of it) the radius grows back to the whole range.
+        :data:`TRUST_GROW_BELOW` of it) the radius grows back to ``max_step``.
         """
         tolerance = self.options.equilibrium_tolerance
         changed, self._model_changed = self._model_changed, False
         if gap > tolerance and not changed:
             self._set_trust_radius(max(TRUST_SHRINK * self._radius, MIN_TRUST_RADIUS))
-        elif self._radius < 1.0 and gap < TRUST_GROW_BELOW * tolerance:
-            self._set_trust_radius(min(TRUST_GROW * self._radius, 1.0))
+        elif self._radius < self.options.max_step and gap < TRUST_GROW_BELOW * tolerance:
+            self._set_trust_radius(min(TRUST_GROW * self._radius, self.options.max_step))
 
     def _set_trust_radius(self, radius):
         """Limit each actuator's change per tick to ``radius`` of its range (and the rate)."""
@@ -636,21 +641,17 @@ class InverseSolver:
         ``'not_converged'``: the tick's equilibrium ``gap`` (of the linearisation it solved on,
         or of its new state when it checked it) exceeds ``equilibrium_tolerance``.
         ``'unreachable'``: an actuator bound holds the QP's optimum and the predicted gap
-        exceeds ``unreachable_distance``. A tick that only the trust region holds is
-        ``'solved'``: it steps toward the target, the next ticks continue.
+        exceeds ``unreachable_distance``. A tick held by the trust region alone reads
+        ``'saturated'`` (a bound of its QP binds; the next ticks continue).
         """
         if gap > self.options.equilibrium_tolerance:
             return 'not_converged'
-        trust_region = self._radius < 1.0 and self._rate is None
-        far = largest_gap > self.options.unreachable_distance
-        if status != 'saturated' or not (far or trust_region):
+        if status != 'saturated' or largest_gap <= self.options.unreachable_distance:
             return status
         margin = 1e-9 * self._span
         at_bound = (saturated & ((self.actuation <= self.lower_bounds + margin)
                                  | (self.actuation >= self.upper_bounds - margin))).any()
-        if not at_bound:
-            return 'solved' if trust_region else status
-        return 'unreachable' if far else status
+        return 'unreachable' if at_bound else status
 
     def _newton_step(self):
         """Apply one full Newton step at the current actuation; return whether it succeeded."""

@@ -136,6 +136,9 @@ class InverseSolverParams:
     relinearize_every: int = param(1, 'ticks between linearisations (1 = every tick, the paper; '
                                    'N > 1 re-solves the QP of the last linear model in between)',
                                    low=1, high=1000)
+    max_step: float = param(1.0, 'largest change of each actuator per tick, as a fraction of its '
+                            'range (1: none, the paper; e.g. 0.1: no jump of the arm when the '
+                            'target jumps)', low=1e-3, high=1.0)
     qp_solver: str = param('active_set', 'QP of each tick: active_set (exact KKT solution of '
                            'the small box QP, proxsuite takes over if it does not converge), '
                            'proxsuite (dense, warm-started) or gauss_seidel (the paper)',
@@ -255,7 +258,7 @@ class InverseSolverNode(Node):
         self.upper, self.gate, self.vent_command, self.box = self._limits(p)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
-                                                     qp_solver=p.qp_solver)
+                                                     qp_solver=p.qp_solver, max_step=p.max_step)
         # compile the numba kernels (or load them from the cache) before any tick is timed
         started = time.perf_counter()
         self.solver.warm_up()
