@@ -8,8 +8,8 @@ the tick time (median and 99th percentile over the measured ticks) and its media
 Cholesky, the multi-RHS solve and the projection to W_ea, W_aa, δ_free and the QP matrices, one
 compiled call, and the check of its equilibrium gap; QP = the box QP with its checks, with the
 active set also the Newton step and the effector positions, one compiled call; update = the
-rest: Newton steps beyond the first, the check of a large step's new state, the result) beside the figures reported in the paper (SOFA, 2.66 GHz Core i7, 2015), and the distance
-to the limit: the tick's flops counted from its shapes
+rest: Newton steps beyond the first, the check of a large step's new state, the result) beside
+the figures reported in the paper (SOFA, 2.66 GHz Core i7, 2015), and the distance to the limit: the tick's flops counted from its shapes
 (:func:`cbha_inverse.report.tick_flops.tick_flops`), their time at this machine's measured rate
 of multiply-add chains (``bound``) and the median over it (``x bound``). ``lin`` is the
 ``relinearize_every`` option: 1 linearises at every tick (as the paper does); 5 keeps a
