@@ -3,23 +3,23 @@ Benchmark of the inverse-simulation control tick per scene (``cbha_bench_inverse
 
 For every scene the solver tracks a circle in the y-z plane around the scene's workspace centre
 (the paper's 60 mm circle for the CBHA, a 10 mm circle for the tendon trunks) and the table shows
-the tick time (median and 99th percentile over the measured ticks) and its median breakdown
-(lin = the linearisation: internal wrenches, tangent, actuator columns and load stiffness, block
-Cholesky, the multi-RHS solve and the projection to W_ea, W_aa, δ_free and the QP matrices, one
-compiled call, and the check of its equilibrium gap; QP = the box QP with its checks, with the
-active set also the Newton step and the effector positions, one compiled call; update = the
-rest: Newton steps beyond the first, the check of a large step's new state, the result) beside
-the figures reported in the paper (SOFA, 2.66 GHz Core i7, 2015), and the distance to the limit: the tick's flops counted from its shapes
-(:func:`cbha_inverse.report.tick_flops.tick_flops`), their time at this machine's measured rate
-of multiply-add chains (``bound``) and the median over it (``x bound``). ``lin`` is the
-``relinearize_every`` option: 1 linearises at every tick (as the paper does); 5 keeps a
-linearisation for up to 5 ticks (the ticks in between only re-solve the QP of the linear model,
-so their phases before the QP are ~0 and the median is theirs; the p99 is the linearisation
-tick). ``QP`` compares the exact active-set solver (the default) with proxsuite. The last
-columns give this machine's goal (median / p99, ``ok`` when met), the paper's tick time and the
-ratio paper / ours.
-A second table times the static forward solve (:func:`cbha_inverse.core.statics.solve_static`,
-which the simulated plant runs every tick) per Newton iteration, in ticks of the same run.
+the tick time (median and 99th percentile over the measured ticks) and its median breakdown (lin =
+the linearisation: internal wrenches, tangent, actuator columns and load stiffness, block Cholesky,
+the multi-RHS solve and the projection to W_ea, W_aa, δ_free and the QP matrices, one compiled
+call, and the check of its equilibrium gap; QP = the box QP with its checks, with the active set
+also the Newton step and the effector positions, one compiled call; update = the rest: Newton steps
+beyond the first, the check of a large step's new state, the result) beside the figures reported in
+the paper (SOFA, 2.66 GHz Core i7, 2015), and the distance to the limit: the tick's flops counted
+from its shapes (:func:`cbha_inverse.report.tick_flops.tick_flops`), their time at this machine's
+measured rate of multiply-add chains (``bound``) and the median over it (``x bound``). ``lin`` is
+the ``relinearize_every`` option: 1 linearises at every tick (as the paper does); 5 keeps a
+linearisation for up to 5 ticks (the ticks in between only re-solve the QP of the linear model, so
+their phases before the QP are ~0 and the median is theirs; the p99 is the linearisation tick).
+``QP`` compares the exact active-set solver (the default) with proxsuite. The last columns give
+this machine's goal (median / p99, ``ok`` when met), the paper's tick time and the ratio paper /
+ours. A second table times the static forward solve
+(:func:`cbha_inverse.core.statics.solve_static`, which the simulated plant runs every tick) per
+Newton iteration, in ticks of the same run.
 """
 
 import argparse
