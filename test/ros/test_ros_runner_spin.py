@@ -8,7 +8,8 @@ import time
 
 from cbha_inverse.ros.common.conversions import command_array, command_message
 from cbha_inverse.ros.common.qos import COMMAND_QOS
-from cbha_inverse.ros.common.runner import SignalSafeEvent, spin_until_stopped, StopRequest
+from cbha_inverse.ros.common.runner import (SignalSafeEvent, spin_until_stopped, StopRequest,
+                                            tear_down)
 import numpy as np
 from rclpy.node import Node
 from rclpy.task import Future
@@ -223,3 +224,22 @@ def test_signal_safe_event_runs_each_callback_once_as_a_future_does():
     assert event.done() and calls == [('first', event)]
     event.add_done_callback(lambda e: calls.append('late'))   # runs at once, as a done Future's
     assert calls == [('first', event), 'late']
+
+
+def test_a_teardown_that_does_not_return_ends_within_its_bound(rclpy_context, capfd):
+    """A ``destroy_node`` that blocks (as rclpy's now and then does) costs the bound, no more."""
+    node = Node('teardown_probe', context=rclpy_context)
+    release = threading.Event()
+    destroy = node.destroy_node
+    node.destroy_node = lambda: release.wait(10.0)
+    started = time.monotonic()
+    tear_down(node, 0.3)
+    waited = time.monotonic() - started
+    assert 0.3 <= waited < 2.0
+    assert 'did not return within 0.3 s' in capfd.readouterr().err
+    release.set()
+    node.destroy_node = destroy
+    started = time.monotonic()
+    tear_down(node, 5.0)
+    assert time.monotonic() - started < 2.0
+    assert capfd.readouterr().err == ''

@@ -24,6 +24,7 @@ objects as leaks (proxsuite's nanobind prints ~30 lines of them).
 import gc
 import signal
 import sys
+import threading
 
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.ros.common.loading import end_process, STOP_SIGNALS
@@ -39,6 +40,8 @@ INTERRUPTED_EXIT = 1
 
 SPIN_POLL_S = 0.1
 """Longest time [s] between a stop signal and the spin loop noticing it."""
+TEARDOWN_TIMEOUT_S = 5.0
+"""Longest wait [s] for ``destroy_node`` and rclpy's shutdown when a node process ends."""
 
 
 class SignalSafeEvent:
@@ -171,6 +174,32 @@ def spin_until_stopped(node, stop, done=None):
         executor.shutdown()
 
 
+def tear_down(node, timeout):
+    """
+    Destroy a node (if any) and shut rclpy down, waiting at most ``timeout`` seconds.
+
+    Now and then rclpy's ``destroy_node`` does not return after the events executor stopped
+    (it waits for the node's handle to be free); a process that ends right after
+    (:func:`~cbha_inverse.ros.common.loading.end_process`) must not hang on it. The teardown
+    then runs in a daemon thread, and a process that waited for it in vain says so on stderr
+    and ends all the same. ``timeout`` None: in this thread, without a bound.
+    """
+    def run():
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+    if timeout is None:
+        run()
+        return
+    worker = threading.Thread(target=run, name='teardown', daemon=True)
+    worker.start()
+    worker.join(timeout)
+    if worker.is_alive():
+        print(f'rclpy teardown did not return within {timeout:g} s: ending the process without '
+              'it', file=sys.stderr)
+
+
 def node_help(node_name, node_class, params_class, executable=None):
     """
     Return the ``--help`` text of a node.
@@ -268,9 +297,7 @@ def run_node(node_class, node_name, argv=None, *, params_class=None, executable=
         except (ParameterError, ConfigError, FileNotFoundError, ModuleNotFoundError) as exc:
             return report_config_error(node_name, exc)
         finally:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
+            tear_down(node, TEARDOWN_TIMEOUT_S if spun else None)
     code = 0
     if done is not None:
         code = int(done.result()) if done.done() else INTERRUPTED_EXIT
