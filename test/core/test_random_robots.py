@@ -15,10 +15,12 @@ admissible tensions) and outside it (an inside target moved by 20-60 mm), one
   ``equilibrium_tolerance``; ``'unreachable'`` has an actuator at a bound and a predicted gap
   above ``unreachable_distance``;
 - after the ticks on an inside target the model's effectors are within :data:`REACHED` of it, or
-  the status is ``'unreachable'`` or ``'not_converged'``;
-- a closed loop (``TargetCorrector``) on a 10 % softer plant, its target moving along ramps
-  through the same targets, never moves the plant's effectors by more per tick than the target
-  moves plus :data:`LOOP_STEP_BOUND`.
+  the status is ``'unreachable'`` or ``'not_converged'``, or the tick is ``'solved'`` and the
+  effectors still approach it (:data:`PROGRESS` closer than :data:`PROGRESS_TICKS` ticks before);
+- a closed loop (``TargetCorrector``) on a 10 % softer plant, its solver's step limited to
+  :data:`LOOP_MAX_STEP` of each range, its target moving along ramps through the same targets,
+  never moves the plant's effectors by more per tick than the target moves plus
+  :data:`LOOP_STEP_BOUND`.
 
 The test collects every violation of every robot and fails once at the end with all of them and
 the coverage (robots, targets, ticks) in its message (``pytest -s`` prints the coverage too).
