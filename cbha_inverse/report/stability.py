@@ -277,6 +277,35 @@ def _track(solver, target, ticks=30):
     return out
 
 
+def equilibrium_offset(scene, tick, state):
+    """
+    Return how far a tick's effectors are from the model's equilibrium at its command.
+
+    Parameters
+    ----------
+    scene : cbha_inverse.scene.Scene
+        The solver's scene.
+    tick : cbha_inverse.core.inverse.results.TickResult
+        The tick.
+    state : cbha_inverse.core.chain.ChainState
+        The solver's state right after the tick (the forward solve's warm start).
+
+    Returns
+    -------
+    offset : float  [m]
+        The largest effector distance from the forward solve of ``tick.actuation`` (NaN when
+        that solve did not converge).
+    forward : cbha_inverse.core.statics.StaticResult
+        The forward solve.
+
+    """
+    forward = scene.forward(tick.actuation, initial_state=state, check_warnings=False)
+    if not forward.converged:
+        return math.nan, forward
+    return float(np.linalg.norm(forward.effector_positions - tick.effector_positions,
+                                axis=1).max()), forward
+
+
 def _bounded(solver, out):
     """Whether a tick's actuation is finite and within the bounds."""
     return bool(np.all(np.isfinite(out.actuation)) and np.all(out.actuation >= solver.lower_bounds)
@@ -494,12 +523,8 @@ def _equilibrium_contract(scene, targets, ticks):
                 out.equilibrium_gap <= tolerance):
             violations.append(f'{where}: {out.status} with equilibrium gap '
                               f'{out.equilibrium_gap * 1e3:.3f} mm')
-        forward = scene.forward(out.actuation, initial_state=state, check_warnings=False)
-        off = math.nan
-        if forward.converged:
-            off = float(np.linalg.norm(forward.effector_positions - out.effector_positions,
-                                       axis=1).max())
-        else:
+        off, _ = equilibrium_offset(scene, out, state)
+        if math.isnan(off):
             counts['skipped'] += 1
         ticks_done.append((out, off))
         if kind == 'inside' and index % ticks == ticks - 1:

@@ -35,6 +35,7 @@ import time
 
 from cbha_inverse.core.inverse.correction import TargetCorrector
 from cbha_inverse.core.inverse.results import HELD_STATUSES
+from cbha_inverse.report.stability import equilibrium_offset
 from hypothesis import assume, given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
@@ -170,12 +171,8 @@ def check_contract(scene, targets, tally, label, ticks=TICKS):
         where = f'{kind} target {index // ticks}, tick {index % ticks}'
         if not _bounded(solver, out.actuation):
             tally.violation(label, f'{where}: command {out.actuation} outside the bounds')
-        forward = scene.forward(out.actuation, initial_state=state, check_warnings=False)
-        off = math.nan
-        if forward.converged:
-            off = float(np.linalg.norm(forward.effector_positions - out.effector_positions,
-                                       axis=1).max())
-        else:
+        off, forward = equilibrium_offset(scene, out, state)
+        if math.isnan(off):
             tally.counts['forward_skipped'] += 1
         records.append((out, (where, off, forward)))
         if out.status in ('solved', 'saturated', 'unreachable') and not (
