@@ -548,6 +548,7 @@ class InverseSolverNode(Node):
                   'residual_norm': result.residual_norm if result else math.nan,
                   'predicted_error_mm': 1e3 * result.predicted_error if result else math.nan,
                   'equilibrium_gap_mm': 1e3 * result.equilibrium_gap if result else math.nan,
+                  'restorations': self.solver.restorations,
                   'saturated': ','.join(np.asarray(self.scene.actuator_names)[
                       result.saturated].tolist()) if result else '',
                   'target_age_s': self.target_watch.age(now),
