@@ -181,9 +181,13 @@ def closed_loop_rows(quick):
             for settle in range(int(rate)):
                 out = solver.step(corrector.update(targets[0], measured))
                 measured = plant.update(out.actuation).effector_positions
+            goal = None
             for target in targets:
                 started = time.perf_counter()
-                out = solver.step(corrector.update(target, measured, out.status in HELD_STATUSES))
+                held = out.status in HELD_STATUSES
+                goal = corrector.update(target, measured, held,
+                                        None if goal is None else goal - out.effector_positions)
+                out = solver.step(goal)
                 solver.prepare()
                 times.append(time.perf_counter() - started)
                 measured = plant.update(out.actuation).effector_positions

@@ -2,6 +2,7 @@
 
 from typing import NamedTuple
 
+from cbha_inverse.core.inverse.correction import MIN_BLOCKED_GAP
 from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
                                           ProxsuiteQP, qp_matrices, qp_problem)
 from cbha_inverse.core.inverse.solver import TargetCorrector
@@ -123,6 +124,53 @@ def test_target_corrector_integrates_clamps_and_stops_winding_up():
     corr.update(target, [[np.nan] * 3])
     assert np.all(np.isfinite(corr.correction))
     np.testing.assert_array_equal(TargetCorrector(1, gain=0.0).update(target, target + 1), target)
+
+
+def test_target_corrector_drops_only_the_outward_part_along_a_predicted_gap():
+    corr = TargetCorrector(2, gain=0.5, max_correction=0.01)
+    target = np.array([[0.1, 0.0, 0.0], [0.2, 0.0, 0.0]])
+    gap = np.array([[0.0, 0.005, 0.0], [0.0, MIN_BLOCKED_GAP / 2, 0.0]])
+    # effector 0: the reach blocks +y, the x part integrates although |c| grows;
+    # effector 1: its gap is too short to name a direction, conditional integration holds it
+    corr.update(target, target - [[0.002, 0.004, 0.0], [0.002, 0.004, 0.0]], saturated=True,
+                predicted_gap=gap)
+    np.testing.assert_allclose(corr.correction, [[0.001, 0.0, 0.0], [0.0, 0.0, 0.0]],
+                               atol=1e-15)
+    # inward along the gap integrates in full
+    corr.update(target, target + [[0.0, 0.002, 0.0], [0.0, 0.0, 0.0]], saturated=True,
+                predicted_gap=gap)
+    np.testing.assert_allclose(corr.correction[0], [0.001, -0.001, 0.0], atol=1e-15)
+    # not held: the gap is ignored; a NaN gap row falls back to conditional integration
+    corr.update(target, target - [[0.0, 0.002, 0.0], [0.0, 0.0, 0.0]], predicted_gap=gap)
+    np.testing.assert_allclose(corr.correction[0], [0.001, 0.0, 0.0], atol=1e-15)
+    corr.update(target, target - [[0.0, 0.002, 0.0], [0.0, 0.0, 0.0]], saturated=True,
+                predicted_gap=[[np.nan] * 3, [0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(corr.correction[0], [0.001, 0.0, 0.0], atol=1e-15)
+
+
+def test_directional_anti_windup_reaches_the_plants_nearest_point_beyond_the_reach():
+    """
+    A model that reaches y <= 0 (it returns the goal's projection), a plant offset from it.
+
+    The plant reaches y <= 1 mm; the target lies 9 mm beyond that: the closed loop with the
+    predicted gap ends at the plant's nearest point (9 mm away), the conditional integration,
+    held from the first tick, at the model's mismatch from it.
+    """
+    offset = np.array([0.002, 0.001, 0.0])
+    target = np.array([[0.0, 0.010, 0.0]])
+    for with_gap in (True, False):
+        corr = TargetCorrector(1, gain=0.2, max_correction=0.03)
+        measured, model, goal = None, None, None
+        for _ in range(200):
+            gap = None if model is None or not with_gap else goal - model
+            goal = corr.update(target, measured, saturated=model is not None, predicted_gap=gap)
+            model = goal * [1.0, 0.0, 1.0] + np.minimum(goal, 0.0) * [0.0, 1.0, 0.0]
+            measured = model + offset
+        distance = np.linalg.norm(measured - target)
+        if with_gap:
+            assert distance == pytest.approx(0.009, abs=1e-9)
+        else:
+            assert distance == pytest.approx(np.hypot(0.002, 0.009), abs=1e-9)
 
 
 def test_corrected_target_adds_the_integral_without_integrating():

@@ -239,10 +239,12 @@ def check_closed_loop(scene, plant, targets, tally, label):
     path = ramp([target for _, target in targets], scene.rest_effector_positions)
     result = plant.forward(solver.actuation.copy(), check_warnings=False)
     plant_state, measured = result.state, result.effector_positions
-    out, previous_target, elapsed = None, scene.rest_effector_positions, 0
+    out, goal, previous_target, elapsed = None, None, scene.rest_effector_positions, 0
     for index, target in enumerate(path):
         saturated = out is not None and out.status in HELD_STATUSES
-        out = solver.step(corrector.update(target, measured, saturated=saturated))
+        predicted_gap = None if out is None else goal - out.effector_positions
+        goal = corrector.update(target, measured, saturated=saturated, predicted_gap=predicted_gap)
+        out = solver.step(goal)
         solver.prepare()
         tally.counts['loop_ticks'] += 1
         if not _bounded(solver, out.actuation):

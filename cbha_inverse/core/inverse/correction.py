@@ -2,6 +2,10 @@
 
 import numpy as np
 
+#: [m] a predicted gap longer than this names the direction the reach blocks (shorter: its
+#: direction is noise, and the conditional integration applies)
+MIN_BLOCKED_GAP = 1e-4
+
 
 class TargetCorrector:
     """
@@ -9,9 +13,14 @@ class TargetCorrector:
 
     The model is asked to reach ``target + c``; every update integrates
     ``c ← c + gain · (target - measured)`` and clamps ``|c|`` per effector to ``max_correction``.
-    Anti-windup: while the solver reports saturation, an update that would increase ``|c|`` is
-    skipped (conditional integration). Effectors without a measurement (NaN rows) are not
-    integrated. Open loop is ``gain = 0`` (the paper's mode).
+    Anti-windup, while the solver holds (a bound, the reach or its convergence): where the
+    model predicts a gap ``p`` between the corrected target it was given and the effector
+    position it reached, the reach blocks the direction of ``p`` only, so the update loses its
+    component outward along ``p`` and integrates the rest: the tip slides along the edge of the
+    reach to the point nearest the target instead of staying where the hold began. Where no gap
+    is predicted (``|p|`` below :data:`MIN_BLOCKED_GAP`, or no ``p`` given), an update that would
+    increase ``|c|`` is skipped (conditional integration). Effectors without a measurement (NaN
+    rows) are not integrated. Open loop is ``gain = 0`` (the paper's mode).
 
     Parameters
     ----------
@@ -36,7 +45,7 @@ class TargetCorrector:
         """Forget the integral."""
         self.correction[:] = 0.0
 
-    def update(self, target, measured, saturated=False):
+    def update(self, target, measured, saturated=False, predicted_gap=None):
         """
         Integrate one measurement and return the corrected target.
 
@@ -47,7 +56,12 @@ class TargetCorrector:
         measured : (k, 3) array_like or None  [m]
             Measured positions (NaN rows: not measured; None: nothing measured).
         saturated : bool
-            Whether the last tick saturated (anti-windup).
+            Whether the last tick held: status in
+            :data:`~cbha_inverse.core.inverse.results.HELD_STATUSES` (anti-windup).
+        predicted_gap : (k, 3) array_like or None  [m]
+            The last tick's corrected target minus the effector positions its model reached
+            (``goal - result.effector_positions``): the direction the reach blocks while it
+            holds. None: conditional integration for every effector.
 
         Returns
         -------
@@ -59,13 +73,18 @@ class TargetCorrector:
         if measured is not None and self.gain > 0.0:
             error = target - np.asarray(measured, dtype=float).reshape(target.shape)
             valid = np.all(np.isfinite(error), axis=1)
-            proposal = self.correction + self.gain * np.where(valid[:, None], error, 0.0)
+            increment = self.gain * np.where(valid[:, None], error, 0.0)
+            blocked = np.zeros(increment.shape[0], dtype=bool)
+            if saturated and predicted_gap is not None:
+                blocked, increment = _without_blocked_part(increment, predicted_gap)
+            proposal = self.correction + increment
             norms = np.linalg.norm(proposal, axis=1)
             too_long = norms > self.max_correction
             proposal[too_long] *= (self.max_correction / norms[too_long])[:, None]
             if saturated:
                 grows = np.linalg.norm(proposal, axis=1) > np.linalg.norm(self.correction, axis=1)
-                proposal[grows] = self.correction[grows]
+                held = grows & ~blocked
+                proposal[held] = self.correction[held]
             self.correction = proposal
         return self.corrected(target)
 
@@ -95,3 +114,33 @@ class TargetCorrector:
         if shape != correction.shape and not (shape == (3,) and correction.shape[0] == 1):
             raise ValueError(f'target must have shape {correction.shape}, got {shape}')
         return correction + target
+
+
+def _without_blocked_part(increment, predicted_gap):
+    """
+    Drop the part of each correction increment that points outward along its predicted gap.
+
+    Parameters
+    ----------
+    increment : (k, 3) ndarray  [m]
+        ``gain · (target - measured)`` per effector.
+    predicted_gap : (k, 3) array_like  [m]
+        Corrected target minus the model's effector position, per effector.
+
+    Returns
+    -------
+    blocked : (k,) ndarray of bool
+        The effectors whose gap is longer than :data:`MIN_BLOCKED_GAP` (their increment is
+        projected).
+    increment : (k, 3) ndarray  [m]
+        The increment without its outward component ``max(Δ·u, 0) u`` along the gap's unit
+        direction ``u``, for the blocked effectors; unchanged for the others.
+
+    """
+    gap = np.asarray(predicted_gap, dtype=float).reshape(increment.shape)
+    lengths = np.linalg.norm(gap, axis=1)
+    blocked = lengths > MIN_BLOCKED_GAP          # False for NaN rows as well
+    direction = np.zeros_like(gap)
+    direction[blocked] = gap[blocked] / lengths[blocked, None]
+    outward = np.maximum(np.sum(increment * direction, axis=1), 0.0)
+    return blocked, increment - outward[:, None] * direction

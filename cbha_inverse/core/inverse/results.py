@@ -9,7 +9,8 @@ import numpy as np
 
 HELD_STATUSES = ('saturated', 'unreachable', 'not_converged')
 """Tick statuses in which a bound, the reach or the state's convergence holds the effector: a
-closed loop's integral must not grow on them (anti-windup)."""
+closed loop's integral must not grow on them, or only across the gap the model predicts
+(anti-windup, :class:`~cbha_inverse.core.inverse.correction.TargetCorrector`)."""
 
 
 @dataclass(frozen=True)

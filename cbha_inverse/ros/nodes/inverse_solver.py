@@ -200,6 +200,7 @@ class InverseSolverNode(Node):
         self.resets = 0
         self.target_stale = False
         self.last_result = None
+        self.last_goal = None        # the corrected target of last_result's tick [m]
         self._last_solve = -math.inf
         self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
         self.rejected = Rejections(self.log)
@@ -376,13 +377,16 @@ class InverseSolverNode(Node):
         self.measured = point
         self.feedback_watch.mark(time.monotonic())
         if self.params.mode == 'closed' and self.target is not None and self.enabled:
-            # anti-windup: no integration while a bound, the reach or the model's convergence
-            # holds the tip
-            saturated = self.last_result is not None and self.last_result.status in HELD_STATUSES
+            # anti-windup: while a bound, the reach or the model's convergence holds the tip, no
+            # integration outward along the gap the model predicts (``TargetCorrector``)
+            result = self.last_result
+            saturated = result is not None and result.status in HELD_STATUSES
+            predicted_gap = None if result is None else self.last_goal - result.effector_positions
             # the target of the measurement's own time: delivery delays and bursts of
             # measurements stay out of the integral
             reference = self.target_history.at(stamp, self.target)
-            self.corrector.update(reference[None], point[None], saturated=saturated)
+            self.corrector.update(reference[None], point[None], saturated=saturated,
+                                  predicted_gap=predicted_gap)
             self.target_error = float(np.linalg.norm(reference - point))
 
     # control --------------------------------------------------------------------------------
@@ -454,6 +458,7 @@ class InverseSolverNode(Node):
         self.corrector.reset()
         self.episodes.reset()
         self.last_result = None
+        self.last_goal = None
         self.target_error = math.nan
         self._last_solve = -math.inf
         self.resets += 1
@@ -478,7 +483,7 @@ class InverseSolverNode(Node):
         published = time.perf_counter(), time.thread_time()
         # the bookkeeping and the linearisation for the next tick come after the publication,
         # off the target -> command path (``docs/design.md``)
-        self.last_result = result
+        self.last_result, self.last_goal = result, goal
         self.statuses[result.status] = self.statuses.get(result.status, 0) + 1
         self._account_episode(result)
         for warning in result.warnings:
