@@ -7,7 +7,8 @@ the order of the paper's section IV:
 1. :func:`linearise_tick`, steps 1-2: the equilibrium's residual, ``J_aᵀ`` and symmetric
    tangent at the current state (:func:`~cbha_inverse.core._kernels.evaluation.evaluate`), the
    block Cholesky ``K = L Lᵀ`` with the forward sweep of ``[r, J_aᵀ]``, the sweep of ``J_eᵀ``,
-   then :func:`project_tick`: ``W_ea``, ``W_aa``, ``δ_free`` (eq. 11-12) and the QP matrices;
+   then :func:`project_tick`: ``W_ea``, ``W_aa``, ``δ_free`` (eq. 11-12), the equilibrium gap
+   and the QP matrices; a call that also solves stops here when the gap exceeds ``gap_limit``;
 2. :func:`solve_tick`, steps 3-4: the QP vectors of the targets, the active-set box QP
    (eq. 13), its outcome, and the Newton step of the same factorization
    (:func:`apply_pending_step`: ``dq = K⁻¹ (r + J_aᵀ Δλ)``).
@@ -16,6 +17,8 @@ Its buffers and the model's constant arrays are one :class:`TickRecord` (fields
 :data:`TICK_FIELDS`), held by :class:`cbha_inverse.core.inverse.tick_data.TickData`; Python
 crosses into compiled code once per tick.
 """
+
+import math
 
 from cbha_inverse.core._kernels.block_band import (block_backward, block_cholesky_forward,
                                                    block_forward, first_nonzero_rows)
@@ -58,6 +61,10 @@ TICK_FIELDS = (
     Field('half_solved', np.bool_, 1, '(1,) whether solved and effector_columns are half-solves'),
     Field('levers', F8, 2, '(k, 3) effector levers R_f o [m]'),
     Field('moved', F8, 2, '(3k, m + 1) J_e K⁻¹ [r, J_aᵀ]'),
+    Field('equilibrium_gap', F8, 1, '(1,) distance of the state from equilibrium [m] '
+          '(equilibrium_gap_of)'),
+    Field('gap_limit', F8, 1, '(1,) a tick that linearises and solves stops after the '
+          'linearisation when equilibrium_gap exceeds it [m]'),
     Field('w_ea', F8, 2, '(3k, m) W_ea [m/Pa, m/N]'),
     Field('w_aa', F8, 2, '(m, m) W_aa'),
     Field('offset', F8, 1, '(3k,) p_e + J_e K⁻¹ r - W_ea λ_prev [m]'),
@@ -122,6 +129,9 @@ BEYOND_REACH = -3
 NOT_FACTORED = -4
 """The block Cholesky failed: nothing solved (the fallback chain of
 :meth:`cbha_inverse.core.system.EquilibriumSystem.fallback_factors` takes over)."""
+OFF_EQUILIBRIUM = -5
+"""The linearised state's ``equilibrium_gap`` exceeds ``gap_limit``: linearised, nothing solved
+(the caller checks the equilibrium before the QP)."""
 
 
 @numba.njit(cache=True)
@@ -149,8 +159,8 @@ def control_tick(targets, tick, materialise, linearise, solve, apply_step):
     -------
     code : int
         :data:`TARGET_NOT_FINITE` or :data:`BEYOND_REACH` (nothing done), :data:`NOT_FACTORED`
-        (nothing solved), else the code of :func:`solve_tick` (:data:`SOLVED` after a
-        linearisation alone).
+        or :data:`OFF_EQUILIBRIUM` (nothing solved), else the code of :func:`solve_tick`
+        (:data:`SOLVED` after a linearisation alone).
     iterations : int
         Active-set iterations (0 unless the QP ran).
     largest_gap : float  [m]
@@ -177,6 +187,8 @@ def control_tick(targets, tick, materialise, linearise, solve, apply_step):
         info, residual_norm = linearise_tick(tick)
         if info != 0:
             return NOT_FACTORED, 0, nan, nan, False, nan
+        if solve and not tick.equilibrium_gap[0] <= tick.gap_limit[0]:
+            return OFF_EQUILIBRIUM, 0, nan, nan, False, residual_norm
     if not solve:
         return SOLVED, 0, nan, nan, False, residual_norm
     code, iterations, largest_gap, largest_move, binding = solve_tick(targets, tick, apply_step)
@@ -237,11 +249,12 @@ def project_tick(tick):
     """
     Project a solved linearisation and form the QP matrices (the end of step 2), in place.
 
-    :func:`~cbha_inverse.core._kernels.projection.project_effectors_into` then
+    :func:`~cbha_inverse.core._kernels.projection.project_effectors_into`, the state's
+    distance from equilibrium (:func:`equilibrium_gap_of`), then
     :func:`~cbha_inverse.core._kernels.qp.qp_hessians_into`: ``w_ea``, ``w_aa``, ``offset``,
-    ``hessian``, ``tracking`` and ``weighted_w``. Without ``half_solved`` (``solved`` holds
-    ``K⁻¹ [r, J_aᵀ]`` of another factor: the fallback chain) it first writes ``J_eᵀ`` into
-    ``effector_columns``.
+    ``equilibrium_gap``, ``hessian``, ``tracking`` and ``weighted_w``. Without ``half_solved``
+    (``solved`` holds ``K⁻¹ [r, J_aᵀ]`` of another factor: the fallback chain) it first writes
+    ``J_eᵀ`` into ``effector_columns``.
 
     Returns
     -------
@@ -257,9 +270,38 @@ def project_tick(tick):
         tick.solved, tick.system.rhs, tick.effector_columns, half, tick.column_starts,
         tick.positions, tick.rotations, tick.effector_frames, tick.effector_offsets,
         tick.linearised, tick.w_ea, tick.w_aa, tick.offset, tick.moved)
+    tick.equilibrium_gap[0] = equilibrium_gap_of(tick.moved)
     qp_hessians_into(tick.w_ea, tick.w_aa, tick.scale, tick.energy_weight, tick.proximal_weight,
                      tick.hessian, tick.tracking, tick.weighted_w)
     return residual_norm
+
+
+@numba.njit(cache=True)
+def equilibrium_gap_of(moved):
+    """
+    Return the largest effector move of a Newton step at the current actuation [m].
+
+    ``max_e |(J_e K⁻¹ r)_e|``, column 0 of ``moved`` (three rows per effector): to first order,
+    each effector's distance from the model's equilibrium at the actuation of the
+    linearisation. Infinite when a move is not finite.
+
+    Parameters
+    ----------
+    moved : (3k, m + 1) ndarray  [m, m/Pa or m/N]
+        ``J_e K⁻¹ [r, J_aᵀ]``.
+
+    Returns
+    -------
+    float  [m]
+
+    """
+    largest = 0.0
+    for row in range(0, moved.shape[0], 3):
+        move = math.sqrt(moved[row, 0] ** 2 + moved[row + 1, 0] ** 2 + moved[row + 2, 0] ** 2)
+        if not math.isfinite(move):
+            return math.inf
+        largest = max(largest, move)
+    return largest
 
 
 @numba.njit(cache=True)

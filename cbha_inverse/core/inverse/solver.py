@@ -21,12 +21,12 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    further full Newton steps at fixed ``λ`` if requested (or, with ``relinearize_every > 1``,
    keep the linear model for a few ticks; see :class:`InverseOptions`).
 
-With the active-set QP and one Newton step per tick, a tick on a prepared linearisation
-(:meth:`InverseSolver.prepare`) is one compiled call
-(:func:`cbha_inverse.core._kernels.tick.control_tick`); a tick without one linearises first,
-in a call of its own, so that its linearisation is checked before the QP (below). The other
-paths (a clamped or rejected target, the fallback chain, the QP solvers in Python, further
-Newton steps) call its parts.
+With the active-set QP and one Newton step per tick, a tick is one compiled call
+(:func:`cbha_inverse.core._kernels.tick.control_tick`), on a prepared linearisation
+(:meth:`InverseSolver.prepare`) or linearising first; the call stops before the QP when the
+linearisation is off equilibrium or the trust region is narrowed (below), and the QP runs in
+a call of its own after the check. The other paths (a clamped or rejected target, the fallback
+chain, the QP solvers in Python, further Newton steps) call its parts.
 
 Every linearisation measures the state's distance from equilibrium, ``|J_e K⁻¹ r|`` at the
 effectors, narrows the actuation's step per tick (a trust region) when it exceeds
@@ -304,23 +304,39 @@ class InverseSolver:
         # the linearisation (steps 1-2) when no prepare() made it: checked for equilibrium
         # before the QP, as prepare() does
         fresh = not (self._linearised and self._age < self._every)
-        if fresh and not self._prepare():
-            return self._held('not_positive_definite', started)
-        linearised = time.perf_counter() if fresh else started
         if not self._one_call:
+            if fresh and not self._prepare():
+                return self._held('not_positive_definite', started)
+            linearised = time.perf_counter() if fresh else started
             checked = target_status(targets, self._base, self._reach)
             if checked == 1:
                 return self._held('rejected', started, warnings=('non-finite target rejected',))
             clamped, warnings = self._reachable(targets) if checked == 2 else (targets, ())
             return self._split_tick(clamped, warnings, (started, linearised))
-        code, iterations, largest_gap, largest_move, binding, _ = self._control_tick(
-            targets, self._record, False, False, True, self._every == 1)
+        code, iterations, largest_gap, largest_move, binding, residual_norm = self._control_tick(
+            targets, self._record, fresh and self._pending, fresh, True, self._every == 1)
         called = time.perf_counter()
-        if code == kernels.TARGET_NOT_FINITE:
-            return self._held('rejected', started, warnings=('non-finite target rejected',))
-        if code == kernels.BEYOND_REACH:
+        linearised = called if fresh else started
+        if code in (kernels.TARGET_NOT_FINITE, kernels.BEYOND_REACH):
+            # the call stopped at the target check: linearised and checked as by the parts
+            if fresh and not self._prepare():
+                return self._held('not_positive_definite', started)
+            if code == kernels.TARGET_NOT_FINITE:
+                return self._held('rejected', started,
+                                  warnings=('non-finite target rejected',))
             clamped, warnings = self._reachable(targets)
             return self._split_tick(clamped, warnings, (started, linearised))
+        if fresh:
+            # linearised in this call: checked as prepare() checks, the QP in a call of its own
+            # when the check stopped the call before it
+            stopped = code in (kernels.NOT_FACTORED, kernels.OFF_EQUILIBRIUM)
+            if not self._checked_linearisation(self._linearised_by(code, residual_norm)):
+                return self._held('not_positive_definite', started)
+            if stopped:
+                linearised = time.perf_counter()
+                code, iterations, largest_gap, largest_move, binding, _ = self._control_tick(
+                    targets, self._record, False, False, True, self._every == 1)
+                called = time.perf_counter()
         self._account()
         if code == SOLVED:
             return self._close(targets, 'saturated' if binding else 'solved', 'solved',
@@ -350,7 +366,11 @@ class InverseSolver:
         """Linearise for the next tick unless the kept linearisation is valid (:meth:`prepare`)."""
         if self._linearised and self._age < self._every:
             return True
-        self._linearised = self._linearise(strict)
+        return self._checked_linearisation(self._linearise_here(), strict)
+
+    def _checked_linearisation(self, factored, strict=False):
+        """Check a new linearisation (:meth:`_linearise`) and keep it for the next QP."""
+        self._linearised = self._linearise(factored, strict)
         self._age, self._prepared = 0, self._linearised
         return self._linearised
 
@@ -373,14 +393,15 @@ class InverseSolver:
         self._age = 1 if self._prepared else self._age + 1
         self._prepared = False
 
-    def _linearise(self, strict=False):
+    def _linearise(self, factored, strict=False):
         """
-        Linearise, factor and project at the stored state and actuation (steps 1-2).
+        Check a linearisation at the stored state and actuation (steps 1-2) before its QP.
 
-        Applies a pending step first; the compiled linearisation, or, when its block Cholesky
-        fails, the fallback chain (:meth:`_fall_back`). It measures the state's distance from
-        equilibrium (:meth:`_measure_equilibrium`) and adapts the trust region of the next
-        steps to it (:meth:`_adapt_trust_region`); when the Newton updates diverge
+        ``factored``: whether the linearisation made by :meth:`_linearise_here` (or by a
+        compiled tick that linearised, :meth:`_linearised_by`) factored, by the block Cholesky
+        or the fallback chain (:meth:`_fall_back`). Its distance from equilibrium
+        (:meth:`_measure_equilibrium`) adapts the trust region of the next steps
+        (:meth:`_adapt_trust_region`); when the Newton updates diverge
         (:meth:`_diverging`), the static solver restores the equilibrium at the current
         actuation (:meth:`_restore_equilibrium`) and the linearisation is made again there
         (``_restored_gap`` keeps the distance it was at). With ``strict`` (after a large step,
@@ -388,7 +409,6 @@ class InverseSolver:
         restores whenever the gap exceeds :data:`TRUST_GROW_BELOW` of the tolerance. Returns
         whether a factorization succeeded (the tick data then hold the linearisation).
         """
-        factored = self._linearise_here()
         self._restored_gap = 0.0
         if factored:
             self._adapt_trust_region(self._gap)
@@ -400,15 +420,30 @@ class InverseSolver:
         return factored
 
     def _linearise_here(self):
-        """Linearise at the stored state and measure its gap (:meth:`_linearise`'s steps)."""
+        """
+        Linearise, factor and project at the stored state and actuation; measure its gap.
+
+        Applies a pending step first; the compiled linearisation, or, when its block Cholesky
+        fails, the fallback chain. Returns whether a factorization succeeded.
+        """
         code, _, _, _, _, residual_norm = self._control_tick(
             self._data.effector_positions, self._record, self._pending, True, False, False)
+        return self._linearised_by(code, residual_norm)
+
+    def _linearised_by(self, code, residual_norm):
+        """
+        Take the outcome of a compiled call that linearised (its pending step applied).
+
+        ``code`` :data:`~cbha_inverse.core._kernels.tick.NOT_FACTORED`: the fallback chain
+        (:meth:`_fall_back`) factors instead; any other code: the block Cholesky factored, and
+        the linearisation's gap is measured. Returns whether a factorization succeeded.
+        """
         self._pending = False
-        if code == SOLVED:
-            self._residual_norm = residual_norm
-            self._measure_equilibrium()
-            return True
-        return self._fall_back()
+        if code == kernels.NOT_FACTORED:
+            return self._fall_back()
+        self._residual_norm = residual_norm
+        self._measure_equilibrium()
+        return True
 
     def _fall_back(self):
         """
@@ -547,17 +582,13 @@ class InverseSolver:
 
     def _measure_equilibrium(self):
         """
-        Measure how far the linearised state is from equilibrium (``_gap`` [m]).
+        Take how far the linearised state is from equilibrium (``_gap`` [m]).
 
-        The effector move of a Newton step at the current actuation, ``J_e K⁻¹ r`` (column 0
-        of the projection's ``moved``), is each effector's distance from the model's
-        equilibrium to first order.
+        The largest effector move of a Newton step at the current actuation, ``|J_e K⁻¹ r|``,
+        is each effector's distance from the model's equilibrium to first order; the
+        projection computed it (:func:`cbha_inverse.core._kernels.tick.equilibrium_gap_of`).
         """
-        moved = self._data.moved
-        gap = 0.0
-        for row in range(0, moved.shape[0], 3):
-            gap = max(gap, math.hypot(moved[row, 0], moved[row + 1, 0], moved[row + 2, 0]))
-        self._previous_gap, self._gap = self._gap, gap
+        self._previous_gap, self._gap = self._gap, float(self._data.equilibrium_gap[0])
 
     def _diverging(self):
         """
@@ -623,12 +654,21 @@ class InverseSolver:
             self._set_trust_radius(min(TRUST_GROW * self._radius, self.options.max_step))
 
     def _set_trust_radius(self, radius):
-        """Limit each actuator's change per tick to ``radius`` of its range (and the rate)."""
+        """
+        Limit each actuator's change per tick to ``radius`` of its range (and the rate).
+
+        A compiled tick that linearises runs its QP in the same call only where the check of
+        the linearisation cannot change the radius (:meth:`_adapt_trust_region`): at
+        ``max_step`` and a gap within ``equilibrium_tolerance`` (the tick data's
+        ``gap_limit``); below ``max_step`` it always stops before the QP.
+        """
         self._radius = radius
         rate = self._data.rate
         rate[:] = math.inf if self._rate is None else self._rate
         if radius < 1.0:
             np.minimum(rate, radius * self._span, out=rate)
+        self._data.gap_limit[0] = (self.options.equilibrium_tolerance
+                                   if radius >= self.options.max_step else -math.inf)
 
     def _step_limit(self):
         """Return the largest change per tick of each actuator, or None for none."""
