@@ -10,7 +10,8 @@ Scene YAML schema (SI units)::
     name: str
     description: str
     base_frame: str                      # TF name of the world (default cbha_base)
-    gravity: [gx, gy, gz] or null        # m/s^2, base_frame axes (+x along the backbone at rest)
+    gravity: [gx, gy, gz] or null        # m/s^2, base_frame axes (+x along the backbone at rest);
+                                         # null: none; absent: [0, 0, -9.81]
     chain:                               # one of two types
       type: beam_vertebrae               # Timoshenko beams, vertebrae every `beams_per_interval`
       n_vertebrae, beams_per_interval, interval_length, vertebra_mass, backbone: {youngs_modulus,
@@ -162,7 +163,7 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
         raise spec.error('effectors', 'at least one effector is needed')
     effectors = _effectors(effector_items, model, vertebra_frames)
     sensors = _sensors(spec.sections('sensors', []), model, vertebra_frames)
-    g = spec.vector('gravity', 3, (0.0, 0.0, -9.81)) if gravity is None else gravity
+    g = _gravity(spec) if gravity is None else gravity
     workspace = _workspace(spec, len(actuators.names))
     if isinstance(workspace, tuple):
         workspace = tuple(base_rotation @ np.asarray(workspace) + base_position)
@@ -183,6 +184,25 @@ SCENE_KEYS = ('name', 'description', 'base_frame', 'gravity', 'chain', 'cables',
 _CHAIN_KEYS = {'segments': ('sections',),
                'beam_vertebrae': ('n_vertebrae', 'beams_per_interval', 'interval_length',
                                   'backbone', 'vertebra_mass')}
+
+
+def _gravity(spec):
+    """
+    Return the scene's gravity [m/s^2]: ``null`` is none (None), absent is Earth's along -z.
+
+    Parameters
+    ----------
+    spec : cbha_inverse.config_files.Section
+        The scene file.
+
+    Returns
+    -------
+    tuple of 3 floats, or None
+
+    """
+    if 'gravity' in spec.data and spec.data['gravity'] is None:
+        return None
+    return spec.vector('gravity', 3, (0.0, 0.0, -9.81))
 
 
 def _actuator_set(spec, groups, n_frames):

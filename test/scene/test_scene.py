@@ -221,3 +221,28 @@ def test_forward_without_the_warning_check_solves_the_same_shape():
     assert unchecked.warnings == ()
     np.testing.assert_array_equal(unchecked.positions, checked.positions)
     np.testing.assert_array_equal(unchecked.effector_positions, checked.effector_positions)
+
+
+@pytest.mark.parametrize('written, expected', [
+    ('gravity: null', None), ('gravity: [0.0, 0.0, 0.0]', (0.0, 0.0, 0.0)),
+    ('', (0.0, 0.0, -9.81)), ('gravity: [0.0, -9.81, 0.0]', (0.0, -9.81, 0.0))])
+def test_gravity_null_is_none_and_absent_is_earths(tmp_path, written, expected):
+    """``gravity: null`` is no gravity (the tip at rest on the axis), absent is -9.81 along z."""
+    text = config_path('scenes', 'tendon_6f_8c.yaml').read_text()
+    lines = [line for line in text.splitlines() if not line.startswith('gravity:')]
+    (tmp_path / 'scene.yaml').write_text('\n'.join(lines + [written]) + '\n')
+    scene = load_scene(tmp_path / 'scene.yaml')
+    if expected is None:
+        assert scene.gravity is None
+    else:
+        np.testing.assert_array_equal(scene.gravity, expected)
+    tip = scene.rest_effector_positions[-1]
+    sag = np.zeros(3) if expected is None else np.asarray(expected)
+    if not sag.any():
+        # without gravity the backbone stays straight along +x
+        np.testing.assert_allclose(tip[1:], 0.0, atol=1e-12)
+    else:
+        # the tip sags along gravity, and only along it
+        assert float(tip @ sag) > 0.0
+        across = np.cross(tip - [tip[0], 0.0, 0.0], sag)
+        np.testing.assert_allclose(across, 0.0, atol=1e-9)
