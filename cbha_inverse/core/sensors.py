@@ -9,8 +9,7 @@ reading is affine in the length, ``reading = offset + gain * length``, with a no
 deviation ``noise_std`` on the length.
 """
 
-from cbha_inverse.core._kernels.cables import routing_lengths_into
-from cbha_inverse.core.actuation.cables import Cable, CableGroup
+from cbha_inverse.core.actuation.cables import Cable, CableGroup, RoutedLengths
 import numpy as np
 
 
@@ -45,9 +44,8 @@ class StringPots:
         if c == 0:
             raise ValueError('string pots: at least one sensor is needed')
         cables = [Cable(name, f, o) for name, f, o in zip(self.names, frames, offsets)]
-        routes = CableGroup(cables, n_frames)
+        self._routes = RoutedLengths(CableGroup(cables, n_frames))
         self.n_frames = int(n_frames)
-        self._routing = routes.routing
         self.reading_offset = _per_sensor(reading_offset, c, 'offset')
         self.reading_gain = _per_sensor(reading_gain, c, 'gain')
         self.noise_std = _per_sensor(noise_std, c, 'noise_std')
@@ -55,16 +53,6 @@ class StringPots:
             raise ValueError('string pots: a gain must be non-zero')
         if np.any(self.noise_std <= 0.0):
             raise ValueError('string pots: noise_std must be positive')
-        self._jacobian = np.zeros((c, 6 * (self.n_frames - 1)))
-        n_points, n_spans = self._routing[0].size, self._routing[2].size
-        unit_gains = np.ones(c)
-        unit_gains.flags.writeable = False
-        # the lengths and the scratch of routing_lengths_into: levers, points, forces (P, 3),
-        # span units (S, 3) and lengths (S,), unit gains (c,)
-        self._lengths = np.zeros(c)
-        self._scratch = (np.zeros((n_points, 3)), np.zeros((n_points, 3)),
-                         np.zeros((n_points, 3)), np.zeros((n_spans, 3)), np.zeros(n_spans),
-                         unit_gains)
 
     @property
     def routing(self):
@@ -78,7 +66,7 @@ class StringPots:
             arguments of :func:`cbha_inverse.core._kernels.cables.routing_lengths_into`.
 
         """
-        return self._routing
+        return self._routes.routing
 
     @property
     def n_sensors(self):
@@ -105,27 +93,12 @@ class StringPots:
 
     def lengths_and_jacobian(self, positions, rotations):
         """
-        Return the lengths and their Jacobian ``J_s = d(length)/dq``.
+        Return the lengths and their Jacobian ``J_s = d(length)/dq`` (c, 6n).
 
-        Parameters
-        ----------
-        positions : (n + 1, 3) ndarray  [m]
-            Frame origins.
-        rotations : (n + 1, 3, 3) ndarray
-            Frame rotations.
-
-        Returns
-        -------
-        lengths : (c,) ndarray  [m]
-        jacobian : (c, 6n) ndarray  [-, m/rad]
-            In the retract increments ``(dx_f, dθ_f)`` of frames 1..n (world axes). A buffer of
-            this object (overwritten by the next call).
-
+        As :meth:`cbha_inverse.core.actuation.cables.RoutedLengths.lengths_and_jacobian`, the
+        Jacobian a buffer of this object (overwritten by the next call).
         """
-        routing_lengths_into(np.ascontiguousarray(positions, dtype=float),
-                             np.ascontiguousarray(rotations, dtype=float), *self.routing,
-                             self._lengths, self._jacobian, *self._scratch)
-        return self._lengths.copy(), self._jacobian
+        return self._routes.lengths_and_jacobian(positions, rotations)
 
     def readings(self, lengths):
         """
@@ -184,7 +157,7 @@ class StringPots:
                                       'noise_std')
         if np.any(other.reading_gain == 0.0) or np.any(other.noise_std <= 0.0):
             raise ValueError('string pots: a gain must be non-zero, noise_std positive')
-        other._jacobian = np.zeros_like(self._jacobian)
+        other._routes = RoutedLengths(self._routes.group)   # buffers of its own
         return other
 
 

@@ -9,6 +9,7 @@ the chain (the base) sits at the origin of ``base_frame``, or at the calibration
 from functools import cached_property
 from pathlib import Path
 
+from cbha_inverse.core.actuation.cables import CableGroup, RoutedLengths
 from cbha_inverse.core.inverse.solver import InverseOptions, InverseSolver
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.scene.calibration import Calibration
@@ -130,6 +131,48 @@ class Scene:
         if strict and not res.converged:
             raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
         return res
+
+    def cable_lengths(self, state):
+        """
+        Return the routed length of every cable (tendon) at a state, and its gradient.
+
+        The sum of each cable's straight spans between its routing points
+        (:class:`cbha_inverse.core.actuation.cables.RoutedLengths`, the geometry of the
+        cables' forces); a tendon's displacement from a pose is the difference of two
+        lengths (pulled in: negative).
+
+        Parameters
+        ----------
+        state : cbha_inverse.core.chain.ChainState
+            The frames, e.g. the ``state`` of a :meth:`forward` result.
+
+        Returns
+        -------
+        names : tuple of str
+            The cables, in scene actuator order (cavities left out).
+        lengths : (c,) ndarray  [m]
+        jacobian : (c, 6n) ndarray  [-, m/rad]
+            ``d(length)/dq`` in the retract increments ``(dx_f, dθ_f)`` of frames 1..n (a copy).
+
+        Raises
+        ------
+        ValueError
+            If the scene has no cable.
+
+        """
+        routes = self._cable_routes
+        if routes is None:
+            raise ValueError(f'scene {self.name} has no cable')
+        lengths, jacobian = routes.lengths_and_jacobian(state.positions, state.rotations)
+        return routes.names, lengths, jacobian.copy()
+
+    @cached_property
+    def _cable_routes(self):
+        """Return the cables' routed lengths in actuator order (None without cables)."""
+        cables = {cable.name: cable for group in self.actuators.groups
+                  if isinstance(group, CableGroup) for cable in group.cables}
+        ordered = [cables[name] for name in self.actuator_names if name in cables]
+        return RoutedLengths(CableGroup(ordered, self.model.n_frames)) if ordered else None
 
     @cached_property
     def rest_effector_positions(self):

@@ -8,11 +8,14 @@ mapped rigidly to the wrench of the point's frame: one column of ``J_aᵀ`` per 
 routing of all cables; :class:`CableTerms` indexes every cable of a scene and the blocks of their
 load stiffness for the compiled :func:`cbha_inverse.core._kernels.cables.cable_pass` (the one
 implementation of the cable equations; the numpy version is a test oracle,
-``test/oracles/actuation.py``).
+``test/oracles/actuation.py``). :class:`RoutedLengths` gives the routed length of cables at a
+pose and its gradient (:func:`cbha_inverse.core._kernels.cables.routing_lengths_into`, the same
+routing geometry): the tendon lengths, and the string potentiometers'.
 """
 
 from dataclasses import dataclass
 
+from cbha_inverse.core._kernels.cables import routing_lengths_into
 import numpy as np
 
 
@@ -125,6 +128,63 @@ class CableGroup:
         """
         return (self.frames, self.offsets, self.segment_start, self.segment_end,
                 self.segment_owner, self.point_owner)
+
+
+class RoutedLengths:
+    """
+    The routed length of every cable of a group at a pose, and its gradient.
+
+    A cable's length is the sum of its straight spans between routing points; its gradient in
+    the retract increments of frames 1..n is minus its column of ``J_aᵀ`` at unit gain (paper
+    eq. 9): ``dℓ = -J_a dq`` without friction.
+
+    Parameters
+    ----------
+    group : CableGroup
+        The cables (their gains do not enter: a length is geometry).
+
+    """
+
+    def __init__(self, group):
+        """Allocate the lengths, the Jacobian and the scratch of the compiled evaluation."""
+        self.group = group
+        self.names = group.names
+        self.routing = group.routing
+        c, n_frames = group.n_actuators, group.n_frames
+        n_points, n_spans = self.routing[0].size, self.routing[2].size
+        unit_gains = np.ones(c)
+        unit_gains.flags.writeable = False
+        self._lengths = np.zeros(c)
+        self._jacobian = np.zeros((c, 6 * (n_frames - 1)))
+        # the scratch of routing_lengths_into: levers, points, forces (P, 3), span units (S, 3)
+        # and lengths (S,), unit gains (c,)
+        self._scratch = (np.zeros((n_points, 3)), np.zeros((n_points, 3)),
+                         np.zeros((n_points, 3)), np.zeros((n_spans, 3)), np.zeros(n_spans),
+                         unit_gains)
+
+    def lengths_and_jacobian(self, positions, rotations):
+        """
+        Return the lengths and their Jacobian ``d(length)/dq``.
+
+        Parameters
+        ----------
+        positions : (n + 1, 3) ndarray  [m]
+            Frame origins.
+        rotations : (n + 1, 3, 3) ndarray
+            Frame rotations.
+
+        Returns
+        -------
+        lengths : (c,) ndarray  [m]
+        jacobian : (c, 6n) ndarray  [-, m/rad]
+            In the retract increments ``(dx_f, dθ_f)`` of frames 1..n (world axes). A buffer of
+            this object (overwritten by the next call).
+
+        """
+        routing_lengths_into(np.ascontiguousarray(positions, dtype=float),
+                             np.ascontiguousarray(rotations, dtype=float), *self.routing,
+                             self._lengths, self._jacobian, *self._scratch)
+        return self._lengths.copy(), self._jacobian
 
 
 class CableTerms:
