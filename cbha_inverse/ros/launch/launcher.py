@@ -49,6 +49,10 @@ def _parser():
         epilog='\n'.join(epilog))
     parser.add_argument('composition', choices=sorted(COMPOSITIONS))
     parser.add_argument('arguments', nargs='*', metavar='name:=value')
+    parser.add_argument('-p', '--param', action='append', default=[],
+                        metavar='NODE.PARAMETER:=VALUE',
+                        help='a one-off parameter of a node, applied last (YAML-typed as ros2 '
+                        'does: 0.3 double, 3 integer); checked before any node starts')
     parser.add_argument('--dry-run', action='store_true', help='print the commands, start none')
     parser.add_argument('-s', '--show-args', action='store_true',
                         help="list the composition's arguments (as ros2 launch --show-args)")
@@ -156,13 +160,45 @@ def main(argv=None):
         See the module docstring.
 
     """
-    # from here this command handles its stops (:mod:`cbha_inverse.ros.common.loading`)
-    loaded()
     try:
         return _main(argv)
     except KeyboardInterrupt:      # before the nodes start: nothing to stop
         print(f'{PROGRAM}: stopped before starting the nodes', file=sys.stderr)
         return 0
+
+
+def _resolved(composition, args, overrides_dir):
+    """
+    Resolve a composition, check what the user gives the nodes, and write the command lines.
+
+    Returns
+    -------
+    processes : list of NodeProcess
+    lines : list of (str, list of str)
+
+    Raises
+    ------
+    ArgumentError, ConfigError
+        On a bad argument, params file or parameter (:mod:`cbha_inverse.ros.launch.checks`).
+
+    """
+    from cbha_inverse.ros.common.params import ParameterError
+    from cbha_inverse.ros.launch.checks import (
+        check_parameters, check_sections, parse_overrides)
+    values = parse_assignments(args.arguments)
+    parameters = parse_overrides(args.param)
+    warnings = []
+    processes = resolve(composition, values, parameters, warnings)
+    user_files = {p.executable: values[f'{p.executable}_params'] for p in processes
+                  if values.get(f'{p.executable}_params')}
+    check_sections(composition, [p for p in processes if p.executable in user_files])
+    try:
+        check_parameters(processes, parameters, user_files)
+    except ParameterError as exc:
+        raise ArgumentError(str(exc)) from None
+    for warning in warnings:
+        print(f'{PROGRAM}: warning: {warning}', file=sys.stderr, flush=True)
+    return processes, command_lines(processes, overrides_dir)
 
 
 def _main(argv):
@@ -175,8 +211,7 @@ def _main(argv):
         # the printed command lines name the overrides files: they must outlive this command
         overrides_dir = tempfile.mkdtemp(prefix='cbha_launch_')
         try:
-            lines = command_lines(resolve(composition, parse_assignments(args.arguments)),
-                                  overrides_dir)
+            _, lines = _resolved(composition, args, overrides_dir)
         except (ArgumentError, ConfigError) as exc:
             shutil.rmtree(overrides_dir, ignore_errors=True)
             return report_config_error(PROGRAM, exc)
@@ -185,10 +220,12 @@ def _main(argv):
         return 0
     with tempfile.TemporaryDirectory(prefix='cbha_launch_') as overrides_dir:
         try:
-            processes = resolve(composition, parse_assignments(args.arguments))
-            lines = command_lines(processes, overrides_dir)
+            processes, lines = _resolved(composition, args, overrides_dir)
         except (ArgumentError, ConfigError) as exc:
             return report_config_error(PROGRAM, exc)
+        # from here this command handles its stops (:mod:`cbha_inverse.ros.common.loading`):
+        # until now a stop was a quiet exit 0, the node modules' imports for the checks included
+        loaded()
         print(f'[{PROGRAM}] {composition.name}: ' + ', '.join(
             f'{p.executable} ({p.namespace})' for p in processes), flush=True)
         return supervise(lines)
