@@ -199,3 +199,61 @@ def test_values_print_as_ros2_param_get_prints_them():
     assert value_text(get_parameter_value('true')) == 'Boolean value is: true'
     assert value_text(get_parameter_value('cbha')) == 'String value is: cbha'
     assert value_text(get_parameter_value('[1.0, 2.0]')) == 'Double values are: [1.0, 2.0]'
+
+
+def _handles_sigterm(pid):
+    """Whether process ``pid`` handles SIGTERM: its quiet stop while loading is installed."""
+    from pathlib import Path
+    import signal
+    try:
+        status = Path(f'/proc/{pid}/status').read_text().splitlines()
+    except OSError:
+        return False
+    caught = next(line.split()[1] for line in status if line.startswith('SigCgt:'))
+    return bool(int(caught, 16) >> (signal.SIGTERM - 1) & 1)
+
+
+@pytest.mark.parametrize('delay', [0.0, 0.05, 0.1, 0.3, 1.0])
+def test_ctrl_c_at_any_moment_of_the_commands_is_quiet(delay, tmp_path):
+    """
+    SIGINT ``delay`` seconds into ``cbha_ctl``, ``cbha_status`` and ``cbha_bag record``.
+
+    Each runs as its console script and waits for something that never comes (a node, a
+    diagnostic, a message). The delay counts from the program's quiet stop (its SIGTERM handler,
+    installed when ``cbha_inverse.ros`` is imported, a few tens of ms in): before it the
+    interpreter itself starts (twice, the ROS wheels re-execute it), which no program of the
+    package can stop cleanly. Then: rclpy's import and start, the graph look-up, the wait.
+    """
+    import signal
+    import time
+    commands = {
+        'cbha_ctl': (['param', 'get', 'absent_node', 'x', '--timeout', '30'], (0, 130)),
+        'cbha_status': ([], (0,)),
+        'cbha_bag': (['record', '/cbha/never', '-o', str(tmp_path / 'bag'), '--allow-empty'],
+                     (0,)),
+    }
+    processes = {name: subprocess.Popen(
+        [str(console_script(tmp_path, name)), *args], env=child_env(), stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True) for name, (args, _) in commands.items()}
+    try:
+        for name, process in processes.items():
+            deadline = time.monotonic() + 30.0
+            while not _handles_sigterm(process.pid) and process.poll() is None:
+                assert time.monotonic() < deadline, f'{name} set no stop handler within 30 s'
+                time.sleep(0.002)
+        time.sleep(delay)
+        for process in processes.values():
+            process.send_signal(signal.SIGINT)
+        outputs = {name: process.communicate(timeout=60)[0]
+                   for name, process in processes.items()}
+    finally:
+        for process in processes.values():
+            if process.poll() is None:
+                process.kill()
+                process.communicate()
+    for name, process in processes.items():
+        output = outputs[name]
+        assert process.returncode in commands[name][1], (name, process.returncode, output)
+        assert 'Traceback' not in output and 'Fatal Python error' not in output, (name, output)
+        if 'while loading' in output:
+            assert output == f'{name}: stopped by SIGINT while loading\n', (name, output)
