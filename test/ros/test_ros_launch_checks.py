@@ -43,7 +43,8 @@ def _launch(*args, dry_run=False):
 
 @pytest.mark.parametrize('key, node, matches', [
     ('/**', '/cbha/inverse_solver', True), ('/cbha/inverse_solver', '/cbha/inverse_solver', True),
-    ('/cbha/*', '/cbha/inverse_solver', True), ('/**/inverse_solver', '/cbha/inverse_solver', True),
+    ('/cbha/*', '/cbha/inverse_solver', True),
+    ('/**/inverse_solver', '/cbha/inverse_solver', True),
     ('/*/inverse_solver', '/cbha/inverse_solver', True), ('/cbha/**', '/cbha/cbha_sim', True),
     ('cbha/inverse_solver', '/cbha/inverse_solver', True),
     # measured on rclpy 7.1: without its leading / a name is from the root namespace
@@ -65,14 +66,14 @@ def test_p_values_are_typed_as_ros2_types_them():
 
 @pytest.mark.parametrize('args, message', [
     (['inverse_solver_params:={bad_key}'],
-     "{bad_key}: /cbha/solver: applies to no node of sim (/cbha/trajectory, "
-     "/cbha/inverse_solver, /cbha/cbha_sim, /cbha/stereo_tracker, /cbha/shape_estimator); did "
+     '{bad_key}: /cbha/solver: applies to no node of sim (/cbha/trajectory, '
+     '/cbha/inverse_solver, /cbha/cbha_sim, /cbha/stereo_tracker, /cbha/shape_estimator); did '
      "you mean '/cbha/inverse_solver'?"),
     (['inverse_solver_params:={bad_name}'],
-     "{bad_name}: /cbha/inverse_solver.ros__parameters.loop_gian: unknown parameter of "
+     '{bad_name}: /cbha/inverse_solver.ros__parameters.loop_gian: unknown parameter of '
      "inverse_solver, did you mean 'loop_gain'?"),
     (['-p', 'inverse_solver.loop_gian:=0.2'],
-     "-p inverse_solver.loop_gian:=0.2: unknown parameter of inverse_solver, did you mean "
+     '-p inverse_solver.loop_gian:=0.2: unknown parameter of inverse_solver, did you mean '
      "'loop_gain'?"),
     (['-p', 'cbha_sim.noise_std:=1'],
      '-p cbha_sim.noise_std:=1: noise_std must be of type double (write floats with a decimal '

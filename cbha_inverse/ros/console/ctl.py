@@ -268,6 +268,7 @@ def call_service(session, node, service, value):
     Parameters
     ----------
     session : Session
+        The command's ROS node and deadline.
     node : str
         The node (relative or fully qualified).
     service : str
@@ -344,6 +345,7 @@ def parameter_command(session, action, node, name=None, value=None):
     Parameters
     ----------
     session : Session
+        The command's ROS node and deadline.
     action : str
         ``list``, ``get`` or ``set``.
     node : str

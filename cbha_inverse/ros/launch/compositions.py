@@ -19,10 +19,15 @@ import.
 
 Every node gets its params file (argument ``<node>_params``, default the installed
 ``config/<node>.yaml``), then the composition's overrides as a second params file, which wins, as
-a ``parameters=[file, {...}]`` list does in a launch file. The overrides of a *yielding* argument
-(``scene``, ``mode``) are weaker: given explicitly, they apply; not given, the composition's
-default applies only where no ``<node>_params`` file of the user sets the parameter; given and set
-otherwise by such a file, that is a conflict (:func:`resolve` raises).
+a ``parameters=[file, {...}]`` list does in a launch file; ``cbha_launch``'s one-off ``-p
+<node>.<parameter>:=<value>`` overrides (the ``parameters`` of :func:`resolve`) come last. What
+the user sets on a node is its ``<node>_params`` file and its ``-p`` overrides. The overrides of
+a *yielding* argument (``scene``, ``mode``) are weaker: given explicitly, they apply, and a node
+on which the user sets the parameter otherwise is a conflict (:func:`resolve` raises); not given,
+the value the user sets on one node is the argument's for the others (one scene for the cell:
+the controller, the simulator and the estimator load the same), and the composition's default
+applies only when the user sets it on none. Nodes on which the user sets different scenes keep
+them; :func:`resolve` then adds a one-line warning.
 
 ``solver_transport:=udp-loopback`` starts ``inverse_solver`` with the environment of
 :func:`cbha_inverse.ros.common.transport.loopback_udp_variables`: UDP on 127.0.0.1 alone, no

@@ -1,5 +1,10 @@
 """
-``cbha_launch sim|robot [name:=value ...]``: the launch files' compositions, without ``launch``.
+``cbha_launch sim|robot [name:=value ...] [-p node.parameter:=value ...]``: the compositions.
+
+The launch files' compositions, without ``launch``. Before any node starts, the params files
+and ``-p`` overrides the user gives are checked as the nodes will read them
+(:mod:`cbha_inverse.ros.launch.checks`): a section that matches no node, a parameter the node
+does not declare or a value it would refuse is one line and exit 2.
 
 Starts every node of :data:`cbha_inverse.ros.launch.compositions.COMPOSITIONS` ``[name]`` as a
 process (:class:`cbha_inverse.ros.launch.processes.NodeProcesses`: ``python -m
@@ -12,8 +17,9 @@ required: when one exits by itself, the others are stopped. Exit status: 0 when 
 stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad argument,
 params file or conflict between them (one line on stderr). ``--dry-run`` prints the command lines
 instead, and keeps the overrides params files they name; ``--show-args`` lists the composition's
-arguments (as ``ros2 launch ... --show-args``). A stop while the command itself still loads exits
-0 with one line (:mod:`cbha_inverse.ros.common.loading`).
+arguments (as ``ros2 launch ... --show-args``). A stop while the command itself still loads or
+checks (until the nodes start) exits 0 with one line (:mod:`cbha_inverse.ros.common.loading`); a
+scene set differently on the nodes by the user is one warning line.
 """
 
 import argparse
