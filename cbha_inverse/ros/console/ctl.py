@@ -23,6 +23,7 @@ after SIGINT/SIGTERM (a stop while the command still loads exits 0, one line:
 """
 
 import argparse
+import os
 import sys
 import time
 
@@ -48,8 +49,8 @@ POLL_S = 0.05
 """Longest spin slice [s]: how soon a stop signal or an answer is noticed."""
 
 
-class Absent(Exception):
-    """A node, service or parameter is not there, or the node refused: one line, exit 1."""
+class Failed(Exception):
+    """A node, service or parameter is not there in time, or does not fit: one line, exit 1."""
 
 
 class Stopped(Exception):
@@ -184,7 +185,6 @@ class Session:
         """Create the node and its executor."""
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
-        import os
         # the context's --ros-args apply to it (a __ns remapping wins over ``namespace``)
         self.node = Node(f'cbha_ctl_{os.getpid()}', namespace=namespace, context=context,
                          start_parameter_services=False, enable_rosout=False)
@@ -204,7 +204,7 @@ class Session:
         self.executor.shutdown()
         self.node.destroy_node()
 
-    def _spin(self, done):
+    def spin_until(self, done):
         """Spin until ``done()`` or the deadline; return ``done()``; raise :class:`Stopped`."""
         while True:
             if self.stop.requested:
@@ -222,11 +222,11 @@ class Session:
                 in self.node.get_node_names_and_namespaces()}
 
     def find_node(self, name):
-        """Wait until node ``name`` (fully qualified) is in the graph; raise :class:`Absent`."""
-        if self._spin(lambda: name in self.nodes()):
+        """Wait until node ``name`` (fully qualified) is in the graph; raise :class:`Failed`."""
+        if self.spin_until(lambda: name in self.nodes()):
             return name
         others = sorted(self.nodes() - {self.node.get_fully_qualified_name()})
-        raise Absent(f'no node {name} within {self.timeout:g} s{did_you_mean(name, others)}')
+        raise Failed(f'no node {name} within {self.timeout:g} s{did_you_mean(name, others)}')
 
     def services_of(self, name):
         """Return ``{service name: type}`` of a node (fully qualified)."""
@@ -239,23 +239,23 @@ class Session:
         return {service: types[0] for service, types in found if types}
 
     def find_service(self, node, service):
-        """Wait for a node's service; return its type; raise :class:`Absent`."""
+        """Wait for a node's service; return its type; raise :class:`Failed`."""
         self.find_node(node)
-        if self._spin(lambda: service in self.services_of(node)):
+        if self.spin_until(lambda: service in self.services_of(node)):
             return self.services_of(node)[service]
         own = sorted(s for s in self.services_of(node) if not s.endswith(PARAMETER_SERVICES))
-        raise Absent(f'node {node} has no service {service} within {self.timeout:g} s'
+        raise Failed(f'node {node} has no service {service} within {self.timeout:g} s'
                      f'{did_you_mean(service, own)}')
 
     def call(self, service_type, service, request):
-        """Call a service and return its response; raise :class:`Absent` without one in time."""
+        """Call a service and return its response; raise :class:`Failed` without one in time."""
         client = self.node.create_client(service_type, service)
         try:
-            if not self._spin(client.service_is_ready):
-                raise Absent(f'service {service} is not ready within {self.timeout:g} s')
+            if not self.spin_until(client.service_is_ready):
+                raise Failed(f'service {service} is not ready within {self.timeout:g} s')
             future = client.call_async(request)
-            if not self._spin(future.done):
-                raise Absent(f'no answer from {service} within {self.timeout:g} s')
+            if not self.spin_until(future.done):
+                raise Failed(f'no answer from {service} within {self.timeout:g} s')
             return future.result()
         finally:
             self.node.destroy_client(client)
@@ -282,7 +282,7 @@ def call_service(session, node, service, value):
 
     Raises
     ------
-    Absent
+    Failed
         If the node or the service is not there, its type is not a std_srvs one, or the value
         does not fit its type.
 
@@ -291,15 +291,15 @@ def call_service(session, node, service, value):
     service = service_name(node, service)
     found = session.find_service(node, service)
     if found not in SERVICE_TYPES:
-        raise Absent(f'{service} is a {found}; {PROGRAM} calls {", ".join(SERVICE_TYPES)}')
+        raise Failed(f'{service} is a {found}; {PROGRAM} calls {", ".join(SERVICE_TYPES)}')
     from std_srvs.srv import Empty, SetBool, Trigger
     if found == 'std_srvs/srv/SetBool':
         if value is None:
-            raise Absent(f'{service} is a SetBool: give true or false')
+            raise Failed(f'{service} is a SetBool: give true or false')
         response = session.call(SetBool, service, SetBool.Request(data=value == 'true'))
     else:
         if value is not None:
-            raise Absent(f'{service} is a {found.rsplit("/", 1)[-1]}: it takes no value')
+            raise Failed(f'{service} is a {found.rsplit("/", 1)[-1]}: it takes no value')
         service_type = Trigger if found == 'std_srvs/srv/Trigger' else Empty
         response = session.call(service_type, service, service_type.Request())
     if not hasattr(response, 'success'):
@@ -313,15 +313,15 @@ def _parameter_client(session, node):
     node = full_name(node, session.namespace)
     session.find_service(node, f'{node}/list_parameters')
     client = AsyncParameterClient(session.node, node)
-    if not session._spin(client.services_are_ready):
-        raise Absent(f'the parameter services of {node} are not ready within '
+    if not session.spin_until(client.services_are_ready):
+        raise Failed(f'the parameter services of {node} are not ready within '
                      f'{session.timeout:g} s')
     return node, client
 
 
 def _answer(session, future, what):
-    if not session._spin(future.done):
-        raise Absent(f'no answer to {what} within {session.timeout:g} s')
+    if not session.spin_until(future.done):
+        raise Failed(f'no answer to {what} within {session.timeout:g} s')
     return future.result()
 
 
@@ -334,7 +334,7 @@ def parameter_names(session, client, node):
 def _known(session, client, node, name):
     names = parameter_names(session, client, node)
     if name not in names:
-        raise Absent(f'node {node} has no parameter {name!r}'
+        raise Failed(f'node {node} has no parameter {name!r}'
                      f'{did_you_mean(name, names, quote=True)}')
 
 
@@ -361,7 +361,7 @@ def parameter_command(session, action, node, name=None, value=None):
 
     Raises
     ------
-    Absent
+    Failed
         If the node or the parameter is not there.
 
     """
@@ -438,7 +438,7 @@ def main(argv=None):
         return 2
     try:
         output, status = run(args, ros_args)
-    except Absent as exc:
+    except Failed as exc:
         print(f'{PROGRAM}: {exc}', file=sys.stderr)
         return 1
     except Stopped as exc:
