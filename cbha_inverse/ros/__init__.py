@@ -7,9 +7,10 @@ The ROS 2 layer (rclpy).
 imports rclpy; above it only :mod:`cbha_inverse.experiments` and the bag benchmark
 :mod:`cbha_inverse.report.bench_bag` do (see ``docs/design.md``).
 
-Importing it in a node executable or in ``cbha_launch`` makes a stop signal while the program
-still loads a quiet exit (:func:`cbha_inverse.ros.common.loading.quiet_while_loading`): every
-node module and the launcher are below this package, so no program of it loads before that.
+Importing it in a node executable or in a command (``cbha_launch``, ``cbha_ctl``, ``cbha_status``,
+``cbha_bag``) makes a stop signal while the program still loads a quiet exit
+(:func:`cbha_inverse.ros.common.loading.quiet_while_loading`): every node module and these
+commands are below this package, so no program of it loads before that.
 """
 
 from pathlib import Path
@@ -19,7 +20,10 @@ from cbha_inverse.ros.common.loading import quiet_while_loading
 PROGRAMS = {
     **{f'{__name__}.nodes.{path.stem}': path.stem
        for path in (Path(__file__).parent / 'nodes').glob('*.py') if path.stem != '__init__'},
-    f'{__name__}.launch.launcher': 'cbha_launch'}
+    f'{__name__}.launch.launcher': 'cbha_launch',
+    f'{__name__}.console.status': 'cbha_status',
+    f'{__name__}.console.ctl': 'cbha_ctl',
+    f'{__name__}.bag.cli': 'cbha_bag'}
 """The programs that stop quietly while they load: ``module -> program`` (console script)."""
 
 quiet_while_loading(PROGRAMS)

@@ -13,6 +13,7 @@ import sys
 
 from cbha_inverse.bag.storage import BagError
 from cbha_inverse.errors import ConfigError, report_config_error
+from cbha_inverse.ros.common.loading import loaded
 import numpy as np
 
 
@@ -138,17 +139,24 @@ def main(argv=None):
     Returns
     -------
     int
-        0 on success, 2 for a missing or damaged bag or bad options.
+        0 on success (and after SIGINT/SIGTERM during record or play), 2 for a missing or
+        damaged bag or bad options, 130 after SIGINT in ``info`` or ``eval``; a stop while
+        the command loads exits 0 with one line.
 
     """
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    # what the subcommand runs loads under the quiet stop while loading (exit 0, one line:
+    # :mod:`cbha_inverse.ros.common.loading`); then record and play turn a stop into the end of
+    # the recording or the playback, and a stop anywhere else is exit 130 without a traceback
+    run = None
+    if args.command == 'record':
+        from cbha_inverse.ros.bag.record import record as run
+    elif args.command == 'play':
+        from cbha_inverse.ros.bag.play import play as run
+    loaded()
     try:
-        if args.command == 'record':
-            from cbha_inverse.ros.bag.record import record
-            return record(args)
-        if args.command == 'play':
-            from cbha_inverse.ros.bag.play import play
-            return play(args)
+        if run is not None:
+            return run(args)
         # a reader that closes the pipe early (``| head``) ends the output, not in a traceback
         signal.signal(signal.SIGPIPE, signal.SIG_DFL)
         if args.command == 'info':
@@ -156,6 +164,9 @@ def main(argv=None):
         return _eval(args)
     except (BagError, ConfigError, FileNotFoundError) as exc:
         return report_config_error(f'cbha_bag {args.command}', exc)
+    except KeyboardInterrupt:
+        print(f'cbha_bag {args.command}: stopped', file=sys.stderr)
+        return 128 + signal.SIGINT
 
 
 if __name__ == '__main__':

@@ -7,7 +7,9 @@ what every node of the package publishes about once a second) and shows, refresh
 age, tick and latency percentiles, whether a driver (``robotino_bridge``, or ``cbha_sim``) is
 there, and every status line with its level and age. On a terminal the block is redrawn in
 place; into a pipe each refresh is printed below the last. ``--once`` prints one block after
-``--wait`` seconds and exits (status 1 if no diagnostics arrived). SIGINT ends it, status 0.
+``--wait`` seconds and exits (status 1 if no diagnostics arrived). SIGINT or SIGTERM ends it
+at any moment, status 0, no traceback (a stop while it loads: one line,
+:mod:`cbha_inverse.ros.common.loading`).
 """
 
 import argparse
@@ -102,15 +104,31 @@ def main(argv=None):
     Returns
     -------
     int
-        0 (SIGINT, or ``--once`` with diagnostics), 1 (``--once`` without any).
+        0 (SIGINT or SIGTERM at any moment, or ``--once`` with diagnostics), 1 (``--once``
+        without any).
 
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     ros_args = argv[argv.index('--ros-args'):] if '--ros-args' in argv else []
     args = _parser().parse_args(argv[:len(argv) - len(ros_args)])
+    # rclpy loads under the quiet stop while loading (:mod:`cbha_inverse.ros.common.loading`);
+    # once loaded, a stop is a flag the loops poll (StopRequest), a second one a KeyboardInterrupt
+    from cbha_inverse.ros.common.loading import loaded
+    from cbha_inverse.ros.common.runner import StopRequest
+    loaded()
+    try:
+        with StopRequest() as stop:
+            return _show(args, ros_args, stop)
+    except KeyboardInterrupt:
+        return 0
+
+
+def _show(args, ros_args, stop):
+    """Subscribe ``/diagnostics`` and print the blocks until ``stop`` (or once); see main."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
     statuses = {}
 
     def on_diagnostics(message):
@@ -120,30 +138,42 @@ def main(argv=None):
             statuses[status.name] = (level, status.message,
                                      {kv.key: kv.value for kv in status.values}, received)
 
-    rclpy.init(args=['cbha_status', *ros_args])
-    node = rclpy.create_node('cbha_status')
-    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    def spin(seconds):
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline and not stop.requested:
+            executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
+
+    context = rclpy.Context()
+    rclpy.init(args=['cbha_status', *ros_args], context=context,
+               signal_handler_options=SignalHandlerOptions.NO)
+    node = executor = None
     terminal = sys.stdout.isatty()
     try:
+        node = rclpy.create_node('cbha_status', context=context)
+        node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
         if args.once:
-            deadline = time.monotonic() + args.wait
-            while time.monotonic() < deadline:
-                rclpy.spin_once(node, timeout_sec=0.05)
+            spin(args.wait)
+            if stop.requested:
+                return 0
             print('\n'.join(status_lines(statuses, time.monotonic())), flush=True)
             return 0 if statuses else 1
-        while True:
-            deadline = time.monotonic() + args.period
-            while time.monotonic() < deadline:
-                rclpy.spin_once(node, timeout_sec=0.05)
+        while not stop.requested:
+            spin(args.period)
+            if stop.requested:
+                break
             clock = time.strftime('%H:%M:%S')
             block = '\n'.join([f'{PROGRAM}: {len(statuses)} statuses on /diagnostics, {clock}',
                                *status_lines(statuses, time.monotonic())])
             print(('\x1b[H\x1b[J' if terminal else '\n') + block, flush=True)
-    except (KeyboardInterrupt, ExternalShutdownException):
         return 0
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
 
 
 if __name__ == '__main__':

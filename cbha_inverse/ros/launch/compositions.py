@@ -19,10 +19,15 @@ import.
 
 Every node gets its params file (argument ``<node>_params``, default the installed
 ``config/<node>.yaml``), then the composition's overrides as a second params file, which wins, as
-a ``parameters=[file, {...}]`` list does in a launch file. The overrides of a *yielding* argument
-(``scene``, ``mode``) are weaker: given explicitly, they apply; not given, the composition's
-default applies only where no ``<node>_params`` file of the user sets the parameter; given and set
-otherwise by such a file, that is a conflict (:func:`resolve` raises).
+a ``parameters=[file, {...}]`` list does in a launch file; ``cbha_launch``'s one-off ``-p
+<node>.<parameter>:=<value>`` overrides (the ``parameters`` of :func:`resolve`) come last. What
+the user sets on a node is its ``<node>_params`` file and its ``-p`` overrides. The overrides of
+a *yielding* argument (``scene``, ``mode``) are weaker: given explicitly, they apply, and a node
+on which the user sets the parameter otherwise is a conflict (:func:`resolve` raises); not given,
+the value the user sets on one node is the argument's for the others (one scene for the cell:
+the controller, the simulator and the estimator load the same), and the composition's default
+applies only when the user sets it on none. Nodes on which the user sets different scenes keep
+them; :func:`resolve` then adds a one-line warning.
 
 ``solver_transport:=udp-loopback`` starts ``inverse_solver`` with the environment of
 :func:`cbha_inverse.ros.common.transport.loopback_udp_variables`: UDP on 127.0.0.1 alone, no
@@ -236,7 +241,7 @@ class ArgumentError(ValueError):
     """A launch argument is unknown, has a value outside its choices or conflicts with a file."""
 
 
-def _yielding_overrides(node, chosen, arguments, params):
+def _yielding_overrides(node, chosen, arguments, explicit, from_nodes):
     """
     Return the overrides of a node, the yielding ones as the module docstring says.
 
@@ -245,11 +250,15 @@ def _yielding_overrides(node, chosen, arguments, params):
     node : NodeEntry
         The node.
     chosen : dict
-        Argument values ('' for a yielding argument not given).
+        Argument values ('' for a yielding argument not given; the cell's value for one that
+        the user sets on a node, :func:`_cell_values`).
     arguments : dict
         ``name -> Argument``.
-    params : str
-        The user's ``<node>_params`` file ('' if none was given).
+    explicit : dict
+        ``parameter -> (value, where)`` that the user sets on this node: its ``<node>_params``
+        file or a ``-p`` override (:func:`_explicit`).
+    from_nodes : set of str
+        The yielding arguments whose value in ``chosen`` comes from a node, not the user.
 
     Returns
     -------
@@ -259,31 +268,109 @@ def _yielding_overrides(node, chosen, arguments, params):
     Raises
     ------
     ArgumentError
-        If a yielding argument is given and the user's params file sets its parameter otherwise.
+        If a yielding argument is given and the user sets its parameter otherwise.
 
     """
-    in_file = node_values(params, node.executable) if params else {}
     overrides = {}
     for override in node.overrides:
         if override.when is not None and chosen[override.when[0]] != override.when[1]:
             continue
         names = {f for _, f, _, _ in Formatter().parse(override.value) if f}
         yielding = [name for name in names if arguments[name].yielding]
-        given = all(chosen[name] != '' for name in yielding)
-        if yielding and not given and override.name in in_file:
-            continue
         value = override.value.format(**{
             name: chosen[name] or arguments[name].default for name in chosen})
-        if yielding and given and override.name in in_file and str(
-                in_file[override.name]) != value:
-            raise ArgumentError(
-                f'{yielding[0]}:={chosen[yielding[0]]} conflicts with {override.name}: '
-                f'{in_file[override.name]} in {params} (give one of them)')
+        if yielding and override.name in explicit:
+            # the user's own value for this node stays, unless an argument given says otherwise
+            given = all(chosen[name] != '' and name not in from_nodes for name in yielding)
+            mine, where = explicit[override.name]
+            if given and str(mine) != value:
+                raise ArgumentError(
+                    f'{yielding[0]}:={chosen[yielding[0]]} conflicts with {override.name}: '
+                    f'{mine} in {where} (give one of them)')
+            if not given:
+                continue
         overrides[override.name] = value
     return overrides
 
 
-def resolve(composition, values):
+def _explicit(node, given_file, parameters):
+    """
+    Return what the user sets on a node: ``parameter -> (value, where)``.
+
+    The ``<node>_params`` file (every section that applies to the node), then the ``-p
+    <node>.<parameter>:=<value>`` overrides, which win.
+    """
+    explicit = {}
+    if given_file:
+        explicit.update({name: (value, given_file)
+                         for name, value in node_values(given_file, node.executable).items()})
+    explicit.update({name: (value, f'-p {node.executable}.{name}')
+                     for name, value in parameters.get(node.executable, {}).items()})
+    return explicit
+
+
+def _cell_values(nodes, chosen, arguments, explicit, warnings):
+    """
+    Give each yielding argument not given the value a node's explicit parameter sets.
+
+    One scene for the cell: when the user sets ``scene`` on one node (its params file, ``-p``),
+    every node of the composition that takes the argument loads it too, unless the user sets
+    another one on it, which :func:`scene_disagreement` reports in ``warnings``.
+
+    Returns
+    -------
+    chosen : dict
+        ``chosen`` with those values.
+    from_nodes : set of str
+        The arguments whose value comes from a node.
+
+    """
+    chosen = dict(chosen)
+    from_nodes = set()
+    for name, argument in arguments.items():
+        if not argument.yielding or chosen[name] != '':
+            continue
+        sets = [(node.executable, *explicit[node.executable][override.name])
+                for node in nodes for override in node.overrides
+                if override.value == f'{{{name}}}' and override.name in explicit[node.executable]]
+        if sets:
+            chosen[name] = str(sets[0][1])
+            from_nodes.add(name)
+            if name == 'scene':
+                disagreement = scene_disagreement(sets)
+                if disagreement:
+                    warnings.append(disagreement)
+    return chosen, from_nodes
+
+
+def scene_disagreement(sets):
+    """
+    Return a one-line warning when nodes of a cell are given different scenes, else ''.
+
+    Parameters
+    ----------
+    sets : list of (str, str, str)
+        ``(node, scene, where)``: the scenes the user sets, node by node.
+
+    Returns
+    -------
+    str
+
+    """
+    def same(scene):
+        from cbha_inverse.scene.loader import resolve_scene_path
+        try:
+            return str(Path(resolve_scene_path(scene)).resolve())
+        except FileNotFoundError:       # the node itself reports it
+            return str(scene)
+
+    if len({same(scene) for _, scene, _ in sets}) < 2:
+        return ''
+    return 'the nodes load different scenes: ' + ', '.join(
+        f'{node} {scene} ({where})' for node, scene, where in sets)
+
+
+def resolve(composition, values, parameters=None, warnings=None):
     """
     Return the node processes of a composition for given argument values.
 
@@ -293,6 +380,11 @@ def resolve(composition, values):
         The composition.
     values : dict
         ``name -> value`` (str); missing arguments take their defaults.
+    parameters : dict, optional
+        ``node -> {parameter: value}``: one-off overrides (``cbha_launch -p
+        <node>.<parameter>:=<value>``), applied last; typed values.
+    warnings : list, optional
+        Gets one line per thing the user should know (different scenes on the nodes of the cell).
 
     Returns
     -------
@@ -302,12 +394,15 @@ def resolve(composition, values):
     Raises
     ------
     ArgumentError
-        On an unknown argument, a value outside its choices or a yielding argument that
-        conflicts with the user's params file.
+        On an unknown argument, a value outside its choices, a yielding argument that
+        conflicts with what the user sets on a node, or a ``-p`` override of a node that the
+        composition does not start.
     cbha_inverse.errors.ConfigError
         If a user's params file cannot be read.
 
     """
+    parameters = parameters or {}
+    warnings = [] if warnings is None else warnings
     arguments = {argument.name: argument for argument in composition.all_arguments()}
     unknown = sorted(set(values) - set(arguments))
     if unknown:
@@ -330,17 +425,30 @@ def resolve(composition, values):
                             '127.0.0.1: it needs every node on this host (role:=all), not '
                             f"role:={chosen['role']}")
 
+    started = [node for node in composition.nodes
+               if applies(node.when) and chosen['role'] in ('all', node.role)]
+    names = [node.executable for node in started]
+    for executable in parameters:
+        if executable not in names:
+            from cbha_inverse.config_files import nearest
+            near = nearest(executable, names)
+            raise ArgumentError(f'-p {executable}.<parameter>: {composition.name} starts no node '
+                                f'{executable}' + (f', did you mean {near!r}?' if near else
+                                                   f" (it starts {', '.join(names)})"))
+    explicit = {node.executable: _explicit(node, chosen[f'{node.executable}_params'],
+                                           parameters) for node in started}
+    chosen, from_nodes = _cell_values(started, chosen, arguments, explicit, warnings)
     processes = []
-    for node in composition.nodes:
-        if not applies(node.when) or chosen['role'] not in ('all', node.role):
-            continue
+    for node in started:
         given = chosen[f'{node.executable}_params']
         params = given or str(config_path(f'{node.executable}.yaml'))
         environment = (loopback_udp_variables()
                        if loopback and node.executable == SOLVER else {})
+        overrides = _yielding_overrides(node, chosen, arguments, explicit[node.executable],
+                                        from_nodes)
+        overrides.update(parameters.get(node.executable, {}))
         processes.append(NodeProcess(
-            node.executable, chosen['namespace'], (str(Path(params)),),
-            _yielding_overrides(node, chosen, arguments, given), environment))
+            node.executable, chosen['namespace'], (str(Path(params)),), overrides, environment))
     return processes
 
 

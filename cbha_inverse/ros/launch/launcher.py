@@ -1,5 +1,10 @@
 """
-``cbha_launch sim|robot [name:=value ...]``: the launch files' compositions, without ``launch``.
+``cbha_launch sim|robot [name:=value ...] [-p node.parameter:=value ...]``: the compositions.
+
+The launch files' compositions, without ``launch``. Before any node starts, the params files
+and ``-p`` overrides the user gives are checked as the nodes will read them
+(:mod:`cbha_inverse.ros.launch.checks`): a section that matches no node, a parameter the node
+does not declare or a value it would refuse is one line and exit 2.
 
 Starts every node of :data:`cbha_inverse.ros.launch.compositions.COMPOSITIONS` ``[name]`` as a
 process (:class:`cbha_inverse.ros.launch.processes.NodeProcesses`: ``python -m
@@ -12,8 +17,9 @@ required: when one exits by itself, the others are stopped. Exit status: 0 when 
 stopped cleanly after the signal, else the first non-zero status of a node; 2 on a bad argument,
 params file or conflict between them (one line on stderr). ``--dry-run`` prints the command lines
 instead, and keeps the overrides params files they name; ``--show-args`` lists the composition's
-arguments (as ``ros2 launch ... --show-args``). A stop while the command itself still loads exits
-0 with one line (:mod:`cbha_inverse.ros.common.loading`).
+arguments (as ``ros2 launch ... --show-args``). A stop while the command itself still loads or
+checks (until the nodes start) exits 0 with one line (:mod:`cbha_inverse.ros.common.loading`); a
+scene set differently on the nodes by the user is one warning line.
 """
 
 import argparse
@@ -49,6 +55,10 @@ def _parser():
         epilog='\n'.join(epilog))
     parser.add_argument('composition', choices=sorted(COMPOSITIONS))
     parser.add_argument('arguments', nargs='*', metavar='name:=value')
+    parser.add_argument('-p', '--param', action='append', default=[],
+                        metavar='NODE.PARAMETER:=VALUE',
+                        help='a one-off parameter of a node, applied last (YAML-typed as ros2 '
+                        'does: 0.3 double, 3 integer); checked before any node starts')
     parser.add_argument('--dry-run', action='store_true', help='print the commands, start none')
     parser.add_argument('-s', '--show-args', action='store_true',
                         help="list the composition's arguments (as ros2 launch --show-args)")
@@ -156,13 +166,45 @@ def main(argv=None):
         See the module docstring.
 
     """
-    # from here this command handles its stops (:mod:`cbha_inverse.ros.common.loading`)
-    loaded()
     try:
         return _main(argv)
     except KeyboardInterrupt:      # before the nodes start: nothing to stop
         print(f'{PROGRAM}: stopped before starting the nodes', file=sys.stderr)
         return 0
+
+
+def _resolved(composition, args, overrides_dir):
+    """
+    Resolve a composition, check what the user gives the nodes, and write the command lines.
+
+    Returns
+    -------
+    processes : list of NodeProcess
+    lines : list of (str, list of str)
+
+    Raises
+    ------
+    ArgumentError, ConfigError
+        On a bad argument, params file or parameter (:mod:`cbha_inverse.ros.launch.checks`).
+
+    """
+    from cbha_inverse.ros.common.params import ParameterError
+    from cbha_inverse.ros.launch.checks import (
+        check_parameters, check_sections, parse_overrides)
+    values = parse_assignments(args.arguments)
+    parameters = parse_overrides(args.param)
+    warnings = []
+    processes = resolve(composition, values, parameters, warnings)
+    user_files = {p.executable: values[f'{p.executable}_params'] for p in processes
+                  if values.get(f'{p.executable}_params')}
+    check_sections(composition, [p for p in processes if p.executable in user_files])
+    try:
+        check_parameters(processes, parameters, user_files)
+    except ParameterError as exc:
+        raise ArgumentError(str(exc)) from None
+    for warning in warnings:
+        print(f'{PROGRAM}: warning: {warning}', file=sys.stderr, flush=True)
+    return processes, command_lines(processes, overrides_dir)
 
 
 def _main(argv):
@@ -175,8 +217,7 @@ def _main(argv):
         # the printed command lines name the overrides files: they must outlive this command
         overrides_dir = tempfile.mkdtemp(prefix='cbha_launch_')
         try:
-            lines = command_lines(resolve(composition, parse_assignments(args.arguments)),
-                                  overrides_dir)
+            _, lines = _resolved(composition, args, overrides_dir)
         except (ArgumentError, ConfigError) as exc:
             shutil.rmtree(overrides_dir, ignore_errors=True)
             return report_config_error(PROGRAM, exc)
@@ -185,10 +226,12 @@ def _main(argv):
         return 0
     with tempfile.TemporaryDirectory(prefix='cbha_launch_') as overrides_dir:
         try:
-            processes = resolve(composition, parse_assignments(args.arguments))
-            lines = command_lines(processes, overrides_dir)
+            processes, lines = _resolved(composition, args, overrides_dir)
         except (ArgumentError, ConfigError) as exc:
             return report_config_error(PROGRAM, exc)
+        # from here this command handles its stops (:mod:`cbha_inverse.ros.common.loading`):
+        # until now a stop was a quiet exit 0, the node modules' imports for the checks included
+        loaded()
         print(f'[{PROGRAM}] {composition.name}: ' + ', '.join(
             f'{p.executable} ({p.namespace})' for p in processes), flush=True)
         return supervise(lines)
