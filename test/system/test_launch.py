@@ -176,7 +176,9 @@ def test_cbha_launch_sim_runs_the_nodes_and_stops_them_all_on_sigint(rclpy_conte
 
 def test_cbha_launch_stops_every_node_when_one_fails(tmp_path):
     params = tmp_path / 'inverse_solver.yaml'
-    params.write_text('/**:\n  ros__parameters:\n    rate_hz: 100\n')
+    # a value the launcher's checks cannot see (the number of valves is the scene's): the node
+    # refuses it at start
+    params.write_text('/**:\n  ros__parameters:\n    valve_names: [a, b]\n')
     process = _launch('scene:=tendon_6f_8c', f'inverse_solver_params:={params}')
     start = time.monotonic()
     output, _ = process.communicate(timeout=60)
@@ -290,7 +292,8 @@ def test_a_users_params_file_wins_over_the_compositions_defaults(tmp_path):
     processes = resolve(sim, {'inverse_solver_params': params, 'mode': 'open'})
     assert _solver(processes).parameters == {'mode': 'open'}
     plant = next(p for p in processes if p.executable == 'cbha_sim')
-    assert plant.parameters == {'scene': 'cbha.yaml'}
+    # one scene for the cell: the simulator loads the scene of the controller's file
+    assert plant.parameters == {'scene': 'identified.yaml'}
 
 
 @pytest.mark.untimed
