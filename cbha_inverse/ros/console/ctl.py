@@ -68,7 +68,7 @@ def _parser():
                          help=f'namespace of a relative NODE (default {DEFAULT_NAMESPACE})')
     parser = argparse.ArgumentParser(
         prog=PROGRAM, parents=[options],
-        description=__doc__.strip().splitlines()[0].strip('`: '),
+        description=__doc__.strip().splitlines()[0],
         epilog='Exit status: 0 done, 1 absent or refused, 2 bad arguments, 130 Ctrl-C. '
         'ROS arguments after --ros-args (e.g. -r __ns:=/left).')
     commands = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
