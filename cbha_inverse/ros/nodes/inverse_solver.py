@@ -18,9 +18,14 @@ arriving, stays the set-point and the model keeps converging to it. What holds o
 (``stale_action``) is stale feedback in closed loop. That timer and the stamps follow the node
 clock (``use_sim_time``: ``/clock``, e.g. from ``cbha_bag play --clock``); the staleness watchdog
 (hold, vent, idle vent) runs on its own timer on the steady clock, so a paused or finished bag
-still makes the node hold or vent. Services: ``~/enable`` (std_srvs/SetBool: stop commanding, or
-resume) and ``~/reset`` (std_srvs/Trigger: model state and closed-loop correction back to rest;
-the set-point stays). Every input passes
+still makes the node hold or vent. Services: ``~/enable`` (std_srvs/SetBool: false stops
+ticking and does ``on_disable``, true resumes), ``~/hold`` and ``~/vent`` (std_srvs/Trigger: stop
+ticking and republish the last command, or the vent command, at ``rate_hz`` until ``~/enable
+true``: the consumers' controller-loss watchdogs see a live controller) and ``~/reset``
+(std_srvs/Trigger: model state and closed-loop correction back to rest; the set-point stays).
+A target that stops arriving is warned about once only when targets came as a stream (the one
+before the last arrived within ``target_timeout`` of it); a target sent once is a set-point, held
+without a warning. Every input passes
 :mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
 the last valid command stays. Every command passes
 :class:`cbha_inverse.robot.safety.CommandGate`: never NaN, never outside ``[0, p_max]``.
@@ -39,8 +44,8 @@ from cbha_inverse.core.sections import check_section_factors
 from cbha_inverse.robot.ordering import DROPPED, StampOrder
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
-    check_point, command_bounds, CommandGate, controller_decision, StalenessWatch, valve_order,
-    watchdog_action, WorkspaceBox)
+    ACTIONS, check_point, command_bounds, CommandGate, controller_decision, StalenessWatch,
+    valve_order, watchdog_action, WorkspaceBox)
 from cbha_inverse.robot.targets import TargetHistory
 from cbha_inverse.ros.common.conversions import (
     backbone_markers, point_values, SerializedCommand, stamp_ns)
@@ -95,7 +100,10 @@ class InverseSolverParams:
     feedback_timeout: float = param(0.5, 'closed loop: measurement older than this is stale [s]',
                                     low=0.001, high=3600.0, live=True)
     stale_action: str = param('hold', 'closed loop, on stale feedback: hold the last command '
-                              'or vent', choices=('hold', 'vent'), live=True)
+                              'or vent', choices=ACTIONS, live=True)
+    on_disable: str = param('hold', '~/enable false: hold (republish the last command) or vent '
+                            '(publish the vent command) at rate_hz until ~/enable true',
+                            choices=ACTIONS, live=True)
     publish_idle: bool = param(False, 'before the first valid target, publish the vent command '
                                'at rate_hz (false: publish nothing until a target arrives)',
                                live=True)
@@ -197,8 +205,11 @@ class InverseSolverNode(Node):
         self.decision = 'waiting'
         self.told_no_feedback = False
         self.enabled = True
+        self.stopped = None     # while disabled: 'hold' or 'vent' (~/hold, ~/vent, on_disable)
         self.resets = 0
         self.target_stale = False
+        self.target_streamed = False    # the last target came within target_timeout of another
+        self.told_stale_target = False
         self.last_result = None
         self.last_goal = None        # the corrected target of last_result's tick [m]
         self._last_solve = -math.inf
@@ -231,6 +242,10 @@ class InverseSolverNode(Node):
             self.create_subscription(Float64MultiArray, p.actuator_gain_topic,
                                      self._on_gains, MEASURED_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
+        self.create_service(Trigger, '~/hold', lambda request, response: self._stop(
+            'hold', response))
+        self.create_service(Trigger, '~/vent', lambda request, response: self._stop(
+            'vent', response))
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)
         self.watchdog_timer = self.create_timer(self.period, self._on_watchdog,
@@ -240,7 +255,8 @@ class InverseSolverNode(Node):
         self.get_logger().info(
             f'scene {self.scene.name}: {len(self.valve_names)} valves {list(self.valve_names)}, '
             f'p_max {self.upper.max():g}, {p.mode} loop, trigger {p.trigger} at {p.rate_hz:g} Hz,'
-            f' stale -> {p.stale_action}; {self.command_publisher.topic_name}')
+            f' stale -> {p.stale_action}, disable -> {p.on_disable}; '
+            f'{self.command_publisher.topic_name}')
         refused = set_realtime_priority(p.realtime_priority)
         if refused:
             self.get_logger().warn(f'{refused}; the control thread stays under the normal '
@@ -256,7 +272,7 @@ class InverseSolverNode(Node):
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
-        self.upper, self.gate, self.vent_command, self.box = self._limits(p)
+        self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(p)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
                                                      qp_solver=p.qp_solver, max_step=p.max_step)
@@ -271,12 +287,12 @@ class InverseSolverNode(Node):
                                          max_correction=p.max_correction)
 
     def _limits(self, p):
-        """Return the upper bounds, command gate, vent command and workspace box of p."""
+        """Return the command bounds, command gate, vent command and workspace box of p."""
         lower, upper = command_bounds(self.scene.lower_bounds[self.order],
                                       self.scene.upper_bounds[self.order], p.max_pressure)
         gate = CommandGate(lower, upper)
         vent = gate(np.full(len(self.valve_names), float(p.vent_pressure)))
-        return upper, gate, vent, WorkspaceBox(p.workspace_min, p.workspace_max)
+        return lower, upper, gate, vent, WorkspaceBox(p.workspace_min, p.workspace_max)
 
     def _apply_parameters(self, old, new):
         """Apply a change of the live parameters (checked; a ``ValueError`` refuses it)."""
@@ -287,7 +303,7 @@ class InverseSolverNode(Node):
 
     def _retune_model(self, new):
         """Live parameters of what ``_setup_model`` built (a ``ValueError`` refuses them)."""
-        self.upper, self.gate, self.vent_command, self.box = self._limits(new)
+        self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(new)
         self.corrector.gain = new.loop_gain if new.mode == 'closed' else 0.0
         self.corrector.max_correction = new.max_correction
 
@@ -357,7 +373,10 @@ class InverseSolverNode(Node):
             return
         self.target = point
         self.target_history.add(stamp_ns(message.header.stamp), point)
-        self.target_watch.mark(time.monotonic())
+        now = time.monotonic()
+        # a stream: this target came within target_timeout of the one before
+        self.target_streamed = not self.target_watch.stale(now)
+        self.target_watch.mark(now)
         if self.params.trigger == 'target' and self._decide() == 'run':
             published, published_cpu = self._solve_and_publish()
             self.latencies.add(published - received)
@@ -414,10 +433,13 @@ class InverseSolverNode(Node):
         target_stale = self.target is not None and self.target_watch.stale(now)
         if target_stale != self.target_stale:
             self.target_stale = target_stale
-            if target_stale:
-                logger.warn(f'no target for {self.target_watch.age(now):.2f} s: the last one '
-                            'stays the set-point')
-            else:
+            # only a stream that stops is worth a warning; a target sent once is a set-point
+            if target_stale and self.target_streamed:
+                self.told_stale_target = True
+                logger.warn(f'no target for {self.target_watch.age(now):.2f} s: the target '
+                            'stream stopped; the last one stays the set-point')
+            elif not target_stale and self.told_stale_target:
+                self.told_stale_target = False
                 logger.info('targets arrive again')
         return decision
 
@@ -433,23 +455,38 @@ class InverseSolverNode(Node):
 
     def _on_watchdog(self):
         """Tick on the steady clock: hold or vent on stale feedback, idle vent if configured."""
-        action = watchdog_action(self._decide(), self.params.publish_idle)
+        decision = self._decide()
+        action = watchdog_action(decision, self.params.publish_idle)
+        if decision == 'disabled':
+            # held or vented: republished, so the consumers see a live controller (before any
+            # command there is nothing to hold)
+            action = self.stopped if self.stopped == 'vent' or self.published else None
         if action == 'hold':
             self._publish(self.command)
         elif action == 'vent':
             self._publish(self.vent_command)
 
     def _on_enable(self, request, response):
-        """``~/enable``: false stops commanding (no solve, no publication), true resumes."""
-        self.enabled = bool(request.data)
+        """``~/enable``: false stops ticking and does ``on_disable``, true resumes."""
+        if not request.data:
+            return self._stop(self.params.on_disable, response)
+        self.enabled, self.stopped = True, None
         self._decide()
         response.success = True
-        response.message = ('enabled: commanding' if self.enabled
-                            else 'disabled: not commanding until ~/enable true')
-        if self.enabled:
-            self.get_logger().info(response.message)
-        else:
-            self.get_logger().warn(response.message)
+        response.message = 'enabled: commanding'
+        self.get_logger().info(response.message)
+        return response
+
+    def _stop(self, action, response):
+        """``~/hold``, ``~/vent``: stop ticking; hold the last command or vent, until enabled."""
+        self.enabled, self.stopped = False, action
+        self._decide()
+        if action == 'vent':
+            self._publish(self.vent_command)     # at once, then at rate_hz by the watchdog
+        response.success = True
+        held = 'holding the last command' if self.published else 'nothing to hold (no command yet)'
+        response.message = (f'{"venting" if action == "vent" else held} until ~/enable true')
+        self.get_logger().warn(response.message)
         return response
 
     def _on_reset(self, request, response):
@@ -532,6 +569,14 @@ class InverseSolverNode(Node):
         self.published += 1
 
     # outputs --------------------------------------------------------------------------------
+    def _at_bounds(self):
+        """Return the valves whose last command is at its lower and at its upper bound."""
+        # (a tendon at 0 N is at its lower bound: normal; at the upper bound it cannot pull more)
+        span = np.maximum(self.upper - self.lower, 1.0) * 1e-9
+        names = np.asarray(self.valve_names)
+        return (names[self.command <= self.lower + span].tolist(),
+                names[self.command >= self.upper - span].tolist())
+
     def _publish_markers(self):
         self.marker_publisher.publish(backbone_markers(
             self.solver.state.positions, self.target, self.get_clock().now().to_msg(),
@@ -546,7 +591,9 @@ class InverseSolverNode(Node):
     def _statuses(self):
         now = time.monotonic()
         result = self.last_result
+        at_lower, at_upper = self._at_bounds() if self.published else ([], [])
         values = {'mode': self.params.mode, 'decision': self.decision, 'enabled': self.enabled,
+                  'stopped': self.stopped or '', 'on_disable': self.params.on_disable,
                   'resets': self.resets, 'target_stale': self.target_stale, 'ticks': self.ticks,
                   'published': self.published, 'last_status': result.status if result else '',
                   'qp_status': result.qp_status if result else '',
@@ -556,6 +603,7 @@ class InverseSolverNode(Node):
                   'restorations': self.solver.restorations,
                   'saturated': ','.join(np.asarray(self.scene.actuator_names)[
                       result.saturated].tolist()) if result else '',
+                  'at_lower_bound': ','.join(at_lower), 'at_upper_bound': ','.join(at_upper),
                   'target_age_s': self.target_watch.age(now),
                   'feedback_age_s': self.feedback_watch.age(now),
                   'correction_mm': 1e3 * float(np.linalg.norm(self.corrector.correction)),
@@ -582,7 +630,8 @@ class InverseSolverNode(Node):
         elif self.decision in ('hold', 'vent'):
             level, message = WARN, f'stale feedback: {self.decision}'
         elif self.decision == 'disabled':
-            level, message = OK, 'disabled (~/enable false): not commanding'
+            level, message = OK, ('stopped: venting' if self.stopped == 'vent' else
+                                  'stopped: holding the last command')
         elif self.decision == 'waiting':
             level, message = OK, 'waiting for a target'
         elif self.target_stale:
