@@ -68,8 +68,8 @@ from cbha_inverse.ros.common.conversions import (command_array, command_message,
                                                  joint_state, point_stamped)
 from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_status, OK,
                                                  TimingStats, WARN)
-from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.loading import end_process
+from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
