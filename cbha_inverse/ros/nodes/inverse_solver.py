@@ -75,6 +75,9 @@ EPISODE_ACTION = {'not_converged': 'narrowing the actuation step until it conver
                   'unreachable': 'tracking the closest reachable point'}
 NOT_CONVERGED_ERROR_S = 1.0
 """An episode off equilibrium longer than this [s] is an ERROR in the diagnostics."""
+NOT_CONVERGED_WARN_S = 0.1
+"""An episode off equilibrium is logged once it lasts this long [s]: the few ticks the model
+takes to converge after a jump of the target (ten at 100 Hz) are no condition to warn of."""
 
 
 @dataclass(frozen=True)
@@ -220,6 +223,7 @@ class InverseSolverNode(Node):
         self.statuses = {}
         # ticks off equilibrium or beyond reach: logged once per episode, in the diagnostics
         self.episodes = StatusEpisodes()
+        self.episode_told = False   # the ongoing episode's WARN line was logged
         self.tick_times = TimingStats()
         self.latencies = TimingStats()
         # the thread's CPU time over the same window: latency minus it is time spent waiting
@@ -494,6 +498,7 @@ class InverseSolverNode(Node):
         self.solver.reset()
         self.corrector.reset()
         self.episodes.reset()
+        self.episode_told = False
         self.last_result = None
         self.last_goal = None
         self.target_error = math.nan
@@ -538,18 +543,29 @@ class InverseSolverNode(Node):
         return published
 
     def _account_episode(self, result):
-        """Log the start and the end of an episode off equilibrium or beyond reach, once each."""
+        """
+        Log an episode off equilibrium or beyond reach once, and its end.
+
+        Beyond reach: at its first tick; off equilibrium: once it lasted
+        :data:`NOT_CONVERGED_WARN_S` (an episode that ends sooner is not logged at all).
+        """
         figure = (result.equilibrium_gap if result.status == 'not_converged'
                   else result.predicted_error)
-        started, ended = self.episodes.update(result.status, figure, time.monotonic())
+        _, ended = self.episodes.update(result.status, figure, time.monotonic())
         logger = self.get_logger()
-        if ended is not None:
+        if ended is not None and self.episode_told:
             summary = ', '.join(f'{n} ticks {c} (worst {1e3 * ended.worst[c]:.2f} mm)'
                                 for c, n in ended.ticks.items())
             logger.info(f'back to normal after {ended.duration:.2f} s: {summary}')
-        if started is not None:
-            text = EPISODE_TEXT[started.condition].format(1e3 * started.figure)
-            logger.warning(f'{text} ({EPISODE_ACTION[started.condition]})')
+        if ended is not None:
+            self.episode_told = False
+        episode = self.episodes.current
+        if episode is not None and not self.episode_told and (
+                'unreachable' in episode.ticks or episode.duration >= NOT_CONVERGED_WARN_S):
+            self.episode_told = True
+            condition = 'unreachable' if 'unreachable' in episode.ticks else episode.condition
+            text = EPISODE_TEXT[condition].format(1e3 * episode.figures[condition])
+            logger.warning(f'{text} ({EPISODE_ACTION[condition]})')
 
     def _count_failure(self, what, exc):
         self.statuses['exception'] = self.statuses.get('exception', 0) + 1
