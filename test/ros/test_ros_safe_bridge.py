@@ -44,9 +44,8 @@ def _after(driver, start):
     return [values for t, values in driver.received if t > start]
 
 
-def test_bridge_vent_and_hold_services_override_a_streaming_controller(rclpy_context,
-                                                                      robotino_msgs):
-    """While a controller streams: ~/vent sends zeros, ~/hold the last set-points, until enabled."""
+def test_bridge_vent_and_hold_override_a_streaming_controller(rclpy_context, robotino_msgs):
+    """While a controller streams: ~/vent sends zeros, ~/hold the last set-points, till enabled."""
     bridge = make_node(RobotinoBridgeNode, rclpy_context, rate_hz=100.0,
                        controller_loss_timeout=30.0)
     driver = DriverStandIn(rclpy_context)
