@@ -246,9 +246,9 @@ class InverseSolverNode(Node):
             self.create_subscription(Float64MultiArray, p.actuator_gain_topic,
                                      self._on_gains, MEASURED_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
-        self.create_service(Trigger, '~/hold', lambda request, response: self._stop(
+        self.create_service(Trigger, '~/hold', lambda request, response: self._safe_state(
             'hold', response))
-        self.create_service(Trigger, '~/vent', lambda request, response: self._stop(
+        self.create_service(Trigger, '~/vent', lambda request, response: self._safe_state(
             'vent', response))
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)
@@ -473,7 +473,7 @@ class InverseSolverNode(Node):
     def _on_enable(self, request, response):
         """``~/enable``: false stops ticking and does ``on_disable``, true resumes."""
         if not request.data:
-            return self._stop(self.params.on_disable, response)
+            return self._safe_state(self.params.on_disable, response)
         self.enabled, self.stopped = True, None
         self._decide()
         response.success = True
@@ -481,7 +481,7 @@ class InverseSolverNode(Node):
         self.get_logger().info(response.message)
         return response
 
-    def _stop(self, action, response):
+    def _safe_state(self, action, response):
         """``~/hold``, ``~/vent``: stop ticking; hold the last command or vent, until enabled."""
         self.enabled, self.stopped = False, action
         self._decide()
@@ -489,7 +489,8 @@ class InverseSolverNode(Node):
             self._publish(self.vent_command)     # at once, then at rate_hz by the watchdog
         response.success = True
         held = 'holding the last command' if self.published else 'nothing to hold (no command yet)'
-        response.message = (f'{"venting" if action == "vent" else held} until ~/enable true')
+        response.message = (f'disabled: {"venting" if action == "vent" else held} until '
+                            '~/enable true')
         self.get_logger().warn(response.message)
         return response
 

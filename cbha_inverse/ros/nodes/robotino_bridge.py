@@ -247,9 +247,9 @@ class RobotinoBridgeNode(Node):
         self.create_subscription(self.readings_type, p.driver_readings_topic, self._on_readings,
                                  DRIVER_READINGS_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
-        self.create_service(Trigger, '~/hold', lambda request, response: self._stop(
+        self.create_service(Trigger, '~/hold', lambda request, response: self._safe_state(
             'hold', response))
-        self.create_service(Trigger, '~/vent', lambda request, response: self._stop(
+        self.create_service(Trigger, '~/vent', lambda request, response: self._safe_state(
             'vent', response))
         self.timer = self.create_timer(1.0 / p.rate_hz, self._on_timer)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
@@ -320,13 +320,13 @@ class RobotinoBridgeNode(Node):
     def _on_enable(self, request, response):
         """``~/enable``: true forwards commands again; false vents (as ``~/vent``)."""
         if not request.data:
-            return self._stop('vent', response)
+            return self._safe_state('vent', response)
         self.stopped = None
         response.success, response.message = True, 'enabled: forwarding pressure_command'
         self.get_logger().info(response.message)
         return response
 
-    def _stop(self, action, response):
+    def _safe_state(self, action, response):
         """``~/hold``, ``~/vent``: stop forwarding; hold the last set-points or vent."""
         self.stopped = action
         if action == 'hold' and self.sent is not None:
