@@ -6,6 +6,9 @@ driver stand-in taking ``/set_bha_pressures``. Expected set-points written out b
 channels 0-5 arm, 6-7 wrist).
 """
 
+import signal
+import subprocess
+import sys
 import time
 
 from cbha_inverse.ros.common.params import ParameterError
@@ -14,8 +17,8 @@ from cbha_inverse.ros.nodes.robotino_bridge import RobotinoBridgeNode
 import numpy as np
 import pytest
 from rclpy.node import Node
-from robotino_helpers import DriverStandIn
-from ros_helpers import make_node, spin_for, spin_until, spinning
+from robotino_helpers import DriverStandIn, robotino_child_env
+from ros_helpers import make_node, reaped, REPO_ROOT, spin_for, spin_until, spinning
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
@@ -108,3 +111,27 @@ def test_both_names_with_different_values_are_refused_in_one_line(rclpy_context,
                        'command_timeout 0.3 disagree: set only controller_loss_timeout$'):
         make_node(RobotinoBridgeNode, rclpy_context, controller_loss_timeout=0.2,
                   command_timeout=0.3)
+
+
+def test_ctrl_c_of_the_bridge_process_vents_the_driver(rclpy_context, robotino_msgs):
+    """SIGINT after set-points were sent: the driver gets the vent set-points before the exit."""
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'cbha_inverse.ros.nodes.robotino_bridge', '--ros-args',
+         '--params-file', str(REPO_ROOT / 'config' / 'robotino_bridge.yaml'),
+         '-r', '__ns:=/cbha'], cwd=REPO_ROOT, env=robotino_child_env(robotino_msgs),
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    driver = DriverStandIn(rclpy_context)
+    client = Node('client', context=rclpy_context, namespace='/cbha')
+    command_pub = client.create_publisher(Float64MultiArray, 'pressure_command', COMMAND_QOS)
+    with reaped(process), spinning(rclpy_context, driver, client) as executor:
+        assert spin_until(executor, lambda: command_pub.get_subscription_count() > 0, 30.0)
+        _stream(executor, command_pub, FIRST, 0.2)
+        assert spin_until(executor, lambda: driver.received, 5.0)
+        process.send_signal(signal.SIGINT)
+        stopped = time.monotonic()
+        assert spin_until(executor, lambda: process.poll() is not None, 20.0)
+        spin_for(executor, 0.1)
+        output = process.communicate(timeout=10.0)[0]
+    assert process.returncode == 0, output
+    np.testing.assert_allclose(driver.received[-1][1], VENT_BAR, atol=1e-12)
+    assert driver.received[-1][0] > stopped and 'stopping: vented' in output, output

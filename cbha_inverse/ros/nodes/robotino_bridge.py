@@ -23,7 +23,10 @@ of ``/set_bha_pressures`` is not overridden), or the vent set-points at ``rate_h
 
 Services: ``~/vent`` and ``~/hold`` (std_srvs/Trigger) stop forwarding commands (they are
 counted, not sent) and publish the vent set-points, or the last set-points, at ``rate_hz`` until
-``~/enable true`` (std_srvs/SetBool; ``false`` vents, as ``~/vent``).
+``~/enable true`` (std_srvs/SetBool; ``false`` vents, as ``~/vent``). When the bridge itself stops
+(Ctrl-C, SIGTERM: its node is destroyed) after it sent set-points, ``on_exit: vent`` sends the
+vent set-points first (acknowledged within :data:`EXIT_ACK_TIMEOUT`): its watchdog ends with it,
+and the driver would hold the last set-points for ever; ``hold`` leaves them.
 
 Each ``/bha_readings`` message is republished as ``pressure_measured`` (Float64MultiArray, Pa in
 ``valve_names`` order, :func:`cbha_inverse.robot.robotino.robotino_pressures`) and
@@ -55,6 +58,7 @@ from cbha_inverse.ros.common.qos import (
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -67,6 +71,9 @@ MISSING_MESSAGES = (
     "this package's copy with `cbha_build_robotino_msgs --workspace WS`, then source "
     'WS/install/setup.sh before starting robotino_bridge')
 """The one line printed when the driver's message package is missing."""
+
+EXIT_ACK_TIMEOUT = 1.0
+"""Longest wait [s] for the driver to acknowledge the vent set-points sent at exit."""
 
 RENAMED = {'controller_loss_timeout': 'command_timeout', 'on_controller_loss': 'stale_action'}
 """Parameters still read under their old names (``name: old name``)."""
@@ -101,6 +108,9 @@ class RobotinoBridgeParams:
                               live=True)
     vent_pressure: float = param(0.0, 'arm pressure commanded when venting [Pa]', low=0.0,
                                  high=MAX_BAR * PASCAL_PER_BAR, live=True)
+    on_exit: str = param('vent', 'when the bridge stops (Ctrl-C, SIGTERM) after it sent '
+                         'set-points: vent first, or hold (leave the last ones with the driver)',
+                         choices=ACTIONS, live=True)
     reading_timeout: float = param(0.5, 'bha_readings older than this are reported stale in '
                                    'diagnostics and warned about [s]', low=0.001, high=3600.0,
                                    live=True)
@@ -279,6 +289,17 @@ class RobotinoBridgeNode(Node):
         self.reading_watch.timeout = self.silence.timeout = new.reading_timeout
         self.silence.period = new.silence_warn_period
         self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
+
+    def destroy_node(self):
+        """Vent first (``on_exit: vent``) when set-points were sent, then destroy the node."""
+        publisher = getattr(self, 'driver_publisher', None)
+        if (getattr(self, 'sent', None) is not None and self.params.on_exit == 'vent'
+                and publisher in self.publishers):
+            self._send(self.vent_bar)
+            acknowledged = publisher.wait_for_all_acked(Duration(seconds=EXIT_ACK_TIMEOUT))
+            self.get_logger().info('stopping: vented' + ('' if acknowledged else
+                                   f' (not acknowledged within {EXIT_ACK_TIMEOUT:g} s)'))
+        super().destroy_node()
 
     # commands -------------------------------------------------------------------------------
     def _on_command(self, message):
