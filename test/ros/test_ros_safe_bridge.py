@@ -22,6 +22,10 @@ from ros_helpers import make_node, reaped, REPO_ROOT, spin_for, spin_until, spin
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
+# bounds on the timing of node callbacks (timeouts + 100 ms, republication rates): ``make
+# test`` runs them in its timing phase, alone on the cores (test/conftest.py)
+pytestmark = pytest.mark.timing
+
 FIRST = [1e4, 2e4, 3e4, 4e4, 5e4, 6e4]
 FIRST_BAR = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.0, 0.0]
 SECOND = [6e4, 5e4, 4e4, 3e4, 2e4, 1e4]

@@ -22,6 +22,10 @@ from ros_helpers import make_node, reaped, spin_for, spin_until, spinning, start
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 
+# bounds on the timing of node callbacks (timeouts + 100 ms, republication rates): ``make
+# test`` runs them in its timing phase, alone on the cores (test/conftest.py)
+pytestmark = pytest.mark.timing
+
 SCENE = 'cbha'
 TARGET = (0.2308, 0.03, -0.0292)
 """A tip position in the CBHA's reach (the paper circle's centre + 30 mm in y) [m]."""
