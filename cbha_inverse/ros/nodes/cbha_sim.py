@@ -40,6 +40,18 @@ last pressures received before it are of the same instant). A fault for tests an
 ``string_pot_stuck_after`` seconds after the first accepted command (after a ``~/reset``: the
 next one).
 
+Controller loss: once the commands come as a stream (a valid command within
+``controller_loss_timeout`` of the previous one, as a controller publishes them at its tick rate),
+a stream that stops for ``controller_loss_timeout`` (steady clock) is a lost controller (a crash, a
+kill, a cut network): ``on_controller_loss: vent`` sends the vent set-points (every valve at its
+lower bound, 0 Pa) into the valve line, so the pressures fall through the same latency and
+first-order lag as for any command, as a real valve vents; ``hold`` keeps the last set-point.
+A single command (a test rig, ``ros2 topic pub --once``) is a set-point the plant keeps: it arms
+nothing. A command of the wrong length is rejected like any bad command, but
+``stop_after_wrong_length`` of them in a row, all of one length, are a controller built for
+another scene: the simulator stops with one line naming both lengths and the likely cause (exit
+2), instead of rejecting every message.
+
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 """
 
@@ -48,12 +60,15 @@ import math
 import sys
 import time
 
+from cbha_inverse.errors import CONFIG_ERROR_EXIT
 from cbha_inverse.robot.robotino import ARM_VALVES
-from cbha_inverse.robot.safety import check_command, valve_order
+from cbha_inverse.robot.safety import (ACTIONS, check_command, command_bounds, StalenessWatch,
+                                       valve_order)
 from cbha_inverse.ros.common.conversions import (command_array, command_message,
                                                  joint_state, point_stamped)
 from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_status, OK,
                                                  TimingStats, WARN)
+from cbha_inverse.ros.common.loading import end_process
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
@@ -64,12 +79,15 @@ from cbha_inverse.sim.arm import SimulatedArm
 from cbha_inverse.sim.plant_errors import plant_errors
 from cbha_inverse.sim.pots import SimulatedPots
 from geometry_msgs.msg import PointStamped
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 NODE_NAME = 'cbha_sim'
+LOSS_WATCH_PERIOD = 0.01
+"""Period [s] of the controller-loss watchdog (steady clock): a loss acts within it."""
 
 
 @dataclass(frozen=True)
@@ -115,6 +133,17 @@ class CbhaSimParams:
     diagnostics_period: float = param(1.0, 'period of /diagnostics [s]', low=0.05, high=60.0)
     log_throttle: float = param(1.0, 'least time between two logs of rejected commands [s]',
                                 low=0.0, high=3600.0, live=True)
+    on_controller_loss: str = param('vent', 'when a command stream stops for '
+                                    'controller_loss_timeout: vent (valves to their lower bound, '
+                                    '0 Pa, through the valve model) or hold the last set-point',
+                                    choices=ACTIONS, live=True)
+    controller_loss_timeout: float = param(0.5, 'a command stream silent this long is a lost '
+                                           'controller [s] (steady clock)', low=0.001,
+                                           high=3600.0, live=True)
+    stop_after_wrong_length: int = param(10, 'this many commands in a row of one wrong length '
+                                         '(a controller on another scene) stop the simulator '
+                                         '(exit 2); 0: reject them one by one', low=0,
+                                         high=1000000, live=True)
     tip_output: str = param('point', 'tip feedback: tip/measured points, rendered stereo '
                             'images, both, or none (a camera-less arm; tip/true stays)',
                             choices=('point', 'stereo', 'both', 'none'))
@@ -152,6 +181,10 @@ class CbhaSimNode(Node):
 
     Parameters
     ----------
+    on_stop : callable
+        Called once the simulator stopped itself (a run of wrong-length commands: its timers
+        are cancelled, commands ignored, the reason logged and in ``stopped``); the process of
+        :func:`main` ends there with exit 2.
     **kwargs
         Passed to ``rclpy.node.Node``.
 
@@ -162,8 +195,9 @@ class CbhaSimNode(Node):
 
     """
 
-    def __init__(self, **kwargs):
+    def __init__(self, on_stop=lambda: None, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
+        self.on_stop = on_stop
         try:
             self.params = declare_parameters(self, CbhaSimParams, self._apply_parameters)
             p = self.params
@@ -196,6 +230,15 @@ class CbhaSimNode(Node):
         self.unconverged_since = None   # steady time of the first unconverged update in a row
         self.failures = 0
         self.resets = 0
+        self.vent_command = command_bounds(self.scene.lower_bounds[self.order],
+                                           self.scene.upper_bounds[self.order])[0]
+        # controller loss: a stream of commands (two within the timeout) that stops
+        self.command_watch = StalenessWatch(p.controller_loss_timeout)
+        self.controller = 'none'    # none (no stream yet), streaming, lost
+        self.losses = 0
+        self.wrong_length_run = (None, 0)   # (length, count) of the wrong lengths in a row
+        self.wrong_length_detail = ''
+        self.stopped = None     # why the simulator stopped itself (a run of wrong lengths)
         self.tick_times = TimingStats()
         self.measured_publisher = self.create_publisher(PointStamped, 'tip/measured',
                                                         MEASURED_QOS)
@@ -206,6 +249,8 @@ class CbhaSimNode(Node):
                                  COMMAND_QOS)
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
+        self.loss_timer = self.create_timer(LOSS_WATCH_PERIOD, self._watch_controller,
+                                            clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.cameras = None
         if p.tip_output in ('stereo', 'both'):
             self.cameras = self._start_cameras()
@@ -219,7 +264,8 @@ class CbhaSimNode(Node):
             f'base offset {[v * 1e3 for v in p.base_offset]} mm), gravity '
             f'{list(p.gravity)}, valves {p.valve_time_constant * 1e3:g} ms, latency '
             f'{p.latency * 1e3:g} ms, noise {p.noise_std * 1e3:g} mm and '
-            f'{p.pressure_noise_std:g} Pa, {p.rate_hz:g} Hz')
+            f'{p.pressure_noise_std:g} Pa, {p.rate_hz:g} Hz; a command stream silent '
+            f'{p.controller_loss_timeout:g} s -> {p.on_controller_loss}')
 
     def _apply_parameters(self, old, new):
         """Apply a change of the live parameters (checked by :func:`declare_parameters`)."""
@@ -227,6 +273,7 @@ class CbhaSimNode(Node):
         self.arm.valves.time_constant = new.valve_time_constant
         self.arm.tip_noise, self.arm.pressure_noise = new.noise_std, new.pressure_noise_std
         self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
+        self.command_watch.timeout = new.controller_loss_timeout
         self.params = new
 
     def _start_cameras(self):
@@ -250,8 +297,14 @@ class CbhaSimNode(Node):
         return SimulatedCameras(self, rig, p.camera_rate_hz, p.marker_radius, p.seed, shape)
 
     def _on_command(self, message):
+        if self.stopped is not None:
+            return
         values = command_array(message)
         check = check_command(values, len(self.order), self.params.max_pressure)
+        if check.reason == 'wrong_length':
+            self._count_wrong_length(len(values), check.detail)
+            return
+        self._end_wrong_length_run()
         if not check.ok:
             self.rejected.count(check.reason, f'rejected pressure_command: {check.detail}')
             return
@@ -260,6 +313,62 @@ class CbhaSimNode(Node):
         self.accepted += 1
         if self.first_command_time is None:
             self.first_command_time = now
+        self._mark_command(time.monotonic())
+
+    def _count_wrong_length(self, length, detail):
+        """Count a command of the wrong length; stop on a run of them (another scene's)."""
+        run_length, run = self.wrong_length_run
+        if length != run_length:
+            self._end_wrong_length_run()
+            run = 0
+        self.wrong_length_run = (length, run + 1)
+        self.wrong_length_detail = detail
+        # counted now, logged when the run ends: a run that stops the node gives one line
+        self.rejected.count('wrong_length', None)
+        limit = self.params.stop_after_wrong_length
+        if limit and run + 1 >= limit and self.stopped is None:
+            self.stopped = (
+                f'stopping: {run + 1} pressure_command messages in a row have {length} values, '
+                f'expected {len(self.order)} (the valves of scene {self.scene.name}): the '
+                'controller and the simulator probably loaded different scenes; give both the '
+                'same scene')
+            for timer in (self.timer, self.loss_timer):
+                timer.cancel()
+            self.get_logger().error(self.stopped)
+            self.on_stop()
+
+    def _end_wrong_length_run(self):
+        """Log the wrong-length commands of a run that ended (throttled, as every rejection)."""
+        run = self.wrong_length_run[1]
+        if run:
+            self.rejected.log.warning('wrong_length', f'rejected pressure_command: '
+                                      f'{self.wrong_length_detail} ({run} in a row, total '
+                                      f'{self.rejected["wrong_length"]})')
+        self.wrong_length_run = (None, 0)
+
+    def _mark_command(self, now):
+        """Record a valid command at steady time ``now``: two within the timeout are a stream."""
+        if self.controller == 'lost':
+            self.get_logger().info('pressure_command arrives again: following it')
+            self.controller = 'none'
+        if not self.command_watch.stale(now):
+            self.controller = 'streaming'
+        self.command_watch.mark(now)
+
+    def _watch_controller(self):
+        """Steady clock: a stream silent for ``controller_loss_timeout`` vents or holds."""
+        now = time.monotonic()
+        if self.controller != 'streaming' or not self.command_watch.stale(now):
+            return
+        self.controller = 'lost'
+        self.losses += 1
+        action = self.params.on_controller_loss
+        if action == 'vent':
+            self.arm.send(self._node_seconds(), self.vent_command)
+        self.get_logger().warning(
+            f'no pressure_command for {self.command_watch.age(now):.2f} s (controller lost): '
+            + ('venting, valves to their lower bound' if action == 'vent'
+               else 'holding the last set-point'))
 
     @property
     def pressures(self):
@@ -272,6 +381,7 @@ class CbhaSimNode(Node):
     def _on_reset(self, request, response):
         """``~/reset``: plant at rest, valves vented, pending commands dropped."""
         self.arm.reset()
+        self.controller = 'none'
         self.last_result = None
         self.pots_due = -math.inf
         self.first_command_time = None
@@ -336,6 +446,9 @@ class CbhaSimNode(Node):
         result = self.last_result
         total = self.rejected.total
         values = {'accepted_commands': self.accepted, 'resets': self.resets,
+                  'controller': self.controller, 'controller_losses': self.losses,
+                  'on_controller_loss': self.params.on_controller_loss,
+                  'command_age_s': self.command_watch.age(time.monotonic()),
                   **self.rejected.key_values(),
                   'valve_pressures_pa': ' '.join(f'{v:.0f}' for v in self.pressures[self.order]),
                   'newton_iterations': result.iterations if result else 0,
@@ -347,7 +460,16 @@ class CbhaSimNode(Node):
         message = (f'{total} rejected commands' if total else
                    'plant not converged: no tip or pot readings published' if level == WARN
                    else 'ok')
+        if self.controller == 'lost':
+            level, message = WARN, f'controller lost ({self.params.on_controller_loss})'
         return [make_status(self.get_name(), 'plant', level, message, values)]
+
+
+class CbhaSimProcess(CbhaSimNode):
+    """The simulated robot: pressure command in, tip position out (its process ends on a stop)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(on_stop=lambda: end_process(CONFIG_ERROR_EXIT), **kwargs)
 
 
 def main(argv=None):
@@ -363,10 +485,11 @@ def main(argv=None):
     Returns
     -------
     int
-        0 on a clean shutdown, 2 on invalid parameters.
+        0 on a clean shutdown, 2 on invalid parameters or a controller on another scene (the
+        process then ends with the one line the node logged).
 
     """
-    return run_node(CbhaSimNode, NODE_NAME, argv, params_class=CbhaSimParams)
+    return run_node(CbhaSimProcess, NODE_NAME, argv, params_class=CbhaSimParams)
 
 
 if __name__ == '__main__':

@@ -18,9 +18,14 @@ arriving, stays the set-point and the model keeps converging to it. What holds o
 (``stale_action``) is stale feedback in closed loop. That timer and the stamps follow the node
 clock (``use_sim_time``: ``/clock``, e.g. from ``cbha_bag play --clock``); the staleness watchdog
 (hold, vent, idle vent) runs on its own timer on the steady clock, so a paused or finished bag
-still makes the node hold or vent. Services: ``~/enable`` (std_srvs/SetBool: stop commanding, or
-resume) and ``~/reset`` (std_srvs/Trigger: model state and closed-loop correction back to rest;
-the set-point stays). Every input passes
+still makes the node hold or vent. Services: ``~/enable`` (std_srvs/SetBool: false stops
+ticking and does ``on_disable``, true resumes), ``~/hold`` and ``~/vent`` (std_srvs/Trigger: stop
+ticking and republish the last command, or the vent command, at ``rate_hz`` until ``~/enable
+true``: the consumers' controller-loss watchdogs see a live controller) and ``~/reset``
+(std_srvs/Trigger: model state and closed-loop correction back to rest; the set-point stays).
+A target that stops arriving is warned about once only when targets came as a stream (the one
+before the last arrived within ``target_timeout`` of it); a target sent once is a set-point, held
+without a warning. Every input passes
 :mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
 the last valid command stays. Every command passes
 :class:`cbha_inverse.robot.safety.CommandGate`: never NaN, never outside ``[0, p_max]``.
@@ -39,8 +44,8 @@ from cbha_inverse.core.sections import check_section_factors
 from cbha_inverse.robot.ordering import DROPPED, StampOrder
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (
-    check_point, command_bounds, CommandGate, controller_decision, StalenessWatch, valve_order,
-    watchdog_action, WorkspaceBox)
+    ACTIONS, check_point, command_bounds, CommandGate, controller_decision, StalenessWatch,
+    valve_order, watchdog_action, WorkspaceBox)
 from cbha_inverse.robot.targets import TargetHistory
 from cbha_inverse.ros.common.conversions import (
     backbone_markers, point_values, SerializedCommand, stamp_ns)
@@ -70,6 +75,9 @@ EPISODE_ACTION = {'not_converged': 'narrowing the actuation step until it conver
                   'unreachable': 'tracking the closest reachable point'}
 NOT_CONVERGED_ERROR_S = 1.0
 """An episode off equilibrium longer than this [s] is an ERROR in the diagnostics."""
+NOT_CONVERGED_WARN_S = 0.1
+"""An episode off equilibrium is logged once it lasts this long [s]: the few ticks the model
+takes to converge after a jump of the target (ten at 100 Hz) are no condition to warn of."""
 
 
 @dataclass(frozen=True)
@@ -95,7 +103,10 @@ class InverseSolverParams:
     feedback_timeout: float = param(0.5, 'closed loop: measurement older than this is stale [s]',
                                     low=0.001, high=3600.0, live=True)
     stale_action: str = param('hold', 'closed loop, on stale feedback: hold the last command '
-                              'or vent', choices=('hold', 'vent'), live=True)
+                              'or vent', choices=ACTIONS, live=True)
+    on_disable: str = param('hold', '~/enable false: hold (republish the last command) or vent '
+                            '(publish the vent command) at rate_hz until ~/enable true',
+                            choices=ACTIONS, live=True)
     publish_idle: bool = param(False, 'before the first valid target, publish the vent command '
                                'at rate_hz (false: publish nothing until a target arrives)',
                                live=True)
@@ -197,8 +208,11 @@ class InverseSolverNode(Node):
         self.decision = 'waiting'
         self.told_no_feedback = False
         self.enabled = True
+        self.stopped = None     # while disabled: 'hold' or 'vent' (~/hold, ~/vent, on_disable)
         self.resets = 0
         self.target_stale = False
+        self.target_streamed = False    # the last target came within target_timeout of another
+        self.told_stale_target = False
         self.last_result = None
         self.last_goal = None        # the corrected target of last_result's tick [m]
         self._last_solve = -math.inf
@@ -209,6 +223,7 @@ class InverseSolverNode(Node):
         self.statuses = {}
         # ticks off equilibrium or beyond reach: logged once per episode, in the diagnostics
         self.episodes = StatusEpisodes()
+        self.episode_told = False   # the ongoing episode's WARN line was logged
         self.tick_times = TimingStats()
         self.latencies = TimingStats()
         # the thread's CPU time over the same window: latency minus it is time spent waiting
@@ -231,6 +246,10 @@ class InverseSolverNode(Node):
             self.create_subscription(Float64MultiArray, p.actuator_gain_topic,
                                      self._on_gains, MEASURED_QOS)
         self.create_service(SetBool, '~/enable', self._on_enable)
+        self.create_service(Trigger, '~/hold', lambda request, response: self._safe_state(
+            'hold', response))
+        self.create_service(Trigger, '~/vent', lambda request, response: self._safe_state(
+            'vent', response))
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(self.period, self._on_timer)
         self.watchdog_timer = self.create_timer(self.period, self._on_watchdog,
@@ -240,7 +259,8 @@ class InverseSolverNode(Node):
         self.get_logger().info(
             f'scene {self.scene.name}: {len(self.valve_names)} valves {list(self.valve_names)}, '
             f'p_max {self.upper.max():g}, {p.mode} loop, trigger {p.trigger} at {p.rate_hz:g} Hz,'
-            f' stale -> {p.stale_action}; {self.command_publisher.topic_name}')
+            f' stale -> {p.stale_action}, disable -> {p.on_disable}; '
+            f'{self.command_publisher.topic_name}')
         refused = set_realtime_priority(p.realtime_priority)
         if refused:
             self.get_logger().warn(f'{refused}; the control thread stays under the normal '
@@ -256,7 +276,7 @@ class InverseSolverNode(Node):
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
-        self.upper, self.gate, self.vent_command, self.box = self._limits(p)
+        self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(p)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
                                                      qp_solver=p.qp_solver, max_step=p.max_step)
@@ -271,12 +291,12 @@ class InverseSolverNode(Node):
                                          max_correction=p.max_correction)
 
     def _limits(self, p):
-        """Return the upper bounds, command gate, vent command and workspace box of p."""
+        """Return the command bounds, command gate, vent command and workspace box of p."""
         lower, upper = command_bounds(self.scene.lower_bounds[self.order],
                                       self.scene.upper_bounds[self.order], p.max_pressure)
         gate = CommandGate(lower, upper)
         vent = gate(np.full(len(self.valve_names), float(p.vent_pressure)))
-        return upper, gate, vent, WorkspaceBox(p.workspace_min, p.workspace_max)
+        return lower, upper, gate, vent, WorkspaceBox(p.workspace_min, p.workspace_max)
 
     def _apply_parameters(self, old, new):
         """Apply a change of the live parameters (checked; a ``ValueError`` refuses it)."""
@@ -287,7 +307,7 @@ class InverseSolverNode(Node):
 
     def _retune_model(self, new):
         """Live parameters of what ``_setup_model`` built (a ``ValueError`` refuses them)."""
-        self.upper, self.gate, self.vent_command, self.box = self._limits(new)
+        self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(new)
         self.corrector.gain = new.loop_gain if new.mode == 'closed' else 0.0
         self.corrector.max_correction = new.max_correction
 
@@ -357,7 +377,10 @@ class InverseSolverNode(Node):
             return
         self.target = point
         self.target_history.add(stamp_ns(message.header.stamp), point)
-        self.target_watch.mark(time.monotonic())
+        now = time.monotonic()
+        # a stream: this target came within target_timeout of the one before
+        self.target_streamed = not self.target_watch.stale(now)
+        self.target_watch.mark(now)
         if self.params.trigger == 'target' and self._decide() == 'run':
             published, published_cpu = self._solve_and_publish()
             self.latencies.add(published - received)
@@ -414,10 +437,13 @@ class InverseSolverNode(Node):
         target_stale = self.target is not None and self.target_watch.stale(now)
         if target_stale != self.target_stale:
             self.target_stale = target_stale
-            if target_stale:
-                logger.warn(f'no target for {self.target_watch.age(now):.2f} s: the last one '
-                            'stays the set-point')
-            else:
+            # only a stream that stops is worth a warning; a target sent once is a set-point
+            if target_stale and self.target_streamed:
+                self.told_stale_target = True
+                logger.warn(f'no target for {self.target_watch.age(now):.2f} s: the target '
+                            'stream stopped; the last one stays the set-point')
+            elif not target_stale and self.told_stale_target:
+                self.told_stale_target = False
                 logger.info('targets arrive again')
         return decision
 
@@ -433,23 +459,39 @@ class InverseSolverNode(Node):
 
     def _on_watchdog(self):
         """Tick on the steady clock: hold or vent on stale feedback, idle vent if configured."""
-        action = watchdog_action(self._decide(), self.params.publish_idle)
+        decision = self._decide()
+        action = watchdog_action(decision, self.params.publish_idle)
+        if decision == 'disabled':
+            # held or vented: republished, so the consumers see a live controller (before any
+            # command there is nothing to hold)
+            action = self.stopped if self.stopped == 'vent' or self.published else None
         if action == 'hold':
             self._publish(self.command)
         elif action == 'vent':
             self._publish(self.vent_command)
 
     def _on_enable(self, request, response):
-        """``~/enable``: false stops commanding (no solve, no publication), true resumes."""
-        self.enabled = bool(request.data)
+        """``~/enable``: false stops ticking and does ``on_disable``, true resumes."""
+        if not request.data:
+            return self._safe_state(self.params.on_disable, response)
+        self.enabled, self.stopped = True, None
         self._decide()
         response.success = True
-        response.message = ('enabled: commanding' if self.enabled
-                            else 'disabled: not commanding until ~/enable true')
-        if self.enabled:
-            self.get_logger().info(response.message)
-        else:
-            self.get_logger().warn(response.message)
+        response.message = 'enabled: commanding'
+        self.get_logger().info(response.message)
+        return response
+
+    def _safe_state(self, action, response):
+        """``~/hold``, ``~/vent``: stop ticking; hold the last command or vent, until enabled."""
+        self.enabled, self.stopped = False, action
+        self._decide()
+        if action == 'vent':
+            self._publish(self.vent_command)     # at once, then at rate_hz by the watchdog
+        response.success = True
+        held = 'holding the last command' if self.published else 'nothing to hold (no command yet)'
+        response.message = (f'disabled: {"venting" if action == "vent" else held} until '
+                            '~/enable true')
+        self.get_logger().warn(response.message)
         return response
 
     def _on_reset(self, request, response):
@@ -457,6 +499,7 @@ class InverseSolverNode(Node):
         self.solver.reset()
         self.corrector.reset()
         self.episodes.reset()
+        self.episode_told = False
         self.last_result = None
         self.last_goal = None
         self.target_error = math.nan
@@ -501,18 +544,29 @@ class InverseSolverNode(Node):
         return published
 
     def _account_episode(self, result):
-        """Log the start and the end of an episode off equilibrium or beyond reach, once each."""
+        """
+        Log an episode off equilibrium or beyond reach once, and its end.
+
+        Beyond reach: at its first tick; off equilibrium: once it lasted
+        :data:`NOT_CONVERGED_WARN_S` (an episode that ends sooner is not logged at all).
+        """
         figure = (result.equilibrium_gap if result.status == 'not_converged'
                   else result.predicted_error)
-        started, ended = self.episodes.update(result.status, figure, time.monotonic())
+        _, ended = self.episodes.update(result.status, figure, time.monotonic())
         logger = self.get_logger()
-        if ended is not None:
+        if ended is not None and self.episode_told:
             summary = ', '.join(f'{n} ticks {c} (worst {1e3 * ended.worst[c]:.2f} mm)'
                                 for c, n in ended.ticks.items())
             logger.info(f'back to normal after {ended.duration:.2f} s: {summary}')
-        if started is not None:
-            text = EPISODE_TEXT[started.condition].format(1e3 * started.figure)
-            logger.warning(f'{text} ({EPISODE_ACTION[started.condition]})')
+        if ended is not None:
+            self.episode_told = False
+        episode = self.episodes.current
+        if episode is not None and not self.episode_told and (
+                'unreachable' in episode.ticks or episode.duration >= NOT_CONVERGED_WARN_S):
+            self.episode_told = True
+            condition = 'unreachable' if 'unreachable' in episode.ticks else episode.condition
+            text = EPISODE_TEXT[condition].format(1e3 * episode.figures[condition])
+            logger.warning(f'{text} ({EPISODE_ACTION[condition]})')
 
     def _count_failure(self, what, exc):
         self.statuses['exception'] = self.statuses.get('exception', 0) + 1
@@ -532,6 +586,14 @@ class InverseSolverNode(Node):
         self.published += 1
 
     # outputs --------------------------------------------------------------------------------
+    def _at_bounds(self):
+        """Return the valves whose last command is at its lower and at its upper bound."""
+        # (a tendon at 0 N is at its lower bound: normal; at the upper bound it cannot pull more)
+        span = np.maximum(self.upper - self.lower, 1.0) * 1e-9
+        names = np.asarray(self.valve_names)
+        return (names[self.command <= self.lower + span].tolist(),
+                names[self.command >= self.upper - span].tolist())
+
     def _publish_markers(self):
         self.marker_publisher.publish(backbone_markers(
             self.solver.state.positions, self.target, self.get_clock().now().to_msg(),
@@ -546,7 +608,9 @@ class InverseSolverNode(Node):
     def _statuses(self):
         now = time.monotonic()
         result = self.last_result
+        at_lower, at_upper = self._at_bounds() if self.published else ([], [])
         values = {'mode': self.params.mode, 'decision': self.decision, 'enabled': self.enabled,
+                  'stopped': self.stopped or '', 'on_disable': self.params.on_disable,
                   'resets': self.resets, 'target_stale': self.target_stale, 'ticks': self.ticks,
                   'published': self.published, 'last_status': result.status if result else '',
                   'qp_status': result.qp_status if result else '',
@@ -556,6 +620,7 @@ class InverseSolverNode(Node):
                   'restorations': self.solver.restorations,
                   'saturated': ','.join(np.asarray(self.scene.actuator_names)[
                       result.saturated].tolist()) if result else '',
+                  'at_lower_bound': ','.join(at_lower), 'at_upper_bound': ','.join(at_upper),
                   'target_age_s': self.target_watch.age(now),
                   'feedback_age_s': self.feedback_watch.age(now),
                   'correction_mm': 1e3 * float(np.linalg.norm(self.corrector.correction)),
@@ -582,7 +647,8 @@ class InverseSolverNode(Node):
         elif self.decision in ('hold', 'vent'):
             level, message = WARN, f'stale feedback: {self.decision}'
         elif self.decision == 'disabled':
-            level, message = OK, 'disabled (~/enable false): not commanding'
+            level, message = OK, ('stopped: venting' if self.stopped == 'vent' else
+                                  'stopped: holding the last command')
         elif self.decision == 'waiting':
             level, message = OK, 'waiting for a target'
         elif self.target_stale:

@@ -11,12 +11,22 @@ reliable) and forwards each valid command at once to ``/set_bha_pressures`` thro
 :func:`cbha_inverse.robot.robotino.robotino_bar_command` (wrist channels from ``wrist_bar``, cap
 ``max_bar``). A command that is not finite, not of length ``len(valve_names)`` or outside
 ``[0, max_pressure]`` is never forwarded (:func:`cbha_inverse.robot.safety.check_command`; logged
-with throttling and counted). When no valid command arrived within ``command_timeout`` (steady
-clock), the bridge publishes at ``rate_hz`` either the last forwarded set-points (``hold``) or
-the vent set-points (``vent``: arm channels at ``vent_pressure``, wrist at 0), as the solver
-does with stale feedback. As the solver, it publishes nothing before the first valid command
-(another publisher of ``/set_bha_pressures`` is not overridden), or the vent set-points at
-``rate_hz`` with ``publish_idle: true``.
+with throttling and counted). When no valid command arrived within ``controller_loss_timeout``
+(steady clock; a lost controller), the bridge publishes at ``rate_hz`` either the last forwarded
+set-points (``on_controller_loss: hold``) or the vent set-points (``vent``: arm channels at
+``vent_pressure``, wrist at 0: the driver has no vent of its own, a vented valve is a zero
+set-point). ``command_timeout`` and ``stale_action`` are the old names of those two parameters,
+still read (a value set under either name counts; both names set to different values is
+refused). As the solver, it publishes nothing before the first valid command (another publisher
+of ``/set_bha_pressures`` is not overridden), or the vent set-points at ``rate_hz`` with
+``publish_idle: true``.
+
+Services: ``~/vent`` and ``~/hold`` (std_srvs/Trigger) stop forwarding commands (they are
+counted, not sent) and publish the vent set-points, or the last set-points, at ``rate_hz`` until
+``~/enable true`` (std_srvs/SetBool; ``false`` vents, as ``~/vent``). When the bridge itself stops
+(Ctrl-C, SIGTERM: its node is destroyed) after it sent set-points, ``on_exit: vent`` sends the
+vent set-points first (acknowledged within :data:`EXIT_ACK_TIMEOUT`): its watchdog ends with it,
+and the driver would hold the last set-points for ever; ``hold`` leaves them.
 
 Each ``/bha_readings`` message is republished as ``pressure_measured`` (Float64MultiArray, Pa in
 ``valve_names`` order, :func:`cbha_inverse.robot.robotino.robotino_pressures`) and
@@ -28,7 +38,7 @@ the rejected commands and measured - commanded pressure per valve.
 missing the node stops with one line saying how to get it.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 import importlib
 import math
 import sys
@@ -38,7 +48,7 @@ from cbha_inverse.robot.robotino import (
     ARM_VALVES, CHANNELS, MAX_BAR, N_CHANNELS, PASCAL_PER_BAR, robotino_bar_command,
     robotino_pressures, string_pot_names)
 from cbha_inverse.robot.safety import (
-    check_command, SilenceWarning, StalenessWatch, watchdog_action)
+    ACTIONS, check_command, SilenceWarning, StalenessWatch, watchdog_action)
 from cbha_inverse.ros.common.conversions import command_array, command_message, joint_state
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, make_status, OK, RateMeter, WARN)
@@ -48,9 +58,11 @@ from cbha_inverse.ros.common.qos import (
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
 
 NODE_NAME = 'robotino_bridge'
 
@@ -59,6 +71,12 @@ MISSING_MESSAGES = (
     "this package's copy with `cbha_build_robotino_msgs --workspace WS`, then source "
     'WS/install/setup.sh before starting robotino_bridge')
 """The one line printed when the driver's message package is missing."""
+
+EXIT_ACK_TIMEOUT = 1.0
+"""Longest wait [s] for the driver to acknowledge the vent set-points sent at exit."""
+
+RENAMED = {'controller_loss_timeout': 'command_timeout', 'on_controller_loss': 'stale_action'}
+"""Parameters still read under their old names (``name: old name``)."""
 
 STRING_POTS = tuple(f'string_pot_{name}' for name in ARM_VALVES)
 """Default names of the six string potentiometers (one per arm bellows, channel order)."""
@@ -78,12 +96,21 @@ class RobotinoBridgeParams:
                            low=0.0, high=MAX_BAR)
     wrist_bar: tuple = param((0.0, 0.0), 'set-points of the wrist channels 6 and 7 [bar] when '
                              'valve_names does not command them')
-    command_timeout: float = param(0.5, 'pressure_command older than this is stale [s] (steady '
-                                   'clock)', low=0.001, high=3600.0, live=True)
-    stale_action: str = param('vent', 'on a stale command stream: hold the last set-points or '
-                              'vent', choices=('hold', 'vent'), live=True)
+    controller_loss_timeout: float = param(0.5, 'no valid pressure_command for this long is a '
+                                           'lost controller [s] (steady clock)', low=0.001,
+                                           high=3600.0, live=True)
+    on_controller_loss: str = param('vent', 'on a lost controller: vent (arm at vent_pressure, '
+                                    'wrist at 0) or hold the last set-points, republished at '
+                                    'rate_hz', choices=ACTIONS, live=True)
+    command_timeout: float = param(0.5, 'old name of controller_loss_timeout [s]', low=0.001,
+                                   high=3600.0, live=True)
+    stale_action: str = param('vent', 'old name of on_controller_loss', choices=ACTIONS,
+                              live=True)
     vent_pressure: float = param(0.0, 'arm pressure commanded when venting [Pa]', low=0.0,
                                  high=MAX_BAR * PASCAL_PER_BAR, live=True)
+    on_exit: str = param('vent', 'when the bridge stops (Ctrl-C, SIGTERM) after it sent '
+                         'set-points: vent first, or hold (leave the last ones with the driver)',
+                         choices=ACTIONS, live=True)
     reading_timeout: float = param(0.5, 'bha_readings older than this are reported stale in '
                                    'diagnostics and warned about [s]', low=0.001, high=3600.0,
                                    live=True)
@@ -116,6 +143,30 @@ class RobotinoBridgeParams:
         if self.vent_pressure > self.max_pressure:
             raise ValueError(f'vent_pressure {self.vent_pressure:g} Pa is above max_pressure '
                              f'{self.max_pressure:g} Pa')
+        for name, old_name in RENAMED.items():
+            _one_of(self, name, old_name)   # both names agree, or one is left at its default
+
+    @property
+    def loss_timeout(self):
+        """Return the controller-loss timeout [s]: ``controller_loss_timeout`` or its old name."""
+        return _one_of(self, 'controller_loss_timeout', 'command_timeout')
+
+    @property
+    def loss_action(self):
+        """Return what a lost controller gets: ``on_controller_loss`` or its old name."""
+        return _one_of(self, 'on_controller_loss', 'stale_action')
+
+
+def _one_of(params, name, old_name):
+    """Return a parameter given under its name or its old one (refused: two values)."""
+    defaults = {spec.name: spec.default for spec in fields(params)}
+    value, old = getattr(params, name), getattr(params, old_name)
+    if old == defaults[old_name] or old == value:
+        return value
+    if value == defaults[name]:
+        return old
+    raise ValueError(f'{name} {value!r} and its old name {old_name} {old!r} disagree: set only '
+                     f'{name}')
 
 
 def import_robotino_msgs():
@@ -182,6 +233,8 @@ class RobotinoBridgeNode(Node):
         self.set_points = self.vent_bar.copy()
         self.sent = None
         self.measured = None
+        self.stopped = None     # 'hold' or 'vent' after ~/hold, ~/vent, until ~/enable true
+        self.ignored_while_stopped = 0
         self.decision = 'waiting'
         log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
         self.rejected = Rejections(log)
@@ -189,7 +242,7 @@ class RobotinoBridgeNode(Node):
         self.stale_published = 0
         self.readings = 0
         now = time.monotonic()
-        self.command_watch = StalenessWatch(p.command_timeout)
+        self.command_watch = StalenessWatch(p.loss_timeout)
         self.reading_watch = StalenessWatch(p.reading_timeout)
         self.silence = SilenceWarning(p.reading_timeout, p.silence_warn_period, now)
         self.command_rate = RateMeter(now)
@@ -203,12 +256,17 @@ class RobotinoBridgeNode(Node):
                                  COMMAND_QOS)
         self.create_subscription(self.readings_type, p.driver_readings_topic, self._on_readings,
                                  DRIVER_READINGS_QOS)
+        self.create_service(SetBool, '~/enable', self._on_enable)
+        self.create_service(Trigger, '~/hold', lambda request, response: self._safe_state(
+            'hold', response))
+        self.create_service(Trigger, '~/vent', lambda request, response: self._safe_state(
+            'vent', response))
         self.timer = self.create_timer(1.0 / p.rate_hz, self._on_timer)
         self.diagnostics = DiagnosticsPublisher(self, self._statuses, p.diagnostics_period)
         self.get_logger().info(
             f'{list(p.valve_names)} Pa -> {self.driver_publisher.topic_name} channels '
             f'{self.channels.tolist()} bar (cap {p.max_bar:g}, wrist {list(p.wrist_bar)}); '
-            f'stale after {p.command_timeout:g} s -> {p.stale_action}')
+            f'controller lost after {p.loss_timeout:g} s -> {p.loss_action}')
 
     @staticmethod
     def _vent_bar(p):
@@ -227,10 +285,21 @@ class RobotinoBridgeNode(Node):
 
     def _retune_interfaces(self, new):
         """Live parameters of what ``_setup_interfaces`` built."""
-        self.command_watch.timeout = new.command_timeout
+        self.command_watch.timeout = new.loss_timeout
         self.reading_watch.timeout = self.silence.timeout = new.reading_timeout
         self.silence.period = new.silence_warn_period
         self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
+
+    def destroy_node(self):
+        """Vent first (``on_exit: vent``) when set-points were sent, then destroy the node."""
+        publisher = getattr(self, 'driver_publisher', None)
+        if (getattr(self, 'sent', None) is not None and self.params.on_exit == 'vent'
+                and publisher in self.publishers):
+            self._send(self.vent_bar)
+            acknowledged = publisher.wait_for_all_acked(Duration(seconds=EXIT_ACK_TIMEOUT))
+            self.get_logger().info('stopping: vented' + ('' if acknowledged else
+                                   f' (not acknowledged within {EXIT_ACK_TIMEOUT:g} s)'))
+        super().destroy_node()
 
     # commands -------------------------------------------------------------------------------
     def _on_command(self, message):
@@ -239,6 +308,9 @@ class RobotinoBridgeNode(Node):
         check = check_command(values, len(p.valve_names), p.max_pressure)
         if not check.ok:
             self.rejected.count(check.reason, f'rejected pressure_command: {check.detail}')
+            return
+        if self.stopped is not None:
+            self.ignored_while_stopped += 1
             return
         self.command_rate.add()
         self.command_watch.mark(time.monotonic())
@@ -254,14 +326,46 @@ class RobotinoBridgeNode(Node):
             self.get_logger().warn(f'no bha_readings from the driver on {topic} for '
                                    f'{self.silence.timeout:g} s or more: is the Robotino driver '
                                    'running?')
+        if self.stopped is not None:
+            self._send_stopped()
+            return
         if not self.command_watch.stale(now):
             return
         if self.decision != 'waiting':
-            self._set_decision(self.params.stale_action)
+            self._set_decision(self.params.loss_action)
             self.stale_published += 1
         action = watchdog_action(self.decision, self.params.publish_idle)
         if action is not None:
             self._send(self.set_points if action == 'hold' else self.vent_bar)
+
+    def _on_enable(self, request, response):
+        """``~/enable``: true forwards commands again; false vents (as ``~/vent``)."""
+        if not request.data:
+            return self._safe_state('vent', response)
+        self.stopped = None
+        response.success, response.message = True, 'enabled: forwarding pressure_command'
+        self.get_logger().info(response.message)
+        return response
+
+    def _safe_state(self, action, response):
+        """``~/hold``, ``~/vent``: stop forwarding; hold the last set-points or vent."""
+        self.stopped = action
+        if action == 'hold' and self.sent is not None:
+            self.set_points = self.sent     # what the driver has now (after a vent: vented)
+        self._send_stopped()
+        held = ('holding the last set-points' if self.sent is not None
+                else 'holding (nothing sent yet: nothing to hold)')
+        response.message = f'{"venting" if action == "vent" else held} until ~/enable true'
+        response.success = True
+        self.get_logger().warn(response.message)
+        return response
+
+    def _send_stopped(self):
+        """Send what ``~/vent`` or ``~/hold`` keeps (hold before any set-point: nothing)."""
+        if self.stopped == 'vent':
+            self._send(self.vent_bar)
+        elif self.sent is not None:
+            self._send(self.set_points)
 
     def _set_decision(self, decision):
         if decision != self.decision:
@@ -301,7 +405,9 @@ class RobotinoBridgeNode(Node):
         now = time.monotonic()
         p = self.params
         total = self.rejected.total
-        values = {'decision': self.decision, 'forwarded_commands': self.forwarded,
+        values = {'decision': self.decision, 'stopped': self.stopped or '',
+                  'ignored_while_stopped': self.ignored_while_stopped,
+                  'forwarded_commands': self.forwarded,
                   'stale_set_points_published': self.stale_published,
                   'command_rate_hz': self.command_rate.rate(now),
                   'command_age_s': self.command_watch.age(now),
@@ -313,7 +419,9 @@ class RobotinoBridgeNode(Node):
             commanded = robotino_pressures(self.sent, p.valve_names)
             for name, error in zip(p.valve_names, self.measured - commanded):
                 values[f'measured_minus_commanded_pa.{name}'] = float(error)
-        if self.decision in ('hold', 'vent'):
+        if self.stopped is not None:
+            level, message = WARN, f'stopped by ~/{self.stopped}: not forwarding'
+        elif self.decision in ('hold', 'vent'):
             level, message = WARN, f'command stream stale: {self.decision}'
         elif self.reading_watch.stale(now):
             level, message = WARN, 'no recent bha_readings from the driver'
