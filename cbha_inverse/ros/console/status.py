@@ -3,8 +3,8 @@
 
 For users without the ``ros2`` CLI: subscribes ``/diagnostics`` (diagnostic_msgs/DiagnosticArray,
 what every node of the package publishes about once a second) and shows, refreshed every
-``--period`` seconds, the controller's decision, tracking error, saturated actuators, feedback
-age, tick and latency percentiles, whether a driver (``robotino_bridge``, or ``cbha_sim``) is
+``--period`` seconds, the controller's decision, tracking error, actuators at their upper bound,
+feedback age, tick and latency percentiles, whether a driver (``robotino_bridge``, or ``cbha_sim``) is
 there, and every status line with its level and age. On a terminal the block is redrawn in
 place; into a pipe each refresh is printed below the last. ``--once`` prints one block after
 ``--wait`` seconds and exits (status 1 if no diagnostics arrived). SIGINT or SIGTERM ends it
@@ -58,8 +58,8 @@ def status_lines(statuses, now):
         lines.append(f"controller  {values.get('decision', '-')} ({values.get('mode', '-')} "
                      f'loop): {control[1]}')
         lines.append(f"            error {_number(values, 'measured_error_mm')} mm, predicted "
-                     f"{_number(values, 'predicted_error_mm')} mm, saturated "
-                     f"{values.get('saturated') or 'none'}")
+                     f"{_number(values, 'predicted_error_mm')} mm, at upper bound "
+                     f"{values.get('at_upper_bound') or 'none'}")
         lines.append(f"            feedback age {_number(values, 'feedback_age_s')} s, target age "
                      f"{_number(values, 'target_age_s')} s")
         lines.append(f"            tick median {_number(values, 'tick_median_ms', digits=3)} ms, "
