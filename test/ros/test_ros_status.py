@@ -53,13 +53,14 @@ def test_status_without_diagnostics_exits_1():
 def test_status_block_of_a_running_loop():
     control = (0, 'running (solved)', {
         'decision': 'run', 'mode': 'closed', 'measured_error_mm': '1.234', 'at_lower_bound':
-        'tendon_1', 'at_upper_bound': 'tendon_0', 'feedback_age_s': '0.01', 'target_age_s': '0.02', 'tick_median_ms': '0.4',
-        'tick_p99_ms': '1.2', 'latency_median_ms': 'nan'}, 9.0)
+        'tendon_1', 'at_upper_bound': 'tendon_0', 'feedback_age_s': '0.01', 'target_age_s': '0.02',
+        'tick_median_ms': '0.4', 'tick_p99_ms': '1.2', 'latency_median_ms': 'nan'}, 9.0)
     driver = (1, 'no recent bha_readings from the driver', {'reading_age_s': 'inf'}, 9.5)
     lines = status_lines({'inverse_solver: control': control,
                           'robotino_bridge: driver': driver}, 10.0)
     assert lines[0] == 'controller  run (closed loop): running (solved)'
-    assert lines[1].startswith('            error 1.23 mm, predicted - mm, at upper bound tendon_0')
+    assert lines[1].startswith(
+        '            error 1.23 mm, predicted - mm, at upper bound tendon_0')
     assert 'tick median 0.400 ms, p99 1.200 ms; latency median - ms' in lines[3]
     assert lines[4] == ('driver      robotino_bridge: driver: WARN no recent bha_readings from '
                         'the driver, readings inf s old')
