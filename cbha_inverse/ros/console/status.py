@@ -4,11 +4,11 @@
 For users without the ``ros2`` CLI: subscribes ``/diagnostics`` (diagnostic_msgs/DiagnosticArray,
 what every node of the package publishes about once a second) and shows, refreshed every
 ``--period`` seconds, the controller's decision, tracking error, actuators at their upper bound,
-feedback age, tick and latency percentiles, whether a driver (``robotino_bridge``, or
-``cbha_sim``) is there, and every status line with its level and age. On a terminal the block
-is redrawn in place; into a pipe each refresh is printed below the last. ``--once`` prints one block after
-``--wait`` seconds and exits (status 1 if no diagnostics arrived). SIGINT or SIGTERM ends it
-at any moment, status 0, no traceback (a stop while it loads: one line,
+feedback age, tick and latency percentiles, whether a driver (``robotino_bridge``, or ``cbha_sim``)
+is there, and every status line with its level and age. On a terminal the block is redrawn in
+place; into a pipe each refresh is printed below the last. ``--once`` prints one block after
+``--wait`` seconds and exits (status 1 if no diagnostics arrived). SIGINT or SIGTERM ends it at any
+moment, status 0, no traceback (a stop while it loads: one line,
 :mod:`cbha_inverse.ros.common.loading`).
 """
 
