@@ -279,12 +279,15 @@ def _built_once(tmp_path_factory, package, build):
 @pytest.fixture(scope='session')
 def robotino_msgs(tmp_path_factory):
     """
-    Build the shipped ``robotino_msgs`` with colcon once per run and load it.
+    Make ``robotino_msgs`` usable: the installed one (``make install``), else build the copy.
 
-    Returns the install prefix; ``from robotino_msgs.msg import ...`` works afterwards in this
-    process, and ``robotino_helpers.robotino_child_env(prefix)`` gives child processes the
-    environment of its ``install/setup.sh``.
+    Returns None for an installed package, else the install prefix of a colcon build made once
+    per run (loaded in this process); ``robotino_helpers.robotino_child_env(prefix)`` gives
+    child processes either environment.
     """
+    import importlib.util
+    if importlib.util.find_spec('robotino_msgs') is not None:
+        return None
     from cbha_inverse.interfaces.robotino_msgs_build import build_robotino_msgs
     return _built_once(tmp_path_factory, 'robotino_msgs', build_robotino_msgs)
 
@@ -292,10 +295,10 @@ def robotino_msgs(tmp_path_factory):
 @pytest.fixture(scope='session')
 def tf2_msgs(tmp_path_factory):
     """
-    Make ``tf2_msgs`` usable: the system one (a sourced ROS 2), else the shipped one, built once.
+    Make ``tf2_msgs`` usable: the installed one (``make install``, a sourced ROS 2), else build.
 
-    Returns None for the system package, else the install prefix of the build (loaded in this
-    process; ``interface_environment(prefix, child_env())`` for child processes).
+    Returns None for an installed package, else the install prefix of a colcon build made once
+    (loaded in this process; ``interface_environment(prefix, child_env())`` for child processes).
     """
     import importlib.util
     if importlib.util.find_spec('tf2_msgs') is not None:

@@ -118,8 +118,9 @@ def interface_environment(prefix, base=None):
 
     Parameters
     ----------
-    prefix : str or os.PathLike
-        The package's install prefix (:func:`install_prefix`).
+    prefix : str or os.PathLike or None
+        The package's install prefix (:func:`install_prefix`); None: the package is installed
+        where every process finds it (the venv, ``make install``; a sourced ROS 2 install).
     base : mapping, optional
         Starting environment (default ``os.environ``).
 
@@ -128,9 +129,12 @@ def interface_environment(prefix, base=None):
     dict
         ``base`` with ``PYTHONPATH``, ``LD_LIBRARY_PATH``, ``AMENT_PREFIX_PATH`` and
         ``CMAKE_PREFIX_PATH`` prepended as ``install/setup.sh`` would (a Python child that imports
-        rclpy must start with it: the library path is read at process start).
+        rclpy must start with it: the library path is read at process start); ``base`` as it is
+        for a prefix None.
 
     """
+    if prefix is None:
+        return dict(os.environ if base is None else base)
     prefix = Path(prefix).resolve()
     version = f'python{sys.version_info.major}.{sys.version_info.minor}'
     env = dict(os.environ if base is None else base)

@@ -101,7 +101,10 @@ def install_interfaces(packages=None, prefix=None, timeout=600.0):
     prefix = Path(sys.prefix if prefix is None else prefix).resolve()
     if prefix != Path(sys.prefix).resolve() or sys.prefix == sys.base_prefix:
         raise BuildError(f'{prefix}: not the venv of this interpreter ({sys.executable}); run '
-                         'this command with the venv\'s python')
+                         "this command with the venv's python")
+    # colcon never crawls the workspace (a `colcon build` of a tree that holds the venv)
+    (prefix / WORKSPACE).mkdir(exist_ok=True)
+    (prefix / WORKSPACE / 'COLCON_IGNORE').touch()
     workspace = build_interface_packages({p: PACKAGES[p] for p in packages},
                                          prefix / WORKSPACE, timeout)
     env = build_environment()
