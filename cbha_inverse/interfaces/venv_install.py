@@ -12,13 +12,15 @@ the ROS wheels' start-up (``ros_wheels_bootstrapper``) puts ``<venv>/lib`` on
 ``LD_LIBRARY_PATH`` before any ROS library loads, in every Python process of the venv (a node,
 a console script, a test), and the ROS type support finds ``lib<pkg>__rosidl_typesupport_*.so``
 there by name. A sourced ROS 2 install still comes first: its ``PYTHONPATH`` precedes the
-venv's ``site-packages``.
+venv's ``site-packages``. The build itself ignores a sourced install (:data:`SOURCED`): what goes
+into the venv is built against the venv's wheels.
 
 A last step imports each package in a new process and serialises one of its messages (which
 loads its type support): an install that cannot be used fails here, not in a node.
 """
 
 import argparse
+import os
 from pathlib import Path
 import subprocess
 import sys
@@ -44,6 +46,14 @@ PROBES = {
 WORKSPACE = 'cbha_interfaces_ws'
 """The colcon workspace of the builds, under the prefix (kept: a rebuild is incremental)."""
 
+SOURCED = ('AMENT_PREFIX_PATH', 'CMAKE_PREFIX_PATH', 'PYTHONPATH')
+"""The variables of a sourced ROS 2 install that the build and the check run without."""
+
+
+def venv_environment():
+    """Return ``os.environ`` without :data:`SOURCED`: the venv's packages alone."""
+    return {key: value for key, value in os.environ.items() if key not in SOURCED}
+
 
 def probe_script(packages):
     """Return the Python source that imports and serialises one message of each package."""
@@ -66,7 +76,8 @@ def check_usable(packages, timeout=120.0):
 
     """
     result = subprocess.run([sys.executable, '-c', probe_script(packages)],
-                            capture_output=True, text=True, timeout=timeout)
+                            env=venv_environment(), capture_output=True, text=True,
+                            timeout=timeout)
     if result.returncode != 0:
         last = (result.stderr.strip().splitlines() or ['(no output)'])[-1]
         raise BuildError(f'the installed messages are not usable in a new process: {last}')
@@ -106,8 +117,8 @@ def install_interfaces(packages=None, prefix=None, timeout=600.0):
     (prefix / WORKSPACE).mkdir(exist_ok=True)
     (prefix / WORKSPACE / 'COLCON_IGNORE').touch()
     workspace = build_interface_packages({p: PACKAGES[p] for p in packages},
-                                         prefix / WORKSPACE, timeout)
-    env = build_environment()
+                                         prefix / WORKSPACE, timeout, venv_environment())
+    env = build_environment(venv_environment())
     for package in packages:
         command = ['cmake', '--install', str(workspace / 'build' / package),
                    '--prefix', str(prefix)]

@@ -20,7 +20,7 @@ from cbha_inverse.interfaces.robotino_msgs_build import (
     build_environment, BuildError, check_build_tools, interface_environment, main, SOURCE)
 from cbha_inverse.interfaces.rosidl_exports import broken_exports, repair_exports
 from cbha_inverse.interfaces.venv_install import (
-    install_interfaces, main as venv_install_main, PACKAGES, PROBES)
+    install_interfaces, main as venv_install_main, PACKAGES, PROBES, SOURCED, venv_environment)
 import pytest
 from ros_helpers import child_env, REPO_ROOT
 
@@ -204,3 +204,12 @@ def test_venv_install_refuses_another_prefix_and_unknown_packages(tmp_path, caps
     assert 'not a shipped package: nav2_msgs' in capsys.readouterr().err
     for package in PACKAGES:
         assert package in PROBES and (SHIPPED / package / 'package.xml').is_file()
+
+
+def test_the_venv_build_ignores_a_sourced_ros_2(monkeypatch):
+    """What goes into the venv is built against the venv's wheels, a sourced install aside."""
+    for key in SOURCED:
+        monkeypatch.setenv(key, '/opt/ros/jazzy')
+    env = venv_environment()
+    assert not set(SOURCED) & set(env) and env['PATH'] == os.environ['PATH']
+    assert build_environment(env)['CMAKE_PREFIX_PATH'] == sys.prefix
