@@ -79,13 +79,11 @@ CLOSED_LOOP_CALLS = re.compile(r'\b(record_tracking|loop_lag_error)\(')
 _SOURCES = {}
 # pytest's cache key of the seconds each test file took in the last run that ran it
 DURATIONS_KEY = 'cbha_inverse/file_seconds'
-# the seconds of the longest files of the first phase in one run (2 workers, load 8-11, the
-# robotino_msgs and tf2_msgs builds made in test_interfaces.py and test_ros_tf.py): their order on
-# a clone whose pytest cache holds no durations yet (CI), where the file order alone starts them
-# late on their worker
+# the seconds of the longest files of the first phase in one run (2 workers, load 8-11): their
+# order on a clone whose pytest cache holds no durations yet (CI), where the file order alone
+# starts them late on their worker
 TYPICAL_FILE_SECONDS = {
-    'test/identify/test_identify.py': 380.0, 'test/ros/test_interfaces.py': 230.0,
-    'test/lint/test_flake8.py': 126.0, 'test/ros/test_ros_tf.py': 112.0,
+    'test/identify/test_identify.py': 380.0, 'test/lint/test_flake8.py': 126.0,
     'test/system/test_installed_executables.py': 98.0, 'test/ros/test_ros_bag_play.py': 86.0,
     'test/scene/test_config_errors.py': 70.0, 'test/core/test_core_system.py': 65.0,
     'test/identify/test_identify_pots.py': 60.0, 'test/vision/test_vision_calibration.py': 48.0,

@@ -20,8 +20,10 @@ loads its type support): an install that cannot be used fails here, not in a nod
 """
 
 import argparse
+import importlib.metadata
 import os
 from pathlib import Path
+import shutil
 import subprocess
 import sys
 
@@ -44,7 +46,9 @@ PROBES = {
 """One message of each package (``T``): importing and serialising it loads its type support."""
 
 WORKSPACE = 'cbha_interfaces_ws'
-"""The colcon workspace of the builds, under the prefix (kept: a rebuild is incremental)."""
+"""The colcon workspace of the builds, under the prefix.
+
+Kept: a rebuild with the same ROS wheels is incremental; other wheels start it anew."""
 
 SOURCED = ('AMENT_PREFIX_PATH', 'CMAKE_PREFIX_PATH', 'PYTHONPATH')
 """The variables of a sourced ROS 2 install that the build and the check run without."""
@@ -53,6 +57,23 @@ SOURCED = ('AMENT_PREFIX_PATH', 'CMAKE_PREFIX_PATH', 'PYTHONPATH')
 def venv_environment():
     """Return ``os.environ`` without :data:`SOURCED`: the venv's packages alone."""
     return {key: value for key, value in os.environ.items() if key not in SOURCED}
+
+
+def installed_ros_wheels():
+    """
+    Return what a build in the workspace was made with: the interpreter and the ROS wheels.
+
+    Returns
+    -------
+    str
+        ``sys.version`` and the ``ros-*`` distributions of the venv with their versions, one a
+        line; a build made with other wheels is not reused (its CMake caches name them).
+
+    """
+    wheels = sorted(f'{d.metadata["Name"]}=={d.version}'
+                    for d in importlib.metadata.distributions()
+                    if (d.metadata['Name'] or '').lower().startswith('ros-'))
+    return '\n'.join([sys.version, *wheels])
 
 
 def probe_script(packages):
@@ -113,9 +134,13 @@ def install_interfaces(packages=None, prefix=None, timeout=600.0):
     if prefix != Path(sys.prefix).resolve() or sys.prefix == sys.base_prefix:
         raise BuildError(f'{prefix}: not the venv of this interpreter ({sys.executable}); run '
                          "this command with the venv's python")
+    made_with = prefix / WORKSPACE / 'made_with.txt'
+    if made_with.is_file() and made_with.read_text() != installed_ros_wheels():
+        shutil.rmtree(prefix / WORKSPACE)
     # colcon never crawls the workspace (a `colcon build` of a tree that holds the venv)
     (prefix / WORKSPACE).mkdir(exist_ok=True)
     (prefix / WORKSPACE / 'COLCON_IGNORE').touch()
+    made_with.write_text(installed_ros_wheels())
     workspace = build_interface_packages({p: PACKAGES[p] for p in packages},
                                          prefix / WORKSPACE, timeout, venv_environment())
     env = build_environment(venv_environment())
