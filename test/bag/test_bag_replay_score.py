@@ -5,10 +5,12 @@ Played messages keep their header stamps while the nodes stamp what they publish
 re-recorded bag the targets' stamps and the tips' stamps are on two clocks; ``eval`` then
 compares them on the recorder's receive times (``cbha_inverse.bag.evaluate.pairing_times``) and
 says so. Bags written here check the choice and the refusal (tips that overlap the targets in
-neither time); the timing test records a closed-loop run of ``cbha_launch sim``, plays its
+neither time); the timing test records an open-loop run of ``cbha_launch sim``, plays its
 targets into a fresh ``inverse_solver`` and ``cbha_sim`` while recording again, and scores both
-bags: the replay runs the same closed loop on the same targets, so its RMS is the run's within
-0.1 mm (0.22 and 0.19 mm in one trial).
+bags: the same targets through the same model and plant, so the replay's RMS is the run's within
+0.1 mm (10.0 mm, the model's 10 % stiffness error; equal to ~0.01 mm in trials). Open loop: the
+tip follows each target whatever the timing, while a closed loop run again tracks differently
+on a loaded machine (0.29 and 0.13 mm RMS in one trial), which is the loop, not the score.
 """
 
 import signal
@@ -129,7 +131,7 @@ def _stop(*processes):
 @pytest.mark.timing
 def test_a_run_replayed_through_the_nodes_scores_its_rms_within_a_tenth_of_a_mm(tmp_path):
     run, replay = tmp_path / 'run', tmp_path / 'replay'
-    launch = _start('cbha_inverse.ros.launch.launcher', 'sim')
+    launch = _start('cbha_inverse.ros.launch.launcher', 'sim', 'mode:=open')
     try:
         recorded = subprocess.run(
             [sys.executable, '-m', 'cbha_inverse.ros.bag.cli', 'record', '-o', str(run),
@@ -138,8 +140,8 @@ def test_a_run_replayed_through_the_nodes_scores_its_rms_within_a_tenth_of_a_mm(
     finally:
         launch_output = _stop(launch)[0]
     assert recorded.returncode == 0, recorded.stdout + recorded.stderr
-    overrides = tmp_path / 'closed.yaml'
-    overrides.write_text('/**:\n  ros__parameters:\n    mode: closed\n')
+    overrides = tmp_path / 'open.yaml'
+    overrides.write_text('/**:\n  ros__parameters:\n    mode: open\n')
     nodes = [_start(f'cbha_inverse.ros.nodes.{node}', '--ros-args', '-r', '__ns:=/cbha',
                     '--params-file', str(REPO_ROOT / 'config' / f'{node}.yaml'), *more)
              for node, more in (('inverse_solver', ('--params-file', str(overrides))),
@@ -157,4 +159,5 @@ def test_a_run_replayed_through_the_nodes_scores_its_rms_within_a_tenth_of_a_mm(
     run_rms, _ = _rms(run)
     replay_rms, report = _rms(replay)
     assert 'paired on receive times' in report, report
+    assert run_rms > 5e-3, run_rms          # open loop: the model's error, not the lag's
     assert abs(replay_rms - run_rms) < 1e-4, (run_rms, replay_rms)
