@@ -13,6 +13,8 @@ PINS_STAMP := $(VENV)/.pins-stamp
 INSTALL_STAMP := $(VENV)/.install-stamp
 KERNELS_STAMP := $(VENV)/.kernels-stamp
 EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
+INTERFACES_STAMP := $(VENV)/.interfaces-stamp
+INTERFACE_FILES := $(shell find cbha_inverse/interfaces -type f -not -name '*.pyc')
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
 KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py \
   test/core/test_core_linalg_btd.py test/core/test_core_tick.py test/core/test_core_links.py \
@@ -56,7 +58,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # the total of the non-compiled code (the numba kernels run as machine code, not Python: make
 # cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
-# reuse (the robotino_msgs and tf2_msgs builds, made again when their files or the pins change).
+# reuse.
 test: install  ## the whole test suite with coverage (~7 min on 2 cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	listed=$$shared/timing-files; rm -f $$listed; \
@@ -99,7 +101,7 @@ help:  ## list the targets
 
 venv: $(PINS_STAMP)  ## the virtual environment .venv from the pins
 
-install: $(INSTALL_STAMP) $(KERNELS_STAMP) $(EXPORTS_STAMP)  ## venv + editable install + compiled kernels
+install: $(INSTALL_STAMP) $(KERNELS_STAMP) $(INTERFACES_STAMP)  ## venv + editable install + compiled kernels + messages
 
 $(PINS_STAMP): requirements.txt requirements-dev.txt constraints.txt
 	@if [ -z "$(PYTHON)" ]; then \
@@ -125,6 +127,15 @@ $(KERNELS_STAMP): $(INSTALL_STAMP) $(KERNEL_SOURCES)
 # build an interface package such as robotino_msgs (cbha_build_robotino_msgs, the bridge tests).
 $(EXPORTS_STAMP): $(PINS_STAMP)
 	$(VPY) -m cbha_inverse.interfaces.rosidl_exports $(VENV)
+	@touch $@
+
+# The message packages the nodes use that PyPI lacks (tf2_msgs, robotino_msgs, control_msgs;
+# cbha_inverse/interfaces/) are built with colcon (CMake and a C/C++ compiler from the system)
+# and installed into the venv beside the wheels' messages, where every process of the venv finds
+# them without sourcing anything (cbha_inverse.interfaces.venv_install); again whenever their
+# files or the pins change.
+$(INTERFACES_STAMP): $(EXPORTS_STAMP) $(INSTALL_STAMP) $(INTERFACE_FILES)
+	$(VPY) -m cbha_inverse.interfaces.venv_install
 	@touch $@
 
 lint: install  ## ament_flake8, ament_pep257 and the layout checks (test/lint)

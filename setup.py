@@ -68,10 +68,11 @@ setup(
         *tree_data_files('launch'),
         *tree_data_files('rviz'),
     ],
-    # the Robotino driver's messages and tf2_msgs, built on demand by cbha_build_<package>
+    # the message packages PyPI lacks, built into the venv by make install
+    # (cbha_inverse.interfaces.venv_install) or into a workspace by cbha_build_<package>
     package_data={'cbha_inverse.interfaces': [
-        f'{package}/{pattern}' for package in ('robotino_msgs', 'tf2_msgs')
-        for pattern in ('*.txt', '*.xml', 'msg/*.msg')]},
+        f'{package}/{pattern}' for package in ('robotino_msgs', 'tf2_msgs', 'control_msgs')
+        for pattern in ('*.txt', '*.xml', 'LICENSE', 'msg/*.msg', 'action/*.action')]},
     install_requires=['setuptools'],
     zip_safe=False,
     maintainer='cbha_inverse maintainers',

@@ -79,13 +79,11 @@ CLOSED_LOOP_CALLS = re.compile(r'\b(record_tracking|loop_lag_error)\(')
 _SOURCES = {}
 # pytest's cache key of the seconds each test file took in the last run that ran it
 DURATIONS_KEY = 'cbha_inverse/file_seconds'
-# the seconds of the longest files of the first phase in one run (2 workers, load 8-11, the
-# robotino_msgs and tf2_msgs builds made in test_interfaces.py and test_ros_tf.py): their order on
-# a clone whose pytest cache holds no durations yet (CI), where the file order alone starts them
-# late on their worker
+# the seconds of the longest files of the first phase in one run (2 workers, load 8-11): their
+# order on a clone whose pytest cache holds no durations yet (CI), where the file order alone
+# starts them late on their worker
 TYPICAL_FILE_SECONDS = {
-    'test/identify/test_identify.py': 380.0, 'test/ros/test_interfaces.py': 230.0,
-    'test/lint/test_flake8.py': 126.0, 'test/ros/test_ros_tf.py': 112.0,
+    'test/identify/test_identify.py': 380.0, 'test/lint/test_flake8.py': 126.0,
     'test/system/test_installed_executables.py': 98.0, 'test/ros/test_ros_bag_play.py': 86.0,
     'test/scene/test_config_errors.py': 70.0, 'test/core/test_core_system.py': 65.0,
     'test/identify/test_identify_pots.py': 60.0, 'test/vision/test_vision_calibration.py': 48.0,
@@ -279,12 +277,15 @@ def _built_once(tmp_path_factory, package, build):
 @pytest.fixture(scope='session')
 def robotino_msgs(tmp_path_factory):
     """
-    Build the shipped ``robotino_msgs`` with colcon once per run and load it.
+    Make ``robotino_msgs`` usable: the installed one (``make install``), else build the copy.
 
-    Returns the install prefix; ``from robotino_msgs.msg import ...`` works afterwards in this
-    process, and ``robotino_helpers.robotino_child_env(prefix)`` gives child processes the
-    environment of its ``install/setup.sh``.
+    Returns None for an installed package, else the install prefix of a colcon build made once
+    per run (loaded in this process); ``robotino_helpers.robotino_child_env(prefix)`` gives
+    child processes either environment.
     """
+    import importlib.util
+    if importlib.util.find_spec('robotino_msgs') is not None:
+        return None
     from cbha_inverse.interfaces.robotino_msgs_build import build_robotino_msgs
     return _built_once(tmp_path_factory, 'robotino_msgs', build_robotino_msgs)
 
@@ -292,10 +293,10 @@ def robotino_msgs(tmp_path_factory):
 @pytest.fixture(scope='session')
 def tf2_msgs(tmp_path_factory):
     """
-    Make ``tf2_msgs`` usable: the system one (a sourced ROS 2), else the shipped one, built once.
+    Make ``tf2_msgs`` usable: the installed one (``make install``, a sourced ROS 2), else build.
 
-    Returns None for the system package, else the install prefix of the build (loaded in this
-    process; ``interface_environment(prefix, child_env())`` for child processes).
+    Returns None for an installed package, else the install prefix of a colcon build made once
+    (loaded in this process; ``interface_environment(prefix, child_env())`` for child processes).
     """
     import importlib.util
     if importlib.util.find_spec('tf2_msgs') is not None:

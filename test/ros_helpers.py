@@ -339,6 +339,33 @@ def child_env():
     return env
 
 
+def hiding_env(folder, *packages, base=None):
+    """
+    Return a :func:`child_env` in which importing the given packages fails.
+
+    ``make install`` puts tf2_msgs, robotino_msgs and control_msgs into the venv; a test of a
+    node without one of them prepends to ``PYTHONPATH`` a folder whose ``<package>/__init__.py``
+    raises ImportError (as a sourced ROS 2 install's packages come first, this one does).
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        An empty folder for the stand-in packages.
+    *packages : str
+        Names of the packages to hide.
+    base : mapping, optional
+        The environment to extend (default :func:`child_env`).
+
+    """
+    for package in packages:
+        (folder / package).mkdir(parents=True, exist_ok=True)
+        (folder / package / '__init__.py').write_text(
+            f'raise ImportError("No module named {package!r} (hidden by the test)")\n')
+    env = dict(child_env() if base is None else base)
+    env['PYTHONPATH'] = os.pathsep.join(p for p in [str(folder), env.get('PYTHONPATH')] if p)
+    return env
+
+
 def stack_dump(process, timeout=10.0):
     """
     Stop a hung child with SIGABRT and return its remaining output: its threads' stacks.

@@ -4,7 +4,10 @@
 Reads ``<ns>/target`` and ``<ns>/tip/true`` (or ``tip/measured``) as geometry_msgs/PointStamped
 and ``<ns>/pressure_command`` as std_msgs/Float64MultiArray, decoded without rclpy. The tracking
 error is :func:`cbha_inverse.metrics.tracking_errors` on the header stamps (the same
-function and window as ``cbha_demo``). The target-to-command latency pairs each target with the
+function and window as ``cbha_demo``), or on the receive times when the stamps of the targets
+and of the tips are not on one clock (:func:`pairing_times`: a bag replayed through the nodes and
+recorded again, its targets with their original stamps, its tips with new ones). The
+target-to-command latency pairs each target with the
 first command the recorder received after it (and before the next target), on the bag's receive
 times: it includes the delivery of both messages to the recorder. With ``start=None`` the
 start-up transient is left out of the score (:func:`cbha_inverse.metrics.transient_end`).
@@ -19,6 +22,11 @@ import numpy as np
 POINT_TYPE = 'geometry_msgs/msg/PointStamped'
 COMMAND_TYPE = 'std_msgs/msg/Float64MultiArray'
 JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
+ONE_CLOCK = 0.5
+"""Largest gap of two topics' stamp offsets (:func:`stamp_offset`) on one clock [s].
+
+Well above a delivery delay or a camera's exposure-to-publish delay (tens of ms), well below the
+time between a run and its replay."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +78,9 @@ class BagEvaluation:
         With ``start=None``: the start-up transient left out, after the first target.
     units : tuple of str or None
         Unit of each command value (``'Pa'`` or ``'N'``); None: Pa.
+    stamp_gap : float or None  [s]
+        When the targets and tips were paired on receive times: how far apart the clocks of
+        their header stamps are (:func:`pairing_times`); None: paired on header stamps.
 
     """
 
@@ -82,6 +93,7 @@ class BagEvaluation:
     latencies: np.ndarray
     skipped: float = None
     units: tuple = None
+    stamp_gap: float = None
 
 
 def point_series(bag, topic):
@@ -225,6 +237,63 @@ def target_command_latencies(target_times, command_times):
     return (command_times[following[paired]] - target_times[paired]) * 1e-9
 
 
+def stamp_offset(received, stamps):
+    """
+    Return the median of a topic's header stamps minus its receive times.
+
+    Parameters
+    ----------
+    received : (N,) int64 ndarray  [ns]
+        Receive (log) times.
+    stamps : (N,) ndarray  [s]
+        Header stamps.
+
+    Returns
+    -------
+    float  [s]
+        About minus the delivery delay when stamps and receive times share one clock; the shift
+        between the clocks otherwise (a replayed message keeps its original stamp).
+
+    """
+    return float(np.median(stamps - 1e-9 * received))
+
+
+def pairing_times(target_received, target_stamps, tip_received, tip_stamps):
+    """
+    Choose the times on which tips are compared with targets: header stamps, or receive times.
+
+    A bag recorded from a live run has the targets' and the tips' header stamps on one clock: each
+    topic's :func:`stamp_offset` is minus a delivery delay. A bag replayed through the nodes and
+    recorded again has targets that keep their original stamps while the nodes stamp their tips
+    anew (or the other way round): the two offsets then differ by the time between the run and
+    its replay. The recorder's receive times are one clock for every topic, so such a bag is
+    compared on them (both carry one delivery delay, ~1 ms on one host).
+
+    Parameters
+    ----------
+    target_received, tip_received : (T,), (N,) int64 ndarray  [ns]
+        Receive times.
+    target_stamps, tip_stamps : (T,), (N,) ndarray  [s]
+        Header stamps.
+
+    Returns
+    -------
+    target_times, tip_times : (T,), (N,) ndarray  [s]
+        The times to compare on.
+    gap : float or None  [s]
+        The gap of the two offsets when receive times were chosen (above :data:`ONE_CLOCK`),
+        None when the header stamps were.
+
+    """
+    if tip_stamps.size == 0 or target_stamps.size == 0:
+        return target_stamps, tip_stamps, None
+    gap = (stamp_offset(tip_received, tip_stamps)
+           - stamp_offset(target_received, target_stamps))
+    if abs(gap) <= ONE_CLOCK:
+        return target_stamps, tip_stamps, None
+    return 1e-9 * target_received, 1e-9 * tip_received, gap
+
+
 def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
                  max_pressure=150000.0, units=None):
     """
@@ -257,7 +326,8 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
     Raises
     ------
     BagError
-        If the bag cannot be read or has no targets.
+        If the bag cannot be read, has no targets, or has tips that overlap the targets neither
+        in header stamps nor in receive times (the message says why and what to record).
 
     """
     namespace = '/' + namespace.strip('/') if namespace.strip('/') else ''
@@ -272,13 +342,23 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
         target_received, target_stamps, targets = point_series(bag, target_topic)
         if target_stamps.size == 0:
             raise BagError(f'{path}: {target_topic} has no messages')
-        tip_stamps, tips = np.zeros(0), np.zeros((0, 3))
+        tip_received, tip_stamps = np.zeros(0, dtype=np.int64), np.zeros(0)
+        tips = np.zeros((0, 3))
         if names.get(tip_topic) == POINT_TYPE:
-            _, tip_stamps, tips = point_series(bag, tip_topic)
+            tip_received, tip_stamps, tips = point_series(bag, tip_topic)
         command_topic = f'{namespace}/pressure_command'
         command_times, commands = np.zeros(0, dtype=np.int64), []
         if names.get(command_topic) == COMMAND_TYPE:
             command_times, commands = command_series(bag, command_topic)
+    target_stamps, tip_stamps, stamp_gap = pairing_times(target_received, target_stamps,
+                                                         tip_received, tip_stamps)
+    if tip_stamps.size and (tip_stamps[-1] < target_stamps[0]
+                            or tip_stamps[0] > target_stamps[-1]):
+        raise BagError(f'{path}: {tip_topic} and {target_topic} do not overlap in time (tips '
+                       f'{tip_stamps[0]:.3f}..{tip_stamps[-1]:.3f} s, targets '
+                       f'{target_stamps[0]:.3f}..{target_stamps[-1]:.3f} s, on '
+                       f'{"receive times" if stamp_gap is not None else "header stamps"}): '
+                       'record the tips and the targets together, in one cbha_bag record')
     first = target_stamps[0]
     window = np.array([first + (start or 0.0),
                        first + end if end is not None else target_stamps[-1]])
@@ -301,7 +381,7 @@ def evaluate_bag(path, namespace='/cbha', tip='auto', start=0.0, end=None,
     tip_in_window = (tip_stamps >= window[0]) & (tip_stamps <= window[1])
     return BagEvaluation(tip_topic, window, tracking, targets[in_window], tips[tip_in_window],
                          statistics, target_command_latencies(target_received, command_times),
-                         skipped, None if units is None else tuple(units))
+                         skipped, None if units is None else tuple(units), stamp_gap)
 
 
 def format_evaluation(evaluation):
@@ -326,6 +406,10 @@ def format_evaluation(evaluation):
     else:
         lines.append(f'tracking ({evaluation.tip_topic}): RMS {tracking.rms * 1e3:.6f} mm, max '
                      f'{tracking.maximum * 1e3:.6f} mm over {tracking.errors.size} samples')
+        if evaluation.stamp_gap is not None:
+            lines.append(f'  paired on receive times: the header stamps of the tips are '
+                         f'{evaluation.stamp_gap:+.3f} s off those of the targets (a replayed '
+                         'bag: its messages keep their original stamps, the nodes stamp anew)')
         if evaluation.skipped is not None:
             lines.append(f'  scored from {evaluation.skipped:.2f} s after the first target: the '
                          'start-up transient (errors above 3x the settled median) left out; '

@@ -118,8 +118,9 @@ def interface_environment(prefix, base=None):
 
     Parameters
     ----------
-    prefix : str or os.PathLike
-        The package's install prefix (:func:`install_prefix`).
+    prefix : str or os.PathLike or None
+        The package's install prefix (:func:`install_prefix`); None: the package is installed
+        where every process finds it (the venv, ``make install``; a sourced ROS 2 install).
     base : mapping, optional
         Starting environment (default ``os.environ``).
 
@@ -128,9 +129,12 @@ def interface_environment(prefix, base=None):
     dict
         ``base`` with ``PYTHONPATH``, ``LD_LIBRARY_PATH``, ``AMENT_PREFIX_PATH`` and
         ``CMAKE_PREFIX_PATH`` prepended as ``install/setup.sh`` would (a Python child that imports
-        rclpy must start with it: the library path is read at process start).
+        rclpy must start with it: the library path is read at process start); ``base`` as it is
+        for a prefix None.
 
     """
+    if prefix is None:
+        return dict(os.environ if base is None else base)
     prefix = Path(prefix).resolve()
     version = f'python{sys.version_info.major}.{sys.version_info.minor}'
     env = dict(os.environ if base is None else base)
@@ -172,20 +176,54 @@ def build_interface_package(package, workspace, dependencies, timeout=600.0, env
         message ends with the tail of the colcon output).
 
     """
+    build_interface_packages({package: dependencies}, workspace, timeout, env)
+    return install_prefix(workspace, package)
+
+
+def build_interface_packages(packages, workspace, timeout=600.0, env=None):
+    """
+    Build several shipped packages in one colcon run (in parallel, as colcon schedules them).
+
+    Parameters
+    ----------
+    packages : mapping of str to sequence of str
+        The shipped packages and the interface packages each depends on.
+    workspace : str or os.PathLike
+        Workspace folder (created if missing; an earlier build there is reused by colcon).
+    timeout : float  [s]
+        Longest build.
+    env : mapping, optional
+        Starting environment (default ``os.environ``).
+
+    Returns
+    -------
+    pathlib.Path
+        The workspace (each package installed in ``install/<package>``, built in
+        ``build/<package>``).
+
+    Raises
+    ------
+    BuildError
+        As :func:`build_interface_package`.
+
+    """
     workspace = Path(workspace).resolve()
     build_env = build_environment(env)
-    colcon = check_build_tools(build_env, dependencies)
+    colcon = check_build_tools(
+        build_env, tuple(dict.fromkeys(d for deps in packages.values() for d in deps)))
     broken = [path for prefix in _prefixes(build_env) for path in broken_exports(prefix)]
     if broken:
         raise BuildError(f'{len(broken)} CMake export files name include folders missing here '
                          f'(e.g. {broken[0]}): run python -m cbha_inverse.interfaces.'
                          'rosidl_exports (make install does)')
-    source = workspace / 'src' / package
-    if source.exists():
-        shutil.rmtree(source)
-    shutil.copytree(SHIPPED / package, source)
+    for package in packages:
+        source = workspace / 'src' / package
+        if source.exists():
+            shutil.rmtree(source)
+        shutil.copytree(SHIPPED / package, source)
+    names = ', '.join(packages)
     command = [colcon, '--log-base', str(workspace / 'log'), 'build',
-               '--base-paths', str(workspace / 'src'), '--packages-select', package,
+               '--base-paths', str(workspace / 'src'), '--packages-select', *packages,
                '--build-base', str(workspace / 'build'),
                '--install-base', str(workspace / 'install'),
                '--cmake-args', f'-DPython3_EXECUTABLE={sys.executable}', '-DBUILD_TESTING=OFF',
@@ -194,12 +232,12 @@ def build_interface_package(package, workspace, dependencies, timeout=600.0, env
         result = subprocess.run(command, cwd=workspace, env=build_env, capture_output=True,
                                 text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
-        raise BuildError(f'colcon build of {package} took more than {timeout:g} s') from None
+        raise BuildError(f'colcon build of {names} took more than {timeout:g} s') from None
     if result.returncode != 0:
         tail = '\n'.join((result.stdout + result.stderr).strip().splitlines()[-25:])
-        raise BuildError(f'colcon build of {package} failed (exit {result.returncode}); '
+        raise BuildError(f'colcon build of {names} failed (exit {result.returncode}); '
                          f'log in {workspace / "log"}:\n{tail}')
-    return install_prefix(workspace, package)
+    return workspace
 
 
 def build_command(package, dependencies, description, use, argv=None):

@@ -1,18 +1,26 @@
 """
-The interface-building helpers: the rosidl export repair and the robotino_msgs build command.
+The interface packages: installed into the venv by ``make install``, their build helpers.
 
-The repair runs on export files written here in the wheels' form (a missing builder Python and
-numpy include folder beside one that exists); the real build is exercised by the session fixture
-``robotino_msgs`` of the bridge tests.
+``make install`` builds tf2_msgs, robotino_msgs and control_msgs into the venv
+(``cbha_inverse.interfaces.venv_install``): a new process imports and serialises them with
+nothing sourced, and a package first on ``PYTHONPATH`` (a sourced ROS 2 install's) still wins.
+The rosidl export repair runs on export files written here in the wheels' form (a missing
+builder Python and numpy include folder beside one that exists); the on-demand colcon build
+(``cbha_build_robotino_msgs``) is checked for its one-line refusals.
 """
 
 import os
+from pathlib import Path
 import subprocess
 import sys
+import sysconfig
 
+from cbha_inverse.interfaces.colcon_build import SHIPPED
 from cbha_inverse.interfaces.robotino_msgs_build import (
     build_environment, BuildError, check_build_tools, interface_environment, main, SOURCE)
 from cbha_inverse.interfaces.rosidl_exports import broken_exports, repair_exports
+from cbha_inverse.interfaces.venv_install import (
+    install_interfaces, main as venv_install_main, PACKAGES, PROBES, SOURCED, venv_environment)
 import pytest
 from ros_helpers import child_env, REPO_ROOT
 
@@ -126,3 +134,82 @@ def test_built_messages_have_the_fields_of_the_shipped_files(robotino_msgs):
     assert readings.get_fields_and_field_types() == {
         'stamp': 'builtin_interfaces/Time', 'pressures': 'sequence<float>',
         'cablepull': 'sequence<float>'}
+
+
+PROBE = """
+import sys
+from rclpy.serialization import deserialize_message, serialize_message
+from control_msgs.action import FollowJointTrajectory
+from robotino_msgs.msg import BHAReadings
+from tf2_msgs.msg import TFMessage
+goal = FollowJointTrajectory.Goal()
+goal.trajectory.joint_names = ['a', 'b']
+assert deserialize_message(serialize_message(goal), FollowJointTrajectory.Goal) == goal
+for module in (FollowJointTrajectory, BHAReadings, TFMessage):
+    print(sys.modules[module.__module__].__file__)
+"""
+
+
+def test_make_install_put_the_messages_into_the_venv():
+    """A new process of the venv, nothing sourced, imports and serialises all three packages."""
+    env = child_env()
+    for key in ('AMENT_PREFIX_PATH', 'CMAKE_PREFIX_PATH'):
+        env.pop(key, None)
+    result = subprocess.run([sys.executable, '-c', PROBE], cwd=REPO_ROOT, env=env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    site = Path(sysconfig.get_paths()['purelib']).resolve()
+    files = [Path(line).resolve() for line in result.stdout.split()]
+    assert len(files) == 3 and all(site in f.parents for f in files), result.stdout
+    for package in PACKAGES:
+        assert sorted(Path(sys.prefix, 'lib').glob(f'lib{package}__rosidl_typesupport_c.so'))
+
+
+def test_a_package_first_on_pythonpath_wins_over_the_venvs(tmp_path):
+    """A sourced ROS 2 install's packages (first on ``PYTHONPATH``) come before the venv's."""
+    stand_in = tmp_path / 'tf2_msgs'
+    stand_in.mkdir()
+    (stand_in / '__init__.py').write_text('ORIGIN = "sourced"\n')
+    env = child_env()
+    env['PYTHONPATH'] = os.pathsep.join([str(tmp_path), env['PYTHONPATH']])
+    result = subprocess.run([sys.executable, '-c', 'import tf2_msgs; print(tf2_msgs.ORIGIN)'],
+                            cwd=REPO_ROOT, env=env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0 and result.stdout.strip() == 'sourced', result.stderr
+
+
+def test_follow_joint_trajectory_has_the_fields_of_jazzy():
+    from control_msgs.action import FollowJointTrajectory
+    from control_msgs.msg import JointComponentTolerance
+    assert FollowJointTrajectory.Goal.get_fields_and_field_types() == {
+        'trajectory': 'trajectory_msgs/JointTrajectory',
+        'multi_dof_trajectory': 'trajectory_msgs/MultiDOFJointTrajectory',
+        'path_tolerance': 'sequence<control_msgs/JointTolerance>',
+        'component_path_tolerance': 'sequence<control_msgs/JointComponentTolerance>',
+        'goal_tolerance': 'sequence<control_msgs/JointTolerance>',
+        'component_goal_tolerance': 'sequence<control_msgs/JointComponentTolerance>',
+        'goal_time_tolerance': 'builtin_interfaces/Duration'}
+    assert FollowJointTrajectory.Result.GOAL_TOLERANCE_VIOLATED == -5
+    assert list(FollowJointTrajectory.Feedback.get_fields_and_field_types()) == [
+        'header', 'joint_names', 'desired', 'actual', 'error', 'multi_dof_joint_names',
+        'multi_dof_desired', 'multi_dof_actual', 'multi_dof_error']
+    assert JointComponentTolerance.ROTATION == 5
+
+
+def test_venv_install_refuses_another_prefix_and_unknown_packages(tmp_path, capsys):
+    with pytest.raises(BuildError, match='not the venv of this interpreter'):
+        install_interfaces(prefix=tmp_path)
+    with pytest.raises(SystemExit) as stop:
+        venv_install_main(['nav2_msgs'])
+    assert stop.value.code == 2
+    assert 'not a shipped package: nav2_msgs' in capsys.readouterr().err
+    for package in PACKAGES:
+        assert package in PROBES and (SHIPPED / package / 'package.xml').is_file()
+
+
+def test_the_venv_build_ignores_a_sourced_ros_2(monkeypatch):
+    """What goes into the venv is built against the venv's wheels, a sourced install aside."""
+    for key in SOURCED:
+        monkeypatch.setenv(key, '/opt/ros/jazzy')
+    env = venv_environment()
+    assert not set(SOURCED) & set(env) and env['PATH'] == os.environ['PATH']
+    assert build_environment(env)['CMAKE_PREFIX_PATH'] == sys.prefix

@@ -27,8 +27,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from robotino_helpers import DriverStandIn, robotino_child_env
 from ros_helpers import (
-    child_env, loop_lag_error, make_node, record_tracking, REPO_ROOT, spin_for, spin_until,
-    spinning, start_node)
+    child_env, hiding_env, loop_lag_error, make_node, record_tracking, REPO_ROOT, spin_for,
+    spin_until, spinning)
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 import yaml
@@ -244,8 +244,12 @@ def test_bridge_process_from_the_params_file_with_the_built_messages(rclpy_conte
 
 
 @pytest.mark.untimed
-def test_missing_robotino_msgs_stops_with_one_line_and_exit_2():
-    process = start_node('cbha_inverse.ros.nodes.robotino_bridge')
+def test_missing_robotino_msgs_stops_with_one_line_and_exit_2(tmp_path):
+    # make install puts robotino_msgs into the venv: hidden here
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'cbha_inverse.ros.nodes.robotino_bridge'], cwd=REPO_ROOT,
+        env=hiding_env(tmp_path, 'robotino_msgs'), stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True)
     output = process.communicate(timeout=60)[0]
     assert process.returncode == 2, output
     assert 'Traceback' not in output

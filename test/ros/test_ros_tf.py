@@ -1,14 +1,16 @@
 """
 TF over real DDS, received by plain rclpy subscribers (``cbha_inverse.ros.common.tf``).
 
-``/tf_static``: ``stereo_tracker`` (its console module, started as a user starts it after sourcing
-the tf2_msgs workspace) latches the two optical frames of the default rig; a subscriber that
-joins afterwards receives them, and they match the rig files, computed here from the files'
-numbers with scipy. ``/tf``: ``inverse_solver`` publishes every model frame and the tip every
-``tf_every_n_ticks`` ticks: exactly ``ticks // N`` messages, the frames equal to its backbone
-markers and its model state, the tip on the target it converged to, none with ``0``.
+``/tf_static``: ``stereo_tracker`` (its console module, started as a user starts it, with the
+tf2_msgs that ``make install`` put into the venv) latches the two optical frames of the default
+rig; a subscriber that joins afterwards receives them, and they match the rig files, computed
+here from the files' numbers with scipy. ``/tf``: ``inverse_solver`` publishes every model
+frame and the tip every ``tf_every_n_ticks`` ticks: exactly ``ticks // N`` messages, the frames
+equal to its backbone markers and its model state, the tip on the target it converged to, none
+with ``0``.
 """
 
+import os
 from pathlib import Path
 import signal
 import subprocess
@@ -26,7 +28,8 @@ import numpy as np
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from ros_helpers import child_env, make_node, REPO_ROOT, spin_for, spin_until, target_point
+from ros_helpers import (
+    child_env, hiding_env, make_node, REPO_ROOT, spin_for, spin_until, target_point)
 from scipy.spatial.transform import Rotation
 from visualization_msgs.msg import MarkerArray
 import yaml
@@ -73,12 +76,12 @@ def _start_tracker(env):
         stderr=subprocess.STDOUT, text=True)
 
 
-def test_stereo_tracker_latches_the_rig_frames_on_tf_static(rclpy_context, tf2_msgs):
+def test_stereo_tracker_latches_the_rig_frames_on_tf_static(rclpy_context, tf2_msgs, tmp_path):
     from tf2_msgs.msg import TFMessage
-    with_tf = _start_tracker(child_env() if tf2_msgs is None
-                             else interface_environment(tf2_msgs, child_env()))
-    # without the tf2_msgs environment the node runs, says so once and publishes no TF
-    without_tf = None if tf2_msgs is None else _start_tracker(child_env())
+    with_tf = _start_tracker(interface_environment(tf2_msgs, child_env()))
+    # without tf2_msgs (hidden: make install puts it into the venv) the node runs, says so once
+    # and publishes no TF
+    without_tf = _start_tracker(hiding_env(tmp_path, 'tf2_msgs'))
     listener = Node('tf_static_listener', context=rclpy_context)
     executor = SingleThreadedExecutor(context=rclpy_context)
     executor.add_node(listener)
@@ -111,10 +114,9 @@ def test_stereo_tracker_latches_the_rig_frames_on_tf_static(rclpy_context, tf2_m
                                atol=1e-12)
     np.testing.assert_allclose(frames['stereo_right_optical'][2], [-0.5, -0.5, 0.5, 0.5],
                                atol=1e-12)
-    if without_tf is not None:
-        output, code = outputs[1]
-        assert code == 0 and 'no TF: tf2_msgs is not usable' in output, output
-        assert 'Traceback' not in output, output
+    output, code = outputs[1]
+    assert code == 0 and 'no TF: tf2_msgs is not usable' in output, output
+    assert 'Traceback' not in output, output
 
 
 def test_backbone_poses_name_every_frame_and_the_tip():
@@ -218,9 +220,11 @@ def test_rviz_view_shows_every_tf_frame_in_the_solvers_frame():
 def test_the_built_tfmessage_has_the_type_hash_of_ros_jazzy(tf2_msgs):
     """Match the type hash of ROS 2 Jazzy (its golden value): RViz and tf2 match types by it."""
     import json
-    from ament_index_python.packages import get_package_share_directory
-    share = Path(get_package_share_directory('tf2_msgs') if tf2_msgs is None
-                 else tf2_msgs / 'share' / 'tf2_msgs')
+    # installed (the venv's share/ beside the wheels', or a sourced ROS 2's), else the build's
+    prefixes = [Path(p) for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    prefixes = [tf2_msgs] if tf2_msgs is not None else prefixes + [Path(sys.prefix)]
+    [share, *_] = [p / 'share' / 'tf2_msgs' for p in prefixes
+                   if (p / 'share' / 'tf2_msgs' / 'msg' / 'TFMessage.json').is_file()]
     description = json.loads((share / 'msg' / 'TFMessage.json').read_text())
     [entry] = [h for h in description['type_hashes'] if h['type_name'] == 'tf2_msgs/msg/TFMessage']
     assert entry['hash_string'] == (

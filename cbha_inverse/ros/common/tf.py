@@ -8,9 +8,10 @@ vertebra), ``cbha_tip`` the effector (its point on its frame, with that frame's 
 optical frames of the stereo rig (x right, y down, z forward), latched on ``/tf_static`` from
 ``stereo_tracker``.
 
-``tf2_msgs`` is not on PyPI: a ROS 2 install provides it, elsewhere ``cbha_build_tf2_msgs``
-builds the shipped copy (:mod:`cbha_inverse.interfaces.tf2_msgs_build`). It is imported when a
-node makes its broadcaster; when it cannot be, the node says so in one line and publishes no TF.
+``tf2_msgs`` is not on PyPI: a ROS 2 install provides it, and ``make install`` builds the
+shipped copy into the venv (:mod:`cbha_inverse.interfaces.venv_install`), where every node finds
+it without sourcing anything. It is imported when a node makes its broadcaster; when it cannot
+be (an install without it), the node says so in one line and publishes no TF.
 """
 
 import importlib
@@ -25,8 +26,9 @@ from rclpy.serialization import serialize_message
 TIP_FRAME = 'cbha_tip'
 """The child frame of the effector (the tip)."""
 
-NO_TF2_MSGS = ('no TF: tf2_msgs is not usable ({error}); source a ROS 2 install, or build it '
-               'with `cbha_build_tf2_msgs --workspace WS` and source WS/install/setup.sh')
+NO_TF2_MSGS = ('no TF: tf2_msgs is not usable ({error}); install it into the venv with '
+               '`make install` (python -m cbha_inverse.interfaces.venv_install), or source a '
+               'ROS 2 install')
 
 
 def backbone_frame(index):
