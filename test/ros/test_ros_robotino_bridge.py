@@ -254,7 +254,7 @@ def test_missing_robotino_msgs_stops_with_one_line_and_exit_2(tmp_path):
     assert process.returncode == 2, output
     assert 'Traceback' not in output
     lines = [line for line in output.splitlines() if 'robotino_msgs is not importable' in line]
-    assert len(lines) == 1 and 'cbha_build_robotino_msgs' in lines[0], output
+    assert len(lines) == 1 and 'make install' in lines[0], output
     assert 'robotino_msgs' not in child_env().get('PYTHONPATH', '')
 
 

@@ -58,6 +58,7 @@ from cbha_inverse.ros.common.realtime import MAX_REALTIME_PRIORITY, set_realtime
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
+from cbha_inverse.ros.common.tf_listener import make_static_listener
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -112,7 +113,9 @@ class InverseSolverParams:
                                live=True)
     vent_pressure: float = param(0.0, 'safe pressure commanded when venting [Pa]',
                                  low=0.0, high=1.0e7, live=True)
-    frame_id: str = param('cbha_base', 'the only accepted frame_id of target and tip/measured')
+    frame_id: str = param('cbha_base', 'frame of the model and the commands; a target or '
+                          'tip/measured in another frame is transformed through /tf_static, or '
+                          'refused with its frame named')
     feedback_topic: str = param('tip/measured', 'closed loop: the measured tip (PointStamped); '
                                 'tip/estimated for the string-pot estimate of shape_estimator')
     payload_topic: str = param('', 'a known tip payload (std_msgs/Float64, kg) in the model '
@@ -235,6 +238,7 @@ class InverseSolverNode(Node):
         self.command_bytes = SerializedCommand(self.valve_names)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
         self.tf = make_broadcaster(self)
+        self.static_tf = make_static_listener(self)
         self.create_subscription(PointStamped, 'target', self._on_target, TARGET_QOS)
         self.create_subscription(PointStamped, p.feedback_topic, self._on_measured, MEASURED_QOS)
         if p.payload_topic:
@@ -324,7 +328,16 @@ class InverseSolverNode(Node):
         """Return the checked point of a message, or None (rejection counted and logged)."""
         # the message's three floats, an array only once accepted (docs/nodes.md, "Latency")
         values = point_values(message)
-        check = check_point(values, message.header.frame_id, self.params.frame_id, self.box)
+        frame = message.header.frame_id
+        if frame != self.params.frame_id and self.static_tf is not None and frame:
+            try:
+                values = self.static_tf.transform_point(values, frame, self.params.frame_id)
+            except (LookupError, ValueError) as exc:
+                self._count_rejected(topic, 'unknown_frame', f'{exc} (publish its transform on '
+                                     f'/tf_static, e.g. cbha_static_transform)')
+                return None
+            frame = self.params.frame_id
+        check = check_point(values, frame, self.params.frame_id, self.box)
         if check.ok:
             return np.array(values)
         self._count_rejected(topic, check.reason, check.detail)

@@ -67,9 +67,9 @@ from std_srvs.srv import SetBool, Trigger
 NODE_NAME = 'robotino_bridge'
 
 MISSING_MESSAGES = (
-    "robotino_msgs is not importable ({error}): build the Robotino driver's robotino_msgs, or "
-    "this package's copy with `cbha_build_robotino_msgs --workspace WS`, then source "
-    'WS/install/setup.sh before starting robotino_bridge')
+    'robotino_msgs is not importable ({error}): `make install` builds it into the venv; '
+    "elsewhere, source the Robotino driver's workspace, or build this package's copy with "
+    '`cbha_build_robotino_msgs --workspace WS` and source WS/install/setup.sh')
 """The one line printed when the driver's message package is missing."""
 
 EXIT_ACK_TIMEOUT = 1.0
