@@ -28,7 +28,7 @@ class FrameTree:
         named = set(self._parents) | {parent for parent, _, _ in self._parents.values()}
         return sorted(named)
 
-    def set(self, parent, child, translation, quaternion):
+    def set_transform(self, parent, child, translation, quaternion):
         """
         Store the transform of ``child`` in ``parent`` (replacing the child's previous one).
 
@@ -72,6 +72,7 @@ class FrameTree:
         Parameters
         ----------
         point : (3,) array_like  [m]
+            The point, in ``source``.
         source, target : str
             Frame names.
 

@@ -45,15 +45,15 @@ class StaticTfListener:
         for item in message.transforms:
             t, q = item.transform.translation, item.transform.rotation
             try:
-                self.frames.set(item.header.frame_id, item.child_frame_id, (t.x, t.y, t.z),
-                                (q.x, q.y, q.z, q.w))
+                self.frames.set_transform(item.header.frame_id, item.child_frame_id,
+                                          (t.x, t.y, t.z), (q.x, q.y, q.z, q.w))
             except ValueError as exc:
                 self.node.get_logger().warning(f'/tf_static refused: {exc}')
                 continue
             self.received += 1
 
     def transform_point(self, point, source, target):
-        """Return ``point`` of frame ``source`` in ``target`` (:meth:`FrameTree.transform_point`)."""
+        """Return ``point`` of frame ``source`` in ``target`` (``FrameTree.transform_point``)."""
         return self.frames.transform_point(point, source, target)
 
 
