@@ -1,13 +1,13 @@
 """
 ``cbha_ctl`` over real DDS: a running controller's services and parameters from a shell.
 
-The controller (``inverse_solver``, idle commands on: it publishes its vent command at
-``rate_hz``) runs in this process; ``cbha_ctl`` runs as the console script setup.py installs
-(the same three lines pip writes, from its ``CONSOLE_SCRIPTS`` entry), one process per command,
-as a user would type it. Each command's effect is seen on the node: ``disable`` stops the
-commands and ``enable`` resumes them, ``reset`` counts a reset, ``param set`` changes the vent
-command it publishes. Absent nodes, services and parameters are one line naming the nearest one,
-exit 1.
+The controller (``inverse_solver``, idle commands on: it publishes its vent command at ``rate_hz``)
+runs in this process; ``cbha_ctl`` runs as the console script setup.py installs (the same three
+lines pip writes, from its ``CONSOLE_SCRIPTS`` entry), one process per command, as a user would
+type it. Each command's effect is seen on the node: ``disable`` holds the last command, ``vent``
+publishes the vent command and ``enable`` resumes the ticks, ``reset`` counts a reset, ``param
+set`` changes the vent command it publishes. Absent nodes, services and parameters are one line
+naming the nearest one, exit 1.
 """
 
 import ast
@@ -89,13 +89,24 @@ def test_disable_enable_and_reset_act_on_the_running_controller(solver, ctl):
 
     status, out, err = _run(executor, ctl, 'disable')
     assert (status, err) == (0, ''), (status, out, err)
-    assert out == ('/cbha/inverse_solver/enable: success: disabled: not commanding until '
-                   '~/enable true\n')
+    assert out == ('/cbha/inverse_solver/enable: success: disabled: holding the last command '
+                   'until ~/enable true\n')
     assert not node.enabled
     spin_for(executor, 0.2)     # a command already on its way
     commands.clear()
     spin_for(executor, 0.5)
-    assert commands == [], f'{len(commands)} commands while disabled'
+    # on_disable: hold, the last command again at rate_hz (a silent controller looks lost)
+    held = list(node.command)
+    assert commands and all(list(c.data) == held for c in commands), len(commands)
+
+    # vent: the vent command (vent_pressure, 0 Pa, within the bounds) until enabled again
+    status, out, err = _run(executor, ctl, 'vent')
+    assert (status, out, err) == (
+        0, '/cbha/inverse_solver/vent: success: disabled: venting until ~/enable true\n', '')
+    spin_for(executor, 0.2)
+    commands.clear()
+    spin_for(executor, 0.3)
+    assert commands and all(list(c.data) == list(node.vent_command) for c in commands)
 
     status, out, err = _run(executor, ctl, 'enable', '--node', '/cbha/inverse_solver')
     assert (status, err) == (0, ''), (status, out, err)
@@ -158,9 +169,9 @@ def test_absent_nodes_services_and_parameters_are_named_with_the_nearest(solver,
          'no node /cbha/solver within 1.5 s; did you mean /cbha/inverse_solver?'),
         (['--namespace', '/left', 'disable', '--timeout', '1.5'],
          'no node /left/inverse_solver within 1.5 s; did you mean /cbha/inverse_solver?'),
-        (['vent', '--timeout', '1.5'],
-         'node /cbha/inverse_solver has no service /cbha/inverse_solver/vent within 1.5 s; '
-         'did you mean /cbha/inverse_solver/reset?'),
+        (['call', 'inverse_solver', 'vnet', '--timeout', '1.5'],
+         'node /cbha/inverse_solver has no service /cbha/inverse_solver/vnet within 1.5 s; '
+         'did you mean /cbha/inverse_solver/vent?'),
     ]
     for args, message in cases:
         status, out, err = _run(executor, ctl, *args)
