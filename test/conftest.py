@@ -72,7 +72,8 @@ TIMING_FILES = (
     'test/ros/test_ros_lifecycle.py', 'test/ros/test_ros_robotino_bridge.py',
     'test/ros/test_ros_trajectory_timing.py')
 UNTIMED_SYSTEM_FILES = (
-    'test/system/test_colcon_layout.py', 'test/system/test_help_runs_no_work.py',
+    'test/system/test_colcon_layout.py', 'test/system/test_docs_commands.py',
+    'test/system/test_help_runs_no_work.py',
     'test/system/test_identify_check.py', 'test/system/test_installed_executables.py',
     'test/system/test_warmup.py')
 CLOSED_LOOP_CALLS = re.compile(r'\b(record_tracking|loop_lag_error)\(')
