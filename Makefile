@@ -59,7 +59,7 @@ demo: install  ## the closed-loop CBHA scene in simulation: tracking error and t
 # cover-kernels measures them with the JIT off). Both phases run even when the first
 # fails; each prints its 15 slowest tests; CBHA_TEST_SHARED holds what both phases and later runs
 # reuse.
-test: install  ## the whole test suite with coverage (~7 min on 2 cores)
+test: install  ## the whole test suite with coverage (~8 min on 2 cores)
 	@shared=$(abspath $(VENV))/test-shared; mkdir -p $$shared; export CBHA_TEST_SHARED=$$shared; \
 	listed=$$shared/timing-files; rm -f $$listed; \
 	start=$$(date +%s); \
