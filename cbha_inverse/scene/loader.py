@@ -19,7 +19,10 @@ Scene YAML schema (SI units)::
     chain:
       type: segments                     # condensed segments in series
       sections: [{name, segment: <path relative to the scene file>, count}]
-    cables: [{name, angle_deg, radius, end_vertebra, max_tension}]       # routed base → end
+    cables:                              # tendons (frictionless), in one of two forms:
+      - {name, max_tension, angle_deg, radius, end_vertebra,   # straight (see below): through
+         start_vertebra (0), helix: {pitch_deg_per_vertebra}}  # every vertebra start → end
+      - {name, max_tension, points: [{vertebra, angle_deg, radius} or {vertebra, offset}, ...]}
     cavities: [{name, section, cavity: <segment cavity name>, max_pressure}]
     cavity_model: linear | mesh          # core.actuation.condensed_cavities / .cavities
     actuator_order: [names]              # column order (default: cables, then cavities)
@@ -43,6 +46,19 @@ default 300 samples), the centre of the sampled reachable set
 (:func:`cbha_inverse.scene.reach.sample_reachable_set`: a reached position around which the
 largest circle fits in the hull of the reach), computed when first read (a few tenths of a
 second), deterministic. Without it: the effectors at rest.
+
+A cable runs in straight spans between routing points fixed to vertebrae (vertebra 0 is the
+base; a vertebra is the frame every ``beams_per_interval`` beams, or every frame of a
+``segments`` chain), in routing order from its actuator end. A point at ``radius`` [m] from the
+backbone and ``angle_deg`` lies at ``[0, radius cos(angle), radius sin(angle)]`` in its
+vertebra's frame: angle 0 along +y, positive toward +z (right-handed about +x, the backbone).
+The straight form (the shorthand) routes through every vertebra from ``start_vertebra`` (default
+0) to ``end_vertebra`` at one angle and radius; ``helix: {pitch_deg_per_vertebra: p}`` advances
+the angle by ``p`` degrees per vertebra after ``start_vertebra`` (``angle_deg`` is the angle
+there; ``p > 0`` winds right-handed about +x). ``points`` lists every routing point, the first
+included (``{vertebra: 0, ...}`` for a cable pulled from the base: nothing is implied), at least
+two, vertebrae strictly increasing; ``offset: [x, y, z]`` [m] in the vertebra frame replaces
+``angle_deg`` and ``radius`` (>= 0). A cable gives ``points`` or the straight form, not both.
 
 Frame 0 of the chain (the base) sits at the origin of ``base_frame``, or at
 ``calibration.base_offset`` when given: every frame, routing and effector point moves with it,
@@ -283,26 +299,96 @@ def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
 
 
 def _cables(items, vertebra_frames, gains=None):
-    """Route each cable from the base through every vertebra up to its end vertebra."""
+    """Build each cable on its route (:func:`_cable_route`)."""
     cables = []
     for item in items:
-        item.only('name', 'angle_deg', 'radius', 'end_vertebra', 'start_vertebra',
-                  'max_tension')
-        frames, offsets = _vertebra_route(item, vertebra_frames)
+        item.only(*_CABLE_KEYS)
+        frames, offsets = _cable_route(item, vertebra_frames)
         name = item.text('name')
         cables.append(Cable(name, frames, offsets, item.number('max_tension', positive=True),
                             (gains or {}).get(name, 1.0)))
     return cables
 
 
-def _vertebra_route(item, vertebra_frames):
+_STRAIGHT_KEYS = ('angle_deg', 'radius', 'end_vertebra', 'start_vertebra', 'helix')
+"""The keys of a cable's straight (or helical) form, which ``points`` replaces."""
+
+_CABLE_KEYS = ('name', 'max_tension', 'points', *_STRAIGHT_KEYS)
+"""The keys of a scene's cable."""
+
+
+def _cable_route(item, vertebra_frames):
+    """
+    Return the routing ``(frames (P,), offsets (P, 3) [m])`` of a scene's cable.
+
+    ``points`` (:func:`_point_route`) or the straight form (:func:`_vertebra_route`), which a
+    ``helix: {pitch_deg_per_vertebra}`` winds around the backbone.
+    """
+    if item.has('points'):
+        for key in _STRAIGHT_KEYS:
+            if key in item.data:
+                raise item.error(key, 'give points or the straight form (angle_deg, radius, '
+                                 'end_vertebra), not both')
+        return _point_route(item, vertebra_frames)
+    pitch = 0.0
+    if item.has('helix'):
+        helix = item.section('helix').only('pitch_deg_per_vertebra')
+        pitch = helix.number('pitch_deg_per_vertebra')
+    return _vertebra_route(item, vertebra_frames, pitch)
+
+
+def _point_route(item, vertebra_frames):
+    """
+    Return the routing of a cable's ``points``, in routing order from the actuator end.
+
+    Each point is ``{vertebra, angle_deg, radius}`` (at ``radius`` from the backbone,
+    ``angle_deg`` from +y toward +z, as the straight form) or ``{vertebra, offset: [x, y, z]}``
+    (in the vertebra frame); the vertebrae strictly increase, the first one is the actuator end
+    (the base, 0, for a cable pulled from there: it is not implied).
+    """
+    points = item.sections('points')
+    if len(points) < 2:
+        raise item.error('points', f'a cable needs >= 2 routing points, got {len(points)}')
+    frames, offsets = [], []
+    previous = -1
+    for point in points:
+        point.only('vertebra', 'angle_deg', 'radius', 'offset')
+        vertebra = point.integer('vertebra', minimum=0)
+        if vertebra >= len(vertebra_frames):
+            raise point.error('vertebra', f'{vertebra} outside 0..{len(vertebra_frames) - 1}')
+        if vertebra <= previous:
+            raise point.error('vertebra', f'{vertebra} must lie above the previous point\'s '
+                              f'{previous} (routing order from the base)')
+        previous = vertebra
+        if point.has('offset'):
+            for key in ('angle_deg', 'radius'):
+                if key in point.data:
+                    raise point.error(key, 'give offset or angle_deg and radius, not both')
+            offset = np.array(point.vector('offset', 3))
+        else:
+            offset = _radial_offset(point.number('angle_deg'),
+                                    point.number('radius', minimum=0.0))
+        frames.append(vertebra_frames[vertebra])
+        offsets.append(offset)
+    return np.array(frames), np.array(offsets)
+
+
+def _radial_offset(angle_deg, radius):
+    """Return the offset ``[0, r cos a, r sin a]`` [m] of a point at ``angle_deg`` from +y."""
+    angle = np.deg2rad(angle_deg)
+    return np.array([0.0, radius * np.cos(angle), radius * np.sin(angle)])
+
+
+def _vertebra_route(item, vertebra_frames, pitch_deg=0.0):
     """
     Return the routing of ``{angle_deg, radius, end_vertebra[, start_vertebra]}``.
 
     The route runs through every vertebra from ``start_vertebra`` (default 0, the base) to
-    ``end_vertebra``, at ``radius`` from the backbone, ``angle_deg`` from +y toward +z.
+    ``end_vertebra``, at ``radius`` from the backbone, ``angle_deg`` from +y toward +z at
+    ``start_vertebra``, the angle advancing by ``pitch_deg`` per vertebra after it (a helix,
+    right-handed about +x for a positive pitch; 0: straight, parallel to the backbone).
     """
-    angle = np.deg2rad(item.number('angle_deg'))
+    angle_deg = item.number('angle_deg')
     radius = item.number('radius', positive=True)
     end = item.integer('end_vertebra')
     if not 1 <= end < len(vertebra_frames):
@@ -311,8 +397,9 @@ def _vertebra_route(item, vertebra_frames):
     if start >= end:
         raise item.error('start_vertebra', f'{start} must lie below end_vertebra {end}')
     frames = vertebra_frames[start:end + 1]
-    offset = np.array([0.0, radius * np.cos(angle), radius * np.sin(angle)])
-    return frames, np.tile(offset, (len(frames), 1))
+    offsets = np.array([_radial_offset(angle_deg + pitch_deg * k, radius)
+                        for k in range(len(frames))])
+    return frames, offsets
 
 
 def _sensors(items, model, vertebra_frames):
