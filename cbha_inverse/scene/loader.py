@@ -357,7 +357,7 @@ def _point_route(item, vertebra_frames):
         if vertebra >= len(vertebra_frames):
             raise point.error('vertebra', f'{vertebra} outside 0..{len(vertebra_frames) - 1}')
         if vertebra <= previous:
-            raise point.error('vertebra', f'{vertebra} must lie above the previous point\'s '
+            raise point.error('vertebra', f"{vertebra} must lie above the previous point's "
                               f'{previous} (routing order from the base)')
         previous = vertebra
         if point.has('offset'):
