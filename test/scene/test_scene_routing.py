@@ -6,6 +6,7 @@ shipped scenes against the documented straight routing, and the twist a helix co
 """
 
 from pathlib import Path
+import re
 import shutil
 
 from cbha_inverse.config_files import read_yaml
@@ -20,6 +21,7 @@ import yaml
 
 ROD_ROBOT = Path(__file__).resolve().parents[2] / 'docs' / 'examples' / 'rod_robot'
 TENDON_SCENE = config_path('scenes', 'tendon_6f_8c.yaml')
+GUIDE = Path(__file__).resolve().parents[2] / 'docs' / 'own-robot.md'
 SHIPPED = sorted(config_path('scenes').glob('*.yaml')) + [ROD_ROBOT / 'rod_robot.yaml']
 
 
@@ -100,6 +102,20 @@ def test_the_shipped_scenes_keep_their_straight_routing(shipped_paths, tmp_path)
             for cable, other in zip(cables, _cables(load_scene(copy))):
                 np.testing.assert_array_equal(other.frames, cable.frames)
                 np.testing.assert_array_equal(other.offsets, cable.offsets)
+
+
+def test_the_guides_routing_example_loads_on_its_rod(shipped_paths):
+    """The ``cables`` block of the guide's routing section, on the guide's six-segment rod."""
+    section = GUIDE.read_text().split('### Cable routing', 1)[1]
+    block = re.search(r'```yaml\n(cables:.*?)```', section, re.DOTALL).group(1)
+    rod = next(path for path in shipped_paths if path.stem == 'rod_robot')
+    scene = load_scene(_write_scene(rod.parent, yaml.safe_load(block)['cables'],
+                                    name='rod_routed', base=rod))
+    spiral, crossover = _cables(scene)
+    np.testing.assert_allclose(np.rad2deg(np.arctan2(spiral.offsets[:, 2], spiral.offsets[:, 1])),
+                               [0.0, 30.0, 60.0, 90.0, 120.0, 150.0], atol=1e-12)
+    np.testing.assert_array_equal(crossover.frames, [0, 2, 4, 6])
+    np.testing.assert_allclose(crossover.offsets[-1], [0.0, 0.0, 0.012])
 
 
 @pytest.fixture(scope='module')
