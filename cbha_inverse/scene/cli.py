@@ -318,8 +318,9 @@ def print_convergence(scene, actuation, out, recondense=False,
         sources = refinement.segment_sources(scene.path, data)
         print('segments to recondense at half their mesh size:', file=out)
         for source in sources:
-            geometry = source.geometry and refinement.shown(source.geometry) or ('not found (no YAML next to the scene or the segment '
-                                           'has the inputs_sha256 it stores)')
+            geometry = ('not found (no YAML next to the scene or the segment has the '
+                        'inputs_sha256 it stores)' if source.geometry is None
+                        else refinement.shown(source.geometry))
             print(f'  {refinement.shown(source.segment)} (sections {", ".join(source.sections)}): '
                   f'P{source.order}, mesh size {1e3 * source.mesh_size:g} mm, condensed in '
                   f'{source.seconds:.1f} s; geometry {geometry}', file=out)

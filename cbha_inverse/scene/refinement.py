@@ -59,7 +59,7 @@ class SegmentSource:
         return self.mesh_size / REFINEMENT
 
     def command(self, output):
-        """Return the ``condense_segment`` command that writes the refined segment to ``output``."""
+        """Return the ``condense_segment`` command that writes the finer segment to ``output``."""
         geometry = 'GEOMETRY.yaml' if self.geometry is None else shown(self.geometry)
         return (f'condense_segment {geometry} --order {self.order} '
                 f'--mesh-size {self.fine_mesh_size:g} --output {output}')
@@ -111,7 +111,7 @@ class Comparison:
 
     @property
     def movement(self):
-        """(a, k) ndarray [m]: how far each effector moves between the two discretisations."""
+        """Return how far each effector moves between the discretisations, (a, k) [m]."""
         return np.linalg.norm(self.fine - self.coarse, axis=-1)
 
 
@@ -326,6 +326,7 @@ def compare(scene, refined, change, labels, actuations):
     labels : tuple of str
         A name per actuation.
     actuations : (a, m) array_like  [N or Pa]
+        Where to compare, within the bounds.
 
     Returns
     -------
