@@ -327,9 +327,11 @@ def print_convergence(scene, actuation, out, recondense=False,
         if not recondense or any(source.geometry is None for source in sources):
             for index, source in enumerate(sources):
                 print(f'  {source.command(Path(f"fine_{index}", source.segment.name))}', file=out)
-            print('convergence: not checked (each segment takes several times its condensation '
-                  'time at half the mesh size): run the commands above and check a copy of the '
-                  'scene that names the fine segments, or add --recondense', file=out)
+            why = ('a geometry file was not found' if recondense else
+                   'each segment takes several times its condensation time at half the mesh '
+                   'size; --recondense runs them')
+            print(f'convergence: not checked ({why}): run the commands above and check a copy '
+                  'of the scene that names the fine segments', file=out)
             return 0
         with tempfile.TemporaryDirectory(prefix='cbha_recondense_') as folder:
             refined = refinement.load_data(
