@@ -6,11 +6,19 @@ gravity), the reach along each actuator (the tip displacement with that actuator
 upper bound), the suggested workspace centre, the inverse solver's tick time (median and p99
 of a run toward the centre) and the reachable set (``--reach-samples`` forward solves,
 :func:`cbha_inverse.scene.reach.sample_reachable_set`: its box, its centre and the largest
-circle around that centre in each principal plane). Exit status 0; 1 if a forward solve does not
-converge; 2 on a bad scene file (one line naming the file and the key) or option.
+circle around that centre in each principal plane).
+
+``--actuation V ...`` (one value per actuator, N or Pa) or ``--actuation-fraction F`` prints the
+equilibrium at that actuation instead: the effectors, the solve's iterations and residual, the
+tendons' routed lengths and the string pots' lengths and readings, with their change from rest.
+``--convergence`` prints how far the effectors move when the chain is refined (at rest, at half
+range and at the given actuation; :mod:`cbha_inverse.scene.refinement`). With either, the reach,
+tick time and reachable set are skipped. Exit status 0; 1 if a forward solve does not converge;
+2 on a bad scene file (one line naming the file and the key) or option.
 """
 
 import argparse
+from pathlib import Path
 import sys
 import time
 
@@ -21,6 +29,8 @@ import numpy as np
 PROGRAM = 'cbha_scene'
 DEFAULT_REACH_SAMPLES = 300
 """Default ``--reach-samples`` (:data:`cbha_inverse.scene.reach.DEFAULT_SAMPLES`)."""
+DEFAULT_TOLERANCE_MM = 0.1
+"""Default ``--tolerance`` of ``--convergence`` [mm]."""
 
 
 def _parser():
@@ -32,6 +42,22 @@ def _parser():
     check.add_argument('--reach-samples', type=int, default=DEFAULT_REACH_SAMPLES, metavar='N',
                        help='actuations sampled for the reachable set (default '
                             f'{DEFAULT_REACH_SAMPLES}; 0 skips it)')
+    given = check.add_mutually_exclusive_group()
+    given.add_argument('--actuation', type=float, nargs='+', metavar='V',
+                       help='print the equilibrium at this actuation: one value per actuator '
+                            'in scene order, N (cables) or Pa (cavities)')
+    given.add_argument('--actuation-fraction', type=float, metavar='F',
+                       help='print the equilibrium with every actuator at F of its range (0..1)')
+    check.add_argument('--convergence', action='store_true',
+                       help='print how far the effectors move on a refined chain (beams per '
+                            'interval doubled; for segments, the mesh size halved)')
+    check.add_argument('--recondense', action='store_true',
+                       help='with --convergence on a segments chain: recondense each segment '
+                            'at half its mesh size (tens of seconds per segment) instead of '
+                            'printing the command')
+    check.add_argument('--tolerance', type=float, default=DEFAULT_TOLERANCE_MM, metavar='MM',
+                       help='--convergence: effector movement [mm] below which the chain is '
+                            f'converged (default {DEFAULT_TOLERANCE_MM:g})')
     return parser
 
 
@@ -39,8 +65,8 @@ class _BadOption(ValueError):
     """An option value the scene rules out (reported like argparse's own errors)."""
 
 
-def _millimetres(point):
-    return '[' + ', '.join(f'{1e3 * v:.1f}' for v in point) + '] mm'
+def _millimetres(point, digits=1):
+    return '[' + ', '.join(f'{1e3 * v:.{digits}f}' for v in point) + '] mm'
 
 
 def actuator_units(scene):
@@ -136,7 +162,198 @@ def _circles(radii):
     return ', '.join(f'{plane} {1e3 * radius:.1f} mm' for plane, radius in radii.items())
 
 
-def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES):
+def given_actuation(scene, values=None, fraction=None):
+    """
+    Return the actuation of ``--actuation`` or ``--actuation-fraction``, checked.
+
+    Parameters
+    ----------
+    scene : cbha_inverse.scene.Scene
+        The scene.
+    values : sequence of float, optional  [N or Pa]
+        One value per actuator, in scene order.
+    fraction : float, optional
+        Every actuator at this fraction of its range (0..1).
+
+    Returns
+    -------
+    (m,) ndarray or None  [N or Pa]
+        None when neither is given.
+
+    Raises
+    ------
+    ValueError
+        (``_BadOption``) On a wrong count, a value outside its actuator's bounds or a fraction
+        outside [0, 1], with one line that says which.
+
+    """
+    low, high = scene.lower_bounds, scene.upper_bounds
+    if fraction is not None:
+        if not 0.0 <= fraction <= 1.0:
+            raise _BadOption(f'--actuation-fraction must lie in [0, 1], got {fraction:g}')
+        return low + fraction * (high - low)
+    if values is None:
+        return None
+    names, units = scene.actuator_names, actuator_units(scene)
+    actuation = np.asarray(values, dtype=float)
+    if actuation.size != len(names):
+        raise _BadOption(f'--actuation needs {len(names)} values, one per actuator '
+                         f'({", ".join(names)}), got {actuation.size}')
+    outside = [i for i, v in enumerate(actuation) if not low[i] <= v <= high[i]]
+    if outside:
+        i = outside[0]
+        more = f' (and {len(outside) - 1} more)' if len(outside) > 1 else ''
+        raise _BadOption(f'--actuation: {names[i]} {actuation[i]:g} {units[i]} is outside its '
+                         f'bounds [{low[i]:g}, {high[i]:g}] {units[i]}{more}')
+    return actuation
+
+
+def _actuation_text(actuation, units):
+    values = ', '.join(f'{v:g}' for v in actuation)
+    if len(set(units)) == 1:
+        return f'[{values}] {units[0]}'
+    return '[' + ', '.join(f'{v:g} {u}' for v, u in zip(actuation, units)) + ']'
+
+
+def print_equilibrium(scene, actuation, out):
+    """
+    Solve the equilibrium at an actuation and print it (``--actuation``).
+
+    The effectors, the solve (converged, iterations, load steps, residual), the routed length
+    of each tendon and the length and raw reading of each string pot, with their change from
+    rest (zero actuation, under the scene's gravity; pulled in: negative).
+
+    Parameters
+    ----------
+    scene : cbha_inverse.scene.Scene
+        The scene.
+    actuation : (m,) ndarray  [N or Pa]
+        Within the bounds (:func:`given_actuation`).
+    out : file-like
+        Where the lines go.
+
+    Returns
+    -------
+    int
+        0, or 1 if the solve did not converge.
+
+    Raises
+    ------
+    RuntimeError
+        If the rest solve does not converge.
+
+    """
+    low, high = scene.lower_bounds, scene.upper_bounds
+    rest = scene.forward(np.clip(np.zeros_like(low), low, high), strict=True)
+    result = scene.forward(actuation)
+    units = actuator_units(scene)
+    print(f'equilibrium at {_actuation_text(actuation, units)}:', file=out)
+    steps = f'{result.load_steps} load step' + ('s' if result.load_steps != 1 else '')
+    verdict = ('converged' if result.converged else
+               f'NOT converged ({result.message}), load factor {result.load_factor:g}')
+    print(f'  {verdict}: {result.iterations} iterations ({steps}), residual '
+          f'{result.residual_norm:.2g} N', file=out)
+    for warning in result.warnings:
+        print(f'  warning: {warning}', file=out)
+    for name, point, at_rest in zip(scene.effector_names, result.effector_positions,
+                                    rest.effector_positions):
+        moved = point - at_rest
+        print(f'  effector {name}: {_millimetres(point, 3)}, from rest {_millimetres(moved, 3)}'
+              f' |{1e3 * np.linalg.norm(moved):.3f} mm|', file=out)
+    if 'N' in units:
+        names, lengths, _ = scene.cable_lengths(result.state)
+        _, rest_lengths, _ = scene.cable_lengths(rest.state)
+        print('tendon lengths (routed; change from rest, pulled in: negative):', file=out)
+        for name, length, change in zip(names, lengths, lengths - rest_lengths):
+            print(f'  {name}: {1e3 * length:.3f} mm ({1e3 * change:+.3f} mm)', file=out)
+    pots = scene.sensors
+    if pots is not None:
+        lengths = pots.lengths(result.state.positions, result.state.rotations)
+        changes = lengths - pots.lengths(rest.state.positions, rest.state.rotations)
+        print('string pots (length, change from rest; raw reading):', file=out)
+        for name, length, change, reading in zip(pots.names, lengths, changes,
+                                                 pots.readings(lengths)):
+            print(f'  {name}: {1e3 * length:.3f} mm ({1e3 * change:+.3f} mm); reading '
+                  f'{reading:.6g}', file=out)
+    return 0 if result.converged else 1
+
+
+def print_convergence(scene, actuation, out, recondense=False,
+                      tolerance_mm=DEFAULT_TOLERANCE_MM):
+    """
+    Refine the scene's chain and print how far its effectors move (``--convergence``).
+
+    A ``beam_vertebrae`` chain doubles ``beams_per_interval``; a ``segments`` chain halves the
+    mesh size of its segments, recondensed only with ``recondense`` (else the commands are
+    printed). Solved at rest, at half range and at ``actuation``
+    (:mod:`cbha_inverse.scene.refinement`).
+
+    Parameters
+    ----------
+    scene : cbha_inverse.scene.Scene
+        The scene, loaded from ``scene.path``.
+    actuation : (m,) ndarray or None  [N or Pa]
+        One more actuation to compare at.
+    out : file-like
+        Where the lines go.
+    recondense : bool
+        Recondense the segments of a ``segments`` chain.
+    tolerance_mm : float  [mm]
+        Movement below which the chain is converged.
+
+    Returns
+    -------
+    int
+        0, or 1 if a forward solve did not converge.
+
+    """
+    import tempfile
+    from cbha_inverse.scene import refinement
+    data = refinement.scene_data(scene.path)
+    labels, actuations = refinement.representative_actuations(scene, actuation)
+    started = time.perf_counter()
+    if data['chain']['type'] == 'beam_vertebrae':
+        refined, change = refinement.refined_beam_scene(scene.path)
+    else:
+        sources = refinement.segment_sources(scene.path, data)
+        print('segments to recondense at half their mesh size:', file=out)
+        for source in sources:
+            geometry = ('not found (no YAML next to the scene or the segment has the '
+                        'inputs_sha256 it stores)' if source.geometry is None
+                        else refinement.shown(source.geometry))
+            print(f'  {refinement.shown(source.segment)} (sections {", ".join(source.sections)}): '
+                  f'P{source.order}, mesh size {1e3 * source.mesh_size:g} mm, condensed in '
+                  f'{source.seconds:.1f} s; geometry {geometry}', file=out)
+        if not recondense or any(source.geometry is None for source in sources):
+            for index, source in enumerate(sources):
+                print(f'  {source.command(Path(f"fine_{index}", source.segment.name))}', file=out)
+            why = ('a geometry file was not found' if recondense else
+                   'each segment takes several times its condensation time at half the mesh '
+                   'size; --recondense runs them')
+            print(f'convergence: not checked ({why}): run the commands above and check a copy '
+                  'of the scene that names the fine segments', file=out)
+            return 0
+        with tempfile.TemporaryDirectory(prefix='cbha_recondense_') as folder:
+            refined = refinement.load_data(
+                refinement.recondensed_data(scene.path, data, sources, folder, out), folder,
+                scene.path.name)
+        change = ('mesh_size', ', '.join(f'{1e3 * s.mesh_size:g}' for s in sources) + ' mm',
+                  ', '.join(f'{1e3 * s.fine_mesh_size:g}' for s in sources) + ' mm')
+    comparison = refinement.compare(scene, refined, change, labels, actuations)
+    took = time.perf_counter() - started
+    print(f'convergence: {comparison.refinement} ({took:.2f} s)', file=out)
+    for label, moved, solved in zip(comparison.labels, comparison.movement,
+                                    comparison.converged):
+        print(f'  {label}: ' + '; '.join(f'{name} moves {1e3 * m:.3f} mm' for name, m in zip(
+            scene.effector_names, moved)) + ('' if solved.all() else ' (not converged)'),
+              file=out)
+    print(f'  {refinement.recommendation(comparison, 1e-3 * tolerance_mm)}', file=out)
+    return 0 if comparison.converged.all() else 1
+
+
+def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES, *, actuation=None,
+          actuation_fraction=None, convergence=False, recondense=False,
+          tolerance_mm=DEFAULT_TOLERANCE_MM):
     """
     Load a scene and print what it builds.
 
@@ -150,6 +367,18 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES):
         Where the report goes.
     reach_samples : int
         Actuations sampled for the reachable set (0 skips it).
+    actuation : sequence of float, optional  [N or Pa]
+        Print the equilibrium at this actuation (:func:`print_equilibrium`) instead of the
+        reach, tick time and reachable set.
+    actuation_fraction : float, optional
+        As ``actuation``, every actuator at this fraction of its range.
+    convergence : bool
+        Print the discretisation check (:func:`print_convergence`) instead of the reach, tick
+        time and reachable set.
+    recondense : bool
+        With ``convergence``: recondense the segments of a ``segments`` chain.
+    tolerance_mm : float  [mm]
+        With ``convergence``: movement below which the chain is converged.
 
     Returns
     -------
@@ -159,7 +388,8 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES):
     Raises
     ------
     ValueError
-        If ``reach_samples`` is neither 0 nor enough for the scene's actuators.
+        If ``reach_samples`` is neither 0 nor enough for the scene's actuators, or the
+        actuation is of the wrong count or outside the bounds.
 
     """
     from cbha_inverse.scene import load_scene, resolve_scene_path
@@ -172,6 +402,7 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES):
     if reach_samples != 0 and reach_samples < fewest:
         raise _BadOption(f'--reach-samples must be 0 (skip) or >= {fewest} for '
                          f'{len(scene.actuator_names)} actuators, got {reach_samples}')
+    given = given_actuation(scene, actuation, actuation_fraction)
     model = scene.model
     print(f'scene {scene.name} ({path}), loaded in {loaded:.2f} s', file=out)
     if scene.description:
@@ -184,6 +415,16 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES):
     for name, low, high, unit in zip(scene.actuator_names, scene.lower_bounds,
                                      scene.upper_bounds, units):
         print(f'  {name}: [{low:g}, {high:g}] {unit}', file=out)
+    if given is not None or convergence:
+        try:
+            status = 0 if given is None else print_equilibrium(scene, given, out)
+            if convergence:
+                status = max(status, print_convergence(scene, given, out, recondense,
+                                                       tolerance_mm))
+        except RuntimeError as exc:
+            print(f'error: {exc}', file=out)
+            return 1
+        return status
     try:
         rest = scene.rest_effector_positions
         displacements = reach(scene)
@@ -233,8 +474,15 @@ def main(argv=None):
     """
     parser = _parser()
     args = parser.parse_args(argv)
+    if args.recondense and not args.convergence:
+        parser.error('--recondense needs --convergence')
+    if not args.tolerance > 0.0:
+        parser.error(f'--tolerance must be > 0 mm, got {args.tolerance:g}')
     try:
-        return check(args.scene, args.ticks, sys.stdout, args.reach_samples)
+        return check(args.scene, args.ticks, sys.stdout, args.reach_samples,
+                     actuation=args.actuation, actuation_fraction=args.actuation_fraction,
+                     convergence=args.convergence, recondense=args.recondense,
+                     tolerance_mm=args.tolerance)
     except (ConfigError, FileNotFoundError) as exc:
         return report_config_error(PROGRAM, exc)
     except _BadOption as exc:
