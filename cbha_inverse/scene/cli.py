@@ -334,9 +334,16 @@ def print_convergence(scene, actuation, out, recondense=False,
                   'of the scene that names the fine segments', file=out)
             return 0
         with tempfile.TemporaryDirectory(prefix='cbha_recondense_') as folder:
-            refined = refinement.load_data(
-                refinement.recondensed_data(scene.path, data, sources, folder, out), folder,
-                scene.path.name)
+            try:
+                refined = refinement.load_data(
+                    refinement.recondensed_data(scene.path, data, sources, folder, out),
+                    folder, scene.path.name)
+            except (OSError, ValueError, RuntimeError) as exc:
+                # a geometry gmsh cannot mesh at the finer size, a full disk: one line
+                print(f'convergence: not checked (recondensing failed: '
+                      f'{str(exc).splitlines()[0] if str(exc) else type(exc).__name__})',
+                      file=out)
+                return 1
         change = ('mesh_size', ', '.join(f'{1e3 * s.mesh_size:g}' for s in sources) + ' mm',
                   ', '.join(f'{1e3 * s.fine_mesh_size:g}' for s in sources) + ' mm')
     comparison = refinement.compare(scene, refined, change, labels, actuations)
