@@ -77,8 +77,9 @@ EPISODE_ACTION = {'not_converged': 'narrowing the actuation step until it conver
 NOT_CONVERGED_ERROR_S = 1.0
 """An episode off equilibrium longer than this [s] is an ERROR in the diagnostics."""
 NOT_CONVERGED_WARN_S = 0.1
-"""An episode off equilibrium is logged once it lasts this long [s]: the few ticks the model
-takes to converge after a jump of the target (ten at 100 Hz) are no condition to warn of."""
+"""Ticks off equilibrium are logged once they add up to this long [s] in an episode (at
+``rate_hz``): the few ticks the model takes to converge after a jump of the target (ten at
+100 Hz) are no condition to warn of."""
 
 
 @dataclass(frozen=True)
@@ -226,7 +227,7 @@ class InverseSolverNode(Node):
         self.statuses = {}
         # ticks off equilibrium or beyond reach: logged once per episode, in the diagnostics
         self.episodes = StatusEpisodes()
-        self.episode_told = False   # the ongoing episode's WARN line was logged
+        self.episode_told = set()   # the ongoing episode's conditions already logged
         self.tick_times = TimingStats()
         self.latencies = TimingStats()
         # the thread's CPU time over the same window: latency minus it is time spent waiting
@@ -512,7 +513,7 @@ class InverseSolverNode(Node):
         self.solver.reset()
         self.corrector.reset()
         self.episodes.reset()
-        self.episode_told = False
+        self.episode_told = set()
         self.last_result = None
         self.last_goal = None
         self.target_error = math.nan
@@ -558,10 +559,12 @@ class InverseSolverNode(Node):
 
     def _account_episode(self, result):
         """
-        Log an episode off equilibrium or beyond reach once, and its end.
+        Log each condition of an episode off equilibrium or beyond reach once, and its end.
 
-        Beyond reach: at its first tick; off equilibrium: once it lasted
-        :data:`NOT_CONVERGED_WARN_S` (an episode that ends sooner is not logged at all).
+        Beyond reach: at its first tick; off equilibrium: once its ticks add up to
+        :data:`NOT_CONVERGED_WARN_S` (an episode that converges sooner is not logged). An
+        episode that starts off equilibrium after a jump of the target and stays beyond reach
+        says both.
         """
         figure = (result.equilibrium_gap if result.status == 'not_converged'
                   else result.predicted_error)
@@ -572,14 +575,16 @@ class InverseSolverNode(Node):
                                 for c, n in ended.ticks.items())
             logger.info(f'back to normal after {ended.duration:.2f} s: {summary}')
         if ended is not None:
-            self.episode_told = False
+            self.episode_told = set()
         episode = self.episodes.current
-        if episode is not None and not self.episode_told and (
-                'unreachable' in episode.ticks or episode.duration >= NOT_CONVERGED_WARN_S):
-            self.episode_told = True
-            condition = 'unreachable' if 'unreachable' in episode.ticks else episode.condition
-            text = EPISODE_TEXT[condition].format(1e3 * episode.figures[condition])
-            logger.warning(f'{text} ({EPISODE_ACTION[condition]})')
+        if episode is None:
+            return
+        for condition, ticks in episode.ticks.items():
+            due = condition == 'unreachable' or ticks * self.period >= NOT_CONVERGED_WARN_S
+            if due and condition not in self.episode_told:
+                self.episode_told.add(condition)
+                text = EPISODE_TEXT[condition].format(1e3 * episode.figures[condition])
+                logger.warning(f'{text} ({EPISODE_ACTION[condition]})')
 
     def _count_failure(self, what, exc):
         self.statuses['exception'] = self.statuses.get('exception', 0) + 1
