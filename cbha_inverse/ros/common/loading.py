@@ -95,6 +95,27 @@ def quiet_while_loading(programs):
     return program
 
 
+def split_ros_arguments(argv):
+    """
+    Split a command's arguments at ``--ros-args``: its own, then the ROS ones.
+
+    Parameters
+    ----------
+    argv : sequence of str
+        The arguments after the program name.
+
+    Returns
+    -------
+    own : list of str
+    ros : list of str
+        ``--ros-args`` and what follows it (empty without it).
+
+    """
+    argv = list(argv)
+    cut = argv.index('--ros-args') if '--ros-args' in argv else len(argv)
+    return argv[:cut], argv[cut:]
+
+
 def loaded():
     """Put back the handlers :func:`quiet_while_loading` replaced: the program handles stops."""
     restore_handlers(_REPLACED)

@@ -27,7 +27,8 @@ import sys
 import threading
 
 from cbha_inverse.errors import ConfigError, report_config_error
-from cbha_inverse.ros.common.loading import end_process, STOP_SIGNALS
+from cbha_inverse.ros.common.loading import (end_process, loaded, split_ros_arguments,
+                                             STOP_SIGNALS)
 from cbha_inverse.ros.common.params import check_params_files, parameter_help, ParameterError
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -127,6 +128,32 @@ class StopRequest:
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         return False
+
+
+def run_until_stopped(body):
+    """
+    Run a command once it is loaded, ``body(stop)``: a stop signal is then a polled flag.
+
+    The quiet stop while loading (:func:`cbha_inverse.ros.common.loading.loaded`) gives way
+    to a :class:`StopRequest` that ``body`` polls; a second signal, a ``KeyboardInterrupt``,
+    ends it with status 0.
+
+    Parameters
+    ----------
+    body : callable
+        ``body(stop) -> int``, the command's exit status.
+
+    Returns
+    -------
+    int
+
+    """
+    loaded()
+    try:
+        with StopRequest() as stop:
+            return body(stop)
+    except KeyboardInterrupt:
+        return 0
 
 
 def spin_until_stopped(node, stop, done=None):
@@ -234,8 +261,7 @@ def node_help(node_name, node_class, params_class, executable=None):
 
 def _user_arguments(argv):
     """Return the arguments before ``--ros-args`` (without the program name)."""
-    args = list(argv[1:])
-    return args[:args.index('--ros-args')] if '--ros-args' in args else args
+    return split_ros_arguments(argv[1:])[0]
 
 
 def run_node(node_class, node_name, argv=None, *, params_class=None, executable=None):

@@ -28,7 +28,7 @@ import sys
 import time
 
 from cbha_inverse.config_files import nearest
-from cbha_inverse.ros.common.loading import loaded
+from cbha_inverse.ros.common.loading import loaded, split_ros_arguments
 
 PROGRAM = 'cbha_ctl'
 
@@ -428,9 +428,8 @@ def main(argv=None):
 
     """
     import signal
-    argv = sys.argv[1:] if argv is None else list(argv)
-    ros_args = argv[argv.index('--ros-args'):] if '--ros-args' in argv else []
-    args = _parser().parse_args(argv[:len(argv) - len(ros_args)])
+    own, ros_args = split_ros_arguments(sys.argv[1:] if argv is None else argv)
+    args = _parser().parse_args(own)
     args.timeout = getattr(args, 'timeout', DEFAULT_TIMEOUT)
     args.namespace = getattr(args, 'namespace', DEFAULT_NAMESPACE)
     if args.timeout <= 0.0:

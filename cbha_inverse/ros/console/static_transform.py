@@ -17,6 +17,8 @@ import argparse
 import math
 import sys
 
+from cbha_inverse.ros.common.loading import split_ros_arguments
+
 PROGRAM = 'cbha_static_transform'
 
 
@@ -87,22 +89,15 @@ def main(argv=None):
         0 (stopped by SIGINT or SIGTERM), 1 (tf2_msgs not usable), 2 (bad arguments).
 
     """
-    argv = sys.argv[1:] if argv is None else list(argv)
-    ros_args = argv[argv.index('--ros-args'):] if '--ros-args' in argv else []
+    own, ros_args = split_ros_arguments(sys.argv[1:] if argv is None else argv)
     parser = _parser()
-    args = parser.parse_args(argv[:len(argv) - len(ros_args)])
+    args = parser.parse_args(own)
     try:
         pose = transform_pose(args)
     except ValueError as exc:
         parser.error(str(exc))
-    from cbha_inverse.ros.common.loading import loaded
-    from cbha_inverse.ros.common.runner import StopRequest
-    loaded()
-    try:
-        with StopRequest() as stop:
-            return _publish(args, pose, ros_args, stop)
-    except KeyboardInterrupt:
-        return 0
+    from cbha_inverse.ros.common.runner import run_until_stopped
+    return run_until_stopped(lambda stop: _publish(args, pose, ros_args, stop))
 
 
 def _publish(args, pose, ros_args, stop):

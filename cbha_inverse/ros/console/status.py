@@ -16,6 +16,8 @@ import argparse
 import sys
 import time
 
+from cbha_inverse.ros.common.loading import split_ros_arguments
+
 LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 PROGRAM = 'cbha_status'
 
@@ -108,19 +110,12 @@ def main(argv=None):
         without any).
 
     """
-    argv = sys.argv[1:] if argv is None else list(argv)
-    ros_args = argv[argv.index('--ros-args'):] if '--ros-args' in argv else []
-    args = _parser().parse_args(argv[:len(argv) - len(ros_args)])
+    own, ros_args = split_ros_arguments(sys.argv[1:] if argv is None else argv)
+    args = _parser().parse_args(own)
     # rclpy loads under the quiet stop while loading (:mod:`cbha_inverse.ros.common.loading`);
-    # once loaded, a stop is a flag the loops poll (StopRequest), a second one a KeyboardInterrupt
-    from cbha_inverse.ros.common.loading import loaded
-    from cbha_inverse.ros.common.runner import StopRequest
-    loaded()
-    try:
-        with StopRequest() as stop:
-            return _show(args, ros_args, stop)
-    except KeyboardInterrupt:
-        return 0
+    # once loaded, a stop is a flag the loops poll
+    from cbha_inverse.ros.common.runner import run_until_stopped
+    return run_until_stopped(lambda stop: _show(args, ros_args, stop))
 
 
 def _show(args, ros_args, stop):
