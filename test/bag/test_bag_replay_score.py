@@ -135,7 +135,7 @@ def test_a_run_replayed_through_the_nodes_scores_its_rms_within_a_tenth_of_a_mm(
     try:
         recorded = subprocess.run(
             [sys.executable, '-m', 'cbha_inverse.ros.bag.cli', 'record', '-o', str(run),
-             '--duration', '8', *TOPICS], cwd=REPO_ROOT, env=child_env(), capture_output=True,
+             '--duration', '14', *TOPICS], cwd=REPO_ROOT, env=child_env(), capture_output=True,
             text=True, timeout=120)
     finally:
         launch_output = _stop(launch)[0]
