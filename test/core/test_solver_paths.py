@@ -9,6 +9,7 @@ object).
 
 import contextlib
 import math
+import time
 
 from cbha_inverse.core.inverse.qp import ProxsuiteQP
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS, TARGET_QOS
@@ -113,14 +114,13 @@ def _point(point, stamp_ns=0):
     return message
 
 
-# timing: the burst must take less than one timer period (in make test's first phase, beside the
-# other worker at load ~17, 3 timer ticks came during it)
-@pytest.mark.timing
 @pytest.mark.parametrize('trigger', ['target', 'timer'])
 def test_target_trigger_solves_each_target_timer_trigger_per_period(rclpy_context, trigger):
-    """A burst of 20 targets in ~0.1 s: 20 ticks when triggered by targets, ~1 at 5 Hz."""
-    solver = _solver_node(rclpy_context, trigger=trigger, rate_hz=5.0)
+    """A burst of 20 targets: 20 ticks when triggered by targets, one per period at 5 Hz."""
+    period_s = 0.2
+    solver = _solver_node(rclpy_context, trigger=trigger, rate_hz=1.0 / period_s)
     with _running(rclpy_context, solver) as (executor, _, target_pub, _, _):
+        start = time.monotonic()
         for i in range(20):
             target_pub.publish(_point(CENTER + [0.0, 0.0005 * i, 0.0]))
             spin_for(executor, 0.005)
@@ -128,11 +128,14 @@ def test_target_trigger_solves_each_target_timer_trigger_per_period(rclpy_contex
                           10.0)
         spin_for(executor, 0.05)
         ticks = solver.ticks
+        elapsed_s = time.monotonic() - start
     if trigger == 'target':
         assert ticks == 20
     else:
-        # at most one timer period (0.2 s) passed during the burst: one or two ticks
-        assert 1 <= ticks <= 2
+        # the timer ticks once per period that passed, whatever the load (under coverage without
+        # the compiled kernels the burst alone can take longer than a period)
+        assert 1 <= ticks <= int(elapsed_s / period_s) + 1
+        assert elapsed_s < 20 * period_s, 'the burst was too slow to tell the triggers apart'
 
 
 def test_measurement_is_compared_with_the_target_of_its_stamp(rclpy_context):
