@@ -160,15 +160,15 @@ class Scene:
             If the scene has no cable.
 
         """
-        routes = self._cable_routes
+        routes = self.tendon_routes
         if routes is None:
             raise ValueError(f'scene {self.name} has no cable')
         lengths, jacobian = routes.lengths_and_jacobian(state.positions, state.rotations)
         return routes.names, lengths, jacobian.copy()
 
     @cached_property
-    def _cable_routes(self):
-        """Return the cables' routed lengths in actuator order (None without cables)."""
+    def tendon_routes(self):
+        """The cables' routed lengths in actuator order (``RoutedLengths``; None: no cable)."""
         cables = {cable.name: cable for group in self.actuators.groups
                   if isinstance(group, CableGroup) for cable in group.cables}
         ordered = [cables[name] for name in self.actuator_names if name in cables]

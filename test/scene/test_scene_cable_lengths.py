@@ -51,7 +51,7 @@ def test_a_tendon_on_an_arc_is_the_chord_polygon_of_its_offset_circle(scene, arc
     """
     straight_state = _arc_state(arc_lengths, 1e-12, [0.0, 1.0, 0.0])[0]
     names, straight, _ = scene.cable_lengths(straight_state)
-    group = scene._cable_routes.group
+    group = scene.tendon_routes.group
     for index, cable in enumerate(group.cables):
         r = float(np.linalg.norm(cable.offsets[0]))
         np.testing.assert_allclose(cable.offsets[:, 0], 0.0, atol=1e-15)
