@@ -168,7 +168,7 @@ class Scene:
 
     @cached_property
     def tendon_routes(self):
-        """The cables' routed lengths in actuator order (``RoutedLengths``; None: no cable)."""
+        """Return the cables' routed lengths in actuator order (None: the scene has no cable)."""
         cables = {cable.name: cable for group in self.actuators.groups
                   if isinstance(group, CableGroup) for cable in group.cables}
         ordered = [cables[name] for name in self.actuator_names if name in cables]
