@@ -23,6 +23,7 @@ Scene YAML schema (SI units)::
       - {name, max_tension, angle_deg, radius, end_vertebra,   # straight (see below): through
          start_vertebra (0), helix: {pitch_deg_per_vertebra}}  # every vertebra start → end
       - {name, max_tension, points: [{vertebra, angle_deg, radius} or {vertebra, offset}, ...]}
+        # each with axial_stiffness: EA [N] (default inextensible; displacement drives need it)
     cavities: [{name, section, cavity: <segment cavity name>, max_pressure}]
     cavity_model: linear | mesh          # core.actuation.condensed_cavities / .cavities
     actuator_order: [names]              # column order (default: cables, then cavities)
@@ -306,14 +307,15 @@ def _cables(items, vertebra_frames, gains=None):
         frames, offsets = _cable_route(item, vertebra_frames)
         name = item.text('name')
         cables.append(Cable(name, frames, offsets, item.number('max_tension', positive=True),
-                            (gains or {}).get(name, 1.0)))
+                            (gains or {}).get(name, 1.0),
+                            item.number('axial_stiffness', np.inf, positive=True)))
     return cables
 
 
 _STRAIGHT_KEYS = ('angle_deg', 'radius', 'end_vertebra', 'start_vertebra', 'helix')
 """The keys of a cable's straight (or helical) form, which ``points`` replaces."""
 
-_CABLE_KEYS = ('name', 'max_tension', 'points', *_STRAIGHT_KEYS)
+_CABLE_KEYS = ('name', 'max_tension', 'axial_stiffness', 'points', *_STRAIGHT_KEYS)
 """The keys of a scene's cable."""
 
 

@@ -10,6 +10,8 @@ from functools import cached_property
 from pathlib import Path
 
 from cbha_inverse.core.actuation.cables import CableGroup, RoutedLengths
+from cbha_inverse.core.actuation.drives import TendonDrives
+from cbha_inverse.core.chain import rest_state
 from cbha_inverse.core.inverse.solver import InverseOptions, InverseSolver
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.scene.calibration import Calibration
@@ -132,6 +134,54 @@ class Scene:
             raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
         return res
 
+    def forward_displacements(self, displacements, *, initial_state=None, tolerance=1e-10,
+                              strict=False):
+        """
+        Solve the static equilibrium of the cables driven by displacement.
+
+        Each cable's tension follows from its stretch (:attr:`tendon_drives`, a cable let out
+        beyond its path is slack); the cables act as in :meth:`forward`, through the same static
+        solver.
+
+        Parameters
+        ----------
+        displacements : (c,) array_like  [m]
+            Drive displacements from the straight chain's cable lengths, in scene actuator
+            order (pulled in: negative).
+        initial_state : ChainState, optional
+            Warm start.
+        tolerance : float
+            Relative tolerance of the static solver.
+        strict : bool
+            Raise ``RuntimeError`` when the solve does not converge.
+
+        Returns
+        -------
+        cbha_inverse.core.statics.StaticResult
+            The equilibrium (its ``actuation`` is zero: the tensions are
+            ``tendon_drives.tensions(result.state, displacements)``).
+
+        Raises
+        ------
+        ValueError
+            If the scene has actuators other than cables, a cable without a finite
+            ``axial_stiffness``, or a displacement is not finite.
+
+        """
+        drives = self.tendon_drives
+        if drives is None or len(drives.names) != len(self.actuator_names):
+            raise ValueError(f'scene {self.name}: displacement commands need a scene whose '
+                             'actuators are all cables')
+        d = np.asarray(displacements, dtype=float).reshape(-1)
+        drives.tensions(rest_state(self.model), d)       # the door: shape, NaN, stiffness
+        res = solve_static(self.model, gravity=self.gravity, effectors=self.effectors,
+                           load_function=lambda state: drives.loads(state, d),
+                           load_tangent=lambda state: drives.load_stiffness(state, d),
+                           initial_state=initial_state, tolerance=tolerance)
+        if strict and not res.converged:
+            raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
+        return res
+
     def cable_lengths(self, state):
         """
         Return the routed length of every cable (tendon) at a state, and its gradient.
@@ -165,6 +215,22 @@ class Scene:
             raise ValueError(f'scene {self.name} has no cable')
         lengths, jacobian = routes.lengths_and_jacobian(state.positions, state.rotations)
         return routes.names, lengths, jacobian.copy()
+
+    @cached_property
+    def tendon_drives(self):
+        """
+        Return the cables as displacement-commanded drives (None: the scene has no cable).
+
+        :class:`cbha_inverse.core.actuation.drives.TendonDrives` with the rest lengths of the
+        straight chain as built (:func:`cbha_inverse.core.chain.rest_state`: zero
+        displacement) and each cable's ``axial_stiffness``.
+        """
+        routes = self.tendon_routes
+        if routes is None:
+            return None
+        straight = rest_state(self.model)
+        rest_lengths, _ = routes.lengths_and_jacobian(straight.positions, straight.rotations)
+        return TendonDrives(routes, rest_lengths)
 
     @cached_property
     def tendon_routes(self):

@@ -117,3 +117,19 @@ def test_bad_displacements_are_refused(scene):
         _drives(scene, np.inf).loads(rest, np.zeros(8))
     with pytest.raises(ValueError, match='axial_stiffness'):
         TendonDrives(scene.tendon_routes, np.ones(8), np.zeros(8))
+
+
+def test_a_scene_solves_its_cables_driven_by_displacement(scene):
+    """``Scene.forward_displacements``: the pose of the tensions the displacements stand for."""
+    by_tension = scene.forward(TENSIONS, strict=True)
+    drives = scene.tendon_drives
+    np.testing.assert_array_equal(drives.axial_stiffness, 4000.0)     # the scene's cables
+    displacements = drives.displacements(by_tension.state, TENSIONS)
+    by_displacement = scene.forward_displacements(displacements, strict=True)
+    np.testing.assert_allclose(by_displacement.effector_positions,
+                               by_tension.effector_positions, atol=1e-9)
+    straight = chain.rest_state(scene.model)
+    _, straight_lengths, _ = scene.cable_lengths(straight)
+    np.testing.assert_allclose(drives.rest_lengths, straight_lengths)   # zero: as built
+    with pytest.raises(ValueError, match='displacements'):
+        scene.forward_displacements(np.full(8, np.nan))

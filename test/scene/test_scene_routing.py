@@ -282,6 +282,9 @@ def _point_edit(index, **changes):
      "unknown key, did you mean 'helix'?"),
     ({**_HELIX, 'end_vertebra': 4, 'helix': {'pitch_deg_per_vertebra': 30.0}},
      'cables[0].end_vertebra', '4 outside 1..3'),
+    ({**_HELIX, 'axial_stiffness': 0.0}, 'cables[0].axial_stiffness', 'must be > 0, got 0'),
+    ({**_HELIX, 'axial_stifness': 4e3}, 'cables[0].axial_stifness',
+     "unknown key, did you mean 'axial_stiffness'?"),
 ])
 def test_a_wrong_route_is_one_line_naming_its_key(tmp_path, cable, key, problem):
     path = _write_scene(tmp_path, [cable])

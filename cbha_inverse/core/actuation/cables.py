@@ -38,6 +38,9 @@ class Cable:
         Factor on the cable's force per unit tension (its column of ``J_aᵀ``, its load and its
         load stiffness): the tension acting along the routing is ``gain`` times the commanded
         one (a scene's ``calibration.actuator_gain``; 1 = the ideal cable).
+    axial_stiffness : float  [N]
+        ``EA`` of the cable, its stretch under tension (``inf``: inextensible); only a
+        displacement-commanded cable stretches (:mod:`cbha_inverse.core.actuation.drives`).
 
     """
 
@@ -46,6 +49,7 @@ class Cable:
     offsets: np.ndarray
     max_tension: float = np.inf
     gain: float = 1.0
+    axial_stiffness: float = np.inf
 
     def __post_init__(self):
         """Validate shapes and the gain."""
@@ -55,6 +59,9 @@ class Cable:
             raise ValueError(f'cable {self.name!r}: need >= 2 routing points with one offset each')
         if not (np.isfinite(self.gain) and self.gain > 0.0):
             raise ValueError(f'cable {self.name!r}: gain must be finite and > 0, got {self.gain}')
+        if not self.axial_stiffness > 0.0:
+            raise ValueError(f'cable {self.name!r}: axial_stiffness must be > 0 (inf: '
+                             f'inextensible), got {self.axial_stiffness}')
         object.__setattr__(self, 'frames', frames)
         object.__setattr__(self, 'offsets', offsets)
 
@@ -104,6 +111,7 @@ class CableGroup:
         self.upper_bounds = np.array([c.max_tension for c in self.cables], dtype=float)
         self.lower_bounds = np.zeros(m)
         self.gains = np.array([c.gain for c in self.cables], dtype=float)
+        self.axial_stiffness = np.array([c.axial_stiffness for c in self.cables], dtype=float)
         for routing_array in self.routing:
             # constants of the compiled kernels, which take them read-only (one compiled type)
             routing_array.flags.writeable = False

@@ -81,13 +81,13 @@ class TendonDrives:
         The cables' routed lengths.
     rest_lengths : (c,) array_like  [m]
         Routed lengths at the rest pose (``d = 0``).
-    axial_stiffness : (c,) array_like  [N]
+    axial_stiffness : (c,) array_like, optional  [N]
         ``EA`` of each cable, > 0 (``inf``: inextensible; a displacement-commanded chain needs
-        finite values).
+        finite values). Default: the cables' own (``Cable.axial_stiffness``).
 
     """
 
-    def __init__(self, routes, rest_lengths, axial_stiffness):
+    def __init__(self, routes, rest_lengths, axial_stiffness=None):
         """Validate and store the rest lengths and stiffnesses."""
         self.routes = routes
         self.names = routes.names
@@ -95,6 +95,8 @@ class TendonDrives:
         self.rest_lengths = checked_array(rest_lengths, (c,), 'rest_lengths')
         if np.any(self.rest_lengths <= 0.0):
             raise ValueError(f'rest_lengths must be > 0, got {self.rest_lengths}')
+        if axial_stiffness is None:
+            axial_stiffness = routes.group.axial_stiffness
         self.axial_stiffness = np.asarray(axial_stiffness, dtype=float).reshape(-1)
         if self.axial_stiffness.shape != (c,) or np.any(np.isnan(self.axial_stiffness)) or \
                 np.any(self.axial_stiffness <= 0.0):
