@@ -159,7 +159,9 @@ class Scene:
         -------
         cbha_inverse.core.statics.StaticResult
             The equilibrium (its ``actuation`` is zero: the tensions are
-            ``tendon_drives.tensions(result.state, displacements)``).
+            ``tendon_drives.tensions(result.state, displacements)``; ``warnings`` unchecked).
+            When one solve does not converge, the drives move in smaller steps from the
+            start; ``converged`` is False if a step of 1/1024 of the way fails too.
 
         Raises
         ------
@@ -174,13 +176,40 @@ class Scene:
                              'actuators are all cables')
         d = np.asarray(displacements, dtype=float).reshape(-1)
         drives.tensions(rest_state(self.model), d)       # the door: shape, NaN, stiffness
-        res = solve_static(self.model, gravity=self.gravity, effectors=self.effectors,
-                           load_function=lambda state: drives.loads(state, d),
-                           load_tangent=lambda state: drives.load_stiffness(state, d),
-                           initial_state=initial_state, tolerance=tolerance)
+        # Newton's tangent: the cables' exact load stiffness at the tensions of the last
+        # equilibrium (the actuators' own, as in forward) plus the stretch stiffness; the loads
+        # are exactly the drives' (the actuators' part plus the difference). The drives move in
+        # steps when one jump does not converge (a stiff cable pulled in far from the start
+        # pulls with a large force at the first iterate).
+        state = rest_state(self.model) if initial_state is None else initial_state
+        reached, step, res = 0.0, 1.0, None
+        held, _ = drives.tensions(state, 0.0 * d)
+        while reached < 1.0 and step >= 1.0 / 1024:
+            trial = min(1.0, reached + step)
+            res = self._displaced(drives, trial * d, held, state, tolerance)
+            if res.converged:
+                state, reached, step = res.state, trial, 2.0 * step
+                held, _ = drives.tensions(state, trial * d)
+            else:
+                step /= 2.0
         if strict and not res.converged:
             raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
         return res
+
+    def _displaced(self, drives, displacements, tensions, initial_state, tolerance):
+        """Solve the drives' equilibrium with the cables' own load stiffness at ``tensions``."""
+        def difference(state):
+            return drives.loads(state, displacements) + (
+                drives.routes.lengths_and_jacobian(state.positions, state.rotations)[1].T
+                @ (drives.gains * tensions)).reshape(-1, 6)
+
+        return solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
+                            actuation=tensions, effectors=self.effectors,
+                            load_function=difference,
+                            load_tangent=lambda state: drives.load_stiffness(state,
+                                                                             displacements),
+                            initial_state=initial_state, tolerance=tolerance, max_load_steps=8,
+                            check_warnings=False)
 
     def cable_lengths(self, state):
         """

@@ -133,3 +133,20 @@ def test_a_scene_solves_its_cables_driven_by_displacement(scene):
     np.testing.assert_allclose(drives.rest_lengths, straight_lengths)   # zero: as built
     with pytest.raises(ValueError, match='displacements'):
         scene.forward_displacements(np.full(8, np.nan))
+
+
+def test_the_inverse_commanded_in_displacement_reaches_the_tension_commanded_poses(scene):
+    """Open loop on the nominal model: the inverse's tensions, as drive displacements, reach."""
+    solver = scene.make_inverse_solver()
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        fraction = rng.uniform(0.0, 0.5, size=8)
+        target = scene.forward(fraction * scene.upper_bounds,
+                               strict=True).effector_positions[-1]
+        for _ in range(60):
+            result = solver.step(target[None])
+        by_tension = scene.forward(result.actuation, strict=True)
+        displacements = scene.tendon_drives.displacements(by_tension.state, result.actuation)
+        by_displacement = scene.forward_displacements(displacements, strict=True)
+        assert np.linalg.norm(by_tension.effector_positions[-1] - target) < 0.1e-3
+        assert np.linalg.norm(by_displacement.effector_positions[-1] - target) < 0.1e-3
