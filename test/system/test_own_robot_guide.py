@@ -91,6 +91,16 @@ def test_guide_shows_the_example_files():
         assert block == path.read_text(), f'the guide shows another {path.name}'
 
 
+@pytest.mark.untimed
+@pytest.mark.parametrize('index', range(len(_blocks('python'))))
+def test_guide_python_runs_as_written(index, tmp_path):
+    """Every Python block of the guide runs in the venv and prints what it computes."""
+    done = subprocess.run([sys.executable, '-c', _blocks('python')[index]], cwd=tmp_path,
+                          env=child_env(), capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip(), 'the block printed nothing'
+
+
 def test_guide_example_runs(condensed, tmp_path, rclpy_context):
     # the guide's first command, condense_segment, ran in the fixture
     work = _copy(condensed, tmp_path)
