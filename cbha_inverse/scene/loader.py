@@ -16,6 +16,8 @@ Scene YAML schema (SI units)::
       type: beam_vertebrae               # Timoshenko beams, vertebrae every `beams_per_interval`
       n_vertebrae, beams_per_interval, interval_length, vertebra_mass, backbone: {youngs_modulus,
       poisson_ratio, outer_radius, inner_radius, density}
+      # or, for parts of other spacing or backbone, base first (chain-level keys: defaults):
+      sections: [{n_vertebrae, interval_length, beams_per_interval, vertebra_mass, backbone}]
     chain:
       type: segments                     # condensed segments in series
       sections: [{name, segment: <path relative to the scene file>, count}]
@@ -198,9 +200,13 @@ SCENE_KEYS = ('name', 'description', 'base_frame', 'gravity', 'chain', 'cables',
               'calibration', 'sensors')
 """The keys of a scene file (docs/own-robot.md describes them)."""
 
+_BEAM_SECTION_KEYS = ('n_vertebrae', 'beams_per_interval', 'interval_length', 'backbone',
+                      'vertebra_mass')
+"""The keys of one part of a ``beam_vertebrae`` chain (the chain itself, or a section)."""
+
+
 _CHAIN_KEYS = {'segments': ('sections',),
-               'beam_vertebrae': ('n_vertebrae', 'beams_per_interval', 'interval_length',
-                                  'backbone', 'vertebra_mass')}
+               'beam_vertebrae': (*_BEAM_SECTION_KEYS, 'sections')}
 
 
 def _gravity(spec):
@@ -270,33 +276,67 @@ def _solver_defaults(spec):
     return dict(solver.data)
 
 
+def _beam_sections(chain):
+    """
+    Return the parts of a ``beam_vertebrae`` chain, base first: its sections, or itself.
+
+    A chain of several parts lists them under ``sections``; a key given at the chain level
+    (e.g. ``beams_per_interval``) is every section's default.
+    """
+    if not chain.has('sections'):
+        return [chain]
+    sections = chain.sections('sections')
+    if not sections:
+        raise chain.error('sections', 'needs at least one section')
+    for key in ('n_vertebrae', 'interval_length'):
+        if chain.has(key):
+            raise chain.error(key, 'give it per section (the chain has sections)')
+    defaults = {key: chain.data[key] for key in ('beams_per_interval', 'backbone',
+                                                 'vertebra_mass') if chain.has(key)}
+    for section in sections:
+        section.only(*_BEAM_SECTION_KEYS)
+        for key, value in defaults.items():
+            section.data.setdefault(key, value)
+    return sections
+
+
 def _vertebra_frames(chain):
     """Frame index of vertebra v (0 = base) for a beam_vertebrae chain."""
-    return (np.arange(chain.integer('n_vertebrae', minimum=1) + 1)
-            * chain.integer('beams_per_interval', minimum=1))
+    frames = [0]
+    for part in _beam_sections(chain):
+        per = part.integer('beams_per_interval', minimum=1)
+        for _ in range(part.integer('n_vertebrae', minimum=1)):
+            frames.append(frames[-1] + per)
+    return np.array(frames)
 
 
 def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
-    """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene."""
-    n_v = chain.integer('n_vertebrae', minimum=1)
-    per = chain.integer('beams_per_interval', minimum=1)
-    b = chain.section('backbone').only('youngs_modulus', 'poisson_ratio', 'outer_radius',
-                                       'inner_radius', 'density')
-    length = chain.number('interval_length', positive=True) / per
-    outer = b.number('outer_radius', positive=True)
-    inner = b.number('inner_radius', 0.0, minimum=0.0)
-    if inner >= outer:
-        raise b.error('inner_radius', f'must be below outer_radius {outer:g}, got {inner:g}')
-    c = timoshenko_compliance(length, b.number('youngs_modulus', positive=True),
-                              b.number('poisson_ratio', minimum=-1.0), outer, inner)
-    n = n_v * per
-    area = np.pi * (outer ** 2 - inner ** 2)
-    masses = np.full(n, b.number('density', 0.0, minimum=0.0) * area * length)
-    masses[per - 1::per] += chain.number('vertebra_mass', 0.0, minimum=0.0)
+    """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene (section by section)."""
+    compliances, lengths, masses = [], [], []
+    for part in _beam_sections(chain):
+        n_v = part.integer('n_vertebrae', minimum=1)
+        per = part.integer('beams_per_interval', minimum=1)
+        b = part.section('backbone').only('youngs_modulus', 'poisson_ratio', 'outer_radius',
+                                          'inner_radius', 'density')
+        length = part.number('interval_length', positive=True) / per
+        outer = b.number('outer_radius', positive=True)
+        inner = b.number('inner_radius', 0.0, minimum=0.0)
+        if inner >= outer:
+            raise b.error('inner_radius', f'must be below outer_radius {outer:g}, got {inner:g}')
+        c = timoshenko_compliance(length, b.number('youngs_modulus', positive=True),
+                                  b.number('poisson_ratio', minimum=-1.0), outer, inner)
+        n = n_v * per
+        area = np.pi * (outer ** 2 - inner ** 2)
+        part_masses = np.full(n, b.number('density', 0.0, minimum=0.0) * area * length)
+        part_masses[per - 1::per] += part.number('vertebra_mass', 0.0, minimum=0.0)
+        compliances.append(np.broadcast_to(c / stiffness_scale, (n, 6, 6)))
+        lengths.append(np.full(n, length))
+        masses.append(part_masses)
+    masses = np.concatenate(masses)
     masses[-1] += tip_payload_mass
-    offsets = np.tile([length, 0.0, 0.0], (n, 1))
-    return ChainModel.from_compliances(np.broadcast_to(c / stiffness_scale, (n, 6, 6)), offsets,
-                                       masses=masses)
+    offsets = np.zeros((masses.size, 3))
+    offsets[:, 0] = np.concatenate(lengths)
+    return ChainModel.from_compliances(np.concatenate(compliances), offsets, masses=masses)
 
 
 def _cables(items, vertebra_frames, gains=None):
