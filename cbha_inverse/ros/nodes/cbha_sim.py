@@ -29,7 +29,9 @@ into both cameras of ``camera_rig`` at ``camera_rate_hz``: ``stereo/{left,right}
 ``camera_info``, see :mod:`cbha_inverse.ros.common.sim_cameras`) for ``stereo_tracker``; ``both``
 publishes both, ``none`` no tip measurement at all (a camera-less arm; ``tip/true`` stays).
 OpenCV is imported only for stereo. ``payload_mass`` hangs a payload the controller does not
-know at the tip. A scene with a ``sensors`` block also gets ``string_pots`` (sensor_msgs/
+know at the tip; for each entry of ``wrench_frames`` the plant takes a load on that frame from
+``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped, :mod:`cbha_inverse.ros.common.wrenches`; the next tick is
+its equilibrium). A scene with a ``sensors`` block also gets ``string_pots`` (sensor_msgs/
 JointState, names and raw readings as ``robotino_bridge`` publishes them, the stamp of the plant
 state) at ``string_pot_rate_hz`` (at most the tick rate), from the plant's true shape with
 ``string_pot_noise_std`` [m] and the plant's own ``string_pot_offset`` / ``string_pot_gain``
@@ -73,6 +75,7 @@ from cbha_inverse.ros.common.params import declare_parameters, param, ParameterE
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.ros.common.wrenches import wrench_frames, WrenchInputs
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration, finite_triple
 from cbha_inverse.sim.arm import SimulatedArm
@@ -149,6 +152,10 @@ class CbhaSimParams:
                             choices=('point', 'stereo', 'both', 'none'))
     payload_mass: float = param(0.0, 'plant payload at the tip, unknown to the controller [kg]',
                                 low=0.0, high=10.0)
+    wrench_frames: tuple = param(None, 'frames (tip or an index i) whose wrench/tip or wrench/frame_<i> topic '
+                                 '(geometry_msgs/WrenchStamped, frame_id: cbha_base or the '
+                                 "frame's cbha_frame_<i>) loads the plant (unset: none; "
+                                 'docs/loads.md)', unset_type='string_array')
     string_pot_offset: tuple = param(None, 'plant string-pot offsets [reading] (1 or one per '
                                      'pot; unset: those of the scene)',
                                      unset_type='double_array')
@@ -212,6 +219,7 @@ class CbhaSimNode(Node):
                 self.scene.sensors, p.string_pot_offset, p.string_pot_gain,
                 p.string_pot_noise_std, p.seed,
                 stuck_pot=None if p.string_pot_stuck < 0 else p.string_pot_stuck))
+            wrench_frames(p.wrench_frames, self.scene.model.n_links)
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
@@ -247,6 +255,11 @@ class CbhaSimNode(Node):
                                                         MEASURED_QOS)
         self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
                                  COMMAND_QOS)
+        self.wrenches = WrenchInputs(
+            self, p.wrench_frames, self.scene.model.n_links, self.scene.loads, p.frame_id,
+            self.arm.plant.set_loads,
+            lambda reason, detail: self.rejected.count(f'wrench.{reason}',
+                                                       f'rejected wrench: {detail}'))
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
         self.loss_timer = self.create_timer(LOSS_WATCH_PERIOD, self._watch_controller,
