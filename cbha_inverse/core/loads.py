@@ -93,7 +93,9 @@ class Load:
         frame : int or 'tip'
             The frame it acts on (1..n).
         force : (3,) array_like  [N]
+            At the frame origin.
         torque : (3,) array_like  [N*m]
+            About the frame origin.
         axes : {'base', 'local'}
             Dead (base-frame axes) or follower (the frame's axes).
 

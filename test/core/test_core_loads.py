@@ -16,7 +16,7 @@ CBHA_PRESSURES = np.array([6e4, 4e4, 2e4, 3e4, 5e4, 4e4])
 
 @pytest.fixture(scope='module')
 def beam():
-    """The tendon trunk without gravity: a straight cantilever along +x at zero tension."""
+    """Return the tendon trunk without gravity: a straight cantilever along +x at rest."""
     return load_scene('tendon_6f_8c', gravity=[0.0, 0.0, 0.0])
 
 

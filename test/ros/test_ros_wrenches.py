@@ -1,5 +1,5 @@
 """
-``wrench/tip`` and ``wrench/frame_<i>`` over real DDS: a WrenchStamped loads the simulated plant and the controller.
+``wrench/tip`` and ``wrench/frame_<i>`` over real DDS: a WrenchStamped loads plant and model.
 
 ``cbha_sim`` (at rest, no command, noise-free tip) takes a dead tip force (``frame_id`` the base
 frame) and then a follower force on frame 8 (``frame_id`` ``cbha_frame_8``, its own axes): each

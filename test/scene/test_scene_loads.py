@@ -53,7 +53,8 @@ def test_tip_payload_mass_is_the_same_load_as_a_mass_in_the_block(tmp_path):
 
 
 @pytest.mark.parametrize('loads, key, problem', [
-    ([{'name': 'a', 'frame': 'tip', 'forse': [0, 0, 1]}], 'loads[0].forse', "did you mean 'force'"),
+    ([{'name': 'a', 'frame': 'tip', 'forse': [0, 0, 1]}], 'loads[0].forse',
+     "did you mean 'force'"),
     ([{'name': 'a', 'frame': 'tip', 'force': [0, 0]}], 'loads[0].force', '3 finite numbers'),
     ([{'name': 'a', 'frame': 'tip', 'force': [0, 0, 1], 'in': 'tool'}], 'loads[0].in',
      'must be one of'),

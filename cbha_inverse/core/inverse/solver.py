@@ -57,7 +57,7 @@ from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected
                                           ProxsuiteQP, qp_problem)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
-from cbha_inverse.core.loads import dead_wrenches, FollowerLoads, follower_hooks, Loads
+from cbha_inverse.core.loads import dead_wrenches, follower_hooks, FollowerLoads, Loads
 from cbha_inverse.core.sections import (check_section_factors, rate_limited,
                                         SectionStiffness)
 from cbha_inverse.core.statics import solve_static

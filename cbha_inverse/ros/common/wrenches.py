@@ -93,7 +93,7 @@ def wrench_load(topic, frame, message, base_frame):
     own = backbone_frame(frame)
     if frame_id not in (base_frame, own):
         return None, ('frame', f'{topic}: frame_id {frame_id!r} is neither {base_frame!r} '
-                      f'(base axes) nor {own!r} (the frame\'s own axes)')
+                      f"(base axes) nor {own!r} (the frame's own axes)")
     return Load.of_wrench(topic, frame, values[:3], values[3:],
                           'base' if frame_id == base_frame else 'local'), None
 

@@ -29,9 +29,7 @@ into both cameras of ``camera_rig`` at ``camera_rate_hz``: ``stereo/{left,right}
 ``camera_info``, see :mod:`cbha_inverse.ros.common.sim_cameras`) for ``stereo_tracker``; ``both``
 publishes both, ``none`` no tip measurement at all (a camera-less arm; ``tip/true`` stays).
 OpenCV is imported only for stereo. ``payload_mass`` hangs a payload the controller does not
-know at the tip; for each entry of ``wrench_frames`` the plant takes a load on that frame from
-``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped, :mod:`cbha_inverse.ros.common.wrenches`; the next tick is
-its equilibrium). A scene with a ``sensors`` block also gets ``string_pots`` (sensor_msgs/
+know at the tip. A scene with a ``sensors`` block also gets ``string_pots`` (sensor_msgs/
 JointState, names and raw readings as ``robotino_bridge`` publishes them, the stamp of the plant
 state) at ``string_pot_rate_hz`` (at most the tick rate), from the plant's true shape with
 ``string_pot_noise_std`` [m] and the plant's own ``string_pot_offset`` / ``string_pot_gain``
@@ -55,6 +53,10 @@ another scene: the simulator stops with one line naming both lengths and the lik
 2), instead of rejecting every message.
 
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
+
+External loads: for each entry of ``wrench_frames`` the plant takes a load on that frame from
+``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped, :mod:`cbha_inverse.ros.common.wrenches`),
+on top of its scene's; the next tick is their equilibrium.
 """
 
 from dataclasses import dataclass
@@ -152,10 +154,10 @@ class CbhaSimParams:
                             choices=('point', 'stereo', 'both', 'none'))
     payload_mass: float = param(0.0, 'plant payload at the tip, unknown to the controller [kg]',
                                 low=0.0, high=10.0)
-    wrench_frames: tuple = param(None, 'frames (tip or an index i) whose wrench/tip or wrench/frame_<i> topic '
-                                 '(geometry_msgs/WrenchStamped, frame_id: cbha_base or the '
-                                 "frame's cbha_frame_<i>) loads the plant (unset: none; "
-                                 'docs/loads.md)', unset_type='string_array')
+    wrench_frames: tuple = param(None, 'frames (tip or an index i) whose wrench/tip or '
+                                 'wrench/frame_<i> topic (geometry_msgs/WrenchStamped, '
+                                 "frame_id: cbha_base or the frame's cbha_frame_<i>) loads the "
+                                 'plant (unset: none; docs/loads.md)', unset_type='string_array')
     string_pot_offset: tuple = param(None, 'plant string-pot offsets [reading] (1 or one per '
                                      'pot; unset: those of the scene)',
                                      unset_type='double_array')

@@ -6,7 +6,8 @@ Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/m
 and, when set, ``payload_topic`` (Float64, kg), ``section_stiffness_topic`` (Float64MultiArray,
 one stiffness factor per scene section) and ``actuator_gain_topic`` (Float64MultiArray, one gain
 per valve) into the model's loads, links and cavities, and for each entry of ``wrench_frames``
-``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped: a load on that frame, :mod:`cbha_inverse.ros.common.wrenches`);
+``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped: a load on that frame,
+:mod:`cbha_inverse.ros.common.wrenches`);
 publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable),
 ``/diagnostics`` (~1 Hz), ``backbone`` (MarkerArray) and, every ``tf_every_n_ticks`` ticks, the
 model frames and the tip on ``/tf`` (:mod:`cbha_inverse.ros.common.tf`; needs tf2_msgs).
@@ -142,10 +143,11 @@ class InverseSolverParams:
     max_gain_change: float = param(2.0e-3, 'each model gain moves toward each message by at '
                                    'most this [-] (0: all the way)', low=0.0, high=10.0,
                                    live=True)
-    wrench_frames: tuple = param(None, 'frames (tip or an index i) whose wrench/tip or wrench/frame_<i> topic '
-                                 '(geometry_msgs/WrenchStamped, frame_id: cbha_base or the '
-                                 "frame's cbha_frame_<i>) puts a known load into the model "
-                                 '(unset: none; docs/loads.md)', unset_type='string_array')
+    wrench_frames: tuple = param(None, 'frames (tip or an index i) whose wrench/tip or '
+                                 'wrench/frame_<i> topic (geometry_msgs/WrenchStamped, '
+                                 "frame_id: cbha_base or the frame's cbha_frame_<i>) puts a "
+                                 'known load into the model (unset: none; docs/loads.md)',
+                                 unset_type='string_array')
     workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected', live=True)
     workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]', live=True)
