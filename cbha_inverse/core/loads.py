@@ -397,8 +397,15 @@ def static_loads(loads, n_links, gravity=None):
     -------
     dict
 
+    Raises
+    ------
+    ValueError
+        If ``loads`` is not a :class:`Loads`, or as :meth:`Loads.checked`.
+
     """
     loads = Loads() if loads is None else loads
+    if not isinstance(loads, Loads):
+        raise ValueError(f'loads must be a Loads, got {type(loads).__name__}')
     function, tangent = follower_hooks(loads, n_links)
     return {'frame_wrenches': dead_wrenches(loads, n_links, gravity),
             'load_function': function, 'load_tangent': tangent}

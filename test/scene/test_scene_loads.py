@@ -6,6 +6,7 @@ from cbha_inverse.paths import config_path
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration
 from cbha_inverse.scene.cli import main as scene_main
+from cbha_inverse.scene.refinement import refined_beam_data
 import numpy as np
 import pytest
 import yaml
@@ -40,6 +41,10 @@ def test_the_loads_block_becomes_the_scenes_loads_and_the_forward_models(tmp_pat
     unloaded = scene.forward(TENSIONS, loads=Loads(), strict=True).positions
     np.testing.assert_array_equal(unloaded, plain.forward(TENSIONS, strict=True).positions)
     assert np.abs(scene.forward(TENSIONS).positions - unloaded).max() > 1e-3
+    with pytest.raises(ValueError, match='Loads'):
+        scene.forward(TENSIONS, loads=[Load.of_mass('tool', 3, 0.02)])
+    with pytest.raises(ValueError, match='outside'):
+        scene.forward(TENSIONS, loads=Loads((Load.of_mass('tool', 7, 0.02),)))
 
 
 def test_tip_payload_mass_is_the_same_load_as_a_mass_in_the_block(tmp_path):
@@ -106,3 +111,11 @@ def test_scene_check_refuses_a_bad_load_in_one_line(spec, problem, capsys):
         scene_main(['check', 'tendon_6f_8c', '--load', spec])
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert stopped.value.code == 2 and problem in last and f'--load {spec}' in last, last
+
+
+def test_a_refined_chain_keeps_a_load_on_the_same_point_of_the_backbone(tmp_path):
+    loads = [{'name': 'a', 'frame': 3, 'force': [0, 0, -0.2]},
+             {'name': 'b', 'vertebra': 1, 'mass': 0.01},
+             {'name': 'c', 'frame': 'tip', 'mass': 0.01}]
+    refined = refined_beam_data(yaml.safe_load(_tendon_file(tmp_path, loads=loads).read_text()))
+    assert [item.get('frame', item.get('vertebra')) for item in refined['loads']] == [6, 1, 'tip']
