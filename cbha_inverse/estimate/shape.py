@@ -34,6 +34,7 @@ import time
 
 from cbha_inverse.core._kernels.tick import SOLVED
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
+from cbha_inverse.core.loads import dead_wrenches
 from cbha_inverse.core.sections import SECTION_FACTOR_BOUNDS
 from cbha_inverse.core.system import EquilibriumSystem
 from cbha_inverse.estimate.checks import check_vector, StuckDetector
@@ -73,6 +74,10 @@ class ShapeEstimator:
         The chain's sections, ``name -> (first link index, count)`` in chain order
         (:attr:`cbha_inverse.scene.scene.Scene.section_links`); needed by
         ``section_stiffness_std``.
+    loads : cbha_inverse.core.loads.Loads, optional
+        Known external loads (a scene's :attr:`~cbha_inverse.scene.scene.Scene.loads`): dead
+        wrenches and masses (:func:`cbha_inverse.core.loads.dead_wrenches`); follower wrenches
+        are refused.
 
     Attributes
     ----------
@@ -82,13 +87,18 @@ class ShapeEstimator:
     """
 
     def __init__(self, model, actuators, effectors, sensors, gravity=None, options=None,
-                 sections=None):
+                 sections=None, loads=None):
         """Precompute the evaluator and the buffers, and start at rest."""
         self.options = options or EstimatorOptions()
         opts = self.options
         self.model, self.actuators, self.effectors, self.sensors = (model, actuators, effectors,
                                                                     sensors)
         external = external_wrenches(model, gravity=gravity).reshape(-1)
+        if loads:
+            if loads.has_followers:
+                raise ValueError('the shape estimator takes dead loads and masses, not follower '
+                                 '(local) wrenches')
+            external += dead_wrenches(loads, model.n_links, gravity).reshape(-1)
         self.section_names, section_arguments = (), None
         if opts.section_stiffness_std is None:
             self._system = EquilibriumSystem(model, actuators, external)
@@ -181,7 +191,8 @@ class ShapeEstimator:
         if scene.sensors is None:
             raise ValueError(f'scene {scene.name!r} declares no sensors (a `sensors` block)')
         return cls(scene.model, scene.actuators, scene.effectors, scene.sensors,
-                   gravity=scene.gravity, options=options, sections=scene.section_links)
+                   gravity=scene.gravity, options=options, sections=scene.section_links,
+                   loads=scene.loads)
 
     def reset(self, state=None, actuation=None):
         """

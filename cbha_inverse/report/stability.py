@@ -322,7 +322,8 @@ def _zero_range_solver(scene):
     cables = list(scene.actuators.groups[0].cables)
     cables[1] = replace(cables[1], max_tension=0.0)
     actuators = ActuatorSet([CableGroup(cables, scene.model.n_frames)], scene.model.n_frames)
-    return InverseSolver(scene.model, actuators, scene.effectors, gravity=scene.gravity)
+    return InverseSolver(scene.model, actuators, scene.effectors, gravity=scene.gravity,
+                         loads=scene.loads)
 
 
 def actuator_cases(tmp_dir):

@@ -45,7 +45,8 @@ class Calibration:
         Actuator name -> factor on its effect per unit command: a cavity's wrench per unit
         pressure and volume (effective area), a cable's force per unit tension.
     tip_payload_mass : float  [kg]
-        Mass added at the last frame (a gripper, a load).
+        Mass at the last frame (a gripper, a load): the scene's mass load ``tip_payload_mass``
+        (:attr:`cbha_inverse.scene.scene.Scene.loads`, ``docs/loads.md``).
     base_position : (3,) tuple of float  [m]
         Origin of the chain's base in the scene's ``base_frame`` (``base_offset.position``).
     base_rpy : (3,) tuple of float  [rad]

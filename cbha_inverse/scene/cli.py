@@ -11,6 +11,9 @@ circle around that centre in each principal plane).
 ``--actuation V ...`` (one value per actuator, N or Pa) or ``--actuation-fraction F`` prints the
 equilibrium at that actuation instead: the effectors, the solve's iterations and residual, the
 tendons' routed lengths and the string pots' lengths and readings, with their change from rest.
+``--load NAME=FX,FY,FZ[,TX,TY,TZ]@FRAME[:base|local]`` (repeatable; ``NAME=KG@FRAME`` for a
+mass, FRAME an index or ``tip``) adds a load to the scene's (``docs/loads.md``) and prints the
+loaded equilibrium (at ``--actuation``, or at zero actuation) and its move from rest.
 ``--convergence`` prints how far the effectors move when the chain is refined (at rest, at half
 range and at the given actuation; :mod:`cbha_inverse.scene.refinement`). With either, the reach,
 tick time and reachable set are skipped. Exit status 0; 1 if a forward solve does not converge;
@@ -23,6 +26,7 @@ import sys
 import time
 
 from cbha_inverse.core.actuation.cables import CableGroup
+from cbha_inverse.core.loads import Load
 from cbha_inverse.errors import ConfigError, report_config_error
 import numpy as np
 
@@ -48,6 +52,11 @@ def _parser():
                             'in scene order, N (cables) or Pa (cavities)')
     given.add_argument('--actuation-fraction', type=float, metavar='F',
                        help='print the equilibrium with every actuator at F of its range (0..1)')
+    check.add_argument('--load', action='append', metavar='NAME=F@FRAME',
+                       help='print the equilibrium with this load added (repeatable): '
+                            'NAME=FX,FY,FZ[,TX,TY,TZ]@FRAME[:base|local] (N, N*m; base: '
+                            'base-frame axes, the default; local: turns with the frame) or '
+                            'NAME=KG@FRAME (a mass); FRAME an index or tip')
     check.add_argument('--convergence', action='store_true',
                        help='print how far the effectors move on a refined chain (beams per '
                             'interval doubled; for segments, the mesh size halved)')
@@ -208,6 +217,66 @@ def given_actuation(scene, values=None, fraction=None):
     return actuation
 
 
+def given_loads(scene, specs):
+    """
+    Return the scene's loads with those of ``--load`` added (None without ``--load``).
+
+    Parameters
+    ----------
+    scene : cbha_inverse.scene.Scene
+        The scene.
+    specs : list of str or None
+        ``NAME=FX,FY,FZ[,TX,TY,TZ]@FRAME[:base|local]`` or ``NAME=KG@FRAME``.
+
+    Returns
+    -------
+    cbha_inverse.core.loads.Loads or None
+
+    Raises
+    ------
+    ValueError
+        (``_BadOption``) On a load that does not parse or does not fit the scene, with one line
+        that says which.
+
+    """
+    if not specs:
+        return None
+    loads = scene.loads
+    for spec in specs:
+        try:
+            loads = loads.updated(_parsed_load(spec)).checked(scene.model.n_links, scene.gravity)
+        except ValueError as exc:
+            raise _BadOption(f'--load {spec}: {exc}') from None
+    return loads
+
+
+def _parsed_load(spec):
+    """Return the :class:`~cbha_inverse.core.loads.Load` of one ``--load`` (ValueError if bad)."""
+    name, equals, rest = spec.partition('=')
+    if not equals or not name:
+        raise ValueError('expected NAME=VALUES@FRAME')
+    values, at, where = rest.partition('@')
+    if not at:
+        raise ValueError('expected @FRAME after the values (an index or tip)')
+    frame, _, axes = where.partition(':')
+    if axes not in ('', 'base', 'local'):
+        raise ValueError(f'axes must be base or local, got {axes!r}')
+    try:
+        numbers = [float(v) for v in values.split(',')]
+        frame = frame if frame == 'tip' else int(frame)
+    except ValueError:
+        raise ValueError('values must be numbers and FRAME an index or tip') from None
+    if len(numbers) not in (1, 3, 6):
+        raise ValueError(f'give 1 (a mass, kg), 3 or 6 values, got {len(numbers)}')
+    if not np.all(np.isfinite(numbers)):
+        raise ValueError('values must be finite')
+    if len(numbers) == 1:
+        if axes:
+            raise ValueError('a mass takes no axes')
+        return Load.of_mass(name, frame, numbers[0])
+    return Load.of_wrench(name, frame, numbers[:3], (numbers + [0.0] * 3)[3:6], axes or 'base')
+
+
 def _actuation_text(actuation, units):
     values = ', '.join(f'{v:g}' for v in actuation)
     if len(set(units)) == 1:
@@ -215,13 +284,14 @@ def _actuation_text(actuation, units):
     return '[' + ', '.join(f'{v:g} {u}' for v, u in zip(actuation, units)) + ']'
 
 
-def print_equilibrium(scene, actuation, out):
+def print_equilibrium(scene, actuation, out, loads=None):
     """
-    Solve the equilibrium at an actuation and print it (``--actuation``).
+    Solve the equilibrium at an actuation and print it (``--actuation``, ``--load``).
 
-    The effectors, the solve (converged, iterations, load steps, residual), the routed length
-    of each tendon and the length and raw reading of each string pot, with their change from
-    rest (zero actuation, under the scene's gravity; pulled in: negative).
+    The loads added, the effectors, the solve (converged, iterations, load steps, residual),
+    the routed length of each tendon and the length and raw reading of each string pot, with
+    their change from rest (zero actuation, under the scene's gravity and loads; pulled in:
+    negative).
 
     Parameters
     ----------
@@ -231,6 +301,8 @@ def print_equilibrium(scene, actuation, out):
         Within the bounds (:func:`given_actuation`).
     out : file-like
         Where the lines go.
+    loads : cbha_inverse.core.loads.Loads, optional
+        The loads of the equilibrium (:func:`given_loads`; default: the scene's).
 
     Returns
     -------
@@ -245,9 +317,17 @@ def print_equilibrium(scene, actuation, out):
     """
     low, high = scene.lower_bounds, scene.upper_bounds
     rest = scene.forward(np.clip(np.zeros_like(low), low, high), strict=True)
-    result = scene.forward(actuation)
+    result = scene.forward(actuation, loads=loads)
     units = actuator_units(scene)
     print(f'equilibrium at {_actuation_text(actuation, units)}:', file=out)
+    for item in () if loads is None else loads.items:
+        if item in scene.loads.items:
+            continue
+        what = (f'{item.mass:g} kg' if item.mass else
+                f'force [{", ".join(f"{v:g}" for v in item.wrench[:3])}] N, torque '
+                f'[{", ".join(f"{v:g}" for v in item.wrench[3:])}] N*m in {item.axes} axes')
+        print(f'  load {item.name}: {what} at frame '
+              f'{item.frame_index(scene.model.n_links)}', file=out)
     steps = f'{result.load_steps} load step' + ('s' if result.load_steps != 1 else '')
     verdict = ('converged' if result.converged else
                f'NOT converged ({result.message}), load factor {result.load_factor:g}')
@@ -360,7 +440,7 @@ def print_convergence(scene, actuation, out, recondense=False,
 
 def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES, *, actuation=None,
           actuation_fraction=None, convergence=False, recondense=False,
-          tolerance_mm=DEFAULT_TOLERANCE_MM):
+          tolerance_mm=DEFAULT_TOLERANCE_MM, loads=None):
     """
     Load a scene and print what it builds.
 
@@ -386,6 +466,9 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES, *, actuat
         With ``convergence``: recondense the segments of a ``segments`` chain.
     tolerance_mm : float  [mm]
         With ``convergence``: movement below which the chain is converged.
+    loads : list of str, optional
+        ``--load`` specifications (:func:`given_loads`): print the equilibrium with them added
+        (at ``actuation``, or at zero actuation).
 
     Returns
     -------
@@ -410,6 +493,10 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES, *, actuat
         raise _BadOption(f'--reach-samples must be 0 (skip) or >= {fewest} for '
                          f'{len(scene.actuator_names)} actuators, got {reach_samples}')
     given = given_actuation(scene, actuation, actuation_fraction)
+    with_loads = given_loads(scene, loads)
+    if with_loads is not None and given is None:
+        given = np.clip(np.zeros(len(scene.actuator_names)), scene.lower_bounds,
+                        scene.upper_bounds)
     model = scene.model
     print(f'scene {scene.name} ({path}), loaded in {loaded:.2f} s', file=out)
     if scene.description:
@@ -424,7 +511,7 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES, *, actuat
         print(f'  {name}: [{low:g}, {high:g}] {unit}', file=out)
     if given is not None or convergence:
         try:
-            status = 0 if given is None else print_equilibrium(scene, given, out)
+            status = 0 if given is None else print_equilibrium(scene, given, out, with_loads)
             if convergence:
                 status = max(status, print_convergence(scene, given, out, recondense,
                                                        tolerance_mm))
@@ -489,7 +576,7 @@ def main(argv=None):
         return check(args.scene, args.ticks, sys.stdout, args.reach_samples,
                      actuation=args.actuation, actuation_fraction=args.actuation_fraction,
                      convergence=args.convergence, recondense=args.recondense,
-                     tolerance_mm=args.tolerance)
+                     tolerance_mm=args.tolerance, loads=args.load)
     except (ConfigError, FileNotFoundError) as exc:
         return report_config_error(PROGRAM, exc)
     except _BadOption as exc:

@@ -35,11 +35,16 @@ Scene YAML schema (SI units)::
       - {name, kind: string_pot, angle_deg, radius, end_vertebra, start_vertebra (0)}  # or
       - {name, kind: string_pot, points: [{vertebra or frame, offset: [x, y, z]}, ...]}
         # each with offset [reading], gain [reading / m], noise_std [m] (length noise)
+    loads:                               # external loads at frame origins (docs/loads.md)
+      - {name, frame: <int or 'tip'> or vertebra: <int>, force: [fx, fy, fz], # N
+         torque: [tx, ty, tz], in: base | local}   # N*m; base: dead, base_frame axes (default);
+                                                   # local: follower, turns with the frame
+      - {name, frame or vertebra, mass: kg}        # a mass under the scene's gravity
     solver: {energy_weight, proximal_weight, rate_limit, relinearize_every, ...}  # defaults
     calibration:                         # identified corrections (cbha_identify), optional
       section_stiffness: {<section name>: factor}    # stiffness factor of a segments section
       actuator_gain: {<actuator name>: factor}       # cavity effective area, cable force/N
-      tip_payload_mass: kg                           # mass added at the last frame
+      tip_payload_mass: kg                           # a mass load at the last frame
       base_offset: {position: [x, y, z], rpy: [r, p, y]}  # chain base in base_frame, m / rad
 
 ``workspace_center`` is the suggested centre of target trajectories (``Scene.workspace_center``):
@@ -81,6 +86,7 @@ from cbha_inverse.core.actuation.effectors import PointEffectors
 from cbha_inverse.core.chain import ChainModel
 from cbha_inverse.core.inverse.solver import InverseOptions
 from cbha_inverse.core.links import timoshenko_compliance
+from cbha_inverse.core.loads import Load, Loads
 from cbha_inverse.core.sensors import StringPots
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene.calibration import check_names, read_calibration
@@ -151,7 +157,7 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     kind = chain.text('type', choices=('beam_vertebrae', 'segments'))
     chain.only('type', *_CHAIN_KEYS[kind])
     if kind == 'beam_vertebrae':
-        model = _beam_chain(chain, stiffness_scale, calibrated.tip_payload_mass)
+        model = _beam_chain(chain, stiffness_scale)
         vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
     else:
         from cbha_inverse.scene.segments import segment_chain
@@ -183,6 +189,7 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     effectors = _effectors(effector_items, model, vertebra_frames)
     sensors = _sensors(spec.sections('sensors', []), model, vertebra_frames)
     g = _gravity(spec) if gravity is None else gravity
+    loads = _loads(spec, model, vertebra_frames, g, calibrated.tip_payload_mass)
     workspace = _workspace(spec, len(actuators.names))
     if isinstance(workspace, tuple):
         workspace = tuple(base_rotation @ np.asarray(workspace) + base_position)
@@ -192,12 +199,12 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
                  workspace=workspace, solver_defaults=_solver_defaults(spec),
                  section_names=tuple(sections), section_links=sections,
                  actuator_sections=tuple(section_of.get(n) for n in actuators.names),
-                 calibration=calibrated, sensors=sensors, path=path)
+                 calibration=calibrated, sensors=sensors, path=path, loads=loads)
 
 
 SCENE_KEYS = ('name', 'description', 'base_frame', 'gravity', 'chain', 'cables', 'cavities',
               'cavity_model', 'actuator_order', 'effectors', 'workspace_center', 'solver',
-              'calibration', 'sensors')
+              'calibration', 'sensors', 'loads')
 """The keys of a scene file (docs/own-robot.md describes them)."""
 
 _BEAM_SECTION_KEYS = ('n_vertebrae', 'beams_per_interval', 'interval_length', 'backbone',
@@ -310,7 +317,7 @@ def _vertebra_frames(chain):
     return np.array(frames)
 
 
-def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
+def _beam_chain(chain, stiffness_scale):
     """Build the chain of Timoshenko beams of a ``beam_vertebrae`` scene (section by section)."""
     compliances, lengths, masses = [], [], []
     for part in _beam_sections(chain):
@@ -333,7 +340,6 @@ def _beam_chain(chain, stiffness_scale, tip_payload_mass=0.0):
         lengths.append(np.full(n, length))
         masses.append(part_masses)
     masses = np.concatenate(masses)
-    masses[-1] += tip_payload_mass
     offsets = np.zeros((masses.size, 3))
     offsets[:, 0] = np.concatenate(lengths)
     return ChainModel.from_compliances(np.concatenate(compliances), offsets, masses=masses)
@@ -494,6 +500,55 @@ def _point_frame(item, model, vertebra_frames):
         if frame > model.n_links:
             raise item.error('frame', f'{frame} outside 0..{model.n_links} (or tip)')
     return frame, item.vector('offset', 3, (0.0, 0.0, 0.0))
+
+
+PAYLOAD_LOAD = 'tip_payload_mass'
+"""The name of the mass load that ``calibration.tip_payload_mass`` puts at the last frame."""
+
+_LOAD_KEYS = ('name', 'frame', 'vertebra', 'force', 'torque', 'in', 'mass')
+"""The keys of a scene's load."""
+
+
+def _loads(spec, model, vertebra_frames, gravity, payload_mass):
+    """
+    Build the scene's loads: its ``loads`` block and ``calibration.tip_payload_mass``.
+
+    A load is a wrench ``{name, frame or vertebra, force, torque, in: base | local}`` (either
+    of force and torque may be left out: zero) or a mass ``{name, frame or vertebra, mass}``;
+    frame 0 (the base) takes none, a mass needs the scene's gravity.
+    """
+    items = []
+    for item in spec.sections('loads', []):
+        item.only(*_LOAD_KEYS)
+        name = item.text('name')
+        if name in [load.name for load in items] or (name == PAYLOAD_LOAD and payload_mass):
+            raise item.error('name', f'load {name!r} named twice')
+        if item.has('frame') and item.has('vertebra'):
+            raise item.error('vertebra', 'give frame or vertebra, not both')
+        frame, _ = _point_frame(item, model, vertebra_frames)
+        if frame == 0:
+            raise item.error('vertebra' if item.has('vertebra') else 'frame',
+                             'the base (frame 0) does not move: a load there does nothing')
+        if item.has('mass'):
+            for key in ('force', 'torque', 'in'):
+                if key in item.data:
+                    raise item.error(key, 'give a mass or a wrench (force, torque, in), not '
+                                     'both')
+            if gravity is None:
+                raise item.error('mass', 'a mass needs gravity (the scene has gravity: null)')
+            items.append(Load.of_mass(name, frame, item.number('mass', minimum=0.0)))
+            continue
+        if not (item.has('force') or item.has('torque')):
+            raise item.error('force', 'a load needs force, torque or mass')
+        items.append(Load.of_wrench(name, frame, item.vector('force', 3, (0.0, 0.0, 0.0)),
+                                    item.vector('torque', 3, (0.0, 0.0, 0.0)),
+                                    item.text('in', 'base', choices=('base', 'local'))))
+    if payload_mass > 0.0:
+        if gravity is None:
+            raise spec.error('calibration.tip_payload_mass',
+                             'a mass needs gravity (the scene has gravity: null)')
+        items.append(Load.of_mass(PAYLOAD_LOAD, 'tip', payload_mass))
+    return Loads(tuple(items))
 
 
 def _effectors(items, model, vertebra_frames):

@@ -2,7 +2,7 @@
 Discretisation check of a scene: the same robot on a finer chain, and how far its tip moves.
 
 A ``beam_vertebrae`` chain is refined by doubling ``beams_per_interval`` (the vertebrae, cables,
-sensors and effectors stay where they are: an effector or sensor point given by ``frame: N``
+sensors, effectors and loads stay where they are: a point given by ``frame: N``
 moves to frame ``2 N``, the same point of the backbone). A ``segments`` chain is refined by
 recondensing each of its segment files with half the mesh size (``condense_segment``, tens of
 seconds per segment): :func:`segment_sources` finds the geometry file each segment was condensed
@@ -134,13 +134,13 @@ def refined_beam_data(data, factor=REFINEMENT):
     Returns
     -------
     dict
-        The refined scene (effector and sensor points given by ``frame: N`` at frame
+        The refined scene (effector, sensor and load points given by ``frame: N`` at frame
         ``factor * N``, the same point of the backbone).
 
     """
     refined = yaml.safe_load(yaml.safe_dump(data))
     refined['chain']['beams_per_interval'] = factor * int(data['chain']['beams_per_interval'])
-    points = list(refined.get('effectors') or [])
+    points = list(refined.get('effectors') or []) + list(refined.get('loads') or [])
     for sensor in refined.get('sensors') or []:
         points += sensor.get('points') or []
     for point in points:

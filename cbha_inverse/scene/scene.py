@@ -13,6 +13,7 @@ from cbha_inverse.core.actuation.cables import CableGroup, RoutedLengths
 from cbha_inverse.core.actuation.drives import TendonDrives
 from cbha_inverse.core.chain import rest_state
 from cbha_inverse.core.inverse.solver import InverseOptions, InverseSolver
+from cbha_inverse.core.loads import combined_hooks, Loads, static_loads
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.scene.calibration import Calibration
 import numpy as np
@@ -50,6 +51,10 @@ class Scene:
         offset is ``model.base_position`` / ``model.base_rotation``).
     sensors : cbha_inverse.core.sensors.StringPots or None
         The string potentiometers of the scene's ``sensors`` block (None without one).
+    loads : cbha_inverse.core.loads.Loads
+        The external loads of the scene's ``loads`` block and its
+        ``calibration.tip_payload_mass`` (a mass named ``tip_payload_mass``), checked against
+        the chain and the gravity (``docs/loads.md``).
     path : pathlib.Path or None
         The scene file.
 
@@ -58,7 +63,7 @@ class Scene:
     def __init__(self, name, model, actuators, effectors, gravity, *, description='',
                  base_frame='cbha_base', workspace=None, solver_defaults=None,
                  section_names=(), actuator_sections=None, calibration=None, sensors=None,
-                 path=None, section_links=None):
+                 path=None, section_links=None, loads=None):
         """Store the parts (use :func:`cbha_inverse.scene.load_scene`)."""
         self.name = name
         self.description = description
@@ -81,6 +86,7 @@ class Scene:
             raise ValueError('actuator_sections needs one entry per actuator')
         self.calibration = Calibration() if calibration is None else calibration
         self.sensors = sensors
+        self.loads = (Loads() if loads is None else loads).checked(model.n_links, self.gravity)
         self.path = None if path is None else Path(path)
         self._workspace = workspace
         self._solver_defaults = dict(solver_defaults or {})
@@ -90,8 +96,8 @@ class Scene:
         return (f'Scene({self.name!r}: {self.model.n_links} links, '
                 f'{len(self.actuator_names)} actuators, {len(self.effector_names)} effectors)')
 
-    def forward(self, actuation, *, initial_state=None, tolerance=1e-10, strict=False,
-                check_warnings=True):
+    def forward(self, actuation, *, loads=None, initial_state=None, tolerance=1e-10,
+                strict=False, check_warnings=True):
         """
         Solve the static equilibrium under an actuation (paper eq. 9).
 
@@ -103,6 +109,10 @@ class Scene:
         ----------
         actuation : (m,) array_like  [N or Pa]
             Tensions / gauge pressures in actuator order (must lie within the bounds).
+        loads : cbha_inverse.core.loads.Loads, optional
+            The external loads (default: the scene's, :attr:`loads`; ``Loads()``: none;
+            ``scene.loads.updated(...)`` adds to them). Follower loads come with their exact
+            load stiffness (:func:`cbha_inverse.core.loads.static_loads`).
         initial_state : ChainState, optional
             Warm start.
         tolerance : float
@@ -120,6 +130,12 @@ class Scene:
             The equilibrium with its ``effector_positions`` and ``actuation`` (``converged``
             says whether it was reached).
 
+        Raises
+        ------
+        ValueError
+            On an actuation of the wrong size, not finite or outside the bounds, or a load
+            beyond the chain or a mass without gravity.
+
         """
         a = np.asarray(actuation, dtype=float).reshape(-1)
         if a.size != len(self.actuator_names) or not np.all(np.isfinite(a)):
@@ -127,9 +143,11 @@ class Scene:
         if np.any(a < self.lower_bounds - 1e-9 * np.abs(self.upper_bounds)) or np.any(
                 a > self.upper_bounds * (1.0 + 1e-9)):
             raise ValueError('actuation outside the actuator bounds')
+        applied = static_loads(self.loads if loads is None else loads, self.model.n_links,
+                               self.gravity)
         res = solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
                            actuation=a, effectors=self.effectors, initial_state=initial_state,
-                           tolerance=tolerance, check_warnings=check_warnings)
+                           tolerance=tolerance, check_warnings=check_warnings, **applied)
         if strict and not res.converged:
             raise RuntimeError(f'forward solve of {self.name} did not converge: {res.message}')
         return res
@@ -139,9 +157,9 @@ class Scene:
         """
         Solve the static equilibrium of the cables driven by displacement.
 
-        Each cable's tension follows from its stretch (:attr:`tendon_drives`, a cable let out
-        beyond its path is slack); the cables act as in :meth:`forward`, through the same static
-        solver.
+        Under the scene's :attr:`loads`, each cable's tension follows from its stretch
+        (:attr:`tendon_drives`, a cable let out beyond its path is slack); the cables act as in
+        :meth:`forward`, through the same static solver.
 
         Parameters
         ----------
@@ -198,18 +216,15 @@ class Scene:
 
     def _displaced(self, drives, displacements, tensions, initial_state, tolerance):
         """Solve the drives' equilibrium with the cables' own load stiffness at ``tensions``."""
-        def difference(state):
-            return drives.loads(state, displacements) + (
-                drives.routes.lengths_and_jacobian(state.positions, state.rotations)[1].T
-                @ (drives.gains * tensions)).reshape(-1, 6)
-
+        applied = static_loads(self.loads, self.model.n_links, self.gravity)
+        function, tangent = combined_hooks(
+            (applied.pop('load_function'), applied.pop('load_tangent')),
+            drives.correction_hooks(displacements, tensions))
         return solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
-                            actuation=tensions, effectors=self.effectors,
-                            load_function=difference,
-                            load_tangent=lambda state: drives.load_stiffness(state,
-                                                                             displacements),
-                            initial_state=initial_state, tolerance=tolerance, max_load_steps=8,
-                            check_warnings=False)
+                            actuation=tensions, effectors=self.effectors, load_function=function,
+                            load_tangent=tangent, initial_state=initial_state,
+                            tolerance=tolerance, max_load_steps=8, check_warnings=False,
+                            **applied)
 
     def cable_lengths(self, state):
         """
@@ -328,4 +343,5 @@ class Scene:
             merged['rate_limit'] = tuple(np.broadcast_to(
                 np.asarray(merged['rate_limit'], dtype=float), (len(self.actuator_names),)))
         return InverseSolver(self.model, self.actuators, self.effectors, gravity=self.gravity,
-                             options=InverseOptions(**merged), sections=self.section_links)
+                             options=InverseOptions(**merged), sections=self.section_links,
+                             loads=self.loads)

@@ -28,8 +28,8 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0, calibration=None):
     stiffness_scale : float
         Divides every compliance.
     calibration : cbha_inverse.scene.calibration.Calibration, optional
-        Its ``section_stiffness`` factor of a section also divides that section's compliances;
-        its ``tip_payload_mass`` is added to the last frame.
+        Its ``section_stiffness`` factor of a section also divides that section's compliances
+        (its ``tip_payload_mass`` is a load of the scene, not a mass of the chain).
 
     Returns
     -------
@@ -65,8 +65,6 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0, calibration=None):
             offsets.append(np.asarray(segment.rest_offset, dtype=float))
             rotations.append(np.asarray(segment.rest_rotation, dtype=float))
             masses.append(float(segment.mass))
-    if calibration is not None:
-        masses[-1] += calibration.tip_payload_mass
     scales = stiffness_scale * section_link_factors(sections, factors, len(compliances))
     model = ChainModel.from_compliances(np.array(compliances) / scales[:, None, None],
                                         np.array(offsets),

@@ -12,6 +12,7 @@ No ROS.
 """
 
 from cbha_inverse.core.chain import rest_state
+from cbha_inverse.core.loads import Loads, static_loads
 from cbha_inverse.core.statics import solve_static
 
 
@@ -35,6 +36,11 @@ class StaticPlant:
     max_load_steps : int
         Load steps of an update at most (warm start included).
 
+    Attributes
+    ----------
+    loads : cbha_inverse.core.loads.Loads
+        The external loads on the plant (the scene's at start; :meth:`set_loads`).
+
     """
 
     def __init__(self, scene, tolerance=1e-8, max_iterations=20, max_rotation_step=None,
@@ -50,6 +56,27 @@ class StaticPlant:
         self.max_load_steps = int(max_load_steps)
         self.gravity = scene.gravity
         self._state = rest_state(self.model)
+        self.set_loads(scene.loads)
+
+    def set_loads(self, loads):
+        """
+        Replace the external loads on the plant; the next update reaches their equilibrium.
+
+        Parameters
+        ----------
+        loads : cbha_inverse.core.loads.Loads
+            The loads (``Loads()``: none), e.g. ``scene.loads.updated(...)``.
+
+        Raises
+        ------
+        ValueError
+            If a load's frame lies beyond the chain or a mass has no gravity.
+
+        """
+        if not isinstance(loads, Loads):
+            raise ValueError(f'loads must be a Loads, got {type(loads).__name__}')
+        self._applied = static_loads(loads, self.model.n_links, self.gravity)
+        self.loads = loads
 
     def reset(self):
         """Return to the rest shape (the next update starts from it)."""
@@ -65,7 +92,8 @@ class StaticPlant:
                             actuation=actuation, effectors=self.effectors,
                             initial_state=self._state, absolute_tolerance=self.tolerance,
                             max_iterations=max_iterations, max_load_steps=max_load_steps,
-                            max_rotation_step=self.max_rotation_step, check_warnings=False)
+                            max_rotation_step=self.max_rotation_step, check_warnings=False,
+                            **self._applied)
 
     def update(self, actuation):
         """

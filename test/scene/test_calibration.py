@@ -96,10 +96,11 @@ def test_mesh_cavity_gain_scales_wrenches_and_volume():
     np.testing.assert_allclose(volumes_scaled, 0.7 * volumes, rtol=1e-12)
 
 
-def test_tip_payload_adds_mass_at_the_last_frame_and_lowers_the_tip(tmp_path, nominal):
+def test_tip_payload_is_a_mass_load_at_the_last_frame_and_lowers_the_tip(tmp_path, nominal):
     scene = load_scene(_scene_file(tmp_path, calibration={'tip_payload_mass': 0.05}))
-    np.testing.assert_allclose(scene.model.masses - nominal.model.masses,
-                               np.r_[np.zeros(15), 0.05])
+    np.testing.assert_array_equal(scene.model.masses, nominal.model.masses)
+    (payload,) = scene.loads.items
+    assert (payload.name, payload.frame, payload.mass) == ('tip_payload_mass', 'tip', 0.05)
     rest = np.zeros(6)
     drop = (scene.forward(rest).effector_positions - nominal.forward(rest).effector_positions)[0]
     assert drop[2] < -1e-3

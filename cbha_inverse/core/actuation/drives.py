@@ -203,6 +203,35 @@ class TendonDrives:
         weights = np.where(taut, self.gains * self._finite_stiffness() / unstretched, 0.0)
         return jacobian.T @ (weights[:, None] * jacobian)
 
+    def correction_hooks(self, displacements, tensions):
+        """
+        Return the drives' loads less those of fixed tensions, as ``solve_static`` hooks.
+
+        With the actuators' own follower loads at ``tensions`` (their exact load stiffness,
+        :func:`cbha_inverse.core.statics.solve_static`'s ``actuators``), these hooks make the
+        loads exactly the drives' (:meth:`loads`); the tangent adds the stretch stiffness
+        (:meth:`load_stiffness`), exact where the drives' tensions equal ``tensions``.
+
+        Parameters
+        ----------
+        displacements : (c,) array_like  [m]
+            Drive displacements from rest.
+        tensions : (c,) array_like  [N]
+            The tensions given to the actuators.
+
+        Returns
+        -------
+        load_function, load_tangent : callable
+
+        """
+        held = self.gains * checked_array(tensions, (len(self.names),), 'tensions')
+
+        def function(state):
+            _, jacobian = self.routes.lengths_and_jacobian(state.positions, state.rotations)
+            return self.loads(state, displacements) + (jacobian.T @ held).reshape(-1, 6)
+
+        return function, lambda state: self.load_stiffness(state, displacements)
+
     def _unstretched(self, displacements):
         unstretched = self.rest_lengths + checked_array(displacements, (len(self.names),),
                                                         'displacements')

@@ -57,6 +57,7 @@ from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected
                                           ProxsuiteQP, qp_problem)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
+from cbha_inverse.core.loads import dead_wrenches, follower_hooks, FollowerLoads, Loads
 from cbha_inverse.core.sections import (check_section_factors, rate_limited,
                                         SectionStiffness)
 from cbha_inverse.core.statics import solve_static
@@ -108,6 +109,8 @@ class InverseSolver:
         The chain's sections, ``name -> (first link index, count)`` in chain order
         (:attr:`cbha_inverse.scene.scene.Scene.section_links`): their stiffness factors can be
         set (:meth:`set_section_stiffness`).
+    loads : cbha_inverse.core.loads.Loads, optional
+        External loads in the model (:meth:`set_loads`; a scene's :attr:`loads`).
 
     Attributes
     ----------
@@ -139,7 +142,7 @@ class InverseSolver:
     """
 
     def __init__(self, model, actuators, effectors, gravity=None, options=None, scale=None,
-                 sections=None):
+                 sections=None, loads=None):
         """Precompute the constant parts and start from rest."""
         self.model = model
         self.actuators = actuators
@@ -172,10 +175,13 @@ class InverseSolver:
                                                     (m,))))
         self._span = span
         self._external = external_wrenches(model, gravity=gravity).reshape(-1)
-        # the model's loads without a payload, and the payload's acceleration (set_payload)
+        # the chain's own weight; the dead loads added (set_loads, set_payload); the payload
+        # and the payload's acceleration (set_payload); the follower loads (set_loads)
         self._unloaded = self._external.copy()
+        self._dead = self._external.copy()
         self._payload = 0.0
         self._gravity = None if gravity is None else np.asarray(gravity, dtype=float)
+        self._loads, self._followers = Loads(), None
         # the links' stiffness the tick reads, scaled by the sections' factors
         self._sections = SectionStiffness(model.stiffnesses, sections or {})
         self.section_names = self._sections.names
@@ -205,6 +211,8 @@ class InverseSolver:
         # the frames and the actuation live in the tick data (the compiled tick updates them)
         self._positions, self._rotations = self._data.positions, self._data.rotations
         self.actuation = self._data.actuation
+        if loads:
+            self.set_loads(loads)
         self.reset()
 
     def reset(self, state=None, actuation=None):
@@ -304,6 +312,8 @@ class InverseSolver:
         # the linearisation (steps 1-2) when no prepare() made it: checked for equilibrium
         # before the QP, as prepare() does
         fresh = not (self._linearised and self._age < self._every)
+        if fresh and self._followers is not None:
+            self._follow()
         if not self._one_call:
             if fresh and not self._prepare():
                 return self._held('not_positive_definite', started)
@@ -426,6 +436,8 @@ class InverseSolver:
         Applies a pending step first; the compiled linearisation, or, when its block Cholesky
         fails, the fallback chain. Returns whether a factorization succeeded.
         """
+        if self._followers is not None:
+            self._follow()
         code, _, _, _, _, residual_norm = self._control_tick(
             self._data.effector_positions, self._record, self._pending, True, False, False)
         return self._linearised_by(code, residual_norm)
@@ -606,12 +618,15 @@ class InverseSolver:
 
         The package's static solver (:func:`cbha_inverse.core.statics.solve_static`: the exact
         tangent, a line search, load steps if the warm start fails), warm-started from the
-        current state, with the solver's loads (gravity, payload), its sections' stiffness and
+        current state, with the solver's loads (gravity, payload, :meth:`set_loads`: the
+        follower loads with their load stiffness), its sections' stiffness and
         its actuator gains (a condensed cavity's wrench is linear in its pressure: gain ``g`` at
         ``p`` is the built cavity at ``g p``). Returns whether the state was restored.
         """
+        function, tangent = follower_hooks(self._loads, self.model.n_links)
         result = solve_static(
-            self._static_model(), frame_wrenches=self._external.reshape(-1, 6),
+            self._static_model(), frame_wrenches=self._dead.reshape(-1, 6),
+            load_function=function, load_tangent=tangent,
             actuators=self.actuators, actuation=self.actuation * self._gains,
             initial_state=ChainState(self._positions.copy(), self._rotations.copy()),
             max_load_steps=RESTORE_LOAD_STEPS, check_warnings=False)
@@ -695,6 +710,8 @@ class InverseSolver:
 
     def _newton_step(self):
         """Apply one full Newton step at the current actuation; return whether it succeeded."""
+        if self._followers is not None:
+            self._follow()
         _, rhs = self._system.linearise(self._positions, self._rotations, self.actuation)
         factor = self._system.factor()
         if factor is None:
@@ -792,17 +809,77 @@ class InverseSolver:
             # the loads already carry it: the linearisation (prepared or not) stays valid
             return mass
         self._payload = mass
-        self._model_changed = True
-        size = self._external.size
-        self._external[size - 6:size - 3] = self._unloaded[size - 6:size - 3] + mass * (
-            self._gravity)
-        self._age = self._every
+        self._set_dead()
         return mass
 
     @property
     def payload(self):
         """Return the payload in the model's loads [kg] (:meth:`set_payload`)."""
         return self._payload
+
+    def set_loads(self, loads):
+        """
+        Replace the external loads in the model (``f_ext`` of paper eq. 9, ``docs/loads.md``).
+
+        The dead wrenches and masses enter the constant loads the tick reads
+        (:func:`cbha_inverse.core.loads.dead_wrenches`), as :meth:`set_payload` does; the next
+        linearisation uses them, and unchanged loads keep the linearisation (the tick pays
+        nothing). Follower wrenches (``axes='local'``) turn with their frame: each
+        linearisation takes them at its state, without their load stiffness in the tick's
+        tangent (the residual is exact, so the fixed point of the ticks is the loaded
+        equilibrium; the static solver restoring it has their exact tangent). A payload of
+        :meth:`set_payload` stays, on top of them.
+
+        Parameters
+        ----------
+        loads : cbha_inverse.core.loads.Loads
+            The loads (``Loads()``: none).
+
+        Returns
+        -------
+        cbha_inverse.core.loads.Loads
+            The loads now in the model.
+
+        Raises
+        ------
+        ValueError
+            If ``loads`` is not a ``Loads``, a load's frame lies beyond the chain, or a mass
+            has no gravity.
+
+        """
+        if not isinstance(loads, Loads):
+            raise ValueError(f'loads must be a Loads, got {type(loads).__name__}')
+        loads.checked(self.model.n_links, self._gravity)
+        if loads == self._loads:
+            return loads
+        self._loads = loads
+        followers = FollowerLoads(loads, self.model.n_links)
+        self._followers = followers if followers else None
+        self._set_dead()
+        return loads
+
+    @property
+    def loads(self):
+        """Return the external loads in the model (:meth:`set_loads`)."""
+        return self._loads
+
+    def _set_dead(self):
+        """Write the constant loads (weight, dead loads, payload) and make the tick relinearise."""
+        dead = self._dead
+        dead[:] = self._unloaded + dead_wrenches(self._loads, self.model.n_links,
+                                                 self._gravity).reshape(-1)
+        if self._payload:
+            dead[-6:-3] += self._payload * self._gravity
+        self._external[:] = dead
+        if self._followers is not None:
+            self._follow()
+        self._model_changed = True
+        self._age = self._every
+
+    def _follow(self):
+        """Turn the follower loads with the frames: the tick's loads at the current state."""
+        np.add(self._dead, self._followers.wrenches(self._rotations).reshape(-1),
+               out=self._external)
 
     def set_section_stiffness(self, factors, max_change=None):
         """

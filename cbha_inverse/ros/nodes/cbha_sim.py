@@ -53,6 +53,10 @@ another scene: the simulator stops with one line naming both lengths and the lik
 2), instead of rejecting every message.
 
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
+
+External loads: for each entry of ``wrench_frames`` the plant takes a load on that frame from
+``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped, :mod:`cbha_inverse.ros.common.wrenches`),
+on top of its scene's; the next tick is their equilibrium.
 """
 
 from dataclasses import dataclass
@@ -73,6 +77,7 @@ from cbha_inverse.ros.common.params import declare_parameters, param, ParameterE
 from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.ros.common.wrenches import wrench_frames, WrenchInputs
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration, finite_triple
 from cbha_inverse.sim.arm import SimulatedArm
@@ -149,6 +154,10 @@ class CbhaSimParams:
                             choices=('point', 'stereo', 'both', 'none'))
     payload_mass: float = param(0.0, 'plant payload at the tip, unknown to the controller [kg]',
                                 low=0.0, high=10.0)
+    wrench_frames: tuple = param(None, 'frames (tip or an index i) whose wrench/tip or '
+                                 'wrench/frame_<i> topic (geometry_msgs/WrenchStamped, '
+                                 "frame_id: cbha_base or the frame's cbha_frame_<i>) loads the "
+                                 'plant (unset: none; docs/loads.md)', unset_type='string_array')
     string_pot_offset: tuple = param(None, 'plant string-pot offsets [reading] (1 or one per '
                                      'pot; unset: those of the scene)',
                                      unset_type='double_array')
@@ -212,6 +221,7 @@ class CbhaSimNode(Node):
                 self.scene.sensors, p.string_pot_offset, p.string_pot_gain,
                 p.string_pot_noise_std, p.seed,
                 stuck_pot=None if p.string_pot_stuck < 0 else p.string_pot_stuck))
+            wrench_frames(p.wrench_frames, self.scene.model.n_links)
         except (ValueError, FileNotFoundError, KeyError) as exc:
             self.destroy_node()
             raise ParameterError(str(exc)) from None
@@ -247,6 +257,11 @@ class CbhaSimNode(Node):
                                                         MEASURED_QOS)
         self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
                                  COMMAND_QOS)
+        self.wrenches = WrenchInputs(
+            self, p.wrench_frames, self.scene.model.n_links, self.scene.loads, p.frame_id,
+            self.arm.plant.set_loads,
+            lambda reason, detail: self.rejected.count(f'wrench.{reason}',
+                                                       f'rejected wrench: {detail}'))
         self.create_service(Trigger, '~/reset', self._on_reset)
         self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
         self.loss_timer = self.create_timer(LOSS_WATCH_PERIOD, self._watch_controller,

@@ -5,7 +5,9 @@ Subscribes ``target`` (PointStamped, reliable) and, in closed-loop mode, ``tip/m
 (PointStamped, sensor data; ``feedback_topic``: e.g. ``tip/estimated`` of ``shape_estimator``)
 and, when set, ``payload_topic`` (Float64, kg), ``section_stiffness_topic`` (Float64MultiArray,
 one stiffness factor per scene section) and ``actuator_gain_topic`` (Float64MultiArray, one gain
-per valve) into the model's loads, links and cavities;
+per valve) into the model's loads, links and cavities, and for each entry of ``wrench_frames``
+``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped: a load on that frame,
+:mod:`cbha_inverse.ros.common.wrenches`);
 publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable),
 ``/diagnostics`` (~1 Hz), ``backbone`` (MarkerArray) and, every ``tf_every_n_ticks`` ticks, the
 model frames and the tip on ``/tf`` (:mod:`cbha_inverse.ros.common.tf`; needs tf2_msgs).
@@ -59,6 +61,7 @@ from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
 from cbha_inverse.ros.common.tf_listener import make_static_listener
+from cbha_inverse.ros.common.wrenches import wrench_frames, WrenchInputs
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -140,6 +143,11 @@ class InverseSolverParams:
     max_gain_change: float = param(2.0e-3, 'each model gain moves toward each message by at '
                                    'most this [-] (0: all the way)', low=0.0, high=10.0,
                                    live=True)
+    wrench_frames: tuple = param(None, 'frames (tip or an index i) whose wrench/tip or '
+                                 'wrench/frame_<i> topic (geometry_msgs/WrenchStamped, '
+                                 "frame_id: cbha_base or the frame's cbha_frame_<i>) puts a "
+                                 'known load into the model (unset: none; docs/loads.md)',
+                                 unset_type='string_array')
     workspace_min: tuple = param((-0.3, -0.4, -0.4), 'workspace box lower corner [m]: targets '
                                  'and measurements outside are rejected', live=True)
     workspace_max: tuple = param((0.6, 0.4, 0.4), 'workspace box upper corner [m]', live=True)
@@ -250,6 +258,9 @@ class InverseSolverNode(Node):
         if p.actuator_gain_topic:
             self.create_subscription(Float64MultiArray, p.actuator_gain_topic,
                                      self._on_gains, MEASURED_QOS)
+        self.wrenches = WrenchInputs(
+            self, p.wrench_frames, self.scene.model.n_links, self.scene.loads, p.frame_id,
+            self._on_loads, lambda reason, detail: self._count_rejected('wrench', reason, detail))
         self.create_service(SetBool, '~/enable', self._on_enable)
         self.create_service(Trigger, '~/hold', lambda request, response: self._safe_state(
             'hold', response))
@@ -281,6 +292,7 @@ class InverseSolverNode(Node):
             raise ValueError(f'scene {self.scene.name} has effectors '
                              f'{list(self.scene.effector_names)}; this node drives exactly one')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
+        wrench_frames(p.wrench_frames, self.scene.model.n_links)  # refused here, not later
         self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(p)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
@@ -353,6 +365,11 @@ class InverseSolverNode(Node):
             self._count_rejected('payload', 'out_of_range', f'{mass} kg')
             return
         self.solver.set_payload(mass, self.params.max_payload_change or None)
+        self._prepare()
+
+    def _on_loads(self, loads):
+        """Put the loads of the ``wrench/<frame>`` topics into the model."""
+        self.solver.set_loads(loads)
         self._prepare()
 
     def _prepare(self):
