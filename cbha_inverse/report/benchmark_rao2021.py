@@ -13,9 +13,10 @@ For each case (tendon tensions, a dead tip force) the report solves the scene's 
 equilibrium (:func:`cbha_inverse.core.statics.solve_static`) and the reference, and prints the
 two tip positions and their distance in mm and in % of the robot's length, also against the
 reference with the tendons' force on a disk they pass through taken as that of a frictionless
-point contact (the package's cable model) instead of the paper's in-plane force. ``--refine``
-adds our tip error at twice and four times the scene's beams per interval and the Richardson
-extrapolation of the last two (the model's limit as the beams get shorter).
+point contact (the package's cable model) instead of the paper's in-plane force. ``--beams N``
+solves the scene with N Timoshenko beams between two disks instead of its own; ``--refine``
+adds our tip error at twice and four times as many and the Richardson extrapolation of the last
+two (the model's limit as the beams get shorter).
 
 The robot, the cases and the results: docs/benchmark-rao2021.md.
 """
@@ -31,7 +32,7 @@ SCENE = 'rao2021_tdcr'
 """The benchmark robot's scene (config/scenes)."""
 
 SCENE_FROM_PAPER = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-"""Rotation from the paper's axes (backbone +z) to the scene's (+x): their x, y, z are our y, z, x."""
+"""Rotation from the paper's axes (backbone +z) to the scene's: their x, y, z = our y, z, x."""
 
 
 @dataclass(frozen=True)
@@ -124,7 +125,9 @@ def our_tip(scene, case):
     Parameters
     ----------
     scene : cbha_inverse.scene.scene.Scene
+        The robot (a scene with its tendons and a tip effector last).
     case : Case
+        Tensions in the scene's actuator order and the tip force.
 
     Returns
     -------
@@ -154,7 +157,9 @@ def reference_tip(robot, case, pass_through='disk_plane'):
     Parameters
     ----------
     robot : cbha_inverse.report.subsegment_cosserat.TendonRobot
+        The reference model of the scene (:func:`reference_robot`).
     case : Case
+        Tensions in the scene's actuator order and the tip force (scene axes).
     pass_through : {'disk_plane', 'eyelet'}
         The paper's tendon force on the disks it passes through, or a point contact's
         (:func:`cbha_inverse.report.subsegment_cosserat.solve_rod`).
@@ -171,17 +176,16 @@ def reference_tip(robot, case, pass_through='disk_plane'):
     return SCENE_FROM_PAPER @ solution.tip
 
 
-def _refined_scene(spec, path, factor):
-    """Return the scene of ``spec`` with ``factor`` times its beams per interval."""
+def _scene_with_beams(spec, path, beams):
+    """Return the scene of ``spec`` with ``beams`` beams per interval (written to ``path``)."""
     from cbha_inverse.scene import load_scene
     import yaml
-    refined = dict(spec, chain=dict(spec['chain']))
-    refined['chain']['beams_per_interval'] = factor * int(spec['chain']['beams_per_interval'])
-    path.write_text(yaml.safe_dump(refined, sort_keys=False))
+    changed = dict(spec, chain=dict(spec['chain'], beams_per_interval=int(beams)))
+    path.write_text(yaml.safe_dump(changed, sort_keys=False))
     return load_scene(path)
 
 
-def benchmark(scene_name=SCENE, cases=CASES, refine=False):
+def benchmark(scene_name=SCENE, cases=CASES, refine=False, beams=None):
     """
     Solve every case with the package's model and the paper's reference.
 
@@ -190,8 +194,11 @@ def benchmark(scene_name=SCENE, cases=CASES, refine=False):
     scene_name : str
         A scene path or a name in ``config/scenes``.
     cases : sequence of Case
+        The cases to solve.
     refine : bool
         Also solve the scene with 2 and 4 times its beams per interval.
+    beams : int, optional
+        Beams per interval instead of the scene's.
 
     Returns
     -------
@@ -201,7 +208,12 @@ def benchmark(scene_name=SCENE, cases=CASES, refine=False):
         ``refine``, ``refined`` ({factor: tip}) and ``extrapolated`` (Richardson, from factors
         2 and 4).
     beams : int
-        The scene's beams per interval.
+        The beams per interval solved.
+
+    Raises
+    ------
+    ValueError
+        If ``beams`` is below 1, or the scene is not a straight-cable beam scene.
 
     """
     import tempfile
@@ -212,12 +224,16 @@ def benchmark(scene_name=SCENE, cases=CASES, refine=False):
     from cbha_inverse.scene.loader import resolve_scene_path
     path = resolve_scene_path(scene_name)
     spec = read_yaml(path)
-    scene, robot = load_scene(path), reference_robot(spec)
+    robot = reference_robot(spec)
     length = float(np.sum(robot.spacing))
-    refined = {}
-    if refine:
-        with tempfile.TemporaryDirectory() as folder:
-            refined = {f: _refined_scene(spec, Path(folder) / f'x{f}.yaml', f) for f in (2, 4)}
+    beams = int(spec['chain']['beams_per_interval']) if beams is None else int(beams)
+    if beams < 1:
+        raise ValueError(f'beams must be >= 1, got {beams}')
+    with tempfile.TemporaryDirectory() as folder:
+        scene = (load_scene(path) if beams == spec['chain']['beams_per_interval']
+                 else _scene_with_beams(spec, Path(folder) / 'scene.yaml', beams))
+        refined = {f: _scene_with_beams(spec, Path(folder) / f'x{f}.yaml', f * beams)
+                   for f in ((2, 4) if refine else ())}
     rows = []
     for case in cases:
         ours = our_tip(scene, case)
@@ -231,12 +247,12 @@ def benchmark(scene_name=SCENE, cases=CASES, refine=False):
             # tip(h) = tip(0) + c h^2: the beams' error is of second order in their length
             row['extrapolated'] = (4.0 * row['refined'][4] - row['refined'][2]) / 3.0
         rows.append(row)
-    return rows, int(spec['chain']['beams_per_interval'])
+    return rows, beams
 
 
 def _vector(p):
     """Format a position [m] in mm."""
-    return '[' + ', '.join(f'{1e3 * v:7.2f}' for v in p) + ']'
+    return '[' + ', '.join(f'{round(1e3 * v, 2) + 0.0:7.2f}' for v in p) + ']'
 
 
 def format_table(rows, beams):
@@ -303,17 +319,23 @@ def main(argv=None):
 
     """
     parser = argparse.ArgumentParser(
-        prog='cbha_report rao2021', description=__doc__.strip().splitlines()[0])
+        prog='cbha_report rao2021',
+        description="the package's model against the reference model of Rao et al. 2021 on "
+                    'their two-segment tendon robot (docs/benchmark-rao2021.md)')
     parser.add_argument('--scene', default=SCENE,
                         help='scene YAML (a path or a name in config/scenes), default %(default)s')
     parser.add_argument('--cases', nargs='+', choices=[c.name for c in CASES],
                         help='the cases to solve (default: all)')
+    parser.add_argument('--beams', type=int,
+                        help="Timoshenko beams between two disks (default: the scene's)")
     parser.add_argument('--refine', action='store_true',
                         help='also 2 and 4 times the beams per interval, and their extrapolation')
     args = parser.parse_args(argv)
+    if args.beams is not None and args.beams < 1:
+        parser.error(f'--beams must be >= 1, got {args.beams}')
     cases = [c for c in CASES if args.cases is None or c.name in args.cases]
     start = time.perf_counter()
-    rows, beams = benchmark(args.scene, cases, args.refine)
+    rows, beams = benchmark(args.scene, cases, args.refine, args.beams)
     print('\n'.join(format_table(rows, beams)))
     print(f'\n{len(rows)} cases in {time.perf_counter() - start:.1f} s')
     return 0

@@ -1,5 +1,5 @@
 """
-The reference model of Rao et al. 2021: a Cosserat rod between every two disks (independent oracle).
+The reference model of Rao et al. 2021: a Cosserat rod between every two disks (an oracle).
 
 Rao, Peyron, Lilge and Burgner-Kahrs, *How to Model Tendon-Driven Continuum Robots and Benchmark
 Modelling Performance*, Frontiers in Robotics and AI 7:630245, 2021, benchmark their models of a
@@ -94,7 +94,7 @@ class TendonRobot:
 
     @property
     def n_disks(self):
-        """Number of disks N above the base."""
+        """Return the number of disks N above the base."""
         return len(self.spacing)
 
     def stiffness(self):
@@ -194,11 +194,15 @@ def _residuals(robot, unknowns, tensions, tip_wrench, pass_through, steps, first
 
     Parameters
     ----------
+    robot : TendonRobot
+        The robot.
     unknowns : (6N, B) ndarray  [N, N m]
         ``Kse (v - e3), Kbt u`` at the start of each subsegment, stacked.
     first : (B,) ndarray of int, optional
         The first subsegment whose unknowns differ from those of column 0 (column 0: 0): up to
         there a column's rod is column 0's, and is not integrated again.
+    tensions, tip_wrench, pass_through, steps
+        As in :func:`solve_rod` (arrays).
 
     Returns
     -------
@@ -280,6 +284,7 @@ def solve_rod(robot, tensions, tip_wrench=None, *, pass_through='disk_plane', st
     Parameters
     ----------
     robot : TendonRobot
+        The robot.
     tensions : (T,) array_like  [N]
         Tendon tensions, in the order of ``robot.holes``.
     tip_wrench : (6,) array_like, optional  [N, N m]
