@@ -85,7 +85,8 @@ def reference_robot(spec):
     Parameters
     ----------
     spec : dict
-        The scene file (``beam_vertebrae`` chain; straight cables from the base, no helix).
+        The scene file (``beam_vertebrae`` chain; straight cables from the base, no helix; no
+        calibration).
 
     Returns
     -------
@@ -103,6 +104,8 @@ def reference_robot(spec):
     chain = spec['chain']
     if chain.get('type') != 'beam_vertebrae' or spec.get('cavities'):
         raise ValueError('the reference needs a beam_vertebrae chain with cables only')
+    if spec.get('calibration'):
+        raise ValueError('the reference models no calibration block')
     holes, ends = [], []
     for cable in spec['cables']:
         if 'points' in cable or cable.get('start_vertebra', 0) != 0 or 'helix' in cable:

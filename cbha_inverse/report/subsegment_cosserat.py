@@ -41,7 +41,7 @@ perturbations integrated together as one batch) with a backtracking line search.
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve
+from scipy.linalg import LinAlgError, solve
 
 _E3 = np.array([0.0, 0.0, 1.0])
 
@@ -277,9 +277,13 @@ def _tendon_loads(robot, positions, rotations, tensions, pass_through):
 
 
 def solve_rod(robot, tensions, tip_wrench=None, *, pass_through='disk_plane', steps=4,
-              tolerance=1e-8, max_iterations=40):
+              tolerance=1e-8, max_iterations=30, max_load_steps=32):
     """
     Solve the reference model's equilibrium under tendon tensions and a tip wrench.
+
+    Newton's method from the straight rod on the full load; where it fails (no descent, or a
+    rod that curls beyond what the shooting can integrate), on a fraction of the load first,
+    the fraction halved until Newton converges and doubled after each success.
 
     Parameters
     ----------
@@ -300,7 +304,9 @@ def solve_rod(robot, tensions, tip_wrench=None, *, pass_through='disk_plane', st
         scale (1 N for forces, 0.01 N m for moments): the internal wrench known to about
         1e-8 N.
     max_iterations : int
-        Newton iterations allowed.
+        Newton iterations allowed per load step.
+    max_load_steps : int
+        Load steps allowed (attempts, successful or not).
 
     Returns
     -------
@@ -309,9 +315,10 @@ def solve_rod(robot, tensions, tip_wrench=None, *, pass_through='disk_plane', st
     Raises
     ------
     ValueError
-        If the tensions or the wrench have the wrong shape or are not finite.
+        If the tensions or the wrench have the wrong shape or are not finite, or
+        ``pass_through`` is unknown.
     RuntimeError
-        If Newton's method does not converge.
+        If the full load is not reached.
 
     """
     tensions = np.asarray(tensions, dtype=float).reshape(-1)
@@ -320,34 +327,79 @@ def solve_rod(robot, tensions, tip_wrench=None, *, pass_through='disk_plane', st
         raise ValueError(f'tensions must be {len(robot.end_disks)} finite values')
     if wrench.shape != (6,) or not np.all(np.isfinite(wrench)):
         raise ValueError('tip_wrench must be 6 finite values')
+    if pass_through not in ('disk_plane', 'eyelet'):
+        raise ValueError(f"pass_through must be 'disk_plane' or 'eyelet', got {pass_through!r}")
     size = 6 * robot.n_disks
     scale = np.tile([1.0, 1.0, 1.0, 0.01, 0.01, 0.01], robot.n_disks)
     delta = 1e-7 * scale
     first = np.concatenate([[0], np.arange(size) // 6])   # column j + 1 perturbs unknown j
 
-    def residuals(x, jacobian=False):
-        """Return the residual at x (and its finite-difference Jacobian)."""
+    def residuals(x, factor, jacobian=False):
+        """Return the residual at x under a fraction of the load (and its Jacobian)."""
+        args = (factor * tensions, factor * wrench, pass_through, steps)
         if not jacobian:
-            return _residuals(robot, x[:, None], tensions, wrench, pass_through, steps)[0][:, 0]
+            return _residuals(robot, x[:, None], *args)[0][:, 0]
         batch = np.hstack([x[:, None], x[:, None] + np.diag(delta)])
-        res = _residuals(robot, batch, tensions, wrench, pass_through, steps, first)[0]
+        res = _residuals(robot, batch, *args, first)[0]
         return res[:, 0], (res[:, 1:] - res[:, :1]) / delta
 
-    x = np.zeros(size)
+    x, done, increment, total = np.zeros(size), 0.0, 1.0, 0
+    with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
+        for _ in range(max_load_steps):
+            factor = min(1.0, done + increment)
+            solved, iterations = _newton(lambda y, j=False: residuals(y, factor, j), x, scale,
+                                         tolerance, max_iterations)
+            total += iterations
+            if solved is None:
+                increment *= 0.5
+                continue
+            x, done, increment = solved, factor, 2.0 * increment
+            if done == 1.0:
+                res, positions, rotations = _residuals(robot, x[:, None], tensions, wrench,
+                                                       pass_through, steps)
+                return RodSolution(positions[..., 0], rotations[..., 0],
+                                   float(np.linalg.norm(res)), total)
+    raise RuntimeError(f'the subsegment Cosserat rod did not converge: load factor {done:g} '
+                       f'reached in {max_load_steps} load steps')
+
+
+def _newton(residuals, x, scale, tolerance, max_iterations):
+    """
+    Run Newton's method with a backtracking line search from ``x``.
+
+    Parameters
+    ----------
+    residuals : callable
+        ``residuals(x)`` -> (6N,) residual; ``residuals(x, True)`` -> residual and Jacobian.
+    x : (6N,) ndarray
+        The start.
+    scale, tolerance, max_iterations
+        As in :func:`solve_rod`.
+
+    Returns
+    -------
+    x : (6N,) ndarray or None
+        The solution, None if Newton failed.
+    iterations : int
+
+    """
     r0, jacobian = residuals(x, True)
     for iteration in range(1, max_iterations + 1):
-        dx = solve(jacobian, -r0)
+        if not (np.all(np.isfinite(r0)) and np.all(np.isfinite(jacobian))):
+            return None, iteration
+        try:
+            dx = solve(jacobian, -r0)
+        except LinAlgError:
+            return None, iteration
         if np.max(np.abs(dx) / scale) < tolerance:
-            res, positions, rotations = _residuals(robot, (x + dx)[:, None], tensions, wrench,
-                                                   pass_through, steps)
-            return RodSolution(positions[..., 0], rotations[..., 0],
-                               float(np.linalg.norm(res)), iteration)
+            return x + dx, iteration
         norm0, t = np.linalg.norm(r0), 1.0
         r1, next_jacobian = residuals(x + dx, True)     # the full step, with its Jacobian
-        while np.linalg.norm(r1) >= (1.0 - 1e-4 * t) * norm0 and t > 1e-4:
+        while not np.linalg.norm(r1) < (1.0 - 1e-4 * t) * norm0:    # False for NaN too
             t *= 0.5                                    # backtracking
+            if t < 1e-4:
+                return None, iteration
             r1, next_jacobian = residuals(x + t * dx), None
         x = x + t * dx
         r0, jacobian = (r1, next_jacobian) if next_jacobian is not None else residuals(x, True)
-    raise RuntimeError(f'the subsegment Cosserat rod did not converge in {max_iterations} '
-                       'Newton iterations')
+    return None, max_iterations

@@ -75,6 +75,17 @@ def test_the_reference_rejects_wrong_inputs():
         _rod(tendon_end=21)
 
 
+def test_the_reference_steps_its_load_where_newton_fails_on_the_full_one():
+    """5 N on a tip tendon turns the tip by 114 degrees: Newton from the straight rod fails."""
+    robot = bench.reference_robot(read_yaml(SCENE_PATH))
+    case = bench.Case('curl', (0.0, 0.0, 0.0, 5.0, 0.0, 0.0), (0.0, 0.0, 0.0), '')
+    with pytest.raises(RuntimeError, match='load factor 0 reached in 1 load steps'):
+        solve_rod(robot, case.tensions, max_load_steps=1)
+    reference = bench.reference_tip(robot, case)
+    ours = bench.our_tip(load_scene(SCENE_PATH), case)
+    assert np.linalg.norm(ours - reference) < 1e-3 * LENGTH, (ours, reference)
+
+
 def test_the_scene_routes_the_references_tendons():
     """The scene's holes, rotated into the paper's axes, are the reference's; rest tip at L."""
     scene = load_scene(SCENE_PATH)
