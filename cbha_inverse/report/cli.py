@@ -26,7 +26,7 @@ REPORTS = {
                 'tip positions against the reference model of Rao et al. 2021 ([--refine])'),
 }
 GROUPS = {'bench': ('core', 'inverse', 'estimator'),
-          'all': ('core', 'inverse', 'estimator', 'fem', 'stability', 'accuracy')}
+          'all': ('core', 'inverse', 'estimator', 'fem', 'stability', 'accuracy', 'rao2021')}
 #: reports that take the common ``[--quick] [--output DIR]`` (passed on by a group run)
 COMMON_ARGS = ('stability', 'accuracy')
 

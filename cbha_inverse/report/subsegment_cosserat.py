@@ -25,10 +25,11 @@ and angular rates in the body frame and no distributed load::
 tendon loads on that disk, ``n(s_k⁻) - n(s_k⁺) = F_k``, ``m(s_k⁻) - m(s_k⁺) = M_k`` (at the
 tip, ``n(L) = F_N + F_tip`` and ``m(L) = M_N + M_tip``). A tendon of tension τ pulls its hole
 on disk k toward its holes on disks k-1 and k+1 (only toward k-1 where it ends):
-``τ (p_{k-1} - p_k) / |p_{k-1} - p_k| + τ (p_{k+1} - p_k) / |p_{k+1} - p_k|``. The paper's model
-drops the component of this force along the disk's normal where the tendon passes through a
-disk (a frictionless hole transmits no force along the tendon's channel, ``pass_through =
-'disk_plane'``); ``'eyelet'`` keeps it, the force of a frictionless point contact.
+``τ (p_{k-1} - p_k) / |p_{k-1} - p_k| + τ (p_{k+1} - p_k) / |p_{k+1} - p_k|``. The authors'
+implementation of the reference drops the component of this force along the disk's normal
+where the tendon passes through a disk (a frictionless hole transmits no force along the
+tendon's channel, ``pass_through = 'disk_plane'``, the default); ``'eyelet'`` keeps it, the
+force of a frictionless point contact.
 
 The boundary-value problem is solved by multiple shooting, as the authors' public code does
 (github.com/SvenLilge/tdcr-modeling, ``VCref_solver.m``): the unknowns are the internal wrench
@@ -131,7 +132,7 @@ class RodSolution:
     residual : float  [N, N m]
         Norm of the disk equilibria at the solution.
     iterations : int
-        Newton iterations.
+        Newton iterations, over all load steps.
 
     """
 
