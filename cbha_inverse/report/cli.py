@@ -22,9 +22,11 @@ REPORTS = {
                   'numerical stability on stiff and extreme cases ([--quick] [--output DIR])'),
     'accuracy': ('cbha_inverse.report.accuracy',
                  'error against run time, Pareto plots ([--quick] [--output DIR])'),
+    'rao2021': ('cbha_inverse.report.benchmark_rao2021',
+                'tip positions against the reference model of Rao et al. 2021 ([--refine])'),
 }
 GROUPS = {'bench': ('core', 'inverse', 'estimator'),
-          'all': ('core', 'inverse', 'estimator', 'fem', 'stability', 'accuracy')}
+          'all': ('core', 'inverse', 'estimator', 'fem', 'stability', 'accuracy', 'rao2021')}
 #: reports that take the common ``[--quick] [--output DIR]`` (passed on by a group run)
 COMMON_ARGS = ('stability', 'accuracy')
 

@@ -73,7 +73,8 @@ Frame 0 of the chain (the base) sits at the origin of ``base_frame``, or at
 as does an explicit ``workspace_center``; gravity and targets stay in ``base_frame`` axes.
 
 Scenes shipped in ``config/scenes``: ``tendon_6f_8c`` and ``tendon_10f_16c`` (the paper's Fig. 6
-trunks, Timoshenko beams and cables) and ``cbha`` (16 condensed bellows segments, 6 cavities).
+trunks, Timoshenko beams and cables), ``cbha`` (16 condensed bellows segments, 6 cavities) and
+``rao2021_tdcr`` (the two-segment tendon robot of Rao et al. 2021, docs/benchmark-rao2021.md).
 """
 
 from dataclasses import fields
