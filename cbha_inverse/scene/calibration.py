@@ -26,6 +26,7 @@ import math
 
 from cbha_inverse.config_files import Section
 from cbha_inverse.core.so3 import rpy_from_so3, so3_from_rpy
+from cbha_inverse.scene.schema import keys
 import numpy as np
 
 _ZERO = (0.0, 0.0, 0.0)
@@ -220,7 +221,7 @@ def read_calibration(spec):
     if not spec.has('calibration'):
         return Calibration()
     block = spec.section('calibration')
-    known = ('section_stiffness', 'actuator_gain', 'tip_payload_mass', 'base_offset')
+    known = keys('calibration')
     block.only(*known)
     factors = []
     for key in known[:2]:
@@ -232,7 +233,7 @@ def read_calibration(spec):
         factors.append(values)
     offset = block.section('base_offset', None) or Section(block.path, {},
                                                            block.key('base_offset'))
-    offset.only('position', 'rpy')
+    offset.only(*keys('base_offset'))
     return Calibration(*factors, block.number('tip_payload_mass', 0.0, minimum=0.0),
                        offset.vector('position', 3, _ZERO), offset.vector('rpy', 3, _ZERO))
 

@@ -40,6 +40,8 @@ DEFAULT_TOLERANCE_MM = 0.1
 def _parser():
     parser = argparse.ArgumentParser(prog=PROGRAM, description=__doc__.strip().splitlines()[0])
     commands = parser.add_subparsers(dest='command', required=True)
+    commands.add_parser('schema', help='print the scene file reference (docs/scene-schema.md): '
+                        'every key, unit, default and convention')
     check = commands.add_parser('check', help='load a scene and report what it builds')
     check.add_argument('scene', help='scene YAML: a path, or a name in config/scenes')
     check.add_argument('--ticks', type=int, default=200, help='solver ticks timed (default 200)')
@@ -568,6 +570,10 @@ def main(argv=None):
     """
     parser = _parser()
     args = parser.parse_args(argv)
+    if args.command == 'schema':
+        from cbha_inverse.scene.schema import markdown
+        sys.stdout.write(markdown())
+        return 0
     if args.recondense and not args.convergence:
         parser.error('--recondense needs --convergence')
     if not args.tolerance > 0.0:

@@ -77,7 +77,6 @@ trunks, Timoshenko beams and cables), ``cbha`` (16 condensed bellows segments, 6
 ``rao2021_tdcr`` (the two-segment tendon robot of Rao et al. 2021, docs/benchmark-rao2021.md).
 """
 
-from dataclasses import fields
 from pathlib import Path
 
 from cbha_inverse.config_files import read_section
@@ -85,13 +84,13 @@ from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import Cable, CableGroup
 from cbha_inverse.core.actuation.effectors import PointEffectors
 from cbha_inverse.core.chain import ChainModel
-from cbha_inverse.core.inverse.solver import InverseOptions
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.loads import Load, Loads
 from cbha_inverse.core.sensors import StringPots
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene.calibration import check_names, read_calibration
 from cbha_inverse.scene.scene import Scene
+from cbha_inverse.scene.schema import keys
 import numpy as np
 
 
@@ -152,11 +151,11 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     if not stiffness_scale > 0.0:
         raise ValueError('stiffness_scale must be positive')
     path = resolve_scene_path(path)
-    spec = read_section(path).only(*SCENE_KEYS)
+    spec = read_section(path).only(*keys('scene'))
     calibrated = read_calibration(spec).combined(calibration)
     chain = spec.section('chain')
     kind = chain.text('type', choices=('beam_vertebrae', 'segments'))
-    chain.only('type', *_CHAIN_KEYS[kind])
+    chain.only(*keys('chain'), *keys(f'chain ({kind})'))
     if kind == 'beam_vertebrae':
         model = _beam_chain(chain, stiffness_scale)
         vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
@@ -201,20 +200,6 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
                  section_names=tuple(sections), section_links=sections,
                  actuator_sections=tuple(section_of.get(n) for n in actuators.names),
                  calibration=calibrated, sensors=sensors, path=path, loads=loads)
-
-
-SCENE_KEYS = ('name', 'description', 'base_frame', 'gravity', 'chain', 'cables', 'cavities',
-              'cavity_model', 'actuator_order', 'effectors', 'workspace_center', 'solver',
-              'calibration', 'sensors', 'loads')
-"""The keys of a scene file (docs/own-robot.md describes them)."""
-
-_BEAM_SECTION_KEYS = ('n_vertebrae', 'beams_per_interval', 'interval_length', 'backbone',
-                      'vertebra_mass')
-"""The keys of one part of a ``beam_vertebrae`` chain (the chain itself, or a section)."""
-
-
-_CHAIN_KEYS = {'segments': ('sections',),
-               'beam_vertebrae': (*_BEAM_SECTION_KEYS, 'sections')}
 
 
 def _gravity(spec):
@@ -262,7 +247,7 @@ def _workspace(spec, n_actuators):
         return spec.vector('workspace_center', 3)
     center = spec.section('workspace_center') if isinstance(value, dict) else None
     if center is not None:
-        center.only('actuation_fraction', 'reachable_center')
+        center.only(*keys('workspace_center'))
         if 'reachable_center' not in center.data:
             return {'actuation_fraction': center.number('actuation_fraction', minimum=0.0)}
         if 'actuation_fraction' in center.data:
@@ -271,7 +256,7 @@ def _workspace(spec, n_actuators):
     from cbha_inverse.scene.reach import DEFAULT_SAMPLES, fewest_samples
     samples = max(DEFAULT_SAMPLES, fewest_samples(n_actuators))
     if center is not None and center.data['reachable_center'] is not None:
-        reach = center.section('reachable_center').only('samples')
+        reach = center.section('reachable_center').only(*keys('reachable_center'))
         samples = reach.integer('samples', samples, minimum=fewest_samples(n_actuators))
     return {'reachable_center': samples}
 
@@ -280,7 +265,7 @@ def _solver_defaults(spec):
     """Return the scene's ``solver`` section, its keys checked against ``InverseOptions``."""
     if not spec.has('solver'):
         return None
-    solver = spec.section('solver').only(*(f.name for f in fields(InverseOptions)))
+    solver = spec.section('solver').only(*keys('solver'))
     return dict(solver.data)
 
 
@@ -302,7 +287,7 @@ def _beam_sections(chain):
     defaults = {key: chain.data[key] for key in ('beams_per_interval', 'backbone',
                                                  'vertebra_mass') if chain.has(key)}
     for section in sections:
-        section.only(*_BEAM_SECTION_KEYS)
+        section.only(*(key for key in keys('chain (beam_vertebrae)') if key != 'sections'))
         for key, value in defaults.items():
             section.data.setdefault(key, value)
     return sections
@@ -324,8 +309,7 @@ def _beam_chain(chain, stiffness_scale):
     for part in _beam_sections(chain):
         n_v = part.integer('n_vertebrae', minimum=1)
         per = part.integer('beams_per_interval', minimum=1)
-        b = part.section('backbone').only('youngs_modulus', 'poisson_ratio', 'outer_radius',
-                                          'inner_radius', 'density')
+        b = part.section('backbone').only(*keys('backbone'))
         length = part.number('interval_length', positive=True) / per
         outer = b.number('outer_radius', positive=True)
         inner = b.number('inner_radius', 0.0, minimum=0.0)
@@ -350,7 +334,7 @@ def _cables(items, vertebra_frames, gains=None):
     """Build each cable on its route (:func:`_cable_route`)."""
     cables = []
     for item in items:
-        item.only(*_CABLE_KEYS)
+        item.only(*keys('cable'))
         frames, offsets = _cable_route(item, vertebra_frames)
         name = item.text('name')
         cables.append(Cable(name, frames, offsets, item.number('max_tension', positive=True),
@@ -361,9 +345,6 @@ def _cables(items, vertebra_frames, gains=None):
 
 _STRAIGHT_KEYS = ('angle_deg', 'radius', 'end_vertebra', 'start_vertebra', 'helix')
 """The keys of a cable's straight (or helical) form, which ``points`` replaces."""
-
-_CABLE_KEYS = ('name', 'max_tension', 'axial_stiffness', 'points', *_STRAIGHT_KEYS)
-"""The keys of a scene's cable."""
 
 
 def _cable_route(item, vertebra_frames):
@@ -381,7 +362,7 @@ def _cable_route(item, vertebra_frames):
         return _point_route(item, vertebra_frames)
     pitch = 0.0
     if item.has('helix'):
-        helix = item.section('helix').only('pitch_deg_per_vertebra')
+        helix = item.section('helix').only(*keys('helix'))
         pitch = helix.number('pitch_deg_per_vertebra')
     return _vertebra_route(item, vertebra_frames, pitch)
 
@@ -401,7 +382,7 @@ def _point_route(item, vertebra_frames):
     frames, offsets = [], []
     previous = -1
     for point in points:
-        point.only('vertebra', 'angle_deg', 'radius', 'offset')
+        point.only(*keys('cable point'))
         vertebra = point.integer('vertebra', minimum=0)
         if vertebra >= len(vertebra_frames):
             raise point.error('vertebra', f'{vertebra} outside 0..{len(vertebra_frames) - 1}')
@@ -458,8 +439,7 @@ def _sensors(items, model, vertebra_frames):
     names, frames, offsets = [], [], []
     calibration = {'offset': [], 'gain': [], 'noise_std': []}
     for item in items:
-        item.only('name', 'kind', 'points', 'angle_deg', 'radius', 'end_vertebra',
-                  'start_vertebra', 'offset', 'gain', 'noise_std')
+        item.only(*keys('sensor'))
         item.text('kind', choices=('string_pot',))
         name = item.text('name')
         if name in names:
@@ -468,7 +448,7 @@ def _sensors(items, model, vertebra_frames):
             points = item.sections('points')
             if len(points) < 2:
                 raise item.error('points', 'a string pot needs >= 2 attachment points')
-            route = [_point_frame(point.only('frame', 'vertebra', 'offset'), model,
+            route = [_point_frame(point.only(*keys('sensor point')), model,
                                   vertebra_frames) for point in points]
             route_frames = [frame for frame, _ in route]
             route_offsets = [offset for _, offset in route]
@@ -506,9 +486,6 @@ def _point_frame(item, model, vertebra_frames):
 PAYLOAD_LOAD = 'tip_payload_mass'
 """The name of the mass load that ``calibration.tip_payload_mass`` puts at the last frame."""
 
-_LOAD_KEYS = ('name', 'frame', 'vertebra', 'force', 'torque', 'in', 'mass')
-"""The keys of a scene's load."""
-
 
 def _loads(spec, model, vertebra_frames, gravity, payload_mass):
     """
@@ -520,7 +497,7 @@ def _loads(spec, model, vertebra_frames, gravity, payload_mass):
     """
     items = []
     for item in spec.sections('loads', []):
-        item.only(*_LOAD_KEYS)
+        item.only(*keys('load'))
         name = item.text('name')
         if name in [load.name for load in items] or (name == PAYLOAD_LOAD and payload_mass):
             raise item.error('name', f'load {name!r} named twice')
@@ -556,7 +533,7 @@ def _effectors(items, model, vertebra_frames):
     """Build the effector points."""
     names, frames, offsets = [], [], []
     for item in items:
-        item.only('name', 'frame', 'vertebra', 'offset')
+        item.only(*keys('effector'))
         frame, offset = _point_frame(item, model, vertebra_frames)
         names.append(item.text('name'))
         frames.append(frame)

@@ -11,6 +11,7 @@ from cbha_inverse.core.actuation.cavities import Cavity, CavityGroup, CavityPart
 from cbha_inverse.core.actuation.condensed_cavities import LinearCavityGroup
 from cbha_inverse.core.chain import ChainModel
 from cbha_inverse.core.sections import section_link_factors
+from cbha_inverse.scene.schema import keys
 import numpy as np
 
 
@@ -49,7 +50,7 @@ def segment_chain(chain, base_dir, stiffness_scale=1.0, calibration=None):
     if not items:
         raise chain.error('sections', 'at least one section is needed')
     for item in items:
-        item.only('name', 'segment', 'count')
+        item.only(*keys('segment section'))
         segment_path = Path(base_dir, item.text('segment'))
         if not segment_path.is_file():
             raise item.error('segment', f'no segment file {segment_path}')
@@ -131,7 +132,7 @@ def cavity_group(items, sections, segments, n_frames, model='linear', gains=None
     """
     cavities = []
     for item in items:
-        item.only('name', 'section', 'cavity', 'max_pressure')
+        item.only(*keys('cavity'))
         section = item.text('section')
         if section not in sections:
             raise item.error('section', f'no chain section {section!r} (has {sorted(sections)})')
