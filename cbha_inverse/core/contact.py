@@ -15,14 +15,23 @@ sphere's frame, at its origin (no moment), and gives the exact load stiffness of
     -df/dx = k (n nᵀ - p H)      (while p > 0),
 
 for :func:`cbha_inverse.core.statics.solve_static`'s ``load_function`` / ``load_tangent``: Newton
-converges quadratically once the set of contacts settles. The penetration of an equilibrium is
-``|f| / k``: the penalty trades accuracy (a stiffer ``k``) against conditioning.
+converges quadratically once the set of contacts settles. The tangent counts a sphere from the
+moment it touches (within :data:`TOUCH_MARGIN`), where the force is still zero: a sphere that
+has just reached an obstacle brings its stiffness into the next step. A tangent is blind to a
+contact that has not begun, so a Newton step from outside would pass through the obstacle;
+:meth:`PenaltyContact.step_limit` shortens it to where the first new contact begins (the
+``load_step_limit`` of :func:`~cbha_inverse.core.statics.solve_static`). The penetration of an
+equilibrium is ``|f| / k``: the penalty trades accuracy (a stiffer ``k``) against conditioning.
 """
 
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+
+TOUCH_MARGIN = 1.0e-9
+"""A sphere this close to an obstacle [m] touches it: its stiffness enters the tangent, and a
+step shortened to a new contact ends this deep inside it."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,13 +164,16 @@ class PenaltyContact:
         self.stiffness = float(stiffness)
         self.n_links = int(n_links)
 
-    def _pairs(self, positions):
-        """Yield ``(obstacle, sphere indices, penetrations, SignedDistance)`` of the contacts."""
+    def _pairs(self, positions, margin=0.0):
+        """Yield ``(obstacle, sphere indices, penetrations, SignedDistance)`` of the contacts.
+
+        A pair is a contact when its penetration exceeds ``-margin``.
+        """
         centres = self.spheres.centres(positions)
         for obstacle in self.obstacles:
             query = obstacle.signed_distance(centres)
             penetration = self.spheres.radii - query.distance
-            touching = np.flatnonzero(penetration > 0.0)
+            touching = np.flatnonzero(penetration > -margin)
             if touching.size:
                 yield obstacle, touching, penetration[touching], query
 
@@ -196,19 +208,49 @@ class PenaltyContact:
         Returns
         -------
         (6n, 6n) ndarray  [N/m]
-            ``k (n nᵀ - p H)`` on the translation block of each penetrating sphere's frame
-            (world-axis increments as :func:`cbha_inverse.core.chain.retract`).
+            ``k (n nᵀ - p H)`` on the translation block of each touching sphere's frame
+            (penetration above ``-TOUCH_MARGIN``: the derivative from the contact side where
+            the contact begins; world-axis increments as
+            :func:`cbha_inverse.core.chain.retract`).
 
         """
         out = np.zeros((6 * self.n_links, 6 * self.n_links))
-        for _, touching, penetration, query in self._pairs(state.positions):
+        for _, touching, penetration, query in self._pairs(state.positions, TOUCH_MARGIN):
             normal = query.normal[touching]
             blocks = self.stiffness * (normal[:, :, None] * normal[:, None, :]
-                                       - penetration[:, None, None]
+                                       - np.maximum(penetration, 0.0)[:, None, None]
                                        * query.curvature[touching])
             for row, block in zip(6 * (self.spheres.frames[touching] - 1), blocks):
                 out[row:row + 3, row:row + 3] += block
         return out
+
+    def step_limit(self, state, stepped):
+        """
+        Return the fraction of a step from ``state`` to ``stepped`` before a new contact begins.
+
+        For each pair apart at ``state`` (gap above ``TOUCH_MARGIN``) and penetrating at
+        ``stepped``, the gap interpolated linearly along the step reaches ``-TOUCH_MARGIN`` at
+        ``(g0 + margin) / (g0 - g1)``; the smallest of these (1 without a new contact). The
+        ``load_step_limit`` of :func:`cbha_inverse.core.statics.solve_static`.
+
+        Parameters
+        ----------
+        state, stepped : cbha_inverse.core.chain.ChainState
+            The start and the end of the full step.
+
+        Returns
+        -------
+        float
+            In (0, 1].
+
+        """
+        before = self.spheres.clearances(state.positions, self.obstacles)
+        after = self.spheres.clearances(stepped.positions, self.obstacles)
+        entering = (before > TOUCH_MARGIN) & (after < 0.0)
+        if not np.any(entering):
+            return 1.0
+        fractions = (before[entering] + TOUCH_MARGIN) / (before[entering] - after[entering])
+        return float(min(1.0, fractions.min()))
 
     def contacts(self, state):
         """

@@ -50,13 +50,18 @@ class Scene:
         The string potentiometers of the scene's ``sensors`` block (None without one).
     path : pathlib.Path or None
         The scene file.
+    obstacles : tuple of cbha_inverse.core.obstacles.Obstacle
+        The solids of the scene's ``obstacles`` block, in ``base_frame`` (empty without one).
+    collision : cbha_inverse.core.contact.CollisionSpheres or None
+        The robot's collision spheres (``collision`` block or the chain's own radius; None
+        when neither gives one).
 
     """
 
     def __init__(self, name, model, actuators, effectors, gravity, *, description='',
                  base_frame='cbha_base', workspace=None, solver_defaults=None,
                  section_names=(), actuator_sections=None, calibration=None, sensors=None,
-                 path=None, section_links=None):
+                 path=None, section_links=None, obstacles=(), collision=None):
         """Store the parts (use :func:`cbha_inverse.scene.load_scene`)."""
         self.name = name
         self.description = description
@@ -80,6 +85,8 @@ class Scene:
         self.calibration = Calibration() if calibration is None else calibration
         self.sensors = sensors
         self.path = None if path is None else Path(path)
+        self.obstacles = tuple(obstacles)
+        self.collision = collision
         self._workspace = workspace
         self._solver_defaults = dict(solver_defaults or {})
 
