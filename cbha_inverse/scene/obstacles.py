@@ -68,9 +68,14 @@ def read_obstacles(spec):
                     raise item.error(key, f'a {shape} takes no {key} (its sizes: '
                                      f'{", ".join(SHAPE_SIZES[shape]) or "none"})')
                 continue
-            sizes[key] = (item.vector(key, 3) if key == 'size'
-                          else item.number(key, minimum=0.0 if shape == 'capsule'
-                                           and key == 'length' else None))
+            if key == 'size':
+                sizes[key] = item.vector(key, 3)
+                if min(sizes[key]) <= 0.0:
+                    raise item.error(key, f'edges must be > 0, got {list(sizes[key])}')
+            elif key == 'length' and shape == 'capsule':
+                sizes[key] = item.number(key, minimum=0.0)   # 0: a sphere
+            else:
+                sizes[key] = item.number(key, positive=True)
         try:
             obstacles.append(obstacle_from_rpy(name, shape, position, rpy, **sizes))
         except ValueError as exc:
