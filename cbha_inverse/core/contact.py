@@ -27,6 +27,7 @@ equilibrium is ``|f| / k``: the penalty trades accuracy (a stiffer ``k``) agains
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from cbha_inverse.core.obstacles import SignedDistance
 import numpy as np
 
 TOUCH_MARGIN = 1.0e-9
@@ -165,17 +166,24 @@ class PenaltyContact:
         self.n_links = int(n_links)
 
     def _pairs(self, positions, margin=0.0):
-        """Yield ``(obstacle, sphere indices, penetrations, SignedDistance)`` of the contacts.
+        """
+        Yield ``(obstacle, sphere indices, penetrations, SignedDistance)`` of the contacts.
 
-        A pair is a contact when its penetration exceeds ``-margin``.
+        A pair is a contact when its penetration exceeds ``-margin``; the query's arrays hold
+        the contacts' rows only. Spheres beyond an obstacle's bounding sphere are not queried.
         """
         centres = self.spheres.centres(positions)
+        radii = self.spheres.radii
         for obstacle in self.obstacles:
-            query = obstacle.signed_distance(centres)
-            penetration = self.spheres.radii - query.distance
+            near = np.flatnonzero(obstacle.near(centres, radii + margin))
+            if not near.size:
+                continue
+            query = obstacle.signed_distance(centres[near])
+            penetration = radii[near] - query.distance
             touching = np.flatnonzero(penetration > -margin)
             if touching.size:
-                yield obstacle, touching, penetration[touching], query
+                yield obstacle, near[touching], penetration[touching], SignedDistance(
+                    *(field[touching] for field in query))
 
     def wrenches(self, state):
         """
@@ -194,7 +202,7 @@ class PenaltyContact:
         out = np.zeros((self.n_links, 6))
         for _, touching, penetration, query in self._pairs(state.positions):
             np.add.at(out, (self.spheres.frames[touching] - 1, slice(0, 3)),
-                      self.stiffness * penetration[:, None] * query.normal[touching])
+                      self.stiffness * penetration[:, None] * query.normal)
         return out
 
     def tangent(self, state):
@@ -216,10 +224,10 @@ class PenaltyContact:
         """
         out = np.zeros((6 * self.n_links, 6 * self.n_links))
         for _, touching, penetration, query in self._pairs(state.positions, TOUCH_MARGIN):
-            normal = query.normal[touching]
+            normal = query.normal
             blocks = self.stiffness * (normal[:, :, None] * normal[:, None, :]
                                        - np.maximum(penetration, 0.0)[:, None, None]
-                                       * query.curvature[touching])
+                                       * query.curvature)
             for row, block in zip(6 * (self.spheres.frames[touching] - 1), blocks):
                 out[row:row + 3, row:row + 3] += block
         return out
@@ -244,13 +252,21 @@ class PenaltyContact:
             In (0, 1].
 
         """
-        before = self.spheres.clearances(state.positions, self.obstacles)
-        after = self.spheres.clearances(stepped.positions, self.obstacles)
-        entering = (before > TOUCH_MARGIN) & (after < 0.0)
-        if not np.any(entering):
-            return 1.0
-        fractions = (before[entering] + TOUCH_MARGIN) / (before[entering] - after[entering])
-        return float(min(1.0, fractions.min()))
+        start, end = self.spheres.centres(state.positions), self.spheres.centres(
+            stepped.positions)
+        radii, limit = self.spheres.radii, 1.0
+        for obstacle in self.obstacles:
+            near = np.flatnonzero(obstacle.near(end, radii))   # penetrating at the end
+            if not near.size:
+                continue
+            after = obstacle.signed_distance(end[near]).distance - radii[near]
+            before = obstacle.signed_distance(start[near]).distance - radii[near]
+            entering = (before > TOUCH_MARGIN) & (after < 0.0)
+            if np.any(entering):
+                fractions = (before[entering] + TOUCH_MARGIN) / (before[entering]
+                                                                 - after[entering])
+                limit = min(limit, float(fractions.min()))
+        return limit
 
     def contacts(self, state):
         """
@@ -270,8 +286,8 @@ class PenaltyContact:
         for obstacle, touching, penetration, query in self._pairs(state.positions):
             frames.append(self.spheres.frames[touching])
             names.extend([obstacle.name] * touching.size)
-            points.append(query.closest[touching])
-            normals.append(query.normal[touching])
+            points.append(query.closest)
+            normals.append(query.normal)
             depths.append(penetration)
         if not frames:
             return NO_CONTACTS
