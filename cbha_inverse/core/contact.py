@@ -74,7 +74,7 @@ class CollisionSpheres:
         object.__setattr__(self, 'radii', radii)
 
     def centres(self, positions):
-        """Return the sphere centres (k, 3) [m] of frame origins ``positions`` (n + 1, 3)."""
+        """Return the spheres' centres [m], (k, 3), from the frame origins (n + 1, 3)."""
         return np.asarray(positions, dtype=float)[self.frames]
 
     def clearances(self, positions, obstacles):
@@ -86,6 +86,7 @@ class CollisionSpheres:
         positions : (n + 1, 3) array_like  [m]
             Frame origins.
         obstacles : sequence of cbha_inverse.core.obstacles.Obstacle
+            The obstacles.
 
         Returns
         -------
@@ -192,6 +193,7 @@ class PenaltyContact:
         Parameters
         ----------
         state : cbha_inverse.core.chain.ChainState
+            The frames.
 
         Returns
         -------
@@ -212,6 +214,7 @@ class PenaltyContact:
         Parameters
         ----------
         state : cbha_inverse.core.chain.ChainState
+            The frames.
 
         Returns
         -------
@@ -275,6 +278,7 @@ class PenaltyContact:
         Parameters
         ----------
         state : cbha_inverse.core.chain.ChainState
+            The frames.
 
         Returns
         -------

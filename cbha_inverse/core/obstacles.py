@@ -184,7 +184,9 @@ class Obstacle:
         Parameters
         ----------
         points : (N, 3) ndarray  [m]
+            Base-frame points.
         reach : (N,) ndarray or float  [m]
+            How far from the solid a point counts as near.
 
         Returns
         -------
@@ -248,6 +250,7 @@ def sphere_gaps(obstacles, centres, radii):
     Parameters
     ----------
     obstacles : sequence of Obstacle
+        The obstacles.
     centres : (N, 3) array_like  [m]
         Sphere centres, base frame.
     radii : (N,) array_like  [m]

@@ -481,6 +481,7 @@ def print_clearance(scene, out):
     scene : cbha_inverse.scene.Scene
         A scene with obstacles (and so with collision spheres).
     out : file-like
+        Where the lines go.
 
     Raises
     ------

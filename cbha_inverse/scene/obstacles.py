@@ -137,6 +137,7 @@ def segment_radii(sections, parts, n_frames):
     parts : dict
         ``name -> segment`` (its cavity surfaces in segment coordinates, axis +x).
     n_frames : int
+        Frames of the chain (base included).
 
     Returns
     -------

@@ -80,6 +80,7 @@ class StaticPlant:
         Parameters
         ----------
         obstacles : sequence of cbha_inverse.core.obstacles.Obstacle
+            The new obstacles, in the scene's base frame.
 
         Raises
         ------

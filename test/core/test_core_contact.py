@@ -9,14 +9,14 @@ import pytest
 
 
 def _chain(n=4):
-    """A straight chain of ``n`` 20 mm links along +x (stiffness irrelevant here)."""
+    """Return a straight chain of ``n`` 20 mm links along +x (stiffness irrelevant here)."""
     compliance = np.diag([1e-6, 1e-4, 1e-4, 1e-2, 1e-1, 1e-1])
     return ChainModel.from_compliances(np.broadcast_to(compliance, (n, 6, 6)),
                                        np.tile([0.02, 0.0, 0.0], (n, 1)))
 
 
 def _state(model, rng, scale=0.01):
-    """The rest shape with random displacements and turns of frames 1..n."""
+    """Return the rest shape with random displacements and turns of frames 1..n."""
     rest = rest_state(model)
     positions = rest.positions.copy()
     positions[1:] += rng.normal(scale=scale, size=(model.n_links, 3))
@@ -26,7 +26,7 @@ def _state(model, rng, scale=0.01):
 
 
 def _obstacles():
-    """A sphere around frames 2-3, a turned box the tip enters by an edge, a floor."""
+    """Return a sphere near frames 2-3, a turned box the tip enters by an edge, a floor."""
     turn = so3_exp(np.array([0.2, -0.4, 0.7]))
     return [Obstacle('ball', 'sphere', [0.05, 0.0, -0.028], np.eye(3), radius=0.02),
             Obstacle('crate', 'box', [0.1, 0.015, 0.012], turn, size=(0.03, 0.02, 0.04)),

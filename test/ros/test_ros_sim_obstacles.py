@@ -1,5 +1,5 @@
 """
-``cbha_sim`` with obstacles, over real DDS: the scene's, those of the ``obstacles`` topic, contacts.
+``cbha_sim`` with obstacles over real DDS: the scene's, the ``obstacles`` topic's, contacts.
 
 The sim runs the table scene (``config/scenes/cbha_table.yaml``): it draws the table and the post
 on ``obstacle_markers`` (latched); the inner section's over tube at full pressure bends the tip
@@ -13,7 +13,7 @@ import math
 
 from builtin_interfaces.msg import Time
 from cbha_inverse.ros.common.conversions import command_message
-from cbha_inverse.ros.common.obstacle_markers import (CONTACT_COLUMNS, contact_array,
+from cbha_inverse.ros.common.obstacle_markers import (contact_array, CONTACT_COLUMNS,
                                                       obstacle_markers)
 from cbha_inverse.ros.common.qos import (COMMAND_QOS, MEASURED_QOS, OBSTACLE_MARKERS_QOS,
                                          OBSTACLES_QOS)

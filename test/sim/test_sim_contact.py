@@ -14,7 +14,7 @@ _TABLE = Obstacle('table', 'plane', [0.0, 0.0, -0.015], np.eye(3))
 
 
 def _free_tip_height(scene, force):
-    """The tip frame's height under the pull and an upward dead force at the tip (no contact)."""
+    """Return the tip frame's height under the pull and an upward tip force (no contact)."""
     tip_wrench = np.array([0.0, 0.0, force, 0.0, 0.0, 0.0])
     result = solve_static(scene.model, tip_wrench, gravity=scene.gravity,
                           actuators=scene.actuators, actuation=_PULL_DOWN, strict=True,

@@ -54,6 +54,7 @@ def obstacles_from_markers(message, frame_id):
     Parameters
     ----------
     message : visualization_msgs.msg.MarkerArray
+        The ``obstacles`` message.
     frame_id : str
         The base frame every marker must be given in.
 
@@ -145,7 +146,9 @@ def obstacle_markers(obstacles, stamp, frame_id, rgba=(0.55, 0.45, 0.35, 0.6)):
     Parameters
     ----------
     obstacles : sequence of cbha_inverse.core.obstacles.Obstacle
+        The obstacles.
     stamp : builtin_interfaces.msg.Time
+        Header stamp.
     frame_id : str
         The base frame.
     rgba : tuple of 4 floats
@@ -191,8 +194,11 @@ def contact_markers(contacts, stamp, frame_id, metres_per_newton):
     Parameters
     ----------
     contacts : cbha_inverse.core.contact.Contacts
+        The plant's contacts.
     stamp : builtin_interfaces.msg.Time
+        Header stamp.
     frame_id : str
+        The base frame.
     metres_per_newton : float  [m/N]
         Arrow length per newton.
 
@@ -223,6 +229,7 @@ def contact_array(contacts):
     Parameters
     ----------
     contacts : cbha_inverse.core.contact.Contacts
+        The plant's contacts.
 
     Returns
     -------

@@ -184,7 +184,7 @@ class CbhaSimParams:
     camera_rate_hz: float = param(30.0, 'stereo output: frame rate [Hz]', low=0.1, high=1000.0)
     marker_radius: float = param(0.006, 'stereo output: radius of the tip sphere [m]',
                                  low=0.0005, high=0.1)
-    contact_stiffness: float = param(1.0e4, 'penalty stiffness of the plant\'s contacts with '
+    contact_stiffness: float = param(1.0e4, "penalty stiffness of the plant's contacts with "
                                      'obstacles [N/m]: a contact force F penetrates F / '
                                      'contact_stiffness', low=1.0, high=1.0e9)
     contact_arrow_scale: float = param(0.05, 'length of a contact force arrow on '
