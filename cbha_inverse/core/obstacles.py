@@ -296,7 +296,8 @@ def _outer(a, b):
 def _plane(obstacle, q):
     """Half-space ``z <= 0``: distance z, normal +z, flat."""
     n = q.shape[0]
-    normal = np.tile([0.0, 0.0, 1.0], (n, 1))
+    normal = np.zeros((n, 3))
+    normal[:, 2] = 1.0
     closest = q.copy()
     closest[:, 2] = 0.0
     return q[:, 2].copy(), normal, closest, np.zeros((n, 3, 3))
