@@ -21,6 +21,7 @@ from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
+import pytest
 from ros_helpers import make_node, spin_until, spinning
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker, MarkerArray
@@ -131,3 +132,20 @@ def test_markers_round_trip_and_contact_rows():
     np.testing.assert_array_equal(rows[:, 0], [3, 7])
     np.testing.assert_array_equal(rows[:, 7], [1e-4, 2e-4])
     np.testing.assert_array_equal(rows[:, 8:], np.arange(6.0).reshape(2, 3))
+
+
+def test_planes_and_capsules_are_drawn_with_the_shapes_markers_have():
+    """A plane: a thin tile whose top lies on the plane; a capsule: a cylinder and two balls."""
+    from cbha_inverse.core.obstacles import obstacle_from_rpy
+    plane = obstacle_from_rpy('wall', 'plane', [0.3, 0.0, 0.0], [0.0, -np.pi / 2, 0.0])
+    capsule = obstacle_from_rpy('rail', 'capsule', [0.0, 0.1, 0.0], [0.0, 0.0, 0.0],
+                                radius=0.01, length=0.2)
+    markers = obstacle_markers([plane, capsule], Time(), 'cbha_base').markers
+    assert markers[0].action == Marker.DELETEALL
+    tile, cylinder, low, high = markers[1:]
+    assert (tile.type, cylinder.type, low.type, high.type) == (
+        Marker.CUBE, Marker.CYLINDER, Marker.SPHERE, Marker.SPHERE)
+    # the wall's free side is -x: the tile's top face (+z of the tile) lies on x = 0.3
+    assert tile.scale.z == 0.001 and tile.pose.position.x == pytest.approx(0.3005)
+    assert [low.pose.position.z, high.pose.position.z] == pytest.approx([-0.1, 0.1])
+    assert (cylinder.scale.x, cylinder.scale.z) == pytest.approx((0.02, 0.2))

@@ -106,3 +106,16 @@ def test_scene_check_prints_the_clearance_at_rest():
     assert 'collision: 16 spheres at frames 1..16, radius 24.5 mm' in text
     assert re.search(r'post: cylinder radius 15\.0 mm, length 300\.0 mm .*; clearance at rest '
                      r'\d+\.\d mm \(frame \d+\)', text)
+
+
+def test_scene_check_says_when_the_rest_shape_penetrates(tmp_path):
+    """A ball around the tendon trunk's tip at rest: a negative clearance, said in words."""
+    path = _scene(tmp_path, """obstacles:
+  - {name: ball, type: sphere, radius: 0.01, pose: {position: [0.12, 0.0, 0.0]}}
+""")
+    out = io.StringIO()
+    assert check(str(path), 1, out, reach_samples=0, actuation_fraction=0.0) == 0
+    tip = load_scene(path).forward(np.zeros(8)).positions[-1]
+    expected = np.linalg.norm(tip - [0.12, 0.0, 0.0]) - 0.01 - 0.006
+    assert (f'minimum clearance at rest: {1e3 * expected:.1f} mm (frame 6 to ball): the rest '
+            'shape penetrates it') in out.getvalue()
