@@ -20,8 +20,8 @@ from cbha_inverse.ros.common.qos import (COMMAND_QOS, MEASURED_QOS, OBSTACLE_MAR
 from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
 from geometry_msgs.msg import PointStamped
 import numpy as np
-from rclpy.node import Node
 import pytest
+from rclpy.node import Node
 from ros_helpers import make_node, spin_until, spinning
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker, MarkerArray
