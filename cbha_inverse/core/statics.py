@@ -30,7 +30,9 @@ the plant evaluate the same physics with the same code:
   in one load step of 7 iterations);
 - backtracking line search on the Euclidean norm of the scaled residual (Armijo, factor 1/2),
   optionally starting from a step shortened so that no link turns by more than
-  ``max_rotation_step``;
+  ``max_rotation_step``, and shortened to the fraction ``load_step_limit`` allows (the step up
+  to a contact that begins: a penalty's tangent is blind to a contact until it begins, so the
+  full step would pass through the obstacle and the search would creep up to it from outside);
 - load stepping: a warm start (``initial_state``) is tried at the full load first; otherwise or
   if it fails, the full load from the rest shape; a load step that fails (no convergence within
   ``max_iterations`` or a failed line search) is halved, successful steps double the increment.
@@ -297,7 +299,7 @@ class _Problem:
     """One static problem: compiled evaluator, loads, convergence test and tangent solves."""
 
     def __init__(self, model, actuators, actuation, external, load_function, load_tangent,
-                 tolerance, absolute_tolerance, max_rotation_step):
+                 tolerance, absolute_tolerance, max_rotation_step, load_step_limit=None):
         self.model = model
         self.system = _system(model, actuators)
         self.newton = _newton_record(model, actuators, self.system)
@@ -311,6 +313,7 @@ class _Problem:
         self.tolerance = float(tolerance)
         self.absolute = None if absolute_tolerance is None else float(absolute_tolerance)
         self.max_rotation_step = max_rotation_step
+        self.load_step_limit = load_step_limit
         constants = _cached(model)['constants']
         self.length, self.x_ref = constants.length, constants.x_ref
         # the record's read-only view: the compiled kernels see one type of it
@@ -464,6 +467,8 @@ def _line_search(problem, point, lam, step, link_rotation=None):
     if link_rotation is None:
         _, link_rotation = problem.coordinates_of(state, step)
     alpha = problem.first_alpha(link_rotation)
+    if problem.load_step_limit is not None:
+        alpha = min(alpha, float(problem.load_step_limit(state, problem.poses(state, 1.0))))
     for _ in range(_MAX_HALVINGS):
         trial = problem.trial(state, alpha, lam)
         if trial.converged or trial.norm <= (1.0 - _ARMIJO * alpha) * point.norm:
@@ -514,7 +519,7 @@ def _newton(problem, state, lam, max_iterations):
 
 def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
                  actuators=None, actuation=None, effectors=None, load_function=None,
-                 load_tangent=None, initial_state=None, tolerance=1e-10,
+                 load_tangent=None, load_step_limit=None, initial_state=None, tolerance=1e-10,
                  absolute_tolerance=None, max_iterations=50, max_load_steps=64,
                  max_rotation_step=None, strict=False, check_warnings=True):
     """
@@ -545,6 +550,11 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
         ``-d load_function / dq`` over frames 1..n (world-axis increments as in ``retract``,
         at the full load). Without it the extra loads are not differentiated, which converges
         slowly and stalls under large follower loads.
+    load_step_limit : callable, optional
+        ``load_step_limit(state, stepped) -> float`` in (0, 1]: the largest fraction of the
+        Newton step from ``state`` (to ``stepped``, the full step) that the line search tries
+        first, for loads whose tangent changes along a step (a penalty contact that begins:
+        :meth:`cbha_inverse.core.contact.PenaltyContact.step_limit`).
     initial_state : ChainState, optional
         Warm start (e.g. the previous solution): Newton on the full load from it; if that
         fails, load stepping from the rest shape (the default start). A state whose frame 0 is
@@ -585,7 +595,7 @@ def solve_static(model, tip_wrench=None, frame_wrenches=None, gravity=None, *,
     amount = np.zeros(m) if actuation is None else checked_array(
         np.asarray(actuation, dtype=float).reshape(-1), (m,), 'actuation')
     problem = _Problem(model, actuators, amount, external, load_function, load_tangent,
-                       tolerance, absolute_tolerance, max_rotation_step)
+                       tolerance, absolute_tolerance, max_rotation_step, load_step_limit)
     lam, increment, steps, total, message = 0.0, 1.0, 0, 0, ''
     state, warm, final = None, None, None
     if initial_state is not None:

@@ -6,7 +6,9 @@ gravity), the reach along each actuator (the tip displacement with that actuator
 upper bound), the suggested workspace centre, the inverse solver's tick time (median and p99
 of a run toward the centre) and the reachable set (``--reach-samples`` forward solves,
 :func:`cbha_inverse.scene.reach.sample_reachable_set`: its box, its centre and the largest
-circle around that centre in each principal plane).
+circle around that centre in each principal plane). A scene with ``obstacles`` also gets them
+listed, with the robot's collision spheres and their minimum clearance to each obstacle at rest
+(negative: the rest shape penetrates it; ``docs/obstacles.md``).
 
 ``--actuation V ...`` (one value per actuator, N or Pa) or ``--actuation-fraction F`` prints the
 equilibrium at that actuation instead: the effectors, the solve's iterations and residual, the
@@ -511,6 +513,12 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES, *, actuat
     for name, low, high, unit in zip(scene.actuator_names, scene.lower_bounds,
                                      scene.upper_bounds, units):
         print(f'  {name}: [{low:g}, {high:g}] {unit}', file=out)
+    if scene.obstacles:
+        try:
+            print_clearance(scene, out)
+        except RuntimeError as exc:
+            print(f'error: {exc}', file=out)
+            return 1
     if given is not None or convergence:
         try:
             status = 0 if given is None else print_equilibrium(scene, given, out, with_loads)
@@ -546,6 +554,48 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES, *, actuat
             print(f'error: {exc}', file=out)
             return 1
     return 0
+
+
+def print_clearance(scene, out):
+    """
+    Print the scene's obstacles and the minimum clearance of its collision spheres at rest.
+
+    The rest shape is the free equilibrium at zero actuation (clipped to the bounds) under the
+    scene's gravity, the obstacles left out; the clearance of a sphere is the signed distance of
+    its centre to the obstacle minus its radius
+    (:meth:`cbha_inverse.core.contact.CollisionSpheres.clearances`).
+
+    Parameters
+    ----------
+    scene : cbha_inverse.scene.Scene
+        A scene with obstacles (and so with collision spheres).
+    out : file-like
+        Where the lines go.
+
+    Raises
+    ------
+    RuntimeError
+        If the rest shape does not converge.
+
+    """
+    spheres = scene.collision
+    rest = scene.forward(np.clip(np.zeros(len(scene.actuator_names)), scene.lower_bounds,
+                                 scene.upper_bounds), strict=True, check_warnings=False)
+    radii = np.unique(spheres.radii)
+    print(f'collision: {spheres.frames.size} spheres at frames {spheres.frames[0]}..'
+          f'{spheres.frames[-1]}, radius ' + ', '.join(f'{1e3 * r:.1f}' for r in radii)
+          + ' mm', file=out)
+    gaps = spheres.clearances(rest.positions, scene.obstacles)
+    print(f'obstacles: {len(scene.obstacles)}', file=out)
+    for column, obstacle in enumerate(scene.obstacles):
+        nearest = int(np.argmin(gaps[:, column]))
+        print(f'  {obstacle.describe()}; clearance at rest {1e3 * gaps[nearest, column]:.1f} mm '
+              f'(frame {spheres.frames[nearest]})', file=out)
+    sphere, column = np.unravel_index(np.argmin(gaps), gaps.shape)
+    least = gaps[sphere, column]
+    print(f'minimum clearance at rest: {1e3 * least:.1f} mm (frame {spheres.frames[sphere]} to '
+          f'{scene.obstacles[column].name})'
+          + (': the rest shape penetrates it' if least < 0.0 else ''), file=out)
 
 
 def main(argv=None):

@@ -46,6 +46,11 @@ Scene YAML schema (SI units)::
       actuator_gain: {<actuator name>: factor}       # cavity effective area, cable force/N
       tip_payload_mass: kg                           # a mass load at the last frame
       base_offset: {position: [x, y, z], rpy: [r, p, y]}  # chain base in base_frame, m / rad
+    obstacles:                           # solids near the arm (scene.obstacles), optional
+      - {name, type: plane | sphere | box | capsule | cylinder,
+         pose: {position: [x, y, z], rpy: [r, p, y]},  # obstacle frame in base_frame, m / rad
+         radius, length, size: [x, y, z]}              # the sizes its type takes, m
+    collision: {radius: m, per: frame | vertebra}  # robot spheres at frame origins (optional)
 
 ``workspace_center`` is the suggested centre of target trajectories (``Scene.workspace_center``):
 explicit coordinates of the last effector; ``{actuation_fraction: f}``, the effectors with every
@@ -72,6 +77,14 @@ Frame 0 of the chain (the base) sits at the origin of ``base_frame``, or at
 ``calibration.base_offset`` when given: every frame, routing and effector point moves with it,
 as does an explicit ``workspace_center``; gravity and targets stay in ``base_frame`` axes.
 
+``obstacles`` and ``collision`` (:mod:`cbha_inverse.scene.obstacles`, ``docs/obstacles.md``):
+a plane is the half-space below the xy plane of its pose (free side +z); a sphere of
+``radius``, a box of edges ``size``, a capsule (``radius`` around a segment of ``length``) and a
+cylinder (``radius``, ``length`` between flat caps) are centred on their pose, axis z. The robot
+touches them through spheres centred at its frames' origins (``per: frame``, the default, or
+only at the vertebrae), of ``radius``, or without it of the chain's own radius (a beam's
+``outer_radius``, a segment's cavities).
+
 Scenes shipped in ``config/scenes``: ``tendon_6f_8c`` and ``tendon_10f_16c`` (the paper's Fig. 6
 trunks, Timoshenko beams and cables), ``cbha`` (16 condensed bellows segments, 6 cavities) and
 ``rao2021_tdcr`` (the two-segment tendon robot of Rao et al. 2021, docs/benchmark-rao2021.md).
@@ -89,6 +102,7 @@ from cbha_inverse.core.loads import Load, Loads
 from cbha_inverse.core.sensors import StringPots
 from cbha_inverse.paths import config_path
 from cbha_inverse.scene.calibration import check_names, read_calibration
+from cbha_inverse.scene.obstacles import read_collision, read_obstacles, segment_radii
 from cbha_inverse.scene.scene import Scene
 from cbha_inverse.scene.schema import keys
 import numpy as np
@@ -159,10 +173,17 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
     if kind == 'beam_vertebrae':
         model = _beam_chain(chain, stiffness_scale)
         vertebra_frames, sections, parts = _vertebra_frames(chain), {}, {}
+        own_radii = _beam_radii(chain)
     else:
         from cbha_inverse.scene.segments import segment_chain
         model, sections, parts = segment_chain(chain, path.parent, stiffness_scale, calibrated)
         vertebra_frames = np.arange(model.n_frames)
+        own_radii = segment_radii(sections, parts, model.n_frames)
+    obstacles = read_obstacles(spec)
+    collision = read_collision(spec, model.n_frames, vertebra_frames, own_radii)
+    if obstacles and collision is None:
+        raise spec.error('collision', 'the chain has no size of its own (a segment without '
+                         'cavities): declare collision.radius for the obstacles')
     base_position, base_rotation = calibrated.base_pose()
     model = model.transformed(base_position, base_rotation)
     check_names(spec, calibrated, sections,
@@ -199,7 +220,8 @@ def load_scene(path, *, stiffness_scale=1.0, gravity=None, calibration=None):
                  workspace=workspace, solver_defaults=_solver_defaults(spec),
                  section_names=tuple(sections), section_links=sections,
                  actuator_sections=tuple(section_of.get(n) for n in actuators.names),
-                 calibration=calibrated, sensors=sensors, path=path, loads=loads)
+                 calibration=calibrated, sensors=sensors, path=path, loads=loads,
+                 obstacles=obstacles, collision=collision)
 
 
 def _gravity(spec):
@@ -301,6 +323,17 @@ def _vertebra_frames(chain):
         for _ in range(part.integer('n_vertebrae', minimum=1)):
             frames.append(frames[-1] + per)
     return np.array(frames)
+
+
+def _beam_radii(chain):
+    """Return the backbone's outer radius at every frame of a beam_vertebrae chain [m]."""
+    radii = []
+    for part in _beam_sections(chain):
+        per = part.integer('beams_per_interval', minimum=1)
+        beams = part.integer('n_vertebrae', minimum=1) * per
+        radius = part.section('backbone').number('outer_radius', positive=True)
+        radii += [radius] * (beams + (0 if radii else 1))     # the base takes the first part's
+    return np.array(radii)
 
 
 def _beam_chain(chain, stiffness_scale):

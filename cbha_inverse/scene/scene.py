@@ -57,13 +57,18 @@ class Scene:
         the chain and the gravity (``docs/loads.md``).
     path : pathlib.Path or None
         The scene file.
+    obstacles : tuple of cbha_inverse.core.obstacles.Obstacle
+        The solids of the scene's ``obstacles`` block, in ``base_frame`` (empty without one).
+    collision : cbha_inverse.core.contact.CollisionSpheres or None
+        The robot's collision spheres (``collision`` block or the chain's own radius; None
+        when neither gives one).
 
     """
 
     def __init__(self, name, model, actuators, effectors, gravity, *, description='',
                  base_frame='cbha_base', workspace=None, solver_defaults=None,
                  section_names=(), actuator_sections=None, calibration=None, sensors=None,
-                 path=None, section_links=None, loads=None):
+                 path=None, section_links=None, loads=None, obstacles=(), collision=None):
         """Store the parts (use :func:`cbha_inverse.scene.load_scene`)."""
         self.name = name
         self.description = description
@@ -88,6 +93,8 @@ class Scene:
         self.sensors = sensors
         self.loads = (Loads() if loads is None else loads).checked(model.n_links, self.gravity)
         self.path = None if path is None else Path(path)
+        self.obstacles = tuple(obstacles)
+        self.collision = collision
         self._workspace = workspace
         self._solver_defaults = dict(solver_defaults or {})
 

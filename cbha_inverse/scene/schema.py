@@ -56,6 +56,10 @@ BLOCKS = {block.path: block for block in (
         Key('calibration', '', 'none', 'Identified corrections: `calibration`.'),
         Key('sensors', '', 'none', 'String potentiometers: a list of `sensor`.'),
         Key('loads', '', 'none', 'External forces, torques and masses: a list of `load`.'),
+        Key('obstacles', '', 'none', 'Solids near the arm (docs/obstacles.md): a list of '
+            '`obstacle`.'),
+        Key('collision', '', "the chain's radius, per frame", "The robot's collision "
+            'spheres: `collision`.'),
     )),
     Block('chain', 'Common to both chain types.', (
         Key('type', '', _R, '`beam_vertebrae` or `segments`.'),
@@ -155,6 +159,25 @@ BLOCKS = {block.path: block for block in (
         Key('torque', 'N*m', '[0, 0, 0]', 'Torque.'),
         Key('in', '', 'base', '`base`: dead, `base_frame` axes; `local`: turns with the frame.'),
         Key('mass', 'kg', 'none', 'A mass under the scene gravity (instead of a wrench).'),
+    )),
+    Block('obstacle', 'A solid the simulated arm touches (frictionless penalty); the inverse '
+          'does not know it.', (
+              Key('name', '', _R, 'Obstacle name (unique).'),
+              Key('type', '', _R, '`plane` (the half-space below the xy plane of its pose), '
+                  '`sphere`, `box`, `capsule` or `cylinder` (axis z, centred on the pose).'),
+              Key('pose', '', 'identity', 'Its frame in `base_frame`: `pose`.'),
+              Key('radius', 'm', _R, 'Sphere, capsule, cylinder.'),
+              Key('length', 'm', _R, 'Capsule (segment), cylinder (between its caps).'),
+              Key('size', 'm', _R, 'Box edges `[x, y, z]`.'),
+          )),
+    Block('pose', 'Pose of an obstacle in `base_frame`.', (
+        Key('position', 'm', '[0, 0, 0]', 'Translation.'),
+        Key('rpy', 'rad', '[0, 0, 0]', 'Roll, pitch, yaw (fixed axes x, y, z).'),
+    )),
+    Block('collision', "The robot's collision spheres, centred at frame origins.", (
+        Key('radius', 'm', "the chain's", "Sphere radius (default: a beam's `outer_radius`, "
+            "a segment's cavities)."),
+        Key('per', '', 'frame', '`frame` (every frame) or `vertebra` (only the vertebrae).'),
     )),
     Block('calibration', 'Identified corrections (`cbha_identify`).', (
         Key('section_stiffness', '', 'none', "`{section: factor}` on a section's stiffness."),

@@ -8,11 +8,19 @@ same scene with a deliberate stiffness error and its own gravity (see
 one static solver (:func:`cbha_inverse.core.statics.solve_static`, the compiled kernels of the
 controller's tick): exact tangent including the actuators' load stiffness, line search, warm
 start from the previous equilibrium and, should that fail, load stepping from the rest shape.
-No ROS.
+
+Obstacles (the scene's, or replaced at run time by :meth:`StaticPlant.set_obstacles`) push the
+robot's collision spheres out with a frictionless penalty
+(:class:`cbha_inverse.core.contact.PenaltyContact`: force ``k p n`` with its exact load
+stiffness, through ``solve_static``'s ``load_function`` / ``load_tangent``); each update reports
+its contacts (point, normal, penetration, force). Without obstacles the solve is the one above,
+bit for bit. No ROS.
 """
 
 from cbha_inverse.core.chain import rest_state
-from cbha_inverse.core.loads import Loads, static_loads
+from cbha_inverse.core.contact import NO_CONTACTS, PenaltyContact
+from cbha_inverse.core.loads import combined_hooks, Loads, static_loads
+from cbha_inverse.core.obstacles import check_names
 from cbha_inverse.core.statics import solve_static
 
 
@@ -35,6 +43,16 @@ class StaticPlant:
         limit of 0.3 rad costs ~50 % more iterations on the CBHA's jumps from rest).
     max_load_steps : int
         Load steps of an update at most (warm start included).
+    contact_stiffness : float  [N/m]
+        Penalty stiffness of the contacts with obstacles: a contact force ``F`` penetrates by
+        ``F / contact_stiffness``.
+
+    Attributes
+    ----------
+    obstacles : tuple of cbha_inverse.core.obstacles.Obstacle
+        The obstacles the plant touches (initially the scene's).
+    contacts : cbha_inverse.core.contact.Contacts
+        The contacts of the last update's state (none before the first).
 
     Attributes
     ----------
@@ -44,7 +62,7 @@ class StaticPlant:
     """
 
     def __init__(self, scene, tolerance=1e-8, max_iterations=20, max_rotation_step=None,
-                 max_load_steps=16):
+                 max_load_steps=16, contact_stiffness=1.0e4):
         """Start at the rest shape with zero actuation."""
         self.model = scene.model
         self.actuators = scene.actuators
@@ -56,7 +74,11 @@ class StaticPlant:
         self.max_load_steps = int(max_load_steps)
         self.gravity = scene.gravity
         self._state = rest_state(self.model)
+        self.collision = scene.collision
+        self.contact_stiffness = float(contact_stiffness)
+        self.contacts = NO_CONTACTS
         self.set_loads(scene.loads)
+        self.set_obstacles(scene.obstacles)
 
     def set_loads(self, loads):
         """
@@ -78,9 +100,34 @@ class StaticPlant:
         self._applied = static_loads(loads, self.model.n_links, self.gravity)
         self.loads = loads
 
+    def set_obstacles(self, obstacles):
+        """
+        Replace the obstacles (the next update sees them; an empty sequence removes them).
+
+        Parameters
+        ----------
+        obstacles : sequence of cbha_inverse.core.obstacles.Obstacle
+            The new obstacles, in the scene's base frame.
+
+        Raises
+        ------
+        ValueError
+            If two share a name, or the scene has no collision spheres
+            (:attr:`cbha_inverse.scene.Scene.collision`) to touch them with.
+
+        """
+        obstacles = check_names(obstacles)
+        if obstacles and self.collision is None:
+            raise ValueError('the plant has no collision spheres (declare collision.radius in '
+                             'the scene) to touch obstacles with')
+        self._contact = (PenaltyContact(self.collision, obstacles, self.contact_stiffness,
+                                        self.model.n_links) if obstacles else None)
+        self.obstacles = obstacles
+
     def reset(self):
         """Return to the rest shape (the next update starts from it)."""
         self._state = rest_state(self.model)
+        self.contacts = NO_CONTACTS
 
     def residual(self, actuation):
         """Return the equilibrium residual ``r`` (6n,) at the current state."""
@@ -88,12 +135,19 @@ class StaticPlant:
 
     def _solve(self, actuation, max_iterations, max_load_steps):
         """Solve from the current state (see :meth:`update`)."""
+        contact = self._contact
+        applied = dict(self._applied)
+        function, tangent = combined_hooks(
+            (applied.pop('load_function'), applied.pop('load_tangent')),
+            (None, None) if contact is None else (contact.wrenches, contact.tangent))
         return solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
                             actuation=actuation, effectors=self.effectors,
+                            load_function=function, load_tangent=tangent,
+                            load_step_limit=None if contact is None else contact.step_limit,
                             initial_state=self._state, absolute_tolerance=self.tolerance,
                             max_iterations=max_iterations, max_load_steps=max_load_steps,
                             max_rotation_step=self.max_rotation_step, check_warnings=False,
-                            **self._applied)
+                            **applied)
 
     def update(self, actuation):
         """
@@ -113,4 +167,6 @@ class StaticPlant:
         """
         res = self._solve(actuation, self.max_iterations, self.max_load_steps)
         self._state = res.state
+        self.contacts = (NO_CONTACTS if self._contact is None
+                         else self._contact.contacts(res.state))
         return res

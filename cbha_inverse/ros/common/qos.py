@@ -67,3 +67,11 @@ TF_STATIC_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
 """``/tf_static`` (tf2_msgs/TFMessage): latched (reliable, transient local, depth 1), as tf2's
 static broadcaster: a listener that starts later still receives the last message."""
+
+OBSTACLES_QOS = reliable(1)
+"""``obstacles`` (visualization_msgs/MarkerArray, into ``cbha_sim``): reliable, volatile, newest
+only (a volatile reader matches a latched or a volatile writer)."""
+
+OBSTACLE_MARKERS_QOS = TF_STATIC_QOS
+"""``obstacle_markers`` (visualization_msgs/MarkerArray, from ``cbha_sim``): latched (reliable,
+transient local, depth 1): RViz started later still draws the obstacles."""

@@ -52,6 +52,17 @@ nothing. A command of the wrong length is rejected like any bad command, but
 another scene: the simulator stops with one line naming both lengths and the likely cause (exit
 2), instead of rejecting every message.
 
+Obstacles (``docs/obstacles.md``): the plant touches the scene's ``obstacles`` with its
+collision spheres through a frictionless penalty of stiffness ``contact_stiffness``. The
+``obstacles`` topic (visualization_msgs/MarkerArray of SPHERE, CUBE and CYLINDER markers in
+``frame_id``, :mod:`cbha_inverse.ros.common.obstacle_markers`) replaces them at run time, each
+message the whole set; a message with a marker of another shape, a non-finite or non-positive
+size, another frame or a duplicate name is rejected (logged, counted), the obstacles kept. The
+obstacles are drawn on ``obstacle_markers`` (latched); every converged tick publishes its
+contacts on ``contacts`` (Float64MultiArray, one row per contact: frame, point, normal,
+penetration, force, in ``frame_id``, after ``tip/true``) and, while there are any and once when
+they end, as force arrows on ``contacts/markers``.
+
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 
 External loads: for each entry of ``wrench_frames`` the plant takes a load on that frame from
@@ -73,8 +84,11 @@ from cbha_inverse.ros.common.conversions import (command_array, command_message,
 from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_status, OK,
                                                  TimingStats, WARN)
 from cbha_inverse.ros.common.loading import end_process
+from cbha_inverse.ros.common.obstacle_markers import (contact_array, contact_markers,
+                                                      obstacle_markers, obstacles_from_markers)
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.qos import (COMMAND_QOS, MARKER_QOS, MEASURED_QOS,
+                                         OBSTACLE_MARKERS_QOS, OBSTACLES_QOS)
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.wrenches import wrench_frames, WrenchInputs
@@ -89,6 +103,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'cbha_sim'
 LOSS_WATCH_PERIOD = 0.01
@@ -178,6 +193,12 @@ class CbhaSimParams:
     camera_rate_hz: float = param(30.0, 'stereo output: frame rate [Hz]', low=0.1, high=1000.0)
     marker_radius: float = param(0.006, 'stereo output: radius of the tip sphere [m]',
                                  low=0.0005, high=0.1)
+    contact_stiffness: float = param(1.0e4, "penalty stiffness of the plant's contacts with "
+                                     'obstacles [N/m]: a contact force F penetrates F / '
+                                     'contact_stiffness', low=1.0, high=1.0e9)
+    contact_arrow_scale: float = param(0.05, 'length of a contact force arrow on '
+                                       'contacts/markers per newton [m/N]', low=0.0, high=10.0,
+                                       live=True)
 
     def __post_init__(self):
         """Check the plant gravity (3 finite numbers)."""
@@ -229,7 +250,8 @@ class CbhaSimNode(Node):
                                 valve_time_constant=p.valve_time_constant,
                                 tip_noise=p.noise_std, pressure_noise=p.pressure_noise_std,
                                 seed=p.seed, tolerance=p.tolerance,
-                                max_iterations=p.max_iterations)
+                                max_iterations=p.max_iterations,
+                                contact_stiffness=p.contact_stiffness)
         self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
         self.rejected = Rejections(self.log)
         self.accepted = 0
@@ -263,6 +285,7 @@ class CbhaSimNode(Node):
             lambda reason, detail: self.rejected.count(f'wrench.{reason}',
                                                        f'rejected wrench: {detail}'))
         self.create_service(Trigger, '~/reset', self._on_reset)
+        self._start_obstacles()
         self.timer = self.create_timer(1.0 / p.rate_hz, self._tick)
         self.loss_timer = self.create_timer(LOSS_WATCH_PERIOD, self._watch_controller,
                                             clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -290,6 +313,48 @@ class CbhaSimNode(Node):
         self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
         self.command_watch.timeout = new.controller_loss_timeout
         self.params = new
+
+    def _start_obstacles(self):
+        """Create the obstacle and contact topics; draw the scene's obstacles."""
+        self.obstacle_updates = 0
+        self.contacts_drawn = False
+        self.obstacle_publisher = self.create_publisher(MarkerArray, 'obstacle_markers',
+                                                        OBSTACLE_MARKERS_QOS)
+        self.contact_publisher = self.create_publisher(Float64MultiArray, 'contacts',
+                                                       MEASURED_QOS)
+        self.contact_marker_publisher = self.create_publisher(MarkerArray, 'contacts/markers',
+                                                              MARKER_QOS)
+        self.create_subscription(MarkerArray, 'obstacles', self._on_obstacles, OBSTACLES_QOS)
+        self._publish_obstacles()
+
+    def _publish_obstacles(self):
+        self.obstacle_publisher.publish(obstacle_markers(
+            self.arm.plant.obstacles, self.get_clock().now().to_msg(), self.params.frame_id))
+
+    def _on_obstacles(self, message):
+        """Replace the plant's obstacles by those of an ``obstacles`` message, or reject it."""
+        obstacles, key, detail = obstacles_from_markers(message, self.params.frame_id)
+        if obstacles is not None:
+            try:
+                self.arm.plant.set_obstacles(obstacles)
+            except ValueError as exc:
+                key, detail = 'no_collision', str(exc)
+        if key is not None:
+            self.rejected.count(f'obstacles.{key}', f'rejected obstacles: {detail}')
+            return
+        self.obstacle_updates += 1
+        self.get_logger().info(f'obstacles from the obstacles topic: '
+                               f'{", ".join(o.name for o in obstacles) or "none"}')
+        self._publish_obstacles()
+
+    def _publish_contacts(self, stamp):
+        """Publish this tick's contacts (numbers always, arrows while there are any)."""
+        contacts = self.arm.plant.contacts
+        self.contact_publisher.publish(contact_array(contacts))
+        if contacts.frames.size or self.contacts_drawn:
+            self.contact_marker_publisher.publish(contact_markers(
+                contacts, stamp, self.params.frame_id, self.params.contact_arrow_scale))
+        self.contacts_drawn = bool(contacts.frames.size)
 
     def _start_cameras(self):
         from cbha_inverse.paths import config_path
@@ -439,6 +504,7 @@ class CbhaSimNode(Node):
         if self.params.tip_output in ('point', 'both'):
             self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
         self.truth_publisher.publish(point_stamped(tip, stamp, self.params.frame_id))
+        self._publish_contacts(stamp)
         if self.pots is not None:
             self._publish_pots(result, stamp)
         self.tick_times.add(time.perf_counter() - start)
@@ -470,9 +536,14 @@ class CbhaSimNode(Node):
                   'residual_norm': result.residual_norm if result else math.nan,
                   'not_converged_updates': self.not_converged, 'failed_updates': self.failures,
                   **self.tick_times.summary('tick'),
-                  'camera_frames': self.cameras.frames if self.cameras else 0}
+                  'camera_frames': self.cameras.frames if self.cameras else 0,
+                  'obstacles': len(self.arm.plant.obstacles),
+                  'obstacle_updates': self.obstacle_updates,
+                  'contacts': self.arm.plant.contacts.frames.size,
+                  'max_penetration_m': float(self.arm.plant.contacts.penetrations.max(
+                      initial=0.0))}
         level = WARN if total or (result is not None and not result.converged) else OK
-        message = (f'{total} rejected commands' if total else
+        message = (f'{total} rejected messages' if total else
                    'plant not converged: no tip or pot readings published' if level == WARN
                    else 'ok')
         if self.controller == 'lost':
