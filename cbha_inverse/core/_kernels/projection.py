@@ -180,7 +180,7 @@ def effector_jacobian_into(rotations, effector_frames, effector_offsets, orienta
 
 @numba.njit(cache=True)
 def orientation_errors_into(rotations, effector_frames, effector_kinds, effector_axes,
-                            target_rotations, target_directions, errors):
+                            target_rotations, target_directions, errors, relative):
     """
     Write each effector's orientation error ``ψ`` [rad], a rotation vector in world axes.
 
@@ -207,9 +207,10 @@ def orientation_errors_into(rotations, effector_frames, effector_kinds, effector
         Unit target direction ``d`` of every ``axis`` effector (world axes).
     errors : (k, 3) ndarray  [rad]
         Receives ``ψ``.
+    relative : (3, 3) ndarray
+        Workspace (``R_f R_tᵀ``).
 
     """
-    relative = np.empty((3, 3))
     for e in range(effector_frames.size):
         rot = rotations[effector_frames[e]]
         kind = effector_kinds[e]

@@ -87,6 +87,7 @@ TICK_FIELDS = (
     Field('energy_weight', float, 0, 'ε_E'),
     Field('proximal_weight', float, 0, 'ε_P'),
     Field('orientation_errors', F8, 2, '(k, 3) orientation error ψ of every effector [rad]'),
+    Field('relative_rotation', F8, 2, '(3, 3) workspace: R_f R_tᵀ of a pose effector'),
     Field('delta_free', F8, 1, '(3k + o,) δ_free: offset - target, offset + c · ψ [m, rad]'),
     Field('gradient', F8, 1, "(m,) the QP's gradient"),
     Field('tracking_gradient', F8, 1, '(m,) its tracking part'),
@@ -430,7 +431,8 @@ def free_gaps_of(targets, tick):
     if tick.orientation_effectors.size:
         orientation_errors_into(tick.rotations, tick.effector_frames, tick.effector_kinds,
                                 tick.effector_axes, tick.target_rotations,
-                                tick.target_directions, tick.orientation_errors)
+                                tick.target_directions, tick.orientation_errors,
+                                tick.relative_rotation)
     free_gaps_into(tick.offset, targets, tick.orientation_effectors, tick.orientation_directions,
                    tick.orientation_errors, tick.delta_free)
 

@@ -89,6 +89,7 @@ class TickData(RecordOwner):
             'w_aa': np.zeros((m, m)), 'offset': np.zeros(rows),
             'hessian': np.zeros((m, m)), 'tracking': np.zeros((m, m)),
             'weighted_w': np.zeros((rows, m)), 'orientation_errors': np.zeros((k, 3)),
+            'relative_rotation': np.zeros((3, 3)),
             'delta_free': np.zeros(rows),
             'gradient': np.zeros(m), 'tracking_gradient': np.zeros(m),
             'box_lower': np.zeros(m), 'box_upper': np.zeros(m), 'x_previous': np.zeros(m),
