@@ -106,6 +106,9 @@ TICK_FIELDS = (
     # the outcome and the step (step 4)
     Field('proposed', F8, 1, '(m,) σ x within the bounds [Pa, N]'),
     Field('gap', F8, 1, '(3k + o,) W_ea λ + δ_free, the predicted effector gap [m, rad]'),
+    Field('orientation_lengths', F8, 1, '(k,) orientation_length of every effector [m]'),
+    Field('orientation_gap', F8, 1, '(2,) largest predicted orientation gap [rad], and times '
+          'its orientation_length [m] (orientation_gap_of)'),
     Field('change', F8, 1, '(m,) λ - λ_prev of the step'),
     Field('increments', F8, 2, '(n, 6) the step [m, rad]'),
     Field('max_rotation', float, 0, 'largest frame rotation of a step [rad]'),
@@ -389,6 +392,8 @@ def solve_tick(targets, tick, apply_step):
         3 * k, tick.proposed, gap)
     if not finite:
         return REJECTED, iterations, largest_gap, largest_move, False
+    if tick.orientation_effectors.size:
+        orientation_gap_of(tick)
     bounds_binding_into(tick.tracking, tick.tracking_gradient, tick.box_lower, tick.box_upper,
                         tick.x, tick.tolerance, tick.free)
     binding = False
@@ -435,6 +440,32 @@ def free_gaps_of(targets, tick):
                                 tick.relative_rotation)
     free_gaps_into(tick.offset, targets, tick.orientation_effectors, tick.orientation_directions,
                    tick.orientation_errors, tick.delta_free)
+
+
+@numba.njit(cache=True)
+def orientation_gap_of(tick):
+    """
+    Write the largest predicted orientation gap of the tick into ``orientation_gap``.
+
+    Each ``axis`` or ``pose`` effector's gap is the norm of its rotational rows of ``gap``
+    (``W_ea λ + δ_free``) [rad]; ``orientation_gap`` receives the largest, and the largest
+    times its effector's ``orientation_length`` [m].
+    """
+    gap, rows = tick.gap, tick.orientation_effectors
+    first = 3 * tick.effector_frames.size
+    largest = largest_length = 0.0
+    start = 0
+    while start < rows.size:
+        end, squares = start, 0.0
+        while end < rows.size and rows[end] == rows[start]:
+            squares += gap[first + end] ** 2
+            end += 1
+        turn = math.sqrt(squares)
+        largest = max(largest, turn)
+        largest_length = max(largest_length, turn * tick.orientation_lengths[rows[start]])
+        start = end
+    tick.orientation_gap[0] = largest
+    tick.orientation_gap[1] = largest_length
 
 
 @numba.njit(cache=True)

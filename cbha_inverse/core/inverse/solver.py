@@ -86,6 +86,8 @@ CHECKED_MOVE = 0.02
 """A tick moving an actuator by more than this fraction of its range checks its new state at once
 (it linearises there, as :meth:`InverseSolver.prepare` would next)."""
 
+_NO_TURN = (math.nan, 0.0)
+"""The orientation gap [rad, m] of a tick without rotational rows."""
 
 class InverseSolver:
     """
@@ -199,6 +201,8 @@ class InverseSolver:
         self._active_set = ActiveSetQP(m, state=self._data.active_set)
         self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
         self._target_shape = (effectors.n_effectors, 3)
+        # whether some effector has rotational rows (a tick reports its orientation gap)
+        self._turns = bool(effectors.orientation_effectors.size)
         self._every = self.options.relinearize_every
         # a tick on a prepared linearisation is one compiled call with the active set and one
         # Newton step per tick
@@ -607,6 +611,8 @@ class InverseSolver:
             status = 'saturated'
         self.actuation[:] = actuation
         data.gap[:] = gap
+        if self._turns:
+            data.entry('orientation_gap_of')(self._record)
         if self._every == 1:
             self._control_tick(targets, self._record, True, False, False, False)
         return self._close(targets, status, solution.status, solution.iterations, saturated,
@@ -669,7 +675,7 @@ class InverseSolver:
             effector_positions = (data.effector_positions.copy() if positions_written
                                   else targets + data.gap[:targets.size].reshape(-1, 3))
         residual_norm = self._residual_norm
-        turn, turn_length = self._largest_turn()
+        turn, turn_length = (self._data.orientation_gap if self._turns else _NO_TURN)
         if status in ('solved', 'saturated'):
             if (self._every == 1 and largest_move > CHECKED_MOVE
                     and self.options.equilibrium_tolerance < math.inf
@@ -682,22 +688,7 @@ class InverseSolver:
             status = self._tick_status(status, saturated, max(largest_gap, turn_length), gap)
         return TickResult(self.actuation.copy(), effector_positions, status, qp_status,
                           iterations, saturated, largest_gap, residual_norm,
-                          _timings(*times, time.perf_counter()), warnings, gap, turn)
-
-    def _largest_turn(self):
-        """
-        Return the largest predicted orientation gap of the tick [rad] and as a length [m].
-
-        Each ``axis`` or ``pose`` effector's gap is the norm of its rotational rows of ``gap``
-        (``W_ea λ + δ_free``); as a length, times its ``orientation_length``. NaN and 0 without
-        rotational rows.
-        """
-        rows = self.effectors.orientation_effectors
-        if not rows.size:
-            return math.nan, 0.0
-        k = self.effectors.n_effectors
-        turns = np.sqrt(np.bincount(rows, self._data.gap[3 * k:] ** 2, minlength=k))
-        return float(turns.max()), float((turns * self.effectors.orientation_lengths).max())
+                          _timings(*times, time.perf_counter()), warnings, gap, float(turn))
 
     def _measure_equilibrium(self):
         """

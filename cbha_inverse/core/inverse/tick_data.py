@@ -97,6 +97,8 @@ class TickData(RecordOwner):
             'pivot': np.zeros(m, dtype=np.int8), 'free': np.zeros(m, dtype=np.bool_),
             'qp_index': np.zeros(m, dtype=np.int64), 'qp_factor': np.zeros((m, m)),
             'qp_solve': np.zeros(m), 'proposed': np.zeros(m), 'gap': np.zeros(rows),
+            'orientation_lengths': np.array(effectors.orientation_lengths, dtype=float),
+            'orientation_gap': np.full(2, math.nan),
             'change': np.zeros(m), 'increments': np.zeros((n, 6)),
             'effector_positions': np.zeros((k, 3))}
         self.max_rotation = (math.inf if options.max_rotation_step is None
@@ -117,8 +119,9 @@ class TickData(RecordOwner):
 
         ``'control_tick'`` (``targets, record, materialise, linearise, solve, apply_step``; the
         targets a C-contiguous float (k, 3) array), ``'pending_step_into'`` (``record,
-        positions, rotations``: C-contiguous float frames), ``'project_tick'`` (``record``) or
-        ``'free_gaps_of'`` (``targets, record``: ``delta_free`` of the targets);
+        positions, rotations``: C-contiguous float frames), ``'project_tick'`` (``record``),
+        ``'free_gaps_of'`` (``targets, record``: ``delta_free`` of the targets) or
+        ``'orientation_gap_of'`` (``record``);
         without numba's per-call type dispatch
         (:func:`cbha_inverse.core._kernels.records.compiled_entry`).
         """
@@ -128,7 +131,8 @@ class TickData(RecordOwner):
                                          True),
                         'pending_step_into': (self.record, self.positions, self.rotations),
                         'project_tick': (self.record,),
-                        'free_gaps_of': (self.effector_positions, self.record)}[name]
+                        'free_gaps_of': (self.effector_positions, self.record),
+                        'orientation_gap_of': (self.record,)}[name]
             entry = compiled_entry(getattr(kernels, name), *examples)
             self._entries[name] = entry
         return entry
