@@ -4,11 +4,11 @@
 Prints the frames, the actuators and their bounds, the effectors at rest (under the scene's
 gravity), the reach along each actuator (the tip displacement with that actuator alone at its
 upper bound; for an ``axis`` effector the tilt of its axis, for a ``pose`` effector the turn of
-its frame, ``docs/effectors.md``), the suggested workspace centre, the inverse solver's tick time (median and p99
-of a run toward the centre) and the reachable set (``--reach-samples`` forward solves,
-:func:`cbha_inverse.scene.reach.sample_reachable_set`: its box, its centre and the largest
-circle around that centre in each principal plane; the tilt or turn of an ``axis`` or ``pose``
-effector over the samples).
+its frame, ``docs/effectors.md``), the suggested workspace centre, the inverse solver's tick
+time (median and p99 of a run toward the centre) and the reachable set (``--reach-samples``
+forward solves, :func:`cbha_inverse.scene.reach.sample_reachable_set`: its box, its centre and
+the largest circle around that centre in each principal plane; the tilt or turn of an ``axis``
+or ``pose`` effector over the samples).
 
 ``--actuation V ...`` (one value per actuator, N or Pa) or ``--actuation-fraction F`` prints the
 equilibrium at that actuation instead: the effectors, the solve's iterations and residual, the

@@ -107,9 +107,10 @@ def test_rotational_rows_of_w_ea_are_the_forward_models_turn(kind):
 
 def test_one_tick_turns_the_axis_toward_its_target_as_predicted():
     """
-    The linear model's prediction: one tick from equilibrium toward a tilted axis turns it by
-    the predicted amount, toward the target (a wrong sign of ``δ_free`` or of ``J_e``'s
-    rotational rows turns it away).
+    One tick from equilibrium toward a tilted axis turns it toward the target, as predicted.
+
+    The linear model's prediction: a wrong sign of ``δ_free`` or of ``J_e``'s rotational rows
+    turns it away.
     """
     scene = _scene('cbha_approach')
     solver = scene.make_inverse_solver()
@@ -171,9 +172,11 @@ def _sampled_run(kind, samples, seed, max_ticks=40):
 @pytest.mark.parametrize('kind', ['axis', 'pose'])
 def test_random_reachable_poses_are_reached_open_loop(kind):
     """
-    Done-when: a tip position and approach axis (``axis``; or full orientation, ``pose``) the
-    forward model reaches at random pressures within the bounds is reached again by the open
-    loop from rest on the nominal model within 0.5 mm and 1 degree.
+    Poses of the forward model at random pressures are reached again by the open loop.
+
+    A tip position and approach axis (``axis``; or full orientation, ``pose``) the forward model
+    reaches at random pressures within the bounds is reached by the open loop from rest on the
+    nominal model within 0.5 mm and 1 degree.
     """
     position_errors, orientation_errors, ticks = _sampled_run(kind, 12, 11)
     assert position_errors.max() <= REACHED_MM

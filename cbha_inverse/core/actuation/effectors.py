@@ -286,6 +286,7 @@ def unit_vectors(vector, what):
     Parameters
     ----------
     vector : (3,) array_like
+        The vector.
     what : str
         What it is, for the message.
 
@@ -317,6 +318,7 @@ def rotation_of_quaternion(quaternion, what):
     Parameters
     ----------
     quaternion : (4,) array_like
+        ``(x, y, z, w)``.
     what : str
         What it is, for the message.
 
@@ -337,7 +339,8 @@ def rotation_of_quaternion(quaternion, what):
         raise TargetRefused(f'{what} must be finite, got {value.tolist()}')
     norm = float(np.linalg.norm(value))
     if not abs(norm - 1.0) <= QUATERNION_TOLERANCE:
-        raise TargetRefused(f'{what} must be a unit quaternion (x, y, z, w), its norm is {norm:.6g}')
+        raise TargetRefused(f'{what} must be a unit quaternion (x, y, z, w), its norm is '
+                            f'{norm:.6g}')
     return matrix_from_quat(value)
 
 

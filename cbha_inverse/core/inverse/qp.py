@@ -23,13 +23,13 @@ the rotational rows of ``axis`` and ``pose`` effectors weigh one radian as
 ``docs/effectors.md``), ``σ`` the per-actuator range (so the problem is solved in dimensionless
 ``x = λ/σ``), ``s_E`` and ``s_P`` scale factors that give both terms the magnitude of the
 tracking term (``s = trace(σ W_eaᵀ Ω² W_ea σ) / trace(σ W_aa σ)`` and
-``trace(σ W_eaᵀ Ω² W_ea σ) / m``), so ``ε_E`` and ``ε_P`` are unit-free. ``λᵀ W_aa λ`` is the elastic energy the actuation stores in the structure:
-it picks the least-effort solution among redundant ones (no co-contraction) and makes the QP
-strictly convex; the proximal term smooths the actuation from tick to tick and vanishes at a fixed
-point, so it adds no steady-state error. Defaults (see
-:class:`cbha_inverse.core.inverse.results.InverseOptions`): ``ε_E = 1e-6`` (its bias on a
-reachable target is a few micrometres at most), ``ε_P = 1e-4`` (enough to stop redundant
-tendons from alternating between equivalent solutions on a saturated target).
+``trace(σ W_eaᵀ Ω² W_ea σ) / m``), so ``ε_E`` and ``ε_P`` are unit-free. ``λᵀ W_aa λ`` is the
+elastic energy the actuation stores in the structure: it picks the least-effort solution among
+redundant ones (no co-contraction) and makes the QP strictly convex; the proximal term smooths
+the actuation from tick to tick and vanishes at a fixed point, so it adds no steady-state error.
+Defaults (see :class:`cbha_inverse.core.inverse.results.InverseOptions`): ``ε_E = 1e-6`` (its
+bias on a reachable target is a few micrometres at most), ``ε_P = 1e-4`` (enough to stop
+redundant tendons from alternating between equivalent solutions on a saturated target).
 
 The solvers (:data:`QP_SOLVERS`, the ``qp_solver`` option of
 :class:`~cbha_inverse.core.inverse.results.InverseOptions`): :class:`ActiveSetQP` (exact,

@@ -89,6 +89,7 @@ CHECKED_MOVE = 0.02
 _NO_TURN = (math.nan, 0.0)
 """The orientation gap [rad, m] of a tick without rotational rows."""
 
+
 class InverseSolver:
     """
     The per-tick controller of the module docstring (pure numerics, no ROS).
