@@ -3,12 +3,14 @@
 
 Prints the frames, the actuators and their bounds, the effectors at rest (under the scene's
 gravity), the reach along each actuator (the tip displacement with that actuator alone at its
-upper bound), the suggested workspace centre, the inverse solver's tick time (median and p99
-of a run toward the centre) and the reachable set (``--reach-samples`` forward solves,
-:func:`cbha_inverse.scene.reach.sample_reachable_set`: its box, its centre and the largest
-circle around that centre in each principal plane). A scene with ``obstacles`` also gets them
-listed, with the robot's collision spheres and their minimum clearance to each obstacle at rest
-(negative: the rest shape penetrates it; ``docs/obstacles.md``).
+upper bound; for an ``axis`` effector the tilt of its axis, for a ``pose`` effector the turn of
+its frame, ``docs/effectors.md``), the suggested workspace centre, the inverse solver's tick
+time (median and p99 of a run toward the centre) and the reachable set (``--reach-samples``
+forward solves, :func:`cbha_inverse.scene.reach.sample_reachable_set`: its box, its centre and
+the largest circle around that centre in each principal plane; the tilt or turn of an ``axis``
+or ``pose`` effector over the samples). A scene with ``obstacles`` also gets them listed, with
+the robot's collision spheres and their minimum clearance to each obstacle at rest (negative:
+the rest shape penetrates it; ``docs/obstacles.md``).
 
 ``--actuation V ...`` (one value per actuator, N or Pa) or ``--actuation-fraction F`` prints the
 equilibrium at that actuation instead: the effectors, the solve's iterations and residual, the
@@ -93,7 +95,7 @@ def actuator_units(scene):
 
 def reach(scene):
     """
-    Return the effector displacement of each actuator alone at its upper bound.
+    Return the effector displacement and turn of each actuator alone at its upper bound.
 
     Parameters
     ----------
@@ -102,8 +104,10 @@ def reach(scene):
 
     Returns
     -------
-    (m, k, 3) ndarray  [m]
+    displacements : (m, k, 3) ndarray  [m]
         Displacement from the rest effector positions, per actuator.
+    turns : (m, k) ndarray  [rad]
+        Turn from rest of each effector's orientation (:func:`effector_turns`), per actuator.
 
     Raises
     ------
@@ -111,13 +115,47 @@ def reach(scene):
         If a forward solve does not converge.
 
     """
-    rest = scene.rest_effector_positions
-    moved = []
+    rest = scene.forward(np.clip(np.zeros(len(scene.actuator_names)), scene.lower_bounds,
+                                 scene.upper_bounds), strict=True)
+    rest_rotations = scene.effectors.rotations(rest.rotations)
+    moved, turns = [], []
     for index in range(len(scene.actuator_names)):
         actuation = np.array(scene.lower_bounds, dtype=float)
         actuation[index] = scene.upper_bounds[index]
-        moved.append(scene.forward(actuation, strict=True).effector_positions - rest)
-    return np.array(moved)
+        result = scene.forward(actuation, strict=True)
+        moved.append(result.effector_positions - rest.effector_positions)
+        turns.append(effector_turns(scene.effectors.kinds, scene.effectors.axes,
+                                    rest_rotations,
+                                    scene.effectors.rotations(result.rotations)))
+    return np.array(moved), np.array(turns)
+
+
+def effector_turns(kinds, axes, rest, rotations):
+    """
+    Return how far each effector's orientation turned from rest [rad].
+
+    An ``axis`` effector: the angle between its axis at rest and now (a turn about the axis is
+    free); a ``pose`` or ``point`` effector: the angle of its frame's rotation from rest.
+
+    Parameters
+    ----------
+    kinds : sequence of str
+        The effectors' kinds (``k``).
+    axes : (k, 3) ndarray
+        Their axes in their frames' axes.
+    rest, rotations : (..., k, 3, 3) ndarray
+        The effectors' frame rotations at rest and now.
+
+    Returns
+    -------
+    (..., k) ndarray  [rad]
+
+    """
+    tilt = np.arccos(np.clip(np.einsum('...kij,kj,...kil,kl->...k', rest, axes, rotations, axes),
+                             -1.0, 1.0))
+    relative = np.einsum('...kji,...kjl->...kil', rest, rotations)
+    turn = np.arccos(np.clip(0.5 * (np.trace(relative, axis1=-2, axis2=-1) - 1.0), -1.0, 1.0))
+    return np.where(np.array(kinds) == 'axis', tilt, turn)
 
 
 def tick_times(scene, targets, ticks):
@@ -168,6 +206,15 @@ def print_reach(scene, samples, out):
           'an estimate: plan 20 % smaller)', file=out)
     around = reach.radii_around(scene.workspace_center[-1])
     print(f'  around the workspace centre: {_circles(around)}', file=out)
+    index = scene.effector_names.index(reach.effector)
+    kind = scene.effectors.kinds[index]
+    if kind != 'point':
+        turns = np.degrees(effector_turns(
+            [kind], scene.effectors.axes[index:index + 1], reach.rotations[:1, None],
+            reach.rotations[:, None])[:, 0])
+        what = 'axis tilt' if kind == 'axis' else 'orientation turn'
+        print(f'  {what} from the lower bounds over the samples: median {np.median(turns):.1f}'
+              f' deg, max {turns.max():.1f} deg', file=out)
     return reach
 
 
@@ -531,17 +578,21 @@ def check(scene_path, ticks, out, reach_samples=DEFAULT_REACH_SAMPLES, *, actuat
         return status
     try:
         rest = scene.rest_effector_positions
-        displacements = reach(scene)
+        displacements, turns = reach(scene)
     except RuntimeError as exc:
         print(f'error: {exc}', file=out)
         return 1
     for name, point in zip(scene.effector_names, rest):
         print(f'effector {name} at rest: {_millimetres(point)}', file=out)
     print('reach (effector displacement, each actuator alone at its upper bound):', file=out)
-    for name, moved in zip(scene.actuator_names, displacements):
+    kinds = scene.effectors.kinds
+    for name, moved, turned in zip(scene.actuator_names, displacements, turns):
         print(f'  {name}: ' + '; '.join(
             f'{effector} {_millimetres(d)} |{1e3 * np.linalg.norm(d):.1f} mm|'
-            for effector, d in zip(scene.effector_names, moved)), file=out)
+            + ('' if kind == 'point' else
+               f' {"tilt" if kind == "axis" else "turn"} {np.degrees(turn):.1f} deg')
+            for effector, d, turn, kind in zip(scene.effector_names, moved, turned, kinds)),
+            file=out)
     center = scene.workspace_center
     print(f'workspace centre: {_millimetres(center[-1])}', file=out)
     times = tick_times(scene, center, ticks)

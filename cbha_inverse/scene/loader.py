@@ -29,7 +29,13 @@ Scene YAML schema (SI units)::
     cavities: [{name, section, cavity: <segment cavity name>, max_pressure}]
     cavity_model: linear | mesh          # core.actuation.condensed_cavities / .cavities
     actuator_order: [names]              # column order (default: cables, then cavities)
-    effectors: [{name, frame: <int or 'tip'> or vertebra: <int>, offset: [x, y, z]}]
+    effectors:                           # docs/effectors.md
+      - {name, kind: point | axis | pose (point), frame: <int or 'tip'> or vertebra: <int>,
+         offset: [x, y, z] (0), axis: [x, y, z] (axis kind only; frame axes, default +x),
+         weights: {position: w or [wx, wy, wz] (1), orientation: w or one per rotational row
+                   (1), orientation_length: m (0.1)}}
+        # point: 3 position rows; axis: + 2 rows turning the frame's axis onto a target
+        # direction; pose: + 3 rows turning the frame onto a target orientation
     workspace_center: [x, y, z], {actuation_fraction: f} or reachable_center  # see below
     sensors:                             # string potentiometers (core.sensors), optional
       - {name, kind: string_pot, angle_deg, radius, end_vertebra, start_vertebra (0)}  # or
@@ -95,7 +101,8 @@ from pathlib import Path
 from cbha_inverse.config_files import read_section
 from cbha_inverse.core.actuation.actuators import ActuatorSet
 from cbha_inverse.core.actuation.cables import Cable, CableGroup
-from cbha_inverse.core.actuation.effectors import PointEffectors
+from cbha_inverse.core.actuation.effectors import (DEFAULT_ORIENTATION_LENGTH, KINDS,
+                                                   ORIENTATION_ROWS, PointEffectors)
 from cbha_inverse.core.chain import ChainModel
 from cbha_inverse.core.links import timoshenko_compliance
 from cbha_inverse.core.loads import Load, Loads
@@ -563,12 +570,62 @@ def _loads(spec, model, vertebra_frames, gravity, payload_mass):
 
 
 def _effectors(items, model, vertebra_frames):
-    """Build the effector points."""
-    names, frames, offsets = [], [], []
+    """Build the effectors: points, with the orientation rows of ``axis`` and ``pose`` kinds."""
+    names, frames, offsets, kinds, axes = [], [], [], [], []
+    weights = {'position': [], 'orientation': [], 'orientation_length': []}
     for item in items:
         item.only(*keys('effector'))
         frame, offset = _point_frame(item, model, vertebra_frames)
-        names.append(item.text('name'))
+        name = item.text('name')
+        if name in names:
+            raise item.error('name', f'effector {name!r} named twice')
+        kind = item.text('kind', 'point', choices=KINDS)
+        if kind != 'axis' and item.has('axis'):
+            raise item.error('axis', f'only an axis effector has an axis (this one is a {kind})')
+        axis = item.vector('axis', 3, (1.0, 0.0, 0.0))
+        if not any(axis):
+            raise item.error('axis', 'must not be zero')
+        names.append(name)
         frames.append(frame)
         offsets.append(offset)
-    return PointEffectors(names, frames, offsets, model.n_frames)
+        kinds.append(kind)
+        axes.append(axis)
+        for key, value in _effector_weights(item, kind).items():
+            weights[key].append(value)
+    return PointEffectors(names, frames, offsets, model.n_frames, kinds=kinds, axes=axes,
+                          position_weights=weights['position'],
+                          orientation_weights=weights['orientation'],
+                          orientation_lengths=weights['orientation_length'])
+
+
+def _effector_weights(item, kind):
+    """
+    Return an effector's ``weights``: ``position``, ``orientation``, ``orientation_length``.
+
+    ``position`` (default 1) and ``orientation`` (default 1) are unit-free, each a number or one
+    per row (3 position rows; 2 rotational rows for ``axis``, 3 for ``pose``), >= 0;
+    ``orientation_length`` [m] > 0 (default
+    :data:`~cbha_inverse.core.actuation.effectors.DEFAULT_ORIENTATION_LENGTH`): one radian of
+    orientation error weighs as that many metres of position error (``docs/effectors.md``).
+    """
+    weights = item.section('weights', None)
+    values = {'position': 1.0, 'orientation': 1.0,
+              'orientation_length': DEFAULT_ORIENTATION_LENGTH}
+    if weights is None:
+        return values
+    weights.only(*keys('weights'))
+    if kind == 'point':
+        for key in ('orientation', 'orientation_length'):
+            if key in weights.data:
+                raise weights.error(key, 'a point effector has no orientation rows')
+    values['orientation_length'] = weights.number('orientation_length',
+                                                  DEFAULT_ORIENTATION_LENGTH, positive=True)
+    for key, rows in (('position', 3), ('orientation', ORIENTATION_ROWS[kind])):
+        value = weights.data.get(key)
+        if isinstance(value, list):
+            values[key] = weights.vector(key, rows)
+            if min(values[key]) < 0.0:
+                raise weights.error(key, f'must be >= 0, got {list(values[key])}')
+        else:
+            values[key] = weights.number(key, 1.0, minimum=0.0)
+    return values

@@ -62,6 +62,8 @@ class ReachableSet:
         for a flat reach, the edges of each plane's projected hull extruded along its normal.
     flat_planes : tuple of str
         The planes whose radius is 0 because the reach is flat there (a flat reach only).
+    rotations : (n, 3, 3) ndarray
+        The effector's frame rotation at each of ``points`` (its orientation's reach).
 
     """
 
@@ -76,6 +78,7 @@ class ReachableSet:
     widest_plane: str | None
     halfspaces: np.ndarray
     flat_planes: tuple
+    rotations: np.ndarray = None
 
     def radii_around(self, point):
         """
@@ -167,6 +170,8 @@ def sample_reachable_set(scene, samples=DEFAULT_SAMPLES, *, effector=-1, seed=0)
     unit = _unit_samples(low.size, samples, seed)
     actuations = low + unit * (high - low)
     points = np.full((len(unit), 3), np.nan)
+    rotations = np.full((len(unit), 3, 3), np.nan)
+    frame = scene.effectors.frames[index]
     state = None
     for i in _nearest_neighbour_order(unit):
         result = scene.forward(actuations[i], initial_state=state, check_warnings=False)
@@ -175,6 +180,7 @@ def sample_reachable_set(scene, samples=DEFAULT_SAMPLES, *, effector=-1, seed=0)
         if result.converged:
             state = result.state
             points[i] = result.effector_positions[index]
+            rotations[i] = result.rotations[frame]
     converged = np.all(np.isfinite(points), axis=1)
     count = int(np.count_nonzero(converged))
     if count < 3:
@@ -187,7 +193,8 @@ def sample_reachable_set(scene, samples=DEFAULT_SAMPLES, *, effector=-1, seed=0)
     return ReachableSet(effector=names[index], actuations=actuations[converged], points=points,
                         failed=len(unit) - count, box_min=box_min, box_max=box_max,
                         center=center, radii=_radii(halfspaces, flat, center),
-                        widest_plane=widest, halfspaces=halfspaces, flat_planes=flat)
+                        widest_plane=widest, halfspaces=halfspaces, flat_planes=flat,
+                        rotations=rotations[converged])
 
 
 def _unit_samples(m, samples, seed):

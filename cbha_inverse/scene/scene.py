@@ -33,6 +33,7 @@ class Scene:
     model : cbha_inverse.core.chain.ChainModel
     actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
     effectors : cbha_inverse.core.actuation.effectors.PointEffectors
+        Points, with the orientation rows of ``axis`` and ``pose`` kinds (``docs/effectors.md``).
     gravity : (3,) ndarray or None  [m/s^2]
         In ``base_frame`` axes (the world of the solvers).
     actuator_names, effector_names : tuple of str
@@ -341,7 +342,8 @@ class Scene:
         Returns
         -------
         cbha_inverse.core.inverse.solver.InverseSolver
-            Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult``; its
+            Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult`` (``axis`` and
+            ``pose`` effectors: ``step(targets, directions=..., quaternions=...)``); its
             ``set_section_stiffness`` takes one factor per entry of :attr:`section_links`.
 
         """

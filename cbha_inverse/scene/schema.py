@@ -11,6 +11,8 @@ the fields of :class:`cbha_inverse.core.inverse.results.InverseOptions`, documen
 from dataclasses import dataclass, fields
 import re
 
+from cbha_inverse.core.actuation.effectors import DEFAULT_ORIENTATION_LENGTH
+
 
 @dataclass(frozen=True)
 class Key:
@@ -119,11 +121,23 @@ BLOCKS = {block.path: block for block in (
         Key('cavity', '', _R, "The segment's cavity name."),
         Key('max_pressure', 'Pa', _R, 'Upper bound of the gauge pressure.'),
     )),
-    Block('effector', 'A point the inverse drives.', (
-        Key('name', '', _R, 'Effector name (targets).'),
-        Key('frame', '', 'the tip', 'Frame index (1..n) or `tip`.'),
-        Key('vertebra', '', 'none', 'Vertebra index instead of `frame`.'),
-        Key('offset', 'm', '[0, 0, 0]', 'The point in the frame.'),
+    Block('effector', 'A point the inverse drives, and for `axis` and `pose` the orientation '
+          'of its frame (docs/effectors.md).', (
+              Key('name', '', _R, 'Effector name (targets).'),
+              Key('kind', '', 'point', '`point` (3 position rows), `axis` (+2 rows: a frame '
+                  'axis toward a direction) or `pose` (+3 rows: the whole orientation).'),
+              Key('frame', '', 'the tip', 'Frame index (1..n) or `tip`.'),
+              Key('vertebra', '', 'none', 'Vertebra index instead of `frame`.'),
+              Key('offset', 'm', '[0, 0, 0]', 'The point in the frame.'),
+              Key('axis', '', '[1, 0, 0]', "The `axis` kind's axis, in the frame's axes "
+                  '(normalised).'),
+              Key('weights', '', 'all 1', 'Row weights: `weights`.'),
+          )),
+    Block('weights', "Weights of an effector's rows in the inverse's objective.", (
+        Key('position', '', '1', 'One number, or one per position row (3), >= 0.'),
+        Key('orientation', '', '1', 'One number, or one per rotational row (2 or 3), >= 0.'),
+        Key('orientation_length', 'm', f'{DEFAULT_ORIENTATION_LENGTH:g}',
+            '1 rad of orientation error weighs as this many metres of position error.'),
     )),
     Block('workspace_center', 'Suggested centre of target trajectories (mapping forms).', (
         Key('actuation_fraction', '', _R, 'The effectors with every actuator at this fraction '

@@ -165,7 +165,8 @@ def test_the_half_solves_give_the_dense_projection_and_step(name):
         _close(moved_rotations - rotations, expected[1] - rotations)
 
 
-@pytest.mark.parametrize('name, every', [('tendon_6f_8c', 1), ('cbha', 1), ('cbha', 5)])
+@pytest.mark.parametrize('name, every', [('tendon_6f_8c', 1), ('cbha', 1), ('cbha', 5),
+                                         ('cbha_approach', 1)])
 def test_a_thousand_ticks_allocate_nothing_but_their_results(name, every):
     """
     Compiled code: no allocation but numba's wrapper of each array argument; Python: the result.

@@ -323,7 +323,8 @@ def load_columns(estimator):
                           estimator.mass_levers, estimator.mass_effector_columns)
     project_effectors_into(mass_columns, mass_rhs, estimator.mass_effector_columns,
                            bool(False), tick.column_starts, tick.positions, tick.rotations,
-                           tick.effector_frames, tick.effector_offsets, estimator.mass_previous,
+                           tick.effector_frames, tick.effector_offsets,
+                           tick.orientation_effectors[:0], estimator.mass_previous,
                            estimator.mass_w, estimator.mass_w_aa, estimator.mass_offset,
                            estimator.mass_moved)
 
@@ -411,7 +412,7 @@ def tip_covariance(estimator):
     p, scale, covariance = estimator.pressures, estimator.unknown_scale, estimator.covariance
     effector_w, mass_w = estimator.effector_w, estimator.mass_w
     m, n_mass, u = p.size, estimator.masses.size, covariance.shape[0]
-    last_row = tick.w_ea.shape[0] - 3
+    last_row = 3 * tick.effector_frames.size - 3
     for i in range(3):
         for j in range(m):
             effector_w[i, j] = tick.w_ea[last_row + i, j] * p[j] * scale[j]

@@ -27,26 +27,32 @@ _BOUND_SLACK = 1e-13
 
 
 @numba.njit(cache=True)
-def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
+def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight, row_weights):
     """
     Return the normalised Hessian parts of the actuation QP.
 
-    With ``W = W_ea diag(σ)``, ``T = Wᵀ W``, ``ν = trace(T) / m`` (1 if not positive),
+    With the row weights ``Ω = diag(ω)`` (:mod:`cbha_inverse.core.actuation.effectors`),
+    ``W = Ω W_ea diag(σ)``, ``T = Wᵀ W``, ``ν = trace(T) / m`` (1 if not positive),
     ``E = diag(σ) W_aa diag(σ)`` and ``ν_E = trace(E) / m``::
 
-        tracking = T / ν,   weighted_w = W / ν,
+        tracking = T / ν,   weighted_w = Ω W / ν,
         hessian  = T / ν + ε_P I + ε_E (E + Eᵀ) / (2 ν_E)      (energy term only if ν_E, ε_E > 0)
+
+    so that the tracking gradient ``weighted_wᵀ δ_free`` and ``tracking`` are those of
+    ``½ ‖Ω (W_ea λ + δ_free)‖² / ν``.
 
     Parameters
     ----------
-    w_ea : (3k, m) ndarray of float64
-        Effector-actuator compliance ``W_ea``.
+    w_ea : (r, m) ndarray of float64
+        Effector-actuator compliance ``W_ea`` (``r`` rows: position and rotational).
     w_aa : (m, m) ndarray of float64
         Actuator-actuator compliance ``W_aa``.
     scale : (m,) ndarray of float64
         ``σ``.
     energy_weight, proximal_weight : float
         ``ε_E``, ``ε_P`` (unit-free).
+    row_weights : (r,) ndarray of float64
+        ``ω`` of each row of ``W_ea`` (all 1: the paper's tracking term).
 
     Returns
     -------
@@ -54,27 +60,29 @@ def qp_hessians(w_ea, w_aa, scale, energy_weight, proximal_weight):
         Full normalised Hessian (exactly symmetric).
     tracking : (m, m) ndarray
         Normalised tracking Hessian ``T / ν`` (exactly symmetric).
-    weighted_w : (3k, m) ndarray
-        ``W / ν``.
+    weighted_w : (r, m) ndarray
+        ``Ω W / ν``.
 
     """
     rows, m = w_ea.shape
     hessian, tracking, w = np.empty((m, m)), np.empty((m, m)), np.empty((rows, m))
-    qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, hessian, tracking, w)
+    qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, row_weights, hessian,
+                     tracking, w)
     return hessian, tracking, w
 
 
 @numba.njit(cache=True)
-def qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, hessian, tracking, w):
+def qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, row_weights, hessian,
+                     tracking, w):
     """
-    :func:`qp_hessians` into preallocated ``hessian``, ``tracking`` (m, m) and ``w`` (3k, m).
+    :func:`qp_hessians` into preallocated ``hessian``, ``tracking`` (m, m) and ``w`` (r, m).
 
     ``w_ea`` must not be ``w`` (it is read while ``w`` is written).
     """
     rows, m = w_ea.shape
     for r in range(rows):
         for j in range(m):
-            w[r, j] = w_ea[r, j] * scale[j]
+            w[r, j] = row_weights[r] * w_ea[r, j] * scale[j]
     # upper triangle of Wᵀ W, accumulated row by row of W (contiguous inner loop)
     tracking[:, :] = 0.0
     for r in range(rows):
@@ -90,7 +98,7 @@ def qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, hessian,
         norm = 1.0
     for r in range(rows):
         for j in range(m):
-            w[r, j] /= norm
+            w[r, j] = w[r, j] * row_weights[r] / norm
     energy_norm = 0.0
     for i in range(m):
         energy_norm += w_aa[i, i] * scale[i] * scale[i]
@@ -120,13 +128,13 @@ def qp_vectors(weighted_w, proximal_weight, scale, delta_free, previous, lower_b
 
     Parameters
     ----------
-    weighted_w : (3k, m) ndarray of float64
-        ``W_ea σ / ν`` from :func:`qp_hessians`.
+    weighted_w : (r, m) ndarray of float64
+        ``Ω² W_ea σ / ν`` from :func:`qp_hessians`.
     proximal_weight : float
         ``ε_P``.
     scale : (m,) ndarray of float64
         ``σ``.
-    delta_free : (3k,) ndarray of float64  [m]
+    delta_free : (r,) ndarray of float64  [m, rad]
         ``δ_e^free``.
     previous : (m,) ndarray of float64
         ``λ_prev``.

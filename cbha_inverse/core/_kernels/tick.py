@@ -9,7 +9,8 @@ the order of the paper's section IV:
    block Cholesky ``K = L Lᵀ`` with the forward sweep of ``[r, J_aᵀ]``, the sweep of ``J_eᵀ``,
    then :func:`project_tick`: ``W_ea``, ``W_aa``, ``δ_free`` (eq. 11-12), the equilibrium gap
    and the QP matrices; a call that also solves stops here when the gap exceeds ``gap_limit``;
-2. :func:`solve_tick`, steps 3-4: the QP vectors of the targets, the active-set box QP
+2. :func:`solve_tick`, steps 3-4: the free gaps of the targets (:func:`free_gaps_of`, with the
+   orientation targets of ``axis`` and ``pose`` effectors), the QP vectors, the active-set box QP
    (eq. 13), its outcome, and the Newton step of the same factorization
    (:func:`apply_pending_step`: ``dq = K⁻¹ (r + J_aᵀ Δλ)``).
 
@@ -23,7 +24,8 @@ import math
 from cbha_inverse.core._kernels.block_band import (block_backward, block_cholesky_forward,
                                                    block_forward, first_nonzero_rows)
 from cbha_inverse.core._kernels.evaluation import evaluate
-from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_points_into,
+from cbha_inverse.core._kernels.projection import (effector_jacobian_into, effector_points_into,
+                                                   free_gaps_into, orientation_errors_into,
                                                    project_effectors_into, target_status,
                                                    tick_outcome_into)
 from cbha_inverse.core._kernels.qp import (active_set_box_qp_into, bounds_binding_into,
@@ -48,33 +50,45 @@ TICK_FIELDS = (
     Field('lower', F8, 1, '(m,) lower bounds [Pa, N]'),
     Field('upper', F8, 1, '(m,) upper bounds [Pa, N]'),
     Field('rate', F8, 1, '(m,) largest change per tick (inf: none) [Pa, N]'),
-    # the effectors
+    # the effectors: 3k position rows, then o rotational rows (docs/effectors.md)
     Field('effector_frames', I8, 1, '(k,) frame of every effector point'),
     Field('effector_offsets', F8, 2, '(k, 3) effector points in their frame [m]'),
+    Field('effector_kinds', I8, 1, '(k,) 0 point, 1 axis, 2 pose'),
+    Field('effector_axes', F8, 2, '(k, 3) unit axis u of every axis effector, frame axes'),
+    Field('orientation_effectors', I8, 1, '(o,) the effector of every rotational row'),
+    Field('orientation_axes', F8, 2, '(o, 3) unit vector v of every rotational row, frame '
+          'axes'),
+    Field('row_weights', F8, 1, '(3k + o,) ω of every row [-, m/rad]'),
     Field('base', F8, 1, "(3,) base position, for the targets' check [m]"),
     Field('reach', F8, 1, '(k,) largest distance of each effector from the base [m]'),
+    Field('target_directions', F8, 2, '(k, 3) unit target direction d of every axis effector'),
+    Field('target_rotations', F8, 3, '(k, 3, 3) target rotation R_t of every pose effector'),
     # the linearisation (steps 1-2)
     Field('solved', F8, 2, '(6n, m + 1) L⁻¹ [r, J_aᵀ] (half_solved), or K⁻¹ [r, J_aᵀ]'),
     Field('column_starts', I8, 1, '(m + 1,) first nonzero row of each column of [r, J_aᵀ]'),
-    Field('effector_columns', F8, 2, '(6n, 3k) L⁻¹ J_eᵀ (half_solved), or J_eᵀ'),
-    Field('effector_starts', I8, 1, '(3k,) first nonzero row of each column of J_eᵀ'),
+    Field('effector_columns', F8, 2, '(6n, 3k + o) L⁻¹ J_eᵀ (half_solved), or J_eᵀ'),
+    Field('effector_starts', I8, 1, '(3k + o,) first nonzero row of each column of J_eᵀ'),
     Field('half_solved', np.bool_, 1, '(1,) whether solved and effector_columns are half-solves'),
     Field('levers', F8, 2, '(k, 3) effector levers R_f o [m]'),
-    Field('moved', F8, 2, '(3k, m + 1) J_e K⁻¹ [r, J_aᵀ]'),
+    Field('orientation_directions', F8, 2, '(o, 3) world direction c = R_f v of every '
+          'rotational row'),
+    Field('moved', F8, 2, '(3k + o, m + 1) J_e K⁻¹ [r, J_aᵀ]'),
     Field('equilibrium_gap', F8, 1, '(1,) distance of the state from equilibrium [m] '
           '(equilibrium_gap_of)'),
     Field('gap_limit', F8, 1, '(1,) a tick that linearises and solves stops after the '
           'linearisation when equilibrium_gap exceeds it [m]'),
-    Field('w_ea', F8, 2, '(3k, m) W_ea [m/Pa, m/N]'),
+    Field('w_ea', F8, 2, '(3k + o, m) W_ea [m/Pa, m/N; rad/Pa, rad/N]'),
     Field('w_aa', F8, 2, '(m, m) W_aa'),
-    Field('offset', F8, 1, '(3k,) p_e + J_e K⁻¹ r - W_ea λ_prev [m]'),
+    Field('offset', F8, 1, '(3k + o,) p_e + J_e K⁻¹ r - W_ea λ_prev [m, rad]'),
     # the QP (step 3)
     Field('hessian', F8, 2, "(m, m) the QP's normalised Hessian"),
     Field('tracking', F8, 2, '(m, m) its tracking part'),
-    Field('weighted_w', F8, 2, '(3k, m) W_ea σ / ν'),
+    Field('weighted_w', F8, 2, '(3k + o, m) Ω² W_ea σ / ν'),
     Field('energy_weight', float, 0, 'ε_E'),
     Field('proximal_weight', float, 0, 'ε_P'),
-    Field('delta_free', F8, 1, '(3k,) δ_free = offset - target [m]'),
+    Field('orientation_errors', F8, 2, '(k, 3) orientation error ψ of every effector [rad]'),
+    Field('relative_rotation', F8, 2, '(3, 3) workspace: R_f R_tᵀ of a pose effector'),
+    Field('delta_free', F8, 1, '(3k + o,) δ_free: offset - target, offset + c · ψ [m, rad]'),
     Field('gradient', F8, 1, "(m,) the QP's gradient"),
     Field('tracking_gradient', F8, 1, '(m,) its tracking part'),
     Field('box_lower', F8, 1, "(m,) the QP's box, lower"),
@@ -91,7 +105,10 @@ TICK_FIELDS = (
     Field('tolerance', float, 0, 'tolerance of the binding bounds'),
     # the outcome and the step (step 4)
     Field('proposed', F8, 1, '(m,) σ x within the bounds [Pa, N]'),
-    Field('gap', F8, 1, '(3k,) W_ea λ + δ_free, the predicted effector gap [m]'),
+    Field('gap', F8, 1, '(3k + o,) W_ea λ + δ_free, the predicted effector gap [m, rad]'),
+    Field('orientation_lengths', F8, 1, '(k,) orientation_length of every effector [m]'),
+    Field('orientation_gap', F8, 1, '(2,) largest predicted orientation gap [rad], and times '
+          'its orientation_length [m] (orientation_gap_of)'),
     Field('change', F8, 1, '(m,) λ - λ_prev of the step'),
     Field('increments', F8, 2, '(n, 6) the step [m, rad]'),
     Field('max_rotation', float, 0, 'largest frame rotation of a step [rad]'),
@@ -142,7 +159,8 @@ def control_tick(targets, tick, materialise, linearise, solve, apply_step):
     Parameters
     ----------
     targets : (k, 3) ndarray  [m]
-        Effector targets (read only with ``solve``).
+        Effector position targets (read only with ``solve``; the orientation targets are the
+        record's ``target_directions`` and ``target_rotations``).
     tick : TickRecord
         The tick's buffers.
     materialise : bool
@@ -236,8 +254,7 @@ def linearise_tick(tick):
     info = block_cholesky_forward(factor, solved, tick.column_starts)
     if info != 0:
         return info, float('nan')
-    effector_columns_into(tick.rotations, tick.effector_frames, tick.effector_offsets,
-                          tick.levers, tick.effector_columns)
+    effector_jacobian_of(tick)
     first_nonzero_rows(tick.effector_columns, tick.effector_starts)
     block_forward(factor, tick.effector_columns, tick.effector_starts)
     tick.half_solved[0] = True
@@ -264,16 +281,30 @@ def project_tick(tick):
     """
     half = tick.half_solved[0]
     if not half:
-        effector_columns_into(tick.rotations, tick.effector_frames, tick.effector_offsets,
-                              tick.levers, tick.effector_columns)
+        effector_jacobian_of(tick)
     residual_norm = project_effectors_into(
         tick.solved, tick.system.rhs, tick.effector_columns, half, tick.column_starts,
         tick.positions, tick.rotations, tick.effector_frames, tick.effector_offsets,
-        tick.linearised, tick.w_ea, tick.w_aa, tick.offset, tick.moved)
-    tick.equilibrium_gap[0] = equilibrium_gap_of(tick.moved)
+        tick.orientation_effectors, tick.linearised, tick.w_ea, tick.w_aa, tick.offset,
+        tick.moved)
+    position_rows = 3 * tick.effector_frames.size
+    tick.equilibrium_gap[0] = equilibrium_gap_of(tick.moved[:position_rows])
     qp_hessians_into(tick.w_ea, tick.w_aa, tick.scale, tick.energy_weight, tick.proximal_weight,
-                     tick.hessian, tick.tracking, tick.weighted_w)
+                     tick.row_weights, tick.hessian, tick.tracking, tick.weighted_w)
     return residual_norm
+
+
+@numba.njit(cache=True)
+def effector_jacobian_of(tick):
+    """
+    Write ``J_eᵀ`` at the tick's frames into ``effector_columns``.
+
+    :func:`~cbha_inverse.core._kernels.projection.effector_jacobian_into`, with ``levers`` and
+    the rotational rows' ``orientation_directions``.
+    """
+    effector_jacobian_into(tick.rotations, tick.effector_frames, tick.effector_offsets,
+                           tick.orientation_effectors, tick.orientation_axes, tick.levers,
+                           tick.orientation_directions, tick.effector_columns)
 
 
 @numba.njit(cache=True)
@@ -288,7 +319,7 @@ def equilibrium_gap_of(moved):
     Parameters
     ----------
     moved : (3k, m + 1) ndarray  [m, m/Pa or m/N]
-        ``J_e K⁻¹ [r, J_aᵀ]``.
+        The position rows of ``J_e K⁻¹ [r, J_aᵀ]``.
 
     Returns
     -------
@@ -309,7 +340,7 @@ def solve_tick(targets, tick, apply_step):
     """
     Solve a tick's QP on a linearisation and apply it (steps 3-4 of the tick), in place.
 
-    ``δ_free = offset - target``, the QP vectors
+    ``δ_free`` (:func:`free_gaps_of`), the QP vectors
     (:func:`~cbha_inverse.core._kernels.qp.qp_vectors_into`), the active-set box QP
     (:func:`~cbha_inverse.core._kernels.qp.active_set_box_qp_into`, warm-started from
     ``active_set``), the outcome
@@ -345,10 +376,8 @@ def solve_tick(targets, tick, apply_step):
 
     """
     k = targets.shape[0]
-    offset, delta_free, gap = tick.offset, tick.delta_free, tick.gap
-    for e in range(k):
-        for i in range(3):
-            delta_free[3 * e + i] = offset[3 * e + i] - targets[e, i]
+    delta_free, gap = tick.delta_free, tick.gap
+    free_gaps_of(targets, tick)
     qp_vectors_into(tick.weighted_w, tick.proximal_weight, tick.scale, delta_free,
                     tick.actuation, tick.lower, tick.upper, tick.rate, tick.gradient,
                     tick.box_lower, tick.box_upper, tick.x_previous, tick.tracking_gradient)
@@ -360,9 +389,11 @@ def solve_tick(targets, tick, apply_step):
         return code, iterations, 0.0, 0.0, False
     largest_gap, largest_move, finite = tick_outcome_into(
         tick.w_ea, delta_free, tick.scale, tick.x, tick.x_previous, tick.lower, tick.upper,
-        tick.proposed, gap)
+        3 * k, tick.proposed, gap)
     if not finite:
         return REJECTED, iterations, largest_gap, largest_move, False
+    if tick.orientation_effectors.size:
+        orientation_gap_of(tick)
     bounds_binding_into(tick.tracking, tick.tracking_gradient, tick.box_lower, tick.box_upper,
                         tick.x, tick.tolerance, tick.free)
     binding = False
@@ -381,6 +412,60 @@ def solve_tick(targets, tick, apply_step):
             for i in range(3):
                 effector_positions[e, i] = targets[e, i] + gap[3 * e + i]
     return SOLVED, iterations, largest_gap, largest_move, binding
+
+
+@numba.njit(cache=True)
+def free_gaps_of(targets, tick):
+    """
+    Write ``δ_free`` of the targets on the tick's linearisation into ``delta_free`` (eq. 11).
+
+    The orientation errors ``ψ`` of the ``axis`` and ``pose`` effectors at the linearisation's
+    frames to their targets (``target_directions``, ``target_rotations``), when the effectors
+    have rotational rows, then
+    :func:`~cbha_inverse.core._kernels.projection.free_gaps_into`: ``offset - target`` on the
+    position rows, ``offset + c · ψ`` on the rotational rows.
+
+    Parameters
+    ----------
+    targets : (k, 3) ndarray  [m]
+        Effector position targets.
+    tick : TickRecord
+        The tick's buffers (a linearisation).
+
+    """
+    if tick.orientation_effectors.size:
+        orientation_errors_into(tick.rotations, tick.effector_frames, tick.effector_kinds,
+                                tick.effector_axes, tick.target_rotations,
+                                tick.target_directions, tick.orientation_errors,
+                                tick.relative_rotation)
+    free_gaps_into(tick.offset, targets, tick.orientation_effectors, tick.orientation_directions,
+                   tick.orientation_errors, tick.delta_free)
+
+
+@numba.njit(cache=True)
+def orientation_gap_of(tick):
+    """
+    Write the largest predicted orientation gap of the tick into ``orientation_gap``.
+
+    Each ``axis`` or ``pose`` effector's gap is the norm of its rotational rows of ``gap``
+    (``W_ea λ + δ_free``) [rad]; ``orientation_gap`` receives the largest, and the largest
+    times its effector's ``orientation_length`` [m].
+    """
+    gap, rows = tick.gap, tick.orientation_effectors
+    first = 3 * tick.effector_frames.size
+    largest = largest_length = 0.0
+    start = 0
+    while start < rows.size:
+        end, squares = start, 0.0
+        while end < rows.size and rows[end] == rows[start]:
+            squares += gap[first + end] ** 2
+            end += 1
+        turn = math.sqrt(squares)
+        largest = max(largest, turn)
+        largest_length = max(largest_length, turn * tick.orientation_lengths[rows[start]])
+        start = end
+    tick.orientation_gap[0] = largest
+    tick.orientation_gap[1] = largest_length
 
 
 @numba.njit(cache=True)

@@ -14,19 +14,22 @@ paper's definition): ``δ_e^free = p_e - p_target + J_e K⁻¹ r - W_ea λ_prev`
 
 The actuation is the solution of the box-constrained QP (eq. 13 plus regularisation)
 
-    min_λ  ½‖W_ea λ + δ_e^free‖² + ½ ε_E s_E λᵀ W_aa λ + ½ ε_P s_P ‖(λ - λ_prev)/σ‖²
+    min_λ  ½‖Ω (W_ea λ + δ_e^free)‖² + ½ ε_E s_E λᵀ W_aa λ + ½ ε_P s_P ‖(λ - λ_prev)/σ‖²
     s.t.   max(lb, λ_prev - rate) ≤ λ ≤ min(ub, λ_prev + rate)
 
-with ``σ`` the per-actuator range (so the problem is solved in dimensionless ``x = λ/σ``), ``s_E``
-and ``s_P`` scale factors that give both terms the magnitude of the tracking term
-(``s = trace(σ W_eaᵀ W_ea σ) / trace(σ W_aa σ)`` and ``trace(σ W_eaᵀ W_ea σ) / m``), so ``ε_E`` and
-``ε_P`` are unit-free. ``λᵀ W_aa λ`` is the elastic energy the actuation stores in the structure:
-it picks the least-effort solution among redundant ones (no co-contraction) and makes the QP
-strictly convex; the proximal term smooths the actuation from tick to tick and vanishes at a fixed
-point, so it adds no steady-state error. Defaults (see
-:class:`cbha_inverse.core.inverse.results.InverseOptions`): ``ε_E = 1e-6`` (its bias on a
-reachable target is a few micrometres at most), ``ε_P = 1e-4`` (enough to stop redundant
-tendons from alternating between equivalent solutions on a saturated target).
+with ``Ω = diag(ω)`` the effectors' row weights (all 1 for point effectors, the paper's term;
+the rotational rows of ``axis`` and ``pose`` effectors weigh one radian as
+``orientation_length`` metres, :mod:`cbha_inverse.core.actuation.effectors`,
+``docs/effectors.md``), ``σ`` the per-actuator range (so the problem is solved in dimensionless
+``x = λ/σ``), ``s_E`` and ``s_P`` scale factors that give both terms the magnitude of the
+tracking term (``s = trace(σ W_eaᵀ Ω² W_ea σ) / trace(σ W_aa σ)`` and
+``trace(σ W_eaᵀ Ω² W_ea σ) / m``), so ``ε_E`` and ``ε_P`` are unit-free. ``λᵀ W_aa λ`` is the
+elastic energy the actuation stores in the structure: it picks the least-effort solution among
+redundant ones (no co-contraction) and makes the QP strictly convex; the proximal term smooths
+the actuation from tick to tick and vanishes at a fixed point, so it adds no steady-state error.
+Defaults (see :class:`cbha_inverse.core.inverse.results.InverseOptions`): ``ε_E = 1e-6`` (its
+bias on a reachable target is a few micrometres at most), ``ε_P = 1e-4`` (enough to stop
+redundant tendons from alternating between equivalent solutions on a saturated target).
 
 The solvers (:data:`QP_SOLVERS`, the ``qp_solver`` option of
 :class:`~cbha_inverse.core.inverse.results.InverseOptions`): :class:`ActiveSetQP` (exact,
@@ -87,9 +90,9 @@ class QPMatrices(NamedTuple):
     hessian : (m, m) ndarray
         Full normalised Hessian (tracking + energy + proximal).
     tracking_hessian : (m, m) ndarray
-        Normalised ``σ W_eaᵀ W_ea σ``.
-    weighted_w : (3k, m) ndarray
-        ``W_ea σ / norm`` (the gradient is ``weighted_wᵀ δ_free - ε_P x_prev``).
+        Normalised ``σ W_eaᵀ Ω² W_ea σ`` (``Ω``: the effectors' row weights).
+    weighted_w : (r, m) ndarray
+        ``Ω² W_ea σ / norm`` (the gradient is ``weighted_wᵀ δ_free - ε_P x_prev``).
     scale : (m,) ndarray
         ``σ``.
     proximal_weight : float
@@ -104,28 +107,33 @@ class QPMatrices(NamedTuple):
     proximal_weight: float
 
 
-def qp_matrices(w_ea, w_aa, scale, *, energy_weight=1e-6, proximal_weight=1e-4):
+def qp_matrices(w_ea, w_aa, scale, *, energy_weight=1e-6, proximal_weight=1e-4,
+                row_weights=None):
     """
     Return the normalised Hessian parts of the actuation QP (module docstring).
 
     Parameters
     ----------
-    w_ea : (3k, m) ndarray
-        Effector-actuator compliance.
+    w_ea : (r, m) ndarray
+        Effector-actuator compliance (``3k`` position rows, then the rotational rows).
     w_aa : (m, m) ndarray
         Actuator-actuator compliance.
     scale : (m,) ndarray
         ``σ``.
     energy_weight, proximal_weight : float
         ``ε_E``, ``ε_P`` (unit-free).
+    row_weights : (r,) ndarray, optional  [-, m/rad]
+        ``ω`` of each row (:mod:`cbha_inverse.core.actuation.effectors`; default all 1).
 
     Returns
     -------
     QPMatrices
 
     """
+    weights = (np.ones(w_ea.shape[0]) if row_weights is None
+               else np.ascontiguousarray(row_weights, dtype=float))
     hessian, tracking, weighted_w = qp_kernels.qp_hessians(
-        w_ea, w_aa, scale, float(energy_weight), float(proximal_weight))
+        w_ea, w_aa, scale, float(energy_weight), float(proximal_weight), weights)
     return QPMatrices(hessian, tracking, weighted_w, scale, proximal_weight)
 
 
@@ -137,7 +145,7 @@ def qp_problem(matrices, delta_free, previous, lower_bounds, upper_bounds, rate_
     ----------
     matrices : QPMatrices
         From :func:`qp_matrices`.
-    delta_free : (3k,) ndarray  [m]
+    delta_free : (r,) ndarray  [m, rad]
         ``δ_e^free``.
     previous : (m,) ndarray
         ``λ_prev``.

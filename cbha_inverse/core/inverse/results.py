@@ -152,6 +152,12 @@ class TickResult(NamedTuple):
     equilibrium_gap : float  [m]
         Distance of the effectors from the model's equilibrium at the linearisation the tick
         solved on, ``max_k |(J_e K⁻¹ r)_k|`` (NaN for a held tick).
+    predicted_orientation_error : float  [rad]
+        The largest predicted orientation gap of the ``axis`` and ``pose`` effectors (the norm
+        of each one's rotational rows of ``W_ea λ + δ_e^free``, ``docs/effectors.md``); NaN
+        without them or for a held tick. ``predicted_error`` is the position gap; a saturated
+        tick reads ``'unreachable'`` when either, the orientation gap times the effector's
+        ``orientation_length``, exceeds :attr:`InverseOptions.unreachable_distance`.
 
     """
 
@@ -166,3 +172,4 @@ class TickResult(NamedTuple):
     timings: dict
     warnings: tuple = ()
     equilibrium_gap: float = math.nan
+    predicted_orientation_error: float = math.nan

@@ -51,6 +51,7 @@ from cbha_inverse.core._kernels import tick as kernels
 from cbha_inverse.core._kernels.projection import target_status, tick_outcome
 from cbha_inverse.core._kernels.qp import SOLVED
 from cbha_inverse.core._kernels.retraction import retract_frames
+from cbha_inverse.core.actuation.effectors import TargetRefused
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
 from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
@@ -60,6 +61,7 @@ from cbha_inverse.core.inverse.tick_data import TickData
 from cbha_inverse.core.loads import dead_wrenches, follower_hooks, FollowerLoads, Loads
 from cbha_inverse.core.sections import (check_section_factors, rate_limited,
                                         SectionStiffness)
+from cbha_inverse.core.so3 import quat_from_matrix
 from cbha_inverse.core.statics import solve_static
 from cbha_inverse.core.system import EquilibriumSystem
 import numpy as np
@@ -85,6 +87,9 @@ CHECKED_MOVE = 0.02
 """A tick moving an actuator by more than this fraction of its range checks its new state at once
 (it linearises there, as :meth:`InverseSolver.prepare` would next)."""
 
+_NO_TURN = (math.nan, 0.0)
+"""The orientation gap [rad, m] of a tick without rotational rows."""
+
 
 class InverseSolver:
     """
@@ -97,7 +102,9 @@ class InverseSolver:
     actuators : cbha_inverse.core.actuation.actuators.ActuatorSet
         Its actuators (``m``).
     effectors : cbha_inverse.core.actuation.effectors.PointEffectors
-        Its effector points (``k``).
+        Its effectors (``k``): points, and the orientation of the ``axis`` and ``pose``
+        effectors' frames (``docs/effectors.md``; targets: :meth:`step`,
+        :meth:`set_orientation_targets`).
     gravity : (3,) array_like or None  [m/s^2]
         Gravity acting on the lumped masses.
     options : InverseOptions, optional
@@ -201,6 +208,8 @@ class InverseSolver:
         self._active_set = ActiveSetQP(m, state=self._data.active_set)
         self._qp = ProxsuiteQP(m, eps_abs=self.options.eps_abs)
         self._target_shape = (effectors.n_effectors, 3)
+        # whether some effector has rotational rows (a tick reports its orientation gap)
+        self._turns = bool(effectors.orientation_effectors.size)
         self._every = self.options.relinearize_every
         # a tick on a prepared linearisation is one compiled call with the active set and one
         # Newton step per tick
@@ -214,6 +223,9 @@ class InverseSolver:
         if loads:
             self.set_loads(loads)
         self.reset()
+        # until given, each orientation target is the effector's orientation at rest
+        self._set_orientation_targets(effectors.directions(self._rotations),
+                                      effectors.rotations(self._rotations))
 
     def reset(self, state=None, actuation=None):
         """
@@ -278,6 +290,86 @@ class InverseSolver:
         """Return the effector positions (k, 3) of the current model state."""
         return self.effectors.positions(*self._current())
 
+    def effector_orientations(self):
+        """
+        Return the orientation of every effector's frame at the current model state.
+
+        Returns
+        -------
+        (k, 4) ndarray
+            Unit quaternions ``(x, y, z, w)`` (``w >= 0``), frame axes → world.
+
+        """
+        return quat_from_matrix(self.effectors.rotations(self._current()[1]))
+
+    def effector_directions(self):
+        """
+        Return the world direction of every effector's axis at the current model state.
+
+        Returns
+        -------
+        (k, 3) ndarray
+            ``R_f u`` (``u`` the axis of an ``axis`` effector, ``+x`` for other kinds).
+
+        """
+        return self.effectors.directions(self._current()[1])
+
+    def set_orientation_targets(self, directions=None, quaternions=None):
+        """
+        Set the orientation targets of the ``axis`` and ``pose`` effectors, validated.
+
+        They hold for every later :meth:`step` until replaced (until first set: each effector's
+        orientation at rest, the chain straight). ``docs/effectors.md`` gives the conventions.
+
+        Parameters
+        ----------
+        directions : (a, 3) array_like, optional
+            Target direction (world axes) of each ``axis`` effector, in effector order
+            (``effectors.axis_effectors``); normalised; a zero or non-finite one is refused.
+            ``(3,)`` for one. None: unchanged.
+        quaternions : (p, 4) array_like, optional
+            Target orientation (world axes, ``(x, y, z, w)`` as ROS) of each ``pose`` effector's
+            frame, in effector order (``effectors.pose_effectors``); normalised when its norm
+            is within :data:`~cbha_inverse.core.actuation.effectors.QUATERNION_TOLERANCE` of 1,
+            else refused (and a non-finite one). ``(4,)`` for one. None: unchanged.
+
+        Raises
+        ------
+        ValueError
+            On a wrong shape, or a refused value
+            (:class:`~cbha_inverse.core.actuation.effectors.TargetRefused`): nothing is changed.
+
+        """
+        checked_directions, checked_rotations = self.effectors.orientation_targets(
+            directions, quaternions)
+        self._set_orientation_targets(checked_directions, checked_rotations, by_kind=True)
+
+    def _set_orientation_targets(self, directions, rotations, by_kind=False):
+        """Write checked targets (per kind's effectors with ``by_kind``, else (k, ...))."""
+        axis = list(self.effectors.axis_effectors) if by_kind else slice(None)
+        pose = list(self.effectors.pose_effectors) if by_kind else slice(None)
+        if directions is not None:
+            self._data.target_directions[axis] = directions
+        if rotations is not None:
+            self._data.target_rotations[pose] = rotations
+
+    @property
+    def orientation_targets(self):
+        """
+        Return the current orientation targets (:meth:`set_orientation_targets`).
+
+        Returns
+        -------
+        directions : (a, 3) ndarray
+            Of the ``axis`` effectors, world axes.
+        quaternions : (p, 4) ndarray
+            Of the ``pose`` effectors, ``(x, y, z, w)``.
+
+        """
+        return (self._data.target_directions[list(self.effectors.axis_effectors)].copy(),
+                quat_from_matrix(self._data.target_rotations[list(
+                    self.effectors.pose_effectors)]).reshape(-1, 4))
+
     def _current(self):
         """Return the frames with the pending linear step applied (a copy when one is pending)."""
         if not self._pending:
@@ -286,7 +378,7 @@ class InverseSolver:
         self._data.entry('pending_step_into')(self._record, positions, rotations)
         return positions, rotations
 
-    def step(self, targets):
+    def step(self, targets, directions=None, quaternions=None):
         """
         Run one control tick toward the effector targets.
 
@@ -294,21 +386,36 @@ class InverseSolver:
         ----------
         targets : (k, 3) array_like  [m]
             Desired effector positions (world axes, effector order).
+        directions : (a, 3) array_like, optional
+            New target directions of the ``axis`` effectors (:meth:`set_orientation_targets`;
+            None: the last ones set).
+        quaternions : (p, 4) array_like, optional
+            New target orientations ``(x, y, z, w)`` of the ``pose`` effectors
+            (:meth:`set_orientation_targets`; None: the last ones set).
 
         Returns
         -------
         TickResult
-            The new actuation, the updated effector positions, status and timings.
+            The new actuation, the updated effector positions, status and timings. A refused
+            orientation target (not finite, a zero direction, a quaternion far from unit) holds
+            the tick (status ``'rejected'``, the reason in ``warnings``) and keeps the previous
+            orientation targets, as a non-finite position target does.
 
         Raises
         ------
         ValueError
             If ``targets`` does not have the shape (k, 3) (or (3,) for one effector): no other
-            shape, e.g. a transposed (3, k) array, is reinterpreted.
+            shape, e.g. a transposed (3, k) array, is reinterpreted; or an orientation target
+            has the wrong shape.
 
         """
         started = time.perf_counter()
         targets = self._target_array(targets)
+        if directions is not None or quaternions is not None:
+            try:
+                self.set_orientation_targets(directions, quaternions)
+            except TargetRefused as exc:
+                return self._held('rejected', started, warnings=(f'{exc}: rejected',))
         # the linearisation (steps 1-2) when no prepare() made it: checked for equilibrium
         # before the QP, as prepare() does
         fresh = not (self._linearised and self._age < self._every)
@@ -502,13 +609,14 @@ class InverseSolver:
     def _general_qp(self, targets, qp_solver, same_hessian, warnings, times):
         """Solve the tick's QP in Python (proxsuite, Gauss-Seidel) and apply it (steps 3-4)."""
         data = self._data
-        delta_free = data.offset - targets.reshape(-1)
+        self._data.entry('free_gaps_of')(targets, self._record)
+        delta_free = data.delta_free.copy()
         problem = qp_problem(data.matrices, delta_free, self.actuation, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._step_limit())
         solution, status = self._solve_qp(problem, qp_solver, same_hessian)
         actuation, gap, largest_gap, largest_move, finite = tick_outcome(
             data.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
-            self.upper_bounds)
+            self.upper_bounds, targets.size)
         if not finite:
             return self._rejected(solution.status, warnings, times[0])
         saturated = binding_bounds(problem, solution.x)
@@ -516,6 +624,8 @@ class InverseSolver:
             status = 'saturated'
         self.actuation[:] = actuation
         data.gap[:] = gap
+        if self._turns:
+            data.entry('orientation_gap_of')(self._record)
         if self._every == 1:
             self._control_tick(targets, self._record, True, False, False, False)
         return self._close(targets, status, solution.status, solution.iterations, saturated,
@@ -576,8 +686,9 @@ class InverseSolver:
             # between linearisations the tick is the linear model of paper eq. 11
             self._pending = True
             effector_positions = (data.effector_positions.copy() if positions_written
-                                  else targets + data.gap.reshape(-1, 3))
+                                  else targets + data.gap[:targets.size].reshape(-1, 3))
         residual_norm = self._residual_norm
+        turn, turn_length = (self._data.orientation_gap if self._turns else _NO_TURN)
         if status in ('solved', 'saturated'):
             if (self._every == 1 and largest_move > CHECKED_MOVE
                     and self.options.equilibrium_tolerance < math.inf
@@ -587,10 +698,10 @@ class InverseSolver:
                 if self._restored_gap:
                     effector_positions = self.effectors.positions(self._positions,
                                                                   self._rotations)
-            status = self._tick_status(status, saturated, largest_gap, gap)
+            status = self._tick_status(status, saturated, max(largest_gap, turn_length), gap)
         return TickResult(self.actuation.copy(), effector_positions, status, qp_status,
                           iterations, saturated, largest_gap, residual_norm,
-                          _timings(*times, time.perf_counter()), warnings, gap)
+                          _timings(*times, time.perf_counter()), warnings, gap, float(turn))
 
     def _measure_equilibrium(self):
         """

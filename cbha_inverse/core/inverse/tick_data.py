@@ -29,7 +29,7 @@ class TickData(RecordOwner):
     system : cbha_inverse.core.system.EquilibriumSystem
         The solver's evaluator (its record is the tick's ``system``).
     effectors : cbha_inverse.core.actuation.effectors.PointEffectors
-        The effector points (``k``).
+        The effectors (``k``; ``3k + o`` rows with the rotational rows).
     scale, lower_bounds, upper_bounds : (m,) ndarray
         ``σ`` and the actuator bounds.
     rate_limit : (m,) ndarray or None
@@ -60,6 +60,8 @@ class TickData(RecordOwner):
                  options, max_iterations, base=None, reach=None):
         """Allocate every buffer and build the compiled record."""
         n, m, k = system.n, system.m, effectors.n_effectors
+        # the rows of J_e: 3k position rows, then o rotational rows (docs/effectors.md)
+        rows, o = effectors.n_rows, effectors.orientation_effectors.size
         rate = np.full(m, math.inf) if rate_limit is None else rate_limit
         self.arrays = {
             'positions': np.zeros((n + 1, 3)), 'rotations': np.zeros((n + 1, 3, 3)),
@@ -68,23 +70,35 @@ class TickData(RecordOwner):
             'upper': _floats(upper_bounds, m), 'rate': _floats(rate, m),
             'effector_frames': np.ascontiguousarray(effectors.frames, dtype=np.int64),
             'effector_offsets': np.ascontiguousarray(effectors.offsets, dtype=float),
+            'effector_kinds': np.array(effectors.kind_codes, dtype=np.int64),
+            'effector_axes': np.array(effectors.axes, dtype=float),
+            'orientation_effectors': np.array(effectors.orientation_effectors, dtype=np.int64),
+            'orientation_axes': np.array(effectors.orientation_axes, dtype=float).reshape(o, 3),
+            'row_weights': np.array(effectors.row_weights, dtype=float),
             'base': _floats(np.zeros(3) if base is None else base, 3),
             'reach': _floats(np.full(k, math.inf) if reach is None else reach, k),
+            'target_directions': np.array(effectors.axes, dtype=float),
+            'target_rotations': np.tile(np.eye(3), (k, 1, 1)),
             'solved': np.zeros((6 * n, m + 1)), 'column_starts': np.zeros(m + 1, dtype=np.int64),
-            'effector_columns': np.zeros((6 * n, 3 * k)),
-            'effector_starts': np.zeros(3 * k, dtype=np.int64),
+            'effector_columns': np.zeros((6 * n, rows)),
+            'effector_starts': np.zeros(rows, dtype=np.int64),
             'half_solved': np.zeros(1, dtype=np.bool_), 'levers': np.zeros((k, 3)),
-            'moved': np.zeros((3 * k, m + 1)), 'equilibrium_gap': np.zeros(1),
-            'gap_limit': np.full(1, math.inf), 'w_ea': np.zeros((3 * k, m)),
-            'w_aa': np.zeros((m, m)), 'offset': np.zeros(3 * k),
+            'orientation_directions': np.zeros((o, 3)),
+            'moved': np.zeros((rows, m + 1)), 'equilibrium_gap': np.zeros(1),
+            'gap_limit': np.full(1, math.inf), 'w_ea': np.zeros((rows, m)),
+            'w_aa': np.zeros((m, m)), 'offset': np.zeros(rows),
             'hessian': np.zeros((m, m)), 'tracking': np.zeros((m, m)),
-            'weighted_w': np.zeros((3 * k, m)), 'delta_free': np.zeros(3 * k),
+            'weighted_w': np.zeros((rows, m)), 'orientation_errors': np.zeros((k, 3)),
+            'relative_rotation': np.zeros((3, 3)),
+            'delta_free': np.zeros(rows),
             'gradient': np.zeros(m), 'tracking_gradient': np.zeros(m),
             'box_lower': np.zeros(m), 'box_upper': np.zeros(m), 'x_previous': np.zeros(m),
             'x': np.zeros(m), 'active_set': np.zeros(m, dtype=np.int8),
             'pivot': np.zeros(m, dtype=np.int8), 'free': np.zeros(m, dtype=np.bool_),
             'qp_index': np.zeros(m, dtype=np.int64), 'qp_factor': np.zeros((m, m)),
-            'qp_solve': np.zeros(m), 'proposed': np.zeros(m), 'gap': np.zeros(3 * k),
+            'qp_solve': np.zeros(m), 'proposed': np.zeros(m), 'gap': np.zeros(rows),
+            'orientation_lengths': np.array(effectors.orientation_lengths, dtype=float),
+            'orientation_gap': np.full(2, math.nan),
             'change': np.zeros(m), 'increments': np.zeros((n, 6)),
             'effector_positions': np.zeros((k, 3))}
         self.max_rotation = (math.inf if options.max_rotation_step is None
@@ -105,7 +119,9 @@ class TickData(RecordOwner):
 
         ``'control_tick'`` (``targets, record, materialise, linearise, solve, apply_step``; the
         targets a C-contiguous float (k, 3) array), ``'pending_step_into'`` (``record,
-        positions, rotations``: C-contiguous float frames) or ``'project_tick'`` (``record``);
+        positions, rotations``: C-contiguous float frames), ``'project_tick'`` (``record``),
+        ``'free_gaps_of'`` (``targets, record``: ``delta_free`` of the targets) or
+        ``'orientation_gap_of'`` (``record``);
         without numba's per-call type dispatch
         (:func:`cbha_inverse.core._kernels.records.compiled_entry`).
         """
@@ -114,7 +130,9 @@ class TickData(RecordOwner):
             examples = {'control_tick': (self.effector_positions, self.record, True, True, True,
                                          True),
                         'pending_step_into': (self.record, self.positions, self.rotations),
-                        'project_tick': (self.record,)}[name]
+                        'project_tick': (self.record,),
+                        'free_gaps_of': (self.effector_positions, self.record),
+                        'orientation_gap_of': (self.record,)}[name]
             entry = compiled_entry(getattr(kernels, name), *examples)
             self._entries[name] = entry
         return entry
