@@ -248,6 +248,29 @@ def check_command(values, n_valves, max_pressure):
     return ACCEPTED if key is None else Check(False, key, detail)
 
 
+def check_displacement_command(values, n_drives, reach):
+    """
+    Validate an incoming tendon displacement command (position-controlled drives).
+
+    Parameters
+    ----------
+    values : sequence of float  [m]
+        The command (``Float64MultiArray.data``): drive displacements from rest.
+    n_drives : int
+        Required length.
+    reach : float  [m]
+        Largest accepted pull-in or let-out.
+
+    Returns
+    -------
+    Check
+        Accepted, or why not (wrong length, non-finite, out of ``[-reach, reach]``).
+
+    """
+    _, key, detail = vector_fault(values, n_drives, 'displacement', -reach, reach, ' m')
+    return ACCEPTED if key is None else Check(False, key, detail)
+
+
 def bounded_command(values, lower, upper):
     """
     Clip a command to its bounds; the last gate before publication.

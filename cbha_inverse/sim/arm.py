@@ -43,15 +43,19 @@ class SimulatedArm:
     contact_stiffness : float  [N/m]
         Penalty stiffness of the plant's contacts with obstacles
         (:class:`cbha_inverse.sim.plant.StaticPlant`).
+    command_kind : str
+        ``'tension'`` (commands in N or Pa) or ``'displacement'`` (tendon drives' positions in
+        m, lagged by the same line: a drive's position loop), as
+        :class:`cbha_inverse.sim.plant.StaticPlant`.
 
     """
 
     def __init__(self, scene, order, *, latency, valve_time_constant, tip_noise=0.0,
                  pressure_noise=0.0, seed=0, tolerance=1e-6, max_iterations=20,
-                 contact_stiffness=1.0e4):
+                 contact_stiffness=1.0e4, command_kind='tension'):
         self.order = np.asarray(order, dtype=int)
         self.plant = StaticPlant(scene, tolerance=tolerance, max_iterations=max_iterations,
-                                 contact_stiffness=contact_stiffness)
+                                 contact_stiffness=contact_stiffness, command_kind=command_kind)
         self.valves = ValveLine(self.order.size, latency, valve_time_constant)
         self.tip_noise = float(tip_noise)
         self.pressure_noise = float(pressure_noise)

@@ -22,6 +22,7 @@ from cbha_inverse.core.contact import NO_CONTACTS, PenaltyContact
 from cbha_inverse.core.loads import combined_hooks, Loads, static_loads
 from cbha_inverse.core.obstacles import check_names
 from cbha_inverse.core.statics import solve_static
+import numpy as np
 
 
 class StaticPlant:
@@ -46,6 +47,10 @@ class StaticPlant:
     contact_stiffness : float  [N/m]
         Penalty stiffness of the contacts with obstacles: a contact force ``F`` penetrates by
         ``F / contact_stiffness``.
+    command_kind : str
+        ``'tension'``: :meth:`update` takes the actuation (N or Pa); ``'displacement'``: the
+        cables' drive displacements [m] (:attr:`cbha_inverse.scene.Scene.tendon_drives`; a
+        scene whose actuators are all cables with a finite ``axial_stiffness``).
 
     Attributes
     ----------
@@ -58,12 +63,25 @@ class StaticPlant:
     ----------
     loads : cbha_inverse.core.loads.Loads
         The external loads on the plant (the scene's at start; :meth:`set_loads`).
+    tensions : (m,) ndarray or None  [N]
+        With ``command_kind='displacement'``: the cables' tensions at the last update.
 
     """
 
     def __init__(self, scene, tolerance=1e-8, max_iterations=20, max_rotation_step=None,
-                 max_load_steps=16, contact_stiffness=1.0e4):
+                 max_load_steps=16, contact_stiffness=1.0e4, command_kind='tension'):
         """Start at the rest shape with zero actuation."""
+        if command_kind not in ('tension', 'displacement'):
+            raise ValueError(f"command_kind must be 'tension' or 'displacement', got "
+                             f'{command_kind!r}')
+        self.command_kind = command_kind
+        self.drives = None
+        if command_kind == 'displacement':
+            self.drives = scene.tendon_drives
+            if self.drives is None or len(self.drives.names) != scene.actuators.n_actuators \
+                    or not all(self.drives.axial_stiffness < float('inf')):
+                raise ValueError(f'scene {scene.name}: displacement commands need every actuator '
+                                 'a cable with a finite axial_stiffness')
         self.model = scene.model
         self.actuators = scene.actuators
         self.effectors = scene.effectors
@@ -77,6 +95,7 @@ class StaticPlant:
         self.collision = scene.collision
         self.contact_stiffness = float(contact_stiffness)
         self.contacts = NO_CONTACTS
+        self.tensions = None if self.drives is None else np.zeros(len(self.drives.names))
         self.set_loads(scene.loads)
         self.set_obstacles(scene.obstacles)
 
@@ -128,18 +147,30 @@ class StaticPlant:
         """Return to the rest shape (the next update starts from it)."""
         self._state = rest_state(self.model)
         self.contacts = NO_CONTACTS
+        if self.drives is not None:
+            self.tensions = np.zeros(len(self.drives.names))
 
     def residual(self, actuation):
         """Return the equilibrium residual ``r`` (6n,) at the current state."""
         return self._solve(actuation, max_iterations=0, max_load_steps=1).residual.reshape(-1)
 
-    def _solve(self, actuation, max_iterations, max_load_steps):
-        """Solve from the current state (see :meth:`update`)."""
+    def _solve(self, command, max_iterations, max_load_steps):
+        """
+        Solve from the current state (see :meth:`update`).
+
+        Displacement-driven cables act as the actuators at the tensions of the last equilibrium
+        (their exact load stiffness) plus the drives' correction
+        (:meth:`cbha_inverse.core.actuation.drives.TendonDrives.correction_hooks`).
+        """
         contact = self._contact
         applied = dict(self._applied)
-        function, tangent = combined_hooks(
-            (applied.pop('load_function'), applied.pop('load_tangent')),
-            (None, None) if contact is None else (contact.wrenches, contact.tangent))
+        hooks = [(applied.pop('load_function'), applied.pop('load_tangent')),
+                 (None, None) if contact is None else (contact.wrenches, contact.tangent)]
+        actuation = command
+        if self.drives is not None:
+            hooks.append(self.drives.correction_hooks(command, self.tensions))
+            actuation = self.tensions
+        function, tangent = combined_hooks(*hooks)
         return solve_static(self.model, gravity=self.gravity, actuators=self.actuators,
                             actuation=actuation, effectors=self.effectors,
                             load_function=function, load_tangent=tangent,
@@ -155,8 +186,9 @@ class StaticPlant:
 
         Parameters
         ----------
-        actuation : (m,) array_like  [N or Pa]
-            Applied actuation in scene actuator order.
+        actuation : (m,) array_like  [N or Pa, or m]
+            Applied actuation in scene actuator order; with ``command_kind='displacement'`` the
+            drives' displacements (:attr:`tensions` then holds the cables' tensions).
 
         Returns
         -------
@@ -167,6 +199,8 @@ class StaticPlant:
         """
         res = self._solve(actuation, self.max_iterations, self.max_load_steps)
         self._state = res.state
+        if self.drives is not None:
+            self.tensions, _ = self.drives.tensions(res.state, actuation)
         self.contacts = (NO_CONTACTS if self._contact is None
                          else self._contact.contacts(res.state))
         return res

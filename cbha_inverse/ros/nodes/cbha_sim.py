@@ -20,6 +20,12 @@ piecewise-constant commands, whatever the tick times). Every tick at ``rate_hz``
 - the tip is published on ``tip/measured`` (PointStamped, sensor data QoS) with Gaussian noise
   ``noise_std`` (seeded) and, noise-free, on ``tip/true``.
 
+With ``command_kind: displacement`` (a tendon scene whose cables have an ``axial_stiffness``)
+it subscribes ``tendon_displacement_command`` instead (Float64MultiArray, the drives' positions
+[m] from the straight chain's cable lengths, pulled in negative, in ``valve_names`` order,
+accepted within half the shortest cable's rest length), lagged by the same line (a drive's
+position loop); venting sets every drive back to zero.
+
 Valves, plant and sensor noise are :class:`cbha_inverse.sim.arm.SimulatedArm`, the plant's
 model errors :func:`cbha_inverse.sim.plant_errors.plant_errors`. Time (ticks, latency, valve lag,
 stamps) is the node clock: with ``use_sim_time`` the plant runs on ``/clock``.
@@ -77,8 +83,8 @@ import time
 
 from cbha_inverse.errors import CONFIG_ERROR_EXIT
 from cbha_inverse.robot.robotino import ARM_VALVES
-from cbha_inverse.robot.safety import (ACTIONS, check_command, command_bounds, StalenessWatch,
-                                       valve_order)
+from cbha_inverse.robot.safety import (ACTIONS, check_command, check_displacement_command,
+                                       command_bounds, StalenessWatch, valve_order)
 from cbha_inverse.ros.common.conversions import (command_array, command_message,
                                                  joint_state, point_stamped)
 from cbha_inverse.ros.common.diagnostics import (DiagnosticsPublisher, make_status, OK,
@@ -98,6 +104,7 @@ from cbha_inverse.sim.arm import SimulatedArm
 from cbha_inverse.sim.plant_errors import plant_errors
 from cbha_inverse.sim.pots import SimulatedPots
 from geometry_msgs.msg import PointStamped
+import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -132,6 +139,11 @@ class CbhaSimParams:
                                unset_type='string_array')
     max_pressure: float = param(150000.0, 'driver limit [Pa]: commands above are rejected',
                                 low=0.0, high=1.0e7, live=True)
+    command_kind: str = param('tension', 'what the commands set: tension (pressure_command, '
+                              'N or Pa) or displacement (tendon_displacement_command: the '
+                              "cables' drive positions [m] from the straight chain, pulled in "
+                              'negative; every actuator a cable with an axial_stiffness)',
+                              choices=('tension', 'displacement'))
     valve_time_constant: float = param(0.01, 'first-order valve response [s] (paper: 10 ms)',
                                        low=0.0, high=10.0, live=True)
     latency: float = param(0.003, 'transport latency command -> valves [s] (paper: 3 ms)',
@@ -251,7 +263,8 @@ class CbhaSimNode(Node):
                                 tip_noise=p.noise_std, pressure_noise=p.pressure_noise_std,
                                 seed=p.seed, tolerance=p.tolerance,
                                 max_iterations=p.max_iterations,
-                                contact_stiffness=p.contact_stiffness)
+                                contact_stiffness=p.contact_stiffness,
+                                command_kind=p.command_kind)
         self.log = ThrottledLog(self.get_logger(), lambda: self.params.log_throttle)
         self.rejected = Rejections(self.log)
         self.accepted = 0
@@ -262,8 +275,17 @@ class CbhaSimNode(Node):
         self.unconverged_since = None   # steady time of the first unconverged update in a row
         self.failures = 0
         self.resets = 0
-        self.vent_command = command_bounds(self.scene.lower_bounds[self.order],
-                                           self.scene.upper_bounds[self.order])[0]
+        if p.command_kind == 'displacement':
+            # a drive's safe state: back to the cables' lengths as built; a command may pull a
+            # cable in or let it out by up to half its shortest rest length
+            self.command_topic = 'tendon_displacement_command'
+            self.vent_command = np.zeros(len(self.order))
+            self.command_reach = 0.5 * float(self.arm.plant.drives.rest_lengths.min())
+        else:
+            self.command_topic = 'pressure_command'
+            self.vent_command = command_bounds(self.scene.lower_bounds[self.order],
+                                               self.scene.upper_bounds[self.order])[0]
+            self.command_reach = None
         # controller loss: a stream of commands (two within the timeout) that stops
         self.command_watch = StalenessWatch(p.controller_loss_timeout)
         self.controller = 'none'    # none (no stream yet), streaming, lost
@@ -277,7 +299,7 @@ class CbhaSimNode(Node):
         self.truth_publisher = self.create_publisher(PointStamped, 'tip/true', MEASURED_QOS)
         self.pressure_publisher = self.create_publisher(Float64MultiArray, 'pressure_measured',
                                                         MEASURED_QOS)
-        self.create_subscription(Float64MultiArray, 'pressure_command', self._on_command,
+        self.create_subscription(Float64MultiArray, self.command_topic, self._on_command,
                                  COMMAND_QOS)
         self.wrenches = WrenchInputs(
             self, p.wrench_frames, self.scene.model.n_links, self.scene.loads, p.frame_id,
@@ -380,13 +402,16 @@ class CbhaSimNode(Node):
         if self.stopped is not None:
             return
         values = command_array(message)
-        check = check_command(values, len(self.order), self.params.max_pressure)
+        if self.command_reach is None:
+            check = check_command(values, len(self.order), self.params.max_pressure)
+        else:
+            check = check_displacement_command(values, len(self.order), self.command_reach)
         if check.reason == 'wrong_length':
             self._count_wrong_length(len(values), check.detail)
             return
         self._end_wrong_length_run()
         if not check.ok:
-            self.rejected.count(check.reason, f'rejected pressure_command: {check.detail}')
+            self.rejected.count(check.reason, f'rejected {self.command_topic}: {check.detail}')
             return
         now = self._node_seconds()
         self.arm.send(now, values)
@@ -408,7 +433,8 @@ class CbhaSimNode(Node):
         limit = self.params.stop_after_wrong_length
         if limit and run + 1 >= limit and self.stopped is None:
             self.stopped = (
-                f'stopping: {run + 1} pressure_command messages in a row have {length} values, '
+                f'stopping: {run + 1} {self.command_topic} messages in a row have {length} '
+                f'values, '
                 f'expected {len(self.order)} (the valves of scene {self.scene.name}): the '
                 'controller and the simulator probably loaded different scenes; give both the '
                 'same scene')
@@ -421,7 +447,7 @@ class CbhaSimNode(Node):
         """Log the wrong-length commands of a run that ended (throttled, as every rejection)."""
         run = self.wrong_length_run[1]
         if run:
-            self.rejected.log.warning('wrong_length', f'rejected pressure_command: '
+            self.rejected.log.warning('wrong_length', f'rejected {self.command_topic}: '
                                       f'{self.wrong_length_detail} ({run} in a row, total '
                                       f'{self.rejected["wrong_length"]})')
         self.wrong_length_run = (None, 0)
@@ -429,7 +455,7 @@ class CbhaSimNode(Node):
     def _mark_command(self, now):
         """Record a valid command at steady time ``now``: two within the timeout are a stream."""
         if self.controller == 'lost':
-            self.get_logger().info('pressure_command arrives again: following it')
+            self.get_logger().info(f'{self.command_topic} arrives again: following it')
             self.controller = 'none'
         if not self.command_watch.stale(now):
             self.controller = 'streaming'
@@ -446,7 +472,7 @@ class CbhaSimNode(Node):
         if action == 'vent':
             self.arm.send(self._node_seconds(), self.vent_command)
         self.get_logger().warning(
-            f'no pressure_command for {self.command_watch.age(now):.2f} s (controller lost): '
+            f'no {self.command_topic} for {self.command_watch.age(now):.2f} s (controller lost): '
             + ('venting, valves to their lower bound' if action == 'vent'
                else 'holding the last set-point'))
 
