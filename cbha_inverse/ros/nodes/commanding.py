@@ -201,6 +201,10 @@ class Commanding:
         targets[indices] = points
         return targets
 
+    def _set(self, targets):
+        """Make (k, 3) targets the node's set-point ((3,) for a single effector)."""
+        self.node._set_target(targets if len(targets) > 1 else targets[0])
+
     def before_tick(self):
         """Move the targets of a running goal or of teleop (the solver's timer, first)."""
         if self.run is not None:
@@ -213,7 +217,7 @@ class Commanding:
         actual = self._actual()
         if run.handle.is_cancel_requested:
             if actual is not None:
-                node._set_target(self._targets_with(run.goal.indices, actual[run.goal.indices]))
+                self._set(self._targets_with(run.goal.indices, actual[run.goal.indices]))
             self._end(run, goals.GoalOutcome(goals.SUCCESSFUL, 'canceled: holding where the '
                                              'effectors are', np.zeros(0)), 'cancel')
             return
@@ -232,11 +236,11 @@ class Commanding:
         elapsed = now - run.started
         outcome = run.monitor.check(elapsed, actual[run.goal.indices])
         if outcome is not None and outcome.code == goals.PATH_TOLERANCE_VIOLATED:
-            node._set_target(self._targets_with(run.goal.indices, actual[run.goal.indices]))
+            self._set(self._targets_with(run.goal.indices, actual[run.goal.indices]))
             self._end(run, outcome, 'abort')
             return
         desired = run.plan.desired(elapsed)
-        node._set_target(self._targets_with(run.goal.indices, desired))
+        self._set(self._targets_with(run.goal.indices, desired))
         run.ticks += 1
         if outcome is not None:
             self._end(run, outcome, 'succeed' if outcome.succeeded else 'abort')
@@ -342,4 +346,4 @@ class Commanding:
             if outside[0] > p.reach_margin and outside[0] > outside[1]:
                 return      # no farther out of the reach: the target stays
         targets[0] = proposed
-        node._set_target(targets)
+        self._set(targets)

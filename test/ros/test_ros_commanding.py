@@ -1,0 +1,153 @@
+"""
+``inverse_solver`` commanded as a manipulator over real DDS (``docs/commanding.md``), open loop.
+
+The trajectory action ``~/follow_trajectory`` (success inside the goal tolerance, a waypoint
+beyond the reach refused with its name and distance, streaming targets refused while a goal
+runs, cancel holds, a new goal preempts), the effector topics ``targets/<effector>`` and the
+teleop topic ``~/delta_twist_cmds`` (the target integrates the velocity, a gap in the commands
+holds it). Open loop: the actual effector is the model's, so the checks need no plant.
+"""
+
+import time
+
+from cbha_inverse.robot import goals
+from cbha_inverse.ros.common.qos import TARGET_QOS
+from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
+from control_msgs.action import FollowJointTrajectory
+from geometry_msgs.msg import PointStamped, TwistStamped
+import numpy as np
+from rclpy.action import ActionClient
+from rclpy.node import Node
+from ros_goal_helpers import send_goal, trajectory_goal, wait_result
+from ros_helpers import make_node, spin_for, spin_until, spinning, target_point
+
+TENDON = 'tendon_6f_8c'
+CENTER = np.array([0.117, 0.0, -0.005])
+"""A tip position well in the tendon trunk's reach [m]."""
+ACTION = 'inverse_solver/follow_trajectory'
+SUCCEEDED, CANCELED, ABORTED = 4, 5, 6
+"""action_msgs/GoalStatus values."""
+
+
+def _solver(context, **params):
+    return make_node(InverseSolverNode, context, scene=TENDON, max_pressure=10.0, **params)
+
+
+def _tip(solver):
+    return solver.solver.effector_positions()[0].copy()
+
+
+def test_a_goal_succeeds_within_its_tolerance_and_one_beyond_reach_is_invalid(rclpy_context):
+    solver = _solver(rclpy_context)
+    client = Node('goal_client', context=rclpy_context, namespace='/cbha')
+    action = ActionClient(client, FollowJointTrajectory, ACTION)
+    targets = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    tip_targets = client.create_publisher(PointStamped, 'targets/tip', TARGET_QOS)
+    feedback = []
+    points = CENTER + [[0.0, 0.01, 0.0], [0.0, 0.01, 0.01], [0.0, 0.0, 0.01]]
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, lambda: action.server_is_ready()
+                          and tip_targets.get_subscription_count() > 0, 10.0)
+        tip_targets.publish(target_point(CENTER))
+        assert spin_until(executor, lambda: solver.target is not None, 5.0)
+        np.testing.assert_array_equal(solver.target, CENTER)
+        handle = send_goal(executor, action, trajectory_goal(
+            'tip', points, [0.5, 1.0, 1.5], goal_tolerance=0.0005), feedback.append)
+        spin_for(executor, 0.3)
+        targets.publish(target_point(CENTER))         # refused: a goal runs
+        status, result = wait_result(executor, handle)
+        final = _tip(solver)
+        assert spin_until(executor, lambda: solver.rejected.get('target.goal_active'), 5.0)
+        far = CENTER + [0.0, 0.0, 0.012]
+        handle = send_goal(executor, action, trajectory_goal(
+            'tip', [far, CENTER + [0.0, 0.12, 0.0]], [1.0, 2.0]))
+        invalid_status, invalid = wait_result(executor, handle)
+        handle = send_goal(executor, action, trajectory_goal('elbow', [CENTER], [1.0]))
+        joints_status, joints = wait_result(executor, handle)
+    assert status == SUCCEEDED and result.error_code == goals.SUCCESSFUL, result.error_string
+    assert np.linalg.norm(final - points[-1]) <= 0.0005
+    assert result.error_string.startswith('reached: tip ')
+    assert feedback and feedback[-1].feedback.multi_dof_joint_names == ['tip']
+    error = feedback[0].feedback.multi_dof_error.transforms[0].translation
+    assert np.isfinite([error.x, error.y, error.z]).all()
+    assert invalid_status == ABORTED and invalid.error_code == goals.INVALID_GOAL
+    assert invalid.error_string.startswith('waypoint 1: tip at [0.117, 0.12, -0.005] m is ')
+    assert 'mm beyond its reachable set' in invalid.error_string
+    assert joints_status == ABORTED and joints.error_code == goals.INVALID_JOINTS
+    assert "unknown effectors ['elbow']" in joints.error_string
+
+
+def test_cancel_holds_where_the_arm_is_and_a_new_goal_preempts(rclpy_context):
+    solver = _solver(rclpy_context)
+    client = Node('goal_client', context=rclpy_context, namespace='/cbha')
+    action = ActionClient(client, FollowJointTrajectory, ACTION)
+    path = CENTER + [[0.0, -0.01, 0.0], [0.0, 0.01, 0.0]]
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, action.server_is_ready, 10.0)
+        handle = send_goal(executor, action, trajectory_goal('tip', path, [0.5, 3.0]))
+        spin_for(executor, 1.5)
+        cancel = handle.cancel_goal_async()
+        assert spin_until(executor, cancel.done, 5.0)
+        status, result = wait_result(executor, handle)
+        at_cancel = _tip(solver)
+        spin_for(executor, 0.5)
+        held = _tip(solver)
+        moved = np.linalg.norm(at_cancel - (CENTER + [0.0, -0.01, 0.0]))
+        first = send_goal(executor, action, trajectory_goal('tip', path, [0.5, 3.0]))
+        spin_for(executor, 1.0)
+        second = send_goal(executor, action, trajectory_goal('tip', [CENTER], [0.5]))
+        first_status, first_result = wait_result(executor, first)
+        second_status, second_result = wait_result(executor, second)
+        final = _tip(solver)
+    assert status == CANCELED and result.error_string.startswith('canceled'), result
+    assert moved > 0.003, 'the goal had not moved before the cancel'
+    assert np.linalg.norm(held - at_cancel) <= 0.001
+    assert first_status == ABORTED and first_result.error_string == 'preempted by a new goal'
+    assert second_status == SUCCEEDED, second_result.error_string
+    assert np.linalg.norm(final - CENTER) <= 0.001
+
+
+def _twist(vy):
+    message = TwistStamped()
+    message.header.frame_id = 'cbha_base'
+    message.twist.linear.y = float(vy)
+    return message
+
+
+def test_teleop_integrates_the_twist_and_a_gap_in_the_commands_holds(rclpy_context):
+    speed = 0.02
+    solver = _solver(rclpy_context, teleop_timeout=0.2)
+    client = Node('teleop_client', context=rclpy_context, namespace='/cbha')
+    targets = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    twists = client.create_publisher(TwistStamped, 'inverse_solver/delta_twist_cmds',
+                                     TARGET_QOS)
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, lambda: twists.get_subscription_count() > 0
+                          and targets.get_subscription_count() > 0, 10.0)
+        targets.publish(target_point(CENTER))
+        spin_for(executor, 0.5)
+        started = time.monotonic()
+        while time.monotonic() < started + 1.0:
+            twists.publish(_twist(speed))
+            spin_for(executor, 0.02)
+        twists.publish(_twist(0.0))
+        ended = time.monotonic()
+        spin_for(executor, 0.5)
+        integrated = CENTER + [0.0, speed * (ended - started), 0.0]
+        after_stream = np.array(solver.target, dtype=float)
+        tip = _tip(solver)
+        # a stream that stops without a zero twist: the target moves until the timeout only
+        gap_start = time.monotonic()
+        while time.monotonic() < gap_start + 0.3:
+            twists.publish(_twist(-speed))
+            spin_for(executor, 0.02)
+        last = time.monotonic()
+        spin_for(executor, 0.3)
+        at_timeout = np.array(solver.target, dtype=float)
+        spin_for(executor, 0.2)
+        held = np.array(solver.target, dtype=float)
+    assert np.linalg.norm(after_stream - integrated) <= 0.001
+    assert np.linalg.norm(tip - integrated) <= 0.001
+    np.testing.assert_array_equal(held, at_timeout)
+    travelled = after_stream[1] - at_timeout[1]
+    assert speed * (last - gap_start) - 0.001 <= travelled <= speed * (last - gap_start + 0.25)
