@@ -11,15 +11,17 @@ holds it). Open loop: the actual effector is the model's, so the checks need no 
 import time
 
 from cbha_inverse.robot import goals
-from cbha_inverse.ros.common.qos import TARGET_QOS
+from cbha_inverse.ros.common.qos import MEASURED_QOS, TARGET_QOS
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
+from cbha_inverse.scene import load_scene
 from control_msgs.action import FollowJointTrajectory
 from geometry_msgs.msg import PointStamped, TwistStamped
 import numpy as np
+import pytest
 from rclpy.action import ActionClient
 from rclpy.node import Node
 from ros_goal_helpers import send_goal, trajectory_goal, wait_result
-from ros_helpers import make_node, spin_for, spin_until, spinning, target_point
+from ros_helpers import make_node, set_parameters, spin_for, spin_until, spinning, target_point
 
 TENDON = 'tendon_6f_8c'
 CENTER = np.array([0.117, 0.0, -0.005])
@@ -151,3 +153,40 @@ def test_teleop_integrates_the_twist_and_a_gap_in_the_commands_holds(rclpy_conte
     np.testing.assert_array_equal(held, at_timeout)
     travelled = after_stream[1] - at_timeout[1]
     assert speed * (last - gap_start) - 0.001 <= travelled <= speed * (last - gap_start + 0.25)
+
+
+@pytest.mark.timing
+def test_closed_loop_goal_reaches_and_a_plant_fault_violates_the_path_tolerance(rclpy_context):
+    """
+    Closed loop on ``cbha_sim``: a goal ends inside its goal tolerance at the plant's true tip;
+    a valve stuck shut mid-path (the plant's ``valve_stuck``) aborts the next goal.
+    """
+    from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
+    names = list(load_scene(TENDON).actuator_names)
+    solver = _solver(rclpy_context, mode='closed', valve_names=names)
+    plant = make_node(CbhaSimNode, rclpy_context, scene=TENDON, valve_names=names,
+                      noise_std=0.0001)
+    client = Node('goal_client', context=rclpy_context, namespace='/cbha')
+    action = ActionClient(client, FollowJointTrajectory, ACTION)
+    truth = []
+    client.create_subscription(PointStamped, 'tip/true', lambda m: truth.append(
+        [m.point.x, m.point.y, m.point.z]), MEASURED_QOS)
+    path = CENTER + [[0.0, 0.005, 0.0], [0.0, 0.005, 0.008]]
+    with spinning(rclpy_context, solver, plant, client) as executor:
+        assert spin_until(executor, lambda: action.server_is_ready() and truth, 10.0)
+        handle = send_goal(executor, action, trajectory_goal(
+            'tip', path, [0.5, 1.0], goal_tolerance=0.001, goal_time_tolerance=2.0))
+        status, result = wait_result(executor, handle)
+        reached = np.array(truth[-1])
+        handle = send_goal(executor, action, trajectory_goal(
+            'tip', [CENTER, CENTER + [0.0, 0.02, 0.0]], [0.5, 1.5], path_tolerance=0.002))
+        spin_for(executor, 0.8)
+        assert set_parameters(plant, valve_stuck=1).successful     # tip_90, pulls toward +y
+        fault_status, fault = wait_result(executor, handle)
+    assert status == SUCCEEDED, result.error_string
+    assert np.linalg.norm(reached - path[-1]) <= 0.001
+    assert fault_status == ABORTED and fault.error_code == goals.PATH_TOLERANCE_VIOLATED
+    # after the fault (0.8 s into the goal), not before: the healthy loop stayed in tolerance
+    at = float(fault.error_string.split('from its path at ')[1].split(' s')[0])
+    assert at >= 0.7, fault.error_string
+    assert solver.decision == 'run'
