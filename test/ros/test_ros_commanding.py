@@ -8,6 +8,8 @@ teleop topic ``~/delta_twist_cmds`` (the target integrates the velocity, a gap i
 holds it). Open loop: the actual effector is the model's, so the checks need no plant.
 """
 
+import subprocess
+import sys
 import time
 
 from cbha_inverse.robot import goals
@@ -21,7 +23,8 @@ import pytest
 from rclpy.action import ActionClient
 from rclpy.node import Node
 from ros_goal_helpers import send_goal, trajectory_goal, wait_result
-from ros_helpers import make_node, set_parameters, spin_for, spin_until, spinning, target_point
+from ros_helpers import (child_env, make_node, REPO_ROOT, set_parameters, spin_for, spin_until,
+                         spinning, target_point)
 
 TENDON = 'tendon_6f_8c'
 CENTER = np.array([0.117, 0.0, -0.005])
@@ -190,3 +193,30 @@ def test_closed_loop_goal_reaches_and_a_plant_fault_violates_the_path_tolerance(
     at = float(fault.error_string.split('from its path at ')[1].split(' s')[0])
     assert at >= 0.7, fault.error_string
     assert solver.decision == 'run'
+
+
+def _goto(executor, *arguments):
+    """Run ``cbha_goto`` as a user does while ``executor`` spins; return (status, output)."""
+    process = subprocess.Popen([sys.executable, '-m', 'cbha_inverse.ros.console.goto',
+                                *arguments], cwd=REPO_ROOT, env=child_env(),
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert spin_until(executor, lambda: process.poll() is not None, 60.0)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    return process.returncode, process.communicate()[0]
+
+
+def test_cbha_goto_exits_0_when_reached_and_1_with_the_reason(rclpy_context):
+    solver = _solver(rclpy_context)
+    with spinning(rclpy_context, solver) as executor:
+        x, y, z = CENTER + [0.0, 0.008, 0.0]
+        reached, output = _goto(executor, str(x), str(y), str(z), '--speed', '0.01',
+                                '--tolerance', '0.0005')
+        final = _tip(solver)
+        refused, refusal = _goto(executor, str(x), '0.12', str(z))
+    assert reached == 0, output
+    assert 'mm to go' in output and 'SUCCESSFUL: reached: tip ' in output
+    assert np.linalg.norm(final - [x, y, z]) <= 0.0005
+    assert refused == 1 and 'INVALID_GOAL: waypoint 0: tip at' in refusal, refusal
