@@ -141,3 +141,22 @@ def test_the_monitor_path_tolerance_success_and_goal_time_tolerance():
     assert reached.succeeded and reached.errors == pytest.approx([0.0008])
     late = monitor.check(2.51, end + [0.0015, 0.0, 0.0])
     assert late.code == goals.GOAL_TOLERANCE_VIOLATED and 'still 1.50 mm' in late.text
+
+
+@pytest.mark.parametrize('shape', ['square', 'circle', 'waypoints'])
+def test_a_trajectory_as_timed_waypoints_follows_its_path_in_time(shape):
+    from cbha_inverse.robot.trajectory import make_trajectory
+    trajectory = make_trajectory(shape, center=(0.2, 0.0, -0.03), radius=0.06, side=0.08,
+                                 speed=0.03, laps=2, start_hold=0.5,
+                                 waypoints=(0.2, 0.0, 0.0, 0.2, 0.03, 0.0, 0.2, 0.03, 0.02))
+    times, points = trajectory.waypoints(max_chord_error=1e-5)
+    assert times[0] == 0.0 and times[-1] == pytest.approx(trajectory.duration)
+    assert np.all(np.diff(times) > 0.0)
+    goal = goals.make_goal(['tip'], ['tip'], times, points[:, None])
+    plan = goals.plan_goal(goal, points[:1], approach_speed=0.01)
+    assert plan.delay == 0.0
+    for t in np.linspace(0.0, trajectory.duration, 977):
+        gap = np.linalg.norm(plan.desired(t)[0] - trajectory.sample(t)[0])
+        assert gap <= (1.5e-5 if shape == 'circle' else 1e-12), (t, gap)
+    with pytest.raises(ValueError, match='endless'):
+        make_trajectory('circle', radius=0.06, laps=0).waypoints()

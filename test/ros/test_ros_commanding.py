@@ -220,3 +220,21 @@ def test_cbha_goto_exits_0_when_reached_and_1_with_the_reason(rclpy_context):
     assert 'mm to go' in output and 'SUCCESSFUL: reached: tip ' in output
     assert np.linalg.norm(final - [x, y, z]) <= 0.0005
     assert refused == 1 and 'INVALID_GOAL: waypoint 0: tip at' in refusal, refusal
+
+
+def test_the_trajectory_node_sends_its_square_as_one_goal(rclpy_context):
+    from cbha_inverse.ros.nodes.trajectory import TrajectoryNode
+    solver = _solver(rclpy_context)
+    path = make_node(TrajectoryNode, rclpy_context, action=True, shape='square', side=0.01,
+                     speed=0.02, laps=1, center=list(CENTER))
+    with spinning(rclpy_context, solver, path) as executor:
+        assert spin_until(executor, path.done.done, 20.0)
+        final = _tip(solver)
+    assert path.done.result() == 0
+    waypoints = path.goal.goal.multi_dof_trajectory.points
+    assert len(waypoints) == 6      # the start, four corners, the start again
+    corner = waypoints[1].transforms[0].translation
+    np.testing.assert_allclose([corner.x, corner.y, corner.z], CENTER + [0.0, 0.005, 0.005])
+    np.testing.assert_allclose(waypoints[-1].time_from_start.sec
+                               + 1e-9 * waypoints[-1].time_from_start.nanosec, 0.04 / 0.02)
+    assert np.linalg.norm(final - (CENTER + [0.0, 0.005, 0.0])) <= 0.001

@@ -132,7 +132,7 @@ class Commanding:
             goal = goals.make_goal(
                 node.scene.effector_names, trajectory.joint_names,
                 [_seconds(point.time_from_start) for point in trajectory.points],
-                self._waypoints(trajectory),
+                self._in_node_frame(trajectory.header.frame_id, self._waypoints(trajectory)),
                 path_tolerance={t.name: t.position for t in request.path_tolerance},
                 goal_tolerance={t.name: t.position for t in request.goal_tolerance},
                 goal_time_tolerance=_seconds(request.goal_time_tolerance),
@@ -166,6 +166,21 @@ class Commanding:
             rows.append([(t.translation.x, t.translation.y, t.translation.z)
                          for t in point.transforms])
         return np.array(rows, dtype=float).reshape(len(rows), k, 3)
+
+    def _in_node_frame(self, frame, positions):
+        """Return waypoints (n, k, 3) of ``frame`` in the node's frame (``/tf_static``)."""
+        node = self.node
+        if not frame or frame == node.params.frame_id:
+            return positions
+        if node.static_tf is None:
+            raise goals.GoalError(goals.INVALID_GOAL, f'waypoints in frame {frame!r}, not '
+                                  f'{node.params.frame_id!r}, and no /tf_static (tf2_msgs)')
+        try:
+            return np.array([[node.static_tf.transform_point(p, frame, node.params.frame_id)
+                              for p in row] for row in positions]).reshape(positions.shape)
+        except (LookupError, ValueError) as exc:
+            raise goals.GoalError(goals.INVALID_GOAL, f'{exc} (publish its transform on '
+                                  '/tf_static, e.g. cbha_static_transform)') from None
 
     @staticmethod
     def _result(code, text):
