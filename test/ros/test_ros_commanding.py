@@ -35,7 +35,8 @@ SUCCEEDED, CANCELED, ABORTED = 4, 5, 6
 
 
 def _solver(context, **params):
-    return make_node(InverseSolverNode, context, scene=TENDON, max_pressure=10.0, **params)
+    return make_node(InverseSolverNode, context, scene=TENDON, max_pressure=10.0,
+                     reach_samples=300, **params)
 
 
 def _tip(solver):

@@ -185,12 +185,14 @@ class InverseSolverParams:
                                                'last waypoint the goal tolerance may take when '
                                                'the goal gives none', low=0.0, high=3600.0,
                                                live=True)
-    reach_samples: int = param(300, 'goals and teleop: actuations sampled for the reachable '
-                               'set of each effector (scene.reach; 0: no reach check)', low=0,
+    reach_samples: int = param(1000, 'goals and teleop: actuations sampled for the reachable '
+                               'set of each effector (scene.reach: its hull lies inside the '
+                               'true reach, finer with more; 0: no reach check)', low=0,
                                high=100000)
-    reach_margin: float = param(0.002, 'a goal waypoint or teleop target up to this far beyond '
-                                'the sampled reachable set is accepted [m]', low=0.0, high=1.0,
-                                live=True)
+    reach_margin: float = param(0.005, 'a goal waypoint or teleop target up to this far beyond '
+                                'the sampled reachable set is accepted [m] (the CBHA: the '
+                                "paper's 60 mm circle is 2.4 mm beyond the hull of 1000 "
+                                'samples)', low=0.0, high=1.0, live=True)
     feedback_every_n_ticks: int = param(10, '~/follow_trajectory feedback every N solver ticks',
                                         low=1, high=100000, live=True)
     teleop_max_speed: float = param(0.05, 'teleop: top speed of the target [m/s] (twist and '
