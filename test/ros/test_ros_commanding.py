@@ -239,3 +239,24 @@ def test_the_trajectory_node_sends_its_square_as_one_goal(rclpy_context):
     np.testing.assert_allclose(waypoints[-1].time_from_start.sec
                                + 1e-9 * waypoints[-1].time_from_start.nanosec, 0.04 / 0.02)
     assert np.linalg.norm(final - (CENTER + [0.0, 0.005, 0.0])) <= 0.001
+
+
+def test_the_pick_and_place_example_runs_its_moves(rclpy_context):
+    solver = _solver(rclpy_context)
+    pick, place = CENTER + [0.0, 0.005, 0.0], CENTER + [0.0, -0.005, 0.0]
+    script = REPO_ROOT / 'docs' / 'examples' / 'pick_and_place.py'
+    process = subprocess.Popen(
+        [sys.executable, str(script), '--pick', *map(str, pick), '--place', *map(str, place),
+         '--lift', '0.005', '--speed', '0.02'], cwd=REPO_ROOT, env=child_env(),
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    with spinning(rclpy_context, solver) as executor:
+        try:
+            assert spin_until(executor, lambda: process.poll() is not None, 60.0)
+        finally:
+            if process.poll() is None:
+                process.kill()
+        final = _tip(solver)
+    output = process.communicate()[0]
+    assert process.returncode == 0, output
+    assert output.count('reached: tip') == 5 and 'open the gripper' in output, output
+    assert np.linalg.norm(final - (place + [0.0, 0.0, 0.005])) <= 0.001

@@ -198,6 +198,7 @@ class Commanding:
         else:
             self.node.get_logger().warn(f'follow_trajectory {how}: {text}')
         run.finished.set_result(self._result(outcome.code, outcome.text))
+        self.node.target_streamed = False   # the end of a goal is a set-point, no stream lost
         if self.run is run:
             self.run = None
 
@@ -343,6 +344,7 @@ class Commanding:
         if time.monotonic() - received > p.teleop_timeout:
             if self.teleop_moving:
                 self.teleop_moving = False
+                node.target_streamed = False    # held on purpose: no stream lost
                 node.get_logger().info(f'teleop: no command for {p.teleop_timeout:g} s, '
                                        'holding the target')
             return
