@@ -1,7 +1,7 @@
 """
 The demo's square sent as one ``~/follow_trajectory`` goal: cross-track error over the whole run.
 
-``python -m cbha_inverse.experiments.action_square [--mode closed] [--seconds 30]`` starts
+``python cbha_inverse/experiments/action_square.py [--mode closed] [--seconds 40]`` starts
 ``cbha_sim`` (the demo's plant: the CBHA scene, 10 % softer than the model), ``inverse_solver``
 (closed loop by default) and ``trajectory --action`` (the paper's square: 80 mm at 3.1 cm/s in
 the y-z plane around the scene's workspace centre, one lap) as processes in ``/cbha``, records
