@@ -17,10 +17,13 @@ def trajectory_goal(effector, points, times, goal_tolerance=0.0, path_tolerance=
     effector : str
         The effector's name.
     points : (n, 3) array_like  [m]
+        The waypoints.
     times : (n,) array_like  [s]
+        Their ``time_from_start``.
     goal_tolerance, path_tolerance : float  [m]
         The effector's tolerances (0: the node's default).
     goal_time_tolerance : float  [s]
+        0: the node's default.
 
     """
     from control_msgs.action import FollowJointTrajectory

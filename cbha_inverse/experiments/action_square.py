@@ -32,8 +32,9 @@ def polyline_distance(points, vertices):
     Parameters
     ----------
     points : (n, 3) array_like  [m]
+        The points.
     vertices : (v, 3) array_like  [m]
-        v >= 2.
+        The polyline, v >= 2.
 
     Returns
     -------
@@ -62,13 +63,10 @@ def main(argv=None):
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray
     ros = ['--ros-args', '-r', '__ns:=/cbha']
-    commands = {
-        'cbha_sim': ['cbha_sim', *ros],
-        'inverse_solver': ['inverse_solver', *ros, '-p', f'mode:={args.mode}'],
-        'trajectory': ['trajectory', '--action', *ros, '-p', 'shape:=square', '-p', 'laps:=1',
+    arguments = {
+        'cbha_sim': ros, 'inverse_solver': [*ros, '-p', f'mode:={args.mode}'],
+        'trajectory': ['--action', *ros, '-p', 'shape:=square', '-p', 'laps:=1',
                        '-p', 'speed:=0.031', '-p', 'side:=0.08']}
-    modules = {'cbha_sim': 'cbha_sim', 'inverse_solver': 'inverse_solver',
-               'trajectory': 'trajectory'}
     context = rclpy.Context()
     rclpy.init(context=context)
     recorder = Node('action_square_recorder', context=context, namespace='/cbha')
@@ -83,8 +81,8 @@ def main(argv=None):
     try:
         for name in ('cbha_sim', 'inverse_solver'):
             processes[name] = subprocess.Popen(
-                [sys.executable, '-m', f'cbha_inverse.ros.nodes.{modules[name]}',
-                 *commands[name][1:]], env=os.environ, stdout=subprocess.DEVNULL,
+                [sys.executable, '-m', f'cbha_inverse.ros.nodes.{name}', *arguments[name]],
+                env=os.environ, stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL)
         deadline = time.monotonic() + 120.0
         while not tips and time.monotonic() < deadline:
@@ -92,7 +90,7 @@ def main(argv=None):
         time.sleep(3.0)     # the solver's warm-up and reachable sets
         processes['trajectory'] = subprocess.Popen(
             [sys.executable, '-m', 'cbha_inverse.ros.nodes.trajectory',
-             *commands['trajectory'][1:]], env=os.environ)
+             *arguments['trajectory']], env=os.environ)
         deadline = time.monotonic() + args.seconds
         while processes['trajectory'].poll() is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
@@ -118,9 +116,10 @@ def main(argv=None):
     path = np.vstack([at_start, square_vertices(CENTER, 0.08, 'yz')])
     window = samples[(samples[:, 0] >= first_command[0]) & (samples[:, 0] <= ended)]
     distance = polyline_distance(window[:, 1:], path)
+    approach = np.linalg.norm(path[1] - path[0])
     print(f'{args.mode} loop, square as one goal (result {status}): {len(window)} tips over '
-          f'{ended - first_command[0]:.1f} s, approach {1e3 * np.linalg.norm(path[1] - path[0]):.1f}'
-          f' mm; cross-track RMS {1e3 * np.sqrt(np.mean(distance ** 2)):.3f} mm, max '
+          f'{ended - first_command[0]:.1f} s, approach {1e3 * approach:.1f} mm; cross-track RMS '
+          f'{1e3 * np.sqrt(np.mean(distance ** 2)):.3f} mm, max '
           f'{1e3 * distance.max():.3f} mm (first 2 s: max '
           f'{1e3 * distance[window[:, 0] < first_command[0] + 2.0].max():.3f} mm)')
     return 0 if status == 0 else 1

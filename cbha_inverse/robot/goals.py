@@ -274,6 +274,7 @@ def interpolate(times, positions, time):
     positions : (n, ...) ndarray
         The knots.
     time : float  [s]
+        When (finite).
 
     Returns
     -------
@@ -305,6 +306,7 @@ def plan_goal(goal, start, approach_speed):
     Parameters
     ----------
     goal : TrajectoryGoal
+        The checked goal.
     start : (k, 3) array_like  [m]
         The goal's effectors now (goal order).
     approach_speed : float  [m/s]

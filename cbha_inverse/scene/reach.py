@@ -108,6 +108,7 @@ class ReachableSet:
         Parameters
         ----------
         points : (n, 3) array_like  [m]
+            The points, in the scene's base frame.
 
         Returns
         -------

@@ -21,7 +21,7 @@ def _goal(times=(1.0, 2.0), positions=None, **kwargs):
 
 
 def _cube_reach(half=0.05):
-    """A reach whose hull is the cube |x|, |y|, |z| <= half [m]."""
+    """Return a reach whose hull is the cube |x|, |y|, |z| <= half [m]."""
     normals = np.vstack([np.eye(3), -np.eye(3)])
     halfspaces = np.hstack([normals, np.full((6, 1), -half)])
     return ReachableSet(effector='tip', actuations=np.zeros((0, 1)), points=np.zeros((0, 3)),

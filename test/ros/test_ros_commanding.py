@@ -162,8 +162,10 @@ def test_teleop_integrates_the_twist_and_a_gap_in_the_commands_holds(rclpy_conte
 @pytest.mark.timing
 def test_closed_loop_goal_reaches_and_a_plant_fault_violates_the_path_tolerance(rclpy_context):
     """
-    Closed loop on ``cbha_sim``: a goal ends inside its goal tolerance at the plant's true tip;
-    a valve stuck shut mid-path (the plant's ``valve_stuck``) aborts the next goal.
+    Closed loop on ``cbha_sim``: a goal reached at the true tip, a stuck valve aborts the next.
+
+    A goal ends inside its goal tolerance at the plant's true tip; a valve stuck shut mid-path
+    (the plant's ``valve_stuck``) aborts the next goal with PATH_TOLERANCE_VIOLATED.
     """
     from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
     names = list(load_scene(TENDON).actuator_names)

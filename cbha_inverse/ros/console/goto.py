@@ -61,7 +61,9 @@ def make_goal(effector, point, tolerance, time_from_start=0.0):
     Parameters
     ----------
     effector : str
+        The effector's name.
     point : (3,) sequence of float  [m]
+        Where, in ``cbha_base``.
     tolerance : float  [m]
         Its goal tolerance.
     time_from_start : float  [s]

@@ -1,5 +1,5 @@
 """
-How ``inverse_solver`` is commanded besides ``target``: effector topics, a trajectory action, teleop.
+``inverse_solver`` commanded besides ``target``: effector topics, a trajectory action, teleop.
 
 The thin rclpy shell of ``docs/commanding.md`` around :mod:`cbha_inverse.robot.goals`, owned by
 :class:`cbha_inverse.ros.nodes.inverse_solver.InverseSolverNode` (``self.commanding``), whose

@@ -325,7 +325,8 @@ class InverseSolverNode(Node):
                                f'{time.perf_counter() - started:.2f} s')
         for warning in self.solver.warnings:
             self.get_logger().warning(f'scene {self.scene.name}: {warning}')
-        self.corrector = TargetCorrector(len(self.scene.effector_names), gain=p.loop_gain if p.mode == 'closed' else 0.0,
+        self.corrector = TargetCorrector(len(self.scene.effector_names),
+                                         gain=p.loop_gain if p.mode == 'closed' else 0.0,
                                          max_correction=p.max_correction)
 
     def _limits(self, p):
@@ -667,8 +668,8 @@ class InverseSolverNode(Node):
     def _publish_markers(self):
         self.marker_publisher.publish(backbone_markers(
             self.solver.state.positions,
-            None if self.target is None else np.reshape(self.target, (-1, 3))[-1], self.get_clock().now().to_msg(),
-            self.params.frame_id))
+            None if self.target is None else np.reshape(self.target, (-1, 3))[-1],
+            self.get_clock().now().to_msg(), self.params.frame_id))
 
     def _publish_tf(self):
         state = self.solver.state

@@ -21,9 +21,9 @@ import sys
 from cbha_inverse.robot.trajectory import make_trajectory, PLANES, SHAPES
 from cbha_inverse.ros.common.conversions import point_stamped
 from cbha_inverse.ros.common.diagnostics import DiagnosticsPublisher, make_status, OK
+from cbha_inverse.ros.common.loading import split_ros_arguments
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import TARGET_QOS
-from cbha_inverse.ros.common.loading import split_ros_arguments
 from cbha_inverse.ros.common.runner import run_node
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
@@ -61,7 +61,7 @@ class TrajectoryParams:
                          'action_server instead of publishing targets, then end')
     action_server: str = param('inverse_solver/follow_trajectory', 'the action (action: true)')
     effector: str = param('tip', 'the effector the goal moves (action: true)')
-    max_chord_error: float = param(1e-5, 'action: largest distance of the goal\'s chords from '
+    max_chord_error: float = param(1e-5, "action: largest distance of the goal's chords from "
                                    'a circle [m]', low=1e-9, high=0.1)
 
 

@@ -1,5 +1,5 @@
 """
-A path sent as one ``FollowJointTrajectory`` goal (``trajectory --action``, ``docs/commanding.md``).
+A path sent as one ``FollowJointTrajectory`` goal (``trajectory --action``, docs/commanding.md).
 
 Thin rclpy shell: the timed waypoints come from :meth:`cbha_inverse.robot.trajectory.
 Trajectory.waypoints`, the goal's semantics are those of :mod:`cbha_inverse.robot.goals`.
@@ -27,8 +27,11 @@ def path_goal(effector, times, points, frame_id='cbha_base'):
     Parameters
     ----------
     effector : str
+        The effector's name.
     times : (n,) array_like  [s]
+        The waypoints' ``time_from_start``.
     points : (n, 3) array_like  [m]
+        The waypoints.
     frame_id : str
         The frame of the points (the header of ``multi_dof_trajectory``).
 
@@ -52,12 +55,11 @@ class PathGoal:
     Parameters
     ----------
     node : rclpy.node.Node
+        The node that sends it.
     server : str
         The action's name (relative names resolve in the node's namespace).
-    effector : str
-    times : (n,) ndarray  [s]
-    points : (n, 3) ndarray  [m]
-    frame_id : str
+    effector, times, points, frame_id
+        As in :func:`path_goal`.
     done : rclpy.task.Future
         Gets 0 when the goal succeeded, 1 otherwise.
 
