@@ -262,3 +262,74 @@ def test_the_pick_and_place_example_runs_its_moves(rclpy_context):
     assert process.returncode == 0, output
     assert output.count('reached: tip') == 5 and 'open the gripper' in output, output
     assert np.linalg.norm(final - (place + [0.0, 0.0, 0.005])) <= 0.001
+
+
+def test_teleop_pose_targets_and_the_speed_limit(rclpy_context):
+    from geometry_msgs.msg import PoseStamped
+    limit = 0.02
+    solver = _solver(rclpy_context, teleop_max_speed=limit)
+    client = Node('teleop_client', context=rclpy_context, namespace='/cbha')
+    targets = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    twists = client.create_publisher(TwistStamped, 'inverse_solver/delta_twist_cmds',
+                                     TARGET_QOS)
+    poses = client.create_publisher(PoseStamped, 'inverse_solver/pose_target_cmds', TARGET_QOS)
+    pose = PoseStamped()
+    pose.header.frame_id = 'cbha_base'
+    goal = CENTER + [0.0, 0.0, 0.006]
+    pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in goal)
+    path = []
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, lambda: poses.get_subscription_count() > 0
+                          and targets.get_subscription_count() > 0, 10.0)
+        targets.publish(target_point(CENTER))
+        spin_for(executor, 0.3)
+        started = time.monotonic()
+        while time.monotonic() < started + 0.6:
+            poses.publish(pose)
+            spin_for(executor, 0.02)
+            path.append(np.array(solver.target, dtype=float))
+        reached = np.array(solver.target, dtype=float)
+        fast = time.monotonic()
+        while time.monotonic() < fast + 0.3:
+            twists.publish(_twist(1.0))         # 50 times the limit
+            spin_for(executor, 0.02)
+        twists.publish(_twist(0.0))
+        pushed = time.monotonic() - fast
+        spin_for(executor, 0.1)
+        after_twist = np.array(solver.target, dtype=float)
+    np.testing.assert_allclose(reached, goal, atol=1e-12)
+    steps = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    assert steps.max() <= limit * 0.1 + 1e-12     # MAX_TELEOP_STEP_S bounds a late tick
+    assert 0.0 < after_twist[1] - reached[1] <= limit * (pushed + 0.05)
+
+
+def test_two_effectors_one_topic_each_and_one_goal_of_both(rclpy_context):
+    """``tendon_10f_16c`` (vertebra_2 and tip): targets/<effector> sets its row, a goal both."""
+    solver = make_node(InverseSolverNode, rclpy_context, scene='tendon_10f_16c',
+                       max_pressure=10.0, reach_samples=0)
+    client = Node('goal_client', context=rclpy_context, namespace='/cbha')
+    mid_targets = client.create_publisher(PointStamped, 'targets/vertebra_2', TARGET_QOS)
+    action = ActionClient(client, FollowJointTrajectory, ACTION)
+    mid, tip = np.array([0.078, 0.002, -0.0067]), np.array([0.1946, 0.004, -0.0288])
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, lambda: action.server_is_ready()
+                          and mid_targets.get_subscription_count() > 0, 10.0)
+        rest = solver.solver.effector_positions().copy()
+        mid_targets.publish(target_point(mid))
+        assert spin_until(executor, lambda: solver.target is not None, 5.0)
+        first = np.array(solver.target)
+        goal = trajectory_goal('tip', [tip], [1.0], goal_tolerance=0.001)
+        goal.multi_dof_trajectory.joint_names = ['vertebra_2', 'tip']
+        point = goal.multi_dof_trajectory.points[0]
+        point.transforms = [type(point.transforms[0])(), point.transforms[0]]
+        point.transforms[0].translation.x, point.transforms[0].translation.y = mid[0], mid[1]
+        point.transforms[0].translation.z = mid[2]
+        goal.goal_tolerance.append(type(goal.goal_tolerance[0])(name='vertebra_2',
+                                                                position=0.001))
+        status, result = wait_result(executor, send_goal(executor, action, goal))
+        final = solver.solver.effector_positions().copy()
+    np.testing.assert_array_equal(first[0], mid)
+    np.testing.assert_array_equal(first[1], rest[1])
+    assert status == SUCCEEDED, result.error_string
+    assert 'vertebra_2' in result.error_string and 'tip' in result.error_string
+    assert np.linalg.norm(final - [mid, tip], axis=1).max() <= 0.001
