@@ -333,3 +333,18 @@ def test_two_effectors_one_topic_each_and_one_goal_of_both(rclpy_context):
     assert status == SUCCEEDED, result.error_string
     assert 'vertebra_2' in result.error_string and 'tip' in result.error_string
     assert np.linalg.norm(final - [mid, tip], axis=1).max() <= 0.001
+
+
+def test_a_goal_is_aborted_when_the_controller_stops(rclpy_context):
+    from std_srvs.srv import Trigger
+    solver = _solver(rclpy_context)
+    client = Node('goal_client', context=rclpy_context, namespace='/cbha')
+    action = ActionClient(client, FollowJointTrajectory, ACTION)
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, action.server_is_ready, 10.0)
+        handle = send_goal(executor, action, trajectory_goal(
+            'tip', [CENTER, CENTER + [0.0, 0.01, 0.0]], [0.5, 2.0]))
+        spin_for(executor, 0.5)
+        solver._safe_state('hold', Trigger.Response())
+        status, result = wait_result(executor, handle)
+    assert status == ABORTED and result.error_string.startswith('controller stopped (hold')

@@ -237,6 +237,11 @@ class Commanding:
             self._end(run, goals.GoalOutcome(goals.SUCCESSFUL, 'canceled: holding where the '
                                              'effectors are', np.zeros(0)), 'cancel')
             return
+        if not node.enabled:
+            self._end(run, goals.GoalOutcome(goals.SUCCESSFUL, f'controller stopped '
+                                             f'({node.stopped}: ~/hold, ~/vent or ~/enable '
+                                             'false)', np.zeros(0)), 'abort')
+            return
         if actual is None:
             return      # closed loop, no measurement yet: the node waits and says so
         now = node._node_seconds()

@@ -29,6 +29,12 @@ without a warning. Every input passes
 :mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
 the last valid command stays. Every command passes
 :class:`cbha_inverse.robot.safety.CommandGate`: never NaN, never outside ``[0, p_max]``.
+
+Besides ``target`` (the first effector's): ``targets/<effector>`` per scene effector, the action
+``~/follow_trajectory`` (control_msgs/FollowJointTrajectory) and the teleop topics
+``~/delta_twist_cmds`` and ``~/pose_target_cmds`` (:mod:`cbha_inverse.ros.nodes.commanding`,
+``docs/commanding.md``); while a goal runs, the streaming topics are refused. A scene with
+several effectors runs in open loop only (the closed loop corrects one measured tip).
 """
 
 from dataclasses import dataclass
