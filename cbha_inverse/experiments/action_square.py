@@ -3,7 +3,7 @@ The demo's square sent as one ``~/follow_trajectory`` goal: cross-track error ov
 
 ``python cbha_inverse/experiments/action_square.py [--mode closed] [--seconds 40]`` starts
 ``cbha_sim`` (the demo's plant: the CBHA scene, 10 % softer than the model), ``inverse_solver``
-(closed loop by default) and ``trajectory --action`` (the paper's square: 80 mm at 3.1 cm/s in
+(closed loop by default) and ``trajectory --action``, each with its installed params file, (the paper's square: 80 mm at 3.1 cm/s in
 the y-z plane around the scene's workspace centre, one lap) as processes in ``/cbha``, records
 ``tip/true`` and ``pressure_command`` here, and prints the cross-track error of the plant's tip
 from the first command to the goal's end, the start included: its distance to the planned path,
@@ -18,6 +18,7 @@ import subprocess
 import sys
 import time
 
+from cbha_inverse.paths import config_path
 from cbha_inverse.robot.trajectory import square_vertices
 import numpy as np
 
@@ -62,11 +63,15 @@ def main(argv=None):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray
-    ros = ['--ros-args', '-r', '__ns:=/cbha']
+    def ros(node):      # the installed params file, as cbha_launch starts a node
+        return ['--ros-args', '-r', '__ns:=/cbha', '--params-file',
+                str(config_path(f'{node}.yaml'))]
+
     arguments = {
-        'cbha_sim': ros, 'inverse_solver': [*ros, '-p', f'mode:={args.mode}'],
-        'trajectory': ['--action', *ros, '-p', 'shape:=square', '-p', 'laps:=1',
-                       '-p', 'speed:=0.031', '-p', 'side:=0.08']}
+        'cbha_sim': ros('cbha_sim'),
+        'inverse_solver': [*ros('inverse_solver'), '-p', f'mode:={args.mode}'],
+        'trajectory': ['--action', *ros('trajectory'), '-p', 'shape:=square', '-p', 'laps:=1',
+                       '-p', 'speed:=0.031', '-p', 'side:=0.08', '-p', 'start_hold:=0.0']}
     context = rclpy.Context()
     rclpy.init(context=context)
     recorder = Node('action_square_recorder', context=context, namespace='/cbha')

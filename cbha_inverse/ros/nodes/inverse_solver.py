@@ -191,9 +191,10 @@ class InverseSolverParams:
                                                'last waypoint the goal tolerance may take when '
                                                'the goal gives none', low=0.0, high=3600.0,
                                                live=True)
-    reach_samples: int = param(1000, 'goals and teleop: actuations sampled for the reachable '
-                               'set of each effector (scene.reach: its hull lies inside the '
-                               'true reach, finer with more; 0: no reach check)', low=0,
+    reach_samples: int = param(0, 'goals and teleop: actuations sampled at start for the '
+                               'reachable set of each effector (scene.reach: its hull lies '
+                               'inside the true reach, finer with more; config/inverse_solver.'
+                               'yaml: 1000, ~1.4 s on the CBHA; 0: no reach check)', low=0,
                                high=100000)
     reach_margin: float = param(0.005, 'a goal waypoint or teleop target up to this far beyond '
                                 'the sampled reachable set is accepted [m] (the CBHA: the '
