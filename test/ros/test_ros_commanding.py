@@ -297,6 +297,11 @@ def test_teleop_pose_targets_and_the_speed_limit(rclpy_context):
         pushed = time.monotonic() - fast
         spin_for(executor, 0.1)
         after_twist = np.array(solver.target, dtype=float)
+        twists.publish(_twist(float('nan')))
+        assert spin_until(executor, lambda: solver.rejected.get('delta_twist_cmds.non_finite'),
+                          5.0)
+        spin_for(executor, 0.1)
+        np.testing.assert_array_equal(solver.target, after_twist)
     np.testing.assert_allclose(reached, goal, atol=1e-12)
     steps = np.linalg.norm(np.diff(path, axis=0), axis=1)
     assert steps.max() <= limit * 0.1 + 1e-12     # MAX_TELEOP_STEP_S bounds a late tick

@@ -83,10 +83,15 @@ class Commanding:
         self.reach = None
         if p.reach_samples:
             started = time.perf_counter()
-            self.reach = [sample_reachable_set(node.scene, p.reach_samples, effector=name)
-                          for name in names]
-            node.get_logger().info(f'reachable sets of {list(names)}: {p.reach_samples} '
-                                   f'samples in {time.perf_counter() - started:.2f} s')
+            try:
+                self.reach = [sample_reachable_set(node.scene, p.reach_samples, effector=name)
+                              for name in names]
+            except (RuntimeError, ValueError) as exc:
+                node.get_logger().warn(f'no reachable set ({exc}): goals and teleop targets '
+                                       'are not checked against the reach')
+            else:
+                node.get_logger().info(f'reachable sets of {list(names)}: {p.reach_samples} '
+                                       f'samples in {time.perf_counter() - started:.2f} s')
         self.run = None
         self.teleop = None          # (kind, vector or point, steady time of the command)
         self.teleop_tick = None     # node time of the last teleop tick
@@ -101,11 +106,6 @@ class Commanding:
         self.server = ActionServer(node, FollowJointTrajectory, '~/follow_trajectory',
                                    self._execute, goal_callback=lambda goal: GoalResponse.ACCEPT,
                                    cancel_callback=lambda handle: CancelResponse.ACCEPT)
-
-    @property
-    def busy(self):
-        """Whether a goal runs (the streaming topics are refused then)."""
-        return self.run is not None
 
     def refused(self, topic):
         """Count and log a streaming message refused because a goal runs; return whether."""
