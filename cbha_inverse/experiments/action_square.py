@@ -3,8 +3,9 @@ The demo's square sent as one ``~/follow_trajectory`` goal: cross-track error ov
 
 ``python cbha_inverse/experiments/action_square.py [--mode closed] [--seconds 40]`` starts
 ``cbha_sim`` (the demo's plant: the CBHA scene, 10 % softer than the model), ``inverse_solver``
-(closed loop by default) and ``trajectory --action``, each with its installed params file, (the paper's square: 80 mm at 3.1 cm/s in
-the y-z plane around the scene's workspace centre, one lap) as processes in ``/cbha``, records
+(closed loop by default) and ``trajectory --action`` (the paper's square: 80 mm at 3.1 cm/s in
+the y-z plane around the scene's workspace centre, one lap) as processes in ``/cbha``, each
+with its installed params file, records
 ``tip/true`` and ``pressure_command`` here, and prints the cross-track error of the plant's tip
 from the first command to the goal's end, the start included: its distance to the planned path,
 the straight approach from where the tip was at the first command to the square's start, then
@@ -63,6 +64,7 @@ def main(argv=None):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray
+
     def ros(node):      # the installed params file, as cbha_launch starts a node
         return ['--ros-args', '-r', '__ns:=/cbha', '--params-file',
                 str(config_path(f'{node}.yaml'))]
