@@ -8,6 +8,7 @@ teleop topic ``~/delta_twist_cmds`` (the target integrates the velocity, a gap i
 holds it). Open loop: the actual effector is the model's, so the checks need no plant.
 """
 
+import signal
 import subprocess
 import sys
 import time
@@ -353,3 +354,25 @@ def test_a_goal_is_aborted_when_the_controller_stops(rclpy_context):
         solver._safe_state('hold', Trigger.Response())
         status, result = wait_result(executor, handle)
     assert status == ABORTED and result.error_string.startswith('controller stopped (hold')
+
+
+def test_ctrl_c_of_cbha_goto_cancels_its_goal_quietly(rclpy_context):
+    solver = _solver(rclpy_context)
+    x, y, z = CENTER + [0.0, 0.01, 0.0]
+    process = subprocess.Popen([sys.executable, '-m', 'cbha_inverse.ros.console.goto', str(x),
+                                str(y), str(z), '--speed', '0.002'], cwd=REPO_ROOT,
+                               env=child_env(), stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True)
+    with spinning(rclpy_context, solver) as executor:
+        try:
+            assert spin_until(executor, lambda: solver.commanding.run is not None
+                              and solver.commanding.run.ticks > 50, 30.0)
+            process.send_signal(signal.SIGINT)
+            assert spin_until(executor, lambda: process.poll() is not None, 20.0)
+        finally:
+            if process.poll() is None:
+                process.kill()
+        assert spin_until(executor, lambda: solver.commanding.run is None, 5.0)
+    output = process.communicate()[0]
+    assert process.returncode == 128 + signal.SIGINT, output
+    assert 'goal canceled, the arm holds' in output and 'Traceback' not in output, output
