@@ -40,6 +40,7 @@ CONSOLE_SCRIPTS = [
     'cbha_launch = cbha_inverse.ros.launch.launcher:main',
     'cbha_status = cbha_inverse.ros.console.status:main',
     'cbha_ctl = cbha_inverse.ros.console.ctl:main',
+    'cbha_goto = cbha_inverse.ros.console.goto:main',
     'cbha_static_transform = cbha_inverse.ros.console.static_transform:main',
     'cbha_scene = cbha_inverse.scene.cli:main',
     'stereo_calibrate = cbha_inverse.vision.calibrate_cli:main',

@@ -133,8 +133,8 @@ def check_point(point, frame_id, expected_frame, box):
         Its header frame.
     expected_frame : str
         The only accepted frame (no TF here: points must already be in the base frame).
-    box : WorkspaceBox
-        Plausible region.
+    box : WorkspaceBox or None
+        Plausible region (None: any finite point, e.g. the end of a velocity vector).
 
     Returns
     -------
@@ -151,7 +151,7 @@ def check_point(point, frame_id, expected_frame, box):
     if frame_id != expected_frame:
         return Check(False, 'wrong_frame',
                      f'frame {frame_id!r} is not the expected {expected_frame!r}')
-    if not box.contains(values):
+    if box is not None and not box.contains(values):
         return Check(False, 'outside_workspace',
                      f'point {[float(f"{v:.6g}") for v in values]} outside the workspace box '
                      f'{list(box.lower)}..{list(box.upper)}')

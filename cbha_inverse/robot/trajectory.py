@@ -270,6 +270,50 @@ class Trajectory:
         """Return whether the trajectory has ended at ``time`` [s] (never for endless paths)."""
         return float(time) >= self.duration
 
+    def waypoints(self, max_chord_error=1e-5):
+        """
+        Return the whole path as timed waypoints, linear in between (one trajectory goal).
+
+        A polyline's vertices are its waypoints; a circle is cut into chords whose sagitta
+        ``r (1 - cos(pi / n))`` stays within ``max_chord_error``. The first waypoint is the
+        start at time 0, a ``start_hold`` adds it again at that time, then every lap follows.
+
+        Parameters
+        ----------
+        max_chord_error : float  [m]
+            Largest distance between a circle and its chords (> 0).
+
+        Returns
+        -------
+        times : (n,) ndarray  [s]
+            Strictly increasing, from 0 to :attr:`duration`.
+        points : (n, 3) ndarray  [m]
+
+        Raises
+        ------
+        ValueError
+            For an endless path (``laps`` 0 of a closed one) or a bad ``max_chord_error``.
+
+        """
+        if not math.isfinite(self.duration):
+            raise ValueError('an endless path (a closed path with laps 0) has no last waypoint')
+        max_chord_error = _positive(max_chord_error, 'max_chord_error')
+        if self.shape == 'circle':
+            ratio = max(-1.0, 1.0 - max_chord_error / self.radius)
+            pieces = max(3, math.ceil(math.pi / math.acos(ratio)))
+            lap = np.linspace(0.0, self.length, pieces + 1)
+        else:
+            lap = np.concatenate([[0.0], np.cumsum(np.linalg.norm(
+                np.diff(self.vertices, axis=0), axis=1))])
+            lap = lap[np.concatenate([[True], np.diff(lap) > 0.0])]   # no zero-length piece
+        laps = self.laps if self.closed else 1
+        arc = np.concatenate([lap] + [lap[1:] + i * self.length for i in range(1, laps)])
+        times = arc / self.speed + self.start_hold
+        if self.start_hold > 0.0:
+            times, arc = np.concatenate([[0.0], times]), np.concatenate([[0.0], arc])
+        return times, self.points_at_arc_length(np.mod(arc, self.length)
+                                                if self.closed else arc)
+
 
 def _check_common(speed, laps, start_hold):
     speed = _positive(speed, 'speed')

@@ -100,6 +100,32 @@ class ReachableSet:
             raise ValueError(f'point must be 3 finite coordinates, got {point!r}')
         return _radii(self.halfspaces, self.flat_planes, p)
 
+    def outside_distance(self, points):
+        """
+        Return how far points lie beyond the hull: the largest signed distance to a facet.
+
+        ``max_f (n_f . p + d_f)`` over the half-spaces: <= 0 inside, > 0 outside, a lower
+        bound of the distance to the hull (exact where the nearest hull point lies inside a
+        facet).
+
+        Parameters
+        ----------
+        points : (n, 3) array_like  [m]
+            The points, in the scene's base frame.
+
+        Returns
+        -------
+        (n,) ndarray  [m]
+            0 for every point when the set has no half-spaces.
+
+        """
+        points = np.asarray(points, dtype=float)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f'points must have shape (n, 3), got {points.shape}')
+        if not len(self.halfspaces):
+            return np.zeros(len(points))
+        return np.max(points @ self.halfspaces[:, :3].T + self.halfspaces[:, 3], axis=1)
+
 
 def sample_reachable_set(scene, samples=DEFAULT_SAMPLES, *, effector=-1, seed=0):
     """

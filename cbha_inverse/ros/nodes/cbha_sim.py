@@ -44,7 +44,8 @@ state is the equilibrium of, as the driver's one message carries both (a pot rea
 last pressures received before it are of the same instant). A fault for tests and demos:
 ``string_pot_stuck`` (a pot index, -1: none) freezes that pot's reading
 ``string_pot_stuck_after`` seconds after the first accepted command (after a ``~/reset``: the
-next one).
+next one). ``valve_stuck`` (a valve index, -1: none; live) keeps that valve at its vent
+set-point whatever it is commanded (a valve stuck shut).
 
 Controller loss: once the commands come as a stream (a valid command within
 ``controller_loss_timeout`` of the previous one, as a controller publishes them at its tick rate),
@@ -200,6 +201,9 @@ class CbhaSimParams:
     string_pot_stuck_after: float = param(0.0, 'fault: the stuck pot freezes this long after '
                                           'the first accepted pressure_command [s]', low=0.0,
                                           high=1.0e6)
+    valve_stuck: int = param(-1, 'fault: index of the valve (valve_names order) stuck shut at '
+                             'its vent set-point whatever it is commanded, -1: none', low=-1,
+                             high=63, live=True)
     camera_rig: str = param('cameras/rig.yaml', 'stereo output: rig file (a path, or relative '
                             'to config/)')
     camera_rate_hz: float = param(30.0, 'stereo output: frame rate [Hz]', low=0.1, high=1000.0)
@@ -414,6 +418,10 @@ class CbhaSimNode(Node):
             self.rejected.count(check.reason, f'rejected {self.command_topic}: {check.detail}')
             return
         now = self._node_seconds()
+        stuck = self.params.valve_stuck
+        if 0 <= stuck < len(values):
+            values = values.copy()
+            values[stuck] = self.vent_command[stuck]
         self.arm.send(now, values)
         self.accepted += 1
         if self.first_command_time is None:

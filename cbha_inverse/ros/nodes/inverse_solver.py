@@ -31,6 +31,12 @@ without a warning. Every input passes
 :mod:`cbha_inverse.robot.safety` first; a rejected message is counted and logged (throttled) and
 the last valid command stays. Every command passes
 :class:`cbha_inverse.robot.safety.CommandGate`: never NaN, never outside ``[0, p_max]``.
+
+Besides ``target`` (the first effector's): ``targets/<effector>`` per scene effector, the action
+``~/follow_trajectory`` (control_msgs/FollowJointTrajectory) and the teleop topics
+``~/delta_twist_cmds`` and ``~/pose_target_cmds`` (:mod:`cbha_inverse.ros.nodes.commanding`,
+``docs/commanding.md``); while a goal runs, the streaming topics are refused. A scene with
+several effectors runs in open loop only (the closed loop corrects one measured tip).
 """
 
 from dataclasses import dataclass
@@ -62,6 +68,7 @@ from cbha_inverse.ros.common.runner import run_node
 from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
 from cbha_inverse.ros.common.tf_listener import make_static_listener
 from cbha_inverse.ros.common.wrenches import wrench_frames, WrenchInputs
+from cbha_inverse.ros.nodes.commanding import Commanding
 from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -177,6 +184,37 @@ class InverseSolverParams:
                                    'ros2_control thread_priority; refused without root or '
                                    'CAP_SYS_NICE: a warning); 0 = the normal scheduler',
                                    low=0, high=MAX_REALTIME_PRIORITY)
+    # commanding (docs/commanding.md, cbha_inverse.ros.nodes.commanding)
+    approach_speed: float = param(0.02, '~/follow_trajectory: top speed [m/s] of the approach '
+                                  'from where the effectors are to the first waypoint (later '
+                                  'waypoints are delayed for it)', low=1e-4, high=10.0,
+                                  live=True)
+    default_path_tolerance: float = param(0.0, '~/follow_trajectory: path tolerance [m] of an '
+                                          'effector the goal gives none (0: unchecked)',
+                                          low=0.0, high=10.0, live=True)
+    default_goal_tolerance: float = param(0.001, '~/follow_trajectory: goal tolerance [m] of '
+                                          'an effector the goal gives none (0: unchecked)',
+                                          low=0.0, high=10.0, live=True)
+    default_goal_time_tolerance: float = param(1.0, '~/follow_trajectory: time [s] after the '
+                                               'last waypoint the goal tolerance may take when '
+                                               'the goal gives none', low=0.0, high=3600.0,
+                                               live=True)
+    reach_samples: int = param(0, 'goals and teleop: actuations sampled at start for the '
+                               'reachable set of each effector (scene.reach: its hull lies '
+                               'inside the true reach, finer with more; config/inverse_solver.'
+                               'yaml: 1000, ~1.4 s on the CBHA; 0: no reach check)', low=0,
+                               high=100000)
+    reach_margin: float = param(0.005, 'a goal waypoint or teleop target up to this far beyond '
+                                'the sampled reachable set is accepted [m] (the CBHA: the '
+                                "paper's 60 mm circle is 2.4 mm beyond the hull of 1000 "
+                                'samples)', low=0.0, high=1.0, live=True)
+    feedback_every_n_ticks: int = param(10, '~/follow_trajectory feedback every N solver ticks',
+                                        low=1, high=100000, live=True)
+    teleop_max_speed: float = param(0.05, 'teleop: top speed of the target [m/s] (twist and '
+                                    'pose commands)', low=1e-4, high=10.0, live=True)
+    teleop_timeout: float = param(0.2, 'teleop: the target stops (holds) when no command came '
+                                  'for this long [s] (steady clock)', low=0.001, high=60.0,
+                                  live=True)
 
 
 class InverseSolverNode(Node):
@@ -267,6 +305,7 @@ class InverseSolverNode(Node):
         self.create_service(Trigger, '~/vent', lambda request, response: self._safe_state(
             'vent', response))
         self.create_service(Trigger, '~/reset', self._on_reset)
+        self.commanding = Commanding(self)
         self.timer = self.create_timer(self.period, self._on_timer)
         self.watchdog_timer = self.create_timer(self.period, self._on_watchdog,
                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -288,9 +327,10 @@ class InverseSolverNode(Node):
         """Load the scene, build the solver and the command order and bounds."""
         p = self.params
         self.scene = load_scene(p.scene)
-        if len(self.scene.effector_names) != 1:
+        if len(self.scene.effector_names) != 1 and p.mode == 'closed':
             raise ValueError(f'scene {self.scene.name} has effectors '
-                             f'{list(self.scene.effector_names)}; this node drives exactly one')
+                             f'{list(self.scene.effector_names)}; the closed loop drives exactly '
+                             'one (one measured tip)')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
         wrench_frames(p.wrench_frames, self.scene.model.n_links)  # refused here, not later
         self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(p)
@@ -304,7 +344,8 @@ class InverseSolverNode(Node):
                                f'{time.perf_counter() - started:.2f} s')
         for warning in self.solver.warnings:
             self.get_logger().warning(f'scene {self.scene.name}: {warning}')
-        self.corrector = TargetCorrector(1, gain=p.loop_gain if p.mode == 'closed' else 0.0,
+        self.corrector = TargetCorrector(len(self.scene.effector_names),
+                                         gain=p.loop_gain if p.mode == 'closed' else 0.0,
                                          max_correction=p.max_correction)
 
     def _limits(self, p):
@@ -337,7 +378,7 @@ class InverseSolverNode(Node):
             timer.timer_period_ns = int(round(self.period * 1e9))
 
     # inputs ---------------------------------------------------------------------------------
-    def _accepted_point(self, topic, message):
+    def _accepted_point(self, topic, message, check_box=True):
         """Return the checked point of a message, or None (rejection counted and logged)."""
         # the message's three floats, an array only once accepted (docs/nodes.md, "Latency")
         values = point_values(message)
@@ -350,7 +391,7 @@ class InverseSolverNode(Node):
                                      f'/tf_static, e.g. cbha_static_transform)')
                 return None
             frame = self.params.frame_id
-        check = check_point(values, frame, self.params.frame_id, self.box)
+        check = check_point(values, frame, self.params.frame_id, self.box if check_box else None)
         if check.ok:
             return np.array(values)
         self._count_rejected(topic, check.reason, check.detail)
@@ -400,22 +441,33 @@ class InverseSolverNode(Node):
         self.solver.set_actuator_gain(in_scene_order, self.params.max_gain_change or None)
         self._prepare()
 
-    def _on_target(self, message):
+    def _on_target(self, message, effector=0, topic='target'):
+        """Take a target of one effector (``target``: the first; ``targets/<name>``)."""
         received = time.perf_counter()
         received_cpu = time.thread_time()
-        point = self._accepted_point('target', message)
+        if self.commanding.refused(topic):
+            return
+        point = self._accepted_point(topic, message)
         if point is None:
             return
-        self.target = point
-        self.target_history.add(stamp_ns(message.header.stamp), point)
-        now = time.monotonic()
-        # a stream: this target came within target_timeout of the one before
-        self.target_streamed = not self.target_watch.stale(now)
-        self.target_watch.mark(now)
+        if len(self.scene.effector_names) > 1:
+            point = self.commanding._targets_with([effector], point)
+        self._set_target(point, stamp_ns(message.header.stamp))
         if self.params.trigger == 'target' and self._decide() == 'run':
             published, published_cpu = self._solve_and_publish()
             self.latencies.add(published - received)
             self.latency_cpu.add(published_cpu - received_cpu)
+
+    def _set_target(self, point, stamp=None):
+        """Make ``point`` ((3,) or (k, 3) [m]) the set-point, current from ``stamp`` [ns]."""
+        if stamp is None:
+            stamp = self.get_clock().now().nanoseconds
+        self.target = point
+        self.target_history.add(stamp, point)
+        now = time.monotonic()
+        # a stream: this target came within target_timeout of the one before
+        self.target_streamed = not self.target_watch.stale(now)
+        self.target_watch.mark(now)
 
     def _on_measured(self, message):
         point = self._accepted_point('tip/measured', message)
@@ -483,6 +535,7 @@ class InverseSolverNode(Node):
 
     def _on_timer(self):
         """Tick on the node clock: solve when no target was solved during the last period."""
+        self.commanding.before_tick()
         if self._decide() == 'run' and (
                 self.params.trigger == 'timer'
                 or self._node_seconds() - self._last_solve >= 0.9 * self.period):
@@ -620,6 +673,13 @@ class InverseSolverNode(Node):
         self.command_publisher.publish(self.command_bytes.serialize(command))
         self.published += 1
 
+    def destroy_node(self):
+        """Destroy the action server, then the node."""
+        commanding = getattr(self, 'commanding', None)
+        if commanding is not None:
+            commanding.destroy()
+        super().destroy_node()
+
     # outputs --------------------------------------------------------------------------------
     def _at_bounds(self):
         """Return the valves whose last command is at its lower and at its upper bound."""
@@ -631,8 +691,9 @@ class InverseSolverNode(Node):
 
     def _publish_markers(self):
         self.marker_publisher.publish(backbone_markers(
-            self.solver.state.positions, self.target, self.get_clock().now().to_msg(),
-            self.params.frame_id))
+            self.solver.state.positions,
+            None if self.target is None else np.reshape(self.target, (-1, 3))[-1],
+            self.get_clock().now().to_msg(), self.params.frame_id))
 
     def _publish_tf(self):
         state = self.solver.state

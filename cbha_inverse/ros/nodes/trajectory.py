@@ -7,6 +7,12 @@ Thin node around :mod:`cbha_inverse.robot.trajectory`. Topic ``target`` (relativ
 (so ``use_sim_time`` follows ``/clock``) from the first tick. Bad parameters stop the node at start
 with a message that names the parameter and a non-zero exit code. ``rate_hz`` and
 ``wait_for_subscribers`` are live (``set_parameters``); the path is fixed at start.
+
+``action: true`` (or ``trajectory --action``) sends the whole path instead as one goal of
+``action_server`` (control_msgs/FollowJointTrajectory, :meth:`cbha_inverse.robot.trajectory.
+Trajectory.waypoints` of the effector ``effector``; ``docs/commanding.md``) once the server is
+there, logs its feedback every second and ends with its result: exit 0 when it succeeded, 1
+otherwise. The path needs an end then (``laps`` > 0 for a closed one).
 """
 
 from dataclasses import dataclass
@@ -15,11 +21,13 @@ import sys
 from cbha_inverse.robot.trajectory import make_trajectory, PLANES, SHAPES
 from cbha_inverse.ros.common.conversions import point_stamped
 from cbha_inverse.ros.common.diagnostics import DiagnosticsPublisher, make_status, OK
+from cbha_inverse.ros.common.loading import split_ros_arguments
 from cbha_inverse.ros.common.params import declare_parameters, param, ParameterError
 from cbha_inverse.ros.common.qos import TARGET_QOS
 from cbha_inverse.ros.common.runner import run_node
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
+from rclpy.task import Future
 
 NODE_NAME = 'trajectory'
 
@@ -49,6 +57,12 @@ class TrajectoryParams:
     wait_for_subscribers: int = param(0, 'publish nothing (and keep the clock at 0) until this '
                                       'many subscriptions match target', low=0, high=1000,
                                       live=True)
+    action: bool = param(False, 'send the path as one FollowJointTrajectory goal of '
+                         'action_server instead of publishing targets, then end')
+    action_server: str = param('inverse_solver/follow_trajectory', 'the action (action: true)')
+    effector: str = param('tip', 'the effector the goal moves (action: true)')
+    max_chord_error: float = param(1e-5, "action: largest distance of the goal's chords from "
+                                   'a circle [m]', low=1e-9, high=0.1)
 
 
 class TrajectoryNode(Node):
@@ -76,9 +90,14 @@ class TrajectoryNode(Node):
                 p.shape, center=p.center, radius=p.radius, side=p.side, plane=p.plane,
                 speed=p.speed, waypoints=p.waypoints, loop=p.loop, laps=p.laps,
                 start_hold=p.start_hold)
+            if self.params.action:
+                self.waypoints = self.trajectory.waypoints(self.params.max_chord_error)
         except ValueError as exc:
             self.destroy_node()
             raise ParameterError(f'invalid parameters: {exc}') from None
+        if self.params.action:
+            self._start_action()
+            return
         self.publisher = self.create_publisher(PointStamped, 'target', TARGET_QOS)
         self._start = None
         self.published = 0
@@ -90,8 +109,18 @@ class TrajectoryNode(Node):
             f'{self.params.rate_hz:g} Hz on {self.publisher.topic_name} '
             f'(frame {self.params.frame_id})')
 
+    def _start_action(self):
+        """Send the path as one goal once its server is there; ``done`` gets the exit code."""
+        from cbha_inverse.ros.nodes.trajectory_action import PathGoal
+        self.done = Future()
+        self.goal = PathGoal(self, self.params.action_server, self.params.effector,
+                             *self.waypoints, self.params.frame_id, self.done)
+
     def _apply_parameters(self, old, new):
         """Apply a change of the live parameters (checked by :func:`declare_parameters`)."""
+        if self.params.action:
+            self.params = new
+            return
         self.timer.timer_period_ns = int(round(1e9 / new.rate_hz))
         self.params = new
 
@@ -137,6 +166,11 @@ def main(argv=None):
         0 on a clean shutdown, 2 on invalid parameters.
 
     """
+    argv = list(sys.argv if argv is None else argv)
+    own, ros = split_ros_arguments(argv[1:])
+    if '--action' in own:       # the shortcut of -p action:=true
+        own.remove('--action')
+        argv = [argv[0], *own, *(ros or ['--ros-args']), '-p', 'action:=true']
     return run_node(TrajectoryNode, NODE_NAME, argv, params_class=TrajectoryParams)
 
 

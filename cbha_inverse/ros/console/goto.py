@@ -1,0 +1,233 @@
+"""
+``cbha_goto X Y Z``: move one effector of ``inverse_solver`` to a point and wait (its action).
+
+Sends one ``~/follow_trajectory`` goal (``docs/commanding.md``): the effector ``--effector``
+(default ``tip``) to (X, Y, Z) [m] in ``cbha_base``, with ``--tolerance`` as its goal tolerance,
+and prints its progress on one line (the effector's distance to the point, to its path, and the
+actuators at a bound) until the goal ends. Without ``--speed`` the node's ``approach_speed``
+bounds the motion; with it, the first feedback gives where the effector is and the goal is sent
+again with its time set for that speed (never faster than ``approach_speed``).
+
+Exit status: 0 reached within the tolerance; 1 not reached (the goal refused, e.g. beyond the
+reach, or a tolerance violated: the reason on stderr), no action server within ``--timeout`` or
+no feedback for that long while the goal runs; 2 bad arguments; 128 + the signal number after
+SIGINT/SIGTERM, which cancels the goal first (the arm holds where it is). ROS arguments after
+``--ros-args`` (``-r __ns:=/left``). ``--help`` starts no ROS.
+"""
+
+import argparse
+import math
+import os
+import signal
+import sys
+import time
+
+from cbha_inverse.robot.goals import CODE_NAMES, SUCCESSFUL
+from cbha_inverse.ros.common.loading import loaded, split_ros_arguments
+
+PROGRAM = 'cbha_goto'
+POLL_S = 0.05
+"""Longest spin slice [s]: how soon a stop signal or an answer is noticed."""
+SUCCEEDED = 4
+"""action_msgs/GoalStatus of a goal that succeeded."""
+
+
+def _parser():
+    parser = argparse.ArgumentParser(
+        prog=PROGRAM, description=__doc__.strip().splitlines()[0],
+        epilog='Exit status: 0 reached, 1 not reached, 2 bad arguments, 130 Ctrl-C. ROS '
+        'arguments after --ros-args (e.g. -r __ns:=/left).')
+    for axis in 'XYZ':
+        parser.add_argument(axis.lower(), metavar=axis, type=float, help=f'{axis} [m] in '
+                            'cbha_base')
+    parser.add_argument('--effector', default='tip', help='the effector (default tip)')
+    parser.add_argument('--speed', type=float, default=None,
+                        help="top speed [m/s] (default: the node's approach_speed)")
+    parser.add_argument('--tolerance', type=float, default=0.001,
+                        help='goal tolerance [m] (default 0.001)')
+    parser.add_argument('--timeout', type=float, default=10.0,
+                        help='seconds to wait for the node, and for the result beyond the '
+                        'motion (default 10)')
+    parser.add_argument('--node', default='inverse_solver',
+                        help='the controller node (default inverse_solver, in /cbha)')
+    parser.add_argument('-n', '--namespace', default='/cbha', help='its namespace')
+    return parser
+
+
+def make_goal(effector, point, tolerance, time_from_start=0.0):
+    """
+    Return the FollowJointTrajectory goal of one effector to one point.
+
+    Parameters
+    ----------
+    effector : str
+        The effector's name.
+    point : (3,) sequence of float  [m]
+        Where, in ``cbha_base``.
+    tolerance : float  [m]
+        Its goal tolerance.
+    time_from_start : float  [s]
+        When it is due (0: at the node's approach speed).
+
+    """
+    from control_msgs.action import FollowJointTrajectory
+    from control_msgs.msg import JointTolerance
+    from geometry_msgs.msg import Transform, Vector3
+    from rclpy.duration import Duration
+    from trajectory_msgs.msg import MultiDOFJointTrajectoryPoint
+    goal = FollowJointTrajectory.Goal()
+    goal.multi_dof_trajectory.joint_names = [effector]
+    waypoint = MultiDOFJointTrajectoryPoint()
+    x, y, z = (float(v) for v in point)
+    waypoint.transforms = [Transform(translation=Vector3(x=x, y=y, z=z))]
+    waypoint.time_from_start = Duration(seconds=float(time_from_start)).to_msg()
+    goal.multi_dof_trajectory.points = [waypoint]
+    goal.goal_tolerance = [JointTolerance(name=effector, position=float(tolerance))]
+    return goal
+
+
+def progress_line(feedback, point):
+    """Return the one-line progress of a feedback message toward ``point`` (3,) [m]."""
+    actual = feedback.multi_dof_actual.transforms[0].translation
+    error = feedback.multi_dof_error.transforms[0].translation
+    left = math.dist((actual.x, actual.y, actual.z), point)
+    off = math.sqrt(error.x ** 2 + error.y ** 2 + error.z ** 2)
+    saturated = ','.join(feedback.joint_names) or 'none'
+    return (f'{feedback.multi_dof_joint_names[0]}: {1e3 * left:7.2f} mm to go, '
+            f'{1e3 * off:6.2f} mm off the path, at a bound: {saturated}')
+
+
+class _Goal:
+    """One goal's handle, last feedback and result future."""
+
+    def __init__(self):
+        self.sent = None
+        self.handle = None
+        self.result = None
+        self.feedback = None
+
+
+def run(args, ros_args, out=sys.stdout):
+    """Send the goal and wait for it; return the exit status."""
+    import rclpy
+    from cbha_inverse.ros.common.runner import StopRequest
+    from control_msgs.action import FollowJointTrajectory
+    from rclpy.action import ActionClient
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.signals import SignalHandlerOptions
+    point = (args.x, args.y, args.z)
+    loaded()
+    with StopRequest() as stop:
+        context = rclpy.Context()
+        rclpy.init(args=[PROGRAM, *ros_args], context=context,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        node = Node(f'cbha_goto_{os.getpid()}', namespace=args.namespace,
+                    context=context, start_parameter_services=False, enable_rosout=False)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        name = args.node if args.node.startswith('/') else (
+            f"{node.get_namespace().rstrip('/')}/{args.node}")
+        client = ActionClient(node, FollowJointTrajectory, f'{name}/follow_trajectory')
+
+        def spin_until(done, timeout):
+            deadline = time.monotonic() + timeout
+            while not done() and not stop.requested and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=POLL_S)
+            return done()
+
+        def send(time_from_start):
+            goal = _Goal()
+            goal.sent = client.send_goal_async(
+                make_goal(args.effector, point, args.tolerance, time_from_start),
+                feedback_callback=lambda message: setattr(goal, 'feedback', message.feedback))
+            return goal
+
+        try:
+            if not spin_until(client.server_is_ready, args.timeout):
+                if stop.requested:
+                    return 128 + signal.Signals[stop.signal_name].value
+                print(f'{PROGRAM}: no action server {name}/follow_trajectory within '
+                      f'{args.timeout:g} s', file=sys.stderr)
+                return 1
+            goal = send(0.0)
+            resent = args.speed is None
+            heard = time.monotonic()
+            while not stop.requested:
+                if time.monotonic() - heard > args.timeout:
+                    print(f'\n{PROGRAM}: no feedback from {name} for {args.timeout:g} s',
+                          file=sys.stderr)
+                    return 1
+                if goal.handle is None and goal.sent.done():
+                    goal.handle = goal.sent.result()
+                    goal.result = goal.handle.get_result_async()
+                if goal.result is not None and goal.result.done():
+                    break
+                if goal.feedback is not None:
+                    heard = time.monotonic()
+                    print('\r' + progress_line(goal.feedback, point), end='', file=out,
+                          flush=True)
+                    if not resent:
+                        resent = True
+                        actual = goal.feedback.multi_dof_actual.transforms[0].translation
+                        distance = math.dist((actual.x, actual.y, actual.z), point)
+                        goal = send(distance / args.speed)
+                        continue
+                    goal.feedback = None
+                executor.spin_once(timeout_sec=POLL_S)
+            if stop.requested:
+                if goal.handle is not None:
+                    cancel = goal.handle.cancel_goal_async()
+                    spin_until(cancel.done, 2.0)
+                print(f'\n{PROGRAM}: stopped by {stop.signal_name}: goal canceled, the arm '
+                      'holds', file=sys.stderr)
+                return 128 + signal.Signals[stop.signal_name].value
+            answer = goal.result.result().result
+            print('', file=out)
+            text = f'{CODE_NAMES.get(answer.error_code, answer.error_code)}: {answer.error_string}'
+            if answer.error_code == SUCCESSFUL and goal.result.result().status == SUCCEEDED:
+                print(text, file=out, flush=True)
+                return 0
+            print(f'{PROGRAM}: {text}', file=sys.stderr)
+            return 1
+        finally:
+            client.destroy()
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+
+
+def main(argv=None):
+    """
+    Run ``cbha_goto``.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments (default ``sys.argv[1:]``); ROS arguments after ``--ros-args``.
+
+    Returns
+    -------
+    int
+        See the module docstring.
+
+    """
+    own, ros_args = split_ros_arguments(sys.argv[1:] if argv is None else argv)
+    args = _parser().parse_args(own)
+    for name in ('speed', 'tolerance', 'timeout'):
+        value = getattr(args, name)
+        if value is not None and not (math.isfinite(value) and value > 0.0):
+            print(f'{PROGRAM}: error: --{name} must be a positive number', file=sys.stderr)
+            return 2
+    if not all(math.isfinite(v) for v in (args.x, args.y, args.z)):
+        print(f'{PROGRAM}: error: X Y Z must be finite', file=sys.stderr)
+        return 2
+    try:
+        return run(args, ros_args)
+    except KeyboardInterrupt:        # a second signal
+        print(f'{PROGRAM}: stopped', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())
