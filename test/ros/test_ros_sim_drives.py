@@ -5,16 +5,21 @@ The plant (tendon_6f_8c with its stiffness error) takes ``tendon_displacement_co
 displacements that hold a set of tensions in the plant's own forward model put ``tip/true`` where
 that model puts the tip under those tensions; a command outside the drives' reach, a NaN and a
 command on ``pressure_command`` change nothing (the first two rejected and counted).
+``inverse_solver`` with the same ``command_kind`` drives it to a target as it drives tensions.
 """
 
 import math
 
-from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS
+from cbha_inverse.ros.common.conversions import point_stamped
+from cbha_inverse.ros.common.qos import COMMAND_QOS, MEASURED_QOS, TARGET_QOS
 from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
+from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
+from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PointStamped
 import numpy as np
+import pytest
 from rclpy.node import Node
-from ros_helpers import make_node, sim_plant_scene, spin_until, spinning
+from ros_helpers import make_node, sim_plant_scene, spin_for, spin_until, spinning
 from std_msgs.msg import Float64MultiArray
 
 TENSIONS = np.array([3.0, 0.0, 0.0, 1.5, 0.0, 2.0, 0.0, 0.5])
@@ -58,3 +63,29 @@ def test_the_sim_driven_by_displacement_reaches_the_pose_of_the_tensions(rclpy_c
     np.testing.assert_array_equal(after, reached)
     assert set(sim.rejected) == {'out_of_range', 'non_finite'}
     assert sim.accepted == 1
+
+
+@pytest.mark.parametrize('command_kind', ['tension', 'displacement'])
+def test_the_inverse_drives_tendons_by_tension_or_by_position_to_the_target(rclpy_context,
+                                                                           command_kind):
+    """Open loop on the nominal plant: either command reaches the target within 0.1 mm."""
+    sim = make_node(CbhaSimNode, rclpy_context, scene='tendon_6f_8c', noise_std=0.0,
+                    stiffness_scale=1.0, command_kind=command_kind)
+    solver = make_node(InverseSolverNode, rclpy_context, scene='tendon_6f_8c', mode='open',
+                       command_kind=command_kind)
+    client = Node('client', context=rclpy_context, namespace='/cbha')
+    targets = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    tips = []
+    client.create_subscription(PointStamped, 'tip/true', lambda m: tips.append(
+        np.array([m.point.x, m.point.y, m.point.z])), MEASURED_QOS)
+    nominal = load_scene('tendon_6f_8c')
+    target = nominal.forward(0.3 * nominal.upper_bounds, strict=True).effector_positions[-1]
+    with spinning(rclpy_context, sim, solver, client) as executor:
+        assert spin_until(executor, lambda: targets.get_subscription_count() == 1 and tips,
+                          10.0)
+        for _ in range(150):        # 1.5 s of targets at 100 Hz
+            targets.publish(point_stamped(target, client.get_clock().now().to_msg(), 'cbha_base'))
+            spin_for(executor, 0.01)
+        reached = tips[-1]
+    assert np.linalg.norm(reached - target) < 0.1e-3, 1e3 * (reached - target)
+    assert sim.accepted > 50 and not sim.rejected

@@ -8,7 +8,9 @@ one stiffness factor per scene section) and ``actuator_gain_topic`` (Float64Mult
 per valve) into the model's loads, links and cavities, and for each entry of ``wrench_frames``
 ``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped: a load on that frame,
 :mod:`cbha_inverse.ros.common.wrenches`);
-publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable),
+publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable;
+with ``command_kind: displacement`` ``tendon_displacement_command``, the tendon drives' positions
+[m] that hold the tick's tensions at the model's state),
 ``/diagnostics`` (~1 Hz), ``backbone`` (MarkerArray) and, every ``tf_every_n_ticks`` ticks, the
 model frames and the tip on ``/tf`` (:mod:`cbha_inverse.ros.common.tf`; needs tf2_msgs).
 
@@ -109,6 +111,11 @@ class InverseSolverParams:
                                unset_type='string_array')
     max_pressure: float = param(150000.0, 'p_max [Pa] ceiling of every command (1.5 bar)',
                                 low=0.0, high=1.0e7, live=True)
+    command_kind: str = param('tension', 'tension: publish pressure_command (the actuation, N '
+                              'or Pa); displacement: publish tendon_displacement_command, the '
+                              "tendon drives' positions [m] that hold the tick's tensions at the "
+                              "model's state (every actuator a cable with an axial_stiffness)",
+                              choices=('tension', 'displacement'))
     target_timeout: float = param(0.5, 'a target older than this is reported stale [s] '
                                   '(steady clock; it stays the set-point, the model keeps '
                                   'converging to it)', low=0.001, high=3600.0, live=True)
@@ -280,7 +287,8 @@ class InverseSolverNode(Node):
         # for a core (docs/nodes.md, "Latency")
         self.latency_cpu = TimingStats()
         self.command_publisher = self.create_publisher(
-            Float64MultiArray, 'pressure_command', COMMAND_WRITER_QOS)
+            Float64MultiArray, 'pressure_command' if self.drives is None
+            else 'tendon_displacement_command', COMMAND_WRITER_QOS)
         # the command's serialized message, its pressures replaced per command
         self.command_bytes = SerializedCommand(self.valve_names)
         self.marker_publisher = self.create_publisher(MarkerArray, 'backbone', MARKER_QOS)
@@ -333,6 +341,13 @@ class InverseSolverNode(Node):
                              'one (one measured tip)')
         self.valve_names, self.order = valve_order(self.scene.actuator_names, p.valve_names)
         wrench_frames(p.wrench_frames, self.scene.model.n_links)  # refused here, not later
+        self.drives = None
+        if p.command_kind == 'displacement':
+            self.drives = self.scene.tendon_drives
+            if self.drives is None or len(self.drives.names) != len(self.order) or not all(
+                    np.isfinite(self.drives.axial_stiffness)):
+                raise ValueError(f'command_kind displacement: scene {self.scene.name} needs '
+                                 'every actuator a cable with a finite axial_stiffness')
         self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(p)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
@@ -552,7 +567,7 @@ class InverseSolverNode(Node):
         if action == 'hold':
             self._publish(self.command)
         elif action == 'vent':
-            self._publish(self.vent_command)
+            self._publish(self.vent_command, vent=True)
 
     def _on_enable(self, request, response):
         """``~/enable``: false stops ticking and does ``on_disable``, true resumes."""
@@ -570,7 +585,7 @@ class InverseSolverNode(Node):
         self.enabled, self.stopped = False, action
         self._decide()
         if action == 'vent':
-            self._publish(self.vent_command)     # at once, then at rate_hz by the watchdog
+            self._publish(self.vent_command, vent=True)  # at once, then by the watchdog
         response.success = True
         held = 'holding the last command' if self.published else 'nothing to hold (no command yet)'
         response.message = (f'disabled: {"venting" if action == "vent" else held} until '
@@ -660,8 +675,14 @@ class InverseSolverNode(Node):
         self.statuses['exception'] = self.statuses.get('exception', 0) + 1
         self.log.error('exception', f'{what}: {exc!r}')
 
-    def _publish(self, command):
-        """Publish a command through the last gate; one that is not finite: the last again."""
+    def _publish(self, command, vent=False):
+        """
+        Publish a command through the last gate; one that is not finite: the last again.
+
+        With ``command_kind`` displacement the gated tensions go out as the drives' positions
+        that hold them at the model's state (venting: every drive back to zero, the cables'
+        lengths as built).
+        """
         try:
             command = self.gate(command)
         except ValueError as exc:
@@ -670,8 +691,18 @@ class InverseSolverNode(Node):
                                 error=True)
             command = self.command
         self.command = command
+        if self.drives is not None:
+            command = self._displacements(command, vent)
         self.command_publisher.publish(self.command_bytes.serialize(command))
         self.published += 1
+
+    def _displacements(self, command, vent):
+        """Return the drives' positions [m], valve order, that hold a tension command."""
+        if vent:
+            return np.zeros(len(self.order))
+        tensions = np.empty(len(self.order))
+        tensions[self.order] = command
+        return self.drives.displacements(self.solver.state, tensions)[self.order]
 
     def destroy_node(self):
         """Destroy the action server, then the node."""
