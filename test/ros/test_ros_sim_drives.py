@@ -66,8 +66,7 @@ def test_the_sim_driven_by_displacement_reaches_the_pose_of_the_tensions(rclpy_c
 
 
 @pytest.mark.parametrize('command_kind', ['tension', 'displacement'])
-def test_the_inverse_drives_tendons_by_tension_or_by_position_to_the_target(rclpy_context,
-                                                                           command_kind):
+def test_the_inverse_drives_tendons_by_tension_or_by_position(rclpy_context, command_kind):
     """Open loop on the nominal plant: either command reaches the target within 0.1 mm."""
     sim = make_node(CbhaSimNode, rclpy_context, scene='tendon_6f_8c', noise_std=0.0,
                     stiffness_scale=1.0, command_kind=command_kind)
