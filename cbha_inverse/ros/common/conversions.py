@@ -257,6 +257,41 @@ def command_array(message):
     return np.asarray(message.data, dtype=float).reshape(-1)
 
 
+def plain_marker(stamp, frame_id, namespace, marker_id, kind, rgba):
+    """
+    Return an ADD ``visualization_msgs/Marker`` of one colour (pose and scale left to the caller).
+
+    Parameters
+    ----------
+    stamp : builtin_interfaces.msg.Time
+        Header stamp.
+    frame_id : str
+        Header frame.
+    namespace : str
+        Marker namespace.
+    marker_id : int
+        Marker id within the namespace.
+    kind : int
+        ``Marker.SPHERE``, ``Marker.ARROW``, ...
+    rgba : (4,) sequence of float
+        Colour, 0..1.
+
+    Returns
+    -------
+    visualization_msgs.msg.Marker
+
+    """
+    item = Marker()
+    item.header.stamp = stamp
+    item.header.frame_id = frame_id
+    item.ns = namespace
+    item.id = marker_id
+    item.type = kind
+    item.action = Marker.ADD
+    item.color.r, item.color.g, item.color.b, item.color.a = (float(v) for v in rgba)
+    return item
+
+
 def backbone_markers(positions, target, stamp, frame_id, namespace='backbone'):
     """
     Build the RViz markers of the model backbone and the current target.
@@ -281,17 +316,9 @@ def backbone_markers(positions, target, stamp, frame_id, namespace='backbone'):
 
     """
     def marker(marker_id, kind, scale, rgb):
-        item = Marker()
-        item.header.stamp = stamp
-        item.header.frame_id = frame_id
-        item.ns = namespace
-        item.id = marker_id
-        item.type = kind
-        item.action = Marker.ADD
+        item = plain_marker(stamp, frame_id, namespace, marker_id, kind, (*rgb, 1.0))
         item.pose.orientation.w = 1.0
         item.scale.x = item.scale.y = item.scale.z = scale
-        item.color.r, item.color.g, item.color.b = rgb
-        item.color.a = 1.0
         return item
 
     points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in positions]

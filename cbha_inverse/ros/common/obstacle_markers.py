@@ -26,6 +26,7 @@ import math
 
 from cbha_inverse.core.obstacles import check_names, Obstacle
 from cbha_inverse.core.so3 import matrix_from_quat, quat_from_matrix
+from cbha_inverse.ros.common.conversions import plain_marker
 from geometry_msgs.msg import Point
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -112,19 +113,6 @@ def _equal(*values):
     return max(values) - min(values) <= _SAME_SCALE * max(values)
 
 
-def _marker(stamp, frame_id, namespace, marker_id, kind, rgba):
-    """Return an ADD marker of one colour."""
-    item = Marker()
-    item.header.stamp = stamp
-    item.header.frame_id = frame_id
-    item.ns = namespace
-    item.id = marker_id
-    item.type = kind
-    item.action = Marker.ADD
-    item.color.r, item.color.g, item.color.b, item.color.a = rgba
-    return item
-
-
 def _posed(item, position, rotation):
     """Set a marker's pose from a position (3,) and a rotation matrix."""
     item.pose.position.x, item.pose.position.y, item.pose.position.z = map(float, position)
@@ -167,7 +155,7 @@ def obstacle_markers(obstacles, stamp, frame_id, rgba=(0.55, 0.45, 0.35, 0.6)):
     markers = [clear]
 
     def add(kind, position, rotation, scale):
-        item = _marker(stamp, frame_id, 'obstacles', len(markers), kind, rgba)
+        item = plain_marker(stamp, frame_id, 'obstacles', len(markers), kind, rgba)
         markers.append(_scaled(_posed(item, position, rotation), *scale))
 
     for obstacle in obstacles:
@@ -213,7 +201,8 @@ def contact_markers(contacts, stamp, frame_id, metres_per_newton):
     markers = [clear]
     for frame, name, point, force in zip(contacts.frames, contacts.obstacles, contacts.points,
                                          contacts.forces):
-        item = _marker(stamp, frame_id, name, int(frame), Marker.ARROW, (1.0, 0.2, 0.1, 1.0))
+        item = plain_marker(stamp, frame_id, name, int(frame), Marker.ARROW,
+                            (1.0, 0.2, 0.1, 1.0))
         item.pose.orientation.w = 1.0
         tip = point + metres_per_newton * force
         item.points = [Point(x=float(point[0]), y=float(point[1]), z=float(point[2])),
