@@ -83,13 +83,40 @@ class FrameTree:
         Raises
         ------
         LookupError
-            If a frame is unknown or the two frames are in separate trees (the message names
-            them).
+            As :meth:`transform`.
 
         """
         p = np.asarray(point, dtype=float).reshape(3)
         if source == target:
             return p.copy()
+        rotation, translation = self.transform(source, target)
+        return rotation @ p + translation
+
+    def transform(self, source, target):
+        """
+        Return the transform of ``source`` coordinates into ``target``: ``p_t = R p_s + t``.
+
+        Parameters
+        ----------
+        source, target : str
+            Frame names.
+
+        Returns
+        -------
+        rotation : (3, 3) ndarray
+            ``source``'s axes in ``target``'s.
+        translation : (3,) ndarray  [m]
+            ``source``'s origin in ``target``.
+
+        Raises
+        ------
+        LookupError
+            If a frame is unknown or the two frames are in separate trees (the message names
+            them).
+
+        """
+        if source == target:
+            return np.eye(3), np.zeros(3)
         known = self.frames
         for frame in (source, target):
             if frame not in known:
@@ -100,8 +127,7 @@ class FrameTree:
         if root_s != root_t:
             raise LookupError(f'no transform between {source!r} and {target!r}: their trees '
                               f'have the roots {root_s!r} and {root_t!r}')
-        in_root = rotation_s @ p + translation_s
-        return rotation_t.T @ (in_root - translation_t)
+        return rotation_t.T @ rotation_s, rotation_t.T @ (translation_s - translation_t)
 
     def _to_root(self, frame):
         """Return the root of ``frame``'s tree and the frame's rotation and origin in it."""

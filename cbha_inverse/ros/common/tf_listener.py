@@ -56,6 +56,10 @@ class StaticTfListener:
         """Return ``point`` of frame ``source`` in ``target`` (``FrameTree.transform_point``)."""
         return self.frames.transform_point(point, source, target)
 
+    def transform(self, source, target):
+        """Return ``source``'s rotation and origin in ``target`` (``FrameTree.transform``)."""
+        return self.frames.transform(source, target)
+
 
 def make_static_listener(node):
     """

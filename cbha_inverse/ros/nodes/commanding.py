@@ -8,6 +8,9 @@ spin_until_stopped`): no lock is needed between the action, the topics and the s
 
 - ``targets/<effector>`` (PointStamped, one topic per scene effector): that effector's target;
   ``target`` is the first effector's. An effector without a target yet holds its model position.
+- ``target_poses/<effector>`` (PoseStamped; ``target_pose``: the first effector's): its position
+  and, for an ``axis`` or ``pose`` effector (``docs/effectors.md``), the orientation it
+  constrains.
 - ``~/follow_trajectory`` (control_msgs/action/FollowJointTrajectory, its
   ``multi_dof_trajectory``): the goal is checked (:func:`cbha_inverse.robot.goals.make_goal`,
   against each effector's reachable set), then at every solver tick its path sets the targets
@@ -26,6 +29,8 @@ spin_until_stopped`): no lock is needed between the action, the topics and the s
 import math
 import time
 
+from cbha_inverse.core.actuation.effectors import rotation_of_quaternion
+from cbha_inverse.core.so3 import quat_from_matrix
 from cbha_inverse.robot import goals
 from cbha_inverse.ros.common.qos import TARGET_QOS
 from cbha_inverse.scene.reach import sample_reachable_set
@@ -101,6 +106,14 @@ class Commanding:
                 PointStamped, f'targets/{name}',
                 lambda message, i=index, n=name: node._on_target(message, i, f'targets/{n}'),
                 TARGET_QOS)
+            node.create_subscription(
+                PoseStamped, f'target_poses/{name}',
+                lambda message, i=index, n=name: self._on_target_pose(message, i,
+                                                                      f'target_poses/{n}'),
+                TARGET_QOS)
+        node.create_subscription(
+            PoseStamped, 'target_pose',
+            lambda message: self._on_target_pose(message, 0, 'target_pose'), TARGET_QOS)
         node.create_subscription(TwistStamped, '~/delta_twist_cmds', self._on_twist, TARGET_QOS)
         node.create_subscription(PoseStamped, '~/pose_target_cmds', self._on_pose, TARGET_QOS)
         self.server = ActionServer(node, FollowJointTrajectory, '~/follow_trajectory',
@@ -319,6 +332,48 @@ class Commanding:
                     return None
             return ends[0] - ends[1]
         return np.array(values, dtype=float)
+
+    def _on_target_pose(self, message, effector, topic):
+        """
+        Take a pose target of one effector: its position, and the orientation it constrains.
+
+        A ``pose`` effector's frame turns to the message's orientation, an ``axis`` effector's
+        axis to where that orientation carries it (the effector's ``axis`` rotated by it); a
+        ``point`` effector takes the position only. A pose in another frame than the node's
+        ``frame_id`` is transformed by ``/tf_static``, or refused as a point is.
+        """
+        node = self.node
+        if self.refused(topic):
+            return
+        stamped = PointStamped()
+        stamped.header = message.header
+        position = message.pose.position
+        stamped.point.x, stamped.point.y, stamped.point.z = position.x, position.y, position.z
+        if node._accepted_point(topic, stamped) is None:
+            return
+        effectors = node.solver.effectors
+        kind = effectors.kinds[effector]
+        if kind != 'point':
+            q = message.pose.orientation
+            try:
+                rotation = rotation_of_quaternion([q.x, q.y, q.z, q.w], f'{topic} orientation')
+                frame = message.header.frame_id or node.params.frame_id
+                if frame != node.params.frame_id:
+                    # the frame is known: the position passed the same transform above
+                    rotation = node.static_tf.transform(frame, node.params.frame_id)[0] @ rotation
+                directions, quaternions = node.solver.orientation_targets
+                if kind == 'axis':
+                    directions[effectors.axis_effectors.index(effector)] = (
+                        rotation @ effectors.axes[effector])
+                    node.solver.set_orientation_targets(directions=directions)
+                else:
+                    quaternions[effectors.pose_effectors.index(effector)] = quat_from_matrix(
+                        rotation)
+                    node.solver.set_orientation_targets(quaternions=quaternions)
+            except ValueError as exc:
+                node._count_rejected(topic, 'bad_orientation', str(exc))
+                return
+        node._on_target(stamped, effector, topic)
 
     def _on_pose(self, message):
         if self.refused('pose_target_cmds'):
