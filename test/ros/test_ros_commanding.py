@@ -160,6 +160,43 @@ def test_teleop_integrates_the_twist_and_a_gap_in_the_commands_holds(rclpy_conte
     assert speed * (last - gap_start) - 0.001 <= travelled <= speed * (last - gap_start + 0.25)
 
 
+def test_a_20_s_scripted_twist_stream_ends_at_its_integral(rclpy_context):
+    """A twist turning on a 8 mm circle for 2.5 turns (20 s): target and tip at its integral."""
+    radius, period, duration = 0.008, 8.0, 20.0
+    solver = _solver(rclpy_context, teleop_timeout=0.2)
+    client = Node('teleop_client', context=rclpy_context, namespace='/cbha')
+    targets = client.create_publisher(PointStamped, 'target', TARGET_QOS)
+    twists = client.create_publisher(TwistStamped, 'inverse_solver/delta_twist_cmds',
+                                     TARGET_QOS)
+    omega = 2.0 * np.pi / period
+    integral = np.zeros(3)
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, lambda: twists.get_subscription_count() > 0
+                          and targets.get_subscription_count() > 0, 10.0)
+        targets.publish(target_point(CENTER))
+        spin_for(executor, 0.5)
+        started = sent = time.monotonic()
+        velocity = np.zeros(3)
+        while sent < started + duration:
+            now = time.monotonic()
+            integral += velocity * (now - sent)     # the last twist held since it was sent
+            sent = now
+            phase = omega * (now - started)
+            velocity = radius * omega * np.array([0.0, -np.sin(phase), np.cos(phase)])
+            message = _twist(velocity[1])
+            message.twist.linear.z = float(velocity[2])
+            twists.publish(message)
+            spin_for(executor, 0.02)
+        integral += velocity * (time.monotonic() - sent)
+        twists.publish(_twist(0.0))
+        spin_for(executor, 0.5)
+        target = np.array(solver.target, dtype=float)
+        tip = _tip(solver)
+    assert np.linalg.norm(integral) > 0.015     # half a turn short of closing: 2 r away
+    assert np.linalg.norm(target - (CENTER + integral)) <= 0.001, target - CENTER - integral
+    assert np.linalg.norm(tip - target) <= 0.001, tip - target
+
+
 @pytest.mark.timing
 def test_closed_loop_goal_reaches_and_a_plant_fault_violates_the_path_tolerance(rclpy_context):
     """
