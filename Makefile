@@ -21,14 +21,16 @@ KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py
   test/core/test_core_so3.py test/core/test_core_actuation.py test/core/test_core_sensors.py \
   test/core/test_core_statics.py test/core/test_solver_paths.py test/core/test_core_records.py \
   test/estimate/test_estimate_filter.py test/estimate/test_estimate_shape.py \
+  test/core/test_core_effector_orientation.py \
   test/report/test_report_tick_flops.py::test_the_multiply_add_chains_follow_their_closed_form
 # with the JIT off: the tests of numba's compiled signatures and allocations have nothing to
-# check, and the long estimation runs repeat what the short ones cover
+# check, and the long estimation runs and the random poses repeat what the short ones cover
 KERNEL_DESELECT ?= test/core/test_core_linalg_btd.py::test_compiled_accepts_strided_and_read_only_blocks \
   test/core/test_core_tick.py::test_a_thousand_ticks_allocate_nothing_but_their_results \
   test/estimate/test_estimate_shape.py::test_a_softer_plant_is_a_weight_error_not_a_tip_bias \
   test/estimate/test_estimate_shape.py::test_the_weight_error_and_a_tip_payload_are_two_unknowns \
-  test/estimate/test_estimate_filter.py::test_the_filter_averages_the_pot_noise_at_a_held_pose
+  test/estimate/test_estimate_filter.py::test_the_filter_averages_the_pot_noise_at_a_held_pose \
+  test/core/test_core_effector_orientation.py::test_random_reachable_poses_are_reached_open_loop
 COVERAGE_ARGS ?= --cov=cbha_inverse
 # the timing phase measures its pytest process only (test/coverage_timing.cfg: no subprocess patch)
 TIMING_COVERAGE_ARGS ?= $(COVERAGE_ARGS) --cov-config=test/coverage_timing.cfg
