@@ -54,6 +54,11 @@ def test_every_node_has_a_console_script():
     assert {'trajectory', 'inverse_solver', 'cbha_sim'} <= set(NODES)
 
 
+FILE_ONLY = {('inverse_solver', 'reach_samples'): 1000}
+"""Shipped values that differ from the code's on purpose: a bare node (and every test) samples
+no reachable set (~1.4 s on the CBHA), a launched one checks goals against 1000 samples."""
+
+
 @pytest.mark.parametrize('node', PLAIN_NODES)
 def test_code_defaults_equal_the_shipped_params_file(node):
     shipped = _file_parameters(node)
@@ -63,7 +68,7 @@ def test_code_defaults_equal_the_shipped_params_file(node):
     assert set(shipped) <= set(declared), f'unknown in the file: {set(shipped) - set(declared)}'
     assert with_default <= set(shipped), f'not in the file: {with_default - set(shipped)}'
     for name, value in shipped.items():
-        default = declared[name]
+        default = FILE_ONLY.get((node, name), declared[name])
         expected = list(default) if isinstance(default, tuple) else default
         assert value == expected and type(value) is type(expected), (
             f'{node}.{name}: file {value!r}, code {default!r}')
