@@ -344,7 +344,9 @@ class Scene:
         cbha_inverse.core.inverse.solver.InverseSolver
             Starts at rest; ``step(targets (k, 3))`` returns a ``TickResult`` (``axis`` and
             ``pose`` effectors: ``step(targets, directions=..., quaternions=...)``); its
-            ``set_section_stiffness`` takes one factor per entry of :attr:`section_links`.
+            ``set_section_stiffness`` takes one factor per entry of :attr:`section_links`; the
+            scene's :attr:`obstacles` and :attr:`collision` spheres give its obstacle rows
+            (``docs/obstacles.md``).
 
         """
         merged = {**self._solver_defaults, **options}
@@ -353,4 +355,5 @@ class Scene:
                 np.asarray(merged['rate_limit'], dtype=float), (len(self.actuator_names),)))
         return InverseSolver(self.model, self.actuators, self.effectors, gravity=self.gravity,
                              options=InverseOptions(**merged), sections=self.section_links,
-                             loads=self.loads)
+                             loads=self.loads, obstacles=self.obstacles,
+                             collision=self.collision)

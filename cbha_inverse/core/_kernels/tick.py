@@ -24,8 +24,9 @@ import math
 from cbha_inverse.core._kernels.block_band import (block_backward, block_cholesky_forward,
                                                    block_forward, first_nonzero_rows)
 from cbha_inverse.core._kernels.evaluation import evaluate
-from cbha_inverse.core._kernels.projection import (effector_jacobian_into, effector_points_into,
-                                                   free_gaps_into, orientation_errors_into,
+from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_jacobian_into,
+                                                   effector_points_into, free_gaps_into,
+                                                   orientation_errors_into,
                                                    project_effectors_into, target_status,
                                                    tick_outcome_into)
 from cbha_inverse.core._kernels.qp import (active_set_box_qp_into, bounds_binding_into,
@@ -292,6 +293,55 @@ def project_tick(tick):
     qp_hessians_into(tick.w_ea, tick.w_aa, tick.scale, tick.energy_weight, tick.proximal_weight,
                      tick.row_weights, tick.hessian, tick.tracking, tick.weighted_w)
     return residual_norm
+
+
+@numba.njit(cache=True)
+def project_points_of(tick, frames, offsets, levers, columns, starts, w_pa, w_aa, offset,
+                      moved):
+    """
+    Project points on the frames (the collision spheres' centres) as effector points, in place.
+
+    The rows of ``W_pa = J_p K⁻¹ J_aᵀ`` and the free points ``p + J_p K⁻¹ r - W_pa λ_prev`` of
+    the tick's linearisation (eq. 11 for these points, ``docs/obstacles.md``): ``J_pᵀ`` by
+    :func:`~cbha_inverse.core._kernels.projection.effector_columns_into`, its forward sweep by
+    the block factor when ``solved`` holds half-solves, then
+    :func:`~cbha_inverse.core._kernels.projection.project_effectors_into`, as for the effectors.
+
+    Parameters
+    ----------
+    tick : TickRecord
+        A linearisation (:func:`linearise_tick` or the fallback chain's ``project_tick``).
+    frames : (s,) int ndarray
+        Frame of every point (1..n).
+    offsets : (s, 3) ndarray  [m]
+        The points in their frame's axes.
+    levers : (s, 3) ndarray  [m]
+        Workspace: ``R_f o``.
+    columns : (6n, 3s) ndarray
+        Workspace: ``J_pᵀ``, then ``L⁻¹ J_pᵀ``.
+    starts : (3s,) int ndarray
+        Workspace: the first nonzero row of each column.
+    w_pa : (3s, m) ndarray  [m/Pa, m/N]
+        Receives ``W_pa``.
+    w_aa : (m, m) ndarray
+        Workspace (``W_aa`` again).
+    offset : (3s,) ndarray  [m]
+        Receives ``p + J_p K⁻¹ r - W_pa λ_prev``: the points' linear model is
+        ``offset + W_pa λ``.
+    moved : (3s, m + 1) ndarray
+        Workspace: ``J_p K⁻¹ [r, J_aᵀ]``.
+
+    """
+    half = tick.half_solved[0]
+    effector_columns_into(tick.rotations, frames, offsets, levers, columns)
+    if half:
+        first_nonzero_rows(columns, starts)
+        block_forward(tick.system.blocks[:tick.solved.shape[0] // 6], columns, starts)
+    # 3s rows, all position rows: the rotational rows' effectors are not read
+    project_effectors_into(tick.solved, tick.system.rhs, columns, half, tick.column_starts,
+                           tick.positions, tick.rotations, frames, offsets,
+                           tick.orientation_effectors, tick.linearised, w_pa, w_aa, offset,
+                           moved)
 
 
 @numba.njit(cache=True)

@@ -1,11 +1,12 @@
 """
 Episodes of a controller's abnormal tick statuses, so that each is reported once, not per tick.
 
-A tick whose state is off equilibrium (``'not_converged'``) or whose target lies outside the
-actuators' reach (``'unreachable'``) is a condition the user must hear of, but at 100 Hz one
+A tick whose state is off equilibrium (``'not_converged'``), whose obstacle rows cannot all hold
+(``'obstacle'``, ``docs/obstacles.md``) or whose target lies outside the actuators' reach
+(``'unreachable'``) is a condition the user must hear of, but at 100 Hz one
 line per tick would bury everything else. :class:`StatusEpisodes` turns the ticks' statuses
-into episodes: one starts at the first tick of either condition and ends after ``clear_ticks``
-consecutive ticks with neither, so a status flickering at a threshold, or between the two
+into episodes: one starts at the first tick of any condition and ends after ``clear_ticks``
+consecutive ticks with none, so a status flickering at a threshold, or between two
 conditions (a target at the edge of the reach), stays one episode. An episode keeps, per
 condition, its ticks, last and worst figure (the distance in metres the condition is measured
 by), and names the condition most of its ticks had. A node logs the start and the end of each
@@ -15,7 +16,7 @@ episode and reports the ongoing one in its diagnostics.
 from dataclasses import dataclass, field
 import math
 
-CONDITIONS = ('not_converged', 'unreachable')
+CONDITIONS = ('not_converged', 'obstacle', 'unreachable')
 """The tick statuses that start or extend an episode."""
 
 

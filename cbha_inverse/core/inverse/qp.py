@@ -40,6 +40,7 @@ which bounds saturate the tracking. The arithmetic runs in the compiled kernels 
 :mod:`cbha_inverse.core._kernels.qp`.
 """
 
+import math
 from typing import NamedTuple
 
 from cbha_inverse.core._kernels import qp as qp_kernels
@@ -177,6 +178,9 @@ _STATUS = {
     'PROXQP_NOT_RUN': 'not_run',
 }
 
+_INFINITY = 1e20
+"""proxsuite's infinite bound."""
+
 _ACTIVE_SET_STATUS = {
     qp_kernels.SOLVED: 'solved',
     qp_kernels.MAX_ITERATIONS: 'max_iterations',
@@ -286,6 +290,113 @@ class ProxsuiteQP:
         if ok:
             x = polish(problem, x)
         return QPSolution(x, status, int(info.iter), ok)
+
+
+class RowsQP:
+    """
+    The actuation QP with inequality rows ``A x + b ≥ 0`` [m], each with a slack, by proxsuite.
+
+    The obstacle rows of a tick (:mod:`cbha_inverse.core.inverse.obstacle_rows`) in the
+    dimensionless ``x = λ / σ``: ``A = G σ``, ``b = c``. A row that cannot hold (the arm pushed
+    against an obstacle by its bounds or by other rows) must not make the QP infeasible: each
+    row ``i`` has a slack ``s_i ≥ 0`` [m], ``A_i x + b_i + s_i ≥ 0``, charged
+    ``½ ρ s_i² / ν`` (``ν`` the tracking term's normaliser: a metre of slack costs ``ρ`` times a
+    metre of tracking gap). In proxsuite's variables the slack is ``s = ℓ t``,
+    ``ℓ = sqrt(ν / ρ)``, so ``t`` enters the Hessian with 1. The box of ``x`` stays a box,
+    ``t ≥ 0`` joins it. One proxsuite object per number of rows, warm-started from its previous
+    result.
+
+    Parameters
+    ----------
+    n_actuators : int
+        ``m``.
+    eps_abs : float
+        Absolute tolerance of the normalised problem.
+    max_iterations : int
+        proxsuite iteration limit.
+
+    """
+
+    def __init__(self, n_actuators, eps_abs=1e-10, max_iterations=1000):
+        """Start without proxsuite objects."""
+        self.n_actuators = int(n_actuators)
+        self.eps_abs = float(eps_abs)
+        self.max_iterations = int(max_iterations)
+        self.reset()
+
+    def reset(self):
+        """Forget the warm starts."""
+        self._qps = {}
+
+    def _qp(self, rows):
+        """Return the proxsuite object of ``rows`` rows and whether it was solved before."""
+        found = self._qps.get(rows)
+        if found is None:
+            qp = proxsuite.proxqp.dense.QP(self.n_actuators + rows, 0, rows, True)
+            qp.settings.eps_abs = self.eps_abs
+            qp.settings.eps_rel = 0.0
+            qp.settings.max_iter = self.max_iterations
+            qp.settings.verbose = False
+            found = self._qps[rows] = [qp, False]
+        return found
+
+    def solve(self, problem, rows, constant, normaliser, weight):
+        """
+        Solve a :class:`QPProblem` with the rows ``rows x + constant ≥ 0``, slackened.
+
+        Parameters
+        ----------
+        problem : QPProblem
+            The normalised box QP.
+        rows : (r, m) ndarray  [m]
+            ``A``.
+        constant : (r,) ndarray  [m]
+            ``b``.
+        normaliser : float  [m²]
+            ``ν``.
+        weight : float  [-]
+            ``ρ``.
+
+        Returns
+        -------
+        solution : QPSolution
+            ``x`` clipped into the box (the previous actuation when proxsuite failed).
+        slack : (r,) ndarray  [m]
+            ``max(0, -(A x + b))`` at the returned ``x``: how far each row is violated.
+
+        """
+        m, r = self.n_actuators, constant.size
+        scale = math.sqrt(normaliser / weight)
+        hessian = np.zeros((m + r, m + r))
+        hessian[:m, :m] = problem.hessian
+        hessian[m:, m:] = np.eye(r)
+        gradient = np.concatenate((problem.gradient, np.zeros(r)))
+        inequality = np.hstack((rows, scale * np.eye(r)))
+        lower = np.concatenate((problem.lower, np.zeros(r)))
+        upper = np.concatenate((problem.upper, np.full(r, _INFINITY)))
+        below, above = -constant, np.full(r, _INFINITY)
+        found = self._qp(r)
+        qp = found[0]
+        if not found[1]:
+            qp.init(hessian, gradient, None, None, inequality, below, above, lower, upper)
+            qp.solve()
+            qp.settings.initial_guess = (
+                proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT)
+            found[1] = True
+        else:
+            qp.update(H=hessian, g=gradient, C=inequality, l=below, u=above, l_box=lower,
+                      u_box=upper, update_preconditioner=False)
+            qp.solve()
+        info = qp.results.info
+        status = _STATUS.get(info.status.name, info.status.name)
+        x = qp.results.x[:m]
+        ok = status == 'solved' and bool(np.isfinite(x.sum()))
+        if not ok:
+            del self._qps[r]
+            x = problem.previous
+        x = np.minimum(np.maximum(x, problem.lower), problem.upper)
+        slack = np.maximum(-(rows @ x + constant), 0.0)
+        return QPSolution(x, status, int(info.iter), ok), slack
 
 
 class ActiveSetQP:

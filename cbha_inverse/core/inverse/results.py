@@ -7,8 +7,9 @@ from typing import NamedTuple
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 import numpy as np
 
-HELD_STATUSES = ('saturated', 'unreachable', 'not_converged')
-"""Tick statuses in which a bound, the reach or the state's convergence holds the effector: a
+HELD_STATUSES = ('saturated', 'unreachable', 'not_converged', 'obstacle')
+"""Tick statuses in which a bound, the reach, the state's convergence or an obstacle holds the
+effector: a
 closed loop's integral must not grow on them, or only across the gap the model predicts
 (anti-windup, :class:`~cbha_inverse.core.inverse.correction.TargetCorrector`)."""
 
@@ -69,6 +70,16 @@ class InverseOptions:
         the latest actuation to the linearisation state (one Newton step), so the fixed point
         is the same static equilibrium. A linearisation is dropped early when an actuator moves
         by more than 2 % of its range in one tick (large motions relinearise every tick).
+    obstacle_margin : float  [m]
+        Clearance the obstacle rows keep between the collision spheres and the obstacles
+        (``docs/obstacles.md``): each active row asks the sphere's predicted clearance to stay
+        at or above it.
+    obstacle_activation : float  [m]
+        A (sphere, obstacle) pair whose clearance at the linearisation is below
+        ``obstacle_margin`` plus this adds a row to the tick's QP; farther pairs add none.
+    obstacle_weight : float  [-]
+        ``ρ`` of the rows' slack: a metre by which a row cannot hold costs ``ρ`` times a metre of
+        tracking gap (:class:`cbha_inverse.core.inverse.qp.RowsQP`).
 
     """
 
@@ -83,6 +94,9 @@ class InverseOptions:
     equilibrium_tolerance: float = 2e-4
     max_step: float = 1.0
     unreachable_distance: float = 1e-3
+    obstacle_margin: float = 0.002
+    obstacle_activation: float = 0.02
+    obstacle_weight: float = 1e6
 
     def __post_init__(self):
         """Validate."""
@@ -96,6 +110,14 @@ class InverseOptions:
         if not (isinstance(self.max_step, (int, float)) and 0.0 < self.max_step <= 1.0):
             raise ValueError('max_step must lie in (0, 1] (a fraction of each actuator range), '
                              f'got {self.max_step!r}')
+        for name in ('obstacle_margin', 'obstacle_activation'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and 0.0 <= value < math.inf):
+                raise ValueError(f'{name} must be a finite distance >= 0 [m], got {value!r}')
+        if not (isinstance(self.obstacle_weight, (int, float))
+                and 0.0 < self.obstacle_weight < math.inf):
+            raise ValueError(f'obstacle_weight must be finite and > 0, got '
+                             f'{self.obstacle_weight!r}')
         for name in ('equilibrium_tolerance', 'unreachable_distance'):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and value > 0.0):
@@ -125,7 +147,11 @@ class TickResult(NamedTuple):
         linearised at is not an equilibrium of the model within
         :attr:`InverseOptions.equilibrium_tolerance`: ``equilibrium_gap`` is the distance; the
         actuation's step is narrowed until it converges),
-        ``'qp_fallback'`` (proxsuite failed, the Gauss-Seidel solution is used),
+        ``'obstacle'`` (some obstacle row cannot hold: the QP's slack lets a collision sphere
+        come closer than ``obstacle_margin`` by more than
+        :data:`~cbha_inverse.core.inverse.obstacle_rows.VIOLATION_TOLERANCE`;
+        ``obstacle_violation`` is how much), ``'qp_fallback'`` (proxsuite failed, the
+        Gauss-Seidel solution is used),
         ``'not_positive_definite'`` (tangent not SPD: actuation held, state unchanged) or
         ``'rejected'`` (non-finite target or non-finite QP solution: actuation held, state
         unchanged).
@@ -158,6 +184,12 @@ class TickResult(NamedTuple):
         without them or for a held tick. ``predicted_error`` is the position gap; a saturated
         tick reads ``'unreachable'`` when either, the orientation gap times the effector's
         ``orientation_length``, exceeds :attr:`InverseOptions.unreachable_distance`.
+    obstacle_rows : int
+        Obstacle rows in the tick's QP (``docs/obstacles.md``).
+    obstacle_violation : float  [m]
+        With rows: the largest predicted clearance below ``obstacle_margin`` (0 when every row
+        holds); NaN without rows. A saturated or solved tick whose rows bind while its predicted
+        gap exceeds :attr:`InverseOptions.unreachable_distance` reads ``'unreachable'``.
 
     """
 
@@ -173,3 +205,5 @@ class TickResult(NamedTuple):
     warnings: tuple = ()
     equilibrium_gap: float = math.nan
     predicted_orientation_error: float = math.nan
+    obstacle_rows: int = 0
+    obstacle_violation: float = math.nan

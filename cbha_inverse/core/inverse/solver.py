@@ -54,8 +54,10 @@ from cbha_inverse.core._kernels.retraction import retract_frames
 from cbha_inverse.core.actuation.effectors import TargetRefused
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
+from cbha_inverse.core.inverse.obstacle_rows import (BINDING_TOLERANCE, checked_obstacles,
+                                                     ObstacleRows, VIOLATION_TOLERANCE)
 from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
-                                          ProxsuiteQP, qp_problem)
+                                          ProxsuiteQP, qp_problem, RowsQP)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
 from cbha_inverse.core.loads import dead_wrenches, follower_hooks, FollowerLoads, Loads
@@ -86,6 +88,10 @@ fraction of the one before: the updates diverge, and the static solver restores 
 CHECKED_MOVE = 0.02
 """A tick moving an actuator by more than this fraction of its range checks its new state at once
 (it linearises there, as :meth:`InverseSolver.prepare` would next)."""
+
+ENTERING_ROUNDS = 4
+"""Solves of a tick's QP at most: each after the first adds the obstacle rows of the spheres
+the step before would have carried into an obstacle (:meth:`InverseSolver._entering`)."""
 
 _NO_TURN = (math.nan, 0.0)
 """The orientation gap [rad, m] of a tick without rotational rows."""
@@ -118,6 +124,11 @@ class InverseSolver:
         set (:meth:`set_section_stiffness`).
     loads : cbha_inverse.core.loads.Loads, optional
         External loads in the model (:meth:`set_loads`; a scene's :attr:`loads`).
+    obstacles : sequence of cbha_inverse.core.obstacles.Obstacle, optional
+        Obstacles the collision spheres keep ``obstacle_margin`` from (:meth:`set_obstacles`,
+        ``docs/obstacles.md``).
+    collision : cbha_inverse.core.contact.CollisionSpheres, optional
+        The robot's collision spheres (needed with obstacles).
 
     Attributes
     ----------
@@ -130,7 +141,7 @@ class InverseSolver:
     ------
     ValueError
         If an actuator has no finite upper bound, a lower bound above its upper bound, or a
-        given ``scale`` is not positive and finite.
+        given ``scale`` is not positive and finite; on obstacles without collision spheres.
 
     Notes
     -----
@@ -149,7 +160,7 @@ class InverseSolver:
     """
 
     def __init__(self, model, actuators, effectors, gravity=None, options=None, scale=None,
-                 sections=None, loads=None):
+                 sections=None, loads=None, obstacles=(), collision=None):
         """Precompute the constant parts and start from rest."""
         self.model = model
         self.actuators = actuators
@@ -213,8 +224,11 @@ class InverseSolver:
         self._every = self.options.relinearize_every
         # a tick on a prepared linearisation is one compiled call with the active set and one
         # Newton step per tick
-        self._one_call = (self.options.qp_solver == 'active_set'
-                          and self.options.newton_steps == 1)
+        self._one_call = self._compiled_qp = (self.options.qp_solver == 'active_set'
+                                              and self.options.newton_steps == 1)
+        # the obstacle rows (set_obstacles): None without obstacles
+        self._collision, self._obstacle_rows = collision, None
+        self._rows_qp = RowsQP(m, eps_abs=self.options.eps_abs)
         self._control_tick = self._data.entry('control_tick')
         self._record = self._data.record
         # the frames and the actuation live in the tick data (the compiled tick updates them)
@@ -222,6 +236,8 @@ class InverseSolver:
         self.actuation = self._data.actuation
         if loads:
             self.set_loads(loads)
+        if obstacles:
+            self.set_obstacles(obstacles)
         self.reset()
         # until given, each orientation target is the effector's orientation at rest
         self._set_orientation_targets(effectors.directions(self._rotations),
@@ -246,7 +262,10 @@ class InverseSolver:
         self.actuation[:] = np.clip(np.asarray(a, dtype=float), self.lower_bounds,
                                     self.upper_bounds)
         self._qp.reset()
+        self._rows_qp.reset()
         self._active_set.reset()
+        if self._obstacle_rows is not None:
+            self._obstacle_rows.clear()
         self._linearised = False      # the tick data hold a valid linearisation
         self._residual_norm = math.nan
         self._gap = math.nan          # its effectors' distance from equilibrium [m]
@@ -429,6 +448,9 @@ class InverseSolver:
             if checked == 1:
                 return self._held('rejected', started, warnings=('non-finite target rejected',))
             clamped, warnings = self._reachable(targets) if checked == 2 else (targets, ())
+            if self._obstacle_rows is not None:
+                warnings += tuple(f'target inside obstacle {name!r}: the obstacle rows hold the '
+                                  'arm out' for name in self._obstacle_rows.inside(clamped))
             return self._split_tick(clamped, warnings, (started, linearised))
         code, iterations, largest_gap, largest_move, binding, residual_norm = self._control_tick(
             targets, self._record, fresh and self._pending, fresh, True, self._every == 1)
@@ -489,6 +511,11 @@ class InverseSolver:
         """Check a new linearisation (:meth:`_linearise`) and keep it for the next QP."""
         self._linearised = self._linearise(factored, strict)
         self._age, self._prepared = 0, self._linearised
+        if self._obstacle_rows is not None:
+            if self._linearised:
+                self._obstacle_rows.linearise()
+            else:
+                self._obstacle_rows.clear()
         return self._linearised
 
     def _target_array(self, targets):
@@ -587,7 +614,7 @@ class InverseSolver:
 
     def _solve(self, targets, new_hessian, warnings, times):
         """Solve the QP of the tick data's linearisation and apply it (steps 3-4)."""
-        if self.options.qp_solver != 'active_set':
+        if self.options.qp_solver != 'active_set' or self._obstacle_rows is not None:
             return self._general_qp(targets, self.options.qp_solver, not new_hessian, warnings,
                                     times)
         code, iterations, largest_gap, largest_move, binding, _ = self._control_tick(
@@ -613,12 +640,19 @@ class InverseSolver:
         delta_free = data.delta_free.copy()
         problem = qp_problem(data.matrices, delta_free, self.actuation, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._step_limit())
-        solution, status = self._solve_qp(problem, qp_solver, same_hessian)
-        actuation, gap, largest_gap, largest_move, finite = tick_outcome(
-            data.w_ea, delta_free, problem.scale, solution.x, problem.previous, self.lower_bounds,
-            self.upper_bounds, targets.size)
-        if not finite:
-            return self._rejected(solution.status, warnings, times[0])
+        for _ in range(ENTERING_ROUNDS):
+            if self._obstacle_rows_count():
+                solution, status, obstacle = self._solve_rows(problem)
+            else:
+                solution, status = self._solve_qp(problem, qp_solver, same_hessian)
+                obstacle = (0, math.nan, False)
+            actuation, gap, largest_gap, largest_move, finite = tick_outcome(
+                data.w_ea, delta_free, problem.scale, solution.x, problem.previous,
+                self.lower_bounds, self.upper_bounds, targets.size)
+            if not finite:
+                return self._rejected(solution.status, warnings, times[0])
+            if self._obstacle_rows is None or not self._entering(actuation):
+                break
         saturated = binding_bounds(problem, solution.x)
         if status == 'solved' and saturated.any():
             status = 'saturated'
@@ -630,7 +664,112 @@ class InverseSolver:
             self._control_tick(targets, self._record, True, False, False, False)
         return self._close(targets, status, solution.status, solution.iterations, saturated,
                            largest_gap, largest_move, False, warnings,
-                           times + (time.perf_counter(),))
+                           times + (time.perf_counter(),), obstacle)
+
+    def _entering(self, actuation):
+        """
+        Return whether the step to ``actuation`` brings a sphere without a row into an obstacle.
+
+        The step of the linearisation to ``actuation`` on copies of the frames; the pairs it
+        carries within ``obstacle_margin`` get rows
+        (:meth:`~cbha_inverse.core.inverse.obstacle_rows.ObstacleRows.add_entering`), and the
+        caller solves again.
+        """
+        previous = self.actuation.copy()
+        self.actuation[:] = actuation
+        positions, rotations = self._positions.copy(), self._rotations.copy()
+        self._data.entry('pending_step_into')(self._record, positions, rotations)
+        self.actuation[:] = previous
+        return self._obstacle_rows.add_entering(positions)
+
+    def _obstacle_rows_count(self):
+        """Return the number of obstacle rows of the current linearisation (0 without)."""
+        return 0 if self._obstacle_rows is None else self._obstacle_rows.count
+
+    def _solve_rows(self, problem):
+        """
+        Solve the tick's QP with its obstacle rows (:class:`~.qp.RowsQP`).
+
+        Returns ``(solution, status, (rows, violation, binding))``: the status ``'solved'`` or
+        ``'qp_fallback'`` (proxsuite failed: the box QP without the rows, by Gauss-Seidel), the
+        rows' largest predicted violation of the margin [m] and whether some row binds.
+        """
+        rows = self._obstacle_rows
+        data, options = self._data, self.options
+        # ν: the tracking term's normaliser (qp_hessians_into)
+        weighted = data.w_ea * data.row_weights[:, None] * self._scale
+        normaliser = float(np.einsum('rj,rj->', weighted, weighted)) / self._scale.size
+        normaliser = normaliser if normaliser > 0.0 else 1.0
+        solution, slack = self._rows_qp.solve(problem, rows.matrix * self._scale, rows.constant,
+                                              normaliser, options.obstacle_weight)
+        status = 'solved'
+        if not solution.ok:
+            status = 'qp_fallback'
+            solution = projected_gauss_seidel(problem)
+            solution = type(solution)(solution.x, f'gauss_seidel_{solution.status}', 0, True)
+            slack = np.maximum(-rows.clearances(self._scale * solution.x), 0.0)
+        clearances = rows.clearances(np.clip(self._scale * solution.x, self.lower_bounds,
+                                             self.upper_bounds))
+        return solution, status, (rows.count, float(slack.max()),
+                                  bool((clearances < BINDING_TOLERANCE).any()))
+
+    def set_obstacles(self, obstacles):
+        """
+        Replace the obstacles the collision spheres keep clear of (``docs/obstacles.md``).
+
+        Each linearisation then adds a row to the QP per (sphere, obstacle) pair within
+        ``obstacle_activation`` of ``obstacle_margin``; the next tick relinearises. Without
+        obstacles the tick is the compiled one of the obstacle-free solver.
+
+        Parameters
+        ----------
+        obstacles : sequence of cbha_inverse.core.obstacles.Obstacle
+            The obstacles (empty: none).
+
+        Returns
+        -------
+        tuple of cbha_inverse.core.obstacles.Obstacle
+            The obstacles now in the model.
+
+        Raises
+        ------
+        ValueError
+            If an item is not an ``Obstacle``, two share a name, or there are obstacles and the
+            solver has no collision spheres: nothing is changed.
+
+        """
+        obstacles = checked_obstacles(obstacles)
+        if obstacles and self._collision is None:
+            raise ValueError('obstacles need collision spheres (a scene\'s collision block)')
+        options = self.options
+        self._obstacle_rows = (ObstacleRows(self._collision, obstacles, options.obstacle_margin,
+                                            options.obstacle_activation, self._data)
+                               if obstacles else None)
+        # with obstacles a tick solves in a call of its own, after the rows of its linearisation
+        self._one_call = self._compiled_qp and not obstacles
+        self._rows_qp.reset()
+        self._age = self._every
+        self._linearised = False
+        return obstacles
+
+    @property
+    def obstacles(self):
+        """Return the obstacles in the model (:meth:`set_obstacles`)."""
+        return () if self._obstacle_rows is None else self._obstacle_rows.obstacles
+
+    @property
+    def obstacle_rows(self):
+        """
+        Return the obstacle rows of the current linearisation (None without obstacles).
+
+        Returns
+        -------
+        cbha_inverse.core.inverse.obstacle_rows.ObstacleRows or None
+            ``matrix`` ``G``, ``constant`` ``c``, ``names`` and ``frames`` of each row
+            (read them; the solver rebuilds them at each linearisation).
+
+        """
+        return self._obstacle_rows
 
     def _solve_qp(self, problem, qp_solver, same_hessian):
         """
@@ -657,14 +796,15 @@ class InverseSolver:
         return projected_gauss_seidel(problem), status
 
     def _close(self, targets, status, qp_status, iterations, saturated, largest_gap,
-               largest_move, positions_written, warnings, times):
+               largest_move, positions_written, warnings, times, obstacle=(0, math.nan, False)):
         """
         Close a solved tick: Newton steps, effector positions, the result.
 
         ``positions_written``: the compiled tick wrote the effector positions into the tick
         data (of the new state, or between linearisations the linear model's prediction).
         ``times``: ``time.perf_counter()`` at the tick's start, after its linearisation and
-        after its QP.
+        after its QP. ``obstacle``: the obstacle rows of the QP, their largest violation [m] and
+        whether one binds (:meth:`_solve_rows`).
         """
         data = self._data
         # the distance from equilibrium of the state the tick solved from
@@ -698,10 +838,12 @@ class InverseSolver:
                 if self._restored_gap:
                     effector_positions = self.effectors.positions(self._positions,
                                                                   self._rotations)
-            status = self._tick_status(status, saturated, max(largest_gap, turn_length), gap)
+            status = self._tick_status(status, saturated, max(largest_gap, turn_length), gap,
+                                       obstacle)
         return TickResult(self.actuation.copy(), effector_positions, status, qp_status,
                           iterations, saturated, largest_gap, residual_norm,
-                          _timings(*times, time.perf_counter()), warnings, gap, float(turn))
+                          _timings(*times, time.perf_counter()), warnings, gap, float(turn),
+                          obstacle[0], obstacle[1])
 
     def _measure_equilibrium(self):
         """
@@ -800,18 +942,25 @@ class InverseSolver:
         """Return the largest change per tick of each actuator, or None for none."""
         return None if self._rate is None and self._radius >= 1.0 else self._data.rate
 
-    def _tick_status(self, status, saturated, largest_gap, gap):
+    def _tick_status(self, status, saturated, largest_gap, gap, obstacle=(0, math.nan, False)):
         """
-        Return a solved tick's status: ``'not_converged'`` or ``'unreachable'`` where they hold.
+        Return a solved tick's status: ``'not_converged'``, ``'obstacle'`` or ``'unreachable'``.
 
         ``'not_converged'``: the tick's equilibrium ``gap`` (of the linearisation it solved on,
         or of its new state when it checked it) exceeds ``equilibrium_tolerance``.
-        ``'unreachable'``: an actuator bound holds the QP's optimum and the predicted gap
-        exceeds ``unreachable_distance``. A tick held by the trust region alone reads
-        ``'saturated'`` (a bound of its QP binds; the next ticks continue).
+        ``'obstacle'``: an obstacle row cannot hold (``obstacle``: the rows, their largest
+        violation [m], whether one binds; :meth:`_solve_rows`).
+        ``'unreachable'``: an actuator bound or an obstacle row holds the QP's optimum and the
+        predicted gap exceeds ``unreachable_distance``. A tick held by the trust region alone
+        reads ``'saturated'`` (a bound of its QP binds; the next ticks continue).
         """
         if gap > self.options.equilibrium_tolerance:
             return 'not_converged'
+        _, violation, row_binds = obstacle
+        if violation > VIOLATION_TOLERANCE:
+            return 'obstacle'
+        if row_binds and largest_gap > self.options.unreachable_distance:
+            return 'unreachable'
         if status != 'saturated' or largest_gap <= self.options.unreachable_distance:
             return status
         margin = 1e-9 * self._span

@@ -113,7 +113,7 @@ class TickData(RecordOwner):
                                    options.proximal_weight)
         self._entries = {}
 
-    def entry(self, name):
+    def entry(self, name, examples=None):
         """
         Return a compiled entry of :mod:`cbha_inverse.core._kernels.tick` for this record.
 
@@ -121,18 +121,20 @@ class TickData(RecordOwner):
         targets a C-contiguous float (k, 3) array), ``'pending_step_into'`` (``record,
         positions, rotations``: C-contiguous float frames), ``'project_tick'`` (``record``),
         ``'free_gaps_of'`` (``targets, record``: ``delta_free`` of the targets) or
-        ``'orientation_gap_of'`` (``record``);
+        ``'orientation_gap_of'`` (``record``), or another entry of the module typed by
+        ``examples`` (its example arguments, e.g. ``'project_points_of'``);
         without numba's per-call type dispatch
         (:func:`cbha_inverse.core._kernels.records.compiled_entry`).
         """
         entry = self._entries.get(name)
         if entry is None:
-            examples = {'control_tick': (self.effector_positions, self.record, True, True, True,
-                                         True),
-                        'pending_step_into': (self.record, self.positions, self.rotations),
-                        'project_tick': (self.record,),
-                        'free_gaps_of': (self.effector_positions, self.record),
-                        'orientation_gap_of': (self.record,)}[name]
+            if examples is None:
+                examples = {'control_tick': (self.effector_positions, self.record, True, True,
+                                             True, True),
+                            'pending_step_into': (self.record, self.positions, self.rotations),
+                            'project_tick': (self.record,),
+                            'free_gaps_of': (self.effector_positions, self.record),
+                            'orientation_gap_of': (self.record,)}[name]
             entry = compiled_entry(getattr(kernels, name), *examples)
             self._entries[name] = entry
         return entry

@@ -61,9 +61,11 @@ from cbha_inverse.ros.common.conversions import (
     backbone_markers, point_values, SerializedCommand, stamp_ns)
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
+from cbha_inverse.ros.common.obstacle_markers import obstacles_from_markers
 from cbha_inverse.ros.common.params import (
     changes_text, declare_parameters, param, ParameterError)
-from cbha_inverse.ros.common.qos import COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS, TARGET_QOS
+from cbha_inverse.ros.common.qos import (COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS,
+                                         OBSTACLES_QOS, TARGET_QOS)
 from cbha_inverse.ros.common.realtime import MAX_REALTIME_PRIORITY, set_realtime_priority
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
@@ -82,10 +84,13 @@ from visualization_msgs.msg import MarkerArray
 
 NODE_NAME = 'inverse_solver'
 EPISODE_TEXT = {'not_converged': 'model state off equilibrium: the effector {:.2f} mm from it',
-                'unreachable': 'target beyond reach: the closest reachable point {:.2f} mm away'}
+                'unreachable': 'target beyond reach: the closest reachable point {:.2f} mm away',
+                'obstacle': 'pushed against an obstacle: a collision sphere {:.2f} mm inside '
+                            'the margin'}
 """What an episode's condition means, with its distance [mm]."""
 EPISODE_ACTION = {'not_converged': 'narrowing the actuation step until it converges',
-                  'unreachable': 'tracking the closest reachable point'}
+                  'unreachable': 'tracking the closest reachable point',
+                  'obstacle': 'keeping as much clearance as the actuators allow'}
 NOT_CONVERGED_ERROR_S = 1.0
 """An episode off equilibrium longer than this [s] is an ERROR in the diagnostics."""
 NOT_CONVERGED_WARN_S = 0.1
@@ -304,6 +309,8 @@ class InverseSolverNode(Node):
         if p.actuator_gain_topic:
             self.create_subscription(Float64MultiArray, p.actuator_gain_topic,
                                      self._on_gains, MEASURED_QOS)
+        self.obstacle_updates = 0
+        self.create_subscription(MarkerArray, 'obstacles', self._on_obstacles, OBSTACLES_QOS)
         self.wrenches = WrenchInputs(
             self, p.wrench_frames, self.scene.model.n_links, self.scene.loads, p.frame_id,
             self._on_loads, lambda reason, detail: self._count_rejected('wrench', reason, detail))
@@ -426,6 +433,22 @@ class InverseSolverNode(Node):
     def _on_loads(self, loads):
         """Put the loads of the ``wrench/<frame>`` topics into the model."""
         self.solver.set_loads(loads)
+        self._prepare()
+
+    def _on_obstacles(self, message):
+        """Replace the model's obstacles by those of an ``obstacles`` message, or reject it."""
+        obstacles, key, detail = obstacles_from_markers(message, self.params.frame_id)
+        if obstacles is not None:
+            try:
+                self.solver.set_obstacles(obstacles)
+            except ValueError as exc:
+                key, detail = 'no_collision', str(exc)
+        if key is not None:
+            self._count_rejected('obstacles', key, detail)
+            return
+        self.obstacle_updates += 1
+        self.get_logger().info(f'obstacles from the obstacles topic: '
+                               f'{", ".join(o.name for o in obstacles) or "none"}')
         self._prepare()
 
     def _prepare(self):
@@ -651,8 +674,9 @@ class InverseSolverNode(Node):
         episode that starts off equilibrium after a jump of the target and stays beyond reach
         says both.
         """
-        figure = (result.equilibrium_gap if result.status == 'not_converged'
-                  else result.predicted_error)
+        figure = {'not_converged': result.equilibrium_gap,
+                  'obstacle': result.obstacle_violation}.get(result.status,
+                                                             result.predicted_error)
         _, ended = self.episodes.update(result.status, figure, time.monotonic())
         logger = self.get_logger()
         if ended is not None and self.episode_told:
@@ -745,6 +769,8 @@ class InverseSolverNode(Node):
                   'predicted_error_mm': 1e3 * result.predicted_error if result else math.nan,
                   'equilibrium_gap_mm': 1e3 * result.equilibrium_gap if result else math.nan,
                   'restorations': self.solver.restorations,
+                  'obstacles': len(self.solver.obstacles), 'obstacle_updates': self.obstacle_updates,
+                  'obstacle_rows': result.obstacle_rows if result else 0,
                   'saturated': ','.join(np.asarray(self.scene.actuator_names)[
                       result.saturated].tolist()) if result else '',
                   'at_lower_bound': ','.join(at_lower), 'at_upper_bound': ','.join(at_upper),

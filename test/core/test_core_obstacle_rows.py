@@ -1,0 +1,142 @@
+"""Tests of the obstacle rows of the inverse: their linear model, the QP, the statuses."""
+
+from cbha_inverse.core.chain import ChainState
+from cbha_inverse.core.inverse.obstacle_rows import VIOLATION_TOLERANCE
+from cbha_inverse.core.inverse.solver import InverseSolver
+from cbha_inverse.core.obstacles import Obstacle
+from cbha_inverse.core.so3 import so3_exp
+from cbha_inverse.scene import load_scene
+import numpy as np
+import pytest
+
+MARGIN = 0.002
+"""The obstacle_margin of these tests [m] (the default)."""
+
+
+@pytest.fixture(scope='module')
+def table():
+    """Return the CBHA above a table (80 mm below its base) beside a post."""
+    return load_scene('cbha_table')
+
+
+def _equilibrium(scene, actuation, start=None):
+    """Return the model's equilibrium at ``actuation`` (the forward model)."""
+    result = scene.forward(actuation, initial_state=start, strict=True)
+    return ChainState(result.positions, result.rotations)
+
+
+def _min_clearance(scene, solver):
+    """Return the smallest clearance of the collision spheres to the scene's obstacles [m]."""
+    return scene.collision.clearances(solver.state.positions, scene.obstacles).min()
+
+
+def test_obstacle_rows_match_finite_differences_of_the_forward_model(table):
+    """
+    ``G Δλ`` is the clearance change of the forward model, ``G λ + c`` the clearance - margin.
+
+    Fails on a wrong normal sign (G changes sign), a missing ``W_sa`` block (G = 0) or a wrong
+    free term.
+    """
+    actuation = np.array([40e3, 10e3, 60e3, 20e3, 70e3, 5e3])
+    state = _equilibrium(table, actuation)
+    # a tilted wall close to the arm's spheres: rows with a normal along no axis
+    wall = Obstacle('wall', 'plane', [0.0, 0.0, 0.0], so3_exp(np.array([0.3, -0.2, 0.0])))
+    centres = table.collision.centres(state.positions)
+    height = wall.signed_distance(centres).distance - table.collision.radii
+    wall = Obstacle('wall', 'plane', wall.rotation[:, 2] * (height.min() - 0.005),
+                    wall.rotation)
+    solver = table.make_inverse_solver(obstacle_activation=0.01)
+    solver.set_obstacles([wall])
+    solver.reset(state, actuation)
+    assert solver.prepare()
+    rows = solver.obstacle_rows
+    assert rows.count >= 2 and set(rows.names) == {'wall'}
+    spheres = [list(table.collision.frames).index(frame) for frame in rows.frames]
+
+    def clearance(at):
+        positions = _equilibrium(table, at, state).positions
+        return table.collision.clearances(positions, [wall])[spheres, 0]
+
+    np.testing.assert_allclose(rows.clearances(actuation), clearance(actuation) - MARGIN,
+                               atol=2e-6)
+    direction = np.array([1.0, -0.5, 0.3, -1.0, 0.8, 0.2]) * 5e3
+    fd = (clearance(actuation + direction) - clearance(actuation - direction)) / 2.0
+    predicted = rows.matrix @ direction
+    assert np.abs(predicted).min() > 1e-4     # every row moves by a tenth of a millimetre
+    np.testing.assert_allclose(predicted, fd, rtol=0.02, atol=2e-6)
+
+
+def _run(scene, solver, target, ticks=60):
+    """Tick toward ``target`` (open loop, the model its own plant); return the run."""
+    clearances, results = [], []
+    for _ in range(ticks):
+        results.append(solver.step(target))
+        clearances.append(_min_clearance(scene, solver))
+        solver.prepare()
+    return np.array(clearances), results
+
+
+def test_a_target_behind_the_table_keeps_the_margin_the_free_inverse_penetrates(table):
+    """The model keeps >= margin - 0.5 mm from the table; without rows it sinks several mm."""
+    target = table.rest_effector_positions[0] + [0.0, 0.0, -0.08]
+    guarded = table.make_inverse_solver()
+    clearances, results = _run(table, guarded, target)
+    assert clearances.min() >= MARGIN - 5e-4
+    assert results[-1].obstacle_rows >= 1
+    assert results[-1].status == 'unreachable'        # the table holds the tip from its target
+    assert 'target inside obstacle' in ' '.join(results[-1].warnings)
+    free = table.make_inverse_solver()
+    free.set_obstacles(())
+    free_clearances, free_results = _run(table, free, target)
+    assert free_clearances.min() < -0.004
+    assert free_results[-1].obstacle_rows == 0
+
+
+def test_rows_end_when_the_obstacle_is_removed(table):
+    """After set_obstacles(()) no row remains: the arm goes through where the table was."""
+    target = table.rest_effector_positions[0] + [0.0, 0.0, -0.06]
+    solver = table.make_inverse_solver()
+    _run(table, solver, target, ticks=20)
+    solver.set_obstacles(())
+    clearances, results = _run(table, solver, target, ticks=20)
+    assert results[-1].obstacle_rows == 0 and solver.obstacle_rows is None
+    assert clearances[-1] < -0.004
+    np.testing.assert_allclose(results[-1].effector_positions[0], target, atol=1e-5)
+
+
+def test_without_obstacles_the_tick_is_the_obstacle_free_one(table):
+    """A solver whose obstacles were removed ticks as the plain scene's, bit for bit."""
+    plain = load_scene('cbha').make_inverse_solver()
+    cleared = table.make_inverse_solver()
+    cleared.set_obstacles(())
+    target = table.rest_effector_positions[0] + [0.0, 0.02, -0.03]
+    for _ in range(5):
+        a, b = plain.step(target), cleared.step(target)
+        assert np.array_equal(a.actuation, b.actuation) and a.status == b.status
+        plain.prepare()
+        cleared.prepare()
+
+
+def test_a_pushed_arm_reports_obstacle(table):
+    """A table through the arm that a tick's step cannot leave: slack, status 'obstacle'."""
+    solver = table.make_inverse_solver(max_step=0.01)
+    sunk = Obstacle('sunk', 'plane', [0.0, 0.0, -0.01], np.eye(3))
+    solver.set_obstacles([sunk])
+    solver.reset(_equilibrium(table, np.zeros(6)))
+    result = solver.step(table.rest_effector_positions[0])
+    assert result.status == 'obstacle'
+    assert result.obstacle_violation > VIOLATION_TOLERANCE
+    assert np.all(np.isfinite(result.actuation))
+
+
+def test_bad_obstacles_are_refused(table):
+    """A NaN obstacle, something else than an obstacle, obstacles without spheres: refused."""
+    with pytest.raises(ValueError, match='position'):
+        Obstacle('nan', 'plane', [0.0, np.nan, 0.0], np.eye(3))
+    solver = table.make_inverse_solver()
+    with pytest.raises(ValueError, match='Obstacle'):
+        solver.set_obstacles([{'name': 'table'}])
+    assert [o.name for o in solver.obstacles] == ['table', 'post']
+    bare = InverseSolver(table.model, table.actuators, table.effectors, gravity=table.gravity)
+    with pytest.raises(ValueError, match='collision'):
+        bare.set_obstacles(table.obstacles)
