@@ -20,7 +20,9 @@ their phases before the QP are ~0 and the median is theirs; the p99 is the linea
 this machine's goal (median / p99, ``ok`` when met), the paper's tick time and the ratio paper /
 ours. A second table times the static forward solve
 (:func:`cbha_inverse.core.statics.solve_static`, which the simulated plant runs every tick) per
-Newton iteration, in ticks of the same run.
+Newton iteration, in ticks of the same run. ``--contact`` times instead the tick with 0 to 4
+active obstacle rows (``docs/obstacles.md``) against the obstacle-free tick
+(:func:`bench_contact`).
 """
 
 import argparse
@@ -30,6 +32,7 @@ import sys
 import time
 
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
+from cbha_inverse.core.obstacles import obstacle_from_rpy
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.report.tick_flops import measured_flop_rate, tick_flops, tick_shapes
 from cbha_inverse.scene import load_scene
@@ -148,6 +151,81 @@ def bench_scene(name, n_ticks=MEASURED_TICKS, warmup=100, qp_solver='proxsuite',
         'radius': radius,
         'status': statuses,
     }
+
+
+CONTACT_BALL = 0.005
+"""Radius of each obstacle ball of :func:`bench_contact` [m]."""
+CONTACT_FRAMES = (16, 12, 8, 4)
+"""The collision spheres :func:`bench_contact` puts a ball under, one more per row."""
+
+
+def bench_contact(name='cbha_table', n_ticks=2000, warmup=50, max_rows=4):
+    """
+    Time the tick with 0 to ``max_rows`` active obstacle rows and without obstacles.
+
+    The arm holds the equilibrium of 30 % of each actuator's range (its effector there is the
+    target); a 5 mm ball sits 2.5 mm below each of the first ``rows`` spheres of
+    :data:`CONTACT_FRAMES` (``obstacle_activation`` 1 mm: one row per ball, its neighbours'
+    spheres stay out of reach); with no row, one ball a metre away. Every tick linearises
+    (``step`` without ``prepare``).
+
+    Parameters
+    ----------
+    name : str
+        A scene with collision spheres.
+    n_ticks, warmup : int
+        Measured ticks per case, and ticks run first.
+    max_rows : int
+        Largest number of rows (at most ``len(CONTACT_FRAMES)``).
+
+    Returns
+    -------
+    list of dict
+        Per case: ``case`` (``'no obstacles'`` or the number of balls), ``rows`` (the median
+        number of rows of its ticks), ``median`` and ``p99`` of the tick [s].
+
+    """
+    scene = load_scene(name)
+    actuation = 0.3 * (scene.upper_bounds - scene.lower_bounds) + scene.lower_bounds
+    equilibrium = scene.forward(actuation, strict=True, check_warnings=False)
+    target = np.array(equilibrium.effector_positions)
+    below = np.array([0.0, 0.0, -1.0])
+    margin = scene.make_inverse_solver().options.obstacle_margin
+    balls = []
+    for frame in CONTACT_FRAMES[:max_rows]:
+        sphere = list(scene.collision.frames).index(frame)
+        centre = equilibrium.positions[frame] + below * (
+            scene.collision.radii[sphere] + margin + 0.5 * 1e-3 + CONTACT_BALL)
+        balls.append(obstacle_from_rpy(f'ball_{frame}', 'sphere', centre, (0.0, 0.0, 0.0),
+                                       radius=CONTACT_BALL))
+    # no row: one ball a metre away (the distance query and the QP of the rows' path, no row)
+    far = obstacle_from_rpy('far', 'sphere', target[0] + [0.0, 0.0, -1.0], (0.0, 0.0, 0.0),
+                            radius=CONTACT_BALL)
+    rows = []
+    for count in [None] + list(range(max_rows + 1)):
+        solver = scene.make_inverse_solver(obstacle_activation=1e-3)
+        solver.set_obstacles(() if count is None else balls[:count] or [far])
+        solver.reset(equilibrium.state, actuation)
+        for _ in range(warmup):
+            solver.step(target)
+        times, active = np.empty(n_ticks), np.empty(n_ticks)
+        for i in range(n_ticks):
+            out = solver.step(target)
+            times[i], active[i] = out.timings['total'], out.obstacle_rows
+        rows.append({'case': 'no obstacles' if count is None else count,
+                     'rows': float(np.median(active)), 'median': float(np.median(times)),
+                     'p99': float(np.percentile(times, 99))})
+    return rows
+
+
+def format_contact(rows):
+    """Return the table of :func:`bench_contact` (ticks in µs, ratio to the obstacle-free)."""
+    free = rows[0]['median']
+    lines = [f"{'obstacles':>12s} {'rows':>5s} {'median':>8s} {'p99':>8s} {'x free':>7s}"]
+    for r in rows:
+        lines.append(f"{str(r['case']):>12s} {r['rows']:5.0f} {1e6 * r['median']:7.1f}u "
+                     f"{1e6 * r['p99']:7.1f}u {r['median'] / free:7.2f}")
+    return '\n'.join(lines)
 
 
 def bench_forward(name, repeats=50, n_cases=6, seed=3):
@@ -321,7 +399,13 @@ def main(argv=None):
     parser.add_argument('--relinearize-every', type=int, nargs='+', default=[1, 5],
                         help='ticks between linearisations to compare (1 = every tick)')
     parser.add_argument('--json', help='write the rows to this JSON file')
+    parser.add_argument('--contact', action='store_true',
+                        help='time the tick with 0-4 active obstacle rows on cbha_table '
+                             'instead (the ticks per case: --ticks)')
     args = parser.parse_args(argv)
+    if args.contact:
+        print(format_contact(bench_contact(n_ticks=args.ticks, warmup=args.warmup)))
+        return 0
     try:
         for name in args.scenes:
             load_scene(name)

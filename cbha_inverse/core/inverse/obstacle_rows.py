@@ -123,13 +123,17 @@ class ObstacleRows:
         reach = self.margin + self.activation
         sphere, names, distance, normal = [], [], [], []
         for index, obstacle in enumerate(self.obstacles):
-            forced = np.array(sorted(s for o, s in self._forced if o == index), dtype=int)
-            near = np.union1d(np.flatnonzero(obstacle.near(centres, radii + reach)), forced)
+            near = np.flatnonzero(obstacle.near(centres, radii + reach))
+            forced = [s for o, s in self._forced if o == index]
+            if forced:
+                near = np.union1d(near, forced)
             if not near.size:
                 continue
             query = obstacle.signed_distance(centres[near])
-            active = np.flatnonzero((query.distance - radii[near] < reach)
-                                    | np.isin(near, forced))
+            within = query.distance - radii[near] < reach
+            if forced:
+                within |= np.isin(near, forced)
+            active = np.flatnonzero(within)
             sphere.append(near[active])
             names += [obstacle.name] * active.size
             distance.append(query.distance[active])
@@ -148,6 +152,10 @@ class ObstacleRows:
                          + np.einsum('si,si->s', normal, moved))
         self.count, self.names, self.frames = rows, tuple(names), frames
         return rows
+
+    def warm_up(self):
+        """Compile (or load) the projection of the centres: project the first sphere's."""
+        self._project_centres(np.ascontiguousarray(self.spheres.frames[:1], dtype=np.int64))
 
     def _project_centres(self, frames):
         """Return ``W_sa`` (3s, m) and the free centres (3s,) of spheres on ``frames``."""
@@ -230,5 +238,9 @@ class ObstacleRows:
         tuple of str
 
         """
-        return tuple(obstacle.name for obstacle in self.obstacles
-                     if np.any(obstacle.signed_distance(targets).distance < 0.0))
+        inside = []
+        for obstacle in self.obstacles:
+            near = obstacle.near(targets, 0.0)
+            if near.any() and np.any(obstacle.signed_distance(targets[near]).distance < 0.0):
+                inside.append(obstacle.name)
+        return tuple(inside)

@@ -297,6 +297,9 @@ class InverseSolver:
             factor.solve(np.zeros(self._system.size))
         self._fall_back()
         self._data.entry('pending_step_into')
+        if self._obstacle_rows is not None:
+            # the projection of the spheres' centres, whether or not a row is active now
+            self._obstacle_rows.warm_up()
         self.reset(state, actuation)
 
     @property
