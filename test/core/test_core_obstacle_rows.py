@@ -14,8 +14,8 @@ MARGIN = 0.002
 
 
 @pytest.fixture(scope='module')
-def table():
-    """Return the CBHA above a table (80 mm below its base) beside a post."""
+def table_scene():
+    """Return the scene of the CBHA above a table (80 mm below its base) beside a post."""
     return load_scene('cbha_table')
 
 
@@ -30,7 +30,7 @@ def _min_clearance(scene, solver):
     return scene.collision.clearances(solver.state.positions, scene.obstacles).min()
 
 
-def test_obstacle_rows_match_finite_differences_of_the_forward_model(table):
+def test_obstacle_rows_match_finite_differences_of_the_forward_model(table_scene):
     """
     ``G Δλ`` is the clearance change of the forward model, ``G λ + c`` the clearance - margin.
 
@@ -38,24 +38,24 @@ def test_obstacle_rows_match_finite_differences_of_the_forward_model(table):
     free term.
     """
     actuation = np.array([40e3, 10e3, 60e3, 20e3, 70e3, 5e3])
-    state = _equilibrium(table, actuation)
+    state = _equilibrium(table_scene, actuation)
     # a tilted wall close to the arm's spheres: rows with a normal along no axis
     wall = Obstacle('wall', 'plane', [0.0, 0.0, 0.0], so3_exp(np.array([0.3, -0.2, 0.0])))
-    centres = table.collision.centres(state.positions)
-    height = wall.signed_distance(centres).distance - table.collision.radii
+    centres = table_scene.collision.centres(state.positions)
+    height = wall.signed_distance(centres).distance - table_scene.collision.radii
     wall = Obstacle('wall', 'plane', wall.rotation[:, 2] * (height.min() - 0.005),
                     wall.rotation)
-    solver = table.make_inverse_solver(obstacle_activation=0.01)
+    solver = table_scene.make_inverse_solver(obstacle_activation=0.01)
     solver.set_obstacles([wall])
     solver.reset(state, actuation)
     assert solver.prepare()
     rows = solver.obstacle_rows
     assert rows.count >= 2 and set(rows.names) == {'wall'}
-    spheres = [list(table.collision.frames).index(frame) for frame in rows.frames]
+    spheres = [list(table_scene.collision.frames).index(frame) for frame in rows.frames]
 
     def clearance(at):
-        positions = _equilibrium(table, at, state).positions
-        return table.collision.clearances(positions, [wall])[spheres, 0]
+        positions = _equilibrium(table_scene, at, state).positions
+        return table_scene.collision.clearances(positions, [wall])[spheres, 0]
 
     np.testing.assert_allclose(rows.clearances(actuation), clearance(actuation) - MARGIN,
                                atol=2e-6)
@@ -76,40 +76,40 @@ def _run(scene, solver, target, ticks=60):
     return np.array(clearances), results
 
 
-def test_a_target_behind_the_table_keeps_the_margin_the_free_inverse_penetrates(table):
+def test_a_target_behind_the_table_keeps_the_margin_the_free_inverse_penetrates(table_scene):
     """The model keeps >= margin - 0.5 mm from the table; without rows it sinks several mm."""
-    target = table.rest_effector_positions[0] + [0.0, 0.0, -0.08]
-    guarded = table.make_inverse_solver()
-    clearances, results = _run(table, guarded, target)
+    target = table_scene.rest_effector_positions[0] + [0.0, 0.0, -0.08]
+    guarded = table_scene.make_inverse_solver()
+    clearances, results = _run(table_scene, guarded, target)
     assert clearances.min() >= MARGIN - 5e-4
     assert results[-1].obstacle_rows >= 1
     assert results[-1].status == 'unreachable'        # the table holds the tip from its target
     assert 'target inside obstacle' in ' '.join(results[-1].warnings)
-    free = table.make_inverse_solver()
+    free = table_scene.make_inverse_solver()
     free.set_obstacles(())
-    free_clearances, free_results = _run(table, free, target)
+    free_clearances, free_results = _run(table_scene, free, target)
     assert free_clearances.min() < -0.004
     assert free_results[-1].obstacle_rows == 0
 
 
-def test_rows_end_when_the_obstacle_is_removed(table):
+def test_rows_end_when_the_obstacle_is_removed(table_scene):
     """After set_obstacles(()) no row remains: the arm goes through where the table was."""
-    target = table.rest_effector_positions[0] + [0.0, 0.0, -0.06]
-    solver = table.make_inverse_solver()
-    _run(table, solver, target, ticks=20)
+    target = table_scene.rest_effector_positions[0] + [0.0, 0.0, -0.06]
+    solver = table_scene.make_inverse_solver()
+    _run(table_scene, solver, target, ticks=20)
     solver.set_obstacles(())
-    clearances, results = _run(table, solver, target, ticks=20)
+    clearances, results = _run(table_scene, solver, target, ticks=20)
     assert results[-1].obstacle_rows == 0 and solver.obstacle_rows is None
     assert clearances[-1] < -0.004
     np.testing.assert_allclose(results[-1].effector_positions[0], target, atol=1e-5)
 
 
-def test_without_obstacles_the_tick_is_the_obstacle_free_one(table):
+def test_without_obstacles_the_tick_is_the_obstacle_free_one(table_scene):
     """A solver whose obstacles were removed ticks as the plain scene's, bit for bit."""
     plain = load_scene('cbha').make_inverse_solver()
-    cleared = table.make_inverse_solver()
+    cleared = table_scene.make_inverse_solver()
     cleared.set_obstacles(())
-    target = table.rest_effector_positions[0] + [0.0, 0.02, -0.03]
+    target = table_scene.rest_effector_positions[0] + [0.0, 0.02, -0.03]
     for _ in range(5):
         a, b = plain.step(target), cleared.step(target)
         assert np.array_equal(a.actuation, b.actuation) and a.status == b.status
@@ -117,26 +117,27 @@ def test_without_obstacles_the_tick_is_the_obstacle_free_one(table):
         cleared.prepare()
 
 
-def test_a_pushed_arm_reports_obstacle(table):
+def test_a_pushed_arm_reports_obstacle(table_scene):
     """A table through the arm that a tick's step cannot leave: slack, status 'obstacle'."""
-    solver = table.make_inverse_solver(max_step=0.01)
+    solver = table_scene.make_inverse_solver(max_step=0.01)
     sunk = Obstacle('sunk', 'plane', [0.0, 0.0, -0.01], np.eye(3))
     solver.set_obstacles([sunk])
-    solver.reset(_equilibrium(table, np.zeros(6)))
-    result = solver.step(table.rest_effector_positions[0])
+    solver.reset(_equilibrium(table_scene, np.zeros(6)))
+    result = solver.step(table_scene.rest_effector_positions[0])
     assert result.status == 'obstacle'
     assert result.obstacle_violation > VIOLATION_TOLERANCE
     assert np.all(np.isfinite(result.actuation))
 
 
-def test_bad_obstacles_are_refused(table):
+def test_bad_obstacles_are_refused(table_scene):
     """A NaN obstacle, something else than an obstacle, obstacles without spheres: refused."""
     with pytest.raises(ValueError, match='position'):
         Obstacle('nan', 'plane', [0.0, np.nan, 0.0], np.eye(3))
-    solver = table.make_inverse_solver()
+    solver = table_scene.make_inverse_solver()
     with pytest.raises(ValueError, match='Obstacle'):
-        solver.set_obstacles([{'name': 'table'}])
+        solver.set_obstacles([{'name': 'table_scene'}])
     assert [o.name for o in solver.obstacles] == ['table', 'post']
-    bare = InverseSolver(table.model, table.actuators, table.effectors, gravity=table.gravity)
+    bare = InverseSolver(table_scene.model, table_scene.actuators, table_scene.effectors,
+                         gravity=table_scene.gravity)
     with pytest.raises(ValueError, match='collision'):
-        bare.set_obstacles(table.obstacles)
+        bare.set_obstacles(table_scene.obstacles)

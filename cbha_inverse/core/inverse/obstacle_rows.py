@@ -217,6 +217,7 @@ class ObstacleRows:
         Parameters
         ----------
         actuation : (m,) ndarray  [Pa, N]
+            The actuation ``λ``.
 
         Returns
         -------
@@ -232,6 +233,7 @@ class ObstacleRows:
         Parameters
         ----------
         targets : (k, 3) ndarray  [m]
+            Effector targets.
 
         Returns
         -------

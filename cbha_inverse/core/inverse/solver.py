@@ -743,7 +743,7 @@ class InverseSolver:
         """
         obstacles = checked_obstacles(obstacles)
         if obstacles and self._collision is None:
-            raise ValueError('obstacles need collision spheres (a scene\'s collision block)')
+            raise ValueError("obstacles need collision spheres (a scene's collision block)")
         options = self.options
         self._obstacle_rows = (ObstacleRows(self._collision, obstacles, options.obstacle_margin,
                                             options.obstacle_activation, self._data)

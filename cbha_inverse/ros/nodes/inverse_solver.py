@@ -769,7 +769,8 @@ class InverseSolverNode(Node):
                   'predicted_error_mm': 1e3 * result.predicted_error if result else math.nan,
                   'equilibrium_gap_mm': 1e3 * result.equilibrium_gap if result else math.nan,
                   'restorations': self.solver.restorations,
-                  'obstacles': len(self.solver.obstacles), 'obstacle_updates': self.obstacle_updates,
+                  'obstacles': len(self.solver.obstacles),
+                  'obstacle_updates': self.obstacle_updates,
                   'obstacle_rows': result.obstacle_rows if result else 0,
                   'saturated': ','.join(np.asarray(self.scene.actuator_names)[
                       result.saturated].tolist()) if result else '',
