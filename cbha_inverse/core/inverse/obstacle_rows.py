@@ -94,6 +94,7 @@ class ObstacleRows:
         self._data = tick_data
         self._project = None
         self._forced = set()
+        self._last_targets, self._last_warnings = None, ()
         self.clear()
 
     def clear(self):
@@ -225,6 +226,29 @@ class ObstacleRows:
 
         """
         return self.matrix @ actuation + self.constant
+
+    def inside_warnings(self, targets):
+        """
+        Return a tick's warnings for targets inside obstacles (:meth:`inside`).
+
+        The same targets as the last call's give the same warnings without a query.
+
+        Parameters
+        ----------
+        targets : (k, 3) ndarray  [m]
+            Effector targets.
+
+        Returns
+        -------
+        tuple of str
+
+        """
+        if self._last_targets is None or not np.array_equal(targets, self._last_targets):
+            self._last_targets = targets.copy()
+            self._last_warnings = tuple(
+                f'target inside obstacle {name!r}: the obstacle rows hold the arm out'
+                for name in self.inside(targets))
+        return self._last_warnings
 
     def inside(self, targets):
         """

@@ -91,7 +91,8 @@ CHECKED_MOVE = 0.02
 
 ENTERING_ROUNDS = 4
 """Solves of a tick's QP at most: each after the first adds the obstacle rows of the spheres
-the step before would have carried into an obstacle (:meth:`InverseSolver._entering`)."""
+the step before (moving an actuator by more than :data:`FAST_MOVE` of its range) would have
+carried into an obstacle (:meth:`InverseSolver._entering`)."""
 
 _NO_TURN = (math.nan, 0.0)
 """The orientation gap [rad, m] of a tick without rotational rows."""
@@ -452,8 +453,7 @@ class InverseSolver:
                 return self._held('rejected', started, warnings=('non-finite target rejected',))
             clamped, warnings = self._reachable(targets) if checked == 2 else (targets, ())
             if self._obstacle_rows is not None:
-                warnings += tuple(f'target inside obstacle {name!r}: the obstacle rows hold the '
-                                  'arm out' for name in self._obstacle_rows.inside(clamped))
+                warnings += self._obstacle_rows.inside_warnings(clamped)
             return self._split_tick(clamped, warnings, (started, linearised))
         code, iterations, largest_gap, largest_move, binding, residual_norm = self._control_tick(
             targets, self._record, fresh and self._pending, fresh, True, self._every == 1)
@@ -654,7 +654,8 @@ class InverseSolver:
                 self.lower_bounds, self.upper_bounds, targets.size)
             if not finite:
                 return self._rejected(solution.status, warnings, times[0])
-            if self._obstacle_rows is None or not self._entering(actuation):
+            if (self._obstacle_rows is None or largest_move <= FAST_MOVE
+                    or not self._entering(actuation)):
                 break
         saturated = binding_bounds(problem, solution.x)
         if status == 'solved' and saturated.any():
