@@ -7,7 +7,8 @@ and, when set, ``payload_topic`` (Float64, kg), ``section_stiffness_topic`` (Flo
 one stiffness factor per scene section) and ``actuator_gain_topic`` (Float64MultiArray, one gain
 per valve) into the model's loads, links and cavities, and for each entry of ``wrench_frames``
 ``wrench/tip`` or ``wrench/frame_<i>`` (WrenchStamped: a load on that frame,
-:mod:`cbha_inverse.ros.common.wrenches`);
+:mod:`cbha_inverse.ros.common.wrenches`), and ``obstacles`` (MarkerArray, the whole set the
+collision spheres keep clear of, replacing the scene's: ``docs/obstacles.md``);
 publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_names``, reliable;
 with ``command_kind: displacement`` ``tendon_displacement_command``, the tendon drives' positions
 [m] that hold the tick's tensions at the model's state),
