@@ -181,7 +181,7 @@ ORIENTED = PointEffectors(('mid', 'tip'), [1, 2], np.zeros((2, 3)), 3, kinds=('p
 
 
 def _oriented_goal(times, rotations, positions=None, **kwargs):
-    """A goal of ``mid`` (pose) and ``tip`` (axis): (n, 2, 3, 3) rotations, fixed positions."""
+    """Return a goal of ``mid`` (pose) and ``tip`` (axis): (n, 2, 3, 3) rotations, fixed places."""
     rotations = np.asarray(rotations)
     if positions is None:
         positions = np.tile([[0.1, 0.0, 0.0], [0.2, 0.0, 0.0]], (len(times), 1, 1))
@@ -191,7 +191,7 @@ def _oriented_goal(times, rotations, positions=None, **kwargs):
 
 
 def test_orientations_follow_the_slerp_of_their_knots():
-    """A pose's frame: the geodesic; an axis: the great circle (a twist about u changes nothing)."""
+    """A pose's frame: the geodesic; an axis: the great circle (a twist about u is free)."""
     z, y, x = [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]
     # mid: Rz(40°) at 1 s, then Ry(30°) Rz(40°) at 2 s; tip (axis +z): tilted 60° toward +x at
     # 1 s (its frame also twisted 90° about its own axis), then back to +z at 2 s

@@ -43,7 +43,7 @@ def _angle(a, b):
 
 
 def _oriented(points, times, quaternions, angle_tolerance=0.0):
-    """A goal of the tip through ``points`` with its rotations and goal angle tolerance [rad]."""
+    """Return a goal of the tip through ``points``, its rotations, a goal angle tolerance [rad]."""
     goal = trajectory_goal('tip', points, times, goal_tolerance=0.0005)
     for waypoint, (x, y, z, w) in zip(goal.multi_dof_trajectory.points, quaternions):
         rotation = waypoint.transforms[0].rotation
@@ -138,7 +138,7 @@ def test_cbha_goto_axis_reaches_and_is_refused_for_a_point_effector(rclpy_contex
                                  '--tolerance', '0.0005')
         turned = solver.solver.effector_directions()[0].copy()
     assert status == 0, out + err
-    assert 'deg off' in out and 'SUCCESSFUL: reached: tip ' in out, out
+    assert 'deg to go' in out and 'deg off the path' in out and 'SUCCESSFUL: reached: tip ' in out, out
     assert _angle(turned, DIRECTION) <= 1.0
     point = _solver(rclpy_context, scene='cbha')
     with spinning(rclpy_context, point) as executor:

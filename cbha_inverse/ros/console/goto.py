@@ -134,19 +134,28 @@ def axis_quaternion(axis, direction):
     return quat_from_matrix(so3_exp(shortest_rotation(axis, direction)))
 
 
-def progress_line(feedback, point, angle=False):
-    """Return the one-line progress of a feedback message toward ``point`` (3,) [m]."""
+def progress_line(feedback, point, axis=None, direction=None):
+    """
+    Return the one-line progress of a feedback message toward ``point`` (3,) [m].
+
+    With an effector's ``axis`` (3,) (in its frame) and a ``direction`` (3,) of ``cbha_base``,
+    the line gives the angle of the actual axis to that direction and to its path too.
+    """
     actual = feedback.multi_dof_actual.transforms[0].translation
     error = feedback.multi_dof_error.transforms[0].translation
     left = math.dist((actual.x, actual.y, actual.z), point)
     off = math.sqrt(error.x ** 2 + error.y ** 2 + error.z ** 2)
     saturated = ','.join(feedback.joint_names) or 'none'
     turn = ''
-    if angle:
-        from cbha_inverse.core.so3 import matrix_from_quat, so3_log_angle
+    if axis is not None:
+        from cbha_inverse.core.so3 import matrix_from_quat, shortest_rotation, so3_log_angle
+        q = feedback.multi_dof_actual.transforms[0].rotation
+        left_angle = math.hypot(*shortest_rotation(
+            matrix_from_quat([q.x, q.y, q.z, q.w]) @ axis, direction))
         q = feedback.multi_dof_error.transforms[0].rotation
-        angle = so3_log_angle(matrix_from_quat([q.x, q.y, q.z, q.w]))[1]
-        turn = f', axis {math.degrees(angle):5.2f} deg off'
+        off_angle = so3_log_angle(matrix_from_quat([q.x, q.y, q.z, q.w]))[1]
+        turn = (f', axis {math.degrees(left_angle):5.2f} deg to go, '
+                f'{math.degrees(off_angle):4.2f} deg off the path')
     return (f'{feedback.multi_dof_joint_names[0]}: {1e3 * left:7.2f} mm to go, '
             f'{1e3 * off:6.2f} mm off the path{turn}, at a bound: {saturated}')
 
@@ -253,12 +262,12 @@ def run(args, ros_args, out=sys.stdout):
                 print(f'{PROGRAM}: no action server {name}/follow_trajectory within '
                       f'{args.timeout:g} s', file=sys.stderr)
                 return 1
-            quaternion = None
+            quaternion = axis = None
             if args.axis is not None:
                 try:
                     scene_name = _scene_of(node, name, spin_until, args.timeout)
-                    quaternion = axis_quaternion(effector_axis(scene_name, args.effector),
-                                                 args.axis)
+                    axis = effector_axis(scene_name, args.effector)
+                    quaternion = axis_quaternion(axis, args.axis)
                 except LookupError as exc:
                     print(f'{PROGRAM}: --axis: {exc}', file=sys.stderr)
                     return 1
@@ -280,7 +289,7 @@ def run(args, ros_args, out=sys.stdout):
                     break
                 if goal.feedback is not None:
                     heard = time.monotonic()
-                    print('\r' + progress_line(goal.feedback, point, args.axis is not None),
+                    print('\r' + progress_line(goal.feedback, point, axis, args.axis),
                           end='', file=out, flush=True)
                     if not resent:
                         resent = True

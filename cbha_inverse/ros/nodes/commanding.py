@@ -17,10 +17,11 @@ spin_until_stopped`): no lock is needed between the action, the topics and the s
   (:func:`cbha_inverse.robot.goals.plan_goal`) and, for the ``axis`` and ``pose`` effectors it
   orients, the solver's orientation targets, and the tolerances are checked
   (:class:`cbha_inverse.robot.goals.GoalMonitor`) against the actual effectors: the measured tip
-  in closed loop, the model's otherwise (the orientations are always the model's). A new goal preempts the running one (aborted); a cancel
-  or a path tolerance violation holds the effectors where they are (the targets set there, the
-  arm never vents). While a goal runs, ``target``, ``targets/*`` and the teleop topics are
-  refused (counted, logged).
+  in closed loop, the model's otherwise (the orientations are always the model's). A new goal
+  preempts the running one (aborted); a cancel or a path tolerance violation holds the
+  effectors where they are (the targets, positions and orientations, set there; the arm never
+  vents). While a goal runs, ``target``, ``targets/*``, the pose topics and the teleop topics
+  are refused (counted, logged).
 - ``~/delta_twist_cmds`` (geometry_msgs/TwistStamped: the first effector's linear velocity) and
   ``~/pose_target_cmds`` (geometry_msgs/PoseStamped: its position approached at
   ``teleop_max_speed``): the target moves at every solver tick, inside the workspace box and
