@@ -133,13 +133,13 @@ class TrajectoryGoal:
     path_tolerance: np.ndarray
     goal_tolerance: np.ndarray
     goal_time_tolerance: float
-    rotations: np.ndarray = None
-    kinds: tuple = None
-    axes: np.ndarray = None
-    orientation_lengths: np.ndarray = None
-    oriented: np.ndarray = None
-    path_angle_tolerance: np.ndarray = None
-    goal_angle_tolerance: np.ndarray = None
+    rotations: np.ndarray
+    kinds: tuple
+    axes: np.ndarray
+    orientation_lengths: np.ndarray
+    oriented: np.ndarray
+    path_angle_tolerance: np.ndarray
+    goal_angle_tolerance: np.ndarray
 
 
 def _tolerances(tolerances, effectors, default, what):
@@ -385,7 +385,7 @@ class GoalPlan:
     times: np.ndarray
     positions: np.ndarray
     delay: float
-    rotations: np.ndarray = None
+    rotations: np.ndarray
 
     @property
     def end_time(self):

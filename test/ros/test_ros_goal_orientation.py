@@ -6,8 +6,9 @@ waypoint's rotation turns that axis to where it carries +x. A goal to the worksp
 with the axis turned 20° about the vertical ends SUCCESSFUL with the model's axis within the
 goal angle tolerance of that direction, 20° from the axis a goal without rotation leaves (+x,
 the rest target); a position-only goal (goal angle tolerance < 0) then keeps the axis. A NaN or
-zero quaternion is INVALID_GOAL naming its waypoint. ``cbha_goto --axis`` reaches the same,
-and refuses ``--axis`` on a scene whose tip is a point effector in one line.
+zero quaternion is INVALID_GOAL naming its waypoint. A ``pose`` tip (the same arm) turns its
+whole frame to a pose of the forward model. ``cbha_goto --axis`` reaches the direction, and
+refuses ``--axis`` on a scene whose tip is a point effector in one line.
 """
 
 import subprocess
@@ -15,6 +16,7 @@ import sys
 
 from cbha_inverse.robot import goals
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
+from cbha_inverse.scene import load_scene
 from control_msgs.action import FollowJointTrajectory
 from control_msgs.msg import JointComponentTolerance
 import numpy as np
@@ -95,6 +97,35 @@ def test_a_waypoint_rotation_turns_the_approach_axis_and_a_free_one_keeps_it(rcl
     axis = Rotation.from_quat([last.x, last.y, last.z, last.w]).apply([1.0, 0.0, 0.0])
     assert len(feedback) >= 3 and max(error_angles) > 0.05
     assert _angle(axis, DIRECTION) < 5.0
+
+
+def test_a_pose_effector_turns_its_frame_to_the_waypoint(rclpy_context, tmp_path):
+    """``cbha_approach`` with a ``pose`` tip: a pose of the forward model is reached, frame too."""
+    (tmp_path / 'scenes').mkdir()
+    (tmp_path / 'segments').symlink_to(REPO_ROOT / 'config' / 'segments')
+    text = (REPO_ROOT / 'config' / 'scenes' / 'cbha_approach.yaml').read_text()
+    text = text.replace('kind: axis', 'kind: pose').replace(' axis: [1.0, 0.0, 0.0],', '')
+    scene_path = tmp_path / 'scenes' / 'cbha_pose.yaml'
+    scene_path.write_text(text)
+    scene = load_scene(scene_path)
+    assert scene.effectors.kinds == ('pose',)
+    reached = scene.forward(np.array([6e4, 1e4, 2e4, 3e4, 5e4, 1e4]), strict=True)
+    rotation = reached.state.rotations[scene.effectors.frames[0]]
+    position = reached.effector_positions[0]
+    solver = _solver(rclpy_context, scene=str(scene_path))
+    client = Node('goal_client', context=rclpy_context, namespace='/cbha')
+    action = ActionClient(client, FollowJointTrajectory, ACTION)
+    tolerance = np.radians(0.5)
+    with spinning(rclpy_context, solver, client) as executor:
+        assert spin_until(executor, action.server_is_ready, 10.0)
+        status, result = wait_result(executor, send_goal(executor, action, _oriented(
+            [position], [0.0], [Rotation.from_matrix(rotation).as_quat()], tolerance)))
+        frame = solver.solver.effectors.rotations(solver.solver.state.rotations)[0]
+    assert status == SUCCEEDED, result.error_string
+    turned = np.degrees(Rotation.from_matrix(frame.T @ rotation).magnitude())
+    assert turned <= np.degrees(tolerance), turned
+    # the pose is not the rest one: the frame really turned
+    assert np.degrees(Rotation.from_matrix(rotation).magnitude()) > 10.0
 
 
 def test_a_nan_or_zero_quaternion_is_an_invalid_goal_naming_its_waypoint(rclpy_context):

@@ -267,6 +267,8 @@ class Commanding:
 
     def _orient(self, goal, rotations):
         """Set the orientation targets of the effectors a goal orients to (k, 3, 3) rotations."""
+        if not np.any(goal.oriented):
+            return
         solver = self.node.solver
         effectors = solver.effectors
         directions, quaternions = solver.orientation_targets
@@ -278,9 +280,8 @@ class Commanding:
             else:
                 quaternions[effectors.pose_effectors.index(index)] = quat_from_matrix(
                     rotations[j])
-        if np.any(goal.oriented):
-            solver.set_orientation_targets(directions=directions if len(directions) else None,
-                                           quaternions=quaternions if len(quaternions) else None)
+        solver.set_orientation_targets(directions=directions if len(directions) else None,
+                                       quaternions=quaternions if len(quaternions) else None)
 
     def _hold(self, run, actual):
         """Set the targets of a goal's effectors to where they are (positions and orientations)."""
