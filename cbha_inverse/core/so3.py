@@ -308,3 +308,58 @@ def so3_left_jacobian_inverse(rotvec):
 
     """
     return _batched(left_jacobian_inverse_batch, rotvec, (3,), (3, 3))
+
+
+def shortest_rotation(a, b):
+    """
+    Return the rotation vector of the shortest rotation taking unit vectors ``a`` to ``b``.
+
+    Its angle is ``atan2(|a × b|, a · b)`` (accurate near 0 and pi), its axis ``a × b``; for
+    ``b = -a`` a half turn about a unit vector orthogonal to ``a`` (``a`` crossed with the axis
+    of its smallest component), the same one for the same ``a``.
+
+    Parameters
+    ----------
+    a, b : (..., 3) array_like
+        Unit vectors (broadcast against each other).
+
+    Returns
+    -------
+    (..., 3) ndarray  [rad]
+        Axis times angle, the angle in [0, pi] (``so3_exp`` of it carries ``a`` to ``b``).
+
+    """
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    axis = cross(a, b)
+    sine = np.linalg.norm(axis, axis=-1, keepdims=True)
+    angle = np.arctan2(sine, np.sum(a * b, axis=-1, keepdims=True))
+    smallest = np.eye(3)[np.argmin(np.abs(a), axis=-1)]
+    other = cross(a, smallest)
+    other = other / np.linalg.norm(other, axis=-1, keepdims=True)
+    turned = sine > 0.0
+    unit = np.where(turned, axis / np.where(turned, sine, 1.0), other)
+    return unit * angle
+
+
+def so3_slerp(r0, r1, fraction):
+    """
+    Return the geodesic interpolation (slerp) of rotations: ``exp(t log(R1 R0ᵀ)) R0``.
+
+    The rotation turns at a constant rate about a fixed axis (world axes) from ``R0`` (``t = 0``)
+    to ``R1`` (``t = 1``), the short way (the quaternion slerp of the pair of the same sign).
+
+    Parameters
+    ----------
+    r0, r1 : (..., 3, 3) array_like
+        Rotation matrices.
+    fraction : float or (...,) array_like
+        ``t`` (0 at ``r0``, 1 at ``r1``).
+
+    Returns
+    -------
+    (..., 3, 3) ndarray
+
+    """
+    r0, r1 = np.asarray(r0, dtype=float), np.asarray(r1, dtype=float)
+    step = so3_log(r1 @ np.swapaxes(r0, -1, -2))
+    return so3_exp(np.asarray(fraction, dtype=float)[..., None] * step) @ r0

@@ -117,3 +117,37 @@ def test_left_jacobian_inverse_and_derivative(angle):
                     - so3.so3_left_jacobian_inverse(phi - h * e).T @ s) / (2 * h)
                    for e in np.eye(3)], axis=-1)
     np.testing.assert_allclose(d, fd, atol=1e-9)
+
+
+def test_slerp_against_scipy():
+    """so3_slerp is scipy's Slerp (quaternion slerp, the short way) at every fraction."""
+    from scipy.spatial.transform import Slerp
+    rng = np.random.default_rng(5)
+    pairs = Rotation.from_rotvec(_rotvecs(rng, 24)), Rotation.from_rotvec(_rotvecs(rng, 24))
+    fractions = np.array([0.0, 0.1, 0.5, 0.73, 1.0])
+    for r0, r1 in zip(*pairs):
+        reference = Slerp([0.0, 1.0], Rotation.concatenate([r0, r1]))(fractions).as_matrix()
+        ours = so3.so3_slerp(r0.as_matrix(), r1.as_matrix(), fractions)
+        np.testing.assert_allclose(ours, reference, atol=1e-12)
+
+
+def test_shortest_rotation_carries_a_to_b_by_their_angle():
+    """exp(ψ) a = b, |ψ| = the angle between them, ψ ⟂ both; b = -a: a half turn ⟂ a."""
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(50, 3))
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b = so3.so3_exp(_rotvecs(rng, 50)) @ a[..., None]
+    b = b[..., 0]
+    b[:3] = a[:3]                           # equal
+    b[3:6] = -a[3:6]                        # opposite
+    psi = so3.shortest_rotation(a, b)
+    np.testing.assert_allclose((so3.so3_exp(psi) @ a[..., None])[..., 0], b, atol=1e-12)
+    angle = np.arccos(np.clip(np.sum(a * b, axis=1), -1.0, 1.0))
+    np.testing.assert_allclose(np.linalg.norm(psi, axis=1), angle, atol=1e-7)
+    np.testing.assert_allclose(np.sum(psi * a, axis=1), 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.sum(psi * b, axis=1), 0.0, atol=1e-12)
+    np.testing.assert_array_equal(psi[:3], 0.0)
+    np.testing.assert_allclose(np.linalg.norm(psi[3:6], axis=1), np.pi)
+    # near 0 the angle keeps its precision (atan2, not arccos)
+    tiny = so3.shortest_rotation([1.0, 0.0, 0.0], [np.cos(1e-9), np.sin(1e-9), 0.0])
+    np.testing.assert_allclose(tiny, [0.0, 0.0, 1e-9], rtol=1e-12)

@@ -1,18 +1,26 @@
 """
-``cbha_goto X Y Z``: move one effector of ``inverse_solver`` to a point and wait (its action).
+``cbha_goto X Y Z [--axis AX AY AZ]``: move one effector of ``inverse_solver`` there (its action).
 
 Sends one ``~/follow_trajectory`` goal (``docs/commanding.md``): the effector ``--effector``
 (default ``tip``) to (X, Y, Z) [m] in ``cbha_base``, with ``--tolerance`` as its goal tolerance,
-and prints its progress on one line (the effector's distance to the point, to its path, and the
-actuators at a bound) until the goal ends. Without ``--speed`` the node's ``approach_speed``
-bounds the motion; with it, the first feedback gives where the effector is and the goal is sent
-again with its time set for that speed (never faster than ``approach_speed``).
+and prints its progress on one line (the effector's distance to the point, to its path, the
+angle of its axis to the direction with ``--axis``, and the actuators at a bound) until the goal
+ends. Without ``--speed`` the node's ``approach_speed`` bounds the motion; with it, the first
+feedback gives where the effector is and the goal is sent again with its time set for that
+speed (never faster than ``approach_speed``).
+
+``--axis AX AY AZ`` turns the approach axis of an ``axis`` effector (``docs/effectors.md``) to
+that direction of ``cbha_base`` (normalised), within ``--angle-tolerance``: the node's ``scene``
+parameter gives the effector's kind and axis (its scene file must be readable here). Without
+``--axis`` the goal frees the orientation (its goal angle tolerance is < 0): an ``axis`` or
+``pose`` effector keeps its orientation target.
 
 Exit status: 0 reached within the tolerance; 1 not reached (the goal refused, e.g. beyond the
 reach, or a tolerance violated: the reason on stderr), no action server within ``--timeout`` or
-no feedback for that long while the goal runs; 2 bad arguments; 128 + the signal number after
-SIGINT/SIGTERM, which cancels the goal first (the arm holds where it is). ROS arguments after
-``--ros-args`` (``-r __ns:=/left``). ``--help`` starts no ROS.
+no feedback for that long while the goal runs, the node's scene not readable for ``--axis``; 2
+bad arguments (``--axis`` of an effector that is not an ``axis`` effector); 128 + the signal
+number after SIGINT/SIGTERM, which cancels the goal first (the arm holds where it is). ROS
+arguments after ``--ros-args`` (``-r __ns:=/left``). ``--help`` starts no ROS.
 """
 
 import argparse
@@ -45,6 +53,12 @@ def _parser():
                         help="top speed [m/s] (default: the node's approach_speed)")
     parser.add_argument('--tolerance', type=float, default=0.001,
                         help='goal tolerance [m] (default 0.001)')
+    parser.add_argument('--axis', type=float, nargs=3, default=None,
+                        metavar=('AX', 'AY', 'AZ'),
+                        help='approach direction of an axis effector in cbha_base (normalised; '
+                        'default: its orientation target is kept)')
+    parser.add_argument('--angle-tolerance', type=float, default=0.0175,
+                        help='goal angle tolerance [rad] of --axis (default 0.0175, 1 degree)')
     parser.add_argument('--timeout', type=float, default=10.0,
                         help='seconds to wait for the node, and for the result beyond the '
                         'motion (default 10)')
@@ -54,7 +68,8 @@ def _parser():
     return parser
 
 
-def make_goal(effector, point, tolerance, time_from_start=0.0):
+def make_goal(effector, point, tolerance, time_from_start=0.0, quaternion=None,
+              angle_tolerance=0.0):
     """
     Return the FollowJointTrajectory goal of one effector to one point.
 
@@ -68,33 +83,117 @@ def make_goal(effector, point, tolerance, time_from_start=0.0):
         Its goal tolerance.
     time_from_start : float  [s]
         When it is due (0: at the node's approach speed).
+    quaternion : (4,) sequence of float, optional
+        The orientation ``(x, y, z, w)`` of the effector's frame in ``cbha_base`` (its
+        ``angle_tolerance`` [rad] as the goal angle tolerance); None: the orientation is free
+        (a goal angle tolerance of -1).
+    angle_tolerance : float  [rad]
+        With ``quaternion``.
 
     """
     from control_msgs.action import FollowJointTrajectory
-    from control_msgs.msg import JointTolerance
-    from geometry_msgs.msg import Transform, Vector3
+    from control_msgs.msg import JointComponentTolerance, JointTolerance
+    from geometry_msgs.msg import Quaternion, Transform, Vector3
     from rclpy.duration import Duration
     from trajectory_msgs.msg import MultiDOFJointTrajectoryPoint
     goal = FollowJointTrajectory.Goal()
     goal.multi_dof_trajectory.joint_names = [effector]
     waypoint = MultiDOFJointTrajectoryPoint()
     x, y, z = (float(v) for v in point)
-    waypoint.transforms = [Transform(translation=Vector3(x=x, y=y, z=z))]
+    qx, qy, qz, qw = (0.0, 0.0, 0.0, 1.0) if quaternion is None else (float(v)
+                                                                      for v in quaternion)
+    waypoint.transforms = [Transform(translation=Vector3(x=x, y=y, z=z),
+                                     rotation=Quaternion(x=qx, y=qy, z=qz, w=qw))]
     waypoint.time_from_start = Duration(seconds=float(time_from_start)).to_msg()
     goal.multi_dof_trajectory.points = [waypoint]
     goal.goal_tolerance = [JointTolerance(name=effector, position=float(tolerance))]
+    goal.component_goal_tolerance = [JointComponentTolerance(
+        joint_name=effector, component=JointComponentTolerance.ROTATION,
+        position=-1.0 if quaternion is None else float(angle_tolerance))]
     return goal
 
 
-def progress_line(feedback, point):
-    """Return the one-line progress of a feedback message toward ``point`` (3,) [m]."""
+def axis_quaternion(axis, direction):
+    """
+    Return the quaternion of the least rotation carrying an effector's axis to a direction.
+
+    Parameters
+    ----------
+    axis : (3,) array_like
+        The effector's unit axis in its frame.
+    direction : (3,) array_like
+        The unit direction in ``cbha_base``.
+
+    Returns
+    -------
+    (4,) ndarray
+        ``(x, y, z, w)``: the frame's orientation whose axis points along ``direction``.
+
+    """
+    from cbha_inverse.core.so3 import quat_from_matrix, shortest_rotation, so3_exp
+    return quat_from_matrix(so3_exp(shortest_rotation(axis, direction)))
+
+
+def progress_line(feedback, point, axis=None, direction=None):
+    """
+    Return the one-line progress of a feedback message toward ``point`` (3,) [m].
+
+    With an effector's ``axis`` (3,) (in its frame) and a ``direction`` (3,) of ``cbha_base``,
+    the line gives the angle of the actual axis to that direction and to its path too.
+    """
     actual = feedback.multi_dof_actual.transforms[0].translation
     error = feedback.multi_dof_error.transforms[0].translation
     left = math.dist((actual.x, actual.y, actual.z), point)
     off = math.sqrt(error.x ** 2 + error.y ** 2 + error.z ** 2)
     saturated = ','.join(feedback.joint_names) or 'none'
+    turn = ''
+    if axis is not None:
+        from cbha_inverse.core.so3 import matrix_from_quat, shortest_rotation, so3_log_angle
+        q = feedback.multi_dof_actual.transforms[0].rotation
+        left_angle = math.hypot(*shortest_rotation(
+            matrix_from_quat([q.x, q.y, q.z, q.w]) @ axis, direction))
+        q = feedback.multi_dof_error.transforms[0].rotation
+        off_angle = so3_log_angle(matrix_from_quat([q.x, q.y, q.z, q.w]))[1]
+        turn = (f', axis {math.degrees(left_angle):5.2f} deg to go, '
+                f'{math.degrees(off_angle):4.2f} deg off the path')
     return (f'{feedback.multi_dof_joint_names[0]}: {1e3 * left:7.2f} mm to go, '
-            f'{1e3 * off:6.2f} mm off the path, at a bound: {saturated}')
+            f'{1e3 * off:6.2f} mm off the path{turn}, at a bound: {saturated}')
+
+
+def effector_axis(scene_name, effector):
+    """
+    Return the axis (3,) of an ``axis`` effector of a scene, or raise with a one-line reason.
+
+    Parameters
+    ----------
+    scene_name : str
+        The node's ``scene`` parameter (a name in ``config/scenes`` or a file path).
+    effector : str
+        The effector.
+
+    Raises
+    ------
+    LookupError
+        The scene cannot be read here, or has no such effector.
+    ValueError
+        The effector is not an ``axis`` effector.
+
+    """
+    from cbha_inverse.errors import ConfigError
+    from cbha_inverse.scene import load_scene
+    try:
+        effectors = load_scene(scene_name).effectors
+    except (OSError, ConfigError) as exc:
+        raise LookupError(f'the scene {scene_name!r} of the node cannot be read here ({exc})') \
+            from None
+    if effector not in effectors.names:
+        raise LookupError(f'scene {scene_name!r} has no effector {effector!r} (it has '
+                          f'{list(effectors.names)})')
+    index = effectors.names.index(effector)
+    if effectors.kinds[index] != 'axis':
+        raise ValueError(f'{effector} is a {effectors.kinds[index]} effector of scene '
+                         f'{scene_name!r}, not an axis effector')
+    return effectors.axes[index]
 
 
 class _Goal:
@@ -105,6 +204,18 @@ class _Goal:
         self.handle = None
         self.result = None
         self.feedback = None
+
+
+def _scene_of(node, name, spin_until, timeout):
+    """Return the ``scene`` parameter of the node ``name``, or raise LookupError."""
+    from rclpy.parameter_client import AsyncParameterClient
+    client = AsyncParameterClient(node, name)
+    if not spin_until(client.services_are_ready, timeout):
+        raise LookupError(f'the parameter services of {name} are not ready within {timeout:g} s')
+    future = client.get_parameters(['scene'])
+    if not spin_until(future.done, timeout) or future.result() is None:
+        raise LookupError(f'no answer to get_parameters of {name} within {timeout:g} s')
+    return future.result().values[0].string_value
 
 
 def run(args, ros_args, out=sys.stdout):
@@ -139,7 +250,8 @@ def run(args, ros_args, out=sys.stdout):
         def send(time_from_start):
             goal = _Goal()
             goal.sent = client.send_goal_async(
-                make_goal(args.effector, point, args.tolerance, time_from_start),
+                make_goal(args.effector, point, args.tolerance, time_from_start, quaternion,
+                          args.angle_tolerance),
                 feedback_callback=lambda message: setattr(goal, 'feedback', message.feedback))
             return goal
 
@@ -150,6 +262,18 @@ def run(args, ros_args, out=sys.stdout):
                 print(f'{PROGRAM}: no action server {name}/follow_trajectory within '
                       f'{args.timeout:g} s', file=sys.stderr)
                 return 1
+            quaternion = axis = None
+            if args.axis is not None:
+                try:
+                    scene_name = _scene_of(node, name, spin_until, args.timeout)
+                    axis = effector_axis(scene_name, args.effector)
+                    quaternion = axis_quaternion(axis, args.axis)
+                except LookupError as exc:
+                    print(f'{PROGRAM}: --axis: {exc}', file=sys.stderr)
+                    return 1
+                except ValueError as exc:
+                    print(f'{PROGRAM}: --axis: {exc}', file=sys.stderr)
+                    return 2
             goal = send(0.0)
             resent = args.speed is None
             heard = time.monotonic()
@@ -165,8 +289,8 @@ def run(args, ros_args, out=sys.stdout):
                     break
                 if goal.feedback is not None:
                     heard = time.monotonic()
-                    print('\r' + progress_line(goal.feedback, point), end='', file=out,
-                          flush=True)
+                    print('\r' + progress_line(goal.feedback, point, axis, args.axis),
+                          end='', file=out, flush=True)
                     if not resent:
                         resent = True
                         actual = goal.feedback.multi_dof_actual.transforms[0].translation
@@ -214,14 +338,22 @@ def main(argv=None):
     """
     own, ros_args = split_ros_arguments(sys.argv[1:] if argv is None else argv)
     args = _parser().parse_args(own)
-    for name in ('speed', 'tolerance', 'timeout'):
+    for name in ('speed', 'tolerance', 'timeout', 'angle_tolerance'):
         value = getattr(args, name)
         if value is not None and not (math.isfinite(value) and value > 0.0):
-            print(f'{PROGRAM}: error: --{name} must be a positive number', file=sys.stderr)
+            print(f'{PROGRAM}: error: --{name.replace("_", "-")} must be a positive number',
+                  file=sys.stderr)
             return 2
     if not all(math.isfinite(v) for v in (args.x, args.y, args.z)):
         print(f'{PROGRAM}: error: X Y Z must be finite', file=sys.stderr)
         return 2
+    if args.axis is not None:
+        size = math.hypot(*args.axis)
+        if not (math.isfinite(size) and size > 0.0):
+            print(f'{PROGRAM}: error: --axis must be a finite non-zero direction',
+                  file=sys.stderr)
+            return 2
+        args.axis = [v / size for v in args.axis]
     try:
         return run(args, ros_args)
     except KeyboardInterrupt:        # a second signal

@@ -14,12 +14,14 @@ spin_until_stopped`): no lock is needed between the action, the topics and the s
 - ``~/follow_trajectory`` (control_msgs/action/FollowJointTrajectory, its
   ``multi_dof_trajectory``): the goal is checked (:func:`cbha_inverse.robot.goals.make_goal`,
   against each effector's reachable set), then at every solver tick its path sets the targets
-  (:func:`cbha_inverse.robot.goals.plan_goal`) and the tolerances are checked
+  (:func:`cbha_inverse.robot.goals.plan_goal`) and, for the ``axis`` and ``pose`` effectors it
+  orients, the solver's orientation targets, and the tolerances are checked
   (:class:`cbha_inverse.robot.goals.GoalMonitor`) against the actual effectors: the measured tip
-  in closed loop, the model's otherwise. A new goal preempts the running one (aborted); a cancel
-  or a path tolerance violation holds the effectors where they are (the targets set there, the
-  arm never vents). While a goal runs, ``target``, ``targets/*`` and the teleop topics are
-  refused (counted, logged).
+  in closed loop, the model's otherwise (the orientations are always the model's). A new goal
+  preempts the running one (aborted); a cancel or a path tolerance violation holds the
+  effectors where they are (the targets, positions and orientations, set there; the arm never
+  vents). While a goal runs, ``target``, ``targets/*``, the pose topics and the teleop topics
+  are refused (counted, logged).
 - ``~/delta_twist_cmds`` (geometry_msgs/TwistStamped: the first effector's linear velocity) and
   ``~/pose_target_cmds`` (geometry_msgs/PoseStamped: its position approached at
   ``teleop_max_speed``): the target moves at every solver tick, inside the workspace box and
@@ -30,12 +32,14 @@ import math
 import time
 
 from cbha_inverse.core.actuation.effectors import rotation_of_quaternion
-from cbha_inverse.core.so3 import quat_from_matrix
+from cbha_inverse.core.so3 import quat_from_matrix, so3_exp
 from cbha_inverse.robot import goals
 from cbha_inverse.ros.common.qos import TARGET_QOS
 from cbha_inverse.scene.reach import sample_reachable_set
 from control_msgs.action import FollowJointTrajectory
-from geometry_msgs.msg import PointStamped, PoseStamped, Transform, TwistStamped, Vector3
+from control_msgs.msg import JointComponentTolerance
+from geometry_msgs.msg import (PointStamped, PoseStamped, Quaternion, Transform, TwistStamped,
+                               Vector3)
 import numpy as np
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.task import Future
@@ -49,12 +53,27 @@ def _seconds(duration):
     return duration.sec + 1e-9 * duration.nanosec
 
 
-def _translations(points):
-    """Return a MultiDOFJointTrajectoryPoint of (k, 3) positions [m] (identity rotations)."""
+def _transforms(points, rotations):
+    """Return a MultiDOFJointTrajectoryPoint of (k, 3) positions [m] and (k, 3, 3) rotations."""
     message = MultiDOFJointTrajectoryPoint()
-    for x, y, z in np.asarray(points, dtype=float):
-        message.transforms.append(Transform(translation=Vector3(x=x, y=y, z=z)))
+    for (x, y, z), (qx, qy, qz, qw) in zip(np.asarray(points, dtype=float),
+                                           quat_from_matrix(rotations).reshape(-1, 4)):
+        message.transforms.append(Transform(translation=Vector3(x=x, y=y, z=z),
+                                            rotation=Quaternion(x=qx, y=qy, z=qz, w=qw)))
     return message
+
+
+def _angle_tolerances(entries):
+    """Return ``name -> angle [rad]`` of the ROTATION entries of JointComponentTolerance."""
+    angles = {}
+    for entry in entries:
+        if entry.component != JointComponentTolerance.ROTATION:
+            raise goals.GoalError(goals.INVALID_GOAL, (
+                f'a component tolerance of {entry.joint_name} on component {entry.component}: '
+                f'only ROTATION ({JointComponentTolerance.ROTATION}) is read (an angle); a '
+                'distance is JointTolerance.position'))
+        angles[entry.joint_name] = entry.position
+    return angles
 
 
 class _Run:
@@ -142,15 +161,20 @@ class Commanding:
             if request.trajectory.joint_names or request.trajectory.points:
                 raise goals.GoalError(goals.INVALID_JOINTS, 'the arm has no joints: give the '
                                       'effector positions in multi_dof_trajectory')
+            positions, quaternions = self._waypoints(trajectory)
             goal = goals.make_goal(
-                node.scene.effector_names, trajectory.joint_names,
-                [_seconds(point.time_from_start) for point in trajectory.points],
-                self._in_node_frame(trajectory.header.frame_id, self._waypoints(trajectory)),
+                node.solver.effectors, trajectory.joint_names,
+                [_seconds(point.time_from_start) for point in trajectory.points], positions,
+                quaternions=quaternions,
+                frame_transform=self._frame_transform(trajectory.header.frame_id),
                 path_tolerance={t.name: t.position for t in request.path_tolerance},
                 goal_tolerance={t.name: t.position for t in request.goal_tolerance},
+                path_angle_tolerance=_angle_tolerances(request.component_path_tolerance),
+                goal_angle_tolerance=_angle_tolerances(request.component_goal_tolerance),
                 goal_time_tolerance=_seconds(request.goal_time_tolerance),
                 defaults=(p.default_path_tolerance, p.default_goal_tolerance,
                           p.default_goal_time_tolerance),
+                angle_defaults=(p.default_path_angle_tolerance, p.default_goal_angle_tolerance),
                 reach=self.reach, reach_margin=p.reach_margin)
         except goals.GoalError as exc:
             node.get_logger().warn(f'follow_trajectory goal refused: {goals.CODE_NAMES[exc.code]}'
@@ -169,28 +193,30 @@ class Commanding:
 
     @staticmethod
     def _waypoints(trajectory):
-        """Return the (n, k, 3) translations of a MultiDOFJointTrajectory [m]."""
+        """Return the (n, k, 3) translations [m] and (n, k, 4) rotations of a trajectory."""
         k = len(trajectory.joint_names)
-        rows = []
+        rows, turns = [], []
         for i, point in enumerate(trajectory.points):
             if len(point.transforms) != k:
                 raise goals.GoalError(goals.INVALID_GOAL, f'waypoint {i}: {len(point.transforms)}'
                                       f' transforms for {k} effectors')
             rows.append([(t.translation.x, t.translation.y, t.translation.z)
                          for t in point.transforms])
-        return np.array(rows, dtype=float).reshape(len(rows), k, 3)
+            turns.append([(t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w)
+                          for t in point.transforms])
+        return (np.array(rows, dtype=float).reshape(len(rows), k, 3),
+                np.array(turns, dtype=float).reshape(len(turns), k, 4))
 
-    def _in_node_frame(self, frame, positions):
-        """Return waypoints (n, k, 3) of ``frame`` in the node's frame (``/tf_static``)."""
+    def _frame_transform(self, frame):
+        """Return ``(R, t)`` of a goal's frame in the node's (``/tf_static``), None for it."""
         node = self.node
         if not frame or frame == node.params.frame_id:
-            return positions
+            return None
         if node.static_tf is None:
             raise goals.GoalError(goals.INVALID_GOAL, f'waypoints in frame {frame!r}, not '
                                   f'{node.params.frame_id!r}, and no /tf_static (tf2_msgs)')
         try:
-            return np.array([[node.static_tf.transform_point(p, frame, node.params.frame_id)
-                              for p in row] for row in positions]).reshape(positions.shape)
+            return node.static_tf.transform(frame, node.params.frame_id)
         except (LookupError, ValueError) as exc:
             raise goals.GoalError(goals.INVALID_GOAL, f'{exc} (publish its transform on '
                                   '/tf_static, e.g. cbha_static_transform)') from None
@@ -234,6 +260,34 @@ class Commanding:
         """Make (k, 3) targets the node's set-point ((3,) for a single effector)."""
         self.node._set_target(targets if len(targets) > 1 else targets[0])
 
+    def _model_rotations(self):
+        """Return the model's effector frame rotations (k, 3, 3) (scene order)."""
+        solver = self.node.solver
+        return solver.effectors.rotations(solver.state.rotations)
+
+    def _orient(self, goal, rotations):
+        """Set the orientation targets of the effectors a goal orients to (k, 3, 3) rotations."""
+        if not np.any(goal.oriented):
+            return
+        solver = self.node.solver
+        effectors = solver.effectors
+        directions, quaternions = solver.orientation_targets
+        for j, index in enumerate(goal.indices):
+            if not goal.oriented[j]:
+                continue
+            if goal.kinds[j] == 'axis':
+                directions[effectors.axis_effectors.index(index)] = rotations[j] @ goal.axes[j]
+            else:
+                quaternions[effectors.pose_effectors.index(index)] = quat_from_matrix(
+                    rotations[j])
+        solver.set_orientation_targets(directions=directions if len(directions) else None,
+                                       quaternions=quaternions if len(quaternions) else None)
+
+    def _hold(self, run, actual):
+        """Set the targets of a goal's effectors to where they are (positions and orientations)."""
+        self._set(self._targets_with(run.goal.indices, actual[run.goal.indices]))
+        self._orient(run.goal, self._model_rotations()[run.goal.indices])
+
     def before_tick(self):
         """Move the targets of a running goal or of teleop (the solver's timer, first)."""
         if self.run is not None:
@@ -246,7 +300,7 @@ class Commanding:
         actual = self._actual()
         if run.handle.is_cancel_requested:
             if actual is not None:
-                self._set(self._targets_with(run.goal.indices, actual[run.goal.indices]))
+                self._hold(run, actual)
             self._end(run, goals.GoalOutcome(goals.SUCCESSFUL, 'canceled: holding where the '
                                              'effectors are', np.zeros(0)), 'cancel')
             return
@@ -258,9 +312,10 @@ class Commanding:
         if actual is None:
             return      # closed loop, no measurement yet: the node waits and says so
         now = node._node_seconds()
+        rotations = self._model_rotations()[run.goal.indices]
         if run.plan is None:
             run.plan = goals.plan_goal(run.goal, actual[run.goal.indices],
-                                       node.params.approach_speed)
+                                       node.params.approach_speed, rotations)
             run.monitor = goals.GoalMonitor(run.goal, run.plan)
             run.started = now
             if run.plan.delay > 0.0:
@@ -268,29 +323,39 @@ class Commanding:
                                        f'{node.params.approach_speed:g} m/s delays the '
                                        f'waypoints by {run.plan.delay:.2f} s')
         elapsed = now - run.started
-        outcome = run.monitor.check(elapsed, actual[run.goal.indices])
+        outcome = run.monitor.check(elapsed, actual[run.goal.indices], rotations)
         if outcome is not None and outcome.code == goals.PATH_TOLERANCE_VIOLATED:
-            self._set(self._targets_with(run.goal.indices, actual[run.goal.indices]))
+            self._hold(run, actual)
             self._end(run, outcome, 'abort')
             return
         desired = run.plan.desired(elapsed)
+        desired_rotations = run.plan.desired_rotations(elapsed)
+        self._orient(run.goal, desired_rotations)
         self._set(self._targets_with(run.goal.indices, desired))
         run.ticks += 1
         if outcome is not None:
             self._end(run, outcome, 'succeed' if outcome.succeeded else 'abort')
         elif run.ticks % node.params.feedback_every_n_ticks == 0:
-            self._feedback(run, desired, actual[run.goal.indices])
+            self._feedback(run, desired, actual[run.goal.indices], desired_rotations, rotations)
 
-    def _feedback(self, run, desired, actual):
-        """Publish desired, actual and error per effector, and the saturated actuators."""
+    def _feedback(self, run, desired, actual, desired_rotations, rotations):
+        """
+        Publish desired, actual and error per effector, and the saturated actuators.
+
+        The rotations: ``actual`` the model's frame, ``error`` the rotation from it to the
+        desired orientation (:func:`cbha_inverse.robot.goals.orientation_errors`: an ``axis``
+        effector's shortest turn of its axis; identity where the goal orients nothing),
+        ``desired`` that error applied to the actual frame.
+        """
         node = self.node
         feedback = FollowJointTrajectory.Feedback()
         feedback.header.stamp = node.get_clock().now().to_msg()
         feedback.header.frame_id = node.params.frame_id
         feedback.multi_dof_joint_names = list(run.goal.effectors)
-        feedback.multi_dof_desired = _translations(desired)
-        feedback.multi_dof_actual = _translations(actual)
-        feedback.multi_dof_error = _translations(desired - actual)
+        errors = so3_exp(goals.orientation_errors(run.goal, desired_rotations, rotations))
+        feedback.multi_dof_desired = _transforms(desired, errors @ rotations)
+        feedback.multi_dof_actual = _transforms(actual, rotations)
+        feedback.multi_dof_error = _transforms(desired - actual, errors)
         result = node.last_result
         if result is not None:
             saturated = np.flatnonzero(result.saturated)

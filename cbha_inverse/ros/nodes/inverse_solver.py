@@ -208,6 +208,14 @@ class InverseSolverParams:
     default_goal_tolerance: float = param(0.001, '~/follow_trajectory: goal tolerance [m] of '
                                           'an effector the goal gives none (0: unchecked)',
                                           low=0.0, high=10.0, live=True)
+    default_path_angle_tolerance: float = param(0.0, '~/follow_trajectory: path angle '
+                                                'tolerance [rad] of an axis or pose effector '
+                                                'the goal gives none (0: unchecked)', low=0.0,
+                                                high=math.pi, live=True)
+    default_goal_angle_tolerance: float = param(0.0175, '~/follow_trajectory: goal angle '
+                                                'tolerance [rad] of an axis or pose effector '
+                                                'the goal gives none (0: unchecked)', low=0.0,
+                                                high=math.pi, live=True)
     default_goal_time_tolerance: float = param(1.0, '~/follow_trajectory: time [s] after the '
                                                'last waypoint the goal tolerance may take when '
                                                'the goal gives none', low=0.0, high=3600.0,
