@@ -407,6 +407,89 @@ def target_cases():
     return cases
 
 
+CLEARANCE_SLACK = 5e-4
+"""How far [m] below the obstacle margin the model's collision spheres may end (the rows'
+linearisation error over a tick)."""
+
+
+def _model_clearance(scene, solver, obstacles):
+    """Return the smallest gap [m] of the model's collision spheres to ``obstacles``."""
+    return float(scene.collision.clearances(solver.state.positions, obstacles).min())
+
+
+def contact_cases():
+    """
+    Obstacles in the inverse (``cbha_table``): deep targets, a moving obstacle, a pinch, margin 0.
+
+    Each case ticks the model open loop and checks that every command is finite and within its
+    bounds, and either that the model keeps the margin (less :data:`CLEARANCE_SLACK`) or that
+    the tick says ``obstacle`` (the constraints cannot all hold). A NaN obstacle is refused
+    at the door with a message naming the value.
+    """
+    from cbha_inverse.core.obstacles import Obstacle
+    scene = load_scene('cbha_table')
+    rest = scene.rest_effector_positions[0]
+    cases = []
+
+    def run(name, solver, targets, obstacles, checked, expect):
+        outs = []
+        for target in targets:
+            outs.append(solver.step(np.asarray(target)[None]))
+        bounded = all(_bounded(solver, out) for out in outs)
+        clearance = _model_clearance(scene, solver, obstacles)
+        statuses = sorted({out.status for out in outs})
+        margin = solver.options.obstacle_margin
+        kept = clearance >= margin - CLEARANCE_SLACK
+        ok = bounded and (kept if expect == 'clear' else 'obstacle' in statuses)
+        cases.append(Case('contact', name, checked, bool(ok), clearance,
+                          f'statuses {statuses}; min clearance {1e3 * clearance:.2f} mm; '
+                          + _told(outs[-1].warnings), {'statuses': statuses}))
+
+    deep = rest + [0.0, 0.0, -0.12]          # 40 mm into the table under the arm
+    run('target 40 mm inside the table', scene.make_inverse_solver(), [deep] * 60,
+        scene.obstacles, 'bounded; the model keeps the margin', 'clear')
+    run('target inside the table, margin 0', scene.make_inverse_solver(obstacle_margin=0.0),
+        [deep] * 60, scene.obstacles, 'bounded; the model keeps clear of the table', 'clear')
+    solver = scene.make_inverse_solver()
+    for _ in range(20):
+        solver.step(rest[None])
+    tip = solver.effector_positions()[0]
+    held, bounded, statuses = [], True, set()
+    for step in range(30):             # a ball sweeping across the tip, 2 mm per tick
+        ball = Obstacle('ball', 'sphere', tip + [0.0, 0.06 - 0.002 * step, 0.0], np.eye(3),
+                        radius=0.01)
+        obstacles = [*scene.obstacles, ball]
+        solver.set_obstacles(obstacles)
+        out = solver.step(rest[None])
+        bounded &= _bounded(solver, out)
+        statuses.add(out.status)
+        held.append(out.status == 'obstacle' or _model_clearance(scene, solver, obstacles)
+                    >= solver.options.obstacle_margin - CLEARANCE_SLACK)
+    clearance = _model_clearance(scene, solver, obstacles)
+    cases.append(Case('contact', 'obstacle moving into the arm (2 mm per tick)',
+                      'bounded; every tick keeps the margin or says obstacle',
+                      bool(bounded and all(held)), clearance,
+                      f'statuses {sorted(statuses)}; {held.count(False)} ticks off; last '
+                      f'clearance {1e3 * clearance:.2f} mm', {'statuses': sorted(statuses)}))
+    pinch = [Obstacle(f'jaw_{side}', 'plane', tip + [0.0, side * 0.01, 0.0],
+                      np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -side], [0.0, side, 0.0]]))
+             for side in (1.0, -1.0)]
+    solver = scene.make_inverse_solver()
+    for _ in range(20):
+        solver.step(rest[None])
+    solver.set_obstacles(pinch)
+    run('two planes pinching the tip (20 mm gap)', solver, [rest] * 10, pinch,
+        'bounded; the constraints cannot all hold: the tick says obstacle', 'obstacle')
+    try:
+        Obstacle('nan', 'sphere', [np.nan, 0.0, 0.0], np.eye(3), radius=0.01)
+        message, ok = 'accepted', False
+    except ValueError as exc:
+        message, ok = str(exc), True
+    cases.append(Case('contact', 'NaN in an obstacle', 'refused at the door', ok,
+                      float('nan'), message, {}))
+    return cases
+
+
 EQUILIBRIUM_MATCH = 5e-4
 """Distance [m] within which a tick's effectors must match the equilibrium of its command."""
 
@@ -593,6 +676,7 @@ def run_cases(quick, tmp_dir):
         cases += group(quick)
     cases += actuator_cases(tmp_dir)
     cases += target_cases()
+    cases += contact_cases()
     cases += random_robot_cases(tmp_dir, quick)
     return cases
 

@@ -14,6 +14,7 @@ def test_quick_stability_report_passes_every_case(tmp_path):
     assert failed == [] and code == 0
     groups = {c['group'] for c in summary['cases']}
     assert groups == {'stiffness ratio', 'Poisson ratio', 'segment length', 'frames', 'roll-up',
-                      'large load', 'buckling', 'actuators', 'targets', 'random robots'}
+                      'large load', 'buckling', 'actuators', 'targets', 'contact',
+                      'random robots'}
     assert (tmp_path / 'stability.png').stat().st_size > 10000
     assert 'message to the user' in (tmp_path / 'stability.md').read_text(encoding='utf-8')
