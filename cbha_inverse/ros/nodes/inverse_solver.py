@@ -35,7 +35,9 @@ without a warning. Every input passes
 the last valid command stays. Every command passes
 :class:`cbha_inverse.robot.safety.CommandGate`: never NaN, never outside ``[0, p_max]``.
 
-Besides ``target`` (the first effector's): ``targets/<effector>`` per scene effector, the action
+Besides ``target`` (the first effector's): ``targets/<effector>`` per scene effector,
+``target_pose`` and ``target_poses/<effector>`` (PoseStamped: with the orientation an ``axis``
+or ``pose`` effector constrains, ``docs/effectors.md``), the action
 ``~/follow_trajectory`` (control_msgs/FollowJointTrajectory) and the teleop topics
 ``~/delta_twist_cmds`` and ``~/pose_target_cmds`` (:mod:`cbha_inverse.ros.nodes.commanding`,
 ``docs/commanding.md``); while a goal runs, the streaming topics are refused. A scene with
