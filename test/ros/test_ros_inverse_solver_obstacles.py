@@ -9,7 +9,8 @@ the obstacles kept, an empty one removes every obstacle and with them the rows.
 
 import math
 
-from cbha_inverse.ros.common.qos import OBSTACLES_QOS, TARGET_QOS
+from cbha_inverse.ros.common.obstacle_markers import obstacles_from_markers
+from cbha_inverse.ros.common.qos import OBSTACLE_MARKERS_QOS, OBSTACLES_QOS, TARGET_QOS
 from cbha_inverse.ros.nodes.inverse_solver import InverseSolverNode
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
@@ -35,6 +36,9 @@ def test_the_solver_keeps_clear_of_its_obstacles_and_takes_new_ones(rclpy_contex
     client = Node('obstacle_client', context=rclpy_context, namespace='/cbha')
     target_pub = client.create_publisher(PointStamped, 'target', TARGET_QOS)
     obstacles = client.create_publisher(MarkerArray, 'obstacles', OBSTACLES_QOS)
+    drawn = []
+    client.create_subscription(MarkerArray, 'model_obstacle_markers', drawn.append,
+                               OBSTACLE_MARKERS_QOS)
     with spinning(rclpy_context, node, client) as executor:
         assert spin_until(executor, lambda: target_pub.get_subscription_count() > 0
                           and obstacles.get_subscription_count() > 0, 10.0)
@@ -48,6 +52,7 @@ def test_the_solver_keeps_clear_of_its_obstacles_and_takes_new_ones(rclpy_contex
         obstacles.publish(MarkerArray(markers=[_ball((0.3, 0.0, 0.3))]))
         assert spin_until(executor, lambda: node.obstacle_updates == 1, 5.0)
         assert [o.name for o in node.solver.obstacles] == ['lab/0']
+        assert spin_until(executor, lambda: len(drawn) >= 2, 5.0)   # latched scene set, then this
         obstacles.publish(MarkerArray())
         assert spin_until(executor, lambda: node.obstacle_updates == 2, 5.0)
         ticks = node.ticks
@@ -56,5 +61,11 @@ def test_the_solver_keeps_clear_of_its_obstacles_and_takes_new_ones(rclpy_contex
     assert held.effector_positions[0, 2] > -0.08 + 0.0245
     assert node.rejected == {'obstacles.non_finite': 1}
     assert node.solver.obstacles == () and node.last_result.obstacle_rows == 0
+    # the model's obstacles drawn: the scene's (latched at start), then each replacement
+    scene_drawn, _, _ = obstacles_from_markers(drawn[0], 'cbha_base')
+    ball_drawn, _, _ = obstacles_from_markers(drawn[1], 'cbha_base')
+    drawn_shapes = [(o.name, o.shape) for o in scene_drawn]
+    assert drawn_shapes == [('obstacles/1', 'box'), ('obstacles/2', 'cylinder')]
+    assert [round(o.radius, 6) for o in ball_drawn] == [0.01]
     # without the table the tip reaches the target below it
     assert node.last_result.effector_positions[0, 2] < -0.099

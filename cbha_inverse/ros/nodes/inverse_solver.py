@@ -64,11 +64,11 @@ from cbha_inverse.ros.common.conversions import (
     backbone_markers, point_values, SerializedCommand, stamp_ns)
 from cbha_inverse.ros.common.diagnostics import (
     DiagnosticsPublisher, ERROR, make_status, OK, TimingStats, WARN)
-from cbha_inverse.ros.common.obstacle_markers import obstacles_from_markers
+from cbha_inverse.ros.common.obstacle_markers import obstacle_markers, obstacles_from_markers
 from cbha_inverse.ros.common.params import (
     changes_text, declare_parameters, param, ParameterError)
 from cbha_inverse.ros.common.qos import (COMMAND_WRITER_QOS, MARKER_QOS, MEASURED_QOS,
-                                         OBSTACLES_QOS, TARGET_QOS)
+                                         OBSTACLE_MARKERS_QOS, OBSTACLES_QOS, TARGET_QOS)
 from cbha_inverse.ros.common.realtime import MAX_REALTIME_PRIORITY, set_realtime_priority
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
@@ -322,6 +322,10 @@ class InverseSolverNode(Node):
                                      self._on_gains, MEASURED_QOS)
         self.obstacle_updates = 0
         self.create_subscription(MarkerArray, 'obstacles', self._on_obstacles, OBSTACLES_QOS)
+        # the obstacles the model keeps clear of, latched (the plant draws its own)
+        self.obstacle_publisher = self.create_publisher(MarkerArray, 'model_obstacle_markers',
+                                                        OBSTACLE_MARKERS_QOS)
+        self._publish_obstacles()
         self.wrenches = WrenchInputs(
             self, p.wrench_frames, self.scene.model.n_links, self.scene.loads, p.frame_id,
             self._on_loads, lambda reason, detail: self._count_rejected('wrench', reason, detail))
@@ -460,7 +464,13 @@ class InverseSolverNode(Node):
         self.obstacle_updates += 1
         self.get_logger().info(f'obstacles from the obstacles topic: '
                                f'{", ".join(o.name for o in obstacles) or "none"}')
+        self._publish_obstacles()
         self._prepare()
+
+    def _publish_obstacles(self):
+        self.obstacle_publisher.publish(obstacle_markers(
+            self.solver.obstacles, self.get_clock().now().to_msg(), self.params.frame_id,
+            rgba=(0.3, 0.5, 0.8, 0.4)))
 
     def _prepare(self):
         """Linearise the changed model now, off the target -> command path."""
