@@ -47,16 +47,32 @@ def ctl(tmp_path_factory):
 
 def _run(executor, ctl, *args):
     """Run ``cbha_ctl args`` while spinning ``executor``; return (status, stdout, stderr)."""
-    process = subprocess.Popen([str(ctl), *args], env=child_env(), stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+    [result] = _run_all(executor, ctl, [args])
+    return result
+
+
+def _run_all(executor, ctl, commands):
+    """
+    Run ``cbha_ctl args`` for every ``args`` of ``commands`` at once while spinning ``executor``.
+
+    Returns
+    -------
+    list of tuple
+        ``(status, stdout, stderr)`` of each command, in their order.
+
+    """
+    processes = [subprocess.Popen([str(ctl), *args], env=child_env(), stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True) for args in commands]
     try:
-        assert spin_until(executor, lambda: process.poll() is not None, 60.0), args
-        out, err = process.communicate(timeout=10)
+        assert spin_until(executor, lambda: all(p.poll() is not None for p in processes),
+                          60.0), commands
+        outputs = [process.communicate(timeout=10) for process in processes]
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
-    return process.returncode, out, err
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+                process.communicate()
+    return [(process.returncode, out, err) for process, (out, err) in zip(processes, outputs)]
 
 
 @pytest.fixture
@@ -141,21 +157,24 @@ def test_a_parameter_set_from_the_shell_changes_the_running_node(solver, ctl):
     commands.clear()
     assert spin_until(executor, lambda: len(commands) >= 3, 10.0)
     assert list(commands[-1].data) == [1.5] * size
-    status, out, _ = _run(executor, ctl, 'param', 'get', '/cbha/inverse_solver',
-                          'vent_pressure')
-    assert out == 'Double value is: 1.5\n'
-
-    # refused by the node: the type (as ros2 param set types 2), and a read-only parameter
-    status, out, err = _run(executor, ctl, 'param', 'set', 'inverse_solver', 'vent_pressure',
-                            '2')
+    # the rest changes nothing (two sets the node refuses): run at once
+    got, typed, read_only, listed, names = _run_all(executor, ctl, [
+        ['param', 'get', '/cbha/inverse_solver', 'vent_pressure'],
+        # refused by the node: the type (as ros2 param set types 2), and a read-only parameter
+        ['param', 'set', 'inverse_solver', 'vent_pressure', '2'],
+        ['param', 'set', 'inverse_solver', 'scene', 'cbha'],
+        ['param', 'list', 'inverse_solver'],
+        ['param', 'get', 'inverse_solver', 'valve_names']])
+    assert got[1] == 'Double value is: 1.5\n', got
+    status, out, err = typed
     assert status == 1 and err.startswith('cbha_ctl: Setting parameter failed: '), err
-    status, out, err = _run(executor, ctl, 'param', 'set', 'inverse_solver', 'scene', 'cbha')
+    status, out, err = read_only
     assert status == 1 and 'read-only' in err, err
     assert node.params.vent_pressure == 1.5 and node.get_parameter('scene').value == SCENE
 
-    status, out, err = _run(executor, ctl, 'param', 'list', 'inverse_solver')
+    status, out, err = listed
     assert status == 0 and '  loop_gain\n' in out and '  vent_pressure\n' in out, out
-    status, out, err = _run(executor, ctl, 'param', 'get', 'inverse_solver', 'valve_names')
+    status, out, err = names
     assert out == f'String values are: {list(load_scene(SCENE).actuator_names)}\n', out
 
 
@@ -173,9 +192,10 @@ def test_absent_nodes_services_and_parameters_are_named_with_the_nearest(solver,
          'node /cbha/inverse_solver has no service /cbha/inverse_solver/vnet within 1.5 s; '
          'did you mean /cbha/inverse_solver/vent?'),
     ]
-    for args, message in cases:
-        status, out, err = _run(executor, ctl, *args)
-        assert (status, out, err) == (1, '', f'cbha_ctl: {message}\n'), args
+    # independent commands, run at once: three of them wait out their 1.5 s
+    results = _run_all(executor, ctl, [args for args, _ in cases])
+    for (args, message), result in zip(cases, results):
+        assert result == (1, '', f'cbha_ctl: {message}\n'), args
 
 
 def test_help_starts_no_ros_and_names_every_command(ctl):
