@@ -212,6 +212,32 @@ class QPSolution(NamedTuple):
     ok: bool
 
 
+def _dense_qp(n_variables, n_inequalities, eps_abs, max_iterations):
+    """Return a proxsuite dense QP with a box and ``n_inequalities`` general rows, quiet."""
+    qp = proxsuite.proxqp.dense.QP(n_variables, 0, n_inequalities, True)
+    qp.settings.eps_abs = eps_abs
+    qp.settings.eps_rel = 0.0
+    qp.settings.max_iter = max_iterations
+    qp.settings.verbose = False
+    return qp
+
+
+def _first_solve(qp, *data):
+    """Initialise a proxsuite QP with ``data`` and solve; later solves warm-start from it."""
+    qp.init(*data)
+    qp.solve()
+    # warm start only once a previous result exists (proxsuite 0.8 crashes otherwise)
+    qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT
+
+
+def _outcome(qp, m):
+    """Return the first ``m`` variables of a proxsuite solve, its status, iterations and ok."""
+    info = qp.results.info
+    status = _STATUS.get(info.status.name, info.status.name)
+    x = qp.results.x[:m]
+    return x, status, int(info.iter), status == 'solved' and bool(np.isfinite(x.sum()))
+
+
 class ProxsuiteQP:
     """
     Reusable proxsuite dense box-QP, warm-started from the previous result.
@@ -236,12 +262,7 @@ class ProxsuiteQP:
 
     def reset(self):
         """Forget the warm start."""
-        qp = proxsuite.proxqp.dense.QP(self.n_actuators, 0, 0, True)
-        qp.settings.eps_abs = self.eps_abs
-        qp.settings.eps_rel = 0.0
-        qp.settings.max_iter = self.max_iterations
-        qp.settings.verbose = False
-        self._qp = qp
+        self._qp = _dense_qp(self.n_actuators, 0, self.eps_abs, self.max_iterations)
         self._initialised = False
 
     def solve(self, problem, same_hessian=False):
@@ -263,12 +284,8 @@ class ProxsuiteQP:
         """
         qp = self._qp
         if not self._initialised:
-            qp.init(problem.hessian, problem.gradient, None, None, None, None, None,
-                    problem.lower, problem.upper)
-            qp.solve()
-            # warm start only once a previous result exists (proxsuite 0.8 crashes otherwise)
-            qp.settings.initial_guess = (
-                proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT)
+            _first_solve(qp, problem.hessian, problem.gradient, None, None, None, None, None,
+                         problem.lower, problem.upper)
             self._initialised = True
         elif same_hessian:
             qp.update(g=problem.gradient, l_box=problem.lower, u_box=problem.upper,
@@ -278,18 +295,14 @@ class ProxsuiteQP:
             qp.update(H=problem.hessian, g=problem.gradient, l_box=problem.lower,
                       u_box=problem.upper, update_preconditioner=False)
             qp.solve()
-        results = qp.results
-        info = results.info
-        status = _STATUS.get(info.status.name, info.status.name)
-        x = results.x
-        ok = status == 'solved' and bool(np.isfinite(x.sum()))
+        x, status, iterations, ok = _outcome(qp, self.n_actuators)
         if not ok:
             self.reset()
             x = problem.previous
         x = np.minimum(np.maximum(x, problem.lower), problem.upper)
         if ok:
             x = polish(problem, x)
-        return QPSolution(x, status, int(info.iter), ok)
+        return QPSolution(x, status, iterations, ok)
 
 
 class RowsQP:
@@ -332,11 +345,7 @@ class RowsQP:
         """Return the proxsuite object of ``rows`` rows and whether it was solved before."""
         found = self._qps.get(rows)
         if found is None:
-            qp = proxsuite.proxqp.dense.QP(self.n_actuators + rows, 0, rows, True)
-            qp.settings.eps_abs = self.eps_abs
-            qp.settings.eps_rel = 0.0
-            qp.settings.max_iter = self.max_iterations
-            qp.settings.verbose = False
+            qp = _dense_qp(self.n_actuators + rows, rows, self.eps_abs, self.max_iterations)
             found = self._qps[rows] = [qp, False]
         return found
 
@@ -378,25 +387,20 @@ class RowsQP:
         found = self._qp(r)
         qp = found[0]
         if not found[1]:
-            qp.init(hessian, gradient, None, None, inequality, below, above, lower, upper)
-            qp.solve()
-            qp.settings.initial_guess = (
-                proxsuite.proxqp.InitialGuess.WARM_START_WITH_PREVIOUS_RESULT)
+            _first_solve(qp, hessian, gradient, None, None, inequality, below, above, lower,
+                         upper)
             found[1] = True
         else:
             qp.update(H=hessian, g=gradient, C=inequality, l=below, u=above, l_box=lower,
                       u_box=upper, update_preconditioner=False)
             qp.solve()
-        info = qp.results.info
-        status = _STATUS.get(info.status.name, info.status.name)
-        x = qp.results.x[:m]
-        ok = status == 'solved' and bool(np.isfinite(x.sum()))
+        x, status, iterations, ok = _outcome(qp, m)
         if not ok:
             del self._qps[r]
             x = problem.previous
         x = np.minimum(np.maximum(x, problem.lower), problem.upper)
         slack = np.maximum(-(rows @ x + constant), 0.0)
-        return QPSolution(x, status, int(info.iter), ok), slack
+        return QPSolution(x, status, iterations, ok), slack
 
 
 class ActiveSetQP:
