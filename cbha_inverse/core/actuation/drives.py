@@ -170,9 +170,7 @@ class TendonDrives:
             :func:`cbha_inverse.core.statics.solve_static`).
 
         """
-        lengths, jacobian = self.routes.lengths_and_jacobian(state.positions, state.rotations)
-        tensions, _ = tensions_of_lengths(lengths, self._unstretched(displacements),
-                                          self._finite_stiffness())
+        jacobian, tensions = self._pull(state, displacements)
         return -(jacobian.T @ (self.gains * tensions)).reshape(-1, 6)
 
     def load_stiffness(self, state, displacements):
@@ -227,10 +225,17 @@ class TendonDrives:
         held = self.gains * checked_array(tensions, (len(self.names),), 'tensions')
 
         def function(state):
-            _, jacobian = self.routes.lengths_and_jacobian(state.positions, state.rotations)
-            return self.loads(state, displacements) + (jacobian.T @ held).reshape(-1, 6)
+            jacobian, pulled = self._pull(state, displacements)
+            return -(jacobian.T @ (self.gains * pulled - held)).reshape(-1, 6)
 
         return function, lambda state: self.load_stiffness(state, displacements)
+
+    def _pull(self, state, displacements):
+        """Return ``dL/dq`` (c, 6n) at a pose and the tensions (c,) [N] of displacements."""
+        lengths, jacobian = self.routes.lengths_and_jacobian(state.positions, state.rotations)
+        tensions, _ = tensions_of_lengths(lengths, self._unstretched(displacements),
+                                          self._finite_stiffness())
+        return jacobian, tensions
 
     def _unstretched(self, displacements):
         unstretched = self.rest_lengths + checked_array(displacements, (len(self.names),),
