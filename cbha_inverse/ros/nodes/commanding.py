@@ -34,6 +34,7 @@ import time
 from cbha_inverse.core.actuation.effectors import rotation_of_quaternion
 from cbha_inverse.core.so3 import quat_from_matrix, so3_exp
 from cbha_inverse.robot import goals
+from cbha_inverse.ros.common.conversions import stamp_ns
 from cbha_inverse.ros.common.qos import TARGET_QOS
 from cbha_inverse.scene.reach import sample_reachable_set
 from control_msgs.action import FollowJointTrajectory
@@ -408,13 +409,15 @@ class Commanding:
         ``frame_id`` is transformed by ``/tf_static``, or refused as a point is.
         """
         node = self.node
+        received, received_cpu = time.perf_counter(), time.thread_time()
         if self.refused(topic):
             return
         stamped = PointStamped()
         stamped.header = message.header
         position = message.pose.position
         stamped.point.x, stamped.point.y, stamped.point.z = position.x, position.y, position.z
-        if node._accepted_point(topic, stamped) is None:
+        point = node._accepted_point(topic, stamped)
+        if point is None:
             return
         effectors = node.solver.effectors
         kind = effectors.kinds[effector]
@@ -438,7 +441,8 @@ class Commanding:
             except ValueError as exc:
                 node._count_rejected(topic, 'bad_orientation', str(exc))
                 return
-        node._on_target(stamped, effector, topic)
+        node._take_target(point, effector, stamp_ns(message.header.stamp), received,
+                          received_cpu)
 
     def _on_pose(self, message):
         if self.refused('pose_target_cmds'):

@@ -507,11 +507,15 @@ class InverseSolverNode(Node):
         if self.commanding.refused(topic):
             return
         point = self._accepted_point(topic, message)
-        if point is None:
-            return
+        if point is not None:
+            self._take_target(point, effector, stamp_ns(message.header.stamp), received,
+                              received_cpu)
+
+    def _take_target(self, point, effector, stamp, received, received_cpu):
+        """Make an accepted point one effector's target; tick now when triggered by targets."""
         if len(self.scene.effector_names) > 1:
             point = self.commanding._targets_with([effector], point)
-        self._set_target(point, stamp_ns(message.header.stamp))
+        self._set_target(point, stamp)
         if self.params.trigger == 'target' and self._decide() == 'run':
             published, published_cpu = self._solve_and_publish()
             self.latencies.add(published - received)
