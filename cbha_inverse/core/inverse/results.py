@@ -190,6 +190,14 @@ class TickResult(NamedTuple):
         With rows: the largest predicted clearance below ``obstacle_margin`` (0 when every row
         holds); NaN without rows. A saturated or solved tick whose rows bind while its predicted
         gap exceeds :attr:`InverseOptions.unreachable_distance` reads ``'unreachable'``.
+    touch_forces : (k,) ndarray or None  [N]
+        With contact targets (``docs/touch.md``): the contact force the tick's linear model
+        predicts for each touching effector, ``max(0, d(λ)) / c``; NaN for the others. None
+        without contact targets.
+    touch_violation : float  [N]
+        With contact targets: how far the predicted force lies outside its bounds at worst (0
+        within them); a solved or saturated tick whose force bounds cannot hold reads
+        ``'unreachable'``, a warning says why. NaN without.
 
     """
 
@@ -207,3 +215,5 @@ class TickResult(NamedTuple):
     predicted_orientation_error: float = math.nan
     obstacle_rows: int = 0
     obstacle_violation: float = math.nan
+    touch_forces: np.ndarray = None
+    touch_violation: float = math.nan

@@ -60,6 +60,7 @@ from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected
                                           ProxsuiteQP, qp_problem, RowsQP)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
+from cbha_inverse.core.inverse.touch import checked_touch, TouchRows
 from cbha_inverse.core.loads import dead_wrenches, follower_hooks, FollowerLoads, Loads
 from cbha_inverse.core.sections import (check_section_factors, rate_limited,
                                         SectionStiffness)
@@ -230,6 +231,8 @@ class InverseSolver:
         # the obstacle rows (set_obstacles): None without obstacles
         self._collision, self._obstacle_rows = collision, None
         self._rows_qp = RowsQP(m, eps_abs=self.options.eps_abs)
+        # the contact targets (set_touch, docs/touch.md)
+        self._touch = TouchRows(self._data, self.effector_names)
         self._control_tick = self._data.entry('control_tick')
         self._record = self._data.record
         # the frames and the actuation live in the tick data (the compiled tick updates them)
@@ -453,7 +456,8 @@ class InverseSolver:
                 return self._held('rejected', started, warnings=('non-finite target rejected',))
             clamped, warnings = self._reachable(targets) if checked == 2 else (targets, ())
             if self._obstacle_rows is not None:
-                warnings += self._obstacle_rows.inside_warnings(clamped)
+                warnings += self._obstacle_rows.inside_warnings(
+                    self._touch.on_surface(clamped) if self._touch.touches else clamped)
             return self._split_tick(clamped, warnings, (started, linearised))
         code, iterations, largest_gap, largest_move, binding, residual_norm = self._control_tick(
             targets, self._record, fresh and self._pending, fresh, True, self._every == 1)
@@ -519,6 +523,8 @@ class InverseSolver:
                 self._obstacle_rows.linearise()
             else:
                 self._obstacle_rows.clear()
+        if self._linearised and self._touch.touches:
+            self._touch.linearise()
         return self._linearised
 
     def _target_array(self, targets):
@@ -617,7 +623,8 @@ class InverseSolver:
 
     def _solve(self, targets, new_hessian, warnings, times):
         """Solve the QP of the tick data's linearisation and apply it (steps 3-4)."""
-        if self.options.qp_solver != 'active_set' or self._obstacle_rows is not None:
+        if (self.options.qp_solver != 'active_set' or self._obstacle_rows is not None
+                or self._touch.touches):
             return self._general_qp(targets, self.options.qp_solver, not new_hessian, warnings,
                                     times)
         code, iterations, largest_gap, largest_move, binding, _ = self._control_tick(
@@ -639,12 +646,14 @@ class InverseSolver:
     def _general_qp(self, targets, qp_solver, same_hessian, warnings, times):
         """Solve the tick's QP in Python (proxsuite, Gauss-Seidel) and apply it (steps 3-4)."""
         data = self._data
+        if self._touch.touches:
+            targets = self._touch.virtual_targets(targets)
         self._data.entry('free_gaps_of')(targets, self._record)
         delta_free = data.delta_free.copy()
         problem = qp_problem(data.matrices, delta_free, self.actuation, self.lower_bounds,
                              self.upper_bounds, rate_limit=self._step_limit())
         for _ in range(ENTERING_ROUNDS):
-            if self._obstacle_rows_count():
+            if self._obstacle_rows_count() or self._touch.count:
                 solution, status, obstacle = self._solve_rows(problem)
             else:
                 solution, status = self._solve_qp(problem, qp_solver, same_hessian)
@@ -664,11 +673,15 @@ class InverseSolver:
         data.gap[:] = gap
         if self._turns:
             data.entry('orientation_gap_of')(self._record)
+        touch = None
+        if self._touch.touches:
+            touch = self._touch.outcome(actuation)
+            warnings += touch[2]
         if self._every == 1:
             self._control_tick(targets, self._record, True, False, False, False)
         return self._close(targets, status, solution.status, solution.iterations, saturated,
                            largest_gap, largest_move, False, warnings,
-                           times + (time.perf_counter(),), obstacle)
+                           times + (time.perf_counter(),), obstacle, touch)
 
     def _entering(self, actuation):
         """
@@ -692,29 +705,46 @@ class InverseSolver:
 
     def _solve_rows(self, problem):
         """
-        Solve the tick's QP with its obstacle rows (:class:`~.qp.RowsQP`).
+        Solve the tick's QP with its obstacle rows and force rows (:class:`~.qp.RowsQP`).
 
         Returns ``(solution, status, (rows, violation, binding))``: the status ``'solved'`` or
         ``'qp_fallback'`` (proxsuite failed: the box QP without the rows, by Gauss-Seidel), the
-        rows' largest predicted violation of the margin [m] and whether some row binds.
+        obstacle rows' largest predicted violation of the margin [m] and whether one binds.
+        The force rows of the contact targets (:mod:`~.touch`) are stacked under the obstacle
+        rows, which lose the rows of a touching sphere against the surface it touches.
         """
         rows = self._obstacle_rows
         data, options = self._data, self.options
+        matrix, constant = ((rows.matrix, rows.constant) if rows is not None
+                            else (np.zeros((0, self._scale.size)), np.zeros(0)))
+        if self._touch.touches:
+            if rows is not None:
+                kept = ~self._touch.touched_rows(rows.names, rows.frames, rows.obstacles)
+                matrix, constant = matrix[kept], constant[kept]
+            obstacle_count = constant.size
+            force_matrix, force_constant = self._touch.rows()
+            matrix = np.vstack((matrix, force_matrix))
+            constant = np.concatenate((constant, force_constant))
+        else:
+            obstacle_count = constant.size
         # ν: the tracking term's normaliser (qp_hessians_into)
         weighted = data.w_ea * data.row_weights[:, None] * self._scale
         normaliser = float(np.einsum('rj,rj->', weighted, weighted)) / self._scale.size
         normaliser = normaliser if normaliser > 0.0 else 1.0
-        solution, slack = self._rows_qp.solve(problem, rows.matrix * self._scale, rows.constant,
+        solution, slack = self._rows_qp.solve(problem, matrix * self._scale, constant,
                                               normaliser, options.obstacle_weight)
         status = 'solved'
         if not solution.ok:
             status = 'qp_fallback'
             solution = projected_gauss_seidel(problem)
             solution = type(solution)(solution.x, f'gauss_seidel_{solution.status}', 0, True)
-            slack = np.maximum(-rows.clearances(self._scale * solution.x), 0.0)
-        clearances = rows.clearances(np.clip(self._scale * solution.x, self.lower_bounds,
-                                             self.upper_bounds))
-        return solution, status, (rows.count, float(slack.max()),
+            slack = np.maximum(-(matrix @ (self._scale * solution.x) + constant), 0.0)
+        clearances = (matrix[:obstacle_count] @ np.clip(self._scale * solution.x,
+                                                        self.lower_bounds, self.upper_bounds)
+                      + constant[:obstacle_count])
+        if not obstacle_count:
+            return solution, status, (0, math.nan, False)
+        return solution, status, (obstacle_count, float(slack[:obstacle_count].max()),
                                   bool((clearances < BINDING_TOLERANCE).any()))
 
     def set_obstacles(self, obstacles):
@@ -750,7 +780,7 @@ class InverseSolver:
                                             options.obstacle_activation, self._data)
                                if obstacles else None)
         # with obstacles a tick solves in a call of its own, after the rows of its linearisation
-        self._one_call = self._compiled_qp and not obstacles
+        self._one_call = self._compiled_qp and not obstacles and not self._touch.touches
         self._rows_qp.reset()
         self._age = self._every
         self._linearised = False
@@ -774,6 +804,109 @@ class InverseSolver:
 
         """
         return self._obstacle_rows
+
+    def set_touch(self, effector, point, normal, force_bounds):
+        """
+        Give an effector a contact target: press a surface with bounded force (``docs/touch.md``).
+
+        The effector's collision sphere is held against the surface through ``point`` with
+        outward normal ``normal``, pressing along ``-normal`` with a force the model predicts
+        within ``force_bounds`` (two rows of the QP, :mod:`cbha_inverse.core.inverse.touch`);
+        its position target of :meth:`step` is followed in the surface's tangent plane only.
+        It holds until :meth:`clear_touch`; the next tick relinearises.
+
+        Parameters
+        ----------
+        effector : int or str
+            The effector (index or name); its point must be its frame's origin, the centre of a
+            collision sphere.
+        point : (3,) array_like  [m]
+            A point of the surface (world axes): where the sphere touches it.
+        normal : (3,) array_like
+            The surface's outward unit normal (out of the touched solid, toward the arm).
+        force_bounds : (2,) array_like  [N]
+            ``[f_min, f_max]``, ``0 <= f_min <= f_max``, finite.
+
+        Returns
+        -------
+        cbha_inverse.core.inverse.touch.Touch
+            The contact target now in the model.
+
+        Raises
+        ------
+        ValueError
+            On an unknown effector, one without a collision sphere at its point, a point or
+            normal that is not finite, a normal not of unit length or invalid bounds: nothing
+            is changed.
+
+        """
+        touch = checked_touch(self.effectors, self._collision, effector, point, normal,
+                              force_bounds)
+        self._touch.put(touch)
+        self._one_call = False
+        self._rows_qp.reset()
+        self._age = self._every
+        return touch
+
+    def clear_touch(self, effector):
+        """
+        Drop an effector's contact target (:meth:`set_touch`): it tracks its target again.
+
+        Parameters
+        ----------
+        effector : int or str
+            The effector (index or name).
+
+        Returns
+        -------
+        bool
+            Whether it had one.
+
+        Raises
+        ------
+        ValueError
+            On an unknown effector.
+
+        """
+        names = self.effector_names
+        if isinstance(effector, str):
+            if effector not in names:
+                raise ValueError(f'touch: unknown effector {effector!r}')
+            effector = names.index(effector)
+        elif not (isinstance(effector, (int, np.integer)) and 0 <= effector < len(names)):
+            raise ValueError(f'touch: unknown effector {effector!r}')
+        cleared = self._touch.clear(int(effector))
+        self._one_call = (self._compiled_qp and self._obstacle_rows is None
+                          and not self._touch.touches)
+        self._rows_qp.reset()
+        self._age = self._every
+        return cleared
+
+    @property
+    def touches(self):
+        """
+        Return the contact targets (:meth:`set_touch`), by effector index.
+
+        Returns
+        -------
+        dict of int to cbha_inverse.core.inverse.touch.Touch
+
+        """
+        return dict(self._touch.touches)
+
+    @property
+    def touch_rows(self):
+        """
+        Return the contact targets' force rows at the current linearisation (read them).
+
+        Returns
+        -------
+        cbha_inverse.core.inverse.touch.TouchRows
+            ``compliances`` ``c`` [m/N], ``rows()`` ``(G, b)`` [m] and ``outcome(λ)``, the
+            predicted forces [N] (:mod:`cbha_inverse.core.inverse.touch`).
+
+        """
+        return self._touch
 
     def _solve_qp(self, problem, qp_solver, same_hessian):
         """
@@ -800,7 +933,8 @@ class InverseSolver:
         return projected_gauss_seidel(problem), status
 
     def _close(self, targets, status, qp_status, iterations, saturated, largest_gap,
-               largest_move, positions_written, warnings, times, obstacle=(0, math.nan, False)):
+               largest_move, positions_written, warnings, times, obstacle=(0, math.nan, False),
+               touch=None):
         """
         Close a solved tick: Newton steps, effector positions, the result.
 
@@ -808,7 +942,9 @@ class InverseSolver:
         data (of the new state, or between linearisations the linear model's prediction).
         ``times``: ``time.perf_counter()`` at the tick's start, after its linearisation and
         after its QP. ``obstacle``: the obstacle rows of the QP, their largest violation [m] and
-        whether one binds (:meth:`_solve_rows`).
+        whether one binds (:meth:`_solve_rows`). ``touch``: the contact targets' predicted
+        forces [N], how far they leave their bounds [N] and the warnings
+        (:meth:`~cbha_inverse.core.inverse.touch.TouchRows.outcome`), or None without.
         """
         data = self._data
         # the distance from equilibrium of the state the tick solved from
@@ -844,10 +980,14 @@ class InverseSolver:
                                                                   self._rotations)
             status = self._tick_status(status, saturated, max(largest_gap, turn_length), gap,
                                        obstacle)
+            if touch is not None and touch[1] > 0.0 and status in ('solved', 'saturated'):
+                # the force bounds cannot hold: the surface or the force is out of reach
+                status = 'unreachable'
+        forces, force_violation = (None, math.nan) if touch is None else touch[:2]
         return TickResult(self.actuation.copy(), effector_positions, status, qp_status,
                           iterations, saturated, largest_gap, residual_norm,
                           _timings(*times, time.perf_counter()), warnings, gap, float(turn),
-                          obstacle[0], obstacle[1])
+                          obstacle[0], obstacle[1], forces, force_violation)
 
     def _measure_equilibrium(self):
         """
