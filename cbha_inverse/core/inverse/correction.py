@@ -22,6 +22,10 @@ class TargetCorrector:
     increase ``|c|`` is skipped (conditional integration). Effectors without a measurement (NaN
     rows) are not integrated. Open loop is ``gain = 0`` (the paper's mode).
 
+    An effector pressing a surface (a contact target, ``docs/touch.md``) sits inside its
+    target's normal by design: :meth:`set_touch_normal` makes the corrector integrate only the
+    error's part in the surface's tangent plane for it.
+
     Parameters
     ----------
     n_effectors : int
@@ -40,6 +44,43 @@ class TargetCorrector:
         self.gain = float(gain)
         self.max_correction = float(max_correction)
         self.correction = np.zeros((int(n_effectors), 3))
+        # the unit normal of each touching effector's surface (zero rows: no touch)
+        self.touch_normals = np.zeros((int(n_effectors), 3))
+
+    def set_touch_normal(self, effector, normal):
+        """
+        Integrate only an effector's error in a surface's tangent plane (None: all of it).
+
+        The correction's part along the normal is dropped as well: the contact target sets the
+        depth (``docs/touch.md``).
+
+        Parameters
+        ----------
+        effector : int
+            The effector's index.
+        normal : (3,) array_like or None
+            The surface's unit normal (finite, nonzero; normalised), or None to clear.
+
+        Raises
+        ------
+        ValueError
+            On an effector out of range or a zero or non-finite normal.
+
+        """
+        if not (isinstance(effector, (int, np.integer))
+                and 0 <= effector < self.correction.shape[0]):
+            raise ValueError(f'effector must lie in 0..{self.correction.shape[0] - 1}, '
+                             f'got {effector!r}')
+        if normal is None:
+            self.touch_normals[effector] = 0.0
+            return
+        normal = np.asarray(normal, dtype=float).reshape(3)
+        length = float(np.linalg.norm(normal))
+        if not (np.all(np.isfinite(normal)) and length > 0.0):
+            raise ValueError(f'touch normal must be finite and nonzero, got {normal.tolist()}')
+        normal = normal / length
+        self.touch_normals[effector] = normal
+        self.correction[effector] -= normal * (normal @ self.correction[effector])
 
     def reset(self):
         """Forget the integral."""
@@ -74,6 +115,9 @@ class TargetCorrector:
             error = target - np.asarray(measured, dtype=float).reshape(target.shape)
             valid = np.all(np.isfinite(error), axis=1)
             increment = self.gain * np.where(valid[:, None], error, 0.0)
+            # a touching effector: the tangential part only
+            normals = self.touch_normals
+            increment -= normals * np.einsum('ki,ki->k', increment, normals)[:, None]
             blocked = np.zeros(increment.shape[0], dtype=bool)
             if saturated and predicted_gap is not None:
                 blocked, increment = _without_blocked_part(increment, predicted_gap)
