@@ -131,6 +131,26 @@ NO_CONTACTS = Contacts(np.zeros(0, dtype=int), (), np.zeros((0, 3)), np.zeros((0
 """The contacts of a state that touches nothing."""
 
 
+def frame_contact_force(contacts, frame):
+    """
+    Return the sum of the contact forces on one frame's sphere [N] (world axes).
+
+    Parameters
+    ----------
+    contacts : Contacts
+        The contacts of a state.
+    frame : int
+        The sphere's frame.
+
+    Returns
+    -------
+    (3,) ndarray  [N]
+        Zero without a contact of that frame.
+
+    """
+    return np.asarray(contacts.forces)[np.asarray(contacts.frames) == frame].sum(axis=0)
+
+
 class PenaltyContact:
     """
     Frictionless penalty contact of collision spheres with obstacles (module docstring).

@@ -24,6 +24,8 @@ REPORTS = {
                  'error against run time, Pareto plots ([--quick] [--output DIR])'),
     'rao2021': ('cbha_inverse.report.benchmark_rao2021',
                 'tip positions against the reference model of Rao et al. 2021 ([--refine])'),
+    'touch': ('cbha_inverse.report.touch',
+              "touch with a bounded force: the plant's measured contact force, tangential drift"),
 }
 GROUPS = {'bench': ('core', 'inverse', 'estimator'),
           'all': ('core', 'inverse', 'estimator', 'fem', 'stability', 'accuracy', 'rao2021')}

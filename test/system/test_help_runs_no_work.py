@@ -17,7 +17,7 @@ from ros_helpers import child_env, REPO_ROOT
 # every console script with --help, then the groups and subcommands that have their own usage
 EXTRA = [['cbha_report', name, '--help'] for name in (
     'all', 'bench', 'core', 'inverse', 'estimator', 'fem', 'stability', 'accuracy',
-    'rao2021')] + [
+    'rao2021', 'touch')] + [
     ['cbha_bag', name, '--help'] for name in ('record', 'play', 'info', 'eval')] + [
     ['cbha_launch', name, '--help'] for name in ('sim', 'robot')] + [
     ['cbha_scene', 'check', '--help']]

@@ -28,6 +28,7 @@ the rows keep the force within the bounds.
 import math
 from typing import NamedTuple
 
+from cbha_inverse.core.contact import frame_contact_force
 import numpy as np
 
 UNIT_TOLERANCE = 1e-6
@@ -130,7 +131,7 @@ def checked_touch(effectors, collision, effector, point, normal, force_bounds):
     radius = float(collision.radii[spheres.index(frame)])
     point = np.array(point, dtype=float)
     normal = np.array(normal, dtype=float)
-    bounds = np.array(force_bounds, dtype=float)
+    bounds = checked_force_bounds(force_bounds)
     if point.shape != (3,) or not np.all(np.isfinite(point)):
         raise ValueError(f'touch: point must be 3 finite values [m], got {point.tolist()}')
     if normal.shape != (3,) or not np.all(np.isfinite(normal)):
@@ -138,11 +139,34 @@ def checked_touch(effectors, collision, effector, point, normal, force_bounds):
     length = float(np.linalg.norm(normal))
     if abs(length - 1.0) > UNIT_TOLERANCE:
         raise ValueError(f'touch: normal must be a unit vector, its norm is {length:.6g}')
+    return Touch(index, frame, radius, point, normal / length, bounds)
+
+
+def checked_force_bounds(force_bounds):
+    """
+    Return a contact target's force bounds, checked.
+
+    Parameters
+    ----------
+    force_bounds : (2,) array_like  [N]
+        ``[f_min, f_max]``.
+
+    Returns
+    -------
+    (2,) ndarray  [N]
+
+    Raises
+    ------
+    ValueError
+        Unless they are two finite values with ``0 <= f_min <= f_max``.
+
+    """
+    bounds = np.array(force_bounds, dtype=float).reshape(-1)
     if bounds.shape != (2,) or not np.all(np.isfinite(bounds)) or not (
             0.0 <= bounds[0] <= bounds[1]):
         raise ValueError('touch: force bounds must be finite [f_min, f_max] N with '
                          f'0 <= f_min <= f_max, got {bounds.tolist()}')
-    return Touch(index, frame, radius, point, normal / length, bounds)
+    return bounds
 
 
 def contact_compliance(columns, normal):
@@ -410,9 +434,9 @@ def measured_touch_force(contacts, frame, normal):
     """
     Return the plant's contact force on a frame's sphere along a normal [N].
 
-    The sum of ``fᵀ n`` over the contacts of the frame's sphere (the plant's
-    :class:`cbha_inverse.core.contact.Contacts`): the force with which the sphere presses the
-    surface along ``n`` (0 without contact).
+    The frame's contact force (:func:`cbha_inverse.core.contact.frame_contact_force`, the
+    plant's :class:`cbha_inverse.core.contact.Contacts`) along ``n``: the force with which the
+    sphere presses the surface (0 without contact).
 
     Parameters
     ----------
@@ -428,5 +452,4 @@ def measured_touch_force(contacts, frame, normal):
     float  [N]
 
     """
-    on_frame = np.asarray(contacts.frames) == frame
-    return float(np.sum(np.asarray(contacts.forces)[on_frame] @ np.asarray(normal, float)))
+    return float(frame_contact_force(contacts, frame) @ np.asarray(normal, dtype=float))
