@@ -67,8 +67,10 @@ message the whole set; a message with a marker of another shape, a non-finite or
 size, another frame or a duplicate name is rejected (logged, counted), the obstacles kept. The
 obstacles are drawn on ``obstacle_markers`` (latched); every converged tick publishes its
 contacts on ``contacts`` (Float64MultiArray, one row per contact: frame, point, normal,
-penetration, force, in ``frame_id``, after ``tip/true``) and, while there are any and once when
-they end, as force arrows on ``contacts/markers``.
+penetration, force, in ``frame_id``, after ``tip/true``), the sum of the tip sphere's contact
+forces on ``tip/contact_force`` (WrenchStamped, ``frame_id``: the force a touching tip presses
+with, ``docs/touch.md``) and, while there are any and once when they end, as force arrows on
+``contacts/markers``.
 
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 
@@ -82,6 +84,7 @@ import math
 import sys
 import time
 
+from cbha_inverse.core.contact import frame_contact_force
 from cbha_inverse.errors import CONFIG_ERROR_EXIT
 from cbha_inverse.robot.robotino import ARM_VALVES
 from cbha_inverse.robot.safety import (ACTIONS, check_command, check_displacement_command,
@@ -104,7 +107,7 @@ from cbha_inverse.scene.calibration import Calibration, finite_triple
 from cbha_inverse.sim.arm import SimulatedArm
 from cbha_inverse.sim.plant_errors import plant_errors
 from cbha_inverse.sim.pots import SimulatedPots
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, WrenchStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -350,6 +353,8 @@ class CbhaSimNode(Node):
                                                        MEASURED_QOS)
         self.contact_marker_publisher = self.create_publisher(MarkerArray, 'contacts/markers',
                                                               MARKER_QOS)
+        self.contact_force_publisher = self.create_publisher(WrenchStamped, 'tip/contact_force',
+                                                             MEASURED_QOS)
         self.create_subscription(MarkerArray, 'obstacles', self._on_obstacles, OBSTACLES_QOS)
         self._publish_obstacles()
 
@@ -377,6 +382,12 @@ class CbhaSimNode(Node):
         """Publish this tick's contacts (numbers always, arrows while there are any)."""
         contacts = self.arm.plant.contacts
         self.contact_publisher.publish(contact_array(contacts))
+        # the tip's (the last effector's, as tip/true) sphere: what a touching tip presses with
+        wrench = WrenchStamped()
+        wrench.header.stamp, wrench.header.frame_id = stamp, self.params.frame_id
+        wrench.wrench.force.x, wrench.wrench.force.y, wrench.wrench.force.z = (
+            frame_contact_force(contacts, int(self.arm.plant.effectors.frames[-1])).tolist())
+        self.contact_force_publisher.publish(wrench)
         if contacts.frames.size or self.contacts_drawn:
             self.contact_marker_publisher.publish(contact_markers(
                 contacts, stamp, self.params.frame_id, self.params.contact_arrow_scale))
