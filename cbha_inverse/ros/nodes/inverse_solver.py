@@ -40,7 +40,10 @@ Besides ``target`` (the first effector's): ``targets/<effector>`` per scene effe
 or ``pose`` effector constrains, ``docs/effectors.md``), the action
 ``~/follow_trajectory`` (control_msgs/FollowJointTrajectory) and the teleop topics
 ``~/delta_twist_cmds`` and ``~/pose_target_cmds`` (:mod:`cbha_inverse.ros.nodes.commanding`,
-``docs/commanding.md``); while a goal runs, the streaming topics are refused. A scene with
+``docs/commanding.md``); while a goal runs, the streaming topics are refused. ``touch``
+(PoseStamped: the first effector's contact target, its position the contact point and its z
+axis the surface's outward normal, pressing with a force within ``touch_force_bounds``;
+``~/release_touch`` (std_srvs/Trigger) ends it: ``docs/touch.md``). A scene with
 several effectors runs in open loop only (the closed loop corrects one measured tip).
 """
 
@@ -49,10 +52,12 @@ import math
 import sys
 import time
 
+from cbha_inverse.core.actuation.effectors import rotation_of_quaternion
 from cbha_inverse.core.inverse.episodes import StatusEpisodes
 from cbha_inverse.core.inverse.qp import QP_SOLVERS
 from cbha_inverse.core.inverse.results import HELD_STATUSES
 from cbha_inverse.core.inverse.solver import TargetCorrector
+from cbha_inverse.core.inverse.touch import checked_force_bounds
 from cbha_inverse.core.sections import check_section_factors
 from cbha_inverse.robot.ordering import DROPPED, StampOrder
 from cbha_inverse.robot.robotino import ARM_VALVES
@@ -77,7 +82,7 @@ from cbha_inverse.ros.common.tf_listener import make_static_listener
 from cbha_inverse.ros.common.wrenches import wrench_frames, WrenchInputs
 from cbha_inverse.ros.nodes.commanding import Commanding
 from cbha_inverse.scene import load_scene
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, PoseStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -235,6 +240,9 @@ class InverseSolverParams:
                                         low=1, high=100000, live=True)
     teleop_max_speed: float = param(0.05, 'teleop: top speed of the target [m/s] (twist and '
                                     'pose commands)', low=1e-4, high=10.0, live=True)
+    touch_force_bounds: tuple = param((0.2, 0.4), 'touch: the force bounds [f_min, f_max] '
+                                      '[N] of a contact target on the touch topic '
+                                      '(0 <= f_min <= f_max; docs/touch.md)', live=True)
     teleop_timeout: float = param(0.2, 'teleop: the target stops (holds) when no command came '
                                   'for this long [s] (steady clock)', low=0.001, high=60.0,
                                   live=True)
@@ -335,6 +343,8 @@ class InverseSolverNode(Node):
         self.create_service(Trigger, '~/vent', lambda request, response: self._safe_state(
             'vent', response))
         self.create_service(Trigger, '~/reset', self._on_reset)
+        self.create_subscription(PoseStamped, 'touch', self._on_touch, TARGET_QOS)
+        self.create_service(Trigger, '~/release_touch', self._on_release_touch)
         self.commanding = Commanding(self)
         self.timer = self.create_timer(self.period, self._on_timer)
         self.watchdog_timer = self.create_timer(self.period, self._on_watchdog,
@@ -371,6 +381,7 @@ class InverseSolverNode(Node):
                 raise ValueError(f'command_kind displacement: scene {self.scene.name} needs '
                                  'every actuator a cable with a finite axial_stiffness')
         self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(p)
+        checked_force_bounds(p.touch_force_bounds)
         self.solver = self.scene.make_inverse_solver(newton_steps=p.newton_steps,
                                                      relinearize_every=p.relinearize_every,
                                                      qp_solver=p.qp_solver, max_step=p.max_step)
@@ -402,7 +413,10 @@ class InverseSolverNode(Node):
 
     def _retune_model(self, new):
         """Live parameters of what ``_setup_model`` built (a ``ValueError`` refuses them)."""
+        bounds = checked_force_bounds(new.touch_force_bounds)
         self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(new)
+        for effector, touch in self.solver.touches.items():
+            self.solver.set_touch(effector, touch.point, touch.normal, bounds)
         self.corrector.gain = new.loop_gain if new.mode == 'closed' else 0.0
         self.corrector.max_correction = new.max_correction
 
@@ -499,6 +513,54 @@ class InverseSolverNode(Node):
         in_scene_order[self.order] = gains
         self.solver.set_actuator_gain(in_scene_order, self.params.max_gain_change or None)
         self._prepare()
+
+    def _on_touch(self, message):
+        """
+        Take a contact target of the first effector (``touch``, ``docs/touch.md``).
+
+        The pose's position is the contact point and the effector's target; its z axis the
+        surface's outward normal; the bounds are ``touch_force_bounds``. The closed loop then
+        corrects the tangential error only.
+        """
+        received, received_cpu = time.perf_counter(), time.thread_time()
+        topic = 'touch'
+        if self.commanding.refused(topic):
+            return
+        stamped = PointStamped()
+        stamped.header = message.header
+        position = message.pose.position
+        stamped.point.x, stamped.point.y, stamped.point.z = position.x, position.y, position.z
+        point = self._accepted_point(topic, stamped)
+        if point is None:
+            return
+        q = message.pose.orientation
+        try:
+            rotation = rotation_of_quaternion([q.x, q.y, q.z, q.w], f'{topic} orientation')
+            frame = message.header.frame_id or self.params.frame_id
+            if frame != self.params.frame_id:
+                # the frame is known: the position passed the same transform above
+                rotation = self.static_tf.transform(frame, self.params.frame_id)[0] @ rotation
+            touch = self.solver.set_touch(0, point, rotation[:, 2],
+                                          self.params.touch_force_bounds)
+        except ValueError as exc:
+            self._count_rejected(topic, 'bad_touch', str(exc))
+            return
+        self.corrector.set_touch_normal(0, touch.normal)
+        f_min, f_max = touch.force_bounds
+        self.get_logger().info(f'touch: {self.scene.effector_names[0]} on {point.round(4)} m, '
+                               f'normal {touch.normal.round(3)}, force in [{f_min:g}, '
+                               f'{f_max:g}] N')
+        self._take_target(point, 0, stamp_ns(message.header.stamp), received, received_cpu)
+
+    def _on_release_touch(self, request, response):
+        """``~/release_touch``: the first effector tracks its target again, pressing nothing."""
+        released = self.solver.clear_touch(0)
+        self.corrector.set_touch_normal(0, None)
+        response.success = True
+        response.message = ('touch released: tracking the target' if released
+                            else 'no touch to release')
+        self.get_logger().info(response.message)
+        return response
 
     def _on_target(self, message, effector=0, topic='target'):
         """Take a target of one effector (``target``: the first; ``targets/<name>``)."""
@@ -797,6 +859,9 @@ class InverseSolverNode(Node):
                   'obstacles': len(self.solver.obstacles),
                   'obstacle_updates': self.obstacle_updates,
                   'obstacle_rows': result.obstacle_rows if result else 0,
+                  'touch': ','.join(self.scene.effector_names[e] for e in self.solver.touches),
+                  'touch_force_n': _touch_force(result),
+                  'touch_violation_n': result.touch_violation if result else math.nan,
                   'saturated': ','.join(np.asarray(self.scene.actuator_names)[
                       result.saturated].tolist()) if result else '',
                   'at_lower_bound': ','.join(at_lower), 'at_upper_bound': ','.join(at_upper),
@@ -839,6 +904,14 @@ class InverseSolverNode(Node):
                              f'{total} rejected messages' if total else 'all inputs valid',
                              self.rejected.key_values())
         return [make_status(self.get_name(), 'control', level, message, values), inputs]
+
+
+def _touch_force(result):
+    """Return the largest contact force a tick predicts [N] (NaN without a contact target)."""
+    forces = None if result is None else result.touch_forces
+    if forces is None or not np.isfinite(forces).any():
+        return math.nan
+    return float(np.nanmax(forces))
 
 
 def main(argv=None):
