@@ -208,3 +208,24 @@ def test_the_corrector_integrates_the_tangential_error_of_a_touch():
         corrector.set_touch_normal(0, [0.0, 0.0, 0.0])
     with pytest.raises(ValueError):
         corrector.set_touch_normal(2, normal)
+
+
+def test_the_touching_spheres_row_against_its_surface_gives_way_to_the_force_rows(table_scene):
+    """The tip's row against the touched wall is left out; every other row stays, in order."""
+    rest = table_scene.rest_effector_positions[0]
+    wall = wall_in_front(rest, table_scene.collision.radii[-1], 0.005)
+    solver = table_scene.make_inverse_solver()
+    solver.set_obstacles(table_scene.obstacles + (wall,))
+    solver.set_touch('tip', [wall.position[0], rest[1], rest[2]], WALL_NORMAL, [0.5, 1.5])
+    assert solver.prepare()
+    rows = solver.obstacle_rows
+    pairs = list(zip(rows.names, rows.frames.tolist()))
+    assert ('wall', table_scene.model.n_links) in pairs
+    matrix, constant, count = solver.touch_rows.stacked(rows)
+    kept = [i for i, pair in enumerate(pairs) if pair != ('wall', table_scene.model.n_links)]
+    assert count == len(kept) == rows.count - 1 and matrix.shape[0] == count + 2
+    np.testing.assert_array_equal(matrix[:count], rows.matrix[kept])
+    np.testing.assert_array_equal(constant[:count], rows.constant[kept])
+    force_matrix, force_constant = solver.touch_rows.rows()
+    np.testing.assert_array_equal(matrix[count:], force_matrix)
+    np.testing.assert_array_equal(constant[count:], force_constant)

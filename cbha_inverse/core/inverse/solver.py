@@ -713,20 +713,8 @@ class InverseSolver:
         The force rows of the contact targets (:mod:`~.touch`) are stacked under the obstacle
         rows, which lose the rows of a touching sphere against the surface it touches.
         """
-        rows = self._obstacle_rows
         data, options = self._data, self.options
-        matrix, constant = ((rows.matrix, rows.constant) if rows is not None
-                            else (np.zeros((0, self._scale.size)), np.zeros(0)))
-        if self._touch.touches:
-            if rows is not None:
-                kept = ~self._touch.touched_rows(rows.names, rows.frames, rows.obstacles)
-                matrix, constant = matrix[kept], constant[kept]
-            obstacle_count = constant.size
-            force_matrix, force_constant = self._touch.rows()
-            matrix = np.vstack((matrix, force_matrix))
-            constant = np.concatenate((constant, force_constant))
-        else:
-            obstacle_count = constant.size
+        matrix, constant, obstacle_count = self._touch.stacked(self._obstacle_rows)
         # ν: the tracking term's normaliser (qp_hessians_into)
         weighted = data.w_ea * data.row_weights[:, None] * self._scale
         normaliser = float(np.einsum('rj,rj->', weighted, weighted)) / self._scale.size

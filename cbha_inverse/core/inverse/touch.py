@@ -217,6 +217,8 @@ class TouchRows:
         self._names = tuple(names)
         self.touches = {}
         self.compliances = {}
+        # per touching effector: (obstacles, touch, the names of the obstacles it touches)
+        self._touched = {}
 
     @property
     def count(self):
@@ -371,33 +373,53 @@ class TouchRows:
                                 f'outside [{f_min:.3g}, {f_max:.3g}] N')
         return forces, violation, tuple(warnings)
 
-    def touched_rows(self, names, frames, obstacles):
+    def stacked(self, obstacle_rows):
         """
-        Return which obstacle rows are a touching sphere against the surface it touches.
+        Return the rows of the tick's QP: the obstacle rows, then the force rows [m].
 
-        Such a row would hold the sphere ``obstacle_margin`` off the surface the force rows
-        press it onto: the solver drops it.
+        An obstacle row of a touching sphere against the surface it touches
+        (:func:`touched_obstacles`) would hold the sphere ``obstacle_margin`` off the surface
+        the force rows press it onto: it is left out.
 
         Parameters
         ----------
-        names : tuple of str
-            The obstacle of each obstacle row.
-        frames : (r,) int ndarray
-            The sphere's frame of each row.
-        obstacles : tuple of cbha_inverse.core.obstacles.Obstacle
-            The obstacles.
+        obstacle_rows : cbha_inverse.core.inverse.obstacle_rows.ObstacleRows or None
+            The obstacle rows of the linearisation (None without obstacles).
 
         Returns
         -------
-        (r,) ndarray of bool
+        matrix : (r + 2t, m) ndarray  [m/Pa, m/N]
+            ``G``.
+        constant : (r + 2t,) ndarray  [m]
+            ``b``.
+        obstacle_count : int
+            ``r``, the obstacle rows kept (first).
 
         """
-        touched = np.zeros(len(names), dtype=bool)
-        for touch in self.touches.values():
-            surfaces = set(touched_obstacles(obstacles, touch.point, touch.normal))
-            touched |= np.array([frame == touch.frame and name in surfaces
-                                 for name, frame in zip(names, frames)], dtype=bool)
-        return touched
+        if obstacle_rows is None:
+            matrix, constant = np.zeros((0, self._data.actuation.size)), np.zeros(0)
+        else:
+            matrix, constant = obstacle_rows.matrix, obstacle_rows.constant
+        if not self.touches:
+            return matrix, constant, constant.size
+        if obstacle_rows is not None:
+            kept = np.ones(constant.size, dtype=bool)
+            for touch in self.touches.values():
+                surfaces = self._surfaces(touch, obstacle_rows.obstacles)
+                kept &= ~np.array([frame == touch.frame and name in surfaces for name, frame
+                                   in zip(obstacle_rows.names, obstacle_rows.frames)], bool)
+            matrix, constant = matrix[kept], constant[kept]
+        force_matrix, force_constant = self.rows()
+        return (np.vstack((matrix, force_matrix)), np.concatenate((constant, force_constant)),
+                constant.size)
+
+    def _surfaces(self, touch, obstacles):
+        """Return the names of the obstacles ``touch`` touches (kept per obstacle set)."""
+        known = self._touched.get(touch.effector)
+        if known is None or known[0] is not obstacles or known[1] is not touch:
+            known = (obstacles, touch, touched_obstacles(obstacles, touch.point, touch.normal))
+            self._touched[touch.effector] = known
+        return known[2]
 
 
 def touched_obstacles(obstacles, point, normal):
