@@ -229,3 +229,30 @@ def test_the_touching_spheres_row_against_its_surface_gives_way_to_the_force_row
     force_matrix, force_constant = solver.touch_rows.rows()
     np.testing.assert_array_equal(matrix[count:], force_matrix)
     np.testing.assert_array_equal(constant[count:], force_constant)
+
+
+def test_the_force_rows_hold_the_bound_the_tangential_pull_presses_against(table_scene):
+    """
+    The upper force row binds where the tangential target pulls the tip into the wall.
+
+    A tangential target 50 mm to the side of a wall contact: the arm, held by the wall, would
+    press harder to get there; the upper row holds the predicted force at ``f_max``, whichever
+    it is.
+    """
+    rest = table_scene.rest_effector_positions[0]
+    wall = wall_in_front(rest, table_scene.collision.radii[-1], 0.005)
+    point = np.array([wall.position[0], rest[1] + 0.05, rest[2]])
+    results = {}
+    for bounds in ((0.5, 1.5), (0.5, 1.2)):
+        solver = table_scene.make_inverse_solver()
+        solver.set_obstacles(table_scene.obstacles + (wall,))
+        solver.set_touch('tip', point, WALL_NORMAL, bounds)
+        for _ in range(40):
+            result = solver.step(point[None, :])
+            solver.prepare()
+        results[bounds] = result
+        assert result.touch_forces[0] == pytest.approx(bounds[1], abs=1e-4)
+        assert result.touch_violation == 0.0
+        assert result.status == 'unreachable' and result.predicted_error > 0.005
+    # the tighter bound leaves the tip farther from its tangential target
+    assert results[(0.5, 1.2)].predicted_error > results[(0.5, 1.5)].predicted_error
