@@ -15,7 +15,7 @@ from cbha_inverse.scene import load_scene
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 import numpy as np
 from rclpy.node import Node
-from ros_helpers import make_node, spin_until, spinning
+from ros_helpers import assert_refused, make_node, set_parameters, spin_until, spinning
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -83,3 +83,18 @@ def test_the_tip_presses_a_wall_with_a_force_within_the_bounds(rclpy_context):
     assert BOUNDS[0] <= measured <= BOUNDS[1]
     assert forces[-1].header.frame_id == 'cbha_base'
     assert future.result().success and solver.solver.touches == {}
+
+
+def test_touch_force_bounds_are_checked_and_apply_to_the_current_touch(rclpy_context):
+    """A live change of ``touch_force_bounds``: refused when invalid, else the touch's bounds."""
+    solver = make_node(InverseSolverNode, rclpy_context, namespace='/touchp', mode='open',
+                       scene='cbha_table')
+    solver.solver.set_touch(0, [0.2, 0.0, -0.08], [0.0, 0.0, 1.0], [0.2, 0.4])
+    try:
+        assert_refused(solver, 'force bounds', touch_force_bounds=[0.5, 0.1])
+        assert_refused(solver, 'force bounds', touch_force_bounds=[-0.1, 0.4])
+        np.testing.assert_array_equal(solver.solver.touches[0].force_bounds, [0.2, 0.4])
+        assert set_parameters(solver, touch_force_bounds=[0.5, 1.0]).successful
+        np.testing.assert_array_equal(solver.solver.touches[0].force_bounds, [0.5, 1.0])
+    finally:
+        solver.destroy_node()

@@ -415,8 +415,9 @@ class InverseSolverNode(Node):
         """Live parameters of what ``_setup_model`` built (a ``ValueError`` refuses them)."""
         bounds = checked_force_bounds(new.touch_force_bounds)
         self.lower, self.upper, self.gate, self.vent_command, self.box = self._limits(new)
-        for effector, touch in self.solver.touches.items():
-            self.solver.set_touch(effector, touch.point, touch.normal, bounds)
+        if tuple(new.touch_force_bounds) != tuple(self.params.touch_force_bounds):
+            for effector, touch in self.solver.touches.items():
+                self.solver.set_touch(effector, touch.point, touch.normal, bounds)
         self.corrector.gain = new.loop_gain if new.mode == 'closed' else 0.0
         self.corrector.max_correction = new.max_correction
 
