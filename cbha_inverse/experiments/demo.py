@@ -38,21 +38,22 @@ as the others, and its second line gives the estimate's own RMS against ``tip/tr
 ``--plant-payload`` hangs a payload at the plant's tip that no model knows; ``--stuck-pot``
 freezes one plant pot halfway through the lap (the estimator drops it: ``degraded``).
 
-``--obstacles rows,free`` (in the default) adds two closed-loop squares on ``--obstacle-scene``
-(``cbha_post``: the CBHA over a table, a short post 29 mm beyond the square's plane below its
-centre, in the way of the tip's sphere along the lower edge; ``docs/obstacles.md``). The plant
-touches the obstacles in both; the inverse keeps its collision spheres ``obstacle_margin`` clear
-of them with its rows in ``rows`` and is told of none in ``free`` (it loads
-``--obstacle-free-scene``, ``cbha``: the same model without obstacles). Their lines give the
-plant's lowest clearance over the whole run (its collision spheres against its obstacles, the
-``lowest_clearance_m`` of the ``cbha_sim`` diagnostics; negative: a penetration), the clearance
-the tip's sphere would have on the lap's targets, the tracking of the *unblocked part* of the lap
+``--feedback obstacles`` (in the default) adds the closed-loop squares of ``--obstacles``
+(``rows,free``) on ``--obstacle-scene`` (``cbha_post``: the CBHA over a table, a short post
+29 mm beyond the square's plane below its centre, in the way of the tip's sphere along the lower
+edge; ``docs/obstacles.md``). The plant touches the obstacles in both; the inverse keeps its
+collision spheres ``obstacle_margin`` clear of them with its rows in ``rows`` and is told of
+none in ``free`` (it loads ``--obstacle-free-scene``, ``cbha``: the same model without
+obstacles). Their lines give the plant's lowest clearance over the whole run (its collision
+spheres against its obstacles, the ``lowest_clearance_m`` of the ``cbha_sim`` diagnostics;
+negative: a penetration), the model's (its equilibria at the run's recorded commands), the
+clearance the tip's sphere would have on the lap's targets, the tracking of the *unblocked part*
+of the lap
 (:func:`cbha_inverse.metrics.unblocked_errors`: the samples whose target is at least
 ``--blocked-distance`` from every obstacle, by default the collision radius + the margin + 5 mm
 = 31.5 mm, and more than ``--settle-time`` (0.5 s) after the last sample that was not; on the
 CBHA's square the post blocks the lower edge's middle 59 mm, and the settling takes 16 mm more)
-and the solver's tick and latency as above. ``--feedback '' --obstacles rows,free`` runs these
-two alone.
+and the solver's tick and latency as above. ``--feedback obstacles`` runs these two alone.
 
 ``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``all``, ... or a YAML file of
 holds) adds an identification run: ``cbha_sim`` and ``cbha_excite`` alone, recorded
@@ -69,7 +70,7 @@ import shutil
 import sys
 import time
 
-from cbha_inverse.bag.evaluate import evaluate_bag
+from cbha_inverse.bag.evaluate import command_series, evaluate_bag
 from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
 from cbha_inverse.core.obstacles import sphere_gaps
@@ -80,13 +81,14 @@ from cbha_inverse.experiments.proprio import (add_estimator_arguments, add_plant
 from cbha_inverse.identify.excitation import make_program
 from cbha_inverse.metrics import plot_runs, unblocked_errors
 from cbha_inverse.paths import config_path
-from cbha_inverse.robot.safety import command_bounds
+from cbha_inverse.robot.safety import command_bounds, valve_order
 from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.ros.common.transport import node_environment
 from cbha_inverse.ros.launch.compositions import (ArgumentError, COMPOSITIONS, NodeProcess,
                                                   resolve)
 from cbha_inverse.ros.launch.processes import NodeProcesses
 from cbha_inverse.scene import load_scene
+from cbha_inverse.sim.plant import StaticPlant
 import numpy as np
 import yaml
 
@@ -131,12 +133,13 @@ def parse_args(argv):
                         help='seed of the plant measurement noise (cbha_sim seed)')
     parser.add_argument('--model-scene', default=None, help="inverse_solver's and "
                         "shape_estimator's scene (default --scene), e.g. cbha_identify's")
-    parser.add_argument('--feedback', default='direct,stereo,proprio',
+    parser.add_argument('--feedback', default='direct,stereo,proprio,obstacles',
                         help='comma-separated: direct (tip/measured from the plant: every shape '
                         'and mode) and/or stereo (closed loop through rendered cameras and '
                         'stereo_tracker, for --stereo-shapes) and/or proprio (closed loop on '
                         'the string-pot estimate of shape_estimator, no tip measurement, for '
-                        '--proprio-shapes)')
+                        '--proprio-shapes) and/or obstacles (direct closed-loop squares on '
+                        '--obstacle-scene, the runs of --obstacles)')
     parser.add_argument('--proprio-shapes', default='circle', help='shapes of the proprio runs')
     parser.add_argument('--plant-payload', type=float, default=0.0,
                         help='plant tip payload unknown to the controller [kg]')
@@ -158,10 +161,10 @@ def parse_args(argv):
     parser.add_argument('--excite-ramp-time', type=float, default=1.0,
                         help='cbha_excite ramp_time [s]')
     parser.add_argument('--obstacles', default='rows,free',
-                        help='comma-separated obstacle runs, closed-loop squares on '
-                        "--obstacle-scene: rows (the inverse keeps clear of the scene's "
-                        'obstacles) and/or free (the inverse on --obstacle-free-scene, told of '
-                        "no obstacles; the plant still touches them); '' for none")
+                        help='comma-separated obstacle runs (with --feedback obstacles): rows '
+                        "(the inverse keeps clear of the scene's obstacles) and/or free (the "
+                        'inverse on --obstacle-free-scene, told of no obstacles; the plant '
+                        'still touches them)')
     parser.add_argument('--obstacle-scene', default='cbha_post.yaml',
                         help='scene of plant and inverse of the obstacle runs')
     parser.add_argument('--obstacle-free-scene', default='cbha.yaml',
@@ -389,6 +392,8 @@ class ObstacleRun:
         The scenes of ``cbha_sim`` and of ``inverse_solver``.
     obstacles : tuple of cbha_inverse.core.obstacles.Obstacle
         The plant's obstacles.
+    model : cbha_inverse.scene.Scene
+        The obstacle scene (the inverse's model: no stiffness error).
     margin : float  [m]
         The ``obstacle_margin`` of the obstacle scene's inverse.
     radius : float  [m]
@@ -404,12 +409,13 @@ class ObstacleRun:
     plant_scene: str
     model_scene: str
     obstacles: tuple
+    model: object
     margin: float
     radius: float
     blocked_distance: float
     settle_time: float
 
-    def numbers(self, tracking, plant):
+    def numbers(self, tracking, plant, bag, valve_names):
         """
         Return the summary entries of the run: the plant's lowest clearance, unblocked tracking.
 
@@ -419,6 +425,10 @@ class ObstacleRun:
             The lap's errors (plant tip vs target).
         plant : dict
             The key/values of the last ``cbha_sim: plant`` diagnostics.
+        bag : pathlib.Path
+            The run's bag (its ``pressure_command``).
+        valve_names : sequence of str
+            The commands' order.
 
         Returns
         -------
@@ -426,8 +436,10 @@ class ObstacleRun:
             ``lowest_clearance_mm`` (over the whole run, the plant's spheres against its
             obstacles), ``target_clearance_mm`` (the smallest clearance a sphere of
             :attr:`radius` centred on a target of the lap would have: what reaching every
-            target would ask), ``unblocked_rms_mm``, ``unblocked_max_mm``,
-            ``unblocked_samples`` and the selection's parameters.
+            target would ask), ``model_clearance_mm`` (the lowest clearance of the model's
+            equilibria at the run's commands: where the inverse meant the spheres to be),
+            ``unblocked_rms_mm``, ``unblocked_max_mm``, ``unblocked_samples`` and the
+            selection's parameters.
 
         """
         unblocked, kept = unblocked_errors(tracking, self.obstacles, self.blocked_distance,
@@ -441,6 +453,7 @@ class ObstacleRun:
         return {'obstacles': self.name, 'obstacle_scene': self.plant_scene,
                 'inverse_scene': self.model_scene, 'lowest_clearance_mm': lowest * 1e3,
                 'target_clearance_mm': float(on_targets.min()) * 1e3,
+                'model_clearance_mm': self.model_clearance(bag, valve_names) * 1e3,
                 'obstacle_margin_mm': self.margin * 1e3,
                 'unblocked_rms_mm': unblocked.rms * 1e3,
                 'unblocked_max_mm': unblocked.maximum * 1e3,
@@ -448,10 +461,33 @@ class ObstacleRun:
                 'blocked_distance_mm': self.blocked_distance * 1e3,
                 'settle_time_s': self.settle_time}
 
+    def model_clearance(self, bag, valve_names):
+        """
+        Return the lowest clearance of the model's equilibria at a run's commands [m].
+
+        Each recorded ``pressure_command`` is solved as the model's equilibrium (the obstacle
+        scene without its obstacles, warm-started from the previous command's), and its
+        collision spheres are measured against the plant's obstacles
+        (:meth:`cbha_inverse.core.contact.CollisionSpheres.clearances`).
+        """
+        with open_bag(bag) as recorded:
+            _, commands = command_series(recorded, f'{NAMESPACE}/pressure_command')
+        _, order = valve_order(self.model.actuator_names, valve_names)
+        model = StaticPlant(self.model)
+        model.set_obstacles(())
+        lowest = np.inf
+        for command in commands:
+            actuation = np.zeros(len(order))
+            actuation[order] = command
+            state = model.update(actuation)
+            lowest = min(lowest, float(self.model.collision.clearances(
+                state.positions, self.obstacles).min()))
+        return lowest
+
 
 def obstacle_runs(args):
     """
-    Return the obstacle runs of ``--obstacles`` and the centre of their square.
+    Return the obstacle runs of ``--obstacles`` (none without ``--feedback obstacles``).
 
     Parameters
     ----------
@@ -472,7 +508,7 @@ def obstacle_runs(args):
 
     """
     names = [name for name in args.obstacles.split(',') if name]
-    if not names:
+    if 'obstacles' not in args.feedback.split(',') or not names:
         return [], None
     unknown = sorted(set(names) - {'rows', 'free'})
     if unknown:
@@ -487,7 +523,8 @@ def obstacle_runs(args):
                 else radius + margin + BLOCKED_EXTRA)
     return [ObstacleRun(name, args.obstacle_scene,
                         args.obstacle_scene if name == 'rows' else args.obstacle_free_scene,
-                        tuple(scene.obstacles), margin, radius, distance, args.settle_time)
+                        tuple(scene.obstacles), scene, margin, radius, distance,
+                        args.settle_time)
             for name in names], scene.workspace_center[-1]
 
 
@@ -590,7 +627,8 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
                             if k.startswith('section_stiffness.')},
         'estimate_tip_rms_mm': estimate_error(bag_points(run_dir / 'bag', NAMESPACE),
                                               args.start_hold, trajectory.duration) * 1e3}
-    blocked = {} if obstacles is None else obstacles.numbers(errors, plant)
+    blocked = {} if obstacles is None else obstacles.numbers(errors, plant, run_dir / 'bag',
+                                                             valve_names)
     return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo, **proprio, **blocked,
             'speed_m_s': speed, 'lap_s': trajectory.lap_time,
             'rms_mm': errors.rms * 1e3, 'max_mm': errors.maximum * 1e3,
@@ -719,8 +757,9 @@ def main(argv=None):
                               obstacles=run)
             results.append(result)
             print(f"square {run.name:6s}: lowest clearance {result['lowest_clearance_mm']:6.3f} mm"
-                  f" (margin {result['obstacle_margin_mm']:g} mm; the tip's sphere on the "
-                  f"targets: {result['target_clearance_mm']:.3f} mm) | unblocked RMS "
+                  f" (margin {result['obstacle_margin_mm']:g} mm; the model's at the "
+                  f"commands {result['model_clearance_mm']:.3f} mm, the tip's sphere on the "
+                  f"targets {result['target_clearance_mm']:.3f} mm) | unblocked RMS "
                   f"{result['unblocked_rms_mm']:6.3f} mm, max {result['unblocked_max_mm']:6.3f}"
                   f" mm ({result['unblocked_samples']} of {result['samples']} samples) | "
                   f"tick median {result['tick_median_ms']:.3f} ms, p99 "
