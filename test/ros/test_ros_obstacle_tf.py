@@ -5,7 +5,8 @@ Obstacle frames on ``/tf_static`` over real DDS (``cbha_inverse.ros.common.tf``)
 frame ``model_obstacle_<name>`` per obstacle its rows keep clear of, both from the scene's base
 frame. A listener that joins after them receives the scene's obstacles (``cbha_post``: the
 poses checked against the scene file's numbers); an ``obstacles`` message replaces them: each
-node sends the new set, and a listener that joins afterwards receives only that set.
+node sends the new set (an empty one for none), and a listener that joins afterwards receives
+only that set.
 """
 
 from cbha_inverse.paths import config_path
@@ -103,3 +104,7 @@ def test_obstacle_frames_follow_the_obstacle_sets(rclpy_context, tf2_msgs):
         listener.create_subscription(TFMessage, '/tf_static', late.append, LISTENER_QOS)
         assert spin_until(executor, lambda: len(late) >= 2, 10.0)
         assert sorted(_transforms(late)) == ['model_obstacle_lab/0', 'obstacle_lab/0']
+        # an empty set: each node sends a message without frames
+        obstacles.publish(MarkerArray())
+        assert spin_until(executor, lambda: len(early) >= 6, 10.0)
+        assert [len(message.transforms) for message in early[4:]] == [0, 0]
