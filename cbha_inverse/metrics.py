@@ -26,6 +26,8 @@ class TrackingErrors:
         Root mean square of ``errors``.
     maximum : float  [m]
         Largest error.
+    goals : (N, 3) ndarray  [m]
+        The target at each sample (interpolated at its stamp).
 
     """
 
@@ -33,6 +35,7 @@ class TrackingErrors:
     errors: np.ndarray
     rms: float
     maximum: float
+    goals: np.ndarray
 
 
 def tracking_errors(target_times, targets, tip_times, tips, start, end):
@@ -75,7 +78,58 @@ def tracking_errors(target_times, targets, tip_times, tips, start, end):
                      for axis in range(3)], axis=1)
     errors = np.linalg.norm(tips[inside] - goal, axis=1)
     return TrackingErrors(tip_times[inside], errors, float(np.sqrt(np.mean(errors ** 2))),
-                          float(np.max(errors)))
+                          float(np.max(errors)), goal)
+
+
+def unblocked_errors(tracking, obstacles, distance, settle_time):
+    """
+    Return the tracking errors of the samples whose targets the obstacles leave free.
+
+    A sample is *blocked* when its target lies closer than ``distance`` to an obstacle (the
+    target point's signed distance, :meth:`cbha_inverse.core.obstacles.Obstacle.signed_distance`):
+    there the obstacle may hold the arm off its target. A sample up to ``settle_time`` after a
+    blocked one is *settling*: the tip catches up once the obstacle lets it go. The rest is the
+    unblocked part.
+
+    Parameters
+    ----------
+    tracking : TrackingErrors
+        A run's errors (:func:`tracking_errors`).
+    obstacles : sequence of cbha_inverse.core.obstacles.Obstacle
+        The obstacles.
+    distance : float  [m]
+        Targets closer than this to an obstacle are blocked (e.g. the tip's collision radius
+        plus the obstacle margin and a few millimetres for the neighbouring spheres).
+    settle_time : float  [s]
+        How long after a blocked sample the samples are left out.
+
+    Returns
+    -------
+    errors : TrackingErrors
+        The unblocked samples' errors, RMS and maximum.
+    kept : (N,) ndarray of bool
+        Which samples of ``tracking`` are unblocked.
+
+    Raises
+    ------
+    ValueError
+        If no sample is unblocked.
+
+    """
+    goals = np.asarray(tracking.goals, dtype=float).reshape(-1, 3)
+    gaps = np.full(len(goals), np.inf)
+    for obstacle in obstacles:
+        gaps = np.minimum(gaps, obstacle.signed_distance(goals).distance)
+    blocked_times = tracking.times[gaps < distance]
+    # the latest blocked sample at or before each sample (-inf: none)
+    before = np.searchsorted(blocked_times, tracking.times, side='right')
+    last_blocked = np.where(before > 0, blocked_times[np.maximum(before - 1, 0)], -np.inf)
+    kept = tracking.times - last_blocked > settle_time
+    if not np.any(kept):
+        raise ValueError('every sample is blocked or settling')
+    errors = tracking.errors[kept]
+    return TrackingErrors(tracking.times[kept], errors, float(np.sqrt(np.mean(errors ** 2))),
+                          float(np.max(errors)), goals[kept]), kept
 
 
 TRANSIENT_FACTOR = 3.0

@@ -38,6 +38,23 @@ as the others, and its second line gives the estimate's own RMS against ``tip/tr
 ``--plant-payload`` hangs a payload at the plant's tip that no model knows; ``--stuck-pot``
 freezes one plant pot halfway through the lap (the estimator drops it: ``degraded``).
 
+``--feedback obstacles`` (in the default) adds the closed-loop squares of ``--obstacles``
+(``rows,free``) on ``--obstacle-scene`` (``cbha_post``: the CBHA over a table, a short post
+29 mm beyond the square's plane below its centre, in the way of the tip's sphere along the lower
+edge; ``docs/obstacles.md``). The plant touches the obstacles in both; the inverse keeps its
+collision spheres ``obstacle_margin`` clear of them with its rows in ``rows`` and is told of
+none in ``free`` (it loads ``--obstacle-free-scene``, ``cbha``: the same model without
+obstacles). Their lines give the plant's lowest clearance over the whole run (its collision
+spheres against its obstacles, the ``lowest_clearance_m`` of the ``cbha_sim`` diagnostics;
+negative: a penetration), the model's (its equilibria at the run's recorded commands), the
+clearance the tip's sphere would have on the lap's targets, the tracking of the *unblocked part*
+of the lap
+(:func:`cbha_inverse.metrics.unblocked_errors`: the samples whose target is at least
+``--blocked-distance`` from every obstacle, by default the collision radius + the margin + 5 mm
+= 31.5 mm, and more than ``--settle-time`` (0.5 s) after the last sample that was not; on the
+CBHA's square the post blocks the lower edge's middle 59 mm, and the settling takes 16 mm more)
+and the solver's tick and latency as above. ``--feedback obstacles`` runs these two alone.
+
 ``--excite PROGRAM`` (a ``cbha_excite`` program: ``bends``, ``all``, ... or a YAML file of
 holds) adds an identification run: ``cbha_sim`` and ``cbha_excite`` alone, recorded
 (pressure_command, pressure_measured, tip/measured, tip/true) into
@@ -45,7 +62,7 @@ holds) adds an identification run: ``cbha_sim`` and ``cbha_excite`` alone, recor
 """
 
 import argparse
-from dataclasses import replace
+from dataclasses import dataclass, replace
 import json
 import os
 from pathlib import Path
@@ -53,23 +70,25 @@ import shutil
 import sys
 import time
 
-from cbha_inverse.bag.evaluate import evaluate_bag
+from cbha_inverse.bag.evaluate import command_series, evaluate_bag
 from cbha_inverse.bag.storage import open_bag
 from cbha_inverse.config_files import read_yaml
+from cbha_inverse.core.obstacles import sphere_gaps
 from cbha_inverse.errors import ConfigError, report_config_error
 from cbha_inverse.experiments.proprio import (add_estimator_arguments, add_plant_pot_arguments,
                                               bag_points, estimate_error, plant_pot_parameters,
                                               proprio_node_parameters, proprio_sim_parameters)
 from cbha_inverse.identify.excitation import make_program
-from cbha_inverse.metrics import plot_runs
+from cbha_inverse.metrics import plot_runs, unblocked_errors
 from cbha_inverse.paths import config_path
-from cbha_inverse.robot.safety import command_bounds
+from cbha_inverse.robot.safety import command_bounds, valve_order
 from cbha_inverse.robot.trajectory import make_trajectory
 from cbha_inverse.ros.common.transport import node_environment
 from cbha_inverse.ros.launch.compositions import (ArgumentError, COMPOSITIONS, NodeProcess,
                                                   resolve)
 from cbha_inverse.ros.launch.processes import NodeProcesses
 from cbha_inverse.scene import load_scene
+from cbha_inverse.sim.plant import StaticPlant
 import numpy as np
 import yaml
 
@@ -81,6 +100,9 @@ RECORDED = ('target', 'tip/true', 'tip/measured', 'tip/estimated', 'payload/esti
             'sections/estimated', 'pressure_command', 'pressure_measured', 'string_pots',
             '/diagnostics')
 EXCITE_RECORDED = ('pressure_command', 'pressure_measured', 'tip/measured', 'tip/true')
+BLOCKED_EXTRA = 0.005
+"""Default blocked distance beyond the collision radius and the margin [m]: the neighbouring
+spheres of the tip's and the rim of a post reach a few millimetres farther."""
 
 
 def parse_args(argv):
@@ -111,12 +133,13 @@ def parse_args(argv):
                         help='seed of the plant measurement noise (cbha_sim seed)')
     parser.add_argument('--model-scene', default=None, help="inverse_solver's and "
                         "shape_estimator's scene (default --scene), e.g. cbha_identify's")
-    parser.add_argument('--feedback', default='direct,stereo,proprio',
+    parser.add_argument('--feedback', default='direct,stereo,proprio,obstacles',
                         help='comma-separated: direct (tip/measured from the plant: every shape '
                         'and mode) and/or stereo (closed loop through rendered cameras and '
                         'stereo_tracker, for --stereo-shapes) and/or proprio (closed loop on '
                         'the string-pot estimate of shape_estimator, no tip measurement, for '
-                        '--proprio-shapes)')
+                        '--proprio-shapes) and/or obstacles (direct closed-loop squares on '
+                        '--obstacle-scene, the runs of --obstacles)')
     parser.add_argument('--proprio-shapes', default='circle', help='shapes of the proprio runs')
     parser.add_argument('--plant-payload', type=float, default=0.0,
                         help='plant tip payload unknown to the controller [kg]')
@@ -137,6 +160,23 @@ def parse_args(argv):
                         help='cbha_excite hold_time [s]')
     parser.add_argument('--excite-ramp-time', type=float, default=1.0,
                         help='cbha_excite ramp_time [s]')
+    parser.add_argument('--obstacles', default='rows,free',
+                        help='comma-separated obstacle runs (with --feedback obstacles): rows '
+                        "(the inverse keeps clear of the scene's obstacles) and/or free (the "
+                        'inverse on --obstacle-free-scene, told of no obstacles; the plant '
+                        'still touches them)')
+    parser.add_argument('--obstacle-scene', default='cbha_post.yaml',
+                        help='scene of plant and inverse of the obstacle runs')
+    parser.add_argument('--obstacle-free-scene', default='cbha.yaml',
+                        help="the inverse's scene of the free obstacle run: --obstacle-scene "
+                        'without obstacles')
+    parser.add_argument('--blocked-distance', type=float, default=None,
+                        help='obstacle runs: a target closer than this to an obstacle is '
+                        "blocked [m] (default: the largest collision radius + the inverse's "
+                        'obstacle_margin + 5 mm)')
+    parser.add_argument('--settle-time', type=float, default=0.5,
+                        help='obstacle runs: samples this long after a blocked one are '
+                        'settling, not scored as unblocked [s]')
     parser.add_argument('--realtime-priority', type=int, default=50,
                         help="inverse_solver's SCHED_FIFO priority (0: normal scheduler)")
     parser.add_argument('--solver-transport', choices=('udp-loopback', 'default'),
@@ -149,15 +189,16 @@ def parse_args(argv):
     return parser.parse_args(argv)
 
 
-def run_nodes(args, parameters, mode='closed', feedback='direct'):
+def run_nodes(args, parameters, mode='closed', feedback='direct', scene=None):
     """
     Return ``{node: NodeProcess}`` of one run: the ``sim`` composition, the run's parameters last.
 
     ``parameters`` maps a node to its run's overrides; ``feedback`` is a key of :data:`FEEDBACK`;
-    a mode the composition does not know raises its ``ArgumentError``.
+    ``scene`` the composition's scene (default ``args.scene``); a mode the composition does not
+    know raises its ``ArgumentError``.
     """
     nodes = resolve(COMPOSITIONS['sim'], {
-        'namespace': NAMESPACE, 'scene': args.scene, 'mode': mode,
+        'namespace': NAMESPACE, 'scene': scene or args.scene, 'mode': mode,
         'feedback': FEEDBACK[feedback], 'solver_transport': args.solver_transport})
     return {node.executable: replace(node, parameters={
         **node.parameters, **parameters.get(node.executable, {})}) for node in nodes}
@@ -266,9 +307,9 @@ def _floats(text):
     return [float(v) for v in text.split(',')]
 
 
-def _sim_overrides(args, valve_names):
-    """Return the ``cbha_sim`` parameters of the demo's plant."""
-    return {'scene': args.scene, 'valve_names': list(valve_names),
+def _sim_overrides(args, valve_names, scene=None):
+    """Return the ``cbha_sim`` parameters of the demo's plant (on ``scene``, default its own)."""
+    return {'scene': scene or args.scene, 'valve_names': list(valve_names),
             'stiffness_scale': args.stiffness_scale,
             'section_stiffness_scale': _floats(args.plant_section_scale),
             'cavity_gain_scale': _floats(args.plant_gain_scale),
@@ -337,16 +378,178 @@ def run_excitation(recorder, run_dir, args, program, valve_names, env):
             'bag': str(run_dir / 'bag'), 'messages': counts}
 
 
-def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, feedback='direct'):
-    """Run one shape in one mode for one lap and return its summary dict."""
+@dataclass(frozen=True)
+class ObstacleRun:
+    """
+    One obstacle run of the demo: the closed-loop square on the obstacle scene.
+
+    Attributes
+    ----------
+    name : str
+        ``'rows'`` (the inverse keeps clear of the obstacles) or ``'free'`` (the inverse is told
+        of none).
+    plant_scene, model_scene : str
+        The scenes of ``cbha_sim`` and of ``inverse_solver``.
+    obstacles : tuple of cbha_inverse.core.obstacles.Obstacle
+        The plant's obstacles.
+    model : cbha_inverse.scene.Scene
+        The obstacle scene (the inverse's model: no stiffness error).
+    margin : float  [m]
+        The ``obstacle_margin`` of the obstacle scene's inverse.
+    radius : float  [m]
+        The largest collision sphere's radius (the tip's on the CBHA).
+    blocked_distance : float  [m]
+        Targets closer than this to an obstacle are blocked.
+    settle_time : float  [s]
+        Samples this long after a blocked one are settling.
+
+    """
+
+    name: str
+    plant_scene: str
+    model_scene: str
+    obstacles: tuple
+    model: object
+    margin: float
+    radius: float
+    blocked_distance: float
+    settle_time: float
+
+    def numbers(self, tracking, plant, bag, valve_names):
+        """
+        Return the summary entries of the run: the plant's lowest clearance, unblocked tracking.
+
+        Parameters
+        ----------
+        tracking : cbha_inverse.metrics.TrackingErrors
+            The lap's errors (plant tip vs target).
+        plant : dict
+            The key/values of the last ``cbha_sim: plant`` diagnostics.
+        bag : pathlib.Path
+            The run's bag (its ``pressure_command``).
+        valve_names : sequence of str
+            The commands' order.
+
+        Returns
+        -------
+        dict
+            ``lowest_clearance_mm`` (over the whole run, the plant's spheres against its
+            obstacles), ``target_clearance_mm`` (the smallest clearance a sphere of
+            :attr:`radius` centred on a target of the lap would have: what reaching every
+            target would ask), ``model_clearance_mm`` (the lowest clearance of the model's
+            equilibria at the run's commands: where the inverse meant the spheres to be),
+            ``unblocked_rms_mm``, ``unblocked_max_mm``, ``unblocked_samples`` and the
+            selection's parameters.
+
+        """
+        unblocked, kept = unblocked_errors(tracking, self.obstacles, self.blocked_distance,
+                                           self.settle_time)
+        on_targets = sphere_gaps(self.obstacles, tracking.goals,
+                                 np.full(len(tracking.goals), self.radius))
+        try:
+            lowest = float(plant['lowest_clearance_m'])
+        except (KeyError, ValueError):
+            lowest = float('nan')
+        return {'obstacles': self.name, 'obstacle_scene': self.plant_scene,
+                'inverse_scene': self.model_scene, 'lowest_clearance_mm': lowest * 1e3,
+                'target_clearance_mm': float(on_targets.min()) * 1e3,
+                'model_clearance_mm': self.model_clearance(bag, valve_names) * 1e3,
+                'obstacle_margin_mm': self.margin * 1e3,
+                'unblocked_rms_mm': unblocked.rms * 1e3,
+                'unblocked_max_mm': unblocked.maximum * 1e3,
+                'unblocked_samples': int(kept.sum()),
+                'blocked_distance_mm': self.blocked_distance * 1e3,
+                'settle_time_s': self.settle_time}
+
+    def model_clearance(self, bag, valve_names):
+        """
+        Return the lowest clearance of the model's equilibria at a run's commands [m].
+
+        Each recorded ``pressure_command`` is solved as the model's equilibrium (the obstacle
+        scene without its obstacles, warm-started from the previous command's), and its
+        collision spheres are measured against the plant's obstacles
+        (:meth:`cbha_inverse.core.contact.CollisionSpheres.clearances`).
+        """
+        with open_bag(bag) as recorded:
+            _, commands = command_series(recorded, f'{NAMESPACE}/pressure_command')
+        _, order = valve_order(self.model.actuator_names, valve_names)
+        model = StaticPlant(self.model)
+        model.set_obstacles(())
+        lowest = np.inf
+        for command in commands:
+            actuation = np.zeros(len(order))
+            actuation[order] = command
+            state = model.update(actuation)
+            lowest = min(lowest, float(self.model.collision.clearances(
+                state.positions, self.obstacles).min()))
+        return lowest
+
+
+def obstacle_runs(args):
+    """
+    Return the obstacle runs of ``--obstacles`` (none without ``--feedback obstacles``).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The demo's options.
+
+    Returns
+    -------
+    runs : list of ObstacleRun
+        In the order given.
+    center : (3,) ndarray or None  [m]
+        The obstacle scene's workspace centre (None without runs).
+
+    Raises
+    ------
+    ValueError
+        On an unknown run name, or an obstacle scene without obstacles or collision spheres.
+
+    """
+    names = [name for name in args.obstacles.split(',') if name]
+    if 'obstacles' not in args.feedback.split(',') or not names:
+        return [], None
+    unknown = sorted(set(names) - {'rows', 'free'})
+    if unknown:
+        raise ValueError(f'--obstacles: unknown run {unknown[0]!r} (rows, free)')
+    scene = load_scene(args.obstacle_scene)
+    if not scene.obstacles or scene.collision is None:
+        raise ValueError(f'--obstacle-scene {args.obstacle_scene}: no obstacles or no collision '
+                         'spheres')
+    margin = scene.make_inverse_solver().options.obstacle_margin
+    radius = float(scene.collision.radii.max())
+    distance = (args.blocked_distance if args.blocked_distance is not None
+                else radius + margin + BLOCKED_EXTRA)
+    return [ObstacleRun(name, args.obstacle_scene,
+                        args.obstacle_scene if name == 'rows' else args.obstacle_free_scene,
+                        tuple(scene.obstacles), scene, margin, radius, distance,
+                        args.settle_time)
+            for name in names], scene.workspace_center[-1]
+
+
+def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, feedback='direct',
+             obstacles=None):
+    """
+    Run one shape in one mode for one lap and return its summary dict.
+
+    ``obstacles`` makes it an obstacle run: an :class:`ObstacleRun`, whose scenes the plant and
+    the inverse load and whose numbers the summary adds (the plant's lowest clearance, the
+    tracking of the unblocked part).
+    """
     speed = args.circle_speed if shape == 'circle' else args.square_speed
     trajectory = make_trajectory(shape, center=center, radius=args.radius, side=args.side,
                                  plane='yz', speed=speed, laps=1, start_hold=args.start_hold)
     run_dir.mkdir(parents=True, exist_ok=True)
     recorder.clear()
-    common = {'scene': args.scene, 'valve_names': list(valve_names)}
-    model = {**common, 'scene': str(args.model_scene or args.scene), 'diagnostics_period': 0.5}
+    plant_scene = args.scene if obstacles is None else obstacles.plant_scene
+    model_scene = str(args.model_scene or args.scene) if obstacles is None else \
+        obstacles.model_scene
+    common = {'scene': plant_scene, 'valve_names': list(valve_names)}
+    model = {**common, 'scene': model_scene, 'diagnostics_period': 0.5}
     sim_extra, solver_extra, tracker_params, estimator_extra = {}, {}, {}, {}
+    if obstacles is not None:   # the lowest clearance read after the lap is at most 0.5 s old
+        sim_extra = {'diagnostics_period': 0.5}
     if feedback == 'stereo':
         sim_extra, tracker_params = _stereo_overrides(args)
         solver_extra = {'loop_gain': args.stereo_loop_gain}
@@ -354,7 +557,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         sim_extra = proprio_sim_parameters(args, trajectory)
         estimator_extra, solver_extra = proprio_node_parameters(args)
     nodes = run_nodes(args, {
-        'cbha_sim': {**_sim_overrides(args, valve_names), **sim_extra},
+        'cbha_sim': {**_sim_overrides(args, valve_names, plant_scene), **sim_extra},
         'stereo_tracker': tracker_params,
         'shape_estimator': {**model, **estimator_extra},
         'inverse_solver': {**model, 'mode': mode, 'realtime_priority': args.realtime_priority,
@@ -362,7 +565,7 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         'trajectory': {'shape': shape, 'center': [float(v) for v in center],
                        'radius': args.radius, 'side': args.side, 'plane': 'yz', 'speed': speed,
                        'laps': 1, 'start_hold': args.start_hold, 'wait_for_subscribers': 3}},
-        mode, feedback)
+        mode, feedback, plant_scene)
     waited = [name for name in nodes if name != 'trajectory']
     recording, processes = NodeProcesses(PROGRAM, env, sys.stderr), NodeProcesses(
         PROGRAM, env, sys.stderr)
@@ -385,8 +588,9 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
         recorder.spin_until(lambda: time.monotonic() - started > trajectory.duration + 0.3,
                             trajectory.duration + 10.0)
         fresh = time.monotonic()
-        recorder.spin_until(lambda: recorder.diagnostics.get(
-            'inverse_solver: control', ({}, 0.0))[1] > fresh, 2.0)
+        awaited = ['inverse_solver: control'] + (['cbha_sim: plant'] if obstacles else [])
+        recorder.spin_until(lambda: all(recorder.diagnostics.get(name, ({}, 0.0))[1] > fresh
+                                        for name in awaited), 2.0)
     finally:
         codes, escalated = _stop(processes, recording)
     evaluation = evaluate_bag(run_dir / 'bag', namespace=NAMESPACE, tip='true',
@@ -423,7 +627,9 @@ def run_once(recorder, run_dir, shape, mode, args, center, valve_names, env, fee
                             if k.startswith('section_stiffness.')},
         'estimate_tip_rms_mm': estimate_error(bag_points(run_dir / 'bag', NAMESPACE),
                                               args.start_hold, trajectory.duration) * 1e3}
-    return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo, **proprio,
+    blocked = {} if obstacles is None else obstacles.numbers(errors, plant, run_dir / 'bag',
+                                                             valve_names)
+    return {'shape': shape, 'mode': mode, 'feedback': feedback, **stereo, **proprio, **blocked,
             'speed_m_s': speed, 'lap_s': trajectory.lap_time,
             'rms_mm': errors.rms * 1e3, 'max_mm': errors.maximum * 1e3,
             'samples': int(errors.errors.size),
@@ -481,7 +687,8 @@ def main(argv=None):
     try:       # the composition's arguments of every run, checked before any node starts
         for _, mode, feedback in runs:
             run_nodes(args, {}, mode, feedback)
-    except ArgumentError as exc:
+        blocked_runs, obstacle_center = obstacle_runs(args)
+    except (ArgumentError, ConfigError, ValueError, FileNotFoundError) as exc:
         return report_config_error('cbha_demo', exc)
     excitation = None
     if args.excite is not None:
@@ -544,6 +751,25 @@ def main(argv=None):
                       f"{result['estimate_median_ms']:.3f} ms, p99 "
                       f"{result['estimate_p99_ms']:.3f} ms, "
                       f"{result['estimate_degraded']:.0f} degraded updates", flush=True)
+        for run in blocked_runs:
+            result = run_once(recorder, output / f'square_closed_obstacles_{run.name}', 'square',
+                              'closed', args, obstacle_center, valve_names, env,
+                              obstacles=run)
+            results.append(result)
+            print(f"square {run.name:6s}: lowest clearance {result['lowest_clearance_mm']:6.3f} mm"
+                  f" (margin {result['obstacle_margin_mm']:g} mm; the model's at the "
+                  f"commands {result['model_clearance_mm']:.3f} mm, the tip's sphere on the "
+                  f"targets {result['target_clearance_mm']:.3f} mm) | unblocked RMS "
+                  f"{result['unblocked_rms_mm']:6.3f} mm, max {result['unblocked_max_mm']:6.3f}"
+                  f" mm ({result['unblocked_samples']} of {result['samples']} samples) | "
+                  f"tick median {result['tick_median_ms']:.3f} ms, p99 "
+                  f"{result['tick_p99_ms']:.3f} ms | target->command latency median "
+                  f"{result['latency_median_ms']:.3f} ms, p99 {result['latency_p99_ms']:.3f} ms "
+                  f"(CPU p99 {result['latency_cpu_p99_ms']:.3f} ms)", flush=True)
+            print(f"{'':6s} {'':6s}  {run.plant_scene}, inverse on {run.model_scene} "
+                  f"({'obstacle rows' if run.name == 'rows' else 'told of no obstacles'}); "
+                  f"whole lap RMS {result['rms_mm']:.3f} mm, max {result['max_mm']:.3f} mm",
+                  flush=True)
         if excitation is not None:
             excited = run_excitation(recorder, output / excite_run_name(args.excite), args,
                                      excitation, valve_names, env)
@@ -558,7 +784,9 @@ def main(argv=None):
             reservation.__exit__(None, None, None)
     plot_runs([{'title': f"{r['shape']} {r['mode']} loop"
                 + {'stereo': ' (stereo cameras)', 'proprio': ' (string pots)'}.get(
-                    r['feedback'], ''),
+                    r['feedback'], '')
+                + {'rows': ', post: rows', 'free': ', post: no rows'}.get(
+                    r.get('obstacles'), ''),
                 'targets': r['_targets'],
                 'tips': r['_tips'], 'rms': r['rms_mm'] * 1e-3} for r in results],
               output / 'demo.png')

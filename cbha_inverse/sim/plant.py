@@ -58,6 +58,10 @@ class StaticPlant:
         The obstacles the plant touches (initially the scene's).
     contacts : cbha_inverse.core.contact.Contacts
         The contacts of the last update's state (none before the first).
+    clearance : float  [m]
+        The smallest gap of the last update's state between a collision sphere and an obstacle
+        (:meth:`cbha_inverse.core.contact.CollisionSpheres.clearances`; negative: the deepest
+        penetration); ``inf`` before the first update and without obstacles.
 
     Attributes
     ----------
@@ -95,6 +99,7 @@ class StaticPlant:
         self.collision = scene.collision
         self.contact_stiffness = float(contact_stiffness)
         self.contacts = NO_CONTACTS
+        self.clearance = np.inf
         self.tensions = None if self.drives is None else np.zeros(len(self.drives.names))
         self.set_loads(scene.loads)
         self.set_obstacles(scene.obstacles)
@@ -147,6 +152,7 @@ class StaticPlant:
         """Return to the rest shape (the next update starts from it)."""
         self._state = rest_state(self.model)
         self.contacts = NO_CONTACTS
+        self.clearance = np.inf
         if self.drives is not None:
             self.tensions = np.zeros(len(self.drives.names))
 
@@ -203,4 +209,6 @@ class StaticPlant:
             self.tensions, _ = self.drives.tensions(res.state, actuation)
         self.contacts = (NO_CONTACTS if self._contact is None
                          else self._contact.contacts(res.state))
+        self.clearance = (np.inf if self._contact is None else float(
+            self.collision.clearances(res.state.positions, self.obstacles).min()))
         return res

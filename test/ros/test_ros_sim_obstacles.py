@@ -4,9 +4,10 @@
 The sim runs the table scene (``config/scenes/cbha_table.yaml``): it draws the table and the post
 on ``obstacle_markers`` (latched); the inner section's over tube at full pressure bends the tip
 down onto the table, and ``contacts`` reports the tip's contact (force along the table's normal,
-penetration = force / ``contact_stiffness``) while ``tip/true`` stays on the table. An
-``obstacles`` message replaces the set (the table gone, the tip falls through to where the free
-plant puts it); malformed messages are rejected, counted, and change nothing.
+penetration = force / ``contact_stiffness``; drawn as an arrow and a point on
+``contacts/markers``) while ``tip/true`` stays on the table. An ``obstacles`` message replaces
+the set (the table gone, the tip falls through to where the free plant puts it); malformed
+messages are rejected, counted, and change nothing.
 """
 
 import math
@@ -15,8 +16,8 @@ from builtin_interfaces.msg import Time
 from cbha_inverse.ros.common.conversions import command_message
 from cbha_inverse.ros.common.obstacle_markers import (contact_array, CONTACT_COLUMNS,
                                                       obstacle_markers)
-from cbha_inverse.ros.common.qos import (COMMAND_QOS, MEASURED_QOS, OBSTACLE_MARKERS_QOS,
-                                         OBSTACLES_QOS)
+from cbha_inverse.ros.common.qos import (COMMAND_QOS, MARKER_QOS, MEASURED_QOS,
+                                         OBSTACLE_MARKERS_QOS, OBSTACLES_QOS)
 from cbha_inverse.ros.nodes.cbha_sim import CbhaSimNode
 from geometry_msgs.msg import PointStamped
 import numpy as np
@@ -50,6 +51,8 @@ def test_sim_presses_on_its_obstacles_and_takes_new_ones(rclpy_context):
                               OBSTACLE_MARKERS_QOS)
     probe.create_subscription(Float64MultiArray, '/obst/contacts', contacts.append, MEASURED_QOS)
     probe.create_subscription(PointStamped, '/obst/tip/true', tips.append, MEASURED_QOS)
+    arrows = []
+    probe.create_subscription(MarkerArray, '/obst/contacts/markers', arrows.append, MARKER_QOS)
     command = probe.create_publisher(Float64MultiArray, '/obst/pressure_command', COMMAND_QOS)
     obstacles = probe.create_publisher(MarkerArray, '/obst/obstacles', OBSTACLES_QOS)
     names = sim.valve_names
@@ -81,6 +84,18 @@ def test_sim_presses_on_its_obstacles_and_takes_new_ones(rclpy_context):
         tip = tips[-1].point
         # (the tip of a neighbouring tick: the valves still settle by micrometres)
         assert abs(tip.z - (TABLE_HEIGHT + RADIUS - row['penetration'])) < 1e-6
+        # drawn: the force's arrow from the contact point, and the point; the plant's clearance
+        # is minus the penetration
+        assert spin_until(executor, lambda: len(arrows) >= 3, 10.0)
+        drawn_contacts = arrows[-1].markers
+        assert drawn_contacts[0].action == Marker.DELETEALL
+        assert [m.type for m in drawn_contacts[1:]] == [Marker.ARROW, Marker.SPHERE_LIST]
+        arrow, points = drawn_contacts[1:]
+        assert (arrow.ns, arrow.id, points.ns) == ('table', 16, 'contact_points')
+        assert arrow.points[0].z == points.points[0].z == TABLE_HEIGHT
+        assert arrow.points[1].z > TABLE_HEIGHT
+        assert sim.arm.plant.clearance == -sim.arm.plant.contacts.penetrations.max()
+        assert sim.lowest_clearance <= sim.arm.plant.clearance < 0.0
         # bad obstacle messages: rejected, counted; the table stays
         bad = [MarkerArray(markers=[_marker(Marker.ARROW, (0.1, 0.1, 0.1))]),
                MarkerArray(markers=[_marker(Marker.SPHERE, (0.1, math.nan, 0.1))]),

@@ -31,6 +31,30 @@ def test_the_table_scene_loads_its_obstacles_and_spheres():
     np.testing.assert_array_equal(scene.collision.radii, 0.0245)
 
 
+def test_the_post_scene_is_the_cbha_with_obstacles():
+    """
+    ``cbha_post`` (the demo's obstacle runs) is ``cbha`` but for its obstacles and spheres.
+
+    The demo's run without rows gives the inverse ``cbha``: the same model, bit for bit, at an
+    actuation, the same actuators and workspace centre. Its post blocks the square's lower edge:
+    the tip's sphere on the edge's middle is inside it, on the vertical edges clear of it.
+    """
+    post, plain = load_scene('cbha_post'), load_scene('cbha')
+    assert plain.obstacles == () and [o.name for o in post.obstacles] == ['table', 'post']
+    assert post.actuator_names == plain.actuator_names
+    np.testing.assert_array_equal(post.workspace_center, plain.workspace_center)
+    actuation = [40e3, 10e3, 60e3, 20e3, 70e3, 5e3]
+    a, b = post.forward(actuation), plain.forward(actuation)
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.rotations, b.rotations)
+    centre, radius = post.workspace_center[-1], post.collision.radii[-1]
+    column = post.obstacles[1]
+    # the post's axis is 29.25 mm beyond the square's plane: sqrt(29.25² + y²) - 10 - 24.5 mm
+    for y, gap in ((0.0, -5.25e-3), (0.04, np.hypot(29.25e-3, 0.04) - 34.5e-3)):
+        at = centre + [0.0, y, -0.04]
+        assert column.signed_distance(at[None]).distance[0] - radius == pytest.approx(
+            gap, abs=1e-5)
+
+
 def test_default_spheres_take_the_chains_own_radius(tmp_path):
     """A beam's outer radius at every frame, or at the vertebrae; a segment's cavities' extent."""
     tendon = load_scene(TENDON)

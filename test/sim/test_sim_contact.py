@@ -129,3 +129,35 @@ def test_the_cbha_rests_on_a_curved_obstacle_with_quadratic_newton():
     np.testing.assert_allclose(np.cross(contacts.forces, outward), 0.0, atol=1e-12)
     # the arm's weight beyond the contact is held: the normal forces are upward
     assert contacts.forces[:, 2].sum() > 0.0
+
+
+def test_the_plant_reports_its_clearance_as_the_closed_form_gap():
+    """
+    The plant's clearance is the smallest gap of its spheres, by the closed forms of the shapes.
+
+    A table below the drooping CBHA: ``z - h - ρ`` of every sphere centre; a ball beside it:
+    ``|x - c| - R - ρ``. The table raised into the arm: the clearance is minus the deepest
+    contact's penetration.
+    """
+    cbha = load_scene('cbha_post')
+    radius = cbha.collision.radii[0]
+    plant = StaticPlant(cbha, tolerance=1e-8, contact_stiffness=1e4)
+    assert plant.clearance == np.inf
+    ball_centre = np.array([0.1, 0.09, 0.0])
+    plant.set_obstacles([Obstacle('table', 'plane', [0.0, 0.0, -0.2], np.eye(3)),
+                         Obstacle('ball', 'sphere', ball_centre, np.eye(3), radius=0.03)])
+    result = plant.update(np.zeros(6))
+    centres = result.positions[1:]
+    above_table = centres[:, 2] + 0.2 - radius
+    beside_ball = np.linalg.norm(centres - ball_centre, axis=1) - 0.03 - radius
+    assert plant.contacts.frames.size == 0
+    assert plant.clearance == pytest.approx(min(above_table.min(), beside_ball.min()), abs=1e-15)
+    plant.set_obstacles([Obstacle('table', 'plane', [0.0, 0.0, -0.03], np.eye(3))])
+    result = plant.update(np.zeros(6))
+    assert plant.contacts.frames.size >= 1
+    assert plant.clearance == pytest.approx(-plant.contacts.penetrations.max(), abs=1e-15)
+    assert plant.clearance == pytest.approx(result.positions[1:, 2].min() + 0.03 - radius,
+                                            abs=1e-15)
+    plant.set_obstacles([])
+    plant.update(np.zeros(6))
+    assert plant.clearance == np.inf

@@ -1,6 +1,7 @@
 """The pure parts behind cbha_sim and cbha_demo: the plant and the tracking metrics."""
 
-from cbha_inverse.metrics import plot_runs, tracking_errors
+from cbha_inverse.core.obstacles import Obstacle
+from cbha_inverse.metrics import plot_runs, tracking_errors, unblocked_errors
 from cbha_inverse.scene import load_scene
 from cbha_inverse.sim.plant import StaticPlant
 import numpy as np
@@ -82,6 +83,34 @@ def test_tracking_errors_against_interpolated_targets():
     assert errors.maximum == pytest.approx(0.002, abs=1e-4)
     with pytest.raises(ValueError, match='no tip sample'):
         tracking_errors(times, targets, tip_times, tips, 20.0, 30.0)
+
+
+def test_the_unblocked_part_leaves_out_blocked_targets_and_the_settling():
+    """
+    A target line through a ball: blocked while closer than the distance, then settling.
+
+    Targets x = -1 + 0.2 t [m] pass a ball of radius 0.1 at the origin; with distance 0.05 they
+    are blocked for |x| < 0.15, i.e. 4.25 < t < 5.75 s, and the ~0.5 s after are settling.
+    """
+    times = np.linspace(0.0, 10.0, 1001)
+    goals = np.stack([-1.0 + 0.2 * times, np.zeros_like(times), np.zeros_like(times)], axis=1)
+    tips = goals + [0.0, 0.001, 0.0]
+    out = (times > 4.25) & (times < 6.25)
+    tips[out, 1] = 0.05         # held off the target: 50 mm
+    tracking = tracking_errors(times, goals, times, tips, 0.0, 10.0)
+    np.testing.assert_allclose(tracking.goals, goals, atol=1e-15)
+    ball = Obstacle('ball', 'sphere', [0.0, 0.0, 0.0], np.eye(3), radius=0.1)
+    unblocked, kept = unblocked_errors(tracking, [ball], 0.05, 0.505)   # (off the 10 ms grid)
+    gap = np.abs(goals[:, 0]) - 0.1
+    last_blocked = times[gap < 0.05].max()
+    assert last_blocked == pytest.approx(5.74)
+    np.testing.assert_array_equal(kept, (gap >= 0.05) & ~((times > last_blocked)
+                                                          & (times <= last_blocked + 0.505)))
+    assert unblocked.rms == pytest.approx(0.001, rel=1e-9)
+    assert unblocked.maximum == pytest.approx(0.001, rel=1e-9)
+    assert tracking.maximum == pytest.approx(0.05)
+    with pytest.raises(ValueError, match='every sample'):
+        unblocked_errors(tracking, [ball], 2.0, 0.5)
 
 
 def test_plot_runs_writes_a_png(tmp_path):

@@ -18,8 +18,8 @@ obstacle set:
 
 Planes and capsules have no marker type: they come from the scene file. :func:`obstacle_markers`
 draws any obstacle (a plane as a 2 m square tile 1 mm thick, its top on the plane; a capsule as
-a cylinder and two spheres), :func:`contact_markers` each contact force as an arrow and
-:func:`contact_array` the contacts as numbers.
+a cylinder and two spheres), :func:`contact_markers` the contact points and each contact force
+as an arrow, :func:`contact_array` the contacts as numbers.
 """
 
 import math
@@ -175,9 +175,16 @@ def obstacle_markers(obstacles, stamp, frame_id, rgba=(0.55, 0.45, 0.35, 0.6)):
     return MarkerArray(markers=markers)
 
 
+CONTACT_POINTS = 'contact_points'
+"""Namespace of the marker of the contact points (one SPHERE_LIST, id 0)."""
+
+CONTACT_POINT_DIAMETER = 0.004
+"""Diameter [m] of a drawn contact point."""
+
+
 def contact_markers(contacts, stamp, frame_id, metres_per_newton):
     """
-    Draw each contact force as an arrow from the contact point, after a ``DELETEALL``.
+    Draw the contact points and each contact force as an arrow from its point, after a DELETEALL.
 
     Parameters
     ----------
@@ -193,7 +200,9 @@ def contact_markers(contacts, stamp, frame_id, metres_per_newton):
     Returns
     -------
     visualization_msgs.msg.MarkerArray
-        One ARROW per contact, namespace the obstacle's name, id the sphere's frame.
+        One ARROW per contact, namespace the obstacle's name, id the sphere's frame; with any
+        contact, one SPHERE_LIST of the contact points (namespace :data:`CONTACT_POINTS`, id 0,
+        the points in the order of ``contacts``).
 
     """
     clear = Marker()
@@ -208,6 +217,12 @@ def contact_markers(contacts, stamp, frame_id, metres_per_newton):
         item.points = [Point(x=float(point[0]), y=float(point[1]), z=float(point[2])),
                        Point(x=float(tip[0]), y=float(tip[1]), z=float(tip[2]))]
         markers.append(_scaled(item, 0.003, 0.006, 0.006))   # shaft and head diameters [m]
+    if contacts.frames.size:
+        item = plain_marker(stamp, frame_id, CONTACT_POINTS, 0, Marker.SPHERE_LIST,
+                            (1.0, 0.9, 0.1, 1.0))
+        item.pose.orientation.w = 1.0
+        item.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in contacts.points]
+        markers.append(_scaled(item, *(CONTACT_POINT_DIAMETER,) * 3))
     return MarkerArray(markers=markers)
 
 

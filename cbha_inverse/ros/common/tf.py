@@ -6,7 +6,11 @@ Frame names (``docs/nodes.md``), every one a child of the node's ``frame_id`` (`
 vertebra), ``cbha_tip`` the effector (its point on its frame, with that frame's axes), both on
 ``/tf`` from ``inverse_solver``; ``stereo_left_optical`` and ``stereo_right_optical`` are the raw
 optical frames of the stereo rig (x right, y down, z forward), latched on ``/tf_static`` from
-``stereo_tracker``.
+``stereo_tracker``. Each obstacle has a frame, its own frame of ``docs/obstacles.md`` (the shape
+about its origin): ``obstacle_<name>`` for the plant's obstacles from ``cbha_sim``,
+``model_obstacle_<name>`` for those the inverse keeps clear of from ``inverse_solver``, latched
+on ``/tf_static`` (the node's whole set in one message, sent again when its ``obstacles`` topic
+replaces them; a listener keeps the frame of a removed obstacle, as it keeps any static frame).
 
 ``tf2_msgs`` is not on PyPI: a ROS 2 install provides it, and ``make install`` builds the
 shipped copy into the venv (:mod:`cbha_inverse.interfaces.venv_install`), where every node finds
@@ -34,6 +38,35 @@ NO_TF2_MSGS = ('no TF: tf2_msgs is not usable ({error}); install it into the ven
 def backbone_frame(index):
     """Return the child frame name of frame ``index`` of the model backbone (0 = base)."""
     return f'cbha_frame_{index}'
+
+
+def obstacle_frame(name, prefix='obstacle'):
+    """Return the child frame name of an obstacle (``<prefix>_<name>``)."""
+    return f'{prefix}_{name}'
+
+
+def obstacle_poses(obstacles, prefix='obstacle'):
+    """
+    Return the frame names and poses of obstacles.
+
+    Parameters
+    ----------
+    obstacles : sequence of cbha_inverse.core.obstacles.Obstacle
+        The obstacles, posed in the base frame.
+    prefix : str
+        ``obstacle`` (the plant's) or ``model_obstacle`` (the inverse's).
+
+    Returns
+    -------
+    names : list of str
+        ``<prefix>_<name>`` of each.
+    poses : (len(obstacles), 7) ndarray  [m, -]
+        ``[x, y, z, qx, qy, qz, qw]`` of each obstacle's own frame in the base frame.
+
+    """
+    poses = pose_vector(np.reshape([o.rotation for o in obstacles], (-1, 3, 3)),
+                        np.reshape([o.position for o in obstacles], (-1, 3)))
+    return [obstacle_frame(o.name, prefix) for o in obstacles], poses
 
 
 def camera_frame(side):
@@ -149,7 +182,7 @@ def _byte_offsets(data, values):
         if data.count(pattern) != 1:
             raise RuntimeError(f'sentinel {value!r} occurs {data.count(pattern)} times')
         starts.append(data.index(pattern))
-    return np.asarray(starts)[:, None] + np.arange(size)
+    return np.asarray(starts, dtype=np.int64)[:, None] + np.arange(size)
 
 
 class TfBroadcaster:

@@ -65,12 +65,16 @@ collision spheres through a frictionless penalty of stiffness ``contact_stiffnes
 ``frame_id``, :mod:`cbha_inverse.ros.common.obstacle_markers`) replaces them at run time, each
 message the whole set; a message with a marker of another shape, a non-finite or non-positive
 size, another frame or a duplicate name is rejected (logged, counted), the obstacles kept. The
-obstacles are drawn on ``obstacle_markers`` (latched); every converged tick publishes its
-contacts on ``contacts`` (Float64MultiArray, one row per contact: frame, point, normal,
-penetration, force, in ``frame_id``, after ``tip/true``), the sum of the tip sphere's contact
-forces on ``tip/contact_force`` (WrenchStamped, ``frame_id``: the force a touching tip presses
-with, ``docs/touch.md``) and, while there are any and once when they end, as force arrows on
-``contacts/markers``.
+obstacles are drawn on ``obstacle_markers`` (latched) and sent as frames ``obstacle_<name>`` on
+``/tf_static`` (latched, again on every replacement; :mod:`cbha_inverse.ros.common.tf`); every
+converged tick publishes its contacts on ``contacts`` (Float64MultiArray, one row per contact:
+frame, point, normal, penetration, force, in ``frame_id``, after ``tip/true``), the sum of the
+tip sphere's contact forces on ``tip/contact_force`` (WrenchStamped, ``frame_id``: the force a
+touching tip presses with, ``docs/touch.md``) and, while there are any and once when they end,
+as points and force arrows on ``contacts/markers``. The diagnostics report the smallest
+clearance of the collision spheres to the obstacles, this tick's (``min_clearance_m``) and the
+lowest since the start or the last ``~/reset`` (``lowest_clearance_m``; negative: a
+penetration).
 
 Service ``~/reset`` (std_srvs/Trigger): plant, valves and pending commands back to rest.
 
@@ -101,6 +105,7 @@ from cbha_inverse.ros.common.qos import (COMMAND_QOS, MARKER_QOS, MEASURED_QOS,
                                          OBSTACLE_MARKERS_QOS, OBSTACLES_QOS)
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
+from cbha_inverse.ros.common.tf import make_broadcaster, obstacle_poses
 from cbha_inverse.ros.common.wrenches import wrench_frames, WrenchInputs
 from cbha_inverse.scene import load_scene
 from cbha_inverse.scene.calibration import Calibration, finite_triple
@@ -347,6 +352,8 @@ class CbhaSimNode(Node):
         """Create the obstacle and contact topics; draw the scene's obstacles."""
         self.obstacle_updates = 0
         self.contacts_drawn = False
+        self.lowest_clearance = math.inf
+        self.obstacle_tf = make_broadcaster(self, static=True)
         self.obstacle_publisher = self.create_publisher(MarkerArray, 'obstacle_markers',
                                                         OBSTACLE_MARKERS_QOS)
         self.contact_publisher = self.create_publisher(Float64MultiArray, 'contacts',
@@ -359,8 +366,11 @@ class CbhaSimNode(Node):
         self._publish_obstacles()
 
     def _publish_obstacles(self):
+        """Draw the plant's obstacles and send their frames (the whole set replaces the last)."""
         self.obstacle_publisher.publish(obstacle_markers(
             self.arm.plant.obstacles, self.get_clock().now().to_msg(), self.params.frame_id))
+        if self.obstacle_tf is not None:
+            self.obstacle_tf.send(self.params.frame_id, *obstacle_poses(self.arm.plant.obstacles))
 
     def _on_obstacles(self, message):
         """Replace the plant's obstacles by those of an ``obstacles`` message, or reject it."""
@@ -510,6 +520,7 @@ class CbhaSimNode(Node):
         self.last_result = None
         self.pots_due = -math.inf
         self.first_command_time = None
+        self.lowest_clearance = math.inf
         if self.pots is not None:
             self.pots.unstick()
         self.resets += 1
@@ -549,6 +560,7 @@ class CbhaSimNode(Node):
         if self.params.tip_output in ('point', 'both'):
             self.measured_publisher.publish(point_stamped(noisy, stamp, self.params.frame_id))
         self.truth_publisher.publish(point_stamped(tip, stamp, self.params.frame_id))
+        self.lowest_clearance = min(self.lowest_clearance, self.arm.plant.clearance)
         self._publish_contacts(stamp)
         if self.pots is not None:
             self._publish_pots(result, stamp)
@@ -586,7 +598,9 @@ class CbhaSimNode(Node):
                   'obstacle_updates': self.obstacle_updates,
                   'contacts': self.arm.plant.contacts.frames.size,
                   'max_penetration_m': float(self.arm.plant.contacts.penetrations.max(
-                      initial=0.0))}
+                      initial=0.0)),
+                  'min_clearance_m': self.arm.plant.clearance,
+                  'lowest_clearance_m': self.lowest_clearance}
         level = WARN if total or (result is not None and not result.converged) else OK
         message = (f'{total} rejected messages' if total else
                    'plant not converged: no tip or pot readings published' if level == WARN

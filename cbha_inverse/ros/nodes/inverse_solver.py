@@ -13,7 +13,9 @@ publishes ``pressure_command`` (Float64MultiArray, gauge Pa, order = ``valve_nam
 with ``command_kind: displacement`` ``tendon_displacement_command``, the tendon drives' positions
 [m] that hold the tick's tensions at the model's state),
 ``/diagnostics`` (~1 Hz), ``backbone`` (MarkerArray) and, every ``tf_every_n_ticks`` ticks, the
-model frames and the tip on ``/tf`` (:mod:`cbha_inverse.ros.common.tf`; needs tf2_msgs).
+model frames and the tip on ``/tf`` (:mod:`cbha_inverse.ros.common.tf`; needs tf2_msgs); the
+obstacles it keeps clear of are drawn on ``model_obstacle_markers`` and sent as frames
+``model_obstacle_<name>`` on ``/tf_static`` (both latched, again on every replacement).
 
 Nothing is published before the first valid target (``publish_idle: true`` publishes the vent
 command meanwhile). With ``trigger: target`` a valid target is solved and its command published
@@ -77,7 +79,7 @@ from cbha_inverse.ros.common.qos import (COMMAND_WRITER_QOS, MARKER_QOS, MEASURE
 from cbha_inverse.ros.common.realtime import MAX_REALTIME_PRIORITY, set_realtime_priority
 from cbha_inverse.ros.common.rejections import Rejections, ThrottledLog
 from cbha_inverse.ros.common.runner import run_node
-from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster
+from cbha_inverse.ros.common.tf import backbone_poses, make_broadcaster, obstacle_poses
 from cbha_inverse.ros.common.tf_listener import make_static_listener
 from cbha_inverse.ros.common.wrenches import wrench_frames, WrenchInputs
 from cbha_inverse.ros.nodes.commanding import Commanding
@@ -333,6 +335,7 @@ class InverseSolverNode(Node):
         # the obstacles the model keeps clear of, latched (the plant draws its own)
         self.obstacle_publisher = self.create_publisher(MarkerArray, 'model_obstacle_markers',
                                                         OBSTACLE_MARKERS_QOS)
+        self.obstacle_tf = make_broadcaster(self, static=True)
         self._publish_obstacles()
         self.wrenches = WrenchInputs(
             self, p.wrench_frames, self.scene.model.n_links, self.scene.loads, p.frame_id,
@@ -483,9 +486,13 @@ class InverseSolverNode(Node):
         self._prepare()
 
     def _publish_obstacles(self):
+        """Draw the model's obstacles and send their frames (the whole set replaces the last)."""
         self.obstacle_publisher.publish(obstacle_markers(
             self.solver.obstacles, self.get_clock().now().to_msg(), self.params.frame_id,
             rgba=(0.3, 0.5, 0.8, 0.4)))
+        if self.obstacle_tf is not None:
+            self.obstacle_tf.send(self.params.frame_id,
+                                  *obstacle_poses(self.solver.obstacles, 'model_obstacle'))
 
     def _prepare(self):
         """Linearise the changed model now, off the target -> command path."""
