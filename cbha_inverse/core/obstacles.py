@@ -418,10 +418,12 @@ def _checked_points(points):
         p = p[None, :]
     if p.ndim != 2 or p.shape[1] != 3:
         raise ValueError(f'points must be (N, 3), got shape {np.shape(points)}')
-    if not np.all(np.isfinite(p)):
+    if not np.isfinite(p).all():
         raise ValueError('points must be finite')
-    # one compiled signature: C-contiguous, writable points (a copy of a read-only array)
-    return np.require(p, requirements=('C', 'W'))
+    if not (p.flags.c_contiguous and p.flags.writeable):
+        # one compiled signature: C-contiguous, writable points
+        p = np.array(p, order='C')
+    return p
 
 
 def _read_only(array):

@@ -293,6 +293,14 @@ def test_every_pair_of_points_and_packed_obstacles_is_the_obstacle_query():
     for j, obstacle in enumerate(obstacles):
         for pair, own in zip(pairs, obstacle.signed_distance(points)):
             assert np.array_equal(pair[:, j], own)
+    # read-only or Fortran-ordered points are copied, not refused
+    frozen = np.asfortranarray(points)
+    frozen.flags.writeable = False
+    for pair, own in zip(pairwise_signed_distance(pack_obstacles(obstacles), frozen), pairs):
+        assert np.array_equal(pair, own)
+    for frozen_own, own in zip(obstacles[2].signed_distance(frozen),
+                               obstacles[2].signed_distance(points)):
+        assert np.array_equal(frozen_own, own)
     nothing = pairwise_signed_distance(pack_obstacles(()), points)
     assert nothing.distance.shape == (12, 0) and nothing.normal.shape == (12, 0, 3)
 

@@ -2,13 +2,14 @@
 Compiled signed distance of a point to a posed primitive solid (``docs/obstacles.md``).
 
 :func:`signed_distance_at` is the package's one implementation of the obstacles' signed-distance
-query (:meth:`cbha_inverse.core.obstacles.Obstacle.signed_distance` loops it over points through
-:func:`signed_distances_into`, :func:`cbha_inverse.core.obstacles.pairwise_signed_distance` over
-points and obstacles through :func:`pairwise_signed_distances_into`; compiled callers call it per
-point). For a point it returns the
-distance ``φ`` to the surface (negative inside the solid) and writes the outward unit normal
-``n = ∇φ``, the closest point of the surface ``p - φ n`` and the Hessian ``H = ∇n`` of the
-distance, all in base-frame axes.
+query: for a point it returns the distance ``φ`` to the surface (negative inside the solid) and
+writes the outward unit normal ``n = ∇φ``, the closest point of the surface ``p - φ n`` and the
+Hessian ``H = ∇n`` of the distance, all in base-frame axes. Compiled callers call it per point;
+:meth:`cbha_inverse.core.obstacles.Obstacle.signed_distance` loops it over points
+(:func:`signed_distances_into`), :func:`cbha_inverse.core.obstacles.pairwise_signed_distance`
+over points and obstacles (:func:`pairwise_signed_distances_into`). Every caller passes the
+obstacle's arrays read-only (an ``Obstacle``'s own, ``read_only_packed`` of the packed arrays,
+a record's read-only fields), so that one compiled copy serves them all (``docs/design.md``).
 
 An obstacle is its shape code (:data:`PLANE` ... :data:`CYLINDER`, the order of
 :data:`cbha_inverse.core.obstacles.SHAPES`), its pose (``position``, and ``rotation``, its axes
