@@ -13,7 +13,9 @@ import math
 
 from cbha_inverse.core._kernels import tick as kernels
 from cbha_inverse.core._kernels.records import compiled_entry, make_record, RecordOwner
+from cbha_inverse.core.inverse.obstacle_rows import obstacle_rows_record
 from cbha_inverse.core.inverse.qp import QPMatrices
+import numba
 import numpy as np
 
 BINDING_TOLERANCE = 1e-6
@@ -88,7 +90,8 @@ class TickData(RecordOwner):
             'gap_limit': np.full(1, math.inf), 'w_ea': np.zeros((rows, m)),
             'w_aa': np.zeros((m, m)), 'offset': np.zeros(rows),
             'hessian': np.zeros((m, m)), 'tracking': np.zeros((m, m)),
-            'weighted_w': np.zeros((rows, m)), 'orientation_errors': np.zeros((k, 3)),
+            'weighted_w': np.zeros((rows, m)), 'tracking_norm': np.ones(1),
+            'orientation_errors': np.zeros((k, 3)),
             'relative_rotation': np.zeros((3, 3)),
             'delta_free': np.zeros(rows),
             'gradient': np.zeros(m), 'tracking_gradient': np.zeros(m),
@@ -103,8 +106,11 @@ class TickData(RecordOwner):
             'effector_positions': np.zeros((k, 3))}
         self.max_rotation = (math.inf if options.max_rotation_step is None
                              else float(options.max_rotation_step))
+        # no obstacles until ObstacleRows attaches its record (attach_rows)
+        self._no_rows = obstacle_rows_record(n, m)[0]
         self._hold(make_record(
             kernels.TickRecord, kernels.new_tick_record, system=system.record,
+            rows=self._no_rows,
             energy_weight=options.energy_weight, proximal_weight=options.proximal_weight,
             max_iterations=int(max_iterations), tolerance=BINDING_TOLERANCE,
             max_rotation=self.max_rotation, **self.arrays), self.arrays)
@@ -138,6 +144,22 @@ class TickData(RecordOwner):
             entry = compiled_entry(getattr(kernels, name), *examples)
             self._entries[name] = entry
         return entry
+
+    def attach_rows(self, rows=None):
+        """
+        Make an obstacle rows record the tick's ``rows`` (None: the record without obstacles).
+
+        Parameters
+        ----------
+        rows : cbha_inverse.core._kernels.obstacle_rows.ObstacleRowsRecord, optional
+            Built by :func:`cbha_inverse.core.inverse.obstacle_rows.obstacle_rows_record` for
+            this solver's ``n`` and ``m``.
+
+        """
+        rows = self._no_rows if rows is None else rows
+        kernels.attach_rows(self.record, rows)
+        if not numba.config.DISABLE_JIT:
+            self.record._values['rows'] = rows
 
     def project_factor(self, factor):
         """
