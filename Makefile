@@ -22,7 +22,7 @@ KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels_ro
   test/core/test_core_so3.py test/core/test_core_actuation.py test/core/test_core_sensors.py \
   test/core/test_core_statics.py test/core/test_solver_paths.py test/core/test_core_records.py \
   test/estimate/test_estimate_filter.py test/estimate/test_estimate_shape.py \
-  test/core/test_core_effector_orientation.py \
+  test/core/test_core_effector_orientation.py test/core/test_core_kernels_obstacles.py \
   test/report/test_report_tick_flops.py::test_the_multiply_add_chains_follow_their_closed_form
 # with the JIT off: the tests of numba's compiled signatures and allocations have nothing to
 # check, and the long estimation runs and the random poses repeat what the short ones cover

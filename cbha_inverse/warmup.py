@@ -6,9 +6,10 @@ the first process that calls them compiles them and writes the machine code to `
 next to the sources (or to ``NUMBA_CACHE_DIR``); later processes load it (a fraction of a second
 for a first tick). This module runs, on every shipped scene, what a node or a command runs: the
 control ticks of every QP solver and option branch, a static solve (the forward model, the
-plant) and the shape estimator's updates, so that each kernel is compiled once, at install, and
-never inside a timed test, the demo or a control loop. The benchmarks' own kernels (the compiled
-BTD backend, the flop-rate loop) are left to the benchmarks, which time repeated calls.
+plant), the obstacles' signed distance and the shape estimator's updates, so that each kernel is
+compiled once, at install, and never inside a timed test, the demo or a control loop. The
+benchmarks' own kernels (the compiled BTD backend, the flop-rate loop) are left to the
+benchmarks, which time repeated calls.
 
 Usage: ``python -m cbha_inverse.warmup [--scenes NAME ...]``. Pure numerics, no rclpy.
 """
@@ -122,6 +123,17 @@ def warm_statics(name):
     scene.forward(0.5 * (scene.lower_bounds + scene.upper_bounds))
 
 
+def warm_obstacles():
+    """Run the signed-distance query of one obstacle of each shape (the plant's contact)."""
+    from cbha_inverse.core.obstacles import Obstacle
+    points = np.array([[0.0, 0.0, 0.0], [0.1, -0.05, 0.2]])
+    for shape, sizes in (('plane', {}), ('sphere', {'radius': 0.03}),
+                         ('box', {'size': (0.04, 0.06, 0.1)}),
+                         ('capsule', {'radius': 0.02, 'length': 0.08}),
+                         ('cylinder', {'radius': 0.02, 'length': 0.08})):
+        Obstacle(shape, shape, np.zeros(3), np.eye(3), **sizes).signed_distance(points)
+
+
 def main(argv=None):
     """
     Compile (or load) every kernel the shipped scenes use; print the time.
@@ -150,6 +162,7 @@ def main(argv=None):
         warm_control(name)
         warm_statics(name)
         names.append(name)
+    warm_obstacles()
     print(f'warm-up: numba kernels compiled or loaded from the cache in '
           f'{time.perf_counter() - started:.1f} s ({", ".join(names) or "no scene"})',
           flush=True)

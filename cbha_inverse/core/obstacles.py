@@ -17,13 +17,15 @@ flat-capped cylinder, placed by a pose (position, rotation) in the scene's ``bas
 distance to the surface (negative inside), the outward unit normal (the distance's gradient),
 the closest point of the surface and the distance's Hessian (the derivative of the normal, for
 exact contact tangents). The simulated plant's contact, ``cbha_scene check``'s clearance and the
-obstacle rows of a controller use it. No ROS, no numba: a handful of numpy operations per
-obstacle and query.
+obstacle rows of a controller use it. Its arithmetic is the compiled kernel
+:func:`cbha_inverse.core._kernels.obstacles.signed_distance_at`, which compiled code calls per
+point on the arrays of :func:`pack_obstacles`. No ROS.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from cbha_inverse.core._kernels.obstacles import signed_distances_into
 import numpy as np
 
 SHAPES = ('plane', 'sphere', 'box', 'capsule', 'cylinder')
@@ -81,6 +83,16 @@ class Obstacle:
     size : (3,) array_like, optional  [m]
         Box edge lengths along its x, y, z.
 
+    Attributes
+    ----------
+    shape_code : int
+        The shape's index in :data:`SHAPES`, the compiled query's shape code
+        (:mod:`cbha_inverse.core._kernels.obstacles`).
+    sizes : (3,) ndarray  [m]
+        The sizes as the compiled query takes them (read-only): the box's edges,
+        ``(radius, length, 0)`` of a capsule or cylinder, ``(radius, 0, 0)`` of a sphere, zeros
+        for a plane.
+
     Raises
     ------
     ValueError
@@ -96,6 +108,8 @@ class Obstacle:
     radius: float = None
     length: float = None
     size: np.ndarray = None
+    shape_code: int = field(init=False, repr=False)
+    sizes: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
         """Check the shape, its sizes and the pose; store them as floats."""
@@ -140,6 +154,8 @@ class Obstacle:
                 object.__setattr__(self, key, checked)
             else:
                 object.__setattr__(self, key, float(checked))
+        object.__setattr__(self, 'shape_code', SHAPES.index(self.shape))
+        object.__setattr__(self, 'sizes', _kernel_sizes(self))
 
     def signed_distance(self, points):
         """
@@ -171,11 +187,14 @@ class Obstacle:
             raise ValueError(f'points must be (N, 3), got shape {np.shape(points)}')
         if not np.all(np.isfinite(p)):
             raise ValueError('points must be finite')
-        local = (p - self.position) @ self.rotation
-        distance, normal, closest, curvature = _LOCAL[self.shape](self, local)
-        r = self.rotation
-        return SignedDistance(distance, normal @ r.T, closest @ r.T + self.position,
-                              r @ curvature @ r.T)
+        # one compiled signature: C-contiguous, writable points (a copy of a read-only array)
+        p = np.require(p, requirements=('C', 'W'))
+        n = p.shape[0]
+        query = SignedDistance(np.empty(n), np.empty((n, 3)), np.empty((n, 3)),
+                               np.empty((n, 3, 3)))
+        signed_distances_into(self.shape_code, self.position, self.rotation, self.sizes, p,
+                              *query)
+        return query
 
     def near(self, points, reach):
         """
@@ -269,6 +288,39 @@ def sphere_gaps(obstacles, centres, radii):
     return gaps
 
 
+def pack_obstacles(obstacles):
+    """
+    Return the obstacles as the arrays the compiled signed distance takes, one row each.
+
+    Parameters
+    ----------
+    obstacles : sequence of Obstacle
+        The obstacles (``o`` of them, possibly none).
+
+    Returns
+    -------
+    shapes : (o,) int64 ndarray
+        Shape codes (:attr:`Obstacle.shape_code`, the index in :data:`SHAPES`).
+    positions : (o, 3) ndarray  [m]
+        Origins of the obstacles' frames, base frame.
+    rotations : (o, 3, 3) ndarray
+        Their axes as columns, base frame.
+    sizes : (o, 3) ndarray  [m]
+        :attr:`Obstacle.sizes`.
+
+    All C-contiguous and writable (copies): row ``j`` passed to
+    :func:`cbha_inverse.core._kernels.obstacles.signed_distance_at` is obstacle ``j``'s query.
+
+    """
+    obstacles = tuple(obstacles)
+    count = len(obstacles)
+    shapes = np.array([o.shape_code for o in obstacles], dtype=np.int64).reshape(count)
+    positions = np.array([o.position for o in obstacles], dtype=float).reshape(count, 3)
+    rotations = np.array([o.rotation for o in obstacles], dtype=float).reshape(count, 3, 3)
+    sizes = np.array([o.sizes for o in obstacles], dtype=float).reshape(count, 3)
+    return shapes, positions, rotations, sizes
+
+
 def check_names(obstacles):
     """Raise ``ValueError`` if two obstacles share a name; return them as a tuple."""
     obstacles = tuple(obstacles)
@@ -279,136 +331,14 @@ def check_names(obstacles):
     return obstacles
 
 
-def _unit_or(vectors, lengths, fallback):
-    """Return ``vectors / lengths`` row-wise, ``fallback`` where the length is zero."""
-    out = np.empty_like(vectors)
-    zero = lengths <= 0.0
-    np.divide(vectors, np.where(zero, 1.0, lengths)[:, None], out=out)
-    out[zero] = fallback
-    return out
-
-
-def _outer(a, b):
-    """Return the batched outer products ``a bᵀ`` (N, 3, 3)."""
-    return a[:, :, None] * b[:, None, :]
-
-
-def _plane(obstacle, q):
-    """Half-space ``z <= 0``: distance z, normal +z, flat."""
-    n = q.shape[0]
-    normal = np.zeros((n, 3))
-    normal[:, 2] = 1.0
-    closest = q.copy()
-    closest[:, 2] = 0.0
-    return q[:, 2].copy(), normal, closest, np.zeros((n, 3, 3))
-
-
-def _sphere(obstacle, q):
-    """Sphere of ``radius``: distance ``|q| - r``, Hessian ``(I - n nᵀ) / |q|``."""
-    rho = np.linalg.norm(q, axis=1)
-    normal = _unit_or(q, rho, (0.0, 0.0, 1.0))
-    safe = np.where(rho > 0.0, rho, np.inf)
-    curvature = (np.eye(3) - _outer(normal, normal)) / safe[:, None, None]
-    return rho - obstacle.radius, normal, obstacle.radius * normal, curvature
-
-
-def _box(obstacle, q):
-    """
-    Box of half edges ``h``: outside, the distance to the clamped point; inside, the nearest face.
-
-    Outside, ``u = sign(q) max(|q| - h, 0)`` joins the closest point to ``q``: distance ``|u|``,
-    normal ``u / |u|``, Hessian ``(D - n nᵀ) / |u|`` with ``D`` the projector on the axes where
-    ``|q| > h`` (zero on a face, the curvature of a rounded edge or corner otherwise).
-    """
-    half = 0.5 * obstacle.size
-    excess = np.abs(q) - half
-    sign = np.where(q < 0.0, -1.0, 1.0)
-    outside = np.any(excess > 0.0, axis=1)
-    n = q.shape[0]
-    distance, normal = np.empty(n), np.zeros((n, 3))
-    closest, curvature = np.clip(q, -half, half), np.zeros((n, 3, 3))
-    if np.any(outside):
-        u = sign[outside] * np.maximum(excess[outside], 0.0)
-        length = np.linalg.norm(u, axis=1)
-        unit = u / length[:, None]
-        active = np.zeros((unit.shape[0], 3, 3))
-        active[:, [0, 1, 2], [0, 1, 2]] = excess[outside] > 0.0
-        distance[outside] = length
-        normal[outside] = unit
-        curvature[outside] = (active - _outer(unit, unit)) / length[:, None, None]
-    inside = ~outside
-    if np.any(inside):
-        face = np.argmax(excess[inside], axis=1)
-        rows = np.flatnonzero(inside)
-        distance[inside] = excess[rows, face]
-        normal[rows, face] = sign[rows, face]
-        closest[rows, face] = sign[rows, face] * half[face]
-    return distance, normal, closest, curvature
-
-
-def _capsule(obstacle, q):
-    """
-    Capsule: distance to the axis segment minus ``radius``.
-
-    With ``p`` the closest point of the segment and ``u = q - p``: normal ``u / |u|``, Hessian
-    ``(D - n nᵀ) / |u|``, ``D = I - e_z e_zᵀ`` beside the segment, ``I`` beyond its ends.
-    """
-    half = 0.5 * obstacle.length
-    axial = np.clip(q[:, 2], -half, half)
-    u = q.copy()
-    u[:, 2] -= axial
-    rho = np.linalg.norm(u, axis=1)
-    normal = _unit_or(u, rho, (1.0, 0.0, 0.0))
-    beside = np.abs(q[:, 2]) < half
-    active = np.tile(np.eye(3), (q.shape[0], 1, 1))
-    active[beside, 2, 2] = 0.0
-    safe = np.where(rho > 0.0, rho, np.inf)
-    curvature = (active - _outer(normal, normal)) / safe[:, None, None]
-    closest = obstacle.radius * normal
-    closest[:, 2] += axial
-    return rho - obstacle.radius, normal, closest, curvature
-
-
-def _cylinder(obstacle, q):
-    """
-    Flat-capped cylinder: the box query in (radial distance, axial coordinate).
-
-    ``a = (s - r, |z| - l/2)`` with ``s`` the distance from the axis. Outside, the distance is
-    ``|max(a, 0)|`` along ``u = max(a_0, 0) e_s + max(a_1, 0) sign(z) e_z``; inside, the larger
-    of ``a``. The Hessian is that of the 2D query plus the turn of the radial direction,
-    ``(n · e_s) / s e_t e_tᵀ`` (``e_t = e_z x e_s``).
-    """
-    radius, half = obstacle.radius, 0.5 * obstacle.length
-    s = np.hypot(q[:, 0], q[:, 1])
-    radial = _unit_or(np.column_stack([q[:, 0], q[:, 1], np.zeros_like(s)]), s,
-                      (1.0, 0.0, 0.0))
-    axis = np.array([0.0, 0.0, 1.0])
-    tangent = np.column_stack([-radial[:, 1], radial[:, 0], np.zeros_like(s)])
-    sign = np.where(q[:, 2] < 0.0, -1.0, 1.0)
-    a_radial, a_axial = s - radius, np.abs(q[:, 2]) - half
-    outside = (a_radial > 0.0) | (a_axial > 0.0)
-    u_radial, u_axial = np.maximum(a_radial, 0.0), np.maximum(a_axial, 0.0)
-    length = np.hypot(u_radial, u_axial)
-    # inside: the nearer of the side and the cap
-    side = ~outside & (a_radial >= a_axial)
-    distance = np.where(outside, length, np.maximum(a_radial, a_axial))
-    # the normal's components along e_s and sign(z) e_z
-    scale = np.where(outside, length, 1.0)
-    w_radial = np.where(outside, u_radial / scale, np.where(side, 1.0, 0.0))
-    w_axial = np.where(outside, u_axial / scale, np.where(side, 0.0, 1.0))
-    normal = w_radial[:, None] * radial + (w_axial * sign)[:, None] * axis
-    closest_radial = np.where(side, radius, np.minimum(s, radius))
-    closest_axial = np.where(~outside & ~side, sign * half, np.clip(q[:, 2], -half, half))
-    closest = closest_radial[:, None] * radial + closest_axial[:, None] * axis
-    active = (_outer(radial, radial) * (a_radial > 0.0)[:, None, None]
-              + np.outer(axis, axis)[None] * (a_axial > 0.0)[:, None, None])
-    safe_length = np.where(outside, length, np.inf)
-    curvature = (active - _outer(normal, normal)) / safe_length[:, None, None]
-    curvature[~outside] = 0.0
-    safe_s = np.where(s > 0.0, s, np.inf)
-    curvature += (w_radial / safe_s)[:, None, None] * _outer(tangent, tangent)
-    return distance, normal, closest, curvature
-
-
-_LOCAL = {'plane': _plane, 'sphere': _sphere, 'box': _box, 'capsule': _capsule,
-          'cylinder': _cylinder}
+def _kernel_sizes(obstacle):
+    """Return an obstacle's sizes as the kernel takes them, (3,) read-only [m]."""
+    sizes = np.zeros(3)
+    if obstacle.shape == 'box':
+        sizes[:] = obstacle.size
+    elif obstacle.shape != 'plane':
+        sizes[0] = obstacle.radius
+        if obstacle.shape != 'sphere':
+            sizes[1] = obstacle.length
+    sizes.flags.writeable = False
+    return sizes
