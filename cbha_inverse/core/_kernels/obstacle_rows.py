@@ -35,13 +35,20 @@ BINDING_TOLERANCE = 1e-6
 
 OBSTACLE_ROW_FIELDS = (
     # the obstacles (cbha_inverse.core.obstacles.pack_obstacles)
-    Field('obstacle_shapes', I8, 1, '(o,) shape code of every obstacle (obstacles.SHAPES)'),
-    Field('obstacle_positions', F8, 2, "(o, 3) origin of every obstacle's frame [m]"),
-    Field('obstacle_rotations', F8, 3, "(o, 3, 3) axes of every obstacle's frame"),
-    Field('obstacle_sizes', F8, 2, '(o, 3) sizes of every obstacle (signed_distance_at) [m]'),
+    # (read-only: the query takes them as it takes an Obstacle's own read-only arrays)
+    Field('obstacle_shapes', I8, 1, '(o,) shape code of every obstacle (obstacles.SHAPES)',
+          read_only=True),
+    Field('obstacle_positions', F8, 2, "(o, 3) origin of every obstacle's frame [m]",
+          read_only=True),
+    Field('obstacle_rotations', F8, 3, "(o, 3, 3) axes of every obstacle's frame",
+          read_only=True),
+    Field('obstacle_sizes', F8, 2, '(o, 3) sizes of every obstacle (signed_distance_at) [m]',
+          read_only=True),
     # the collision spheres and the rows' parameters
-    Field('sphere_frames', I8, 1, '(s,) frame of every collision sphere (1..n)'),
-    Field('sphere_radii', F8, 1, '(s,) radius ρ_s of every collision sphere [m]'),
+    Field('sphere_frames', I8, 1, '(s,) frame of every collision sphere (1..n)',
+          read_only=True),
+    Field('sphere_radii', F8, 1, '(s,) radius ρ_s of every collision sphere [m]',
+          read_only=True),
     Field('margin', float, 0, 'the clearance the rows keep [m]'),
     Field('activation', float, 0, 'a pair adds a row below margin + activation of clearance '
           '[m]'),
@@ -67,7 +74,8 @@ OBSTACLE_ROW_FIELDS = (
     # the projection of the rows' centres (project_points_of)
     Field('offsets', F8, 2, '(c, 3) the centres in their frames: zero (frame origins) [m]'),
     Field('levers', F8, 2, '(c, 3) workspace: R_f o [m]'),
-    Field('columns', F8, 2, '(6n, 3c) workspace: J_pᵀ, then L⁻¹ J_pᵀ'),
+    Field('columns', F8, 1, '(6n 3c,) workspace: J_pᵀ of r rows, then L⁻¹ J_pᵀ, a (6n, 3r) '
+          'C-ordered array (column_block_of)'),
     Field('starts', I8, 1, '(3c,) workspace: first nonzero row of each column'),
     Field('w_pa', F8, 2, '(3c, m) W_sa of every row [m/Pa, m/N]'),
     Field('w_aa', F8, 2, '(m, m) workspace: W_aa'),
@@ -108,6 +116,18 @@ define_record(ObstacleRowsRecord, ObstacleRowsRecordType, OBSTACLE_ROW_FIELDS)
 def new_obstacle_rows_record(*values):
     """Build an :class:`ObstacleRowsRecord` (fields in declaration order)."""
     return ObstacleRowsRecord(*values)
+
+
+@numba.njit(cache=True)
+def column_block_of(rows, size):
+    """
+    Return the ``columns`` workspace as the (size, 3r) C-ordered array of the ``r`` rows.
+
+    ``size`` = 6n; a C-ordered array whatever ``r``, as the effectors' columns are (one
+    compiled copy of the projection for both).
+    """
+    points = 3 * rows.count[0]
+    return rows.columns[:size * points].reshape((size, points))
 
 
 @numba.njit(cache=True)

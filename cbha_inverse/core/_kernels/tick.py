@@ -26,9 +26,9 @@ import math
 from cbha_inverse.core._kernels.block_band import (block_backward, block_cholesky_forward,
                                                    block_forward, first_nonzero_rows)
 from cbha_inverse.core._kernels.evaluation import evaluate
-from cbha_inverse.core._kernels.obstacle_rows import (add_entering_pairs, row_outcome_of,
-                                                      rows_from_projection_of, scale_rows_of,
-                                                      select_pairs_of)
+from cbha_inverse.core._kernels.obstacle_rows import (add_entering_pairs, column_block_of,
+                                                      row_outcome_of, rows_from_projection_of,
+                                                      scale_rows_of, select_pairs_of)
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_jacobian_into,
                                                    effector_points_into, free_gaps_into,
                                                    orientation_errors_into,
@@ -323,9 +323,9 @@ def obstacle_rows_of(tick):
     if count:
         points = 3 * count
         project_points_of(tick, rows.row_frames[:count], rows.offsets[:count],
-                          rows.levers[:count], rows.columns[:, :points], rows.starts[:points],
-                          rows.w_pa[:points], rows.w_aa, rows.free_centres[:points],
-                          rows.moved[:points])
+                          rows.levers[:count], column_block_of(rows, tick.solved.shape[0]),
+                          rows.starts[:points], rows.w_pa[:points], rows.w_aa,
+                          rows.free_centres[:points], rows.moved[:points])
         rows_from_projection_of(rows, tick.positions)
     return count
 

@@ -98,7 +98,7 @@ def obstacle_rows_record(n_links, n_actuators, obstacles=(), frames=(), radii=()
         'normals': np.zeros((capacity, 3)), 'matrix': np.zeros((capacity, m)),
         'constant': np.zeros(capacity), 'normal': np.zeros(3), 'closest': np.zeros(3),
         'curvature': np.zeros((3, 3)), 'offsets': np.zeros((capacity, 3)),
-        'levers': np.zeros((capacity, 3)), 'columns': np.zeros((6 * n, 3 * capacity)),
+        'levers': np.zeros((capacity, 3)), 'columns': np.zeros(6 * n * 3 * capacity),
         'starts': np.zeros(3 * capacity, dtype=np.int64), 'w_pa': np.zeros((3 * capacity, m)),
         'w_aa': np.zeros((m, m)), 'free_centres': np.zeros(3 * capacity),
         'moved': np.zeros((3 * capacity, m + 1)), 'scaled_matrix': np.zeros((capacity, m)),

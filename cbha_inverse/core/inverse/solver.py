@@ -13,8 +13,9 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    positive definite, the fallback chain
    (:meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`) solves
    ``K⁻¹ [r, J_aᵀ]`` and the same projection takes ``J_eᵀ`` and ``J_aᵀ`` as its left operands;
-3. solve the regularised box QP (the exact active-set solver, compiled; proxsuite, warm-started,
-   or projected Gauss-Seidel on request or as fallbacks);
+3. solve the regularised box QP (the exact active-set solver, compiled, and with obstacle rows
+   an active set over the rows around it, ``docs/obstacles.md``; proxsuite, warm-started, or
+   projected Gauss-Seidel on request or as fallbacks);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (one backward sweep of one column,
    ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``), followed by ``newton_steps - 1``
