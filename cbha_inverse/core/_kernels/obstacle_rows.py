@@ -85,7 +85,7 @@ OBSTACLE_ROW_FIELDS = (
     Field('scaled_matrix', F8, 2, '(c, m) A = G σ [m]'),
     Field('values', F8, 1, '(c,) A x + b of the solution [m]'),
     Field('row_on', np.bool_, 1, "(c,) rows whose slack's penalty is on"),
-    Field('penalised_hessian', F8, 2, "(m, m) workspace: H_S"),
+    Field('penalised_hessian', F8, 2, '(m, m) workspace: H_S'),
     Field('penalised_gradient', F8, 1, '(m,) workspace: g_S'),
     # the check of a long step (add_entering_pairs)
     Field('stepped_positions', F8, 2, '(n + 1, 3) workspace: frame origins after a step [m]'),
@@ -104,7 +104,7 @@ class ObstacleRowsRecordType(RecordType):
 
 
 class ObstacleRowsRecord(Record):
-    """The obstacles, the collision spheres and the rows of one solver (:data:`OBSTACLE_ROW_FIELDS`)."""
+    """The obstacles, spheres and rows of one solver (:data:`OBSTACLE_ROW_FIELDS`)."""
 
     __slots__ = ()
 

@@ -228,7 +228,7 @@ class ObstacleRows:
         self._entering()
 
     def _entering(self):
-        """Return the compiled entry of :func:`~cbha_inverse.core._kernels.tick.add_entering_rows`."""
+        """Return the compiled :func:`~cbha_inverse.core._kernels.tick.add_entering_rows`."""
         data = self._data
         return data.entry('add_entering_rows', (data.record, data.actuation))
 
@@ -253,8 +253,8 @@ class ObstacleRows:
             Whether a pair was added.
 
         """
-        return bool(self._entering()(self._data.record, np.ascontiguousarray(actuation,
-                                                                               dtype=float)))
+        actuation = np.ascontiguousarray(actuation, dtype=float)
+        return bool(self._entering()(self._data.record, actuation))
 
     def clearances(self, actuation):
         """
@@ -271,6 +271,7 @@ class ObstacleRows:
 
         """
         return self.matrix @ actuation + self.constant
+
     def inside_warnings(self, targets):
         """
         Return a tick's warnings for targets inside obstacles (:meth:`inside`).

@@ -15,7 +15,6 @@ from cbha_inverse.core._kernels import tick as kernels
 from cbha_inverse.core._kernels.records import compiled_entry, make_record, RecordOwner
 from cbha_inverse.core.inverse.obstacle_rows import obstacle_rows_record
 from cbha_inverse.core.inverse.qp import QPMatrices
-import numba
 import numpy as np
 
 BINDING_TOLERANCE = 1e-6
@@ -158,8 +157,10 @@ class TickData(RecordOwner):
         """
         rows = self._no_rows if rows is None else rows
         kernels.attach_rows(self.record, rows)
-        if not numba.config.DISABLE_JIT:
-            self.record._values['rows'] = rows
+        # the Python side's fields (a compiled record's; with the JIT off, the namespace is it)
+        values = getattr(self.record, '_values', None)
+        if values is not None:
+            values['rows'] = rows
 
     def project_factor(self, factor):
         """
