@@ -1,6 +1,9 @@
 """
 Compiled kernels of the actuation QP (paper eq. 13): its matrices, the active-set box-QP solver.
 
+:func:`rows_qp_into` solves the QP with slackened rows (the obstacle rows,
+``docs/obstacles.md``) by an active set over the rows around the box solver.
+
 The QP of a control tick is tiny (``m`` = 6..16 actuators) and solved every tick, so a numpy
 implementation spends its time in call overhead (dozens of 1-3 us calls) rather than arithmetic.
 These kernels hold the arithmetic of :mod:`cbha_inverse.core.inverse.qp` (``qp_matrices``,
