@@ -6,6 +6,8 @@ from cbha_inverse.core.inverse.solver import InverseSolver
 from cbha_inverse.core.obstacles import Obstacle
 from cbha_inverse.core.so3 import so3_exp
 from cbha_inverse.scene import load_scene
+import numba
+from numba.core.runtime import _nrt_python, rtsys
 import numpy as np
 import pytest
 
@@ -250,3 +252,33 @@ def test_a_long_step_adds_the_rows_of_the_spheres_it_carries_into_an_obstacle(
                                                              [table]).min()
     assert clearance[4] > MARGIN - 1e-3
     assert clearance[1] < MARGIN - 3e-3
+
+
+def test_ticks_with_rows_are_one_compiled_call_that_allocates_nothing(table_scene):
+    """
+    A tick holding a sphere off a ball: its rows and their QP run in the one compiled call.
+
+    numba counts every allocation of its runtime: one wrapper of the targets per tick (the one
+    array a tick passes to compiled code), nothing else (the rows' buffers are the record's).
+    """
+    actuation = 0.3 * (table_scene.upper_bounds - table_scene.lower_bounds)
+    state = _equilibrium(table_scene, actuation)
+    centre = state.positions[16] + [0.0, 0.0, -(table_scene.collision.radii[-1] + 0.008)]
+    ball = Obstacle('ball', 'sphere', centre, np.eye(3), radius=0.005)
+    solver = table_scene.make_inverse_solver(obstacle_activation=0.005)
+    solver.set_obstacles([ball])
+    solver.reset(state, actuation)
+    target = np.array(table_scene.forward(actuation, strict=True).effector_positions)
+    for _ in range(20):
+        solver.step(target)
+    _nrt_python.memsys_enable_stats()
+    try:
+        before = rtsys.get_allocation_stats()
+        results = [solver.step(target) for _ in range(200)]
+        after = rtsys.get_allocation_stats()
+    finally:
+        _nrt_python.memsys_disable_stats()
+    assert all(r.obstacle_rows == 1 and r.status in ('solved', 'saturated') for r in results)
+    made = after.alloc - before.alloc
+    assert after.free - before.free == made
+    assert made == (0 if numba.config.DISABLE_JIT else 200)
