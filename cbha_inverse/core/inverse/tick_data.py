@@ -127,7 +127,7 @@ class TickData(RecordOwner):
         positions, rotations``: C-contiguous float frames), ``'project_tick'`` (``record``),
         ``'free_gaps_of'`` (``targets, record``: ``delta_free`` of the targets) or
         ``'orientation_gap_of'`` (``record``), or another entry of the module typed by
-        ``examples`` (its example arguments, e.g. ``'project_points_of'``);
+        ``examples`` (its example arguments, e.g. ``'add_entering_rows'``);
         without numba's per-call type dispatch
         (:func:`cbha_inverse.core._kernels.records.compiled_entry`).
         """
