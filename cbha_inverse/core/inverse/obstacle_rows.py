@@ -177,7 +177,7 @@ class ObstacleRows:
         self._data = tick_data
         tick_data.attach_rows(self.record)
         self._names = tuple(obstacle.name for obstacle in self.obstacles)
-        self._last_targets, self._last_warnings = None, ()
+        self._last_targets, self._last_warnings = b'', ()
         self.clear()
 
     def clear(self):
@@ -276,7 +276,7 @@ class ObstacleRows:
         """
         Return a tick's warnings for targets inside obstacles (:meth:`inside`).
 
-        The same targets as the last call's give the same warnings without a query.
+        The same targets as the last call's (their bytes) give the same warnings without a query.
 
         Parameters
         ----------
@@ -288,8 +288,9 @@ class ObstacleRows:
         tuple of str
 
         """
-        if self._last_targets is None or not np.array_equal(targets, self._last_targets):
-            self._last_targets = targets.copy()
+        key = np.ascontiguousarray(targets, dtype=float).tobytes()
+        if key != self._last_targets:
+            self._last_targets = key
             self._last_warnings = tuple(
                 f'target inside obstacle {name!r}: the obstacle rows hold the arm out'
                 for name in self.inside(targets))
