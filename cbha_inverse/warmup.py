@@ -124,14 +124,17 @@ def warm_statics(name):
 
 
 def warm_obstacles():
-    """Run the signed-distance query of one obstacle of each shape (the plant's contact)."""
-    from cbha_inverse.core.obstacles import Obstacle
+    """Run the signed-distance queries of one obstacle of each shape (the plant's contact)."""
+    from cbha_inverse.core.obstacles import (Obstacle, pack_obstacles,
+                                             pairwise_signed_distance)
     points = np.array([[0.0, 0.0, 0.0], [0.1, -0.05, 0.2]])
-    for shape, sizes in (('plane', {}), ('sphere', {'radius': 0.03}),
-                         ('box', {'size': (0.04, 0.06, 0.1)}),
-                         ('capsule', {'radius': 0.02, 'length': 0.08}),
-                         ('cylinder', {'radius': 0.02, 'length': 0.08})):
-        Obstacle(shape, shape, np.zeros(3), np.eye(3), **sizes).signed_distance(points)
+    obstacles = [Obstacle(shape, shape, np.zeros(3), np.eye(3), **sizes) for shape, sizes in (
+        ('plane', {}), ('sphere', {'radius': 0.03}), ('box', {'size': (0.04, 0.06, 0.1)}),
+        ('capsule', {'radius': 0.02, 'length': 0.08}),
+        ('cylinder', {'radius': 0.02, 'length': 0.08}))]
+    for obstacle in obstacles:
+        obstacle.signed_distance(points)
+    pairwise_signed_distance(pack_obstacles(obstacles), points)
 
 
 def main(argv=None):

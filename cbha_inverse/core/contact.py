@@ -27,7 +27,8 @@ equilibrium is ``|f| / k``: the penalty trades accuracy (a stiffer ``k``) agains
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from cbha_inverse.core.obstacles import SignedDistance
+from cbha_inverse.core.obstacles import (check_names, pack_obstacles, pairwise_signed_distance,
+                                         read_only_packed, SignedDistance, sphere_gaps)
 import numpy as np
 
 TOUCH_MARGIN = 1.0e-9
@@ -93,7 +94,6 @@ class CollisionSpheres:
         (k, len(obstacles)) ndarray  [m]
 
         """
-        from cbha_inverse.core.obstacles import sphere_gaps
         return sphere_gaps(obstacles, self.centres(positions), self.radii)
 
 
@@ -155,7 +155,6 @@ class PenaltyContact:
 
     def __init__(self, spheres, obstacles, stiffness, n_links):
         """Check and keep the parts."""
-        from cbha_inverse.core.obstacles import check_names
         if not (np.isfinite(stiffness) and stiffness > 0.0):
             raise ValueError(f'contact stiffness must be finite and > 0, got {stiffness!r}')
         if spheres.frames.size and spheres.frames.max() > n_links:
@@ -163,28 +162,37 @@ class PenaltyContact:
                              f'chain (frames 1..{n_links})')
         self.spheres = spheres
         self.obstacles = check_names(obstacles)
+        self._packed = read_only_packed(pack_obstacles(self.obstacles))
         self.stiffness = float(stiffness)
         self.n_links = int(n_links)
 
-    def _pairs(self, positions, margin=0.0):
+    def _query(self, positions):
         """
-        Yield ``(obstacle, sphere indices, penetrations, SignedDistance)`` of the contacts.
+        Return the signed distance of every sphere's centre to every obstacle, and the depths.
 
-        A pair is a contact when its penetration exceeds ``-margin``; the query's arrays hold
-        the contacts' rows only. Spheres beyond an obstacle's bounding sphere are not queried.
+        Returns
+        -------
+        query : cbha_inverse.core.obstacles.SignedDistance
+            Of sphere ``s`` to obstacle ``j`` at ``[s, j]`` (k, o leading dimensions).
+        penetrations : (k, o) ndarray  [m]
+            ``ρ - φ(x)`` of every pair (negative: apart; -inf for every pair of a non-finite
+            state, which touches nothing).
+
         """
         centres = self.spheres.centres(positions)
-        radii = self.spheres.radii
-        for obstacle in self.obstacles:
-            near = np.flatnonzero(obstacle.near(centres, radii + margin))
-            if not near.size:
-                continue
-            query = obstacle.signed_distance(centres[near])
-            penetration = radii[near] - query.distance
-            touching = np.flatnonzero(penetration > -margin)
-            if touching.size:
-                yield obstacle, near[touching], penetration[touching], SignedDistance(
-                    *(field[touching] for field in query))
+        if not np.all(np.isfinite(centres)):
+            # a diverged trial state: no pair touches, its residual tells the static solver
+            k, o = centres.shape[0], len(self.obstacles)
+            query = SignedDistance(np.full((k, o), np.inf), np.zeros((k, o, 3)),
+                                   np.zeros((k, o, 3)), np.zeros((k, o, 3, 3)))
+        else:
+            query = pairwise_signed_distance(self._packed, centres, check=False)
+        return query, self.spheres.radii[:, None] - query.distance
+
+    def _add_frame_blocks(self, out, blocks):
+        """Add the (k, 3, 3) ``blocks`` onto the translation block of each sphere's frame."""
+        rows = 6 * (self.spheres.frames - 1)[:, None] + np.arange(3)
+        out[rows[:, :, None], rows[:, None, :]] += blocks
 
     def wrenches(self, state):
         """
@@ -202,9 +210,9 @@ class PenaltyContact:
 
         """
         out = np.zeros((self.n_links, 6))
-        for _, touching, penetration, query in self._pairs(state.positions):
-            np.add.at(out, (self.spheres.frames[touching] - 1, slice(0, 3)),
-                      self.stiffness * penetration[:, None] * query.normal)
+        query, penetrations = self._query(state.positions)
+        forces = self.stiffness * np.maximum(penetrations, 0.0)[:, :, None] * query.normal
+        out[self.spheres.frames - 1, 0:3] += forces.sum(axis=1)
         return out
 
     def tangent(self, state):
@@ -226,13 +234,13 @@ class PenaltyContact:
 
         """
         out = np.zeros((6 * self.n_links, 6 * self.n_links))
-        for _, touching, penetration, query in self._pairs(state.positions, TOUCH_MARGIN):
-            normal = query.normal
-            blocks = self.stiffness * (normal[:, :, None] * normal[:, None, :]
-                                       - np.maximum(penetration, 0.0)[:, None, None]
-                                       * query.curvature)
-            for row, block in zip(6 * (self.spheres.frames[touching] - 1), blocks):
-                out[row:row + 3, row:row + 3] += block
+        query, penetrations = self._query(state.positions)
+        normal = query.normal
+        blocks = self.stiffness * (normal[:, :, :, None] * normal[:, :, None, :]
+                                   - np.maximum(penetrations, 0.0)[:, :, None, None]
+                                   * query.curvature)
+        touching = penetrations > -TOUCH_MARGIN
+        self._add_frame_blocks(out, np.where(touching[:, :, None, None], blocks, 0.0).sum(axis=1))
         return out
 
     def step_limit(self, state, stepped):
@@ -255,21 +263,13 @@ class PenaltyContact:
             In (0, 1].
 
         """
-        start, end = self.spheres.centres(state.positions), self.spheres.centres(
-            stepped.positions)
-        radii, limit = self.spheres.radii, 1.0
-        for obstacle in self.obstacles:
-            near = np.flatnonzero(obstacle.near(end, radii))   # penetrating at the end
-            if not near.size:
-                continue
-            after = obstacle.signed_distance(end[near]).distance - radii[near]
-            before = obstacle.signed_distance(start[near]).distance - radii[near]
-            entering = (before > TOUCH_MARGIN) & (after < 0.0)
-            if np.any(entering):
-                fractions = (before[entering] + TOUCH_MARGIN) / (before[entering]
-                                                                 - after[entering])
-                limit = min(limit, float(fractions.min()))
-        return limit
+        before = -self._query(state.positions)[1]
+        after = -self._query(stepped.positions)[1]
+        entering = (before > TOUCH_MARGIN) & (after < 0.0)
+        if not np.any(entering):
+            return 1.0
+        fractions = (before[entering] + TOUCH_MARGIN) / (before[entering] - after[entering])
+        return min(1.0, float(fractions.min()))
 
     def contacts(self, state):
         """
@@ -283,18 +283,15 @@ class PenaltyContact:
         Returns
         -------
         Contacts
-            Ordered by obstacle, then by frame.
+            Ordered by obstacle, then by sphere.
 
         """
-        frames, names, points, normals, depths = [], [], [], [], []
-        for obstacle, touching, penetration, query in self._pairs(state.positions):
-            frames.append(self.spheres.frames[touching])
-            names.extend([obstacle.name] * touching.size)
-            points.append(query.closest)
-            normals.append(query.normal)
-            depths.append(penetration)
-        if not frames:
+        query, penetrations = self._query(state.positions)
+        obstacle, sphere = np.nonzero(penetrations.T > 0.0)
+        if not sphere.size:
             return NO_CONTACTS
-        normals, depths = np.concatenate(normals), np.concatenate(depths)
-        return Contacts(np.concatenate(frames), tuple(names), np.concatenate(points), normals,
-                        depths, self.stiffness * depths[:, None] * normals)
+        depths, normals = penetrations[sphere, obstacle], query.normal[sphere, obstacle]
+        return Contacts(self.spheres.frames[sphere],
+                        tuple(self.obstacles[j].name for j in obstacle),
+                        query.closest[sphere, obstacle], normals, depths,
+                        self.stiffness * depths[:, None] * normals)

@@ -25,7 +25,8 @@ point on the arrays of :func:`pack_obstacles`. No ROS.
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from cbha_inverse.core._kernels.obstacles import signed_distances_into
+from cbha_inverse.core._kernels.obstacles import (pairwise_signed_distances_into,
+                                                  signed_distances_into)
 import numpy as np
 
 SHAPES = ('plane', 'sphere', 'box', 'capsule', 'cylinder')
@@ -180,15 +181,7 @@ class Obstacle:
             If ``points`` is not (N, 3) or not finite.
 
         """
-        p = np.asarray(points, dtype=float)
-        if p.ndim == 1:
-            p = p[None, :]
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise ValueError(f'points must be (N, 3), got shape {np.shape(points)}')
-        if not np.all(np.isfinite(p)):
-            raise ValueError('points must be finite')
-        # one compiled signature: C-contiguous, writable points (a copy of a read-only array)
-        p = np.require(p, requirements=('C', 'W'))
+        p = _checked_points(points)
         n = p.shape[0]
         query = SignedDistance(np.empty(n), np.empty((n, 3)), np.empty((n, 3)),
                                np.empty((n, 3, 3)))
@@ -262,6 +255,83 @@ def obstacle_from_rpy(name, shape, position, rpy, **sizes):
     return Obstacle(name, shape, position, so3_from_rpy(rpy), **sizes)
 
 
+def pairwise_signed_distance(packed, points, check=True):
+    """
+    Return the signed distance of every point to every obstacle of :func:`pack_obstacles`.
+
+    Parameters
+    ----------
+    packed : tuple of 4 ndarray
+        ``pack_obstacles(obstacles)`` of ``o`` obstacles.
+    points : (N, 3) array_like  [m]
+        Base-frame points (a single (3,) point is taken as N = 1).
+    check : bool
+        Check ``packed`` and ``points``. A caller that queries the same obstacles often (the
+        plant's contact, :mod:`cbha_inverse.core.contact`) checks them once and passes False,
+        with read-only views of the packed arrays (:func:`read_only_packed`) and finite,
+        C-contiguous, writable (N, 3) float points.
+
+    Returns
+    -------
+    SignedDistance
+        Of point ``i`` to obstacle ``j`` at ``[i, j]``: distance (N, o), normal (N, o, 3),
+        closest (N, o, 3), curvature (N, o, 3, 3), as :meth:`Obstacle.signed_distance`.
+
+    Raises
+    ------
+    ValueError
+        If ``points`` is not (N, 3) or not finite, or ``packed`` not arrays as
+        :func:`pack_obstacles` gives them.
+
+    """
+    if check:
+        points = _checked_points(points)
+        packed = read_only_packed(packed)
+    shapes = packed[0]
+    n, o = points.shape[0], shapes.shape[0]
+    query = SignedDistance(np.empty((n, o)), np.empty((n, o, 3)), np.empty((n, o, 3)),
+                           np.empty((n, o, 3, 3)))
+    pairwise_signed_distances_into(*packed, points, *query)
+    return query
+
+
+def read_only_packed(packed):
+    """
+    Return read-only views of the arrays of :func:`pack_obstacles`, checked.
+
+    The compiled query then sees the same array types as from an :class:`Obstacle` (one
+    compiled copy of it).
+
+    Parameters
+    ----------
+    packed : tuple of 4 ndarray
+        ``(shapes, positions, rotations, sizes)`` of ``o`` obstacles.
+
+    Returns
+    -------
+    tuple of 4 ndarray
+        The same arrays, read-only.
+
+    Raises
+    ------
+    ValueError
+        If an array is not C-contiguous of its dtype and shape, or a shape code is unknown.
+
+    """
+    shapes = packed[0]
+    o = shapes.shape[0] if isinstance(shapes, np.ndarray) and shapes.ndim == 1 else -1
+    for name, array, shape, dtype in zip(('shapes', 'positions', 'rotations', 'sizes'), packed,
+                                         ((o,), (o, 3), (o, 3, 3), (o, 3)),
+                                         (np.int64, np.float64, np.float64, np.float64)):
+        if not (isinstance(array, np.ndarray) and array.shape == shape and array.dtype == dtype
+                and array.flags.c_contiguous):
+            raise ValueError(f'packed obstacles: {name} must be a C-contiguous {shape} '
+                             f'{np.dtype(dtype).name} array (pack_obstacles)')
+    if np.any((shapes < 0) | (shapes >= len(SHAPES))):
+        raise ValueError(f'packed obstacles: shape codes must be 0..{len(SHAPES) - 1}')
+    return tuple(_read_only(array) for array in packed)
+
+
 def sphere_gaps(obstacles, centres, radii):
     """
     Return the gap between spheres and each obstacle: signed distance of the centre minus radius.
@@ -282,10 +352,7 @@ def sphere_gaps(obstacles, centres, radii):
 
     """
     radii = np.asarray(radii, dtype=float).reshape(-1)
-    gaps = np.empty((radii.size, len(obstacles)))
-    for j, obstacle in enumerate(obstacles):
-        gaps[:, j] = obstacle.signed_distance(centres).distance - radii
-    return gaps
+    return pairwise_signed_distance(pack_obstacles(obstacles), centres).distance - radii[:, None]
 
 
 def pack_obstacles(obstacles):
@@ -342,3 +409,25 @@ def _kernel_sizes(obstacle):
             sizes[1] = obstacle.length
     sizes.flags.writeable = False
     return sizes
+
+
+def _checked_points(points):
+    """Return points as a C-contiguous, writable (N, 3) float array, or raise ``ValueError``."""
+    p = np.asarray(points, dtype=float)
+    if p.ndim == 1:
+        p = p[None, :]
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f'points must be (N, 3), got shape {np.shape(points)}')
+    if not np.isfinite(p).all():
+        raise ValueError('points must be finite')
+    if not (p.flags.c_contiguous and p.flags.writeable):
+        # one compiled signature: C-contiguous, writable points
+        p = np.array(p, order='C')
+    return p
+
+
+def _read_only(array):
+    """Return a read-only view of an array."""
+    view = array.view()
+    view.flags.writeable = False
+    return view

@@ -61,6 +61,35 @@ def test_tangent_is_minus_the_derivative_of_the_contact_wrenches():
     assert checked >= 10     # most states touch something: the test compares real tangents
 
 
+def test_the_loads_and_the_report_sum_every_pair_and_a_diverged_state_touches_nothing():
+    """Against a loop over obstacles and spheres of ``Obstacle.signed_distance``; NaN frames."""
+    model = _chain()
+    spheres = CollisionSpheres([1, 2, 3, 4], [0.006, 0.007, 0.008, 0.009])
+    obstacles = _obstacles()
+    contact = PenaltyContact(spheres, obstacles, 3e4, model.n_links)
+    rng = np.random.default_rng(9)
+    pairs = 0
+    for _ in range(10):
+        state = _state(model, rng)
+        expected, rows = np.zeros((model.n_links, 6)), []
+        for obstacle in obstacles:
+            query = obstacle.signed_distance(spheres.centres(state.positions))
+            depth = spheres.radii - query.distance
+            for s in np.flatnonzero(depth > 0.0):
+                expected[spheres.frames[s] - 1, :3] += 3e4 * depth[s] * query.normal[s]
+                rows.append((spheres.frames[s], obstacle.name, depth[s]))
+        np.testing.assert_allclose(contact.wrenches(state), expected, rtol=1e-14, atol=1e-14)
+        report = contact.contacts(state)
+        assert list(zip(report.frames.tolist(), report.obstacles)) == [r[:2] for r in rows]
+        np.testing.assert_allclose(report.penetrations, [r[2] for r in rows], rtol=1e-14)
+        pairs += len(rows)
+    assert pairs >= 10
+    diverged = ChainState(np.full_like(state.positions, np.nan), state.rotations)
+    assert not np.any(contact.wrenches(diverged)) and not np.any(contact.tangent(diverged))
+    assert contact.contacts(diverged).frames.size == 0
+    assert contact.step_limit(state, diverged) == 1.0
+
+
 def _retracted(state, increments):
     """Return ``state`` with world-axis increments (n, 6) applied (as ``retract``)."""
     from cbha_inverse.core.chain import retract

@@ -12,7 +12,8 @@ cover-kernels``).
 from cbha_inverse.core._kernels.obstacles import (BOX, CAPSULE, CYLINDER, PLANE,
                                                   signed_distance_at, signed_distances_into,
                                                   SPHERE)
-from cbha_inverse.core.obstacles import Obstacle, pack_obstacles, SHAPES
+from cbha_inverse.core.obstacles import (Obstacle, pack_obstacles, pairwise_signed_distance,
+                                         SHAPES)
 import numba
 from numba.core.runtime import _nrt_python, rtsys
 import numpy as np
@@ -281,6 +282,44 @@ def test_packed_obstacles_round_trip_and_answer_as_the_obstacles():
     empty = pack_obstacles(())
     assert [a.shape for a in empty] == [(0,), (0, 3), (0, 3, 3), (0, 3)]
     assert empty[0].dtype == np.int64 and all(a.flags.c_contiguous for a in empty)
+
+
+def test_every_pair_of_points_and_packed_obstacles_is_the_obstacle_query():
+    """The pairwise query's column ``j`` is obstacle ``j``'s own query, bit for bit."""
+    obstacles = _scene_obstacles()
+    points = np.random.default_rng(3).uniform(-0.1, 0.3, size=(12, 3))
+    pairs = pairwise_signed_distance(pack_obstacles(obstacles), points)
+    assert pairs.distance.shape == (12, 5) and pairs.curvature.shape == (12, 5, 3, 3)
+    for j, obstacle in enumerate(obstacles):
+        for pair, own in zip(pairs, obstacle.signed_distance(points)):
+            assert np.array_equal(pair[:, j], own)
+    # read-only or Fortran-ordered points are copied, not refused
+    frozen = np.asfortranarray(points)
+    frozen.flags.writeable = False
+    for pair, own in zip(pairwise_signed_distance(pack_obstacles(obstacles), frozen), pairs):
+        assert np.array_equal(pair, own)
+    for frozen_own, own in zip(obstacles[2].signed_distance(frozen),
+                               obstacles[2].signed_distance(points)):
+        assert np.array_equal(frozen_own, own)
+    nothing = pairwise_signed_distance(pack_obstacles(()), points)
+    assert nothing.distance.shape == (12, 0) and nothing.normal.shape == (12, 0, 3)
+
+
+@pytest.mark.parametrize('field, value, problem', [
+    (0, np.array([1, 7]), 'shape codes'),
+    (0, np.array([1.0, 2.0]), 'shapes must be'),
+    (1, np.zeros((2, 2)), 'positions must be'),
+    (2, np.zeros((2, 3, 3))[:, :, ::-1], 'rotations must be'),
+    (3, np.zeros((3, 3)), 'sizes must be'),
+])
+def test_badly_packed_obstacles_are_refused(field, value, problem):
+    """Arrays that are not what pack_obstacles gives raise a ValueError naming the array."""
+    packed = list(pack_obstacles(_scene_obstacles()[1:3]))
+    packed[field] = value
+    with pytest.raises(ValueError, match=problem):
+        pairwise_signed_distance(tuple(packed), np.zeros((1, 3)))
+    with pytest.raises(ValueError, match='finite'):
+        pairwise_signed_distance(pack_obstacles(()), [[0.0, np.inf, 0.0]])
 
 
 @numba.njit(cache=False)

@@ -2,11 +2,14 @@
 Compiled signed distance of a point to a posed primitive solid (``docs/obstacles.md``).
 
 :func:`signed_distance_at` is the package's one implementation of the obstacles' signed-distance
-query (:meth:`cbha_inverse.core.obstacles.Obstacle.signed_distance` loops it over points through
-:func:`signed_distances_into`; compiled callers call it per point). For a point it returns the
-distance ``φ`` to the surface (negative inside the solid) and writes the outward unit normal
-``n = ∇φ``, the closest point of the surface ``p - φ n`` and the Hessian ``H = ∇n`` of the
-distance, all in base-frame axes.
+query: for a point it returns the distance ``φ`` to the surface (negative inside the solid) and
+writes the outward unit normal ``n = ∇φ``, the closest point of the surface ``p - φ n`` and the
+Hessian ``H = ∇n`` of the distance, all in base-frame axes. Compiled callers call it per point;
+:meth:`cbha_inverse.core.obstacles.Obstacle.signed_distance` loops it over points
+(:func:`signed_distances_into`), :func:`cbha_inverse.core.obstacles.pairwise_signed_distance`
+over points and obstacles (:func:`pairwise_signed_distances_into`). Every caller passes the
+obstacle's arrays read-only (an ``Obstacle``'s own, ``read_only_packed`` of the packed arrays,
+a record's read-only fields), so that one compiled copy serves them all (``docs/design.md``).
 
 An obstacle is its shape code (:data:`PLANE` ... :data:`CYLINDER`, the order of
 :data:`cbha_inverse.core.obstacles.SHAPES`), its pose (``position``, and ``rotation``, its axes
@@ -119,6 +122,36 @@ def signed_distances_into(shape, position, rotation, sizes, points, distance, no
     for i in range(points.shape[0]):
         distance[i] = signed_distance_at(shape, position, rotation, sizes, points[i], normal[i],
                                          closest[i], curvature[i])
+
+
+@numba.njit(cache=True)
+def pairwise_signed_distances_into(shapes, positions, rotations, sizes, points, distance, normal,
+                                   closest, curvature):
+    """
+    Write the signed distance of N points to each of ``o`` obstacles (every pair).
+
+    Parameters
+    ----------
+    shapes : (o,) int64 ndarray
+        Shape codes.
+    positions, rotations, sizes : (o, 3), (o, 3, 3), (o, 3) ndarray
+        The obstacles' poses and sizes, one row each, as :func:`signed_distance_at` takes them
+        (:func:`cbha_inverse.core.obstacles.pack_obstacles`).
+    points : (N, 3) ndarray  [m]
+        The points, base frame.
+    distance : (N, o) ndarray  [m]
+        Receives the signed distance of point ``i`` to obstacle ``j`` at ``[i, j]``.
+    normal, closest : (N, o, 3) ndarray
+        Receive the outward unit normals and the closest surface points [m].
+    curvature : (N, o, 3, 3) ndarray  [1/m]
+        Receives the Hessians of the distance.
+
+    """
+    for i in range(points.shape[0]):
+        for j in range(shapes.size):
+            distance[i, j] = signed_distance_at(shapes[j], positions[j], rotations[j], sizes[j],
+                                                points[i], normal[i, j], closest[i, j],
+                                                curvature[i, j])
 
 
 # --- the primitives, in their own frame (local coordinates x, y, z of the point) -------------
