@@ -16,7 +16,8 @@ EXPORTS_STAMP := $(VENV)/.rosidl-exports-stamp
 INTERFACES_STAMP := $(VENV)/.interfaces-stamp
 INTERFACE_FILES := $(shell find cbha_inverse/interfaces -type f -not -name '*.pyc')
 KERNEL_SOURCES := $(wildcard cbha_inverse/core/_kernels/*.py)
-KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels.py \
+KERNEL_TESTS ?= test/core/test_core_kernels_qp.py test/core/test_core_kernels_rows_qp.py \
+  test/core/test_core_obstacle_rows.py test/core/test_core_kernels.py \
   test/core/test_core_linalg_btd.py test/core/test_core_tick.py test/core/test_core_links.py \
   test/core/test_core_so3.py test/core/test_core_actuation.py test/core/test_core_sensors.py \
   test/core/test_core_statics.py test/core/test_solver_paths.py test/core/test_core_records.py \

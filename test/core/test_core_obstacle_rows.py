@@ -6,6 +6,8 @@ from cbha_inverse.core.inverse.solver import InverseSolver
 from cbha_inverse.core.obstacles import Obstacle
 from cbha_inverse.core.so3 import so3_exp
 from cbha_inverse.scene import load_scene
+import numba
+from numba.core.runtime import _nrt_python, rtsys
 import numpy as np
 import pytest
 
@@ -141,3 +143,142 @@ def test_bad_obstacles_are_refused(table_scene):
                          gravity=table_scene.gravity)
     with pytest.raises(ValueError, match='collision'):
         bare.set_obstacles(table_scene.obstacles)
+
+
+def _twins(scene, state, actuation, obstacles, **options):
+    """Return the compiled solver and the proxsuite one, at one state, with the obstacles."""
+    solvers = []
+    for qp_solver in ('active_set', 'proxsuite'):
+        solver = scene.make_inverse_solver(qp_solver=qp_solver, **options)
+        solver.set_obstacles(obstacles)
+        solver.reset(state, actuation)
+        solvers.append(solver)
+    return solvers
+
+
+def test_the_compiled_rows_tick_matches_proxsuite_on_the_rows_qp(table_scene):
+    """
+    Along a run toward a target under the table, the compiled tick's rows QP is proxsuite's.
+
+    At each state of the run both solvers tick from it (reset there: the same history) and
+    solve the same QP (the slack eliminated in the compiled one, ``RowsQP`` in proxsuite): the
+    same actuation to proxsuite's accuracy, the same rows, slack and statuses.
+    """
+    target = table_scene.rest_effector_positions[0] + [0.0, 0.0, -0.08]
+    span = table_scene.upper_bounds - table_scene.lower_bounds
+    state = _equilibrium(table_scene, np.zeros(6))
+    compiled, reference = _twins(table_scene, state, np.zeros(6), table_scene.obstacles)
+    run = table_scene.make_inverse_solver()
+    run.reset(state, np.zeros(6))
+    rows_seen = 0
+    for _ in range(30):
+        for solver in (compiled, reference):
+            solver.reset(run.state, run.actuation)
+        a, b = compiled.step(target), reference.step(target)
+        np.testing.assert_allclose(a.actuation, b.actuation, rtol=0.0, atol=1e-5 * span.max())
+        assert a.obstacle_rows == b.obstacle_rows and a.status == b.status
+        if a.obstacle_rows:
+            np.testing.assert_allclose(a.obstacle_violation, b.obstacle_violation, atol=1e-8)
+            rows_seen += 1
+        run.step(target)
+        run.prepare()
+    assert rows_seen > 10
+    assert a.status == 'unreachable'
+
+
+def test_a_pushed_arm_reads_obstacle_in_both_solvers(table_scene):
+    """A row that cannot hold: the compiled tick's slack is proxsuite's."""
+    sunk = Obstacle('sunk', 'plane', [0.0, 0.0, -0.01], np.eye(3))
+    state = _equilibrium(table_scene, np.zeros(6))
+    compiled, reference = _twins(table_scene, state, np.zeros(6), [sunk], max_step=0.01)
+    target = table_scene.rest_effector_positions[0]
+    a, b = compiled.step(target), reference.step(target)
+    assert a.status == b.status == 'obstacle'
+    assert a.obstacle_violation > VIOLATION_TOLERANCE
+    np.testing.assert_allclose(a.obstacle_violation, b.obstacle_violation, rtol=1e-6)
+    np.testing.assert_allclose(a.actuation, b.actuation, rtol=0.0, atol=1.0)
+
+
+def test_obstacles_replaced_at_run_time_change_the_rows(table_scene):
+    """Two, one, three obstacles and none in turn: each tick's rows are those of its obstacles."""
+    target = table_scene.rest_effector_positions[0] + [0.0, 0.0, -0.08]
+    table, post = table_scene.obstacles
+    ball = Obstacle('ball', 'sphere', table_scene.rest_effector_positions[0] + [0.0, 0.0, -0.04],
+                    np.eye(3), radius=0.01)
+    solver = table_scene.make_inverse_solver()
+    reference = table_scene.make_inverse_solver(qp_solver='proxsuite')
+    for obstacles in ([table, post], [ball], [post, ball, table], [], [table]):
+        solver.set_obstacles(obstacles)
+        reference.set_obstacles(obstacles)
+        for _ in range(10):
+            solver.step(target)
+            solver.prepare()
+        # one tick of both from the run's state (reset there: the same history)
+        reference.reset(solver.state, solver.actuation)
+        solver.reset(solver.state, solver.actuation)
+        a, b = solver.step(target), reference.step(target)
+        names = {o.name for o in obstacles}
+        rows = solver.obstacle_rows
+        assert (rows is None) == (not obstacles)
+        if rows is not None:
+            assert set(rows.names) <= names and rows.count == len(rows.names)
+        assert a.obstacle_rows == b.obstacle_rows
+        np.testing.assert_allclose(a.actuation, b.actuation, rtol=0.0, atol=1.0)
+        assert (a.obstacle_rows > 0) == bool(names & {'ball', 'table'})
+
+
+def test_a_long_step_adds_the_rows_of_the_spheres_it_carries_into_an_obstacle(
+        table_scene, monkeypatch):
+    """
+    A table beyond the activation distance, a target far under it: one tick keeps the margin.
+
+    Without the check of the step (one solve per tick) the tick's step sinks the tip's sphere
+    into the table, which had no row at the linearisation.
+    """
+    state = _equilibrium(table_scene, np.zeros(6))
+    positions = state.positions
+    radii = table_scene.collision.radii
+    lowest = (positions[table_scene.collision.frames, 2] - radii).min()
+    table = Obstacle('table', 'plane', [0.0, 0.0, lowest - 0.008], np.eye(3))
+    target = table_scene.rest_effector_positions[0] + [0.0, 0.0, -0.1]
+    clearance = {}
+    for rounds in (4, 1):
+        monkeypatch.setattr('cbha_inverse.core.inverse.solver.ENTERING_ROUNDS', rounds)
+        solver = table_scene.make_inverse_solver(obstacle_activation=0.001)
+        solver.set_obstacles([table])
+        solver.reset(state, np.zeros(6))
+        solver.step(target)
+        clearance[rounds] = table_scene.collision.clearances(solver.state.positions,
+                                                             [table]).min()
+    assert clearance[4] > MARGIN - 1e-3
+    assert clearance[1] < MARGIN - 3e-3
+
+
+def test_ticks_with_rows_are_one_compiled_call_that_allocates_nothing(table_scene):
+    """
+    A tick holding a sphere off a ball: its rows and their QP run in the one compiled call.
+
+    numba counts every allocation of its runtime: one wrapper of the targets per tick (the one
+    array a tick passes to compiled code), nothing else (the rows' buffers are the record's).
+    """
+    actuation = 0.3 * (table_scene.upper_bounds - table_scene.lower_bounds)
+    state = _equilibrium(table_scene, actuation)
+    centre = state.positions[16] + [0.0, 0.0, -(table_scene.collision.radii[-1] + 0.008)]
+    ball = Obstacle('ball', 'sphere', centre, np.eye(3), radius=0.005)
+    solver = table_scene.make_inverse_solver(obstacle_activation=0.005)
+    solver.set_obstacles([ball])
+    solver.reset(state, actuation)
+    target = np.array(table_scene.forward(actuation, strict=True).effector_positions)
+    for _ in range(20):
+        solver.step(target)
+    _nrt_python.memsys_enable_stats()
+    try:
+        before = rtsys.get_allocation_stats()
+        results = [solver.step(target) for _ in range(200)]
+        after = rtsys.get_allocation_stats()
+    finally:
+        _nrt_python.memsys_disable_stats()
+    assert all(r.obstacle_rows == 1 and r.status in ('solved', 'saturated') for r in results)
+    made = after.alloc - before.alloc
+    assert after.free - before.free == made
+    assert made == (0 if numba.config.DISABLE_JIT else 200)

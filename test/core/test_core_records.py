@@ -125,7 +125,7 @@ def test_every_record_of_the_kernels_is_declared_with_named_documented_fields():
                if isinstance(value, type) and issubclass(value, Record)
                and value is not Record]
     assert sorted(record.__name__ for record in records) == [
-        'EquilibriumRecord', 'EstimatorRecord', 'NewtonRecord', 'TickRecord']
+        'EquilibriumRecord', 'EstimatorRecord', 'NewtonRecord', 'ObstacleRowsRecord', 'TickRecord']
     for record in records:
         names = [field.name for field in record.fields]
         assert len(set(names)) == len(names) and all(name.isidentifier() for name in names)

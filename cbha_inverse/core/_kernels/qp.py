@@ -1,6 +1,9 @@
 """
 Compiled kernels of the actuation QP (paper eq. 13): its matrices, the active-set box-QP solver.
 
+:func:`rows_qp_into` solves the QP with slackened rows (the obstacle rows,
+``docs/obstacles.md``) by an active set over the rows around the box solver.
+
 The QP of a control tick is tiny (``m`` = 6..16 actuators) and solved every tick, so a numpy
 implementation spends its time in call overhead (dozens of 1-3 us calls) rather than arithmetic.
 These kernels hold the arithmetic of :mod:`cbha_inverse.core.inverse.qp` (``qp_matrices``,
@@ -21,6 +24,9 @@ MAX_ITERATIONS = 1
 """Status code of :func:`active_set_box_qp`: the iteration limit was reached."""
 SINGULAR = 2
 """Status code of :func:`active_set_box_qp`: a free block is not positive definite."""
+ROWS_UNSETTLED = 3
+"""Status code of :func:`rows_qp`: the rows' states still disagree with their signs after the
+round limit."""
 
 _BOUND_SLACK = 1e-13
 """Box violation (dimensionless) tolerated before a free variable is made active (round-off)."""
@@ -77,7 +83,8 @@ def qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, row_weig
     """
     :func:`qp_hessians` into preallocated ``hessian``, ``tracking`` (m, m) and ``w`` (r, m).
 
-    ``w_ea`` must not be ``w`` (it is read while ``w`` is written).
+    ``w_ea`` must not be ``w`` (it is read while ``w`` is written). Returns the normaliser
+    ``ν`` [m², the rows' units squared].
     """
     rows, m = w_ea.shape
     for r in range(rows):
@@ -115,6 +122,7 @@ def qp_hessians_into(w_ea, w_aa, scale, energy_weight, proximal_weight, row_weig
             hessian[i, j] = h
             hessian[j, i] = h
         hessian[i, i] += proximal_weight
+    return norm
 
 
 @numba.njit(cache=True)
@@ -469,3 +477,158 @@ def bounds_binding_into(tracking_hessian, tracking_gradient, lower, upper, x, to
         if near_lower or near_upper:
             grad = _gradient_entry(tracking_hessian, tracking_gradient, x, i)
             binding[i] = (near_lower and grad > tolerance) or (near_upper and grad < -tolerance)
+
+
+@numba.njit(cache=True)
+def rows_qp(h, g, lower, upper, rows, constant, penalty, state, row_on, max_iterations,
+            max_rounds):
+    """
+    Solve the box QP with slackened rows: ``min ½ xᵀ H x + gᵀ x + ½ p Σ max(0, -(A x + b))²``.
+
+    The problem of :class:`cbha_inverse.core.inverse.qp.RowsQP` (``min ½ xᵀ H x + gᵀ x + ½ |t|²``
+    over ``lower ≤ x ≤ upper``, ``t ≥ 0``, ``A x + b + ℓ t ≥ 0``) with its slack eliminated: at
+    the optimum ``t_i = max(0, -(A_i x + b_i)) / ℓ``, so it is this box QP with a convex
+    piecewise-quadratic penalty, ``p = 1 / ℓ²``. With the set ``S`` of the rows "on" (their
+    penalty active), the penalised problem is the box QP of
+
+        H_S = H + p Σ_{i∈S} a_i a_iᵀ,     g_S = g + p Σ_{i∈S} b_i a_i,
+
+    solved by :func:`active_set_box_qp_into` (warm-started from ``state``); a row is on when
+    ``A_i x + b_i < 0`` at that solution and off when it is positive: the rows whose state
+    disagrees are flipped (all of them in rounds 1-3, then the first one) and the box QP solved
+    again, until every state agrees with its row's sign within round-off (``1e-12`` of the
+    row's terms). Then ``x`` satisfies the KKT conditions of the penalised problem, which are
+    those of the box QP of ``H_S``, ``g_S``.
+
+    Parameters
+    ----------
+    h : (m, m) ndarray
+        Symmetric positive definite Hessian (normalised).
+    g : (m,) ndarray
+        Gradient.
+    lower, upper : (m,) ndarray
+        Box.
+    rows : (r, m) ndarray
+        ``A``.
+    constant : (r,) ndarray
+        ``b``.
+    penalty : float
+        ``p = 1 / ℓ²`` (> 0).
+    state : (m,) ndarray of int8
+        Warm start of the box's active set; not modified.
+    row_on : (r,) ndarray of bool
+        Warm start of the rows' states; not modified.
+    max_iterations : int
+        Iteration limit of each box QP.
+    max_rounds : int
+        Limit of the box QPs solved.
+
+    Returns
+    -------
+    x : (m,) ndarray
+        The solution clipped into the box (undefined unless the status is :data:`SOLVED`).
+    status : int
+        :data:`SOLVED`, :data:`ROWS_UNSETTLED`, or the box QP's :data:`MAX_ITERATIONS` or
+        :data:`SINGULAR`.
+    iterations : int
+        Active-set iterations over all rounds.
+    rounds : int
+        Box QPs solved.
+    state : (m,) ndarray of int8
+        The final active set of the box.
+    row_on : (r,) ndarray of bool
+        The final rows' states.
+    values : (r,) ndarray
+        ``A x + b`` at the solution.
+
+    """
+    m, r = g.size, constant.size
+    state, row_on = state.copy(), row_on.copy()
+    x, values = np.empty(m), np.empty(r)
+    status, iterations, rounds = rows_qp_into(
+        h, g, lower, upper, rows, constant, penalty, state, row_on, max_iterations,
+        max_rounds, x, np.empty(m, dtype=np.bool_), np.empty(m, dtype=np.int8),
+        np.empty(m, dtype=np.int64), np.empty((m, m)), np.empty(m), np.empty((m, m)),
+        np.empty(m), values)
+    return x, status, iterations, rounds, state, row_on, values
+
+
+@numba.njit(cache=True)
+def rows_qp_into(h, g, lower, upper, rows, constant, penalty, state, row_on, max_iterations,
+                 max_rounds, x, free, pivot, index, a, y, penalised_h, penalised_g, values):
+    """
+    :func:`rows_qp` in place: ``state`` and ``row_on`` are updated, ``x``, ``values`` written.
+
+    The workspace of :func:`active_set_box_qp_into` (``free``, ``pivot``, ``index``, ``a``,
+    ``y``) and ``penalised_h`` (m, m), ``penalised_g`` (m,): ``H_S``, ``g_S``. Returns
+    ``(status, iterations, rounds)``.
+    """
+    iterations = 0
+    for rounds in range(1, max_rounds + 1):
+        penalised_qp_into(h, g, rows, constant, penalty, row_on, penalised_h, penalised_g)
+        status, done = active_set_box_qp_into(penalised_h, penalised_g, lower, upper, state,
+                                              max_iterations, x, free, pivot, index, a, y)
+        iterations += done
+        if status != SOLVED:
+            return status, iterations, rounds
+        first = -1
+        for i in range(constant.size):
+            value, size = constant[i], abs(constant[i])
+            for j in range(x.size):
+                value += rows[i, j] * x[j]
+                size += abs(rows[i, j] * x[j])
+            values[i] = value
+            round_off = 1e-12 * size
+            if (row_on[i] and value > round_off) or (not row_on[i] and value < -round_off):
+                if first < 0:
+                    first = i
+                if rounds <= 3:
+                    row_on[i] = not row_on[i]
+        if first < 0:
+            return SOLVED, iterations, rounds
+        if rounds > 3:
+            row_on[first] = not row_on[first]
+    return ROWS_UNSETTLED, iterations, max_rounds
+
+
+@numba.njit(cache=True)
+def penalised_qp_into(h, g, rows, constant, penalty, row_on, penalised_h, penalised_g):
+    """
+    Write ``H_S = H + p Σ_{i∈S} a_i a_iᵀ`` and ``g_S = g + p Σ_{i∈S} b_i a_i`` (:func:`rows_qp`).
+
+    Parameters
+    ----------
+    h : (m, m) ndarray
+        ``H``.
+    g : (m,) ndarray
+        ``g``.
+    rows : (r, m) ndarray
+        ``A`` (row ``i``: ``a_iᵀ``).
+    constant : (r,) ndarray
+        ``b``.
+    penalty : float
+        ``p``.
+    row_on : (r,) ndarray of bool
+        ``S``.
+    penalised_h : (m, m) ndarray
+        Receives ``H_S`` (exactly symmetric).
+    penalised_g : (m,) ndarray
+        Receives ``g_S``.
+
+    """
+    m = g.size
+    for i in range(m):
+        penalised_g[i] = g[i]
+        for j in range(m):
+            penalised_h[i, j] = h[i, j]
+    for k in range(constant.size):
+        if not row_on[k]:
+            continue
+        for i in range(m):
+            weighted = penalty * rows[k, i]
+            penalised_g[i] += weighted * constant[k]
+            for j in range(i, m):
+                penalised_h[i, j] += weighted * rows[k, j]
+    for i in range(m):
+        for j in range(i + 1, m):
+            penalised_h[j, i] = penalised_h[i, j]

@@ -7,11 +7,13 @@ the order of the paper's section IV:
 1. :func:`linearise_tick`, steps 1-2: the equilibrium's residual, ``J_aᵀ`` and symmetric
    tangent at the current state (:func:`~cbha_inverse.core._kernels.evaluation.evaluate`), the
    block Cholesky ``K = L Lᵀ`` with the forward sweep of ``[r, J_aᵀ]``, the sweep of ``J_eᵀ``,
-   then :func:`project_tick`: ``W_ea``, ``W_aa``, ``δ_free`` (eq. 11-12), the equilibrium gap
-   and the QP matrices; a call that also solves stops here when the gap exceeds ``gap_limit``;
+   then :func:`project_tick`: ``W_ea``, ``W_aa``, ``δ_free`` (eq. 11-12), the equilibrium gap,
+   the QP matrices and, with obstacles, the obstacle rows (:func:`obstacle_rows_of`); a call
+   that also solves stops here when the gap exceeds ``gap_limit``;
 2. :func:`solve_tick`, steps 3-4: the free gaps of the targets (:func:`free_gaps_of`, with the
    orientation targets of ``axis`` and ``pose`` effectors), the QP vectors, the active-set box QP
-   (eq. 13), its outcome, and the Newton step of the same factorization
+   (eq. 13; with obstacle rows, the active set over the rows around it, :func:`solve_qp_of`),
+   its outcome, and the Newton step of the same factorization
    (:func:`apply_pending_step`: ``dq = K⁻¹ (r + J_aᵀ Δλ)``).
 
 Its buffers and the model's constant arrays are one :class:`TickRecord` (fields
@@ -24,13 +26,17 @@ import math
 from cbha_inverse.core._kernels.block_band import (block_backward, block_cholesky_forward,
                                                    block_forward, first_nonzero_rows)
 from cbha_inverse.core._kernels.evaluation import evaluate
+from cbha_inverse.core._kernels.obstacle_rows import (add_entering_pairs, column_block_of,
+                                                      row_outcome_of, rows_from_projection_of,
+                                                      scale_rows_of, select_pairs_of)
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_jacobian_into,
                                                    effector_points_into, free_gaps_into,
                                                    orientation_errors_into,
                                                    project_effectors_into, target_status,
                                                    tick_outcome_into)
 from cbha_inverse.core._kernels.qp import (active_set_box_qp_into, bounds_binding_into,
-                                           qp_hessians_into, qp_vectors_into, SOLVED)
+                                           qp_hessians_into, qp_vectors_into, rows_qp_into,
+                                           SOLVED)
 from cbha_inverse.core._kernels.records import define_record, Field, Record, RecordType
 from cbha_inverse.core._kernels.retraction import apply_linear_step_into
 import numba
@@ -41,6 +47,8 @@ F8, I8 = np.float64, np.int64
 
 TICK_FIELDS = (
     Field('system', 'record', 0, 'the equilibrium evaluator (evaluation.EquilibriumRecord)'),
+    Field('rows', 'record', 0, 'the obstacles, the collision spheres and the obstacle rows '
+          '(obstacle_rows.ObstacleRowsRecord; no obstacle: none)'),
     # the state
     Field('positions', F8, 2, '(n + 1, 3) frame origins [m]'),
     Field('rotations', F8, 3, '(n + 1, 3, 3) frame rotations'),
@@ -85,6 +93,7 @@ TICK_FIELDS = (
     Field('hessian', F8, 2, "(m, m) the QP's normalised Hessian"),
     Field('tracking', F8, 2, '(m, m) its tracking part'),
     Field('weighted_w', F8, 2, '(3k + o, m) Ω² W_ea σ / ν'),
+    Field('tracking_norm', F8, 1, "(1,) ν, the tracking term's normaliser [m²]"),
     Field('energy_weight', float, 0, 'ε_E'),
     Field('proximal_weight', float, 0, 'ε_P'),
     Field('orientation_errors', F8, 2, '(k, 3) orientation error ψ of every effector [rad]'),
@@ -290,9 +299,35 @@ def project_tick(tick):
         tick.moved)
     position_rows = 3 * tick.effector_frames.size
     tick.equilibrium_gap[0] = equilibrium_gap_of(tick.moved[:position_rows])
-    qp_hessians_into(tick.w_ea, tick.w_aa, tick.scale, tick.energy_weight, tick.proximal_weight,
-                     tick.row_weights, tick.hessian, tick.tracking, tick.weighted_w)
+    tick.tracking_norm[0] = qp_hessians_into(
+        tick.w_ea, tick.w_aa, tick.scale, tick.energy_weight, tick.proximal_weight,
+        tick.row_weights, tick.hessian, tick.tracking, tick.weighted_w)
+    if tick.rows.obstacle_shapes.size:
+        obstacle_rows_of(tick)
     return residual_norm
+
+
+@numba.njit(cache=True)
+def obstacle_rows_of(tick):
+    """
+    Write the obstacle rows of the tick's linearisation into its ``rows``; return their count.
+
+    The pairs within reach at the linearisation's frames
+    (:func:`~cbha_inverse.core._kernels.obstacle_rows.select_pairs_of`), the projection of
+    their spheres' centres (:func:`project_points_of`) and the rows' ``G``, ``c``
+    (:func:`~cbha_inverse.core._kernels.obstacle_rows.rows_from_projection_of`,
+    ``docs/obstacles.md``).
+    """
+    rows = tick.rows
+    count = select_pairs_of(rows, tick.positions)
+    if count:
+        points = 3 * count
+        project_points_of(tick, rows.row_frames[:count], rows.offsets[:count],
+                          rows.levers[:count], column_block_of(rows, tick.solved.shape[0]),
+                          rows.starts[:points], rows.w_pa[:points], rows.w_aa,
+                          rows.free_centres[:points], rows.moved[:points])
+        rows_from_projection_of(rows, tick.positions)
+    return count
 
 
 @numba.njit(cache=True)
@@ -391,10 +426,13 @@ def solve_tick(targets, tick, apply_step):
     Solve a tick's QP on a linearisation and apply it (steps 3-4 of the tick), in place.
 
     ``δ_free`` (:func:`free_gaps_of`), the QP vectors
-    (:func:`~cbha_inverse.core._kernels.qp.qp_vectors_into`), the active-set box QP
-    (:func:`~cbha_inverse.core._kernels.qp.active_set_box_qp_into`, warm-started from
-    ``active_set``), the outcome
-    (:func:`~cbha_inverse.core._kernels.projection.tick_outcome_into`) and the binding bounds
+    (:func:`~cbha_inverse.core._kernels.qp.qp_vectors_into`), the QP (:func:`solve_qp_of`: the
+    active-set box QP, warm-started from ``active_set``, with the obstacle rows when there are
+    some), the outcome (:func:`~cbha_inverse.core._kernels.projection.tick_outcome_into`), the
+    check of a long step for spheres entering obstacles without a row (:func:`add_entering_rows`:
+    a step moving an actuator by more than the rows' ``entering_move`` adds their rows and
+    solves again, ``entering_rounds`` solves at most), the rows' outcome
+    (:func:`~cbha_inverse.core._kernels.obstacle_rows.row_outcome_of`) and the binding bounds
     (:func:`~cbha_inverse.core._kernels.qp.bounds_binding_into`). With ``apply_step`` the
     Newton step of the factorization (:func:`apply_pending_step`) moves the frames and the
     effector positions of the new state are written; without it, those the linear model
@@ -413,10 +451,10 @@ def solve_tick(targets, tick, apply_step):
     -------
     code : int
         :data:`~cbha_inverse.core._kernels.qp.SOLVED`, the active set's failure code
-        (``MAX_ITERATIONS``, ``SINGULAR``: the QP vectors are written, nothing else) or
-        :data:`REJECTED`.
+        (``MAX_ITERATIONS``, ``SINGULAR``, ``ROWS_UNSETTLED``: the QP vectors are written, and
+        the rows, nothing else) or :data:`REJECTED`.
     iterations : int
-        Active-set iterations.
+        Active-set iterations (of all solves).
     largest_gap : float  [m]
         Largest predicted effector gap.
     largest_move : float
@@ -431,17 +469,22 @@ def solve_tick(targets, tick, apply_step):
     qp_vectors_into(tick.weighted_w, tick.proximal_weight, tick.scale, delta_free,
                     tick.actuation, tick.lower, tick.upper, tick.rate, tick.gradient,
                     tick.box_lower, tick.box_upper, tick.x_previous, tick.tracking_gradient)
-    code, iterations = active_set_box_qp_into(
-        tick.hessian, tick.gradient, tick.box_lower, tick.box_upper, tick.active_set,
-        tick.max_iterations, tick.x, tick.free, tick.pivot, tick.qp_index, tick.qp_factor,
-        tick.qp_solve)
-    if code != SOLVED:
-        return code, iterations, 0.0, 0.0, False
-    largest_gap, largest_move, finite = tick_outcome_into(
-        tick.w_ea, delta_free, tick.scale, tick.x, tick.x_previous, tick.lower, tick.upper,
-        3 * k, tick.proposed, gap)
-    if not finite:
-        return REJECTED, iterations, largest_gap, largest_move, False
+    rows = tick.rows
+    iterations = 0
+    for _ in range(max(rows.entering_rounds, 1)):
+        code, done = solve_qp_of(tick)
+        iterations += done
+        if code != SOLVED:
+            return code, iterations, 0.0, 0.0, False
+        largest_gap, largest_move, finite = tick_outcome_into(
+            tick.w_ea, delta_free, tick.scale, tick.x, tick.x_previous, tick.lower, tick.upper,
+            3 * k, tick.proposed, gap)
+        if not finite:
+            return REJECTED, iterations, largest_gap, largest_move, False
+        if (not rows.obstacle_shapes.size or largest_move <= rows.entering_move
+                or not add_entering_rows(tick, tick.proposed)):
+            break
+    row_outcome_of(rows, tick.x, tick.proposed)
     if tick.orientation_effectors.size:
         orientation_gap_of(tick)
     bounds_binding_into(tick.tracking, tick.tracking_gradient, tick.box_lower, tick.box_upper,
@@ -462,6 +505,68 @@ def solve_tick(targets, tick, apply_step):
             for i in range(3):
                 effector_positions[e, i] = targets[e, i] + gap[3 * e + i]
     return SOLVED, iterations, largest_gap, largest_move, binding
+
+
+@numba.njit(cache=True)
+def solve_qp_of(tick):
+    """
+    Solve the tick's QP into ``x``: the box QP, or with the obstacle rows the rows QP.
+
+    Without rows, :func:`~cbha_inverse.core._kernels.qp.active_set_box_qp_into`; with ``r``
+    rows, :func:`~cbha_inverse.core._kernels.qp.rows_qp_into` on ``A = G σ``, ``b = c`` and
+    the penalty ``ρ / ν`` of their slack (``docs/obstacles.md``), each row's state started from
+    its sign at ``x_prev`` (:func:`~cbha_inverse.core._kernels.obstacle_rows.scale_rows_of`),
+    ``4 r + 10`` box QPs at most. Both warm-start from ``active_set``.
+
+    Returns
+    -------
+    code : int
+        :data:`~cbha_inverse.core._kernels.qp.SOLVED` or the solver's failure code.
+    iterations : int
+        Active-set iterations.
+
+    """
+    rows = tick.rows
+    count = rows.count[0]
+    if not count:
+        return active_set_box_qp_into(
+            tick.hessian, tick.gradient, tick.box_lower, tick.box_upper, tick.active_set,
+            tick.max_iterations, tick.x, tick.free, tick.pivot, tick.qp_index, tick.qp_factor,
+            tick.qp_solve)
+    scale_rows_of(rows, tick.scale, tick.x_previous)
+    code, iterations, _ = rows_qp_into(
+        tick.hessian, tick.gradient, tick.box_lower, tick.box_upper, rows.scaled_matrix[:count],
+        rows.constant[:count], rows.weight / tick.tracking_norm[0], tick.active_set,
+        rows.row_on[:count], tick.max_iterations, 4 * count + 10, tick.x, tick.free, tick.pivot,
+        tick.qp_index, tick.qp_factor, tick.qp_solve, rows.penalised_hessian,
+        rows.penalised_gradient, rows.values[:count])
+    return code, iterations
+
+
+@numba.njit(cache=True)
+def add_entering_rows(tick, actuation):
+    """
+    Add the rows of the pairs the step to ``actuation`` carries within the margin; relinearise.
+
+    The step of the linearisation to ``actuation`` (m,) [Pa, N] on copies of the frames
+    (:func:`step_to_into` into the rows' ``stepped_positions`` and ``stepped_rotations``), the
+    pairs without a row it brings within ``margin``
+    (:func:`~cbha_inverse.core._kernels.obstacle_rows.add_entering_pairs`) and, when it added
+    one, the rows again at the same linearisation (:func:`obstacle_rows_of`): the caller solves
+    again. Returns whether a pair was added.
+    """
+    rows = tick.rows
+    positions, rotations = rows.stepped_positions, rows.stepped_rotations
+    for f in range(positions.shape[0]):
+        for i in range(3):
+            positions[f, i] = tick.positions[f, i]
+            for j in range(3):
+                rotations[f, i, j] = tick.rotations[f, i, j]
+    step_to_into(tick, actuation, positions, rotations)
+    if not add_entering_pairs(rows, positions):
+        return False
+    obstacle_rows_of(tick)
+    return True
 
 
 @numba.njit(cache=True)
@@ -529,9 +634,7 @@ def pending_step_into(tick, positions, rotations):
     """
     Apply the Newton step of the tick's linearisation to given frames, in place.
 
-    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (``change`` receives ``λ - λ_prev``), by
-    :func:`~cbha_inverse.core._kernels.retraction.apply_linear_step_into` on ``solved``: with
-    ``half_solved`` the half-solves, then one backward sweep of the block factor.
+    The step to the tick's ``actuation`` (:func:`step_to_into`).
 
     Parameters
     ----------
@@ -543,12 +646,42 @@ def pending_step_into(tick, positions, rotations):
         Frame rotations (updated).
 
     """
+    step_to_into(tick, tick.actuation, positions, rotations)
+
+
+@numba.njit(cache=True)
+def step_to_into(tick, actuation, positions, rotations):
+    """
+    Apply the Newton step of the tick's linearisation to an actuation to given frames, in place.
+
+    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (``change`` receives ``λ - λ_prev``), by
+    :func:`~cbha_inverse.core._kernels.retraction.apply_linear_step_into` on ``solved``: with
+    ``half_solved`` the half-solves, then one backward sweep of the block factor.
+
+    Parameters
+    ----------
+    tick : TickRecord
+        The tick's buffers (a solved linearisation).
+    actuation : (m,) ndarray  [Pa, N]
+        ``λ``.
+    positions : (n + 1, 3) ndarray  [m]
+        Frame origins (updated).
+    rotations : (n + 1, 3, 3) ndarray
+        Frame rotations (updated).
+
+    """
     change, solved, system = tick.change, tick.solved, tick.system
     for j in range(change.size):
-        change[j] = tick.actuation[j] - tick.linearised[j]
+        change[j] = actuation[j] - tick.linearised[j]
     apply_linear_step_into(positions, rotations, solved[:, 0], solved[:, 1:], change,
                            tick.max_rotation, tick.increments,
                            system.blocks[:solved.shape[0] // 6], tick.half_solved[0])
+
+
+@numba.njit(cache=True)
+def attach_rows(tick, rows):
+    """Make ``rows`` (an ``ObstacleRowsRecord``) the tick's obstacle rows."""
+    tick.rows = rows
 
 
 @numba.njit(cache=True)

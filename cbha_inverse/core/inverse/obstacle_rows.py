@@ -3,9 +3,8 @@ The obstacle rows of the actuation QP: unilateral constraints on the collision s
 
 At each linearisation, the signed distance ``φ`` of every collision sphere's centre ``p_s``
 (:class:`cbha_inverse.core.contact.CollisionSpheres`, radius ``ρ_s``) to every obstacle
-(:meth:`cbha_inverse.core.obstacles.Obstacle.signed_distance`, outward normal ``n``) is queried;
-each (sphere, obstacle) pair whose clearance ``φ(p_s) - ρ_s`` is below the activation distance
-adds one row
+(outward normal ``n``) is queried; each (sphere, obstacle) pair whose clearance ``φ(p_s) - ρ_s``
+is below the activation distance adds one row
 
     φ(p_s) + nᵀ (p_s' - p_s) - ρ_s ≥ margin,     p_s' = offset_s + W_sa λ,
 
@@ -13,20 +12,24 @@ adds one row
 the centre, a point on its frame like an effector point: the same projection,
 :func:`cbha_inverse.core._kernels.tick.project_points_of`, one more block ``W_sa`` of ``W``).
 In the actuation ``λ`` a row reads ``G λ + c ≥ 0`` with ``G = nᵀ W_sa`` [m/Pa, m/N] and
-``c = φ - ρ_s - margin + nᵀ (offset_s - p_s)`` [m]. ``docs/obstacles.md`` describes the rows,
-their slack and what a tick reports.
+``c = φ - ρ_s - margin + nᵀ (offset_s - p_s)`` [m]. The rows are computed inside the compiled
+tick, at every linearisation (:func:`cbha_inverse.core._kernels.tick.obstacle_rows_of`, on the
+record of :mod:`cbha_inverse.core._kernels.obstacle_rows`); :class:`ObstacleRows` owns that
+record and reads it. ``docs/obstacles.md`` describes the rows, their slack, the QP and what a
+tick reports.
 """
 
 import math
 
-from cbha_inverse.core.obstacles import check_names, Obstacle
+from cbha_inverse.core._kernels import obstacle_rows as kernels
+from cbha_inverse.core._kernels.obstacle_rows import BINDING_TOLERANCE  # noqa: F401 (public)
+from cbha_inverse.core._kernels.records import make_record
+from cbha_inverse.core.obstacles import check_names, Obstacle, pack_obstacles
 import numpy as np
 
 VIOLATION_TOLERANCE = 1e-5
 """A row of a solved QP violated by more than this [m] means the rows cannot all hold: the
 tick reads ``'obstacle'``."""
-BINDING_TOLERANCE = 1e-6
-"""A row satisfied within this [m] binds: it holds the arm against the obstacle."""
 
 
 def checked_obstacles(obstacles):
@@ -47,9 +50,76 @@ def checked_obstacles(obstacles):
     return tuple(check_names(obstacles))
 
 
+def obstacle_rows_record(n_links, n_actuators, obstacles=(), frames=(), radii=(), margin=0.0,
+                         activation=0.0, weight=1.0, entering_move=math.inf,
+                         entering_rounds=1):
+    """
+    Return a new obstacle rows record and its arrays by field name.
+
+    Parameters
+    ----------
+    n_links, n_actuators : int
+        ``n``, ``m`` of the solver.
+    obstacles : sequence of cbha_inverse.core.obstacles.Obstacle
+        The obstacles (``o``; none: a record without rows).
+    frames : (s,) array_like of int
+        The collision spheres' frames (1..n).
+    radii : (s,) array_like  [m]
+        Their radii.
+    margin, activation : float  [m]
+        ``obstacle_margin``, ``obstacle_activation``.
+    weight : float
+        ``obstacle_weight`` ``ρ``.
+    entering_move : float
+        Fraction of an actuator's range a solve must move it by for the check of its step.
+    entering_rounds : int
+        Solves of a tick's QP at most.
+
+    Returns
+    -------
+    record : cbha_inverse.core._kernels.obstacle_rows.ObstacleRowsRecord
+    arrays : dict of str to ndarray
+
+    """
+    n, m = int(n_links), int(n_actuators)
+    shapes, positions, rotations, sizes = pack_obstacles(obstacles)
+    sphere_frames = np.array(frames, dtype=np.int64).reshape(-1)
+    s, o = sphere_frames.size, shapes.size
+    capacity = s * o
+    arrays = {
+        'obstacle_shapes': shapes, 'obstacle_positions': positions,
+        'obstacle_rotations': rotations, 'obstacle_sizes': sizes,
+        'sphere_frames': sphere_frames,
+        'sphere_radii': np.array(radii, dtype=float).reshape(-1),
+        'forced': np.zeros((s, o), dtype=np.bool_), 'count': np.zeros(1, dtype=np.int64),
+        'row_spheres': np.zeros(capacity, dtype=np.int64),
+        'row_obstacles': np.zeros(capacity, dtype=np.int64),
+        'row_frames': np.zeros(capacity, dtype=np.int64), 'distances': np.zeros(capacity),
+        'normals': np.zeros((capacity, 3)), 'matrix': np.zeros((capacity, m)),
+        'constant': np.zeros(capacity), 'normal': np.zeros(3), 'closest': np.zeros(3),
+        'curvature': np.zeros((3, 3)), 'offsets': np.zeros((capacity, 3)),
+        'levers': np.zeros((capacity, 3)), 'columns': np.zeros(6 * n * 3 * capacity),
+        'starts': np.zeros(3 * capacity, dtype=np.int64), 'w_pa': np.zeros((3 * capacity, m)),
+        'w_aa': np.zeros((m, m)), 'free_centres': np.zeros(3 * capacity),
+        'moved': np.zeros((3 * capacity, m + 1)), 'scaled_matrix': np.zeros((capacity, m)),
+        'values': np.zeros(capacity), 'row_on': np.zeros(capacity, dtype=np.bool_),
+        'penalised_hessian': np.zeros((m, m)), 'penalised_gradient': np.zeros(m),
+        'stepped_positions': np.zeros((n + 1, 3)), 'stepped_rotations': np.zeros((n + 1, 3, 3)),
+        'violation': np.full(1, math.nan), 'binds': np.zeros(1, dtype=np.bool_)}
+    record = make_record(kernels.ObstacleRowsRecord, kernels.new_obstacle_rows_record,
+                         margin=float(margin), activation=float(activation),
+                         weight=float(weight), entering_move=float(entering_move),
+                         entering_rounds=int(entering_rounds), **arrays)
+    return record, arrays
+
+
 class ObstacleRows:
     """
     The obstacle rows of one solver's linearisation (module docstring).
+
+    Builds the record of the obstacles, the spheres and the rows and attaches it to the tick
+    data: the compiled tick then computes the rows at every linearisation and solves its QP
+    with them. This object reads them.
 
     Parameters
     ----------
@@ -63,9 +133,18 @@ class ObstacleRows:
         A pair adds a row when its clearance is below ``margin + activation``.
     tick_data : cbha_inverse.core.inverse.tick_data.TickData
         The solver's tick buffers (the linearisation the rows project on).
+    weight : float
+        ``ρ`` of the rows' slack (``obstacle_weight``).
+    entering_move : float
+        A solve moving an actuator by more than this fraction of its range checks its step for
+        spheres entering an obstacle without a row.
+    entering_rounds : int
+        Solves of a tick's QP at most.
 
     Attributes
     ----------
+    record : cbha_inverse.core._kernels.obstacle_rows.ObstacleRowsRecord
+        The record (``tick_data.record.rows``).
     count : int
         Rows of the current linearisation.
     matrix : (count, m) ndarray  [m/Pa, m/N]
@@ -79,8 +158,9 @@ class ObstacleRows:
 
     """
 
-    def __init__(self, spheres, obstacles, margin, activation, tick_data):
-        """Check the parameters and keep the parts."""
+    def __init__(self, spheres, obstacles, margin, activation, tick_data, weight=1e6,
+                 entering_move=math.inf, entering_rounds=1):
+        """Check the parameters, build the record and attach it to the tick data."""
         for name, value in (('obstacle_margin', margin), ('obstacle_activation', activation)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be a finite distance >= 0 [m], got {value!r}')
@@ -91,102 +171,81 @@ class ObstacleRows:
         self.spheres = spheres
         self.obstacles = checked_obstacles(obstacles)
         self.margin, self.activation = float(margin), float(activation)
+        self.record, self._arrays = obstacle_rows_record(
+            n_links, tick_data.actuation.size, self.obstacles, spheres.frames, spheres.radii,
+            margin, activation, weight, entering_move, entering_rounds)
         self._data = tick_data
-        self._project = None
-        self._forced = set()
-        self._last_targets, self._last_warnings = None, ()
+        tick_data.attach_rows(self.record)
+        self._names = tuple(obstacle.name for obstacle in self.obstacles)
+        self._last_targets, self._last_warnings = b'', ()
         self.clear()
 
     def clear(self):
         """Drop the rows and the pairs :meth:`add_entering` added (no linearisation yet)."""
-        self._forced = set()
-        m = self._data.actuation.size
-        self.count = 0
-        self.matrix, self.constant = np.zeros((0, m)), np.zeros(0)
-        self.names, self.frames = (), np.zeros(0, dtype=np.int64)
+        self._arrays['count'][0] = 0
+        self._arrays['forced'][:] = False
+        self._arrays['violation'][0] = math.nan
+        self._arrays['binds'][0] = False
 
-    def linearise(self):
+    @property
+    def count(self):
+        """Return the number of rows of the current linearisation."""
+        return int(self._arrays['count'][0])
+
+    @property
+    def matrix(self):
+        """Return ``G`` (count, m) [m/Pa, m/N] (a view of the record)."""
+        return self._arrays['matrix'][:self.count]
+
+    @property
+    def constant(self):
+        """Return ``c`` (count,) [m] (a view of the record)."""
+        return self._arrays['constant'][:self.count]
+
+    @property
+    def names(self):
+        """Return the obstacle of each row (tuple of str)."""
+        return tuple(self._names[o] for o in self._arrays['row_obstacles'][:self.count])
+
+    @property
+    def frames(self):
+        """Return the sphere's frame of each row, (count,) int ndarray."""
+        return self._arrays['row_frames'][:self.count].copy()
+
+    def outcome(self):
         """
-        Build the rows at the tick data's linearisation (its frames, solves and ``λ_prev``).
-
-        The pairs within the activation distance, and those :meth:`add_entering` added since
-        the last :meth:`clear`.
+        Return the rows of the last compiled solve, their largest violation [m], whether one binds.
 
         Returns
         -------
-        int
-            The number of rows.
+        tuple of (int, float, bool)
 
         """
-        data = self._data
-        centres = self.spheres.centres(data.positions)
-        radii = self.spheres.radii
-        reach = self.margin + self.activation
-        sphere, names, distance, normal = [], [], [], []
-        for index, obstacle in enumerate(self.obstacles):
-            near = np.flatnonzero(obstacle.near(centres, radii + reach))
-            forced = [s for o, s in self._forced if o == index]
-            if forced:
-                near = np.union1d(near, forced)
-            if not near.size:
-                continue
-            query = obstacle.signed_distance(centres[near])
-            within = query.distance - radii[near] < reach
-            if forced:
-                within |= np.isin(near, forced)
-            active = np.flatnonzero(within)
-            sphere.append(near[active])
-            names += [obstacle.name] * active.size
-            distance.append(query.distance[active])
-            normal.append(query.normal[active])
-        if not names:
-            self.clear()
-            return 0
-        sphere = np.concatenate(sphere)
-        normal, distance = np.concatenate(normal), np.concatenate(distance)
-        frames = np.ascontiguousarray(self.spheres.frames[sphere], dtype=np.int64)
-        w_pa, offset = self._project_centres(frames)
-        rows = sphere.size
-        self.matrix = np.einsum('si,sij->sj', normal, w_pa.reshape(rows, 3, -1))
-        moved = offset.reshape(rows, 3) - centres[sphere]
-        self.constant = (distance - radii[sphere] - self.margin
-                         + np.einsum('si,si->s', normal, moved))
-        self.count, self.names, self.frames = rows, tuple(names), frames
-        return rows
+        return (self.count, float(self._arrays['violation'][0]), bool(self._arrays['binds'][0]))
 
     def warm_up(self):
-        """Compile (or load) the projection of the centres: project the first sphere's."""
-        self._project_centres(np.ascontiguousarray(self.spheres.frames[:1], dtype=np.int64))
+        """Compile (or load) :meth:`add_entering`."""
+        self._entering()
 
-    def _project_centres(self, frames):
-        """Return ``W_sa`` (3s, m) and the free centres (3s,) of spheres on ``frames``."""
+    def _entering(self):
+        """Return the compiled :func:`~cbha_inverse.core._kernels.tick.add_entering_rows`."""
         data = self._data
-        s, m = frames.size, data.actuation.size
-        size = data.solved.shape[0]
-        offsets, levers = np.zeros((s, 3)), np.zeros((s, 3))
-        columns, starts = np.zeros((size, 3 * s)), np.zeros(3 * s, dtype=np.int64)
-        w_pa, w_aa = np.zeros((3 * s, m)), np.zeros((m, m))
-        offset, moved = np.zeros(3 * s), np.zeros((3 * s, m + 1))
-        arguments = (data.record, frames, offsets, levers, columns, starts, w_pa, w_aa, offset,
-                     moved)
-        if self._project is None:
-            self._project = data.entry('project_points_of', arguments)
-        self._project(*arguments)
-        return w_pa, offset
+        return data.entry('add_entering_rows', (data.record, data.actuation))
 
-    def add_entering(self, positions):
+    def add_entering(self, actuation):
         """
-        Add the pairs a step would bring within the margin without a row, and relinearise.
+        Add the pairs the step to ``actuation`` would bring within the margin without a row.
 
         A pair beyond the activation distance at the linearisation has no row, but a long step
-        may still carry its sphere into the obstacle. Given the frames the step would reach,
-        every pair without a row whose clearance there is below the margin is added to the
-        rows (:meth:`linearise`, at the same linearisation): the caller solves again.
+        may still carry its sphere into the obstacle: given the actuation of a solve, every pair
+        without a row whose clearance after the linearisation's step to it is below the margin
+        is added to the rows, at the same linearisation
+        (:func:`cbha_inverse.core._kernels.tick.add_entering_rows`): the caller solves again.
 
         Parameters
         ----------
-        positions : (n + 1, 3) ndarray  [m]
-            Frame origins after the step.
+        actuation : (m,) ndarray  [Pa, N]
+            The actuation of the solve.
 
         Returns
         -------
@@ -194,22 +253,8 @@ class ObstacleRows:
             Whether a pair was added.
 
         """
-        centres, radii = self.spheres.centres(positions), self.spheres.radii
-        rows = set(zip(self.names, self.frames.tolist()))
-        added = False
-        for index, obstacle in enumerate(self.obstacles):
-            near = np.flatnonzero(obstacle.near(centres, radii + self.margin))
-            if not near.size:
-                continue
-            clearance = obstacle.signed_distance(centres[near]).distance - radii[near]
-            for sphere in near[clearance < self.margin]:
-                frame = int(self.spheres.frames[sphere])
-                if (obstacle.name, frame) not in rows and (index, sphere) not in self._forced:
-                    self._forced.add((index, int(sphere)))
-                    added = True
-        if added:
-            self.linearise()
-        return added
+        actuation = np.ascontiguousarray(actuation, dtype=float)
+        return bool(self._entering()(self._data.record, actuation))
 
     def clearances(self, actuation):
         """
@@ -231,7 +276,7 @@ class ObstacleRows:
         """
         Return a tick's warnings for targets inside obstacles (:meth:`inside`).
 
-        The same targets as the last call's give the same warnings without a query.
+        The same targets as the last call's (their bytes) give the same warnings without a query.
 
         Parameters
         ----------
@@ -243,8 +288,9 @@ class ObstacleRows:
         tuple of str
 
         """
-        if self._last_targets is None or not np.array_equal(targets, self._last_targets):
-            self._last_targets = targets.copy()
+        key = np.ascontiguousarray(targets, dtype=float).tobytes()
+        if key != self._last_targets:
+            self._last_targets = key
             self._last_warnings = tuple(
                 f'target inside obstacle {name!r}: the obstacle rows hold the arm out'
                 for name in self.inside(targets))

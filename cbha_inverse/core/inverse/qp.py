@@ -317,7 +317,10 @@ class RowsQP:
     metre of tracking gap). In proxsuite's variables the slack is ``s = ℓ t``,
     ``ℓ = sqrt(ν / ρ)``, so ``t`` enters the Hessian with 1. The box of ``x`` stays a box,
     ``t ≥ 0`` joins it. One proxsuite object per number of rows, warm-started from its previous
-    result.
+    result. The compiled tick solves the same problem with the slack eliminated, exactly, by an
+    active set over the rows (:func:`cbha_inverse.core._kernels.qp.rows_qp_into`); this class
+    serves the ``proxsuite`` and ``gauss_seidel`` solver options and the fallback when that
+    active set fails.
 
     Parameters
     ----------

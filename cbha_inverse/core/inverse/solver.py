@@ -13,8 +13,9 @@ mutable tick state (frame poses, current actuation, QP warm start). One :meth:`I
    positive definite, the fallback chain
    (:meth:`~cbha_inverse.core.system.EquilibriumSystem.fallback_factors`) solves
    ``K⁻¹ [r, J_aᵀ]`` and the same projection takes ``J_eᵀ`` and ``J_aᵀ`` as its left operands;
-3. solve the regularised box QP (the exact active-set solver, compiled; proxsuite, warm-started,
-   or projected Gauss-Seidel on request or as fallbacks);
+3. solve the regularised box QP (the exact active-set solver, compiled, and with obstacle rows
+   an active set over the rows around it, ``docs/obstacles.md``; proxsuite, warm-started, or
+   projected Gauss-Seidel on request or as fallbacks);
 4. apply ``λ`` and update the state by the Newton step of the same factorization,
    ``dq = K⁻¹ r + K⁻¹ J_aᵀ (λ - λ_prev)`` (one backward sweep of one column,
    ``L⁻ᵀ (L⁻¹ r + L⁻¹ J_aᵀ Δλ)``), followed by ``newton_steps - 1``
@@ -461,6 +462,8 @@ class InverseSolver:
             return self._split_tick(clamped, warnings, (started, linearised))
         code, iterations, largest_gap, largest_move, binding, residual_norm = self._control_tick(
             targets, self._record, fresh and self._pending, fresh, True, self._every == 1)
+        # the obstacle rows' outcome of this solve, before a check of the new state relinearises
+        obstacle = self._row_outcome()
         called = time.perf_counter()
         linearised = called if fresh else started
         if code in (kernels.TARGET_NOT_FINITE, kernels.BEYOND_REACH):
@@ -471,6 +474,8 @@ class InverseSolver:
                 return self._held('rejected', started,
                                   warnings=('non-finite target rejected',))
             clamped, warnings = self._reachable(targets)
+            if self._obstacle_rows is not None:
+                warnings += self._obstacle_rows.inside_warnings(clamped)
             return self._split_tick(clamped, warnings, (started, linearised))
         if fresh:
             # linearised in this call: checked as prepare() checks, the QP in a call of its own
@@ -483,12 +488,15 @@ class InverseSolver:
                 code, iterations, largest_gap, largest_move, binding, _ = self._control_tick(
                     targets, self._record, False, False, True, self._every == 1)
                 called = time.perf_counter()
+                obstacle = self._row_outcome()
         self._account()
+        warnings = (() if self._obstacle_rows is None
+                    else self._obstacle_rows.inside_warnings(targets))
         if code == SOLVED:
             return self._close(targets, 'saturated' if binding else 'solved', 'solved',
                                iterations, self._data.free.copy(), largest_gap, largest_move,
-                               True, (), (started, linearised, called))
-        return self._after_active_set(code, targets, (), (started, linearised))
+                               True, warnings, (started, linearised, called), obstacle)
+        return self._after_active_set(code, targets, warnings, (started, linearised))
 
     def prepare(self):
         """
@@ -518,11 +526,9 @@ class InverseSolver:
         """Check a new linearisation (:meth:`_linearise`) and keep it for the next QP."""
         self._linearised = self._linearise(factored, strict)
         self._age, self._prepared = 0, self._linearised
-        if self._obstacle_rows is not None:
-            if self._linearised:
-                self._obstacle_rows.linearise()
-            else:
-                self._obstacle_rows.clear()
+        if self._obstacle_rows is not None and not self._linearised:
+            # the rows are computed with every linearisation (the compiled projection's)
+            self._obstacle_rows.clear()
         if self._linearised and self._touch.touches:
             self._touch.linearise()
         return self._linearised
@@ -623,8 +629,7 @@ class InverseSolver:
 
     def _solve(self, targets, new_hessian, warnings, times):
         """Solve the QP of the tick data's linearisation and apply it (steps 3-4)."""
-        if (self.options.qp_solver != 'active_set' or self._obstacle_rows is not None
-                or self._touch.touches):
+        if self.options.qp_solver != 'active_set' or self._touch.touches:
             return self._general_qp(targets, self.options.qp_solver, not new_hessian, warnings,
                                     times)
         code, iterations, largest_gap, largest_move, binding, _ = self._control_tick(
@@ -632,11 +637,16 @@ class InverseSolver:
         if code == SOLVED:
             return self._close(targets, 'saturated' if binding else 'solved', 'solved',
                                iterations, self._data.free.copy(), largest_gap, largest_move,
-                               True, warnings, times + (time.perf_counter(),))
+                               True, warnings, times + (time.perf_counter(),),
+                               self._row_outcome())
         return self._after_active_set(code, targets, warnings, times)
 
     def _after_active_set(self, code, targets, warnings, times):
-        """Hold a non-finite QP solution, or hand an unconverged active set to proxsuite."""
+        """
+        Hold a non-finite QP solution, or hand an unconverged active set to proxsuite.
+
+        With obstacle rows, proxsuite solves the rows QP (:meth:`_solve_rows`).
+        """
         if code == kernels.REJECTED:
             return self._rejected('solved', warnings, times[0])
         # proxsuite (status checked) takes over; it has not seen this Hessian
@@ -689,15 +699,16 @@ class InverseSolver:
 
         The step of the linearisation to ``actuation`` on copies of the frames; the pairs it
         carries within ``obstacle_margin`` get rows
-        (:meth:`~cbha_inverse.core.inverse.obstacle_rows.ObstacleRows.add_entering`), and the
-        caller solves again.
+        (:meth:`~cbha_inverse.core.inverse.obstacle_rows.ObstacleRows.add_entering`, the
+        compiled tick's check), and the caller solves again.
         """
-        previous = self.actuation.copy()
-        self.actuation[:] = actuation
-        positions, rotations = self._positions.copy(), self._rotations.copy()
-        self._data.entry('pending_step_into')(self._record, positions, rotations)
-        self.actuation[:] = previous
-        return self._obstacle_rows.add_entering(positions)
+        return self._obstacle_rows.add_entering(actuation)
+
+    def _row_outcome(self):
+        """Return the compiled solve's rows, their largest violation [m], whether one binds."""
+        if self._obstacle_rows is None:
+            return (0, math.nan, False)
+        return self._obstacle_rows.outcome()
 
     def _obstacle_rows_count(self):
         """Return the number of obstacle rows of the current linearisation (0 without)."""
@@ -716,9 +727,7 @@ class InverseSolver:
         data, options = self._data, self.options
         matrix, constant, obstacle_count = self._touch.stacked(self._obstacle_rows)
         # ν: the tracking term's normaliser (qp_hessians_into)
-        weighted = data.w_ea * data.row_weights[:, None] * self._scale
-        normaliser = float(np.einsum('rj,rj->', weighted, weighted)) / self._scale.size
-        normaliser = normaliser if normaliser > 0.0 else 1.0
+        normaliser = float(data.tracking_norm[0])
         solution, slack = self._rows_qp.solve(problem, matrix * self._scale, constant,
                                               normaliser, options.obstacle_weight)
         status = 'solved'
@@ -740,8 +749,8 @@ class InverseSolver:
         Replace the obstacles the collision spheres keep clear of (``docs/obstacles.md``).
 
         Each linearisation then adds a row to the QP per (sphere, obstacle) pair within
-        ``obstacle_activation`` of ``obstacle_margin``; the next tick relinearises. Without
-        obstacles the tick is the compiled one of the obstacle-free solver.
+        ``obstacle_activation`` of ``obstacle_margin``; the next tick relinearises. The rows
+        and their QP run in the compiled tick; without obstacles it is the obstacle-free one.
 
         Parameters
         ----------
@@ -764,11 +773,13 @@ class InverseSolver:
         if obstacles and self._collision is None:
             raise ValueError("obstacles need collision spheres (a scene's collision block)")
         options = self.options
-        self._obstacle_rows = (ObstacleRows(self._collision, obstacles, options.obstacle_margin,
-                                            options.obstacle_activation, self._data)
-                               if obstacles else None)
-        # with obstacles a tick solves in a call of its own, after the rows of its linearisation
-        self._one_call = self._compiled_qp and not obstacles and not self._touch.touches
+        if obstacles:
+            self._obstacle_rows = ObstacleRows(
+                self._collision, obstacles, options.obstacle_margin, options.obstacle_activation,
+                self._data, options.obstacle_weight, FAST_MOVE, ENTERING_ROUNDS)
+        else:
+            self._obstacle_rows = None
+            self._data.attach_rows()
         self._rows_qp.reset()
         self._age = self._every
         self._linearised = False
@@ -864,8 +875,7 @@ class InverseSolver:
         elif not (isinstance(effector, (int, np.integer)) and 0 <= effector < len(names)):
             raise ValueError(f'touch: unknown effector {effector!r}')
         cleared = self._touch.clear(int(effector))
-        self._one_call = (self._compiled_qp and self._obstacle_rows is None
-                          and not self._touch.touches)
+        self._one_call = self._compiled_qp and not self._touch.touches
         self._rows_qp.reset()
         self._age = self._every
         return cleared

@@ -13,6 +13,7 @@ import math
 
 from cbha_inverse.core._kernels import tick as kernels
 from cbha_inverse.core._kernels.records import compiled_entry, make_record, RecordOwner
+from cbha_inverse.core.inverse.obstacle_rows import obstacle_rows_record
 from cbha_inverse.core.inverse.qp import QPMatrices
 import numpy as np
 
@@ -88,7 +89,8 @@ class TickData(RecordOwner):
             'gap_limit': np.full(1, math.inf), 'w_ea': np.zeros((rows, m)),
             'w_aa': np.zeros((m, m)), 'offset': np.zeros(rows),
             'hessian': np.zeros((m, m)), 'tracking': np.zeros((m, m)),
-            'weighted_w': np.zeros((rows, m)), 'orientation_errors': np.zeros((k, 3)),
+            'weighted_w': np.zeros((rows, m)), 'tracking_norm': np.ones(1),
+            'orientation_errors': np.zeros((k, 3)),
             'relative_rotation': np.zeros((3, 3)),
             'delta_free': np.zeros(rows),
             'gradient': np.zeros(m), 'tracking_gradient': np.zeros(m),
@@ -103,8 +105,11 @@ class TickData(RecordOwner):
             'effector_positions': np.zeros((k, 3))}
         self.max_rotation = (math.inf if options.max_rotation_step is None
                              else float(options.max_rotation_step))
+        # no obstacles until ObstacleRows attaches its record (attach_rows)
+        self._no_rows = obstacle_rows_record(n, m)[0]
         self._hold(make_record(
             kernels.TickRecord, kernels.new_tick_record, system=system.record,
+            rows=self._no_rows,
             energy_weight=options.energy_weight, proximal_weight=options.proximal_weight,
             max_iterations=int(max_iterations), tolerance=BINDING_TOLERANCE,
             max_rotation=self.max_rotation, **self.arrays), self.arrays)
@@ -122,7 +127,7 @@ class TickData(RecordOwner):
         positions, rotations``: C-contiguous float frames), ``'project_tick'`` (``record``),
         ``'free_gaps_of'`` (``targets, record``: ``delta_free`` of the targets) or
         ``'orientation_gap_of'`` (``record``), or another entry of the module typed by
-        ``examples`` (its example arguments, e.g. ``'project_points_of'``);
+        ``examples`` (its example arguments, e.g. ``'add_entering_rows'``);
         without numba's per-call type dispatch
         (:func:`cbha_inverse.core._kernels.records.compiled_entry`).
         """
@@ -138,6 +143,24 @@ class TickData(RecordOwner):
             entry = compiled_entry(getattr(kernels, name), *examples)
             self._entries[name] = entry
         return entry
+
+    def attach_rows(self, rows=None):
+        """
+        Make an obstacle rows record the tick's ``rows`` (None: the record without obstacles).
+
+        Parameters
+        ----------
+        rows : cbha_inverse.core._kernels.obstacle_rows.ObstacleRowsRecord, optional
+            Built by :func:`cbha_inverse.core.inverse.obstacle_rows.obstacle_rows_record` for
+            this solver's ``n`` and ``m``.
+
+        """
+        rows = self._no_rows if rows is None else rows
+        kernels.attach_rows(self.record, rows)
+        # the Python side's fields (a compiled record's; with the JIT off, the namespace is it)
+        values = getattr(self.record, '_values', None)
+        if values is not None:
+            values['rows'] = rows
 
     def project_factor(self, factor):
         """
