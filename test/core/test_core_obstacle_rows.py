@@ -1,7 +1,7 @@
 """Tests of the obstacle rows of the inverse: their linear model, the QP, the statuses."""
 
 from cbha_inverse.core.chain import ChainState
-from cbha_inverse.core.inverse.obstacle_rows import VIOLATION_TOLERANCE
+from cbha_inverse.core.inverse.obstacle_rows import sphere_shares, VIOLATION_TOLERANCE
 from cbha_inverse.core.inverse.solver import InverseSolver
 from cbha_inverse.core.obstacles import Obstacle
 from cbha_inverse.core.so3 import so3_exp
@@ -282,3 +282,41 @@ def test_ticks_with_rows_are_one_compiled_call_that_allocates_nothing(table_scen
     made = after.alloc - before.alloc
     assert after.free - before.free == made
     assert made == (0 if numba.config.DISABLE_JIT else 200)
+
+
+def test_sphere_shares_grow_along_the_arm_to_the_next_effector():
+    """``f / f_e`` of the first effector at or beyond the sphere; all of the last beyond it."""
+    shares = sphere_shares([1, 4, 8, 10, 12], [12, 8])
+    np.testing.assert_allclose(shares, [[0.0, 1 / 8], [0.0, 0.5], [0.0, 1.0],
+                                        [10 / 12, 0.0], [1.0, 0.0]])
+    np.testing.assert_allclose(sphere_shares([3, 6], [4]), [[0.75], [1.0]])
+
+
+def test_plant_offsets_keep_the_plant_spheres_clear(table_scene):
+    """
+    A plant measured 3 mm below the model at the tip: the model's tip sphere stays 3 mm higher.
+
+    The target lies behind the table; the model's spheres stop at the margin without an
+    offset, at the margin plus the tip sphere's share of the offset with it (the tip's sphere
+    is the lowest, its share is 1).
+    """
+    target = table_scene.rest_effector_positions[0] + [0.0, 0.0, -0.08]
+    drop = 0.003
+    tip = list(table_scene.collision.frames).index(table_scene.effectors.frames[0])
+    ends = []
+    for offset in (0.0, -drop):
+        solver = table_scene.make_inverse_solver()
+        solver.set_plant_offsets([[0.0, 0.0, offset]])
+        _run(table_scene, solver, target)
+        gaps = table_scene.collision.clearances(solver.state.positions, table_scene.obstacles)
+        ends.append(gaps[tip, 0])
+    np.testing.assert_allclose(ends, [MARGIN, MARGIN + drop], atol=5e-5)
+
+
+def test_bad_plant_offsets_are_refused(table_scene):
+    """Wrong shape or non-finite offsets raise and change nothing."""
+    solver = table_scene.make_inverse_solver()
+    with pytest.raises(ValueError, match='shape'):
+        solver.set_plant_offsets(np.zeros(3))
+    with pytest.raises(ValueError, match='finite'):
+        solver.set_plant_offsets([[0.0, np.nan, 0.0]])

@@ -2,7 +2,7 @@
 The obstacle rows of the actuation QP as compiled code over one record (``docs/obstacles.md``).
 
 At each linearisation the signed distance ``φ`` of every collision sphere's centre ``p_s``
-(radius ``ρ_s``, a frame origin) to every obstacle
+(radius ``ρ_s``, a frame origin, moved by the sphere's ``sphere_shifts``) to every obstacle
 (:func:`cbha_inverse.core._kernels.obstacles.signed_distance_at`, outward normal ``n``) is
 queried (:func:`select_pairs_of`); each (sphere, obstacle) pair whose clearance ``φ - ρ_s`` is
 below ``margin + activation``, or that :func:`add_entering_pairs` forced, adds one row
@@ -49,6 +49,8 @@ OBSTACLE_ROW_FIELDS = (
           read_only=True),
     Field('sphere_radii', F8, 1, '(s,) radius ρ_s of every collision sphere [m]',
           read_only=True),
+    Field('sphere_shifts', F8, 2, "(s, 3) the plant's estimated displacement of every "
+          "sphere's centre from the model's, added before the distance query [m]"),
     Field('margin', float, 0, 'the clearance the rows keep [m]'),
     Field('activation', float, 0, 'a pair adds a row below margin + activation of clearance '
           '[m]'),
@@ -68,6 +70,7 @@ OBSTACLE_ROW_FIELDS = (
     Field('matrix', F8, 2, '(c, m) G [m/Pa, m/N]'),
     Field('constant', F8, 1, '(c,) c [m]'),
     # the distance query's workspace
+    Field('centre', F8, 1, '(3,) the shifted centre of one query [m]'),
     Field('normal', F8, 1, '(3,) the outward normal of one query'),
     Field('closest', F8, 1, '(3,) the closest surface point of one query [m]'),
     Field('curvature', F8, 2, '(3, 3) the Hessian of one query [1/m]'),
@@ -135,12 +138,17 @@ def pair_distance_of(rows, sphere, obstacle, positions):
     """
     Return the signed distance [m] of a sphere's centre to an obstacle; its normal in ``normal``.
 
-    The centre is the origin of the sphere's frame in ``positions`` (n + 1, 3) [m].
+    The centre is the origin of the sphere's frame in ``positions`` (n + 1, 3) [m] plus the
+    sphere's ``sphere_shifts`` (the plant's sphere where the closed loop measures the plant
+    away from the model, ``docs/obstacles.md``; zero in open loop).
     """
+    origin = positions[rows.sphere_frames[sphere]]
+    shift, centre = rows.sphere_shifts[sphere], rows.centre
+    for i in range(3):
+        centre[i] = origin[i] + shift[i]
     return signed_distance_at(rows.obstacle_shapes[obstacle], rows.obstacle_positions[obstacle],
                               rows.obstacle_rotations[obstacle], rows.obstacle_sizes[obstacle],
-                              positions[rows.sphere_frames[sphere]], rows.normal, rows.closest,
-                              rows.curvature)
+                              centre, rows.normal, rows.closest, rows.curvature)
 
 
 @numba.njit(cache=True)

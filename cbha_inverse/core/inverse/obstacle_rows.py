@@ -50,6 +50,40 @@ def checked_obstacles(obstacles):
     return tuple(check_names(obstacles))
 
 
+def sphere_shares(sphere_frames, effector_frames):
+    """
+    Return each collision sphere's share of each effector's plant offset (``set_plant_offsets``).
+
+    A sphere on frame ``f`` takes ``f / f_e`` of the offset of the first effector at or beyond
+    it (frame ``f_e``), all of the last effector's offset beyond the last effector: the offset
+    of the plant from the model grows along the arm from nothing at the base.
+
+    Parameters
+    ----------
+    sphere_frames : (s,) array_like of int
+        The collision spheres' frames (1..n).
+    effector_frames : (k,) array_like of int
+        The effectors' frames.
+
+    Returns
+    -------
+    (s, k) ndarray
+        ``shifts = shares @ offsets``.
+
+    """
+    spheres = np.asarray(sphere_frames, dtype=np.int64).reshape(-1)
+    effectors = np.asarray(effector_frames, dtype=np.int64).reshape(-1)
+    shares = np.zeros((spheres.size, effectors.size))
+    if not effectors.size:
+        return shares
+    order = np.argsort(effectors, kind='stable')
+    for sphere, frame in enumerate(spheres):
+        beyond = order[effectors[order] >= frame]
+        effector = beyond[0] if beyond.size else order[-1]
+        shares[sphere, effector] = min(1.0, frame / max(int(effectors[effector]), 1))
+    return shares
+
+
 def obstacle_rows_record(n_links, n_actuators, obstacles=(), frames=(), radii=(), margin=0.0,
                          activation=0.0, weight=1.0, entering_move=math.inf,
                          entering_rounds=1):
@@ -91,6 +125,7 @@ def obstacle_rows_record(n_links, n_actuators, obstacles=(), frames=(), radii=()
         'obstacle_rotations': rotations, 'obstacle_sizes': sizes,
         'sphere_frames': sphere_frames,
         'sphere_radii': np.array(radii, dtype=float).reshape(-1),
+        'sphere_shifts': np.zeros((s, 3)), 'centre': np.zeros(3),
         'forced': np.zeros((s, o), dtype=np.bool_), 'count': np.zeros(1, dtype=np.int64),
         'row_spheres': np.zeros(capacity, dtype=np.int64),
         'row_obstacles': np.zeros(capacity, dtype=np.int64),
@@ -211,6 +246,23 @@ class ObstacleRows:
     def frames(self):
         """Return the sphere's frame of each row, (count,) int ndarray."""
         return self._arrays['row_frames'][:self.count].copy()
+
+    def set_shifts(self, shifts):
+        """
+        Move every sphere's centre by the plant's estimated displacement for the distance query.
+
+        The rows then keep the plant's spheres ``obstacle_margin`` clear where the closed loop
+        measures the plant away from the model (:meth:`InverseSolver.set_plant_offsets
+        <cbha_inverse.core.inverse.solver.InverseSolver.set_plant_offsets>`); the next
+        linearisation uses them.
+
+        Parameters
+        ----------
+        shifts : (s, 3) ndarray  [m]
+            Per collision sphere, finite.
+
+        """
+        self._arrays['sphere_shifts'][:] = shifts
 
     def outcome(self):
         """

@@ -56,7 +56,8 @@ from cbha_inverse.core.actuation.effectors import TargetRefused
 from cbha_inverse.core.chain import ChainState, external_wrenches, rest_state
 from cbha_inverse.core.inverse.correction import TargetCorrector  # noqa: F401 (public re-export)
 from cbha_inverse.core.inverse.obstacle_rows import (BINDING_TOLERANCE, checked_obstacles,
-                                                     ObstacleRows, VIOLATION_TOLERANCE)
+                                                     ObstacleRows, sphere_shares,
+                                                     VIOLATION_TOLERANCE)
 from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected_gauss_seidel,
                                           ProxsuiteQP, qp_problem, RowsQP)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
@@ -234,6 +235,11 @@ class InverseSolver:
         self._rows_qp = RowsQP(m, eps_abs=self.options.eps_abs)
         # the contact targets (set_touch, docs/touch.md)
         self._touch = TouchRows(self._data, self.effector_names)
+        # the plant's offset from the model at each effector (set_plant_offsets), and each
+        # collision sphere's share of it
+        self._plant_offsets = np.zeros((effectors.n_effectors, 3))
+        self._sphere_shares = (None if collision is None
+                               else sphere_shares(collision.frames, effectors.frames))
         self._control_tick = self._data.entry('control_tick')
         self._record = self._data.record
         # the frames and the actuation live in the tick data (the compiled tick updates them)
@@ -777,6 +783,7 @@ class InverseSolver:
             self._obstacle_rows = ObstacleRows(
                 self._collision, obstacles, options.obstacle_margin, options.obstacle_activation,
                 self._data, options.obstacle_weight, FAST_MOVE, ENTERING_ROUNDS)
+            self._obstacle_rows.set_shifts(self._sphere_shares @ self._plant_offsets)
         else:
             self._obstacle_rows = None
             self._data.attach_rows()
@@ -784,6 +791,42 @@ class InverseSolver:
         self._age = self._every
         self._linearised = False
         return obstacles
+
+    def set_plant_offsets(self, offsets):
+        """
+        Tell the obstacle rows where the plant's effectors are measured from the model's.
+
+        The closed loop holds the plant's effectors on their targets by asking the model for
+        corrected targets: where the plant is softer or stiffer than the model, its arm lies
+        away from the model's, and rows on the model's spheres would spend their margin on
+        that model error. Given each effector's offset ``δ_e`` (plant minus model, e.g. minus
+        the closed loop's correction), each collision sphere's centre is moved by its share of
+        it before the distance query, ``(f_s / f_e) δ_e`` (``f`` the frame index: the offset
+        grows from nothing at the base to ``δ_e`` at the effector's frame ``f_e``, the first
+        effector at or beyond the sphere's frame; beyond the last effector its whole offset),
+        so the rows keep the plant's spheres clear (``docs/obstacles.md``). The next
+        linearisation uses them; they stay through :meth:`reset` and :meth:`set_obstacles`.
+
+        Parameters
+        ----------
+        offsets : (k, 3) array_like  [m]
+            Plant minus model position of every effector (zeros: the model's spheres).
+
+        Raises
+        ------
+        ValueError
+            If ``offsets`` is not (k, 3) or not finite: nothing is changed.
+
+        """
+        offsets = np.asarray(offsets, dtype=float)
+        if offsets.shape != self._plant_offsets.shape:
+            raise ValueError(f'plant offsets must have shape {self._plant_offsets.shape}, got '
+                             f'{offsets.shape}')
+        if not np.all(np.isfinite(offsets)):
+            raise ValueError('plant offsets must be finite')
+        self._plant_offsets[:] = offsets
+        if self._obstacle_rows is not None:
+            self._obstacle_rows.set_shifts(self._sphere_shares @ offsets)
 
     @property
     def obstacles(self):

@@ -184,6 +184,10 @@ class InverseSolverParams:
                              low=0.0, high=1.0, live=True)
     max_correction: float = param(0.03, 'closed loop: largest target correction [m]',
                                   low=0.0, high=1.0, live=True)
+    plant_delay: float = param(0.015, 'closed loop with obstacles: delay from a command to its '
+                               'effect in a measurement (transport + valve response) [s]: a '
+                               'measurement is compared with the model of that long before',
+                               low=0.0, high=1.0, live=True)
     newton_steps: int = param(1, 'Newton steps of the model per tick', low=1, high=20)
     relinearize_every: int = param(1, 'ticks between linearisations (1 = every tick, the paper; '
                                    'N > 1 re-solves the QP of the last linear model in between)',
@@ -395,6 +399,10 @@ class InverseSolverNode(Node):
                                f'{time.perf_counter() - started:.2f} s')
         for warning in self.solver.warnings:
             self.get_logger().warning(f'scene {self.scene.name}: {warning}')
+        # plant minus model position of every effector, measured (closed loop only)
+        self.plant_offsets = np.zeros((len(self.scene.effector_names), 3))
+        # the model's first effector at each tick (node clock [ns]), for plant_offsets
+        self.model_history = TargetHistory()
         self.corrector = TargetCorrector(len(self.scene.effector_names),
                                          gain=p.loop_gain if p.mode == 'closed' else 0.0,
                                          max_correction=p.max_correction)
@@ -626,6 +634,12 @@ class InverseSolverNode(Node):
             reference = self.target_history.at(stamp, self.target)
             self.corrector.update(reference[None], point[None], saturated=saturated,
                                   predicted_gap=predicted_gap)
+            # where the plant lies from the model, low-passed at the loop's gain: the obstacle
+            # rows keep the plant's spheres clear (InverseSolver.set_plant_offsets)
+            model = self.model_history.at(stamp - int(self.params.plant_delay * 1e9),
+                                          self.solver.effector_positions()[0])
+            offset = point - model
+            self.plant_offsets[0] += self.corrector.gain * (offset - self.plant_offsets[0])
             self.target_error = float(np.linalg.norm(reference - point))
 
     # control --------------------------------------------------------------------------------
@@ -715,6 +729,7 @@ class InverseSolverNode(Node):
         """``~/reset``: model state and closed-loop correction back to rest."""
         self.solver.reset()
         self.corrector.reset()
+        self.plant_offsets[:] = 0.0
         self.episodes.reset()
         self.episode_told = set()
         self.last_result = None
@@ -741,6 +756,11 @@ class InverseSolverNode(Node):
             return time.perf_counter(), time.thread_time()
         self._publish(result.actuation[self.order])
         published = time.perf_counter(), time.thread_time()
+        if self.solver.obstacles:
+            # the rows keep the plant's spheres clear (InverseSolver.set_plant_offsets)
+            self.model_history.add(self.get_clock().now().nanoseconds,
+                                   result.effector_positions[0].copy())
+            self.solver.set_plant_offsets(self.plant_offsets)
         # the bookkeeping and the linearisation for the next tick come after the publication,
         # off the target -> command path (``docs/design.md``)
         self.last_result, self.last_goal = result, goal
