@@ -412,11 +412,7 @@ class Commanding:
         received, received_cpu = time.perf_counter(), time.thread_time()
         if self.refused(topic):
             return
-        stamped = PointStamped()
-        stamped.header = message.header
-        position = message.pose.position
-        stamped.point.x, stamped.point.y, stamped.point.z = position.x, position.y, position.z
-        point = node._accepted_point(topic, stamped)
+        point = node._accepted_pose_position(topic, message)
         if point is None:
             return
         effectors = node.solver.effectors
@@ -447,11 +443,7 @@ class Commanding:
     def _on_pose(self, message):
         if self.refused('pose_target_cmds'):
             return
-        stamped = PointStamped()
-        stamped.header = message.header
-        position = message.pose.position
-        stamped.point.x, stamped.point.y, stamped.point.z = position.x, position.y, position.z
-        point = self.node._accepted_point('pose_target_cmds', stamped)
+        point = self.node._accepted_pose_position('pose_target_cmds', message)
         if point is not None:
             self._command('pose', point)
 

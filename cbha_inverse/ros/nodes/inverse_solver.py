@@ -441,6 +441,14 @@ class InverseSolverNode(Node):
             timer.timer_period_ns = int(round(self.period * 1e9))
 
     # inputs ---------------------------------------------------------------------------------
+    def _accepted_pose_position(self, topic, message):
+        """Return the checked position of a PoseStamped, or None (:meth:`_accepted_point`)."""
+        stamped = PointStamped()
+        stamped.header = message.header
+        position = message.pose.position
+        stamped.point.x, stamped.point.y, stamped.point.z = position.x, position.y, position.z
+        return self._accepted_point(topic, stamped)
+
     def _accepted_point(self, topic, message, check_box=True):
         """Return the checked point of a message, or None (rejection counted and logged)."""
         # the message's three floats, an array only once accepted (docs/nodes.md, "Latency")
@@ -542,11 +550,7 @@ class InverseSolverNode(Node):
         topic = 'touch'
         if self.commanding.refused(topic):
             return
-        stamped = PointStamped()
-        stamped.header = message.header
-        position = message.pose.position
-        stamped.point.x, stamped.point.y, stamped.point.z = position.x, position.y, position.z
-        point = self._accepted_point(topic, stamped)
+        point = self._accepted_pose_position(topic, message)
         if point is None:
             return
         q = message.pose.orientation
