@@ -320,3 +320,21 @@ def test_bad_plant_offsets_are_refused(table_scene):
         solver.set_plant_offsets(np.zeros(3))
     with pytest.raises(ValueError, match='finite'):
         solver.set_plant_offsets([[0.0, np.nan, 0.0]])
+
+
+def test_targets_inside_obstacles_are_named_by_the_compiled_query(table_scene):
+    """A target 1 mm inside a box or a ball names it, 1 mm outside does not; NaN is refused."""
+    box = Obstacle('box', 'box', [0.2, 0.1, 0.0], np.eye(3), size=[0.02, 0.04, 0.06])
+    ball = Obstacle('ball', 'sphere', [0.2, -0.1, 0.0], np.eye(3), radius=0.01)
+    solver = table_scene.make_inverse_solver()
+    solver.set_obstacles([box, ball])
+    rows = solver.obstacle_rows
+    inside_box = [[0.2 + 0.009, 0.1, 0.0]]
+    outside_box = [[0.2 + 0.011, 0.1, 0.0]]
+    inside_ball = [0.2, -0.1, 0.009]
+    assert rows.inside(inside_box) == ('box',)
+    assert rows.inside(outside_box) == ()
+    assert rows.inside([inside_box[0], inside_ball]) == ('box', 'ball')
+    assert rows.inside([outside_box[0], [0.2, -0.1, 0.011]]) == ()
+    with pytest.raises(ValueError, match='finite'):
+        rows.inside([[np.nan, 0.0, 0.0]])

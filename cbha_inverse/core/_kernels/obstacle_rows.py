@@ -93,6 +93,8 @@ OBSTACLE_ROW_FIELDS = (
     # the check of a long step (add_entering_pairs)
     Field('stepped_positions', F8, 2, '(n + 1, 3) workspace: frame origins after a step [m]'),
     Field('stepped_rotations', F8, 3, '(n + 1, 3, 3) workspace: frame rotations after it'),
+    # the check of the targets (targets_inside_obstacles)
+    Field('targets_inside', np.bool_, 1, '(o,) the obstacles some target lies inside of'),
     # the outcome (row_outcome_of)
     Field('violation', F8, 1, "(1,) the rows' largest slack at the solution [m] (NaN: no "
           'row)'),
@@ -221,6 +223,28 @@ def add_entering_pairs(rows, positions):
                 rows.forced[sphere, obstacle] = True
                 added = True
     return added
+
+
+@numba.njit(cache=True)
+def targets_inside_obstacles(rows, targets):
+    """
+    Mark the obstacles some target (k, 3) [m] lies inside of (``φ < 0``); return their count.
+
+    ``targets_inside`` receives the marks: a target inside an obstacle is projected out by the
+    rows, and the tick says so (``docs/obstacles.md``).
+    """
+    count = 0
+    for obstacle in range(rows.obstacle_shapes.size):
+        inside = False
+        for target in range(targets.shape[0]):
+            distance = signed_distance_at(
+                rows.obstacle_shapes[obstacle], rows.obstacle_positions[obstacle],
+                rows.obstacle_rotations[obstacle], rows.obstacle_sizes[obstacle],
+                targets[target], rows.normal, rows.closest, rows.curvature)
+            inside = inside or distance < 0.0
+        rows.targets_inside[obstacle] = inside
+        count += inside
+    return count
 
 
 @numba.njit(cache=True)

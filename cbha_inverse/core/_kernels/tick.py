@@ -28,7 +28,8 @@ from cbha_inverse.core._kernels.block_band import (block_backward, block_cholesk
 from cbha_inverse.core._kernels.evaluation import evaluate
 from cbha_inverse.core._kernels.obstacle_rows import (add_entering_pairs, column_block_of,
                                                       row_outcome_of, rows_from_projection_of,
-                                                      scale_rows_of, select_pairs_of)
+                                                      scale_rows_of, select_pairs_of,
+                                                      targets_inside_obstacles)
 from cbha_inverse.core._kernels.projection import (effector_columns_into, effector_jacobian_into,
                                                    effector_points_into, free_gaps_into,
                                                    orientation_errors_into,
@@ -567,6 +568,17 @@ def add_entering_rows(tick, actuation):
         return False
     obstacle_rows_of(tick)
     return True
+
+
+@numba.njit(cache=True)
+def targets_inside_of(targets, tick):
+    """
+    Mark the obstacles some target lies inside of in ``rows.targets_inside``; return the count.
+
+    :func:`~cbha_inverse.core._kernels.obstacle_rows.targets_inside_obstacles` over the tick's
+    obstacles, ``targets`` (k, 3) [m].
+    """
+    return targets_inside_obstacles(tick.rows, targets)
 
 
 @numba.njit(cache=True)

@@ -140,6 +140,7 @@ def obstacle_rows_record(n_links, n_actuators, obstacles=(), frames=(), radii=()
         'values': np.zeros(capacity), 'row_on': np.zeros(capacity, dtype=np.bool_),
         'penalised_hessian': np.zeros((m, m)), 'penalised_gradient': np.zeros(m),
         'stepped_positions': np.zeros((n + 1, 3)), 'stepped_rotations': np.zeros((n + 1, 3, 3)),
+        'targets_inside': np.zeros(o, dtype=np.bool_),
         'violation': np.full(1, math.nan), 'binds': np.zeros(1, dtype=np.bool_)}
     record = make_record(kernels.ObstacleRowsRecord, kernels.new_obstacle_rows_record,
                          margin=float(margin), activation=float(activation),
@@ -276,8 +277,14 @@ class ObstacleRows:
         return (self.count, float(self._arrays['violation'][0]), bool(self._arrays['binds'][0]))
 
     def warm_up(self):
-        """Compile (or load) :meth:`add_entering`."""
+        """Compile (or load) :meth:`add_entering` and :meth:`inside`."""
         self._entering()
+        self._inside_of()
+
+    def _inside_of(self):
+        """Return the compiled :func:`~cbha_inverse.core._kernels.tick.targets_inside_of`."""
+        data = self._data
+        return data.entry('targets_inside_of', (data.effector_positions, data.record))
 
     def _entering(self):
         """Return the compiled :func:`~cbha_inverse.core._kernels.tick.add_entering_rows`."""
@@ -352,19 +359,28 @@ class ObstacleRows:
         """
         Return the names of the obstacles some target lies inside of (``φ < 0``).
 
+        The compiled query of every target against every obstacle
+        (:func:`cbha_inverse.core._kernels.obstacle_rows.targets_inside_obstacles`).
+
         Parameters
         ----------
-        targets : (k, 3) ndarray  [m]
+        targets : (k, 3) array_like  [m]
             Effector targets.
 
         Returns
         -------
         tuple of str
 
+        Raises
+        ------
+        ValueError
+            If ``targets`` is not a finite (k, 3) array.
+
         """
-        inside = []
-        for obstacle in self.obstacles:
-            near = obstacle.near(targets, 0.0)
-            if near.any() and np.any(obstacle.signed_distance(targets[near]).distance < 0.0):
-                inside.append(obstacle.name)
-        return tuple(inside)
+        targets = np.array(targets, dtype=float, order='C')
+        if targets.ndim != 2 or targets.shape[1] != 3 or not np.all(np.isfinite(targets)):
+            raise ValueError(f'targets must be finite (k, 3), got shape {targets.shape}')
+        if not self._inside_of()(targets, self._data.record):
+            return ()
+        return tuple(name for name, inside in zip(self._names, self._arrays['targets_inside'])
+                     if inside)
