@@ -91,6 +91,11 @@ def test_stereo_tracker_latches_the_rig_frames_on_tf_static(rclpy_context, tf2_m
         # joins after the publication: only latching (transient local) delivers it
         listener.create_subscription(TFMessage, '/tf_static', received.append, TF_STATIC_QOS)
         assert spin_until(executor, lambda: received, 10.0), 'no /tf_static received'
+        # both trackers up (their camera subscriptions come at the end of their start): a
+        # SIGINT earlier would stop the one without TF while it loads, before it says so
+        assert spin_until(executor, lambda: listener.count_subscribers(
+            f'{NAMESPACE}/stereo/right/camera_info') >= 2, 60.0)
+        spin_for(executor, 0.5)
     finally:
         executor.shutdown()
         listener.destroy_node()
