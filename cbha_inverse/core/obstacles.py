@@ -189,34 +189,6 @@ class Obstacle:
                               *query)
         return query
 
-    def near(self, points, reach):
-        """
-        Return which points may lie within ``reach`` of the solid (a cheap conservative test).
-
-        Parameters
-        ----------
-        points : (N, 3) ndarray  [m]
-            Base-frame points.
-        reach : (N,) ndarray or float  [m]
-            How far from the solid a point counts as near.
-
-        Returns
-        -------
-        (N,) bool ndarray
-            False only where the point is farther than ``reach`` from the solid (its bounding
-            box, or the capsule holding a cylinder).
-
-        """
-        if self.shape == 'plane':
-            return np.ones(len(points), dtype=bool)
-        q = (np.asarray(points, dtype=float) - self.position) @ self.rotation
-        if self.shape == 'box':
-            return np.all(np.abs(q) <= 0.5 * self.size + np.reshape(reach, (-1, 1)), axis=1)
-        if self.shape != 'sphere':
-            half = 0.5 * self.length
-            q[:, 2] -= np.clip(q[:, 2], -half, half)
-        return np.einsum('ij,ij->i', q, q) <= (self.radius + reach) ** 2
-
     def describe(self):
         """Return one line naming the obstacle, its shape, sizes [mm] and position [mm]."""
         sizes = []

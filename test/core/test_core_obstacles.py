@@ -150,16 +150,3 @@ def test_points_are_checked():
         ball.signed_distance([[0.0, np.nan, 0.0]])
     with pytest.raises(ValueError, match=r'\(N, 3\)'):
         ball.signed_distance(np.zeros((2, 2)))
-
-
-@pytest.mark.parametrize('shape', list(_obstacles()))
-def test_near_never_misses_a_point_within_reach(shape):
-    """The cheap test is conservative: every point within ``reach`` of the solid is near."""
-    obstacle = _obstacles()[shape]
-    points = _random_points(np.random.default_rng(8), 2000) * 2.0
-    reach = 0.01
-    within = obstacle.signed_distance(points).distance <= reach
-    near = obstacle.near(points, np.full(len(points), reach))
-    assert within.any() and np.all(near[within])
-    if shape != 'plane':
-        assert not near.all()    # and it does leave far points out
