@@ -77,6 +77,30 @@ class Touch(NamedTuple):
         return 0.5 * float(self.force_bounds[0] + self.force_bounds[1])
 
 
+def at_height(touch, target, height):
+    """
+    Return ``target`` moved along the contact normal to ``height`` [m] above the surface.
+
+    Its tangential part stays: ``target + n (height - nᵀ (target - s))``.
+
+    Parameters
+    ----------
+    touch : Touch
+        The contact target (``s``, ``n``).
+    target : (3,) ndarray  [m]
+        An effector target.
+    height : float  [m]
+        Signed height above the tangent plane through ``s`` along ``n``.
+
+    Returns
+    -------
+    (3,) ndarray  [m]
+
+    """
+    normal = touch.normal
+    return target + normal * (height - normal @ (target - touch.point))
+
+
 def checked_touch(effectors, collision, effector, point, normal, force_bounds):
     """
     Return a validated :class:`Touch`.
@@ -274,9 +298,9 @@ class TouchRows:
         """
         virtual = np.array(targets, dtype=float, order='C')
         for touch in self._ready():
-            e, normal = touch.effector, touch.normal
-            height = touch.radius - self.compliances[e] * touch.force_target
-            virtual[e] += normal * (height - normal @ (virtual[e] - touch.point))
+            e = touch.effector
+            virtual[e] = at_height(touch, virtual[e],
+                                   touch.radius - self.compliances[e] * touch.force_target)
         return virtual
 
     def on_surface(self, targets):
@@ -299,8 +323,7 @@ class TouchRows:
         """
         moved = np.array(targets, dtype=float)
         for touch in self.touches.values():
-            e, normal = touch.effector, touch.normal
-            moved[e] += normal * (touch.radius - normal @ (moved[e] - touch.point))
+            moved[touch.effector] = at_height(touch, moved[touch.effector], touch.radius)
         return moved
 
     def rows(self):

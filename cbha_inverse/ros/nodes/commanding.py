@@ -31,7 +31,6 @@ spin_until_stopped`): no lock is needed between the action, the topics and the s
 import math
 import time
 
-from cbha_inverse.core.actuation.effectors import rotation_of_quaternion
 from cbha_inverse.core.so3 import quat_from_matrix, so3_exp
 from cbha_inverse.robot import goals
 from cbha_inverse.ros.common.conversions import stamp_ns
@@ -418,13 +417,8 @@ class Commanding:
         effectors = node.solver.effectors
         kind = effectors.kinds[effector]
         if kind != 'point':
-            q = message.pose.orientation
             try:
-                rotation = rotation_of_quaternion([q.x, q.y, q.z, q.w], f'{topic} orientation')
-                frame = message.header.frame_id or node.params.frame_id
-                if frame != node.params.frame_id:
-                    # the frame is known: the position passed the same transform above
-                    rotation = node.static_tf.transform(frame, node.params.frame_id)[0] @ rotation
+                rotation = node._pose_rotation(topic, message)
                 directions, quaternions = node.solver.orientation_targets
                 if kind == 'axis':
                     directions[effectors.axis_effectors.index(effector)] = (

@@ -449,6 +449,26 @@ class InverseSolverNode(Node):
         stamped.point.x, stamped.point.y, stamped.point.z = position.x, position.y, position.z
         return self._accepted_point(topic, stamped)
 
+    def _pose_rotation(self, topic, message):
+        """
+        Return a PoseStamped's orientation as a rotation matrix in the node's ``frame_id``.
+
+        Call after :meth:`_accepted_pose_position` accepted its position: its frame is known.
+
+        Raises
+        ------
+        ValueError
+            On a quaternion that is not finite or not of unit length.
+
+        """
+        q = message.pose.orientation
+        rotation = rotation_of_quaternion([q.x, q.y, q.z, q.w], f'{topic} orientation')
+        frame = message.header.frame_id or self.params.frame_id
+        if frame != self.params.frame_id:
+            # the frame is known: the position passed the same transform
+            rotation = self.static_tf.transform(frame, self.params.frame_id)[0] @ rotation
+        return rotation
+
     def _accepted_point(self, topic, message, check_box=True):
         """Return the checked point of a message, or None (rejection counted and logged)."""
         # the message's three floats, an array only once accepted (docs/nodes.md, "Latency")
@@ -553,13 +573,8 @@ class InverseSolverNode(Node):
         point = self._accepted_pose_position(topic, message)
         if point is None:
             return
-        q = message.pose.orientation
         try:
-            rotation = rotation_of_quaternion([q.x, q.y, q.z, q.w], f'{topic} orientation')
-            frame = message.header.frame_id or self.params.frame_id
-            if frame != self.params.frame_id:
-                # the frame is known: the position passed the same transform above
-                rotation = self.static_tf.transform(frame, self.params.frame_id)[0] @ rotation
+            rotation = self._pose_rotation(topic, message)
             touch = self.solver.set_touch(0, point, rotation[:, 2],
                                           self.params.touch_force_bounds)
         except ValueError as exc:
@@ -638,12 +653,13 @@ class InverseSolverNode(Node):
             reference = self.target_history.at(stamp, self.target)
             self.corrector.update(reference[None], point[None], saturated=saturated,
                                   predicted_gap=predicted_gap)
-            # where the plant lies from the model, low-passed at the loop's gain: the obstacle
-            # rows keep the plant's spheres clear (InverseSolver.set_plant_offsets)
-            model = self.model_history.at(stamp - int(self.params.plant_delay * 1e9),
-                                          self.solver.effector_positions()[0])
-            offset = point - model
-            self.plant_offsets[0] += self.corrector.gain * (offset - self.plant_offsets[0])
+            if self.solver.obstacles:
+                # where the plant lies from the model, low-passed at the loop's gain: the
+                # obstacle rows keep the plant's spheres clear (InverseSolver.set_plant_offsets)
+                model = self.model_history.at(stamp - int(self.params.plant_delay * 1e9),
+                                              self.solver.effector_positions()[0])
+                offset = point - model
+                self.plant_offsets[0] += self.corrector.gain * (offset - self.plant_offsets[0])
             self.target_error = float(np.linalg.norm(reference - point))
 
     # control --------------------------------------------------------------------------------
