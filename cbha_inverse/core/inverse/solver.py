@@ -62,7 +62,7 @@ from cbha_inverse.core.inverse.qp import (ActiveSetQP, binding_bounds, projected
                                           ProxsuiteQP, qp_problem, RowsQP)
 from cbha_inverse.core.inverse.results import InverseOptions, TickResult
 from cbha_inverse.core.inverse.tick_data import TickData
-from cbha_inverse.core.inverse.touch import checked_touch, TouchRows
+from cbha_inverse.core.inverse.touch import checked_touch, effector_index, TouchRows
 from cbha_inverse.core.loads import dead_wrenches, follower_hooks, FollowerLoads, Loads
 from cbha_inverse.core.sections import (check_section_factors, rate_limited,
                                         SectionStiffness)
@@ -910,14 +910,7 @@ class InverseSolver:
             On an unknown effector.
 
         """
-        names = self.effector_names
-        if isinstance(effector, str):
-            if effector not in names:
-                raise ValueError(f'touch: unknown effector {effector!r}')
-            effector = names.index(effector)
-        elif not (isinstance(effector, (int, np.integer)) and 0 <= effector < len(names)):
-            raise ValueError(f'touch: unknown effector {effector!r}')
-        cleared = self._touch.clear(int(effector))
+        cleared = self._touch.clear(effector_index(self.effector_names, effector))
         self._one_call = self._compiled_qp and not self._touch.touches
         self._rows_qp.reset()
         self._age = self._every

@@ -101,6 +101,38 @@ def at_height(touch, target, height):
     return target + normal * (height - normal @ (target - touch.point))
 
 
+def effector_index(names, effector):
+    """
+    Return the index of an effector given by index or name.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The effectors' names.
+    effector : int or str
+        The effector.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        On an unknown name or an index out of range.
+
+    """
+    names = tuple(names)
+    if isinstance(effector, str):
+        if effector not in names:
+            raise ValueError(f'touch: unknown effector {effector!r} (effectors: '
+                             f'{", ".join(names)})')
+        return names.index(effector)
+    if isinstance(effector, (int, np.integer)) and 0 <= effector < len(names):
+        return int(effector)
+    raise ValueError(f'touch: unknown effector {effector!r} (0..{len(names) - 1})')
+
+
 def checked_touch(effectors, collision, effector, point, normal, force_bounds):
     """
     Return a validated :class:`Touch`.
@@ -134,15 +166,7 @@ def checked_touch(effectors, collision, effector, point, normal, force_bounds):
 
     """
     names = tuple(effectors.names)
-    if isinstance(effector, str):
-        if effector not in names:
-            raise ValueError(f'touch: unknown effector {effector!r} (effectors: '
-                             f'{", ".join(names)})')
-        index = names.index(effector)
-    elif isinstance(effector, (int, np.integer)) and 0 <= effector < len(names):
-        index = int(effector)
-    else:
-        raise ValueError(f'touch: unknown effector {effector!r} (0..{len(names) - 1})')
+    index = effector_index(names, effector)
     name = names[index]
     frame = int(effectors.frames[index])
     if np.any(effectors.offsets[index] != 0.0):
